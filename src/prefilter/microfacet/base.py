@@ -1,0 +1,154 @@
+"""The interface every microfacet model shares (pbrt's ``f`` / ``Sample_f`` / ``PDF`` triple).
+
+Subclasses provide the NDF ``D``, Smith's ``smith_lambda`` and visible-normal sampling
+``sample_vndf``; everything else (masking, the cosine-weighted BRDF, exact lobe sampling, albedo)
+follows from those here. Local frame: z = macro normal, x = tangent. Fresnel is 1 throughout.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from prefilter._validate import as_directions, as_positive_int, as_rng, as_upper_directions
+
+
+def reflect(wo: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """Mirror ``wo (..., 3)`` about microfacet normals ``m (..., 3)``: ``2 (wo.m) m - wo``."""
+    return 2.0 * np.sum(wo * m, axis=-1, keepdims=True) * m - wo
+
+
+def half_vector(wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
+    """``normalize(wo + wi)``; zero-length sums (opposite directions) give ``(0, 0, 1)``."""
+    h = wo + wi
+    n = np.linalg.norm(h, axis=-1, keepdims=True)
+    safe = n > 1e-12
+    return np.where(safe, h / np.where(safe, n, 1.0), np.array([0.0, 0.0, 1.0]))
+
+
+class MicrofacetModel:
+    """Base class: Smith masking, the cosine-weighted BRDF, exact lobe sampling, albedo."""
+
+    #: Number of quadrature nodes per axis used by :meth:`albedo`.
+    albedo_nodes: int = 64
+
+    # -- provided by subclasses ------------------------------------------------------------------
+    def D(self, m) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def smith_lambda(self, w) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def sample_vndf(self, wo, u) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _scalar_params(self) -> bool:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _with_trailing_axis(self) -> "MicrofacetModel":  # pragma: no cover - abstract
+        """The same model with parameters reshaped to broadcast against one more trailing axis."""
+        raise NotImplementedError
+
+    # -- shared ----------------------------------------------------------------------------------
+    def G1(self, w) -> np.ndarray:
+        """Smith masking ``1 / (1 + Lambda(w))`` for ``w (..., 3)``; 0 below the horizon."""
+        w = as_directions(w, "w")
+        lam = self.smith_lambda(w)
+        return np.where(w[..., 2] > 0.0, 1.0 / (1.0 + lam), 0.0)
+
+    def G2(self, wo, wi) -> np.ndarray:
+        """Height-correlated masking-shadowing ``1 / (1 + Lambda(wo) + Lambda(wi))``."""
+        wo = as_directions(wo, "wo")
+        wi = as_directions(wi, "wi")
+        g = 1.0 / (1.0 + self.smith_lambda(wo) + self.smith_lambda(wi))
+        return np.where((wo[..., 2] > 0.0) & (wi[..., 2] > 0.0), g, 0.0)
+
+    def eval(self, wo, wi) -> np.ndarray:
+        """Cosine-weighted BRDF ``f(wo, wi) wi_z = D(h) G2(wo, wi) / (4 wo_z)`` (Fresnel 1).
+
+        Zero when either direction is at or below the horizon.
+        """
+        wo = as_directions(wo, "wo")
+        wi = as_directions(wi, "wi")
+        h = half_vector(wo, wi)
+        up = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0)
+        woz = np.where(up, wo[..., 2], 1.0)
+        g2 = 1.0 / (1.0 + self.smith_lambda(wo) + self.smith_lambda(wi))
+        val = self.D(h) * g2 / (4.0 * woz)
+        return np.where(up, val, 0.0)
+
+    def pdf_vndf(self, wo, m) -> np.ndarray:
+        """Density of :meth:`sample_vndf`: ``G1(wo) max(0, wo.m) D(m) / wo_z`` (solid angle)."""
+        wo = as_directions(wo, "wo")
+        m = as_directions(m, "m")
+        dot = np.maximum(0.0, np.sum(wo * m, axis=-1))
+        woz = np.where(wo[..., 2] > 0, wo[..., 2], 1.0)
+        return np.where(wo[..., 2] > 0, self.G1(wo) * dot * self.D(m) / woz, 0.0)
+
+    def pdf_reflect(self, wo, wi) -> np.ndarray:
+        """Density of ``wi = reflect(wo, m)`` with ``m`` from :meth:`sample_vndf`."""
+        wo = as_directions(wo, "wo")
+        wi = as_directions(wi, "wi")
+        h = half_vector(wo, wi)
+        dot = np.sum(wo * h, axis=-1)
+        safe = dot > 1e-12
+        return np.where(safe, self.pdf_vndf(wo, h) / (4.0 * np.where(safe, dot, 1.0)), 0.0)
+
+    def sample_lobe(self, wo, n: int, rng) -> np.ndarray:
+        """``n`` exact samples ``(n, 3)`` of the normalised cosine-weighted lobe ``eval(wo, .)``.
+
+        Algorithm 1 of the anisotropic-LTC paper: reflect a visible normal, accept with probability
+        ``G2(wo, wi) / G1(wo)`` (<= 1). Needs scalar roughness parameters and one view ``wo (3,)``.
+        """
+        wo = as_upper_directions(wo, "wo")
+        if wo.shape != (3,):
+            raise_shape("wo", wo.shape, "(3,)")
+        if not self._scalar_params():
+            from prefilter.errors import PrefilterError
+
+            raise PrefilterError("sample_lobe: roughness parameters must be scalars")
+        n = as_positive_int(n, "n")
+        rng = as_rng(rng)
+        out = []
+        have = 0
+        g1o = float(self.G1(wo))
+        lam_o = float(self.smith_lambda(wo))
+        rate = 0.5
+        while have < n:
+            batch = int(min(4_000_000, max(1024, 1.2 * (n - have) / max(rate, 1e-3))))
+            m = self.sample_vndf(wo, rng.random((batch, 2)))
+            wi = reflect(wo, m)
+            ok = wi[:, 2] > 0.0
+            g2 = np.zeros(batch)
+            g2[ok] = 1.0 / (1.0 + lam_o + self.smith_lambda(wi[ok]))
+            acc = ok & (rng.random(batch) * g1o < g2)
+            rate = max(acc.mean(), 1e-3)
+            out.append(wi[acc])
+            have += int(acc.sum())
+        return np.concatenate(out)[:n]
+
+    def albedo(self, wo) -> np.ndarray:
+        """Directional albedo ``integral eval(wo, wi) dwi`` (Fresnel 1) for ``wo (..., 3)``.
+
+        Deterministic: Gauss-Legendre quadrature in the unit square of visible-normal sampling,
+        where the integrand is ``G2 / G1`` (smooth except at the horizon).
+        """
+        wo = as_directions(wo, "wo")
+        k = self.albedo_nodes
+        x, w = np.polynomial.legendre.leggauss(k)
+        x = (x + 1) / 2
+        u = np.stack(np.meshgrid(x, x, indexing="ij"), -1).reshape(-1, 2)
+        wgt = (w[:, None] * w[None, :]).reshape(-1) / 4
+        wo_b = wo[..., None, :]
+        model = self._with_trailing_axis()
+        m = model.sample_vndf(wo_b, u)
+        wi = reflect(wo_b, m)
+        lam_o = self.smith_lambda(wo)[..., None]
+        lam_i = model.smith_lambda(wi)
+        ratio = np.where(wi[..., 2] > 0.0, (1.0 + lam_o) / (1.0 + lam_o + lam_i), 0.0)
+        return np.where(wo[..., 2] > 0.0, np.sum(ratio * wgt, axis=-1), 0.0)
+
+
+def raise_shape(name, shape, expected):
+    from prefilter.errors import PrefilterError
+
+    raise PrefilterError(f"{name}: expected shape {expected}, got {shape}")

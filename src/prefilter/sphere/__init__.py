@@ -1,0 +1,27 @@
+"""Shared spherical foundations: frames, warps (uniform, cosine) and the chi-square test."""
+
+from prefilter.sphere.sampling import (
+    cosine_hemisphere,
+    cosine_hemisphere_pdf,
+    frame_from_normal,
+    spherical_direction,
+    to_local,
+    to_world,
+    uniform_sphere,
+    uniform_sphere_pdf,
+)
+from prefilter.sphere.chi2 import Chi2Result, chi2_sphere, lobe_cap
+
+__all__ = [
+    "Chi2Result",
+    "chi2_sphere",
+    "lobe_cap",
+    "cosine_hemisphere",
+    "cosine_hemisphere_pdf",
+    "frame_from_normal",
+    "spherical_direction",
+    "to_local",
+    "to_world",
+    "uniform_sphere",
+    "uniform_sphere_pdf",
+]
