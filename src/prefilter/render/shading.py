@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from prefilter.ltc.polygon import clamped_cosine_integral, polygon_integral_minv
 from prefilter.microfacet import GGX, half_vector
 from prefilter.render.lights import LightSet
 from prefilter.sphere.sampling import to_local
@@ -131,8 +132,6 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
     ``(f0 (n - f5) + f5) E(M^-1 P)`` with ``(M, n, f5)`` from the table. Polygons are clipped at
     the shading horizon. Point and directional lights use the true BRDF.
     """
-    from prefilter.ltc import polygon_integral_minv
-
     position = np.asarray(position, dtype=np.float64)
     ts, bs, ns = (np.asarray(a, dtype=np.float64) for a in (frame_t, frame_b, frame_n))
     alpha = np.asarray(alpha, dtype=np.float64)
@@ -142,14 +141,14 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
     out = shade_delta_lights(position, ts, bs, ns, wo, alpha, alpha, base_color, f0, lights)
     if not lights.quads:
         return out
-    M, magnitude, fresnel = table.lookup(wo, alpha)
+    # Roughness below the table's range uses its smoothest row (documented in docs/reference.md).
+    M, magnitude, fresnel = table.lookup(wo, np.clip(alpha, table.alpha_min, 1.0))
     M_inv = np.linalg.inv(M)
-    eye = np.broadcast_to(np.eye(3), M_inv.shape)
     spec_scale = f0 * (magnitude - fresnel)[:, None] + fresnel[:, None]
     for ql in lights.quads:
         P = quad_local(ql, position, ts, bs, ns)
         front = (position - ql.vertices[0]) @ ql.normal > 0.0
-        e_d = polygon_integral_minv(eye, P)
+        e_d = clamped_cosine_integral(P)
         e_s = polygon_integral_minv(M_inv, P)
         rad = base_color * e_d[:, None] + spec_scale * e_s[:, None]
         out += np.where(front[:, None], rad, 0.0) * ql.radiance
