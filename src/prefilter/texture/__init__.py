@@ -7,6 +7,15 @@ PNG / EXR / ``.npy``; ``normalmap`` encodes tangent-space normals (OpenGL or Dir
 them up by footprint.
 """
 
+from prefilter.texture.io import read_image, write_image
+from prefilter.texture.mip import (
+    MipChain,
+    footprint_axes,
+    lod_from_footprint,
+    moment_chain,
+    moments_to_stats,
+)
+from prefilter.texture.normalmap import decode_normals, encode_normals
 from prefilter.texture.procedural import (
     HEIGHT_KINDS,
     NORMAL_KINDS,
@@ -19,6 +28,15 @@ from prefilter.texture.procedural import (
 )
 
 __all__ = [
+    "MipChain",
+    "decode_normals",
+    "encode_normals",
+    "footprint_axes",
+    "lod_from_footprint",
+    "moment_chain",
+    "moments_to_stats",
+    "read_image",
+    "write_image",
     "HEIGHT_KINDS",
     "NORMAL_KINDS",
     "HeightMap",

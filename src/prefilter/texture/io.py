@@ -1,0 +1,284 @@
+"""Image IO: PNG (8/16-bit), OpenEXR and ``.npy``, as float64 ``(H, W, C)`` arrays.
+
+Every reader returns ``(H, W, C)`` float64 with ``C`` in 1..4 (row 0 = top of the image). PNG
+values are mapped to [0, 1] (``v / 255`` or ``v / 65535``); they are taken as linear data unless
+``srgb=True`` (colour images authored in sRGB). EXR and ``.npy`` are returned as stored.
+
+Pillow reads 16-bit *colour* PNGs as 8-bit, so those are read and written by the small codec here
+(zlib + the five PNG row filters, RFC 2083); everything else goes through Pillow.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from prefilter._io import atomic_path
+from prefilter._numba import njit_serial
+from prefilter.errors import PrefilterError
+
+__all__ = ["read_image", "write_image", "srgb_to_linear", "linear_to_srgb", "IMAGE_SUFFIXES"]
+
+IMAGE_SUFFIXES = (".png", ".exr", ".npy")
+_PNG_SIG = b"\x89PNG\r\n\x1a\n"
+
+
+def srgb_to_linear(c) -> np.ndarray:
+    """IEC 61966-2-1 sRGB decoding of values in [0, 1]."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c) -> np.ndarray:
+    """IEC 61966-2-1 sRGB encoding of linear values in [0, 1]."""
+    c = np.clip(np.asarray(c, dtype=np.float64), 0.0, 1.0)
+    return np.where(c <= 0.0031308, 12.92 * c, 1.055 * c ** (1 / 2.4) - 0.055)
+
+
+def _suffix(path: Path) -> str:
+    s = path.suffix.lower()
+    if s not in IMAGE_SUFFIXES:
+        raise PrefilterError(
+            f"{path}: unsupported image type {s or '(none)'!r}; expected one of "
+            f"{', '.join(IMAGE_SUFFIXES)}"
+        )
+    return s
+
+
+def _as_hwc(a: np.ndarray, where: str) -> np.ndarray:
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.ndim != 3 or not 1 <= a.shape[2] <= 4 or a.shape[0] < 1 or a.shape[1] < 1:
+        raise PrefilterError(f"{where}: expected an image of shape (H, W) or (H, W, 1..4), "
+                             f"got shape {a.shape}")
+    return a
+
+
+# -- PNG -----------------------------------------------------------------------------------------
+
+
+@njit_serial
+def _unfilter(raw, h, stride, bpp):  # pragma: no cover - compiled
+    """Undo the PNG per-row filters (RFC 2083 section 6) in place; returns (h, stride) bytes."""
+    out = np.zeros((h, stride), dtype=np.uint8)
+    pos = 0
+    for y in range(h):
+        ft = raw[pos]
+        pos += 1
+        for x in range(stride):
+            a = np.int32(out[y, x - bpp]) if x >= bpp else np.int32(0)
+            b = np.int32(out[y - 1, x]) if y > 0 else np.int32(0)
+            c = np.int32(out[y - 1, x - bpp]) if (y > 0 and x >= bpp) else np.int32(0)
+            v = np.int32(raw[pos + x])
+            if ft == 1:
+                v += a
+            elif ft == 2:
+                v += b
+            elif ft == 3:
+                v += (a + b) // 2
+            elif ft == 4:
+                p = a + b - c
+                pa, pb, pc = abs(p - a), abs(p - b), abs(p - c)
+                v += a if (pa <= pb and pa <= pc) else (b if pb <= pc else c)
+            out[y, x] = v & 255
+        pos += stride
+    return out
+
+
+def _png_chunks(data: bytes, where: str):
+    if not data.startswith(_PNG_SIG):
+        raise PrefilterError(f"{where}: not a PNG file (bad signature)")
+    pos = len(_PNG_SIG)
+    while pos + 8 <= len(data):
+        (n,) = struct.unpack(">I", data[pos : pos + 4])
+        kind = data[pos + 4 : pos + 8]
+        body = data[pos + 8 : pos + 8 + n]
+        if len(body) != n or pos + 12 + n > len(data):
+            raise PrefilterError(f"{where}: truncated PNG chunk {kind!r}")
+        yield kind, body
+        pos += 12 + n
+
+
+def _read_png16_colour(data: bytes, where: str):
+    """Decode a non-interlaced 16-bit gray+alpha / RGB / RGBA PNG, or None if not that kind."""
+    chunks = list(_png_chunks(data, where))
+    if not chunks or chunks[0][0] != b"IHDR":
+        raise PrefilterError(f"{where}: corrupt PNG (no IHDR chunk)")
+    w, h, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", chunks[0][1])
+    channels = {4: 2, 2: 3, 6: 4}.get(ctype)
+    if depth != 16 or channels is None:
+        return None
+    if interlace:
+        raise PrefilterError(f"{where}: interlaced 16-bit colour PNGs are not supported")
+    try:
+        raw = zlib.decompress(b"".join(b for k, b in chunks if k == b"IDAT"))
+    except zlib.error as exc:
+        raise PrefilterError(f"{where}: corrupt PNG data ({exc})") from None
+    stride = w * channels * 2
+    if len(raw) < h * (stride + 1):
+        raise PrefilterError(f"{where}: truncated PNG image data")
+    rows = _unfilter(np.frombuffer(raw, dtype=np.uint8), h, stride, channels * 2)
+    return rows.view(">u2").reshape(h, w, channels).astype(np.float64) / 65535.0
+
+
+def _write_png16(path: Path, q: np.ndarray) -> None:
+    h, w, c = q.shape
+    ctype = {1: 0, 2: 4, 3: 2, 4: 6}[c]
+    rows = q.astype(">u2").reshape(h, w * c).view(np.uint8)
+    raw = np.concatenate([np.zeros((h, 1), np.uint8), rows], axis=1).tobytes()  # filter 0
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(
+            ">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+
+    ihdr = struct.pack(">IIBBBBB", w, h, 16, ctype, 0, 0, 0)
+    data = _PNG_SIG + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw, 6)) + chunk(
+        b"IEND", b"")
+    path.write_bytes(data)
+
+
+def _read_png(path: Path) -> np.ndarray:
+    from PIL import Image, UnidentifiedImageError
+
+    where = str(path)
+    data = path.read_bytes()
+    a = _read_png16_colour(data, where)
+    if a is not None:
+        return a
+    try:
+        with Image.open(path) as im:
+            im.load()
+            mode = im.mode
+            if mode == "P":
+                im = im.convert("RGBA" if "transparency" in im.info else "RGB")
+                mode = im.mode
+            if mode in ("1", "L", "LA", "RGB", "RGBA"):
+                return np.asarray(im.convert(mode if mode != "1" else "L"), np.float64) / 255.0
+            if mode.startswith("I;16") or mode == "I":
+                return np.asarray(im, np.float64) / 65535.0
+            raise PrefilterError(f"{where}: unsupported PNG mode {mode!r}")
+    except (UnidentifiedImageError, OSError, SyntaxError) as exc:
+        raise PrefilterError(f"{where}: unreadable or corrupt PNG ({exc})") from None
+
+
+def _write_png(path: Path, a: np.ndarray, bits: int) -> None:
+    from PIL import Image
+
+    top = 255 if bits == 8 else 65535
+    q = np.rint(np.clip(a, 0.0, 1.0) * top)
+    if bits == 16 and a.shape[2] > 1:
+        _write_png16(path, q.astype(np.uint16))
+        return
+    if bits == 16:
+        im = Image.fromarray(q[..., 0].astype(np.uint16))
+    else:
+        mode = {1: "L", 2: "LA", 3: "RGB", 4: "RGBA"}[a.shape[2]]
+        q8 = q.astype(np.uint8)
+        im = Image.fromarray(q8[..., 0] if mode == "L" else q8, mode=mode if mode != "L" else None)
+    im.save(path, format="PNG")
+
+
+# -- EXR -----------------------------------------------------------------------------------------
+
+_EXR_LAYOUTS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
+
+
+def _read_exr(path: Path) -> np.ndarray:
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(str(path), separate_channels=True) as f:
+            ch = {k: np.asarray(v.pixels, np.float64) for k, v in f.channels().items()}
+    except (RuntimeError, OSError) as exc:
+        raise PrefilterError(f"{path}: unreadable or corrupt EXR ({exc})") from None
+    for names in (("R", "G", "B", "A"), ("R", "G", "B"), ("Y", "A"), ("Y",)):
+        if all(n in ch for n in names):
+            return np.stack([ch[n] for n in names], axis=-1)
+    if len(ch) == 1:
+        return next(iter(ch.values()))[..., None]
+    raise PrefilterError(
+        f"{path}: expected EXR channels R,G,B[,A] or Y[,A], got {', '.join(sorted(ch))}")
+
+
+def _write_exr(path: Path, a: np.ndarray, half: bool) -> None:
+    import OpenEXR
+
+    dtype = np.float16 if half else np.float32
+    chans = {n: np.ascontiguousarray(a[..., i], dtype=dtype)
+             for i, n in enumerate(_EXR_LAYOUTS[a.shape[2]])}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    with OpenEXR.File(header, chans) as f:
+        f.write(str(path))
+
+
+# -- public API ----------------------------------------------------------------------------------
+
+
+def read_image(path: str | os.PathLike, *, srgb: bool = False) -> np.ndarray:
+    """Read a PNG (8/16-bit), EXR or ``.npy`` image as float64 ``(H, W, C)``, ``C`` in 1..4.
+
+    ``srgb=True`` decodes the colour channels of a PNG from sRGB to linear (alpha untouched);
+    EXR and ``.npy`` are always linear. Raises :class:`PrefilterError` for a missing, unreadable or
+    corrupt file, or one with an unsupported shape.
+    """
+    path = Path(path)
+    kind = _suffix(path)
+    if not path.is_file():
+        raise PrefilterError(f"{path}: image file not found")
+    if kind == ".png":
+        a = _read_png(path)
+        a = _as_hwc(a, str(path))
+        if srgb:
+            nc = a.shape[2] - (1 if a.shape[2] in (2, 4) else 0)
+            a = np.concatenate([srgb_to_linear(a[..., :nc]), a[..., nc:]], axis=-1)
+        return a
+    if kind == ".exr":
+        a = _read_exr(path)
+    else:
+        try:
+            a = np.load(path, allow_pickle=False)
+        except (ValueError, OSError, EOFError) as exc:
+            raise PrefilterError(f"{path}: unreadable or corrupt .npy ({exc})") from None
+        if a.dtype.kind not in "biuf":
+            raise PrefilterError(f"{path}: expected a numeric array, got dtype {a.dtype}")
+        a = a.astype(np.float64)
+    a = _as_hwc(a, str(path))
+    if not np.all(np.isfinite(a)):
+        raise PrefilterError(f"{path}: expected finite pixel values, got NaN or inf")
+    return a
+
+
+def write_image(path: str | os.PathLike, image, *, bits: int = 8, srgb: bool = False,
+                half: bool = False) -> Path:
+    """Write ``image`` ``(H, W)`` or ``(H, W, C)``, ``C`` in 1..4, atomically; returns the path.
+
+    PNG: values are clipped to [0, 1] (after sRGB encoding of colour channels when ``srgb``) and
+    quantised to ``bits`` = 8 or 16. EXR: float32 (``half=True``: float16), ZIP-compressed,
+    channels Y / YA / RGB / RGBA. ``.npy``: float64 as given.
+    """
+    path = Path(path)
+    kind = _suffix(path)
+    a = np.asarray(image)
+    if a.dtype.kind not in "biuf":
+        raise PrefilterError(f"image: expected a numeric array, got dtype {a.dtype}")
+    a = _as_hwc(a.astype(np.float64), "image")
+    if kind == ".png" and srgb:
+        nc = a.shape[2] - (1 if a.shape[2] in (2, 4) else 0)
+        a = np.concatenate([linear_to_srgb(a[..., :nc]), a[..., nc:]], axis=-1)
+    if kind == ".png" and bits not in (8, 16):
+        raise PrefilterError(f"bits: expected 8 or 16 for PNG, got {bits!r}")
+    if kind != ".npy" and not np.all(np.isfinite(a)):
+        raise PrefilterError("image: expected finite values, got NaN or inf")
+    with atomic_path(path, suffix=kind) as tmp:
+        if kind == ".png":
+            _write_png(tmp, a, bits)
+        elif kind == ".exr":
+            _write_exr(tmp, a, half)
+        else:
+            with open(tmp, "wb") as fh:
+                np.save(fh, a)
+    return path
