@@ -12,17 +12,11 @@ from PIL import Image
 
 from prefilter.errors import PrefilterError
 from prefilter.render import metrics as m
+from prefilter.texture.io import write_image
 
 
 def _write_exr(path, rgb):
-    # private stand-in until prefilter.texture.io lands
-    import OpenEXR
-
-    rgb = np.asarray(rgb, dtype=np.float32)
-    channels = {"R": rgb[..., 0].copy(), "G": rgb[..., 1].copy(), "B": rgb[..., 2].copy()}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-    with OpenEXR.File(header, channels) as f:
-        f.write(str(path))
+    write_image(path, np.asarray(rgb, dtype=np.float64))
 
 
 # ------------------------------------------------------------------------------------ RMSE, relMSE
@@ -379,3 +373,25 @@ def test_compare_cli_unreadable_file_exits_2(tmp_path, capsys):
     code, err = _run_main(["compare", str(tmp_path / "missing.exr"), str(tmp_path / "b.exr")],
                           capsys)
     assert code == 2 and "missing.exr" in err
+
+
+def test_compare_cli_rejects_mixed_kinds_and_nan(tmp_path, capsys):
+    _write_exr(tmp_path / "a.exr", np.zeros((4, 5, 3)))
+    Image.fromarray(np.zeros((4, 5, 3), np.uint8)).save(tmp_path / "b.png")
+    code, err = _run_main(["compare", str(tmp_path / "a.exr"), str(tmp_path / "b.png")], capsys)
+    assert code == 2 and "one of each" in err
+    nan = np.zeros((4, 5, 3))
+    nan[1, 1, 1] = np.nan
+    np.save(tmp_path / "n.npy", nan)
+    np.save(tmp_path / "z.npy", np.zeros((4, 5, 3)))
+    code, err = _run_main(["compare", str(tmp_path / "n.npy"), str(tmp_path / "z.npy")], capsys)
+    assert code == 2 and "n.npy" in err and "finite" in err
+
+
+def test_compare_grey_exr_counts_as_rgb(tmp_path):
+    from prefilter.render.commands import compare_images
+
+    _write_exr(tmp_path / "a.exr", np.full((3, 4, 1), 0.75))
+    _write_exr(tmp_path / "b.exr", np.full((3, 4, 3), 0.5))
+    res = compare_images(tmp_path / "a.exr", tmp_path / "b.exr")
+    assert res["rmse"] == pytest.approx(0.25) and res["relmse"] == pytest.approx(0.0625 / 0.26)

@@ -16,42 +16,23 @@ from prefilter.errors import PrefilterError
 
 
 def _read_image(path: Path) -> tuple[np.ndarray, bool]:
-    """``(linear RGB float64 (H, W, 3), is_hdr)`` from an EXR (linear) or PNG/JPEG (sRGB) file."""
-    if path.suffix.lower() == ".exr":
-        return _read_exr(path), True
-    try:
-        from PIL import Image
+    """``(linear RGB float64 (H, W, 3), is_hdr)``: EXR/.npy are linear, PNG is sRGB-encoded."""
+    from prefilter.texture.io import read_image
 
-        with Image.open(path) as im:
-            rgb8 = np.asarray(im.convert("RGB"))
-    except (OSError, ValueError) as exc:
-        raise PrefilterError(f"{path}: cannot read the image: {exc}") from exc
-    from prefilter.render.metrics import from_srgb8
-
-    return from_srgb8(rgb8), False
-
-
-def _read_exr(path: Path) -> np.ndarray:
-    # TODO(h6): switch to prefilter.texture.io once it lands.
-    import OpenEXR
-
-    try:
-        with OpenEXR.File(str(path), separate_channels=True) as f:
-            ch = {k: np.asarray(v.pixels, dtype=np.float64) for k, v in f.channels().items()}
-    except Exception as exc:  # the bindings raise plain RuntimeError/Exception on bad files
-        raise PrefilterError(f"{path}: cannot read the EXR image: {exc}") from exc
-    if all(c in ch for c in "RGB"):
-        return np.stack([ch["R"], ch["G"], ch["B"]], axis=-1)
-    if "Y" in ch:
-        return np.repeat(ch["Y"][..., None], 3, axis=-1)
-    raise PrefilterError(f"{path}: expected R, G, B (or Y) channels, got {sorted(ch)}")
+    hdr = path.suffix.lower() != ".png"
+    img = read_image(path, srgb=not hdr)
+    c = img.shape[2]
+    if c in (1, 2):  # grey (+ alpha): the same value in R, G and B
+        return np.repeat(img[..., :1], 3, axis=-1), hdr
+    return img[..., :3], hdr  # alpha does not enter the comparison
 
 
 def compare_images(test_path, reference_path, *, eps: float = 1e-2) -> dict:
     """RMSE, relative MSE and FLIP of the image file ``test_path`` against ``reference_path``.
 
-    EXR files are compared as linear radiance with HDR-FLIP; PNG/JPEG files are decoded from sRGB
-    to linear for RMSE/relMSE and compared with LDR-FLIP. Returns a JSON-ready dict; the FLIP
+    EXR (and ``.npy``) files are compared as linear radiance with HDR-FLIP; PNG files are decoded
+    from sRGB to linear for RMSE/relMSE and compared with LDR-FLIP. Alpha is ignored, grey images
+    count as R = G = B. Returns a JSON-ready dict; the FLIP
     error map is under ``"flip_map"`` (removed before JSON output).
     """
     from prefilter.render.metrics import flip, linear_to_srgb, relmse, rmse
@@ -61,12 +42,9 @@ def compare_images(test_path, reference_path, *, eps: float = 1e-2) -> dict:
     ref, ref_hdr = _read_image(reference_path)
     if test_hdr != ref_hdr:
         raise PrefilterError(
-            f"{test_path}, {reference_path}: expected two EXR images or two display images "
-            f"(PNG/JPEG), got one of each"
+            f"{test_path}, {reference_path}: expected two linear images (EXR/.npy) or two "
+            f"sRGB PNGs, got one of each"
         )
-    for path, img in ((test_path, test), (reference_path, ref)):
-        if not np.all(np.isfinite(img)):
-            raise PrefilterError(f"{path}: expected finite pixel values, got NaN or inf")
     if test.shape != ref.shape:
         raise PrefilterError(
             f"{test_path}, {reference_path}: expected images of the same size, got "
@@ -104,7 +82,7 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
             eps: float) -> None:
     """Compare image TEST against REFERENCE: RMSE, relative MSE and FLIP.
 
-    EXR inputs are linear (HDR-FLIP); PNG/JPEG inputs are sRGB (LDR-FLIP).
+    EXR/.npy inputs are linear (HDR-FLIP); PNG inputs are sRGB (LDR-FLIP).
     """
     from prefilter._io import save_json_atomic
     from prefilter.render.metrics import flip_heatmap
