@@ -1,4 +1,4 @@
-"""Image metrics against closed forms on tiny images, FLIP sanity, flicker statistics, compare CLI."""
+"""Metrics against closed forms on tiny images, FLIP sanity, flicker statistics, compare CLI."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The HTML report: well-formed, self-contained, every referenced file exists and holds the image."""
+"""The HTML report: well-formed, self-contained, each referenced file exists and holds its image."""
 
 from __future__ import annotations
 

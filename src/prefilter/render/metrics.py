@@ -165,7 +165,7 @@ def flip(
 ) -> FlipResult:
     """NVIDIA FLIP perceptual difference of ``test`` against ``reference``.
 
-    Andersson et al. 2020, "FLIP: A Difference Evaluator for Alternating Images" (LDR-FLIP, eq. 1-9),
+    Andersson et al. 2020, "FLIP: A Difference Evaluator for Alternating Images" (LDR-FLIP),
     and 2021, "Visualizing Errors in Rendered High Dynamic Range Images" (HDR-FLIP).
 
     HDR-FLIP (``hdr=True``) is for linear images (EXR renders, values >= 0, unbounded): it tone

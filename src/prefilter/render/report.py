@@ -288,7 +288,7 @@ def line_plot(x, series: dict, *, xlabel: str, ylabel: str, title: str | None = 
     for name, y in series.items():
         y = np.asarray(y, dtype=np.float64)
         if y.shape != x.shape:
-            raise PrefilterError(f"series[{name!r}]: expected shape {x.shape} like x, got {y.shape}")
+            raise PrefilterError(f"series[{name!r}]: expected shape {x.shape}, got {y.shape}")
         ax.plot(x, y, marker="o", markersize=3, label=str(name))
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
