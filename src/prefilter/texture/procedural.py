@@ -29,6 +29,7 @@ from prefilter.errors import PrefilterError
 __all__ = [
     "HeightMap",
     "NORMAL_KINDS",
+    "PARAMS",
     "HEIGHT_KINDS",
     "height_map",
     "normal_map",
@@ -209,6 +210,11 @@ def height_map(kind: str = "gaussian", size: int = 512, seed=0, **params) -> Hei
 _SCRATCHES = {"count": 60, "width": 1.0, "depth": 1.0, "length": 0.3, "base_rms_slope": 0.0}
 _FLAKES = {"flake_size": 8.0, "rms_slope": 0.3}
 NORMAL_KINDS = ("gaussian", "anisotropic", "brushed", "scratches", "flakes")
+_NOISE = {"corr_length": 4.0, "sigma": 1.0}
+#: Parameter names of every procedural kind (``noise`` is the scalar noise of :func:`noise`).
+PARAMS = {k: tuple(p) for k, p in (("gaussian", _GAUSSIAN), ("anisotropic", _ANISO),
+                                   ("brushed", _BRUSHED), ("scratches", _SCRATCHES),
+                                   ("flakes", _FLAKES), ("noise", _NOISE))}
 
 
 def _scratch_slopes(n: int, rng: np.random.Generator, p: dict) -> np.ndarray:

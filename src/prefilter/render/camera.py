@@ -1,0 +1,296 @@
+"""Pinhole camera, ray differentials, ray-object intersection and the G-buffer.
+
+Image conventions: pixel ``(row i, column j)`` covers ``x in [j, j+1)``, ``y in [i, i+1)`` with its
+centre at ``(j + 0.5, i + 0.5)``; row 0 is the top of the image. Sample positions are given in
+these continuous pixel coordinates ``(x, y)``.
+
+World conventions: right-handed, y up; the camera looks from ``origin`` to ``target``;
+``fov`` is the vertical field of view in degrees.
+
+Footprints (Igehy 1999, "Tracing ray differentials"; pbrt-v4 section 10.1): for a hit point ``p``
+on a surface with normal ``n`` reached by the direction ``d(x, y)``, the hit point moves on the
+tangent plane as ``dp/dx = t (dd/dx - (n . dd/dx) / (n . d) d)`` (same for y), which is the exact
+first derivative on planes and spheres alike (the tangent plane has first-order contact); the UV
+Jacobian is ``d(uv)/d(pixel) = (d uv / d p) (dp/dx, dp/dy)``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from prefilter._validate import as_float_array
+from prefilter.errors import PrefilterError
+
+__all__ = ["Camera", "GBuffer", "Rays", "gbuffer", "gbuffer_at", "generate_rays", "intersect",
+           "pixel_positions", "rays_at"]
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A pinhole camera.
+
+    Attributes
+    ----------
+    origin, target, up : numpy.ndarray, shape (3,)
+        Eye position, a point it looks at and an approximate up vector (world units).
+    fov : float
+        Vertical field of view in degrees, in (0, 180).
+    width, height : int
+        Image size in pixels.
+    """
+
+    origin: np.ndarray
+    target: np.ndarray
+    up: np.ndarray
+    fov: float
+    width: int
+    height: int
+
+    def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Unit ``(right, true_up, forward)`` vectors, right-handed with ``forward = -back``."""
+        f = self.target - self.origin
+        f = f / np.linalg.norm(f)
+        r = np.cross(f, self.up)
+        r = r / np.linalg.norm(r)
+        return r, np.cross(r, f), f
+
+    def with_size(self, width: int, height: int) -> "Camera":
+        return Camera(self.origin, self.target, self.up, self.fov, int(width), int(height))
+
+
+@dataclass(frozen=True)
+class Rays:
+    """Primary rays: ``origin``, unit ``direction`` and their pixel derivatives ``ddx``, ``ddy``
+    (derivatives of the unit direction w.r.t. pixel x and y), all ``(..., 3)``."""
+
+    origin: np.ndarray
+    direction: np.ndarray
+    ddx: np.ndarray
+    ddy: np.ndarray
+
+
+@dataclass
+class GBuffer:
+    """Per-sample surface data, every array with leading shape ``(...)`` (e.g. ``(H, W)`` or
+    ``(H, W, S)``).
+
+    Attributes
+    ----------
+    hit : bool (...)
+    object_id : int32 (...), index into ``scene.objects``, -1 where nothing is hit.
+    position : (..., 3) world hit point.
+    normal, tangent, bitangent : (..., 3) geometric frame; tangent = d p / d u direction,
+        right-handed ``tangent x bitangent = normal``.
+    uv : (..., 2) texture coordinates (scaled by the object's ``uv_scale``, not wrapped).
+    dudv : (..., 2, 2) ``dudv[..., a, b] = d uv_a / d pixel_b`` (pixel axes x, y).
+    dpdx, dpdy : (..., 3) derivatives of the hit point w.r.t. pixel x and y.
+    distance : (...) ray parameter of the hit (``inf`` on misses).
+    view : (..., 3) unit direction from the surface to the eye (``-direction``; also on misses).
+    direction : (..., 3) unit ray direction.
+    Missed samples have zero geometry.
+    """
+
+    hit: np.ndarray
+    object_id: np.ndarray
+    position: np.ndarray
+    normal: np.ndarray
+    tangent: np.ndarray
+    bitangent: np.ndarray
+    uv: np.ndarray
+    dudv: np.ndarray
+    dpdx: np.ndarray
+    dpdy: np.ndarray
+    distance: np.ndarray
+    view: np.ndarray
+    direction: np.ndarray
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return self.hit.shape
+
+    def reshape(self, *shape) -> "GBuffer":
+        """The same data with leading shape ``shape`` (e.g. ``-1`` to flatten for shading)."""
+        lead = self.hit.ndim
+        return GBuffer(**{f.name: getattr(self, f.name).reshape(
+            *shape, *getattr(self, f.name).shape[lead:]) for f in fields(self)})
+
+    def select(self, mask) -> "GBuffer":
+        """Flat ``(N, ...)`` buffer of the samples where the boolean ``mask (...)`` is true."""
+        return GBuffer(**{f.name: getattr(self, f.name)[mask] for f in fields(self)})
+
+
+# -- rays ------------------------------------------------------------------------------------------
+
+
+def pixel_positions(camera: Camera, *, jitter=None, offsets=None) -> np.ndarray:
+    """Continuous pixel positions ``(x, y)`` of pixel centres plus offsets.
+
+    ``jitter (2,)``: one offset (pixels) for every pixel -> ``(H, W, 2)``.
+    ``offsets (S, 2)`` or ``(H, W, S, 2)``: sub-pixel sample offsets from each centre (typically
+    in ``[-0.5, 0.5)``) -> ``(H, W, S, 2)``.
+    """
+    h, w = camera.height, camera.width
+    ys, xs = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
+    centres = np.stack([xs, ys], axis=-1)
+    if jitter is not None and offsets is not None:
+        raise PrefilterError("jitter, offsets: expected at most one of them")
+    if jitter is not None:
+        j = as_float_array(jitter, "jitter")
+        if j.shape != (2,):
+            raise PrefilterError(f"jitter: expected (dx, dy), got shape {j.shape}")
+        return centres + j
+    if offsets is not None:
+        o = as_float_array(offsets, "offsets", ndim_min=2, last_dim=2)
+        if o.ndim == 2:
+            o = np.broadcast_to(o, (h, w) + o.shape)
+        if o.ndim != 4 or o.shape[:2] != (h, w):
+            raise PrefilterError(
+                f"offsets: expected shape (S, 2) or ({h}, {w}, S, 2), got {o.shape}")
+        return centres[:, :, None, :] + o
+    return centres
+
+
+def rays_at(camera: Camera, xy) -> Rays:
+    """Primary rays through continuous pixel positions ``xy (..., 2)``, with differentials."""
+    xy = as_float_array(xy, "xy", ndim_min=1, last_dim=2)
+    r, u, f = camera.basis()
+    th = np.tan(np.radians(camera.fov) / 2.0)
+    sy = 2.0 * th / camera.height  # image-plane units per pixel (square pixels)
+    px = (xy[..., 0:1] - camera.width / 2.0) * sy
+    py = (camera.height / 2.0 - xy[..., 1:2]) * sy
+    d = f + px * r + py * u
+    inv = 1.0 / np.linalg.norm(d, axis=-1, keepdims=True)
+    dn = d * inv
+    # derivative of d / |d|: (I - dn dn^T) (dd/dx) / |d|, with dd/dx = sy r and dd/dy = -sy u
+    ex, ey = sy * r, -sy * u
+    ddx = (ex - np.sum(dn * ex, -1, keepdims=True) * dn) * inv
+    ddy = (ey - np.sum(dn * ey, -1, keepdims=True) * dn) * inv
+    return Rays(np.broadcast_to(camera.origin, dn.shape), dn, ddx, ddy)
+
+
+def generate_rays(camera: Camera, *, jitter=None, offsets=None) -> Rays:
+    """Rays through pixel centres ``(H, W, 3)`` (optionally jittered) or through sub-pixel
+    samples ``(H, W, S, 3)``; see :func:`pixel_positions`."""
+    return rays_at(camera, pixel_positions(camera, jitter=jitter, offsets=offsets))
+
+
+# -- intersection ----------------------------------------------------------------------------------
+
+_EPS = 1e-9
+
+
+def _hit_plane(obj, o, d):
+    """Distance to a finite plane (``inf`` on a miss), frame and uv as functions of the point."""
+    n, t_ax = obj.normal, obj.tangent
+    denom = d @ n
+    ok = np.abs(denom) > 1e-12
+    t = np.where(ok, ((obj.center - o) @ n) / np.where(ok, denom, 1.0), np.inf)
+    p = o + t[..., None] * d
+    q = p - obj.center
+    b_ax = np.cross(n, t_ax)
+    a, b = q @ t_ax, q @ b_ax
+    inside = ok & (t > _EPS) & (np.abs(a) <= obj.size[0] / 2) & (np.abs(b) <= obj.size[1] / 2)
+    return np.where(inside, t, np.inf)
+
+
+def _plane_geometry(obj, p):
+    shape = p.shape[:-1]
+    b_ax = np.cross(obj.normal, obj.tangent)
+    q = p - obj.center
+    su, sv = obj.uv_scale / obj.size
+    uv = np.stack([(q @ obj.tangent) * su + 0.5 * obj.uv_scale[0],
+                   (q @ b_ax) * sv + 0.5 * obj.uv_scale[1]], -1)
+    duv_dp = np.broadcast_to(np.stack([obj.tangent * su, b_ax * sv]), shape + (2, 3))
+    frame = [np.broadcast_to(v, shape + (3,)) for v in (obj.normal, obj.tangent, b_ax)]
+    return frame, uv, duv_dp
+
+
+def _hit_sphere(obj, o, d):
+    oc = o - obj.center
+    b = np.sum(oc * d, -1)
+    c = np.sum(oc * oc, -1) - obj.radius**2
+    disc = b * b - c
+    ok = disc >= 0.0
+    s = np.sqrt(np.where(ok, disc, 0.0))
+    t0, t1 = -b - s, -b + s
+    t = np.where(t0 > _EPS, t0, t1)
+    return np.where(ok & (t > _EPS), t, np.inf)
+
+
+def _sphere_geometry(obj, p):
+    """Outward normal; tangent d p / d phi, bitangent d p / d theta, uv = (phi / 2pi, theta / pi)
+    times uv_scale, in the sphere's local axes (``pole`` = theta 0, ``axis_x`` = phi 0)."""
+    ex, ey = obj.axis_x, obj.pole
+    ez = np.cross(ex, ey)
+    q = (p - obj.center) / obj.radius
+    x, y, z = q @ ex, np.clip(q @ ey, -1.0, 1.0), q @ ez
+    theta = np.arccos(y)
+    phi = np.mod(np.arctan2(z, x), 2.0 * np.pi)
+    st = np.maximum(np.sqrt(x * x + z * z), 1e-12)  # sin(theta), kept off the poles
+    cp, sp = x / st, z / st
+    n = q / np.linalg.norm(q, axis=-1, keepdims=True)
+    tangent = -sp[..., None] * ex + cp[..., None] * ez
+    bitangent = (y * cp)[..., None] * ex - st[..., None] * ey + (y * sp)[..., None] * ez
+    su, sv = obj.uv_scale
+    uv = np.stack([phi / (2 * np.pi) * su, theta / np.pi * sv], -1)
+    # grad phi = tangent / (r sin theta), grad theta = bitangent / r
+    duv_dp = np.stack([tangent * (su / (2 * np.pi * obj.radius * st))[..., None],
+                       bitangent * (sv / (np.pi * obj.radius))], -2)
+    return [n, tangent, bitangent], uv, duv_dp
+
+
+_SHAPES = {"plane": (_hit_plane, _plane_geometry), "sphere": (_hit_sphere, _sphere_geometry)}
+
+
+def intersect(scene, rays: Rays) -> GBuffer:
+    """Nearest hits of ``rays`` with ``scene.objects`` and the surface data at them."""
+    o, d = np.asarray(rays.origin, float), np.asarray(rays.direction, float)
+    shape = d.shape[:-1]
+    best = np.full(shape, np.inf)
+    oid = np.full(shape, -1, dtype=np.int32)
+    for k, obj in enumerate(scene.objects):  # a loop over objects, not pixels
+        t = _SHAPES[obj.type][0](obj, o, d)
+        closer = t < best
+        best = np.where(closer, t, best)
+        oid[closer] = k
+    hit = oid >= 0
+    z3 = np.zeros(shape + (3,))
+    g = GBuffer(hit=hit, object_id=oid, position=z3.copy(), normal=z3.copy(),
+                tangent=z3.copy(), bitangent=z3.copy(), uv=np.zeros(shape + (2,)),
+                dudv=np.zeros(shape + (2, 2)), dpdx=z3.copy(), dpdy=z3.copy(), distance=best,
+                view=-d, direction=d)
+    for k, obj in enumerate(scene.objects):
+        m = oid == k
+        if not np.any(m):
+            continue
+        t = best[m]
+        dm = d[m]
+        p = o[m] + t[:, None] * dm
+        (n, tan, bit), uv, duv_dp = _SHAPES[obj.type][1](obj, p)
+        dn = np.sum(dm * n, -1, keepdims=True)
+        dpdx = t[:, None] * (rays.ddx[m] - np.sum(rays.ddx[m] * n, -1, keepdims=True) / dn * dm)
+        dpdy = t[:, None] * (rays.ddy[m] - np.sum(rays.ddy[m] * n, -1, keepdims=True) / dn * dm)
+        g.position[m], g.normal[m], g.tangent[m], g.bitangent[m] = p, n, tan, bit
+        g.uv[m] = uv
+        g.dpdx[m], g.dpdy[m] = dpdx, dpdy
+        g.dudv[m] = np.stack([np.einsum("...ij,...j->...i", duv_dp, dpdx),
+                              np.einsum("...ij,...j->...i", duv_dp, dpdy)], -1)
+    return g
+
+
+def gbuffer(scene, camera: Camera | None = None, *, jitter=None, offsets=None) -> GBuffer:
+    """G-buffer of ``scene`` seen by ``camera`` (default ``scene.camera``).
+
+    Shape ``(H, W)`` at pixel centres (``jitter (2,)`` shifts them all), or ``(H, W, S)`` for
+    sub-pixel ``offsets (S, 2)`` / ``(H, W, S, 2)``; see :func:`pixel_positions`.
+    """
+    cam = scene.camera if camera is None else camera
+    return intersect(scene, generate_rays(cam, jitter=jitter, offsets=offsets))
+
+
+def gbuffer_at(scene, xy, camera: Camera | None = None) -> GBuffer:
+    """G-buffer at arbitrary continuous pixel positions ``xy (..., 2)``."""
+    cam = scene.camera if camera is None else camera
+    return intersect(scene, rays_at(cam, xy))
