@@ -10,7 +10,10 @@ PYTEST_ARGS ?=
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test]'
+	# torch only for the `fit` extra; pinned to the CPU build that this machine serves from a local
+	# file (any other spelling pulls gigabytes of CUDA wheels). 2.13.0 satisfies `torch>=2.3`.
+	$(PY) -m pip install -q torch==2.13.0
+	$(PY) -m pip install -q -e '.[test,fit]'
 	touch $(STAMP)
 
 demo: $(STAMP)

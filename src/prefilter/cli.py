@@ -42,6 +42,8 @@ class LazyGroup(click.Group):
 
 BAKE_COMMANDS = {
     "ltc-iso": "prefilter.ltc.commands:bake_ltc_iso",
+    "ltc-aniso": "prefilter.ltc.aniso.commands:bake_ltc_aniso",
+    "colormap": "prefilter.colormap.commands:bake_colormap",
     "glints": "prefilter.glints.commands:bake_glints",
 }
 
