@@ -256,11 +256,12 @@ def intersect(scene, rays: Rays) -> GBuffer:
         best = np.where(closer, t, best)
         oid[closer] = k
     hit = oid >= 0
-    z3 = np.zeros(shape + (3,))
-    g = GBuffer(hit=hit, object_id=oid, position=z3.copy(), normal=z3.copy(),
-                tangent=z3.copy(), bitangent=z3.copy(), uv=np.zeros(shape + (2,)),
-                dudv=np.zeros(shape + (2, 2)), dpdx=z3.copy(), dpdy=z3.copy(), distance=best,
-                view=-d, direction=d)
+    def z3():
+        return np.zeros(shape + (3,))  # fresh zero pages are cheaper than copies
+
+    g = GBuffer(hit=hit, object_id=oid, position=z3(), normal=z3(), tangent=z3(),
+                bitangent=z3(), uv=np.zeros(shape + (2,)), dudv=np.zeros(shape + (2, 2)),
+                dpdx=z3(), dpdy=z3(), distance=best, view=-d, direction=d)
     for k, obj in enumerate(scene.objects):
         m = oid == k
         if not np.any(m):
