@@ -1,0 +1,213 @@
+"""Scene -> image for a registered method: the row-chunk driver, surface attributes, ``ltc``.
+
+:func:`render` loads the scene if needed, looks the method up in
+:mod:`prefilter.render.methods` and returns linear radiance ``(H, W, 3)`` float32.
+
+Methods built on :func:`render_samples` trace ``spp`` sub-pixel positions per pixel through
+:func:`prefilter.render.camera.gbuffer_at`, shade the hits over flat arrays, and average. Rows are
+processed in chunks of at most ``settings.chunk_samples`` samples; every random number of a row
+comes from its own generator (``SeedSequence(seed, spawn_key=(row,))``), so images do not depend on
+the chunk size. Pixels whose samples miss every object are black (no background).
+
+Surfaces are two-sided: a hit seen from behind its geometric normal is shaded with the frame
+flipped (``n, b -> -n, -b``, still right-handed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from tqdm import tqdm
+
+from prefilter._validate import as_float_array, as_positive_int
+from prefilter.errors import PrefilterError
+from prefilter.render.camera import gbuffer_at
+from prefilter.render.methods import RenderSettings, get_method
+from prefilter.render.scene import Scene, load_scene
+from prefilter.render.shading import shade_ltc, shading_frame
+from prefilter.texture.procedural import slopes_to_normals
+
+
+def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0.0, 0.0),
+           progress: bool = False, table=None, chunk_samples: int = 1 << 18) -> np.ndarray:
+    """Render ``scene`` (a :class:`Scene`, a JSON path or a dict) with the named method.
+
+    Parameters
+    ----------
+    method : str
+        A name from :func:`prefilter.render.methods.available` (``"ltc"``, ``"reference"``, ...).
+    spp : int
+        Samples per pixel.
+    seed : int
+        Seed of all random numbers: same inputs -> same bytes.
+    jitter : (float, float)
+        Camera offset in pixels (temporal-stability measurements).
+    progress : bool
+        tqdm progress bar for renders longer than a second.
+    table : GGXTable or None
+        LTC table for LTC-based methods (default: the shipped one).
+
+    Returns
+    -------
+    numpy.ndarray, shape (H, W, 3), float32
+        Linear radiance.
+    """
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    j = as_float_array(jitter, "jitter")
+    if j.shape != (2,):
+        raise PrefilterError(f"jitter: expected (dx, dy), got shape {j.shape}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise PrefilterError(f"seed: expected an integer >= 0, got {seed!r}")
+    settings = RenderSettings(spp=as_positive_int(spp, "spp"), seed=int(seed),
+                              jitter=(float(j[0]), float(j[1])), progress=bool(progress),
+                              chunk_samples=as_positive_int(chunk_samples, "chunk_samples"),
+                              table=table)
+    image = get_method(method)(scene, settings)
+    return np.asarray(image, dtype=np.float32)
+
+
+def supported_lights(scene: Scene, method: str):
+    """The scene's :class:`~prefilter.render.lights.LightSet`; environment maps and textured quad
+    lights are rejected with a message naming the light (no method supports them yet)."""
+    for i, light in enumerate(scene.lights):
+        if light.type == "environment" or getattr(light, "texture", None) is not None:
+            what = "environment" if light.type == "environment" else "textured quad"
+            raise PrefilterError(
+                f"lights[{i}]: {what} lights are not supported by method {method!r}; expected "
+                "untextured quad, point or directional lights")
+    return scene.light_set()
+
+
+def row_rng(seed: int, row: int) -> np.random.Generator:
+    """The generator of image row ``row`` (independent of chunking)."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(row,)))
+
+
+def render_samples(scene: Scene, settings: RenderSettings, shade, *, random_dims: int = 0,
+                   stratified: bool = True, desc: str = "render") -> np.ndarray:
+    """Drive a method over row chunks: trace sub-pixel samples, shade hits, average per pixel.
+
+    Parameters
+    ----------
+    shade : callable(g, u) -> (N, 3)
+        Shades the flat G-buffer ``g`` of the hit samples; ``u (N, random_dims)`` are uniform
+        numbers per sample (``None`` when ``random_dims == 0``).
+    random_dims : int
+        Uniform numbers each sample needs.
+    stratified : bool
+        ``True``: ``spp`` stratified random positions per pixel
+        (:func:`prefilter.render.reference.stratified_offsets`); ``False`` with ``spp == 1``:
+        the pixel centre.
+    """
+    from prefilter.render.reference import stratified_offsets
+
+    cam = scene.camera
+    h, w, s = cam.height, cam.width, settings.spp
+    rows_per_chunk = max(1, settings.chunk_samples // (w * s))
+    image = np.zeros((h, w, 3))
+    jit = np.asarray(settings.jitter, dtype=np.float64)
+    xs = np.arange(w, dtype=np.float64)
+    with tqdm(total=h, desc=desc, unit="row", delay=1.0, leave=False,
+              disable=not settings.progress) as bar:
+        for r0 in range(0, h, rows_per_chunk):
+            rows = range(r0, min(h, r0 + rows_per_chunk))
+            offs, us = [], []
+            for y in rows:
+                rng = row_rng(settings.seed, y)
+                if stratified or s > 1:
+                    o = stratified_offsets(s, w, rng)
+                else:
+                    o = np.full((w, 1, 2), 0.5)
+                offs.append(o)
+                if random_dims:
+                    us.append(rng.random((w * s, random_dims)))
+            o = np.stack(offs)  # (rows, W, S, 2) in [0, 1)
+            xy = o + jit
+            xy[..., 0] += xs[None, :, None]
+            xy[..., 1] += np.asarray(rows, dtype=np.float64)[:, None, None]
+            g = gbuffer_at(scene, xy).reshape(-1)
+            rad = np.zeros((g.hit.size, 3))
+            if np.any(g.hit):
+                u = np.concatenate(us)[g.hit] if random_dims else None
+                rad[g.hit] = shade(g.select(g.hit), u)
+            image[r0:r0 + len(rows)] = rad.reshape(len(rows), w, s, 3).mean(axis=2)
+            bar.update(len(rows))
+    return image
+
+
+def surface_attributes(scene: Scene, g, *, filtered: bool):
+    """Shading frame and material per hit sample of a flat G-buffer ``g``.
+
+    ``filtered=True`` reads textures at the mip level of the pixel footprint (trilinear, isotropic
+    LOD from ``g.dudv``: the naive prefiltering); ``False`` reads level 0 bilinearly (ground truth
+    supersampling). Normal maps take precedence over height maps; a height map's normal is
+    ``normalize(-s_x, -s_y, 1)`` of its (mean) slopes. A colour map multiplies ``base_color``.
+
+    Returns
+    -------
+    dict with ``t, b, n`` (N, 3) shading frame, ``alpha_x, alpha_y`` (N,), ``base_color, f0``
+    (N, 3).
+    """
+    n_samples = g.hit.size
+    ts = np.zeros((n_samples, 3))
+    bs = np.zeros((n_samples, 3))
+    ns = np.zeros((n_samples, 3))
+    ax = np.zeros(n_samples)
+    ay = np.zeros(n_samples)
+    base = np.zeros((n_samples, 3))
+    f0 = np.zeros((n_samples, 3))
+    # Two-sided surfaces: flip the frame of hits seen from behind.
+    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
+    gn, gt, gb = g.normal * flip, g.tangent, g.bitangent * flip
+
+    def tex(ref, m):
+        if filtered:
+            return ref.mip().lookup_footprint(g.uv[m], g.dudv[m])
+        return ref.mip().lookup(g.uv[m], 0.0)
+
+    for k in np.unique(g.object_id):
+        m = g.object_id == k
+        mat = scene.objects[int(k)].material
+        nts = None
+        if mat.normal_map is not None:
+            nts = tex(mat.normal_map, m)
+        elif mat.height_map is not None:
+            nts = slopes_to_normals(tex(mat.height_map, m)[:, :2])
+        ts[m], bs[m], ns[m] = shading_frame(gt[m], gb[m], gn[m], nts)
+        ax[m], ay[m] = mat.alpha_x, mat.alpha_y
+        c = np.broadcast_to(mat.base_color, (int(m.sum()), 3))
+        if mat.color_map is not None:
+            cm = tex(mat.color_map, m)
+            c = c * (cm[:, :3] if cm.shape[1] >= 3 else cm[:, :1])
+        base[m] = c
+        f0[m] = mat.f0
+    return {"t": ts, "b": bs, "n": ns, "alpha_x": ax, "alpha_y": ay, "base_color": base,
+            "f0": f0}
+
+
+def render_ltc(scene: Scene, settings: RenderSettings) -> np.ndarray:
+    """The ``ltc`` method: isotropic LTC table for quad lights, textures at the footprint's mip
+    level (the naive method later methods improve on).
+
+    Anisotropic materials use the isotropic table with ``alpha = sqrt(alpha_x alpha_y)``.
+    With ``spp > 1`` the pixel is supersampled at stratified positions (same as the reference).
+    """
+    from prefilter.ltc.table import GGXTable
+
+    lights = supported_lights(scene, "ltc")
+    table = settings.table if settings.table is not None else GGXTable.load()
+
+    def shade(g, _u):
+        a = surface_attributes(scene, g, filtered=True)
+        return shade_ltc(g.position, a["t"], a["b"], a["n"], g.view,
+                         np.sqrt(a["alpha_x"] * a["alpha_y"]), a["base_color"], a["f0"],
+                         lights, table)
+
+    return render_samples(scene, settings, shade, stratified=settings.spp > 1, desc="ltc")
+
+
+def with_settings(settings: RenderSettings, **changes) -> RenderSettings:
+    """A copy of ``settings`` with fields replaced (convenience for callers and tests)."""
+    return replace(settings, **changes)
