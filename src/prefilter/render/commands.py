@@ -105,3 +105,50 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
     if json_path is not None:
         save_json_atomic(json_path, result)
         click.echo(f"metrics: {json_path}")
+
+
+# -------------------------------------------------------------------------------------- render
+
+
+@click.command("render")
+@click.argument("scene", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option("--method", default="ltc", show_default=True,
+              help="Shading method (see `prefilter.render.methods.available()`: ltc, reference, "
+                   "and those later issues register).")
+@click.option("--spp", type=int, default=1, show_default=True, help="Samples per pixel.")
+@click.option("--seed", type=int, default=0, show_default=True,
+              help="Seed of all random numbers (same seed -> same image bytes).")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Output image, linear radiance (.exr; .npy also works).")
+@click.option("--png", "png", type=click.Path(dir_okay=False, path_type=Path),
+              help="Also write an sRGB 8-bit PNG (values clipped to [0, 1]).")
+@click.option("--jitter", type=float, nargs=2, default=(0.0, 0.0), show_default=True,
+              help="Camera offset in pixels (dx dy).")
+@click.option("--table", "table_path", type=click.Path(exists=True, dir_okay=False,
+                                                       path_type=Path),
+              help="LTC table file (default: the shipped table).")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path | None,
+           jitter: tuple[float, float], table_path: Path | None, quiet: bool) -> None:
+    """Render SCENE (JSON, see docs/scenes.md) with a shading method to an EXR image."""
+    import time
+
+    from prefilter.render.methods import get_method
+    from prefilter.render.pipeline import render as render_image
+    from prefilter.texture.io import write_image
+
+    get_method(method)  # fail on a bad name before loading the scene and table
+    table = None
+    if table_path is not None:
+        from prefilter.ltc.table import GGXTable
+
+        table = GGXTable.load(table_path)
+    t0 = time.perf_counter()
+    image = render_image(scene, method, spp=spp, seed=seed, jitter=jitter, progress=not quiet,
+                         table=table)
+    seconds = time.perf_counter() - t0
+    write_image(out, image)
+    click.echo(f"{method}: {image.shape[1]}x{image.shape[0]}, {spp} spp, {seconds:.2f} s -> {out}")
+    if png is not None:
+        write_image(png, image, srgb=True)
+        click.echo(f"sRGB preview: {png}")
