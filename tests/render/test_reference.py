@@ -245,3 +245,23 @@ def test_shade_reference_deterministic():
     a = shade_reference(*args, np.random.default_rng(12).random((n, 1, 5)))
     b2 = shade_reference(*args, np.random.default_rng(12).random((n, 1, 5)))
     assert a.tobytes() == b2.tobytes()
+
+
+def test_numba_kernel_matches_numpy_estimator():
+    from prefilter.render.reference import estimate_quad_fast
+
+    rng = np.random.default_rng(13)
+    n = 20_000
+    q, _ = np.linalg.qr(rng.normal(size=(n, 3, 3)) * 0.3 + np.eye(3))
+    t, b, nn = q[:, :, 0], q[:, :, 1], q[:, :, 2]
+    pos = rng.normal(size=(n, 3)) * 0.4
+    wo = rng.normal(size=(n, 3))
+    wo[:, 2] = np.abs(wo[:, 2]) + 0.02
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    args = (pos, t, b, nn, wo, rng.uniform(0.01, 1, n), rng.uniform(0.01, 1, n),
+            rng.random((n, 3)), rng.random((n, 3)), rng.random((n, 5)))
+    light = QuadLight(RECT, [1.0, 2.0, 3.0])
+    a = estimate_quad(light, *args)
+    k = estimate_quad_fast(light, *args)
+    assert np.count_nonzero(a) > n  # the comparison covers real contributions
+    assert np.allclose(k, a, rtol=1e-9, atol=1e-12)

@@ -14,7 +14,11 @@ chunk size or thread count.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+
+from prefilter._numba import njit_parallel, njit_serial, prange
 
 from prefilter.microfacet import GGX, reflect
 from prefilter.render.lights import LightSet, QuadLight, quad_light_pdf, quad_light_sample
@@ -89,7 +93,7 @@ def estimate_quad(light: QuadLight, position, ts, bs, ns, wo, alpha_x, alpha_y, 
 
 
 def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y, base_color, f0,
-                    lights: LightSet, u) -> np.ndarray:
+                    lights: LightSet, u, *, kernel: bool = True) -> np.ndarray:
     """Monte Carlo radiance ``(N, 3)`` at shading points, one MIS sample pair per quad light.
 
     Parameters
@@ -102,6 +106,8 @@ def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
     lights : LightSet
     u : (N, Q, 5)
         Uniform random numbers, ``Q = len(lights.quads)``.
+    kernel : bool
+        Use the Numba kernel (default) or the NumPy implementation (same numbers to rounding).
 
     Point and directional lights are evaluated exactly (no sampling).
     """
@@ -113,8 +119,9 @@ def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
     f0 = np.asarray(f0, dtype=np.float64)
     wo = local_view(view, ts, bs, ns)
     out = shade_delta_lights(position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, lights)
+    est = estimate_quad_fast if kernel else estimate_quad
     for q, ql in enumerate(lights.quads):
-        out += estimate_quad(ql, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0,
+        out += est(ql, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0,
                              u[:, q, :])
     return out
 
@@ -155,3 +162,208 @@ def render_reference(scene, settings) -> np.ndarray:
 
     return render_samples(scene, settings, shade, random_dims=q * DIMS_PER_QUAD,
                           stratified=True, desc="reference")
+
+
+# --------------------------------------------------------------------------------------------
+# Numba kernel: the same estimator per sample, no temporaries (estimate_quad is its reference)
+# --------------------------------------------------------------------------------------------
+
+
+@njit_serial
+def _lambda(ax, ay, x, y, z):
+    a2 = ((ax * x) ** 2 + (ay * y) ** 2) / max(z * z, 1e-300)
+    return a2 / (1.0 + math.sqrt(1.0 + a2)) / 2.0
+
+
+@njit_serial
+def _ggx_d(ax, ay, x, y, z):
+    if z <= 0.0:
+        return 0.0
+    t = (x / ax) ** 2 + (y / ay) ** 2 + z * z
+    return 1.0 / (math.pi * ax * ay * t * t)
+
+
+@njit_serial
+def _brdf_pdf(wox, woy, woz, wix, wiy, wiz, ax, ay, base, f0, p_spec, f_out):
+    """Writes the cosine-weighted BRDF (rgb) into ``f_out``; returns the mixture pdf."""
+    hx, hy, hz = wox + wix, woy + wiy, woz + wiz
+    hn = math.sqrt(hx * hx + hy * hy + hz * hz)
+    if hn > 1e-12:
+        hx, hy, hz = hx / hn, hy / hn, hz / hn
+    else:
+        hx, hy, hz = 0.0, 0.0, 1.0
+    lam_o = _lambda(ax, ay, wox, woy, woz)
+    d = _ggx_d(ax, ay, hx, hy, hz)
+    spec = 0.0
+    if woz > 0.0 and wiz > 0.0:
+        spec = d / (1.0 + lam_o + _lambda(ax, ay, wix, wiy, wiz)) / (4.0 * woz)
+    c = min(max(wix * hx + wiy * hy + wiz * hz, 0.0), 1.0)
+    c5 = (1.0 - c) ** 5
+    cos_i = max(wiz, 0.0)
+    for k in range(3):
+        f_out[k] = base[k] / math.pi * cos_i + (f0[k] + (1.0 - f0[k]) * c5) * spec
+    # Density of a reflected visible normal (pdf_reflect) and of the cosine lobe.
+    doth = wox * hx + woy * hy + woz * hz
+    p_s = 0.0
+    if doth > 1e-12 and woz > 0.0:
+        p_s = (d * doth / (1.0 + lam_o) / woz) / (4.0 * doth)
+    return p_spec * p_s + (1.0 - p_spec) * cos_i / math.pi
+
+
+@njit_parallel
+def _estimate_quad_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, u, out):
+    n = pos.shape[0]
+    tri1 = 0.5 * math.sqrt(
+        ((verts[1, 1] - verts[0, 1]) * (verts[2, 2] - verts[0, 2])
+         - (verts[1, 2] - verts[0, 2]) * (verts[2, 1] - verts[0, 1])) ** 2
+        + ((verts[1, 2] - verts[0, 2]) * (verts[2, 0] - verts[0, 0])
+           - (verts[1, 0] - verts[0, 0]) * (verts[2, 2] - verts[0, 2])) ** 2
+        + ((verts[1, 0] - verts[0, 0]) * (verts[2, 1] - verts[0, 1])
+           - (verts[1, 1] - verts[0, 1]) * (verts[2, 0] - verts[0, 0])) ** 2)
+    p1 = tri1 / area
+    for i in prange(n):
+        f = np.empty(3)
+        wox, woy, woz = wo[i, 0], wo[i, 1], wo[i, 2]
+        axi, ayi = ax[i], ay[i]
+        # Lobe selection probability (specular_probability).
+        c5 = (1.0 - min(max(woz, 0.0), 1.0)) ** 5
+        s = 0.0
+        dsum = 0.0
+        for k in range(3):
+            s += (f0[i, k] + (1.0 - f0[i, k]) * c5) / 3.0
+            dsum += base[i, k] / 3.0
+        tot = s + dsum
+        p_spec = min(max(s / tot, 0.05), 1.0) if tot > 0.0 else 0.5
+        acc0 = 0.0
+        acc1 = 0.0
+        acc2 = 0.0
+        # -- light sample: uniform on the area (sample_quad_area) --
+        u0 = u[i, 0]
+        if u0 < p1:
+            u0 = u0 / p1
+            b_i, c_i = 1, 2
+        else:
+            u0 = (u0 - p1) / (1.0 - p1) if p1 < 1.0 else 0.0
+            b_i, c_i = 2, 3
+        u0 = min(max(u0, 0.0), 1.0)
+        su = math.sqrt(u0)
+        b0 = 1.0 - su
+        b1 = u[i, 1] * su
+        b2 = 1.0 - b0 - b1
+        dx = verts[0, 0] + b1 * (verts[c_i, 0] - verts[0, 0]) + b2 * (verts[b_i, 0] - verts[0, 0])
+        dy = verts[0, 1] + b1 * (verts[c_i, 1] - verts[0, 1]) + b2 * (verts[b_i, 1] - verts[0, 1])
+        dz = verts[0, 2] + b1 * (verts[c_i, 2] - verts[0, 2]) + b2 * (verts[b_i, 2] - verts[0, 2])
+        dx -= pos[i, 0]
+        dy -= pos[i, 1]
+        dz -= pos[i, 2]
+        dist2 = dx * dx + dy * dy + dz * dz
+        dist = math.sqrt(dist2)
+        if dist > 1e-12:
+            dx, dy, dz = dx / dist, dy / dist, dz / dist
+            cos_l = -(dx * normal[0] + dy * normal[1] + dz * normal[2])
+            if cos_l > 1e-12:
+                pl = dist2 / (area * cos_l)
+                lx = dx * ts[i, 0] + dy * ts[i, 1] + dz * ts[i, 2]
+                ly = dx * bs[i, 0] + dy * bs[i, 1] + dz * bs[i, 2]
+                lz = dx * ns[i, 0] + dy * ns[i, 1] + dz * ns[i, 2]
+                ln = math.sqrt(lx * lx + ly * ly + lz * lz)
+                lx, ly, lz = lx / ln, ly / ln, lz / ln
+                pb = _brdf_pdf(wox, woy, woz, lx, ly, lz, axi, ayi, base[i], f0[i], p_spec, f)
+                den = pl + pb
+                if den > 0.0:
+                    acc0 += f[0] / den
+                    acc1 += f[1] / den
+                    acc2 += f[2] / den
+        # -- BRDF sample: GGX visible normal (Heitz 2018) reflected, or cosine --
+        if u[i, 4] < p_spec:
+            vx, vy, vz = axi * wox, ayi * woy, woz
+            vn = math.sqrt(vx * vx + vy * vy + vz * vz)
+            vx, vy, vz = vx / vn, vy / vn, vz / vn
+            lensq = vx * vx + vy * vy
+            if lensq > 1e-14:
+                inv = 1.0 / math.sqrt(lensq)
+                t1x, t1y, t1z = -vy * inv, vx * inv, 0.0
+            else:
+                t1x, t1y, t1z = 1.0, 0.0, 0.0
+            t2x = vy * t1z - vz * t1y
+            t2y = vz * t1x - vx * t1z
+            t2z = vx * t1y - vy * t1x
+            r = math.sqrt(u[i, 2])
+            phi = 2.0 * math.pi * u[i, 3]
+            q1 = r * math.cos(phi)
+            q2 = r * math.sin(phi)
+            sw = 0.5 * (1.0 + vz)
+            q2 = (1.0 - sw) * math.sqrt(max(0.0, 1.0 - q1 * q1)) + sw * q2
+            q3 = math.sqrt(max(0.0, 1.0 - q1 * q1 - q2 * q2))
+            mx = axi * (q1 * t1x + q2 * t2x + q3 * vx)
+            my = ayi * (q1 * t1y + q2 * t2y + q3 * vy)
+            mz = max(1e-12, q1 * t1z + q2 * t2z + q3 * vz)
+            mn = math.sqrt(mx * mx + my * my + mz * mz)
+            mx, my, mz = mx / mn, my / mn, mz / mn
+            dot = wox * mx + woy * my + woz * mz
+            bx, by, bz = 2.0 * dot * mx - wox, 2.0 * dot * my - woy, 2.0 * dot * mz - woz
+        else:
+            # Shirley-Chiu concentric disk lifted to the hemisphere (cosine_hemisphere).
+            a = 2.0 * u[i, 2] - 1.0
+            b = 2.0 * u[i, 3] - 1.0
+            if a == 0.0 and b == 0.0:
+                rr, ph = 0.0, 0.0
+            elif abs(a) > abs(b):
+                rr, ph = a, (math.pi / 4.0) * b / a
+            else:
+                rr, ph = b, math.pi / 2.0 - (math.pi / 4.0) * a / b
+            bx, by = rr * math.cos(ph), rr * math.sin(ph)
+            bz = math.sqrt(max(0.0, 1.0 - bx * bx - by * by))
+        # World direction and its hit on the front of the quad (quad_light_pdf).
+        wx = bx * ts[i, 0] + by * bs[i, 0] + bz * ns[i, 0]
+        wy = bx * ts[i, 1] + by * bs[i, 1] + bz * ns[i, 1]
+        wz = bx * ts[i, 2] + by * bs[i, 2] + bz * ns[i, 2]
+        cos_l = -(wx * normal[0] + wy * normal[1] + wz * normal[2])
+        if cos_l > 1e-12:
+            t = ((verts[0, 0] - pos[i, 0]) * normal[0] + (verts[0, 1] - pos[i, 1]) * normal[1]
+                 + (verts[0, 2] - pos[i, 2]) * normal[2]) / (-cos_l)
+            if t > 0.0:
+                hx = pos[i, 0] + t * wx
+                hy = pos[i, 1] + t * wy
+                hz = pos[i, 2] + t * wz
+                inside = True
+                for k in range(4):
+                    k1 = (k + 1) % 4
+                    ex = verts[k1, 0] - verts[k, 0]
+                    ey = verts[k1, 1] - verts[k, 1]
+                    ez = verts[k1, 2] - verts[k, 2]
+                    px = hx - verts[k, 0]
+                    py = hy - verts[k, 1]
+                    pz = hz - verts[k, 2]
+                    cr = ((ey * pz - ez * py) * normal[0] + (ez * px - ex * pz) * normal[1]
+                          + (ex * py - ey * px) * normal[2])
+                    if cr < 0.0:
+                        inside = False
+                if inside:
+                    plb = t * t / (area * cos_l)
+                    pb = _brdf_pdf(wox, woy, woz, bx, by, bz, axi, ayi, base[i], f0[i], p_spec,
+                                   f)
+                    den = plb + pb
+                    if den > 0.0:
+                        acc0 += f[0] / den
+                        acc1 += f[1] / den
+                        acc2 += f[2] / den
+        out[i, 0] = acc0
+        out[i, 1] = acc1
+        out[i, 2] = acc2
+
+
+def estimate_quad_fast(light: QuadLight, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color,
+                       f0, u) -> np.ndarray:
+    """:func:`estimate_quad` as a Numba kernel (same random numbers, same estimate to rounding)."""
+    n = len(position)
+
+    def c(a, shape):
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=np.float64), shape))
+
+    out = np.empty((n, 3))
+    _estimate_quad_kernel(c(position, (n, 3)), c(ts, (n, 3)), c(bs, (n, 3)), c(ns, (n, 3)),
+                          c(wo, (n, 3)), c(alpha_x, (n,)), c(alpha_y, (n,)),
+                          c(base_color, (n, 3)), c(f0, (n, 3)), light.vertices, light.normal,
+                          float(light.area), c(u, (n, 5)), out)
+    return out * light.radiance
