@@ -140,3 +140,28 @@ def test_ltc_agrees_with_reference_on_a_flat_plane():
     assert np.median(rel) < 0.04 and np.quantile(rel, 0.9) < 0.12, (np.median(rel),
                                                                     np.quantile(rel, 0.9))
     assert abs(lum_l.sum() / lum_r.sum() - 1) < 0.03
+
+
+def test_render_command_writes_exr_and_png(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from prefilter.cli import cli
+    from prefilter.texture.io import read_image
+
+    path = tmp_path / "flat.json"
+    path.write_text(json.dumps(FLAT))
+    out, png = tmp_path / "ref.exr", tmp_path / "ref.png"
+    res = CliRunner().invoke(cli, ["render", str(path), "--method", "reference", "--spp", "4",
+                                   "--seed", "5", "--out", str(out), "--png", str(png),
+                                   "--quiet"])
+    assert res.exit_code == 0, res.output
+    img = read_image(out)
+    assert img.shape == (16, 24, 3)
+    # The file holds the library's image (float32 EXR is lossless for float32 data).
+    assert np.array_equal(img, render(load_scene(FLAT), "reference", spp=4, seed=5))
+    assert read_image(png).shape[:2] == (16, 24)
+    bad = CliRunner().invoke(cli, ["render", str(path), "--method", "nope", "--out",
+                                   str(tmp_path / "x.exr")])
+    assert bad.exit_code != 0
