@@ -179,7 +179,7 @@ class SlopeColormapTable:
             out = out + wk * (top * (1 - fy) + bot * fy)
         return out
 
-    def lookup(self, mean, cov, n_taps: int = 5) -> np.ndarray:
+    def lookup(self, mean, cov, n_taps: int = 7) -> np.ndarray:
         """``<C, N(mean, cov)>``: stack at the minor std, Gauss-Hermite taps along the major axis.
 
         Parameters
@@ -255,7 +255,7 @@ def slope_prefilter_table(colormap, extent: float = 1.0, sigma_max: float = 0.5,
     return SlopeColormapTable(stack, e, smax)
 
 
-def filter_slope(table: SlopeColormapTable, wo, mean, cov, n_taps: int = 5) -> np.ndarray:
+def filter_slope(table: SlopeColormapTable, wo, mean, cov, n_taps: int = 7) -> np.ndarray:
     """Filtered slope-correlated colour ``C_s_bar(wo) = <C_s, D_s>`` (Heitz et al. 2013, eq. 20)
     with ``D_s`` replaced by the Gaussian of its exact moments. Shape ``(..., C)``."""
     m, c = slope_distribution(wo, mean, cov)

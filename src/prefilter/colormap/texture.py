@@ -104,8 +104,14 @@ class NoiseStd:
 
 
 def filter_noise(table, noise_chain: MipChain, noise_std: NoiseStd, uv, dudv) -> np.ndarray:
-    """Filtered colour of colour-mapped procedural noise: mean from the noise's mip chain, std from
-    the per-LOD table (section 4.2), ``(..., C)``. Returns ``(filtered, naive)``."""
+    """Colour-mapped procedural noise over pixel footprints (section 4.2): the mean is the noise's
+    mip-mapped value at the footprint's LOD, the std comes from the per-LOD table.
+
+    Returns
+    -------
+    filtered, naive : numpy.ndarray, shape (..., C)
+        ``<C, N(mean, sigma(lod)^2)>`` and ``C(mean)``.
+    """
     if not isinstance(noise_chain, MipChain) or noise_chain.shape[2] != 1:
         raise PrefilterError("noise_chain: expected a one-channel MipChain of the noise")
     h, w = noise_chain.shape[:2]
