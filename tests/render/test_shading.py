@@ -126,3 +126,13 @@ def test_ltc_diffuse_is_the_rectangle_form_factor_in_a_rotated_frame():
                      np.array([0.5]), base, np.zeros((1, 3)), LightSet(quads=(light,)),
                      _NoSpecular())
     assert np.all(back == 0)
+
+
+def test_scaled_inverse_is_a_positive_multiple_of_the_inverse():
+    from prefilter.render.shading import scaled_inverse
+
+    M = np.random.default_rng(3).normal(size=(200, 3, 3))
+    S = scaled_inverse(M)
+    prod = S @ M  # = |det M| I
+    det = np.abs(np.linalg.det(M))
+    assert np.allclose(prod, det[:, None, None] * np.eye(3), atol=1e-12)

@@ -104,10 +104,19 @@ def shade_delta_lights(position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f
 def quad_local(light, position, ts, bs, ns) -> np.ndarray:
     """Corners ``(N, 4, 3)`` of a quad light relative to each shading point, in its frame."""
     d = light.vertices[None, :, :] - position[:, None, :]
-    return np.stack(
-        [np.sum(d * ts[:, None], -1), np.sum(d * bs[:, None], -1), np.sum(d * ns[:, None], -1)],
-        axis=-1,
-    )
+    return np.matmul(d, np.stack([ts, bs, ns], axis=-1))
+
+
+def scaled_inverse(M) -> np.ndarray:
+    """``|det M| M^-1`` for ``M (N, 3, 3)`` by cross products of the columns (no LAPACK call).
+
+    Rows of the adjugate are ``c1 x c2, c2 x c0, c0 x c1``; the polygon integral only needs
+    ``M^-1`` up to a positive factor (:func:`prefilter.ltc.polygon_integral_minv`).
+    """
+    c0, c1, c2 = M[..., :, 0], M[..., :, 1], M[..., :, 2]
+    adj = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=-2)
+    det = np.sum(c0 * adj[..., 0, :], axis=-1)
+    return adj * np.where(det < 0.0, -1.0, 1.0)[..., None, None]
 
 
 def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
@@ -143,7 +152,7 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
         return out
     # Roughness below the table's range uses its smoothest row (documented in docs/reference.md).
     M, magnitude, fresnel = table.lookup(wo, np.clip(alpha, table.alpha_min, 1.0))
-    M_inv = np.linalg.inv(M)
+    M_inv = scaled_inverse(M)
     spec_scale = f0 * (magnitude - fresnel)[:, None] + fresnel[:, None]
     for ql in lights.quads:
         P = quad_local(ql, position, ts, bs, ns)
