@@ -1,0 +1,75 @@
+"""``prefilter bake colormap``: bake a pre-convolved colour-map table (a thin layer over
+:func:`prefilter.colormap.table.prefilter_table`)."""
+
+from __future__ import annotations
+
+import click
+
+
+def load_colormap_image(path, *, srgb: bool = True):
+    """Colour-map samples ``(N, C)`` from an image: a single row or column is taken as is; a
+    larger image is averaged over its rows (a horizontal gradient), left = ``value_range[0]``.
+    An alpha channel is dropped."""
+    import numpy as np
+
+    from prefilter.errors import PrefilterError
+    from prefilter.texture.io import read_image
+
+    a = read_image(path, srgb=srgb)
+    if a.shape[2] in (2, 4):
+        a = a[..., :-1]
+    if a.shape[0] == 1:
+        c = a[0]
+    elif a.shape[1] == 1:
+        c = a[:, 0]
+    else:
+        c = a.mean(axis=0)
+    if c.shape[0] < 2:
+        raise PrefilterError(f"{path}: expected a colour map at least 2 texels long, got {a.shape}")
+    return np.ascontiguousarray(c)
+
+
+@click.command("colormap")
+@click.argument("colormap", type=click.Path(exists=True, dir_okay=False))
+@click.option("--sigma-max", type=float, required=True,
+              help="Largest std of the driving function (value units) the table serves.")
+@click.option("--range", "value_range", type=float, nargs=2, default=(0.0, 1.0),
+              show_default=True, help="Values spanned by the colour map (left to right).")
+@click.option("--size", default=256, show_default=True, type=click.IntRange(2, 8192),
+              help="Table columns (means); the map is resampled exactly if its length differs.")
+@click.option("--n-sigma", default=None, type=click.IntRange(2, 8192),
+              help="Table rows (stds); default: --size.")
+@click.option("--edge", type=click.Choice(["clamp", "mirror", "periodic"]), default="clamp",
+              show_default=True, help="How the colour map continues outside --range.")
+@click.option("--linear", is_flag=True,
+              help="The PNG holds linear values (default: sRGB-encoded colours are decoded).")
+@click.option("-o", "--out", type=click.Path(dir_okay=False), required=True,
+              help="Output table (.exr, .npy or .png); metadata goes next to it as .json.")
+@click.option("--glsl", "glsl_out", type=click.Path(dir_okay=False), default=None,
+              help="Also write the GLSL lookup snippet for this table.")
+def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear, out, glsl_out):
+    """Pre-convolve COLORMAP (an image) with Gaussians of std 0..SIGMA_MAX (Heitz et al. 2013,
+    eq. 10). Writes the table (rows = sigma, columns = mean) and TABLE.json with its layout."""
+    import hashlib
+    from pathlib import Path
+
+    from prefilter._io import atomic_path, save_json_atomic
+    from prefilter.colormap.glsl import glsl_snippet
+    from prefilter.colormap.table import prefilter_table
+    from prefilter.texture.io import write_image
+
+    c = load_colormap_image(colormap, srgb=not linear)
+    table = prefilter_table(c, value_range, sigma_max, size=size, edge=edge, n_sigma=n_sigma)
+    out = Path(out)
+    write_image(out, table.table, bits=16)
+    meta = table.metadata()
+    meta.update(source=str(colormap), source_sha256=hashlib.sha256(
+        Path(colormap).read_bytes()).hexdigest(), source_encoding="linear" if linear else "srgb",
+        table_file=out.name)
+    save_json_atomic(out.with_suffix(".json"), meta)
+    click.echo(f"wrote {out} ({table.n_sigma} x {table.n_mean} x {table.table.shape[2]}) and "
+               f"{out.with_suffix('.json').name}")
+    if glsl_out:
+        with atomic_path(glsl_out) as tmp:
+            Path(tmp).write_text(glsl_snippet(meta))
+        click.echo(f"wrote {glsl_out}")

@@ -1,0 +1,113 @@
+"""GLSL lookup snippet for baked colour-map tables, and its Python twin.
+
+The twin :func:`glsl_texture_twin` reproduces what the snippet asks of the GPU -- ``texture()`` on a
+``GL_LINEAR`` sampler with the wrap modes of the OpenGL 4.6 specification (section 8.14.2) -- on
+the float32 table as stored in the baked file, independently of
+:meth:`prefilter.colormap.table.ColormapTable.lookup`; the tests check the two agree.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from prefilter._validate import as_float_array
+from prefilter.errors import PrefilterError
+
+__all__ = ["GLSL_WRAP", "glsl_lookup_twin", "glsl_snippet", "glsl_texture_twin"]
+
+#: OpenGL wrap mode of the mean axis for each edge rule (the sigma axis is always clamped).
+GLSL_WRAP = {"clamp": "GL_CLAMP_TO_EDGE", "mirror": "GL_MIRRORED_REPEAT", "periodic": "GL_REPEAT"}
+
+_SNIPPET = """\
+// Filtered colour maps (Heitz, Nowrouzezahrai, Poulin, Neyret 2013), baked by
+// `prefilter bake colormap`. Upload the table with row 0 of the file at t = 0, GL_LINEAR
+// min/mag filters without mipmaps, wrap S = {wrap_s}, wrap T = GL_CLAMP_TO_EDGE.
+uniform sampler2D uColormapTable; // rows: sigma = sigma_max * j / (n_sigma - 1); columns: mean
+const vec2  kValueRange = vec2({lo:.9g}, {hi:.9g});
+const float kSigmaMax   = {sigma_max:.9g};
+const float kNSigma     = {n_sigma:.1f};
+
+// <C, N(mean, sigma^2)> (eq. 10): one bilinear fetch.
+vec3 colormapFiltered(float mean, float sigma) {{
+    float u = (mean - kValueRange.x) / (kValueRange.y - kValueRange.x);
+    float v = (clamp(sigma / kSigmaMax, 0.0, 1.0) * (kNSigma - 1.0) + 0.5) / kNSigma;
+    return texture(uColormapTable, vec2(u, v)).rgb;
+}}
+
+// Tabulated driving function (section 4.2): a mipmapped texture of (E[f], E[f^2]).
+vec3 colormapTexture(sampler2D moments, vec2 uv) {{
+    vec2 m = texture(moments, uv).rg;
+    return colormapFiltered(m.x, sqrt(max(m.y - m.x * m.x, 0.0)));
+}}
+
+// Procedural noise (section 4.2): the filtered noise value and its std per LOD (1D texture).
+vec3 colormapNoise(float filteredNoise, sampler2D noiseStd, float lod, float nLevels) {{
+    float s = texture(noiseStd, vec2((lod + 0.5) / nLevels, 0.5)).r;
+    return colormapFiltered(filteredNoise, s);
+}}
+
+// Height-correlated colour (section 5.1, eqs. 13, 17, 18); lambdaO / lambdaI from eq. 3.
+// Returns V_bar * <C_h, D_h> as eq. 14.
+const vec4 kHeightFit = vec4({a_mu:.6g}, {b_mu:.6g}, {a_s:.6g}, {b_s:.6g}); // alpha/beta mu, sigma
+vec3 colormapHeight(float sigmaH, float lambdaO, float lambdaI) {{
+    float L = lambdaO + lambdaI;
+    float mu = kHeightFit.x * sigmaH * log(kHeightFit.y * L + 1.0);
+    float sd = sigmaH / (1.0 + kHeightFit.z * log(kHeightFit.w * L + 1.0));
+    return (1.0 + lambdaO) / (1.0 + L) * colormapFiltered(mu, sd);
+}}
+"""
+
+
+def glsl_snippet(metadata: dict, height_params=None) -> str:
+    """The GLSL lookup code for a baked table described by ``metadata``
+    (:meth:`ColormapTable.metadata`); ``height_params`` defaults to our refit constants."""
+    from prefilter.colormap.height import OWN_PARAMS
+
+    try:
+        lo, hi = metadata["value_range"]
+        p = OWN_PARAMS if height_params is None else height_params
+        return _SNIPPET.format(wrap_s=GLSL_WRAP[metadata["edge"]], lo=lo, hi=hi,
+                               sigma_max=metadata["sigma_max"], n_sigma=metadata["n_sigma"],
+                               a_mu=p[0], b_mu=p[1], a_s=p[2], b_s=p[3])
+    except (KeyError, TypeError, ValueError) as exc:
+        raise PrefilterError(f"metadata: expected a colour-map table description, got {exc}") \
+            from None
+
+
+def _wrap(i: np.ndarray, size: int, mode: str) -> np.ndarray:
+    """Texel index wrapping of OpenGL 4.6, section 8.14.2 (table 8.20)."""
+    if mode == "GL_REPEAT":
+        return np.mod(i, size)
+    if mode == "GL_MIRRORED_REPEAT":
+        a = np.mod(i, 2 * size) - size
+        return (size - 1) - np.where(a >= 0, a, -(1 + a))
+    if mode == "GL_CLAMP_TO_EDGE":
+        return np.clip(i, 0, size - 1)
+    raise PrefilterError(f"wrap mode: expected one of {', '.join(GLSL_WRAP.values())}, got {mode!r}")
+
+
+def glsl_texture_twin(image, u, v, wrap_s: str, wrap_t: str = "GL_CLAMP_TO_EDGE") -> np.ndarray:
+    """``texture(sampler, vec2(u, v))`` of a ``GL_LINEAR`` 2D sampler on ``image (H, W, C)``
+    (row ``r`` at ``t = (r + 0.5) / H``), ``(..., C)``, evaluated in float32 as a GPU would."""
+    img = np.asarray(image, dtype=np.float32)
+    h, w = img.shape[:2]
+    x = np.asarray(u, dtype=np.float32) * np.float32(w) - np.float32(0.5)
+    y = np.asarray(v, dtype=np.float32) * np.float32(h) - np.float32(0.5)
+    x, y = np.broadcast_arrays(x, y)
+    i0, j0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
+    a, b = (x - np.floor(x))[..., None], (y - np.floor(y))[..., None]
+    c0, c1 = _wrap(i0, w, wrap_s), _wrap(i0 + 1, w, wrap_s)
+    r0, r1 = _wrap(j0, h, wrap_t), _wrap(j0 + 1, h, wrap_t)
+    return ((1 - a) * (1 - b) * img[r0, c0] + a * (1 - b) * img[r0, c1]
+            + (1 - a) * b * img[r1, c0] + a * b * img[r1, c1])
+
+
+def glsl_lookup_twin(image, metadata: dict, mean, sigma) -> np.ndarray:
+    """Python twin of the snippet's ``colormapFiltered(mean, sigma)``, shape ``(..., C)``."""
+    m = as_float_array(mean, "mean").astype(np.float32)
+    s = as_float_array(sigma, "sigma").astype(np.float32)
+    lo, hi = (np.float32(x) for x in metadata["value_range"])
+    smax, ns = np.float32(metadata["sigma_max"]), np.float32(metadata["n_sigma"])
+    u = (m - lo) / (hi - lo)
+    v = (np.clip(s / smax, 0, 1) * (ns - 1) + np.float32(0.5)) / ns
+    return glsl_texture_twin(image, u, v, GLSL_WRAP[metadata["edge"]])
