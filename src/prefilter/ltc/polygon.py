@@ -36,7 +36,7 @@ __all__ = ["clamped_cosine_integral", "polygon_integral", "polygon_integral_minv
 
 _PLANE_RTOL = 1e-12  # plane-through-origin test, relative to the polygon's size
 _AREA_RTOL = 1e-14  # |Newell normal| below this x size^2 is rounding noise (about 100 ulps)
-_DET_RTOL = 1e-12  # |det| / (product of column norms) below this counts as singular
+_DET_RTOL2 = 1e-24  # (|det| / product of column norms)^2 below this counts as singular
 _INV_2PI = 1.0 / (2.0 * math.pi)
 
 
@@ -60,6 +60,22 @@ _ATAN_P = (
     0.021138573606647313,
 )
 _TAN_PI_8 = math.tan(math.pi / 8)
+_TAN2_PI_8 = _TAN_PI_8 * _TAN_PI_8
+
+
+@njit_serial
+def _atan_poly(z):
+    """``P(z)`` with ``atan(y) = y (1 + z P(z))``, ``z = y^2 <= tan^2(pi/8)`` (Horner)."""
+    p = _ATAN_P[9]
+    p = p * z + _ATAN_P[8]
+    p = p * z + _ATAN_P[7]
+    p = p * z + _ATAN_P[6]
+    p = p * z + _ATAN_P[5]
+    p = p * z + _ATAN_P[4]
+    p = p * z + _ATAN_P[3]
+    p = p * z + _ATAN_P[2]
+    p = p * z + _ATAN_P[1]
+    return p * z + _ATAN_P[0]
 
 
 @njit_serial
@@ -76,17 +92,7 @@ def _atan2_pos(s, d):
         y = (lo - hi) / (lo + hi)
         base = 0.25 * math.pi
     z = y * y
-    p = _ATAN_P[9]
-    p = p * z + _ATAN_P[8]
-    p = p * z + _ATAN_P[7]
-    p = p * z + _ATAN_P[6]
-    p = p * z + _ATAN_P[5]
-    p = p * z + _ATAN_P[4]
-    p = p * z + _ATAN_P[3]
-    p = p * z + _ATAN_P[2]
-    p = p * z + _ATAN_P[1]
-    p = p * z + _ATAN_P[0]
-    r = base + (y + y * z * p)
+    r = base + (y + y * z * _atan_poly(z))
     if s > ad:
         r = 0.5 * math.pi - r
     if d < 0.0:
@@ -100,12 +106,20 @@ def _edge(ax, ay, az, bx, by, bz):
     cx = ay * bz - az * by
     cy = az * bx - ax * bz
     cz = ax * by - ay * bx
-    s = math.sqrt(cx * cx + cy * cy + cz * cz)
-    if s <= 0.0:
+    s2 = cx * cx + cy * cy + cz * cz
+    d = ax * bx + ay * by + az * bz
+    if s2 <= 0.0:
         # a, b parallel: zero-length arc, or antipodal (only on edge-on polygons, which are 0)
         return 0.0
-    # atan2 keeps full precision for short edges where acos(dot) does not
-    return _atan2_pos(s, ax * bx + ay * by + az * bz) * (cz / s)
+    # theta = atan2(s, d) keeps full precision for short edges, where acos(dot) does not
+    if d > 0.0 and s2 <= _TAN2_PI_8 * (d * d):
+        # the common short-edge case: theta / s = (1 + z P(z)) / d with z = (s / d)^2,
+        # which needs neither s nor a second division
+        inv_d = 1.0 / d
+        z = s2 * (inv_d * inv_d)
+        return cz * inv_d * (1.0 + z * _atan_poly(z))
+    s = math.sqrt(s2)
+    return _atan2_pos(s, d) * (cz / s)
 
 
 @njit_parallel
@@ -138,10 +152,10 @@ def _polygon_kernel(mats, m_mode, m_idx, verts, v_mode, v_idx, invert, two_sided
         k01 = a12 * a20 - a10 * a22
         k02 = a10 * a21 - a11 * a20
         det = a00 * k00 + a01 * k01 + a02 * k02
-        c0 = math.sqrt(a00 * a00 + a10 * a10 + a20 * a20)
-        c1 = math.sqrt(a01 * a01 + a11 * a11 + a21 * a21)
-        c2 = math.sqrt(a02 * a02 + a12 * a12 + a22 * a22)
-        if not (abs(det) > _DET_RTOL * c0 * c1 * c2):
+        c0 = a00 * a00 + a10 * a10 + a20 * a20
+        c1 = a01 * a01 + a11 * a11 + a21 * a21
+        c2 = a02 * a02 + a12 * a12 + a22 * a22
+        if not (det * det > _DET_RTOL2 * (c0 * c1 * c2)):  # |det| vs product of column norms
             status[k] = 1
             out[k] = 0.0
             continue
