@@ -127,3 +127,33 @@ def test_bad_input_raises():
         smith_lambda_direction(np.array([0.0, 0.0, -1.0]), 0.1)
     with pytest.raises(PrefilterError, match="sigma_s"):
         smith_lambda(1.0, 0.0)
+
+
+def test_footprint_extension_reduces_to_the_whole_surface():
+    from prefilter.colormap.height import height_footprint
+
+    lam = np.array([0.01, 0.3, 1.0, 5.0, 40.0])
+    mu, sd = height_moments_exact(lam, 2.0)
+    m, s, vb = height_footprint(0.0, 2.0, 0.25 * lam, 0.75 * lam, 2.0)
+    np.testing.assert_allclose(m, mu, atol=5e-4)  # 1D table interpolation
+    np.testing.assert_allclose(s, sd, atol=0.04)
+    np.testing.assert_allclose(vb, mean_visibility(0.25 * lam, 0.75 * lam), atol=2e-4)
+
+
+@pytest.mark.parametrize("mf,sf,lo,li", [(0.5, 0.5, 1, 2), (1.5, 0.8, 3, 10), (0.0, 0.2, 0.1, 0.2),
+                                         (0.7, 0.0, 2.0, 3.0)])
+def test_footprint_extension_against_quadrature(mf, sf, lo, li):
+    from prefilter.colormap.height import height_footprint
+
+    m, s, vb = height_footprint(mf, sf, lo, li, 1.0)
+    if sf == 0.0:  # a point: its own height, lit with probability P_h(h)^Lambda_i
+        assert m == mf and s == 0.0
+        assert vb == pytest.approx(norm.cdf(mf) ** li, rel=0.05)
+        return
+    f = lambda h, k, lam: h**k * norm.cdf(h) ** lam * norm.pdf(h, mf, sf)  # noqa: E731
+    z = quad(f, -12, 12, args=(0, lo + li))[0]
+    m1 = quad(f, -12, 12, args=(1, lo + li))[0] / z
+    m2 = quad(f, -12, 12, args=(2, lo + li))[0] / z
+    assert m == pytest.approx(m1, abs=0.02)
+    assert s == pytest.approx(np.sqrt(m2 - m1 * m1), abs=0.01)
+    assert vb == pytest.approx(z / quad(f, -12, 12, args=(0, lo))[0], abs=0.01)

@@ -19,7 +19,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.special import erfc, log_ndtr
+from scipy.special import erfc, erfcx, log_ndtr
 
 from prefilter._validate import as_float_array, as_upper_directions
 from prefilter.errors import PrefilterError
@@ -31,6 +31,8 @@ __all__ = [
     "HeightParams",
     "fit_height_params",
     "filter_height",
+    "filter_height_footprint",
+    "height_footprint",
     "height_density",
     "height_distribution",
     "height_moments_approx",
@@ -309,3 +311,91 @@ def naive_height(table, sigma_h=1.0, *, noise_mean=0.0, noise_sigma=0.0) -> np.n
     sh = as_float_array(sigma_h, "sigma_h")
     sr = as_float_array(noise_sigma, "noise_sigma")
     return table.lookup(as_float_array(noise_mean, "noise_mean"), np.sqrt(sh * sh + sr * sr))
+
+
+# -- footprints smaller than the whole surface (our extension) -------------------------------------
+#
+# Near the camera a pixel sees only part of the height distribution: heights ~ N(mu_fp, sigma_fp^2)
+# while the Smith visibility P_h(h)^L still refers to the whole surface. We approximate
+# P_h(h)^L ~ Phi(kappa_L h / sigma_h + d_L) (a probit): a Gaussian times a probit is a skew normal,
+# whose mass, mean and variance are closed forms, and we choose kappa_L, d_L so that for the whole
+# surface (mu_fp = 0, sigma_fp = sigma_h) the mass is eq. 16's 1 / (1 + L) and the mean is the
+# exact mu_d. Then V_bar reduces to eq. 13 and the mean to eq. 17's left side; the std is within
+# 0.02 sigma_h of the exact sigma_d for L <= 100 (checked in the tests).
+
+_PROBIT_T = np.linspace(np.log(1e-4), np.log(1e4), 161)  # grid in log L
+
+
+def _probit_table():
+    """``(kappa_L, d_L)`` on :data:`_PROBIT_T` (computed once from the exact moments)."""
+    global _PROBIT
+    try:
+        return _PROBIT
+    except NameError:
+        pass
+    from scipy.special import ndtri
+
+    lam = np.exp(_PROBIT_T)
+    mu, _ = height_moments_exact(lam)
+    z0 = ndtri(1.0 / (1.0 + lam))
+    tau = _mills(z0) / mu  # sqrt(1 + s^2) with s the probit's scale
+    s = np.sqrt(np.maximum(tau * tau - 1.0, 1e-12))
+    _PROBIT = (1.0 / s, z0 * tau / s)
+    return _PROBIT
+
+
+def _mills(z):
+    """``phi(z) / Phi(z)``, stable for z << 0."""
+    return np.sqrt(2.0 / np.pi) / erfcx(-z / np.sqrt(2.0))
+
+
+def _probit(lam):
+    kappa, d = _probit_table()
+    t = np.log(np.maximum(lam, 1e-300))
+    k = np.interp(t, _PROBIT_T, kappa)
+    dd = np.interp(t, _PROBIT_T, d)
+    # below the grid the tilt vanishes (kappa -> 0, d -> +inf); above it L is far beyond use
+    small = lam < np.exp(_PROBIT_T[0])
+    return np.where(small, 0.0, k), np.where(small, 40.0, dd)
+
+
+def height_footprint(mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h=1.0):
+    """Height filtering distribution over a footprint whose heights are ``N(mu_fp, sigma_fp^2)``
+    on a surface of height std ``sigma_h`` (our extension of eqs. 13-17, see the comment above).
+
+    Returns
+    -------
+    mean, std, v_bar : numpy.ndarray, broadcast shape
+        Mean and std of ``D_h`` (a Gaussian approximation) and the footprint's mean light
+        visibility ``E[V_o V_i] / E[V_o]``.
+    """
+    from scipy.special import log_ndtr as _lndtr
+
+    m = as_float_array(mu_fp, "mu_fp")
+    sf = as_float_array(sigma_fp, "sigma_fp")
+    sh = as_float_array(sigma_h, "sigma_h")
+    lo = _as_lambda(lambda_o, "lambda_o")
+    li = _as_lambda(lambda_i, "lambda_i")
+    if np.any(sf < 0) or np.any(sh <= 0):
+        raise PrefilterError("sigma_fp, sigma_h: expected sigma_fp >= 0 and sigma_h > 0")
+    x, v = m / sh, (sf / sh) ** 2
+
+    def tilt(lam):
+        k, d = _probit(lam)
+        r = np.sqrt(1.0 + k * k * v)
+        z = (k * x + d) / r
+        return z, k, r
+
+    z, k, r = tilt(lo + li)
+    zo, _, _ = tilt(lo)
+    lam_z = _mills(z)
+    mean = x + k * v * lam_z / r
+    var = np.maximum(v - (k * v / r) ** 2 * lam_z * (z + lam_z), 0.0)
+    v_bar = np.exp(_lndtr(z) - _lndtr(zo))
+    return mean * sh, np.sqrt(var) * sh, v_bar
+
+
+def filter_height_footprint(table, mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h=1.0):
+    """``V_bar <C_h, D_h>`` over a footprint (eq. 14 with :func:`height_footprint`), ``(..., C)``."""
+    mean, std, v_bar = height_footprint(mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h)
+    return v_bar[..., None] * table.lookup(mean, std)
