@@ -8,6 +8,7 @@ call (JIT compilation or cache load) is excluded.
 
 from __future__ import annotations
 
+import os
 import time
 
 import numba
@@ -37,14 +38,19 @@ def random_quads(rng: np.random.Generator, n: int) -> np.ndarray:
     return np.stack(corners, axis=1)
 
 
-def best_time(f, repeat: int = REPEAT) -> float:
+def best_time(f, repeat: int = REPEAT) -> tuple[float, float]:
+    """Best wall-clock and best process CPU time (all threads) over ``repeat`` calls, seconds.
+
+    CPU time is reported too because the machine is shared: wall time then depends on the load,
+    CPU time much less (it still rises with contention for caches and hyperthreads)."""
     f()  # compile / load the cache
-    times = []
+    wall, cpu = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         f()
-        times.append(time.perf_counter() - t0)
-    return min(times)
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return min(wall), min(cpu)
 
 
 def main() -> None:
@@ -57,13 +63,22 @@ def main() -> None:
     t_m = best_time(lambda: polygon_integral(M, V))
     t_minv = best_time(lambda: polygon_integral_minv(M_inv, V))
     t_cos = best_time(lambda: clamped_cosine_integral(V))
+    numba.set_num_threads(1)
+    t_one = best_time(lambda: polygon_integral_minv(M_inv, V))
+    numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
     t_np = best_time(lambda: _polygon_integral_numpy(M_inv, V), repeat=2)
     diff = np.max(np.abs(polygon_integral_minv(M_inv, V) - _polygon_integral_numpy(M_inv, V)))
-    for name, t in [("polygon_integral(M, P)", t_m), ("polygon_integral_minv(M_inv, P)", t_minv),
-                    ("clamped_cosine_integral(P)", t_cos), ("NumPy reference (M_inv)", t_np)]:
-        print(f"  {name:34s} {t * 1e3:8.1f} ms   {N / t / 1e6:7.2f} M integrals/s")
-    print(f"  ratio NumPy reference / Numba (polygon_integral_minv): {t_np / t_minv:.1f}x")
+    rows = [("polygon_integral(M, P)", t_m), ("polygon_integral_minv(M_inv, P)", t_minv),
+            ("clamped_cosine_integral(P)", t_cos), ("polygon_integral_minv, 1 thread", t_one),
+            ("NumPy reference (M_inv)", t_np)]
+    print(f"  {'':34s} {'wall':>9s} {'cpu':>9s}   wall throughput")
+    for name, (w, c) in rows:
+        print(f"  {name:34s} {w * 1e3:6.1f} ms {c * 1e3:6.1f} ms   "
+              f"{N / w / 1e6:6.2f} M integrals/s")
+    print(f"  ratio NumPy reference / Numba (polygon_integral_minv): "
+          f"wall {t_np[0] / t_minv[0]:.1f}x, cpu {t_np[1] / t_minv[1]:.1f}x")
     print(f"  max |Numba - NumPy| = {diff:.2e}")
+    print(f"  load average during the run: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cpus")
 
 
 if __name__ == "__main__":

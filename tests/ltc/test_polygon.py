@@ -41,13 +41,14 @@ def facing_origin(poly):
 
 
 def regular_polygon(k, centre, axis, radius, phase=0.0):
-    """Regular k-gon with circumradius ``radius`` in the plane through ``centre`` normal to ``axis``."""
+    """Regular k-gon, circumradius ``radius``, in the plane through ``centre`` normal to ``axis``"""
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
     t = np.cross(axis, [1.0, 0.0, 0.0] if abs(axis[0]) < 0.9 else [0.0, 1.0, 0.0])
     t /= np.linalg.norm(t)
     b = np.cross(axis, t)
     ang = phase + 2 * np.pi * np.arange(k) / k
-    return np.asarray(centre, float) + radius * (np.cos(ang)[:, None] * t + np.sin(ang)[:, None] * b)
+    ring = np.cos(ang)[:, None] * t + np.sin(ang)[:, None] * b
+    return np.asarray(centre, float) + radius * ring
 
 
 def random_convex_polygon(rng, k, centre, radius, axis=None):

@@ -8,8 +8,8 @@ one term per edge of the spherical polygon.
 Winding convention (all functions here): a polygon's *front face* is the side from which its
 vertices appear counter-clockwise, i.e. the right-hand normal ``(v1 - v0) x (v2 - v0)`` points
 toward the shading point. A front-facing polygon has a positive signed integral ``E``. This is the
-opposite sign of the edge sum as written in equations.md (whose positive case is a polygon wound
-counter-clockwise seen from *above*, looking down at the shading point); the magnitudes agree.
+opposite sign of the edge sum as written in equations.md, which is positive for a polygon wound
+counter-clockwise seen from its far side (e.g. from above a ceiling light); magnitudes agree.
 One-sided lights return ``max(0, E)`` (back faces give 0), two-sided lights ``|E|``. The winding
 refers to the polygon as given (before ``M^-1``): a matrix with negative determinant mirrors the
 lobe but not which face of the light emits.
@@ -18,8 +18,9 @@ Polygons whose plane passes through the shading point (edge-on lights, vertices 
 point) and zero-area polygons (repeated or collinear vertices) subtend no solid angle and give
 exactly 0. The tests, on the transformed vertices ``M^-1 v`` with Newell normal ``N``, centroid
 ``c`` and largest absolute coordinate ``r``: ``|N . c| <= 1e-12 |N| r`` or ``|N| <= 1e-14 n r^2``
-(a sliver thinner than ~1e-14 of its length gives 0 instead of a value of that order). Coordinates are used unnormalised
-(the edge terms are scale invariant), so keep them within about ``1e-100 .. 1e100``.
+(a sliver thinner than ~1e-14 of its length gives 0 instead of a value of that order).
+Coordinates are used unnormalised (the edge terms are scale invariant), so keep them within about
+``1e-100 .. 1e100``.
 """
 
 from __future__ import annotations
@@ -331,9 +332,10 @@ def _integrate(mats, name, V, *, invert: bool, two_sided) -> np.ndarray:
     if status.any():
         k = int(np.flatnonzero(status)[0])
         mi = k if m_mode == 0 else (0 if m_mode == 1 else int(m_idx[k]))
+        where = tuple(int(i) for i in np.unravel_index(k, batch))
         raise PrefilterError(
             f"{name}: expected invertible matrices, got a singular one at batch index "
-            f"{tuple(int(i) for i in np.unravel_index(k, batch))}: {np.array2string(mf[mi], precision=4)}"
+            f"{where}: {np.array2string(mf[mi], precision=4)}"
         )
     return out.reshape(batch)
 
@@ -389,52 +391,54 @@ def clamped_cosine_integral(vertices, *, two_sided: bool = False) -> np.ndarray:
 
 
 def _polygon_integral_numpy(M_inv, vertices, two_sided: bool = False) -> np.ndarray:
-    """Reference implementation: explicit Sutherland-Hodgman into a padded buffer, then the
-    edge sum over the clipped polygon. Same conventions as :func:`polygon_integral_minv`;
-    no input validation."""
+    """Reference implementation: explicit Sutherland-Hodgman (each input edge offers two output
+    slots, valid or not), then the edge sum over consecutive valid slots. Same
+    conventions as :func:`polygon_integral_minv`; no input validation. Component arrays
+    ``(B, n)`` rather than ``np.cross`` on ``(..., 3)``, which is several times slower."""
     M_inv = np.asarray(M_inv, np.float64)
     V = np.asarray(vertices, np.float64)
     n = V.shape[-2]
     batch = np.broadcast_shapes(M_inv.shape[:-2], V.shape[:-2])
     Mb = np.broadcast_to(M_inv, batch + (3, 3)).reshape(-1, 3, 3)
     Vb = np.broadcast_to(V, batch + (n, 3)).reshape(-1, n, 3)
-    nb = Mb.shape[0]
-    rows = np.arange(nb)
+    Mb = Mb / np.abs(Mb).max(axis=(1, 2))[:, None, None]
+    Lx, Ly, Lz = (Mb[:, r, 0:1] * Vb[..., 0] + Mb[:, r, 1:2] * Vb[..., 1]
+                  + Mb[:, r, 2:3] * Vb[..., 2] for r in range(3))
 
-    L = np.einsum("bij,bnj->bni", Mb, Vb)
-    L /= np.abs(Mb).max(axis=(1, 2))[:, None, None]
-    N = np.cross(np.roll(L, 1, axis=1), L).sum(axis=1)
-    size = np.abs(L).max(axis=(1, 2))
-    nn = np.linalg.norm(N, axis=-1)
-    edge_on = (nn <= _AREA_RTOL * n * size**2) | (
-        np.abs(np.sum(N * L.sum(axis=1), -1)) <= _PLANE_RTOL * n * nn * size)
+    # edge-on / zero-area test (Newell normal, centroid, size)
+    Px, Py, Pz = (np.roll(c, 1, axis=1) for c in (Lx, Ly, Lz))
+    Nx = (Py * Lz - Pz * Ly).sum(1)
+    Ny = (Pz * Lx - Px * Lz).sum(1)
+    Nz = (Px * Ly - Py * Lx).sum(1)
+    size = np.maximum(np.abs(Lx).max(1), np.maximum(np.abs(Ly).max(1), np.abs(Lz).max(1)))
+    nn = np.sqrt(Nx * Nx + Ny * Ny + Nz * Nz)
+    plane = np.abs(Nx * Lx.sum(1) + Ny * Ly.sum(1) + Nz * Lz.sum(1))
+    edge_on = (nn <= _AREA_RTOL * n * size**2) | (plane <= _PLANE_RTOL * n * nn * size)
 
-    clipped = np.zeros((nb, 2 * n, 3))  # each input edge emits at most two vertices
-    count = np.zeros(nb, np.int64)
-    for i in range(n):
-        a, b = L[:, i - 1], L[:, i]
-        a_in, b_in = a[:, 2] >= 0, b[:, 2] >= 0
-        crossing = a_in != b_in
+    # Sutherland-Hodgman: edge P->L emits the crossing point (slot 2i) if it crosses z = 0,
+    # then L itself (slot 2i + 1) if L is inside
+    p_in, l_in = Pz >= 0, Lz >= 0
+    crossing = p_in != l_in
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(crossing, Pz / (Pz - Lz), 0.0)
+    Cx = np.stack([Px + t * (Lx - Px), Lx], axis=-1).reshape(-1, 2 * n)
+    Cy = np.stack([Py + t * (Ly - Py), Ly], axis=-1).reshape(-1, 2 * n)
+    Cz = np.stack([np.zeros_like(Lz), Lz], axis=-1).reshape(-1, 2 * n)
+    valid = np.stack([crossing, l_in], axis=-1).reshape(-1, 2 * n)
+
+    # edges join each valid slot to the next valid one (cyclically): scan the slots backwards,
+    # carrying the coordinates of the next valid slot, which starts as the first valid slot
+    first = np.argmax(valid, axis=1)[:, None]
+    bx, by, bz = (np.take_along_axis(c, first, axis=1)[:, 0] for c in (Cx, Cy, Cz))
+    total = np.zeros(Cx.shape[0])
+    for j in range(2 * n - 1, -1, -1):
+        ax, ay, az, ok = Cx[:, j], Cy[:, j], Cz[:, j], valid[:, j]
+        cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        s = np.sqrt(cx * cx + cy * cy + cz * cz)
+        theta = np.arctan2(s, ax * bx + ay * by + az * bz)
         with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(crossing, a[:, 2] / (a[:, 2] - b[:, 2]), 0.0)
-        q = a + t[:, None] * (b - a)
-        q[:, 2] = 0.0
-        clipped[rows[crossing], count[crossing]] = q[crossing]
-        count += crossing
-        clipped[rows[b_in], count[b_in]] = b[b_in]
-        count += b_in
-
-    total = np.zeros(nb)
-    for j in range(2 * n):
-        valid = j < count
-        a = clipped[:, j]
-        b = clipped[rows, (j + 1) % np.maximum(count, 1)]
-        c = np.cross(a, b)
-        s = np.linalg.norm(c, axis=-1)
-        theta = np.arctan2(s, np.sum(a * b, -1))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            term = np.where(valid & (s > 0), theta * c[:, 2] / s, 0.0)
-        total += term
+            total += np.where(ok & (s > 0), theta * cz / s, 0.0)
+        bx, by, bz = np.where(ok, ax, bx), np.where(ok, ay, by), np.where(ok, az, bz)
     e = -np.sign(np.linalg.det(Mb)) * total / (2 * np.pi)
     e = np.where(edge_on, 0.0, e)
     e = np.abs(e) if two_sided else np.maximum(0.0, e)
