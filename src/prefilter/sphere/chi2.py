@@ -56,11 +56,15 @@ def chi2_sphere(
     res: tuple[int, int] = (16, 32),
     quad: int = 6,
     min_expected: float = 5.0,
+    max_refine: int = 5,
+    refine_tol: float = 0.02,
 ) -> Chi2Result:
     """Chi-square test of ``samples (n, 3)`` against the solid-angle density ``pdf(w (..., 3))``.
 
     Bins: ``res[0]`` rings of equal solid angle in ``cos`` of the angle to ``axis`` within
-    ``theta_max``, times ``res[1]`` azimuthal sectors, plus the outside of the cap.
+    ``theta_max``, times ``res[1]`` azimuthal sectors, plus the outside of the cap. Each bin's
+    mass uses ``quad x quad`` Gauss-Legendre nodes, split adaptively (up to ``max_refine`` times)
+    until a split changes it by less than ``refine_tol`` standard deviations of its count.
     """
     samples = np.asarray(samples, dtype=np.float64)
     n = samples.shape[0]
@@ -81,21 +85,50 @@ def chi2_sphere(
     observed[-1] = n - inside.sum()
 
     # Expected counts: Gauss-Legendre over (cos, phi) in each bin; d(omega) = d(cos) d(phi).
+    # Bins where a 2 x 2 split changes the mass by more than a small fraction of the count's
+    # standard deviation are split again (pdfs of BRDF lobes jump at the horizon).
     x, wq = np.polynomial.legendre.leggauss(quad)
     dc = (1.0 - cmin) / n_th
     dp = 2 * np.pi / n_ph
-    c_lo = 1.0 - dc * (np.arange(n_th) + 1)
-    p_lo = dp * np.arange(n_ph)
-    cq = c_lo[:, None] + dc * (x[None, :] + 1) / 2  # (n_th, quad)
-    pq = p_lo[:, None] + dp * (x[None, :] + 1) / 2  # (n_ph, quad)
-    C = cq[:, None, :, None]
-    P = pq[None, :, None, :]
-    s = np.sqrt(np.maximum(0.0, 1.0 - C * C))
-    local = np.stack(np.broadcast_arrays(s * np.cos(P), s * np.sin(P), C), axis=-1)
-    world = to_world(local, t, b, axis)
-    dens = np.asarray(pdf(world), dtype=np.float64)
-    weights = (wq[:, None] * wq[None, :]) * (dc / 2) * (dp / 2)
-    mass = np.sum(dens * weights, axis=(-2, -1)).reshape(-1)
+    ii, jj = np.meshgrid(np.arange(n_th), np.arange(n_ph), indexing="ij")
+    c0 = (1.0 - dc * (ii + 1)).ravel()
+    p0 = (dp * jj).ravel()
+    cells = (np.arange(n_th * n_ph), c0, c0 + dc, p0, p0 + dp)
+
+    def cell_mass(c_a, c_b, p_a, p_b):
+        cq = c_a[:, None] + (c_b - c_a)[:, None] * (x[None, :] + 1) / 2
+        pq = p_a[:, None] + (p_b - p_a)[:, None] * (x[None, :] + 1) / 2
+        C, P = cq[:, :, None], pq[:, None, :]
+        sn = np.sqrt(np.maximum(0.0, 1.0 - C * C))
+        local = np.stack(np.broadcast_arrays(sn * np.cos(P), sn * np.sin(P), C), axis=-1)
+        dens = np.asarray(pdf(to_world(local, t, b, axis)), dtype=np.float64)
+        w2 = wq[:, None] * wq[None, :] / 4
+        return np.sum(dens * w2, axis=(-2, -1)) * (c_b - c_a) * (p_b - p_a)
+
+    mass = np.zeros(n_th * n_ph)
+    coarse = cell_mass(*cells[1:])
+    for level in range(max_refine + 1):
+        idx, ca, cb, pa, pb = cells
+        cm, pm = (ca + cb) / 2, (pa + pb) / 2
+        kids = (
+            np.concatenate([idx] * 4),
+            np.concatenate([ca, ca, cm, cm]),
+            np.concatenate([cm, cm, cb, cb]),
+            np.concatenate([pa, pm, pa, pm]),
+            np.concatenate([pm, pb, pm, pb]),
+        )
+        kid_mass = cell_mass(*kids[1:])
+        fine = kid_mass.reshape(4, -1).sum(axis=0)
+        tol = refine_tol * np.sqrt(np.maximum(np.abs(fine), 1e-12) / max(n, 1))
+        ok = np.abs(fine - coarse) <= tol
+        if level == max_refine:
+            ok[:] = True
+        np.add.at(mass, idx[ok], fine[ok])
+        if np.all(ok):
+            break
+        sel = np.tile(~ok, 4)
+        cells = tuple(k[sel] for k in kids)
+        coarse = kid_mass[sel]
     mass_cap = float(mass.sum())
     expected = np.concatenate([mass, [max(0.0, 1.0 - mass_cap)]]) * n
 

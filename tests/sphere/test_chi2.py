@@ -1,0 +1,70 @@
+"""The chi-square test itself: accepts right samplers, rejects wrong ones, integrates bins well."""
+
+import numpy as np
+import pytest
+
+from prefilter.sphere import (
+    chi2_sphere,
+    cosine_hemisphere,
+    cosine_hemisphere_pdf,
+    lobe_cap,
+    uniform_sphere,
+    uniform_sphere_pdf,
+)
+
+
+def test_rejects_wrong_density():
+    w = cosine_hemisphere(np.random.default_rng(0).random((100_000, 2)))
+    res = chi2_sphere(w, lambda d: np.where(d[..., 2] > 0, 1 / (2 * np.pi), 0.0))
+    assert res.p_value < 1e-6
+
+
+def test_rejects_samples_where_density_is_zero():
+    w = uniform_sphere(np.random.default_rng(1).random((50_000, 2)))
+    res = chi2_sphere(w, cosine_hemisphere_pdf)
+    assert res.p_value == 0.0 and "zero density" in res.message
+
+
+def test_rejects_slightly_too_narrow_power_cosine():
+    # Samples of z^n / norm with n = 22 tested against n = 20: a 10% narrower lobe.
+    rng = np.random.default_rng(2)
+    u = rng.random((200_000, 2))
+
+    def power(nexp, u):
+        z = u[:, 0] ** (1 / (nexp + 1))
+        r = np.sqrt(1 - z * z)
+        return np.stack([r * np.cos(2 * np.pi * u[:, 1]), r * np.sin(2 * np.pi * u[:, 1]), z], -1)
+
+    pdf = lambda d: np.maximum(d[..., 2], 0) ** 20 * 21 / (2 * np.pi)  # noqa: E731
+    axis, th = lobe_cap(power(20, rng.random((20_000, 2))))
+    assert chi2_sphere(power(20, u), pdf, axis=axis, theta_max=th).passed()
+    assert chi2_sphere(power(22, u), pdf, axis=axis, theta_max=th).p_value < 1e-3
+
+
+def test_p_values_under_the_null_are_not_too_small():
+    # Under H0 the p-value is uniform: 20 independent runs at 1% should fail at most twice
+    # (binomial tail probability < 2e-3).
+    fails = 0
+    for seed in range(20):
+        w = uniform_sphere(np.random.default_rng(100 + seed).random((20_000, 2)))
+        fails += not chi2_sphere(w, uniform_sphere_pdf, res=(8, 16)).passed()
+    assert fails <= 2
+
+
+def test_bin_masses_across_a_discontinuity():
+    # Uniform density on the upper hemisphere, cap = hemisphere x > 0: the jump at z = 0 cuts
+    # through the bins. The exact mass in the cap is a quarter sphere / (2 pi) = 1/2.
+    w = uniform_sphere(np.random.default_rng(3).random((100_000, 2)))
+    w[:, 2] = np.abs(w[:, 2])
+    pdf = lambda d: np.where(d[..., 2] > 0, 1 / (2 * np.pi), 0.0)  # noqa: E731
+    res = chi2_sphere(w, pdf, axis=(1.0, 0.0, 0.0), theta_max=np.pi / 2)
+    assert res.mass_in_cap == pytest.approx(0.5, abs=2e-4)
+    assert res.passed(), res
+
+
+def test_lobe_cap_contains_the_quantile():
+    w = cosine_hemisphere(np.random.default_rng(4).random((50_000, 2)))
+    axis, th = lobe_cap(w, quantile=0.9)
+    np.testing.assert_allclose(axis, [0, 0, 1], atol=0.02)
+    # P(theta < t) = sin^2 t for the cosine lobe: the 0.9 quantile is asin(sqrt(0.9)), x 1.05.
+    assert th == pytest.approx(1.05 * np.arcsin(np.sqrt(0.9)), rel=0.02)
