@@ -1,0 +1,48 @@
+"""Multi-scale LTC (Tao et al. 2021): antialiased area lighting of normal-mapped surfaces.
+
+``mean_resultant_length`` / ``alpha_meso`` (eqs. 4-5): meso-scale roughness from the length of
+an unnormalised mip-averaged normal; ``alpha_total`` (eqs. 6-7): micro- and meso-scale roughness
+combined; the render method ``ltc-multiscale`` lives in :mod:`prefilter.multiscale.render`.
+"""
+
+from prefilter.multiscale.convolution import (
+    FIT_COEFFS,
+    PAPER_EQ7,
+    alpha_total,
+    convolution_grid,
+    convolve_samples,
+    fit_alpha_ml,
+    fit_polynomial,
+    sample_ltc_iso,
+)
+from prefilter.multiscale.meso import (
+    PAPER_EQ5,
+    alpha_meso,
+    alpha_meso_exact,
+    mean_resultant_length,
+)
+
+__all__ = [
+    "FIT_COEFFS",
+    "PAPER_EQ5",
+    "PAPER_EQ7",
+    "alpha_meso",
+    "alpha_meso_exact",
+    "alpha_total",
+    "convolution_grid",
+    "convolve_samples",
+    "fit_alpha_ml",
+    "fit_polynomial",
+    "mean_resultant_length",
+    "sample_ltc_iso",
+]
+
+from prefilter.render.methods import register as _register  # noqa: E402
+
+_register("ltc-multiscale", "prefilter.multiscale.render:render_multiscale",
+          description="multi-scale LTC (Tao et al. 2021): roughness from the length of the "
+                      "footprint's averaged normal, exact eq. 4 inverse and refitted eq. 7")
+_register("ltc-multiscale-paper", "prefilter.multiscale.render:render_multiscale_paper",
+          description="multi-scale LTC with the paper's published eqs. 5 and 7")
+_register("ltc-multiscale-mrl", "prefilter.multiscale.render:render_multiscale_mrl",
+          description="multi-scale LTC combining scales by mean resultant length (closed form)")
