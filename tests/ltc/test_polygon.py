@@ -203,6 +203,19 @@ def test_closed_box_integrates_ltc_to_one_for_random_matrices():
         assert total == pytest.approx(1.0, abs=1e-9), (i, np.linalg.cond(M))
 
 
+def test_lobe_tilted_below_the_horizon_counts_there():
+    # M = R (a rotation): int_P D = E(R^T P), so for P = R Q it is Q's form factor, even where
+    # P dips below the shading horizon (the LTC's support is R's hemisphere, not z >= 0)
+    g = 1.2
+    R = np.array([[np.cos(g), 0, np.sin(g)], [0, 1, 0], [-np.sin(g), 0, np.cos(g)]])
+    Q = rect(-2, 2, -1, 0.5, 1.0)
+    P = Q @ R.T
+    assert P[:, 2].min() < 0 < P[:, 2].max()
+    e = rect_form_factor(-2, 2, -1, 0.5, 1.0)
+    assert polygon_integral(R, P) == pytest.approx(e, abs=1e-12)
+    assert polygon_integral_minv(R.T, P) == pytest.approx(e, abs=1e-12)
+
+
 def test_below_horizon_is_zero():
     poly = rect(-1, 1, -1, 1, -0.5)[::-1]  # faces up toward the origin, but below it
     assert clamped_cosine_integral(poly, two_sided=True) == 0.0
@@ -432,3 +445,19 @@ def test_fast_atan2_matches_numpy():
     got = np.array([_atan2_pos(a, b) for a, b in zip(s, d)])
     want = np.arctan2(s, d)
     np.testing.assert_allclose(got, want, rtol=2e-15, atol=0)
+
+
+@pytest.mark.slow
+def test_random_sweep_against_ltc_sampling():
+    # 40 random (M, polygon) pairs, k = 3..8 vertices, many straddling either horizon
+    rng = np.random.default_rng(300)
+    for i in range(40):
+        M = random_ltc_matrix(rng, max_cond=50.0)
+        ltc = LTC(M)
+        w = ltc.sample(rng.random((N_MC, 2)))
+        centre = w[:50].mean(axis=0) * 1.5 + 0.8 * rng.normal(size=3)
+        axis = centre + 0.7 * rng.normal(size=3)
+        poly = facing_origin(random_convex_polygon(rng, 3 + i % 6, centre, 1.0, axis))
+        p = ray_hits(poly, w).mean()
+        se = np.sqrt(max(p * (1 - p), 1e-12) / N_MC)
+        assert abs(polygon_integral(M, poly, two_sided=True) - p) < 5 * se + 1e-9, i

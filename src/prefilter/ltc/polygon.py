@@ -341,9 +341,13 @@ def _integrate(mats, name, V, *, invert: bool, two_sided) -> np.ndarray:
 
 
 def polygon_integral(M, vertices, *, two_sided: bool = False) -> np.ndarray:
-    """Integral of the LTC with matrix ``M`` over polygonal lights, clipped to the horizon.
+    """Integral of the LTC with matrix ``M`` over polygonal lights: ``int_P D(w) dw``.
 
-    Heitz et al. 2016: ``int_P D = int_{M^-1 P} Do`` (Lambert's edge sum after clipping ``z >= 0``).
+    Heitz et al. 2016: ``int_P D = int_{M^-1 P} Do`` (Lambert's edge sum after clipping ``M^-1 P``
+    to ``z >= 0``, the support of ``Do``). The clipping is exact in the cosine's space; when ``M``
+    tilts the lobe below the shading horizon, the part of ``P`` below it still counts (as in
+    Heitz et al.'s shaders). To integrate over the upper hemisphere only, clip ``P`` to ``z >= 0``
+    first (``prefilter.ltc.validate.clip_to_horizon``). For ``M = I`` the two coincide.
 
     Parameters
     ----------
