@@ -247,6 +247,20 @@ def test_mirror_matrix_keeps_the_emitting_face():
     assert polygon_integral(np.diag([-1.0, 1, 1]), front[::-1]) == 0.0
 
 
+def test_negated_matrix_is_the_point_reflected_lobe():
+    # (-M)^-1 w = -(M^-1 w), so D_{-M}(w) = D_M(-w): int_P D_{-M} = int_{-P} D_M. -P has the
+    # opposite facing, so the one-sided value for P must equal the two-sided value for -P
+    rng = np.random.default_rng(5)
+    for _ in range(10):
+        M = random_ltc_matrix(rng)
+        poly = facing_origin(random_convex_polygon(rng, 4, -M[:, 2] + 0.3 * rng.normal(size=3),
+                                                   0.8))
+        want = polygon_integral(M, -poly, two_sided=True)
+        assert want > 1e-3
+        assert polygon_integral(-M, poly) == pytest.approx(want, abs=1e-12)
+        assert polygon_integral(-M, poly[::-1]) == 0.0
+
+
 def test_rotation_about_normal_invariance():
     rng = np.random.default_rng(4)
     for _ in range(20):
