@@ -83,8 +83,8 @@ def test_eval_integrates_to_one_monte_carlo():
 def test_sample_passes_chi_square(name):
     ltc = LTC(MATRICES[name])
     pilot = ltc.sample(np.random.default_rng(10).random((20000, 2)))
-    # heavy-tailed narrow lobes: a 99.5 % cap puts the whole peak in the first ring, where the
-    # test's per-bin quadrature cannot resolve it; a 90 % cap keeps the rings finer than the peak
+    # heavy-tailed narrow lobe: a 99.5 % cap puts most of the peak in the first ring; a 90 % cap
+    # keeps the rings finer than the peak, so the test resolves its shape
     axis, theta_max = lobe_cap(pilot, quantile=0.9 if name == "narrow" else 0.995)
     samples = ltc.sample(np.random.default_rng(11).random((200_000, 2)))
     res = chi2_sphere(samples, ltc.pdf, axis=axis, theta_max=theta_max, res=(12, 24))
