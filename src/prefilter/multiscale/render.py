@@ -54,7 +54,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit") 
         nts = None
         if mat.normal_map is not None:
             nts = mat.normal_map.mip().lookup_footprint(g.uv[m], g.dudv[m])
-            r[m] = np.minimum(np.linalg.norm(nts, axis=-1), 1.0)
+            r[m] = np.minimum(np.sqrt(np.einsum("ij,ij->i", nts, nts)), 1.0)
         elif mat.height_map is not None:
             nts = slopes_to_normals(mat.height_map.mip().lookup_footprint(g.uv[m],
                                                                           g.dudv[m])[:, :2])
