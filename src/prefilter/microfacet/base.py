@@ -48,6 +48,24 @@ class MicrofacetModel:
         """The same model with parameters reshaped to broadcast against one more trailing axis."""
         raise NotImplementedError
 
+    # -- overridden by non-centred models --------------------------------------------------------
+    def mean_projected_area(self, w) -> np.ndarray:
+        """Projected area of the mean surface per unit geometric area, ``(n_bar.w) / (n_bar.z)``.
+
+        ``w_z`` for centred NDFs (mean normal = z); ``(...,)`` for ``w (..., 3)``. LEADR
+        supplemental 1.5, eq. 9. May be negative (``w`` below the mean surface).
+        """
+        return np.asarray(w, dtype=np.float64)[..., 2]
+
+    def projected_area(self, w) -> np.ndarray:
+        """Back-face-culled projected area ``integral max(0, w.m) D(m) dm`` for ``w (..., 3)``.
+
+        Smith's identity (LEADR supplemental eq. 9): ``(1 + Lambda(w))`` times the mean surface's
+        projected area. It normalises the visible-normal density :meth:`pdf_vndf`.
+        """
+        w = np.asarray(w, dtype=np.float64)
+        return self.mean_projected_area(w) * (1.0 + self.smith_lambda(w))
+
     # -- shared ----------------------------------------------------------------------------------
     def G1(self, w) -> np.ndarray:
         """Smith masking ``1 / (1 + Lambda(w))`` for ``w (..., 3)``; 0 below the horizon."""
@@ -63,26 +81,37 @@ class MicrofacetModel:
         return np.where((wo[..., 2] > 0.0) & (wi[..., 2] > 0.0), g, 0.0)
 
     def eval(self, wo, wi) -> np.ndarray:
-        """Cosine-weighted BRDF ``f(wo, wi) wi_z = D(h) G2(wo, wi) / (4 wo_z)`` (Fresnel 1).
+        """Cosine-weighted BRDF ``f(wo, wi) wi_z = D(h) G2(wo, wi) / (4 A(wo))`` (Fresnel 1).
 
-        Zero when either direction is at or below the horizon.
+        ``A(wo)`` is :meth:`mean_projected_area`, ``wo_z`` for centred models (Walter et al. 2007
+        eq. 20; for non-centred slopes the radiance is per projected area of the mean surface,
+        LEADR supplemental 3.3). Zero when either direction is at or below the horizon or below
+        the mean surface. ``(...,)`` for ``wo, wi (..., 3)``.
         """
         wo = as_directions(wo, "wo")
         wi = as_directions(wi, "wi")
         h = half_vector(wo, wi)
-        up = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0)
-        woz = np.where(up, wo[..., 2], 1.0)
-        g2 = 1.0 / (1.0 + self.smith_lambda(wo) + self.smith_lambda(wi))
-        val = self.D(h) * g2 / (4.0 * woz)
+        area = self.mean_projected_area(wo)
+        lam_o = self.smith_lambda(wo)
+        lam_i = self.smith_lambda(wi)
+        up = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0) & (area > 0.0) & np.isfinite(lam_o + lam_i)
+        safe_area = np.where(up, area, 1.0)
+        g2 = np.where(up, 1.0 / (1.0 + np.where(up, lam_o + lam_i, 0.0)), 0.0)
+        val = self.D(h) * g2 / (4.0 * safe_area)
         return np.where(up, val, 0.0)
 
     def pdf_vndf(self, wo, m) -> np.ndarray:
-        """Density of :meth:`sample_vndf`: ``G1(wo) max(0, wo.m) D(m) / wo_z`` (solid angle)."""
+        """Density of :meth:`sample_vndf` (solid angle), ``(...,)``.
+
+        ``max(0, wo.m) D(m) / integral max(0, wo.m) D(m) dm`` (Heitz 2014 eq. 16); equal to
+        ``G1(wo) max(0, wo.m) D(m) / wo_z`` for centred NDFs. Zero for ``wo_z <= 0``.
+        """
         wo = as_directions(wo, "wo")
         m = as_directions(m, "m")
         dot = np.maximum(0.0, np.sum(wo * m, axis=-1))
-        woz = np.where(wo[..., 2] > 0, wo[..., 2], 1.0)
-        return np.where(wo[..., 2] > 0, self.G1(wo) * dot * self.D(m) / woz, 0.0)
+        area = self.projected_area(wo)
+        ok = (wo[..., 2] > 0) & (area > 0.0)
+        return np.where(ok, dot * self.D(m) / np.where(ok, area, 1.0), 0.0)
 
     def pdf_reflect(self, wo, wi) -> np.ndarray:
         """Density of ``wi = reflect(wo, m)`` with ``m`` from :meth:`sample_vndf`."""
@@ -108,13 +137,19 @@ class MicrofacetModel:
             raise PrefilterError("sample_lobe: roughness parameters must be scalars")
         n = as_positive_int(n, "n")
         rng = as_rng(rng)
+        g1o = float(self.G1(wo))
+        if not g1o > 0.0:
+            from prefilter.errors import PrefilterError
+
+            raise PrefilterError(
+                f"wo: the lobe is empty (G1 = 0, wo = {wo} faces away from the mean surface)"
+            )
         out = []
         have = 0
-        g1o = float(self.G1(wo))
         lam_o = float(self.smith_lambda(wo))
         rate = 0.5
         while have < n:
-            batch = int(min(4_000_000, max(1024, 1.2 * (n - have) / max(rate, 1e-3))))
+            batch = int(min(1_000_000, max(1024, 1.2 * (n - have) / max(rate, 1e-3))))
             m = self.sample_vndf(wo, rng.random((batch, 2)))
             wi = reflect(wo, m)
             ok = wi[:, 2] > 0.0
@@ -142,10 +177,13 @@ class MicrofacetModel:
         model = self._with_trailing_axis()
         m = model.sample_vndf(wo_b, u)
         wi = reflect(wo_b, m)
-        lam_o = self.smith_lambda(wo)[..., None]
+        lam_o = self.smith_lambda(wo)
         lam_i = model.smith_lambda(wi)
-        ratio = np.where(wi[..., 2] > 0.0, (1.0 + lam_o) / (1.0 + lam_o + lam_i), 0.0)
-        return np.where(wo[..., 2] > 0.0, np.sum(ratio * wgt, axis=-1), 0.0)
+        seen = (wo[..., 2] > 0.0) & np.isfinite(lam_o)
+        # G2 / G1 = 1 / (1 + Lambda_i / (1 + Lambda_o)); Lambda_i = inf gives 0, not NaN.
+        ratio = 1.0 / (1.0 + lam_i / (1.0 + np.where(seen, lam_o, 0.0))[..., None])
+        ratio = np.where(wi[..., 2] > 0.0, ratio, 0.0)
+        return np.where(seen, np.sum(ratio * wgt, axis=-1), 0.0)
 
 
 def raise_shape(name, shape, expected):
