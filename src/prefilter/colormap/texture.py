@@ -17,10 +17,16 @@ import numpy as np
 
 from prefilter._validate import as_float_array
 from prefilter.errors import PrefilterError
-from prefilter.texture.mip import MipChain, lod_from_footprint, moment_chain, moments_to_stats
+from prefilter.texture.mip import (
+    MipChain,
+    footprint_axes,
+    lod_from_footprint,
+    moment_chain,
+    moments_to_stats,
+)
 
-__all__ = ["NoiseStd", "filter_noise", "filter_texture", "moments_mip", "naive_texture",
-           "texture_stats"]
+__all__ = ["NoiseStd", "filter_noise", "filter_texture", "footprint_stats", "moments_mip",
+           "naive_texture", "texture_stats"]
 
 
 def moments_mip(data) -> MipChain:
@@ -28,8 +34,67 @@ def moments_mip(data) -> MipChain:
     return moment_chain(data)
 
 
+def footprint_stats(chain: MipChain, uv, dudv, *, anisotropic: bool = False,
+                    max_aniso: int = 8):
+    """Mean and (co)variance over pixel footprints from a moments mip chain (section 4.2).
+
+    The lookup interpolates the moments; at level 0 that interpolation itself creates a spurious
+    variance (``bilerp(f^2) - bilerp(f)^2``: the spread of the four texels under the bilinear
+    weights), whereas the function a renderer samples -- the bilinearly interpolated texture --
+    barely varies inside a footprint smaller than a texel. That level-0 term is removed with the
+    level-0 weight of the trilinear lookup, ``1 - clip(lod, 0, 1)``: magnified footprints get the
+    variance 0 (the filtered colour is then the naive one, as it should be) and minified ones are
+    unchanged.
+
+    Parameters
+    ----------
+    chain : MipChain
+        Two channels ``E[f], E[f^2]`` or five ``E[x], E[y], E[x^2], E[y^2], E[xy]``
+        (:func:`prefilter.texture.mip.moment_chain`).
+    uv : array_like, shape (..., 2)
+    dudv : array_like, shape (..., 2, 2)
+
+    Returns
+    -------
+    mean : numpy.ndarray, shape (...) or (..., 2)
+    var : numpy.ndarray, shape (...) or (..., 2, 2)
+    """
+    if not isinstance(chain, MipChain) or chain.shape[2] not in (2, 5):
+        raise PrefilterError("chain: expected a moments MipChain with 2 or 5 channels "
+                             "(moments_mip / prefilter.texture.mip.moment_chain)")
+    h, w = chain.shape[:2]
+    m = chain.lookup_footprint(uv, dudv, anisotropic=anisotropic, max_aniso=max_aniso)
+    mean, var = moments_to_stats(m)
+    lod = lod_from_footprint(dudv, (h, w), anisotropic=anisotropic, max_aniso=max_aniso)
+    w0 = 1.0 - np.clip(lod, 0.0, 1.0)
+    if np.any(w0 > 0):
+        _, var0 = moments_to_stats(chain.lookup(uv, 0.0))
+        if var.ndim == mean.ndim:  # scalar data
+            var = np.maximum(var - w0 * var0, 0.0)
+        else:
+            var = _psd(var - w0[..., None, None] * var0)
+    return mean, var
+
+
+def _psd(c: np.ndarray) -> np.ndarray:
+    """Clamp 2x2 symmetric matrices to positive semi-definite (eigenvalues >= 0)."""
+    p, q, r = c[..., 0, 0], 0.5 * (c[..., 0, 1] + c[..., 1, 0]), c[..., 1, 1]
+    mid = 0.5 * (p + r)
+    disc = np.sqrt(0.25 * (p - r) ** 2 + q * q)
+    l1, l2 = np.maximum(mid + disc, 0.0), np.maximum(mid - disc, 0.0)
+    # eigenvector of l1 at angle phi with tan(2 phi) = 2q / (p - r)
+    phi = 0.5 * np.arctan2(2.0 * q, p - r)
+    cs, sn = np.cos(phi), np.sin(phi)
+    out = np.empty_like(c)
+    out[..., 0, 0] = l1 * cs * cs + l2 * sn * sn
+    out[..., 1, 1] = l1 * sn * sn + l2 * cs * cs
+    out[..., 0, 1] = out[..., 1, 0] = (l1 - l2) * cs * sn
+    return out
+
+
 def texture_stats(chain: MipChain, uv, dudv, *, anisotropic: bool = False, max_aniso: int = 8):
-    """Mean and std of a tabulated driving function over pixel footprints (section 4.2).
+    """Mean and std of a tabulated driving function over pixel footprints (section 4.2), with the
+    magnification correction of :func:`footprint_stats`.
 
     Parameters
     ----------
@@ -45,8 +110,7 @@ def texture_stats(chain: MipChain, uv, dudv, *, anisotropic: bool = False, max_a
     """
     if not isinstance(chain, MipChain) or chain.shape[2] != 2:
         raise PrefilterError("chain: expected a two-channel moments MipChain (moments_mip)")
-    m = chain.lookup_footprint(uv, dudv, anisotropic=anisotropic, max_aniso=max_aniso)
-    mean, var = moments_to_stats(m)
+    mean, var = footprint_stats(chain, uv, dudv, anisotropic=anisotropic, max_aniso=max_aniso)
     return mean, np.sqrt(var)
 
 
@@ -103,9 +167,14 @@ class NoiseStd:
         return np.sqrt(np.interp(lod, np.arange(self.variance.size), self.variance))
 
 
-def filter_noise(table, noise_chain: MipChain, noise_std: NoiseStd, uv, dudv) -> np.ndarray:
+def filter_noise(table, noise_chain: MipChain, noise_std: NoiseStd, uv, dudv, *,
+                 anisotropic: bool = False, max_aniso: int = 8):
     """Colour-mapped procedural noise over pixel footprints (section 4.2): the mean is the noise's
-    mip-mapped value at the footprint's LOD, the std comes from the per-LOD table.
+    mip-mapped value over the footprint, the std comes from the per-LOD table.
+
+    Isotropic: both at ``lod = log2(major axis)``. Anisotropic: the mean by the anisotropic lookup,
+    the std at the LOD of the square of equal area, ``log2(sqrt(major minor))`` (the variance left
+    in a footprint depends on how much of the noise it covers).
 
     Returns
     -------
@@ -115,6 +184,11 @@ def filter_noise(table, noise_chain: MipChain, noise_std: NoiseStd, uv, dudv) ->
     if not isinstance(noise_chain, MipChain) or noise_chain.shape[2] != 1:
         raise PrefilterError("noise_chain: expected a one-channel MipChain of the noise")
     h, w = noise_chain.shape[:2]
-    lod = lod_from_footprint(dudv, (h, w))
-    mean = noise_chain.lookup(uv, lod)[..., 0]
+    if anisotropic:
+        mean = noise_chain.lookup_footprint(uv, dudv, anisotropic=True, max_aniso=max_aniso)[..., 0]
+        major, minor, _ = footprint_axes(dudv, (h, w))
+        lod = 0.5 * np.log2(np.maximum(major * minor, 1.0))
+    else:
+        lod = lod_from_footprint(dudv, (h, w))
+        mean = noise_chain.lookup(uv, lod)[..., 0]
     return table.lookup(mean, noise_std(lod)), table.naive(mean)

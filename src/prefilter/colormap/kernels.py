@@ -1,0 +1,353 @@
+"""Compiled per-pixel shading of colour-mapped textures, noise and heights (Numba).
+
+The same computations as the NumPy path (:mod:`prefilter.colormap.texture`,
+:func:`prefilter.colormap.height.filter_height_footprint`), fused per pixel as a shader would run
+them: footprint axes, anisotropic trilinear fetches of a mip chain (as
+:meth:`prefilter.texture.mip.MipChain.lookup_footprint`), then one table lookup. Each method reads
+only what it needs (naive: the one-channel mean mip and row 0 of the table; filtered: the moments
+mip and the 2D table), so their time ratio is the cost of filtering (``benchmarks/bench_colormap.py``).
+The tests check these kernels against the NumPy path and brute-force footprint averages.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter._validate import as_float_array, as_positive_int
+from prefilter.errors import PrefilterError
+from prefilter.texture.mip import MipChain
+
+__all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
+
+_EDGE_CODE = {"clamp": 0, "mirror": 1, "periodic": 2}
+
+
+class PackedChain:
+    """A :class:`MipChain` flattened for the kernels: ``data (total, C)``, per-level ``offset``,
+    ``height``, ``width``."""
+
+    def __init__(self, chain: MipChain):
+        if not isinstance(chain, MipChain):
+            raise PrefilterError(f"chain: expected a MipChain, got {type(chain).__name__}")
+        self.channels = chain.shape[2]
+        self.heights = np.array([lv.shape[0] for lv in chain.levels], np.int64)
+        self.widths = np.array([lv.shape[1] for lv in chain.levels], np.int64)
+        sizes = self.heights * self.widths
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+        self.data = np.ascontiguousarray(np.concatenate(
+            [lv.reshape(-1, self.channels) for lv in chain.levels]))
+
+
+@njit_serial
+def _bilerp(data, off, h, w, u, v, c, weight, out):  # pragma: no cover - compiled
+    x = u * w - 0.5
+    y = v * h - 0.5
+    x0 = math.floor(x)
+    y0 = math.floor(y)
+    fx = x - x0
+    fy = y - y0
+    j0 = int(x0) % w
+    i0 = int(y0) % h
+    j1 = (j0 + 1) % w
+    i1 = (i0 + 1) % h
+    w00 = (1 - fx) * (1 - fy) * weight
+    w01 = fx * (1 - fy) * weight
+    w10 = (1 - fx) * fy * weight
+    w11 = fx * fy * weight
+    for k in range(c):
+        out[k] += (w00 * data[off + i0 * w + j0, k] + w01 * data[off + i0 * w + j1, k]
+                   + w10 * data[off + i1 * w + j0, k] + w11 * data[off + i1 * w + j1, k])
+
+
+@njit_serial
+def _trilinear(data, offs, hs, ws, u, v, lod, c, weight, out):  # pragma: no cover - compiled
+    n = offs.shape[0]
+    if n == 1:
+        _bilerp(data, offs[0], hs[0], ws[0], u, v, c, weight, out)
+        return
+    lod = min(max(lod, 0.0), n - 1.0)
+    l0 = min(int(math.floor(lod)), n - 2)
+    t = lod - l0
+    _bilerp(data, offs[l0], hs[l0], ws[l0], u, v, c, weight * (1 - t), out)
+    _bilerp(data, offs[l0 + 1], hs[l0 + 1], ws[l0 + 1], u, v, c, weight * t, out)
+
+
+@njit_serial
+def _footprint(j00, j01, j10, j11, w, h):  # pragma: no cover - compiled
+    """Major / minor axis (texels) and unit major direction (texel space) of the footprint."""
+    a00, a01, a10, a11 = j00 * w, j01 * w, j10 * h, j11 * h
+    p = a00 * a00 + a01 * a01
+    r = a10 * a10 + a11 * a11
+    q = a00 * a10 + a01 * a11
+    mid = 0.5 * (p + r)
+    disc = math.sqrt(max(0.25 * (p - r) ** 2 + q * q, 0.0))
+    l1 = mid + disc
+    l2 = max(mid - disc, 0.0)
+    v1x, v1y = q, l1 - p
+    v2x, v2y = l1 - r, q
+    if v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y:
+        dx, dy = v1x, v1y
+    else:
+        dx, dy = v2x, v2y
+    nrm = math.sqrt(dx * dx + dy * dy)
+    if nrm > 0:
+        dx, dy = dx / nrm, dy / nrm
+    else:
+        dx, dy = 1.0, 0.0
+    return math.sqrt(l1), math.sqrt(l2), dx, dy
+
+
+@njit_serial
+def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, out):
+    """Footprint lookup (isotropic or anisotropic) into ``out[:c]``; returns the LOD used
+    (``log2`` of the tap size) and the area LOD ``log2(sqrt(major minor))``."""  # pragma: no cover
+    w = ws[0]
+    h = hs[0]
+    major, minor, dx, dy = _footprint(j00, j01, j10, j11, w, h)
+    for k in range(c):
+        out[k] = 0.0
+    area_lod = 0.5 * math.log2(max(major * minor, 1.0))
+    if not aniso:
+        lod = math.log2(max(major, 1.0))
+        _trilinear(data, offs, hs, ws, u, v, lod, c, 1.0, out)
+        return lod, area_lod
+    taps = 1
+    if minor > 0:
+        taps = int(min(max(math.ceil(major / minor), 1.0), max_aniso))
+    else:
+        taps = max_aniso
+    lod = math.log2(max(max(minor, major / max_aniso), 1.0))
+    au = dx * major / w
+    av = dy * major / h
+    for i in range(taps):
+        o = (i + 0.5) / taps - 0.5
+        _trilinear(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, out)
+    return lod, area_lod
+
+
+@njit_serial
+def _wrap(i, n, edge):  # pragma: no cover - compiled
+    if edge == 0:
+        return min(max(i, 0), n - 1)
+    if edge == 2:
+        return i % n
+    j = i % (2 * n)
+    return j if j < n else 2 * n - 1 - j
+
+
+@njit_serial
+def _table(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - compiled
+    """Bilinear lookup of a ColormapTable (``sigma < 0``: row 0 only, the naive colour)."""
+    ns, n, c = table.shape
+    x = (mean - lo) / (hi - lo) * n - 0.5
+    x0 = math.floor(x)
+    fx = x - x0
+    i0 = _wrap(int(x0), n, edge)
+    i1 = _wrap(int(x0) + 1, n, edge)
+    if sigma <= 0.0:
+        for k in range(c):
+            out[k] = table[0, i0, k] * (1 - fx) + table[0, i1, k] * fx
+        return
+    y = min(sigma / smax, 1.0) * (ns - 1)
+    j0 = min(int(math.floor(y)), ns - 2)
+    fy = y - j0
+    for k in range(c):
+        a = table[j0, i0, k] * (1 - fx) + table[j0, i1, k] * fx
+        b = table[j0 + 1, i0, k] * (1 - fx) + table[j0 + 1, i1, k] * fx
+        out[k] = a * (1 - fy) + b * fy
+
+
+@njit_parallel
+def _texture_kernel(data, offs, hs, ws, uv, dudv, table, lo, hi, smax, edge, filtered, aniso,
+                    max_aniso, scratch, out):  # pragma: no cover - compiled
+    for p in prange(uv.shape[0]):
+        m = scratch[p, 0:2]  # views of preallocated rows: no allocation per pixel
+        m0 = scratch[p, 2:4]
+        c = 2 if filtered else 1
+        lod, _ = _fetch(data, offs, hs, ws, uv[p, 0], uv[p, 1], dudv[p, 0, 0], dudv[p, 0, 1],
+                        dudv[p, 1, 0], dudv[p, 1, 1], aniso, max_aniso, c, m)
+        sigma = -1.0
+        if filtered:
+            var = m[1] - m[0] * m[0]
+            if lod < 1.0:  # magnification correction (texture.footprint_stats)
+                m0[0] = 0.0
+                m0[1] = 0.0
+                _bilerp(data, offs[0], hs[0], ws[0], uv[p, 0], uv[p, 1], 2, 1.0, m0)
+                var -= (1.0 - max(lod, 0.0)) * (m0[1] - m0[0] * m0[0])
+            sigma = math.sqrt(max(var, 0.0))
+        _table(table, lo, hi, smax, edge, m[0], sigma, out[p])
+
+
+@njit_parallel
+def _noise_kernel(data, offs, hs, ws, uv, dudv, std_var, table, lo, hi, smax, edge, filtered,
+                  max_aniso, scratch, out):  # pragma: no cover - compiled
+    nl = std_var.shape[0]
+    for p in prange(uv.shape[0]):
+        m = scratch[p, 0:1]
+        _, area_lod = _fetch(data, offs, hs, ws, uv[p, 0], uv[p, 1], dudv[p, 0, 0],
+                             dudv[p, 0, 1], dudv[p, 1, 0], dudv[p, 1, 1], True, max_aniso, 1, m)
+        sigma = -1.0
+        if filtered:
+            t = min(max(area_lod, 0.0), nl - 1.0)
+            l0 = min(int(t), nl - 2) if nl > 1 else 0
+            f = t - l0
+            v = std_var[l0] * (1 - f) + std_var[min(l0 + 1, nl - 1)] * f
+            sigma = math.sqrt(max(v, 0.0))
+        _table(table, lo, hi, smax, edge, m[0], sigma, out[p])
+
+
+_INV_SQRT_2PI = 0.3989422804014327
+
+
+@njit_serial
+def _lambda(wx, wy, wz, cxx, cxy, cyy):  # pragma: no cover - compiled
+    """Smith Lambda of a Gaussian surface (Heitz et al. 2013, eq. 3)."""
+    r = math.sqrt(wx * wx + wy * wy)
+    if r <= 0.0:
+        return 0.0
+    cx, cy = wx / r, wy / r
+    s = math.sqrt(cxx * cx * cx + 2 * cxy * cx * cy + cyy * cy * cy)
+    a = wz / r / s
+    return max(_INV_SQRT_2PI / a * math.exp(-0.5 * a * a) - 0.5 * math.erfc(a / math.sqrt(2.0)),
+               0.0)
+
+
+@njit_serial
+def _log_cdf(z):  # pragma: no cover - compiled
+    if z > -30.0:
+        return math.log(0.5 * math.erfc(-z / math.sqrt(2.0)))
+    return -0.5 * z * z - math.log(-z) - 0.5 * math.log(2 * math.pi)
+
+
+@njit_serial
+def _mills(z):  # pragma: no cover - compiled
+    if z > -30.0:
+        return _INV_SQRT_2PI * math.exp(-0.5 * z * z) / (0.5 * math.erfc(-z / math.sqrt(2.0)))
+    return -z - 1.0 / z
+
+
+@njit_serial
+def _probit(lam, grid, kappa, dd):  # pragma: no cover - compiled
+    """Probit ``(kappa_L, d_L)`` of ``P_h^L`` (height.py), linear in ``log L`` on ``grid``."""
+    if lam < 1e-4:  # == exp(grid[0]): no tilt below the table
+        return 0.0, 40.0
+    n = grid.shape[0]
+    x = (math.log(lam) - grid[0]) / (grid[1] - grid[0])
+    i = min(max(int(x), 0), n - 2)
+    f = min(max(x - i, 0.0), 1.0)
+    return kappa[i] * (1 - f) + kappa[i + 1] * f, dd[i] * (1 - f) + dd[i + 1] * f
+
+
+@njit_parallel
+def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kappa, dd, table,
+                   lo, hi, smax, edge, filtered, max_aniso, scratch, out):  # pragma: no cover
+    cxx, cxy, cyy = cov[0, 0], cov[0, 1], cov[1, 1]
+    for p in prange(uv.shape[0]):
+        lam_o = _lambda(wo[p, 0], wo[p, 1], wo[p, 2], cxx, cxy, cyy)
+        lam_i = _lambda(wi[p, 0], wi[p, 1], wi[p, 2], cxx, cxy, cyy)
+        m = scratch[p, 0:2]
+        c = 2 if filtered else 1
+        lod, _ = _fetch(data, offs, hs, ws, uv[p, 0], uv[p, 1], dudv[p, 0, 0], dudv[p, 0, 1],
+                        dudv[p, 1, 0], dudv[p, 1, 1], True, max_aniso, c, m)
+        if not filtered:
+            _table(table, lo, hi, smax, edge, m[0], -1.0, out[p])
+            vb = (1.0 + lam_o) / (1.0 + lam_o + lam_i)
+            for k in range(out.shape[1]):
+                out[p, k] *= vb
+            continue
+        var = m[1] - m[0] * m[0]
+        if lod < 1.0:
+            m0 = scratch[p, 2:4]
+            m0[0] = 0.0
+            m0[1] = 0.0
+            _bilerp(data, offs[0], hs[0], ws[0], uv[p, 0], uv[p, 1], 2, 1.0, m0)
+            var -= (1.0 - max(lod, 0.0)) * (m0[1] - m0[0] * m0[0])
+        x = m[0] / sigma_h
+        v = max(var, 0.0) / (sigma_h * sigma_h)
+        k1, d1 = _probit(lam_o + lam_i, grid, kappa, dd)
+        r1 = math.sqrt(1.0 + k1 * k1 * v)
+        z1 = (k1 * x + d1) / r1
+        k0, d0 = _probit(lam_o, grid, kappa, dd)
+        z0 = (k0 * x + d0) / math.sqrt(1.0 + k0 * k0 * v)
+        if z1 > -30.0 and z0 > -30.0:  # the usual case: two erfc and one exp
+            cdf1 = 0.5 * math.erfc(-z1 * 0.7071067811865476)
+            lz = _INV_SQRT_2PI * math.exp(-0.5 * z1 * z1) / cdf1
+            vb = cdf1 / (0.5 * math.erfc(-z0 * 0.7071067811865476))
+        else:  # deep shadow: log-space tails
+            lz = _mills(z1)
+            vb = math.exp(_log_cdf(z1) - _log_cdf(z0))
+        mean = x + k1 * v * lz / r1
+        vv = max(v - (k1 * v / r1) ** 2 * lz * (z1 + lz), 0.0)
+        _table(table, lo, hi, smax, edge, mean * sigma_h, math.sqrt(vv) * sigma_h, out[p])
+        for k in range(out.shape[1]):
+            out[p, k] *= vb
+
+
+def _flat(uv, dudv):
+    uv = as_float_array(uv, "uv", ndim_min=1, last_dim=2)
+    j = as_float_array(dudv, "dudv", ndim_min=2)
+    if j.shape[-2:] != (2, 2) or j.shape[:-2] != uv.shape[:-1]:
+        raise PrefilterError(f"dudv: expected shape {uv.shape[:-1] + (2, 2)}, got {j.shape}")
+    return uv.shape[:-1], np.ascontiguousarray(uv.reshape(-1, 2)), \
+        np.ascontiguousarray(j.reshape(-1, 2, 2))
+
+
+def _table_args(table):
+    lo, hi = table.value_range
+    return (np.ascontiguousarray(table.table), float(lo), float(hi), float(table.sigma_max),
+            _EDGE_CODE[table.edge])
+
+
+def shade_texture(table, chain: PackedChain, uv, dudv, *, filtered: bool = True,
+                  anisotropic: bool = True, max_aniso: int = 8) -> np.ndarray:
+    """Colour-mapped tabulated texture (section 4.2), ``(..., C)``.
+
+    ``chain``: packed moments chain (``E[f], E[f^2]``) for ``filtered``; for the naive method the
+    packed one-channel mean chain (only its first channel is read either way)."""
+    shape, uvf, jf = _flat(uv, dudv)
+    if filtered and chain.channels != 2:
+        raise PrefilterError("chain: the filtered method needs the two-channel moments chain")
+    out = np.zeros((uvf.shape[0], table.table.shape[2]))
+    _texture_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf,
+                    *_table_args(table), bool(filtered), bool(anisotropic),
+                    as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 4)), out)
+    return out.reshape(shape + (out.shape[1],))
+
+
+def shade_noise(table, chain: PackedChain, noise_std, uv, dudv, *, filtered: bool = True,
+                max_aniso: int = 8) -> np.ndarray:
+    """Colour-mapped procedural noise (section 4.2; anisotropic mean, std at the area LOD, as
+    :func:`prefilter.colormap.texture.filter_noise`), ``(..., C)``."""
+    shape, uvf, jf = _flat(uv, dudv)
+    out = np.zeros((uvf.shape[0], table.table.shape[2]))
+    _noise_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf,
+                  np.ascontiguousarray(noise_std.variance, dtype=np.float64),
+                  *_table_args(table), bool(filtered), as_positive_int(max_aniso, "max_aniso"),
+                  np.empty((uvf.shape[0], 4)), out)
+    return out.reshape(shape + (out.shape[1],))
+
+
+def shade_height(table, chain: PackedChain, uv, dudv, wo, wi, slope_cov, sigma_h=1.0, *,
+                 filtered: bool = True, max_aniso: int = 8) -> np.ndarray:
+    """Height-correlated colour over footprints (eq. 14 with
+    :func:`prefilter.colormap.height.height_footprint`; naive: ``V_bar C(mean)``), ``(..., C)``.
+    ``wo``, ``wi``: tangent-frame view and light directions ``(..., 3)`` (z > 0)."""
+    from prefilter.colormap.height import _PROBIT_T, _probit_table
+
+    shape, uvf, jf = _flat(uv, dudv)
+    wo = np.ascontiguousarray(as_float_array(wo, "wo", last_dim=3).reshape(-1, 3))
+    wi = np.ascontiguousarray(as_float_array(wi, "wi", last_dim=3).reshape(-1, 3))
+    if np.any(wo[:, 2] <= 0) or np.any(wi[:, 2] <= 0):
+        raise PrefilterError("wo, wi: expected directions above the surface (z > 0)")
+    cov = as_float_array(slope_cov, "slope_cov")
+    cov = cov * np.eye(2) if cov.ndim == 0 else cov
+    kappa, dd = _probit_table()
+    out = np.zeros((uvf.shape[0], table.table.shape[2]))
+    _height_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf, wo, wi,
+                   np.ascontiguousarray(cov), float(sigma_h), _PROBIT_T, np.asarray(kappa),
+                   np.asarray(dd), *_table_args(table), bool(filtered),
+                   as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 4)), out)
+    return out.reshape(shape + (out.shape[1],))
