@@ -325,3 +325,35 @@ def run_acceptance(size: int = 48, n_ref: int = 32, seed: int = 0, configs=CONFI
             if log:
                 log(row)
     return rows
+
+
+def format_rows(rows) -> str:
+    """The acceptance results as a Markdown table."""
+    lines = ["| shape | view | distance | texels/px | case | dE filtered | dE naive | ratio | "
+             "FLIP filtered | FLIP naive | ratio |", "|" + "---|" * 11]
+    for r in rows:
+        lines.append(
+            f"| {r['shape']} | {r['view_deg']:.0f} | {r['distance']} | "
+            f"{r['texels_per_pixel']:.1f} | {r['case']} | {r['lab_filtered']:.2f} | "
+            f"{r['lab_naive']:.2f} | {r['lab_ratio']:.2f} | {r['flip_filtered']:.3f} | "
+            f"{r['flip_naive']:.3f} | {r['flip_ratio']:.2f} |")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> None:  # pragma: no cover - a long run
+    """``python -m prefilter.colormap.acceptance [SIZE] [N_REF] [OUT.json]``."""
+    import sys
+
+    args = sys.argv[1:] if argv is None else argv
+    size = int(args[0]) if args else 48
+    n_ref = int(args[1]) if len(args) > 1 else 32
+    rows = run_acceptance(size, n_ref)
+    print(format_rows(rows))
+    if len(args) > 2:
+        from prefilter._io import save_json_atomic
+
+        save_json_atomic(args[2], rows)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

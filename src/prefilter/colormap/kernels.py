@@ -101,30 +101,42 @@ def _footprint(j00, j01, j10, j11, w, h):  # pragma: no cover - compiled
 
 
 @njit_serial
-def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, out):
-    """Footprint lookup (isotropic or anisotropic) into ``out[:c]``; returns the LOD used
-    (``log2`` of the tap size) and the area LOD ``log2(sqrt(major minor))``."""  # pragma: no cover
+def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, out,
+           ivar):  # pragma: no cover - compiled
+    """Footprint lookup (isotropic or anisotropic, as ``MipChain.lookup_footprint``) into
+    ``out[:c]``; returns the LOD used and the area LOD ``log2(sqrt(major minor))``. With ``ivar``
+    (two-channel moments) and LOD < 1, ``ivar[0]`` receives the level-0 interpolation variance
+    averaged over the taps (``texture.footprint_stats``)."""
     w = ws[0]
     h = hs[0]
     major, minor, dx, dy = _footprint(j00, j01, j10, j11, w, h)
     for k in range(c):
         out[k] = 0.0
     area_lod = 0.5 * math.log2(max(major * minor, 1.0))
-    if not aniso:
-        lod = math.log2(max(major, 1.0))
-        _trilinear(data, offs, hs, ws, u, v, lod, c, 1.0, out)
-        return lod, area_lod
     taps = 1
-    if minor > 0:
-        taps = int(min(max(math.ceil(major / minor), 1.0), max_aniso))
+    au = 0.0
+    av = 0.0
+    if aniso:
+        if minor > 0:
+            taps = int(min(max(math.ceil(major / minor), 1.0), max_aniso))
+        else:
+            taps = max_aniso
+        lod = math.log2(max(max(minor, major / max_aniso), 1.0))
+        au = dx * major / w
+        av = dy * major / h
     else:
-        taps = max_aniso
-    lod = math.log2(max(max(minor, major / max_aniso), 1.0))
-    au = dx * major / w
-    av = dy * major / h
+        lod = math.log2(max(major, 1.0))
+    want = ivar.shape[0] > 0 and lod < 1.0
+    if want:
+        ivar[0] = 0.0
     for i in range(taps):
-        o = (i + 0.5) / taps - 0.5
+        o = (i + 0.5) / taps - 0.5 if aniso else 0.0
         _trilinear(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, out)
+        if want:
+            ivar[1] = 0.0
+            ivar[2] = 0.0
+            _bilerp(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, ivar[1:3])
+            ivar[0] += (ivar[2] - ivar[1] * ivar[1]) / taps
     return lod, area_lod
 
 
@@ -165,18 +177,15 @@ def _texture_kernel(data, offs, hs, ws, uv, dudv, table, lo, hi, smax, edge, fil
                     max_aniso, scratch, out):  # pragma: no cover - compiled
     for p in prange(uv.shape[0]):
         m = scratch[p, 0:2]  # views of preallocated rows: no allocation per pixel
-        m0 = scratch[p, 2:4]
+        iv = scratch[p, 2:5] if filtered else scratch[p, 2:2]
         c = 2 if filtered else 1
         lod, _ = _fetch(data, offs, hs, ws, uv[p, 0], uv[p, 1], dudv[p, 0, 0], dudv[p, 0, 1],
-                        dudv[p, 1, 0], dudv[p, 1, 1], aniso, max_aniso, c, m)
+                        dudv[p, 1, 0], dudv[p, 1, 1], aniso, max_aniso, c, m, iv)
         sigma = -1.0
         if filtered:
             var = m[1] - m[0] * m[0]
             if lod < 1.0:  # magnification correction (texture.footprint_stats)
-                m0[0] = 0.0
-                m0[1] = 0.0
-                _bilerp(data, offs[0], hs[0], ws[0], uv[p, 0], uv[p, 1], 2, 1.0, m0)
-                var -= (1.0 - max(lod, 0.0)) * (m0[1] - m0[0] * m0[0])
+                var -= (1.0 - max(lod, 0.0)) * iv[0]
             sigma = math.sqrt(max(var, 0.0))
         _table(table, lo, hi, smax, edge, m[0], sigma, out[p])
 
@@ -188,7 +197,8 @@ def _noise_kernel(data, offs, hs, ws, uv, dudv, std_var, table, lo, hi, smax, ed
     for p in prange(uv.shape[0]):
         m = scratch[p, 0:1]
         _, area_lod = _fetch(data, offs, hs, ws, uv[p, 0], uv[p, 1], dudv[p, 0, 0],
-                             dudv[p, 0, 1], dudv[p, 1, 0], dudv[p, 1, 1], True, max_aniso, 1, m)
+                             dudv[p, 0, 1], dudv[p, 1, 0], dudv[p, 1, 1], True, max_aniso, 1, m,
+                             scratch[p, 1:1])
         sigma = -1.0
         if filtered:
             t = min(max(area_lod, 0.0), nl - 1.0)
@@ -249,9 +259,10 @@ def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kap
         lam_o = _lambda(wo[p, 0], wo[p, 1], wo[p, 2], cxx, cxy, cyy)
         lam_i = _lambda(wi[p, 0], wi[p, 1], wi[p, 2], cxx, cxy, cyy)
         m = scratch[p, 0:2]
+        iv = scratch[p, 2:5] if filtered else scratch[p, 2:2]
         c = 2 if filtered else 1
         lod, _ = _fetch(data, offs, hs, ws, uv[p, 0], uv[p, 1], dudv[p, 0, 0], dudv[p, 0, 1],
-                        dudv[p, 1, 0], dudv[p, 1, 1], True, max_aniso, c, m)
+                        dudv[p, 1, 0], dudv[p, 1, 1], True, max_aniso, c, m, iv)
         if not filtered:
             _table(table, lo, hi, smax, edge, m[0], -1.0, out[p])
             vb = (1.0 + lam_o) / (1.0 + lam_o + lam_i)
@@ -260,11 +271,7 @@ def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kap
             continue
         var = m[1] - m[0] * m[0]
         if lod < 1.0:
-            m0 = scratch[p, 2:4]
-            m0[0] = 0.0
-            m0[1] = 0.0
-            _bilerp(data, offs[0], hs[0], ws[0], uv[p, 0], uv[p, 1], 2, 1.0, m0)
-            var -= (1.0 - max(lod, 0.0)) * (m0[1] - m0[0] * m0[0])
+            var -= (1.0 - max(lod, 0.0)) * iv[0]
         x = m[0] / sigma_h
         v = max(var, 0.0) / (sigma_h * sigma_h)
         k1, d1 = _probit(lam_o + lam_i, grid, kappa, dd)
@@ -313,7 +320,7 @@ def shade_texture(table, chain: PackedChain, uv, dudv, *, filtered: bool = True,
     out = np.zeros((uvf.shape[0], table.table.shape[2]))
     _texture_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf,
                     *_table_args(table), bool(filtered), bool(anisotropic),
-                    as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 4)), out)
+                    as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))
 
 
@@ -326,7 +333,7 @@ def shade_noise(table, chain: PackedChain, noise_std, uv, dudv, *, filtered: boo
     _noise_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf,
                   np.ascontiguousarray(noise_std.variance, dtype=np.float64),
                   *_table_args(table), bool(filtered), as_positive_int(max_aniso, "max_aniso"),
-                  np.empty((uvf.shape[0], 4)), out)
+                  np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))
 
 
@@ -349,5 +356,5 @@ def shade_height(table, chain: PackedChain, uv, dudv, wo, wi, slope_cov, sigma_h
     _height_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf, wo, wi,
                    np.ascontiguousarray(cov), float(sigma_h), _PROBIT_T, np.asarray(kappa),
                    np.asarray(dd), *_table_args(table), bool(filtered),
-                   as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 4)), out)
+                   as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))

@@ -45,8 +45,10 @@ def _as_mean_cov(mean, cov):
     c = as_float_array(cov, "cov", ndim_min=2)
     if c.shape[-2:] != (2, 2):
         raise PrefilterError(f"cov: expected shape (..., 2, 2), got {c.shape}")
-    if np.any(c[..., 0, 0] < 0) or np.any(c[..., 1, 1] < 0) or \
-            np.any(c[..., 0, 0] * c[..., 1, 1] - c[..., 0, 1] * c[..., 1, 0] < -1e-15):
+    tr = c[..., 0, 0] + c[..., 1, 1]
+    disc = np.sqrt(0.25 * (c[..., 0, 0] - c[..., 1, 1]) ** 2 + c[..., 0, 1] * c[..., 1, 0])
+    # rank-deficient covariances come out of arithmetic with slightly negative eigenvalues
+    if np.any(0.5 * tr - disc < -1e-9 * np.abs(tr) - 1e-15):
         raise PrefilterError("cov: expected positive semi-definite 2x2 covariances")
     return mu, c
 

@@ -68,12 +68,37 @@ def footprint_stats(chain: MipChain, uv, dudv, *, anisotropic: bool = False,
     lod = lod_from_footprint(dudv, (h, w), anisotropic=anisotropic, max_aniso=max_aniso)
     w0 = 1.0 - np.clip(lod, 0.0, 1.0)
     if np.any(w0 > 0):
-        _, var0 = moments_to_stats(chain.lookup(uv, 0.0))
+        var0 = _level0_interpolation_variance(chain, uv, dudv, anisotropic, max_aniso)
         if var.ndim == mean.ndim:  # scalar data
             var = np.maximum(var - w0 * var0, 0.0)
         else:
             var = _psd(var - w0[..., None, None] * var0)
     return mean, var
+
+
+def _level0_interpolation_variance(chain, uv, dudv, anisotropic, max_aniso):
+    """The level-0 part of the lookup's variance that bilinear interpolation creates, averaged
+    over the same taps as :meth:`MipChain.lookup_footprint` (so the spread *between* taps, a
+    genuine variation across the footprint, is kept)."""
+    uv = np.asarray(uv, dtype=np.float64)
+    if not anisotropic:
+        return moments_to_stats(chain.lookup(uv, 0.0))[1]
+    h, w = chain.shape[:2]
+    major, minor, direction = footprint_axes(dudv, (h, w))
+    with np.errstate(divide="ignore"):
+        taps = np.clip(np.ceil(major / np.maximum(minor, 1e-300)), 1, max_aniso).astype(np.int64)
+    axis_uv = direction * (major[..., None] / np.array([w, h], float))
+    out = None
+    for n in np.unique(taps):  # a loop over tap counts and taps, not pixels
+        m = taps == n
+        acc = 0.0
+        for i in range(n):
+            offset = ((i + 0.5) / n - 0.5) * axis_uv[m]
+            acc = acc + moments_to_stats(chain.lookup(uv[m] + offset, 0.0))[1] / n
+        if out is None:
+            out = np.zeros(uv.shape[:-1] + np.shape(acc)[1:])
+        out[m] = acc
+    return out
 
 
 def _psd(c: np.ndarray) -> np.ndarray:
