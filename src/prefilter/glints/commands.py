@@ -1,0 +1,76 @@
+"""``prefilter bake glints``: a thin CLI over :func:`prefilter.glints.bake.bake`."""
+
+from __future__ import annotations
+
+import json
+
+from pathlib import Path
+
+import click
+import numpy as np
+
+from prefilter.errors import PrefilterError
+
+
+def load_normal_map(spec: str) -> np.ndarray:
+    """Normals ``(H, W, 3)`` from a file or a ``procedural:KIND[:SIZE[:SEED]]`` spec."""
+    if spec.startswith("procedural:"):
+        from prefilter.texture.procedural import normal_map
+
+        parts = spec.split(":")[1:]
+        try:
+            size = int(parts[1]) if len(parts) > 1 else 512
+            seed = int(parts[2]) if len(parts) > 2 else 0
+        except ValueError as exc:
+            raise PrefilterError(f"NORMAL_MAP: expected procedural:KIND[:SIZE[:SEED]], got {spec!r}") from exc
+        return normal_map(parts[0], size=size, seed=seed)
+    path = Path(spec)
+    if not path.is_file():
+        raise PrefilterError(f"NORMAL_MAP: no such file {spec!r}")
+    if path.suffix.lower() == ".npy":
+        return np.load(path, allow_pickle=False)
+    from prefilter.texture.io import read_image
+    from prefilter.texture.normalmap import decode_normals
+
+    return decode_normals(read_image(path))
+
+
+@click.command("glints")
+@click.argument("normal_map")
+@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
+              help="Output .npz (written atomically; parts in OUT.parts/ make it resumable).")
+@click.option("--rank", default=16, show_default=True, help="CP rank (paper: 16, 32 for flakes).")
+@click.option("--ndf-res", default=128, show_default=True, help="NDF image resolution.")
+@click.option("--block", default=16, show_default=True, help="Block size B of the NDF images.")
+@click.option("--support", default=0.5, show_default=True,
+              help="Half-width of the NDF images in projected normals s.")
+@click.option("--roughness", default=0.005, show_default=True, help="Intrinsic roughness sigma_r.")
+@click.option("--stride0", default=4, show_default=True, help="Level-0 footprint stride (texels).")
+@click.option("--sigma0", default=None, type=float, help="Level-0 footprint std [default: stride0].")
+@click.option("--cell", default=64, show_default=True, help="Spatial cell of a group (texels).")
+@click.option("--converge", default=0.01, show_default=True,
+              help="Stop adding levels when one differs from the previous by less (rel. L2).")
+@click.option("--iters", default=50, show_default=True, help="Max CP iterations per group.")
+@click.option("--seed", default=0, show_default=True)
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def bake_glints(normal_map, out, rank, ndf_res, block, support, roughness, stride0, sigma0, cell,
+                converge, iters, seed, quiet):
+    """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
+
+    NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
+    'procedural:KIND[:SIZE[:SEED]]' (prefilter.texture.procedural.normal_map).
+    """
+    from prefilter.glints.bake import bake
+
+    nm = load_normal_map(normal_map)
+    summary = bake(nm, out, rank=rank, ndf_res=ndf_res, block=block, support=support,
+                   intrinsic_roughness=roughness, stride0=stride0, sigma0=sigma0, cell=cell,
+                   converge=converge, n_iter_max=iters, seed=seed, progress=not quiet)
+    s = summary
+    click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
+    click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "
+               f"{s['compressed_bytes'] / 2**20:.2f} MiB, ratio {100 * s['ratio']:.2f} %")
+    click.echo(f"relative L2 error {100 * s['rel_l2_error']:.2f} % (per level: "
+               + ", ".join(f"{100 * e:.1f}" for e in s["rel_l2_error_per_level"]) + ")")
+    click.echo(f"time {s['seconds']:.1f} s -> {out}")
+    click.echo(json.dumps(summary))

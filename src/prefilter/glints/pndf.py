@@ -1,0 +1,383 @@
+"""Direct position-normal NDF of a normal map over a Gaussian footprint (Yan et al. 2016).
+
+Conventions (used by the whole ``prefilter.glints`` package):
+
+* A normal map is ``(H, W, 3)`` unit tangent-space normals with ``n_z > 0``; texel ``[row, col]``
+  is centred at texture position ``u = (x, y) = (col + 0.5, row + 0.5)`` in texel units (as in
+  ``prefilter.texture.procedural``). The map is treated as
+  periodic (a tile), so footprints near or larger than the map wrap around.
+* Projected normals ``s = (n_x, n_y)`` live in the unit disk. ``D_p(s)`` is a density w.r.t. ``s``:
+  ``integral D_p(s) ds = 1``.
+* On the hemisphere ``m = (s, sqrt(1 - |s|^2))`` the solid angle is ``dw = ds / m_z``. ``D_p(s) ds``
+  is the fraction of *macro-surface* area whose normal falls in ``ds`` and the microfacet NDF obeys
+  ``D(m) m_z dw = fraction of macro area``, so ``D(m) = D_p(s(m))`` with no extra factor, and
+  ``integral D(m) m_z dm = 1`` (tested by quadrature on the hemisphere).
+
+Each texel ``i`` is a 4D element ``g_i(u) N(s; n_i + J_i (u - u_i), sigma_r^2)`` with
+``g_i(u) = exp(-|u - u_i|^2 / (2 sigma_h^2))``, ``sigma_h`` a FWHM of one texel, ``J_i`` the central
+finite-difference Jacobian ``ds/du``. Against the footprint ``G_p(u) = exp(-|u - u_p|^2 / (2
+sigma_p^2))`` the ``u`` integral is closed form: element ``i`` contributes a 2D Gaussian in ``s`` with
+
+    weight  w_i = exp(-|u_p - u_i|^2 / (2 (sigma_p^2 + sigma_h^2)))
+    mean    n_i + J_i mu_i,   mu_i = (u_p - u_i) sigma_h^2 / (sigma_p^2 + sigma_h^2)
+    cov     sigma_r^2 I + sigma^2 J_i J_i^T,   sigma^2 = sigma_p^2 sigma_h^2 / (sigma_p^2 + sigma_h^2)
+
+and ``D_p(s) = sum_i w_i N_i(s) / sum_i w_i`` (normalised exactly). Elements with ``|u_p - u_i|``
+beyond ``TRUNCATION`` standard deviations (per axis) are skipped: the texel grid is the spatial
+acceleration structure, so the cost is proportional to the texels under the footprint.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter._validate import as_float_array, as_positive_int, as_upper_directions
+from prefilter.errors import PrefilterError
+
+SIGMA_H = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))  # FWHM of one texel (Yan et al. 2016)
+TRUNCATION = 4.0  # footprint Gaussians are cut at 4 sigma per axis (mass lost < 1.3e-4)
+DEFAULT_ROUGHNESS = 0.005  # intrinsic roughness sigma_r (Yan et al. 2016)
+
+
+# ---------------------------------------------------------------------------------------------
+# validation
+
+
+def as_normal_map(normal_map, name: str = "normal_map") -> np.ndarray:
+    """A validated ``(H, W, 3)`` float64 normal map of unit normals with ``n_z > 0``."""
+    a = as_float_array(normal_map, name, ndim_min=3, last_dim=3)
+    if a.ndim != 3 or a.shape[0] < 2 or a.shape[1] < 2:
+        raise PrefilterError(f"{name}: expected shape (H, W, 3) with H, W >= 2, got {a.shape}")
+    return np.ascontiguousarray(as_upper_directions(a, name, tol=1e-2))
+
+
+def _as_roughness(sigma_r, name: str = "intrinsic_roughness") -> float:
+    try:
+        v = float(sigma_r)
+    except (TypeError, ValueError) as exc:
+        raise PrefilterError(f"{name}: expected a number, got {sigma_r!r}") from exc
+    if not (1e-4 <= v <= 0.5):
+        raise PrefilterError(f"{name}: expected intrinsic roughness in [1e-4, 0.5], got {v!r}")
+    return v
+
+
+def _as_sigma_p(sigma_p, name: str = "sigma_p") -> np.ndarray:
+    a = as_float_array(sigma_p, name)
+    if np.any(a < 0.0) or np.any(a > 1e6):
+        raise PrefilterError(f"{name}: expected footprint std in texels in [0, 1e6], got {a}")
+    return a
+
+
+def _as_support(support, name: str = "support") -> float:
+    try:
+        v = float(support)
+    except (TypeError, ValueError) as exc:
+        raise PrefilterError(f"{name}: expected a number, got {support!r}") from exc
+    if not (0.0 < v <= 1.0):
+        raise PrefilterError(f"{name}: expected a half-width of the s-square in (0, 1], got {v!r}")
+    return v
+
+
+# ---------------------------------------------------------------------------------------------
+# elements
+
+
+def elements(normal_map) -> tuple[np.ndarray, np.ndarray]:
+    """Per-texel element centres and Jacobians of a normal map (Yan et al. 2016, sec. 4).
+
+    Parameters
+    ----------
+    normal_map : (H, W, 3) unit normals, periodic.
+
+    Returns
+    -------
+    s : (H, W, 2) projected normals ``n_i``.
+    J : (H, W, 2, 2) central-difference Jacobians, ``J[..., a, b] = d s_a / d u_b`` with
+        ``u = (x, y)``, ``x`` along columns.
+    """
+    n = as_normal_map(normal_map)
+    s = np.ascontiguousarray(n[..., :2])
+    J = np.empty(s.shape[:2] + (2, 2))
+    J[..., :, 0] = 0.5 * (np.roll(s, -1, axis=1) - np.roll(s, 1, axis=1))
+    J[..., :, 1] = 0.5 * (np.roll(s, -1, axis=0) - np.roll(s, 1, axis=0))
+    return s, J
+
+
+def pixel_edges(resolution: int, support: float) -> np.ndarray:
+    """Edges ``(resolution + 1,)`` of the NDF-image pixels along one axis of ``[-support, support]``."""
+    return np.linspace(-support, support, resolution + 1)
+
+
+def pixel_centers(resolution: int, support: float) -> np.ndarray:
+    e = pixel_edges(resolution, support)
+    return 0.5 * (e[1:] + e[:-1])
+
+
+# ---------------------------------------------------------------------------------------------
+# Numba kernels
+
+
+_PHI_LO, _PHI_N = -6.0, 8192
+_PHI_STEP = -2.0 * _PHI_LO / _PHI_N
+# Tabulated standard normal CDF: linear interpolation error <= step^2 / 8 * max|phi'| < 3e-8, and
+# erfc dominated the splat cost.
+_PHI_TABLE = np.array([0.5 * math.erfc(-(_PHI_LO + k * _PHI_STEP) / math.sqrt(2.0))
+                       for k in range(_PHI_N + 1)])
+
+
+@njit_serial
+def _phi(z):
+    t = (z - _PHI_LO) / _PHI_STEP
+    if t <= 0.0:
+        return 0.0
+    if t >= _PHI_N:
+        return 1.0
+    k = int(t)
+    f = t - k
+    return _PHI_TABLE[k] + f * (_PHI_TABLE[k + 1] - _PHI_TABLE[k])
+
+
+@njit_serial
+def _window(c, rad):
+    # texel indices whose centres (index + 0.5) lie within c +- rad
+    return int(math.ceil(c - rad - 0.5)), int(math.floor(c + rad - 0.5))
+
+
+@njit_parallel
+def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, out):
+    H, W = s_el.shape[0], s_el.shape[1]
+    sh2 = sh * sh
+    for q in prange(out.shape[0]):
+        sp2 = sp[q] * sp[q]
+        tot2 = sp2 + sh2
+        f = sh2 / tot2
+        var = sp2 * sh2 / tot2
+        rad = trunc * math.sqrt(tot2)
+        x0, x1 = _window(cx[q], rad)
+        y0, y1 = _window(cy[q], rad)
+        acc = 0.0
+        wsum = 0.0
+        for y in range(y0, y1 + 1):
+            dy = cy[q] - (y + 0.5)
+            r = y % H
+            for x in range(x0, x1 + 1):
+                dx = cx[q] - (x + 0.5)
+                c = x % W
+                w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+                wsum += w
+                j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
+                mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
+                my = s_el[r, c, 1] + f * (j10 * dx + j11 * dy)
+                a = sr * sr + var * (j00 * j00 + j01 * j01)
+                b = var * (j00 * j10 + j01 * j11)
+                d = sr * sr + var * (j10 * j10 + j11 * j11)
+                det = a * d - b * b
+                ex = qx[q] - mx
+                ey = qy[q] - my
+                quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
+                if quad < 2.0 * trunc * trunc * 4.0:
+                    acc += w * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+        out[q] = acc / wsum
+
+
+@njit_serial
+def _splat(img, px, py, mx, my, siso, w, lo, h, trunc):
+    """Add ``w`` times the pixel masses of ``N((mx, my), siso^2 I)`` to ``img`` (separable erf)."""
+    R = img.shape[0]
+    rad = trunc * siso
+    j0 = max(0, int(math.floor((mx - rad - lo) / h)))
+    j1 = min(R - 1, int(math.floor((mx + rad - lo) / h)))
+    i0 = max(0, int(math.floor((my - rad - lo) / h)))
+    i1 = min(R - 1, int(math.floor((my + rad - lo) / h)))
+    if j0 > j1 or i0 > i1:
+        return
+    inv = 1.0 / siso
+    prev = _phi((lo + j0 * h - mx) * inv)
+    for j in range(j0, j1 + 1):
+        cur = _phi((lo + (j + 1) * h - mx) * inv)
+        px[j] = cur - prev
+        prev = cur
+    prev = _phi((lo + i0 * h - my) * inv)
+    for i in range(i0, i1 + 1):
+        cur = _phi((lo + (i + 1) * h - my) * inv)
+        py[i] = cur - prev
+        prev = cur
+    for i in range(i0, i1 + 1):
+        wy = w * py[i]
+        for j in range(j0, j1 + 1):
+            img[i, j] += wy * px[j]
+
+
+@njit_parallel
+def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, out):
+    """NDF images ``out (N, R, R)``: pixel averages of ``D_p`` (row = s_y, column = s_x).
+
+    Each element's covariance ``sr^2 I + var J J^T`` is split exactly into an isotropic part
+    ``siso^2 I`` (splatted with separable erf pixel masses) and a rank-one part ``kappa^2 v v^T``
+    integrated along ``v`` by nodes spaced at most 1.5 siso apart (the isotropic blur makes this sum
+    spectrally accurate: aliasing ~ exp(-2 pi^2 / 1.5^2) ~ 1.5e-4, further damped by the pixel box).
+    """
+    H, W = s_el.shape[0], s_el.shape[1]
+    R = out.shape[1]
+    hi = lo + R * h
+    sh2 = sh * sh
+    for q in prange(out.shape[0]):
+        img = out[q]
+        px = np.zeros(R)
+        py = np.zeros(R)
+        sp2 = sp[q] * sp[q]
+        tot2 = sp2 + sh2
+        f = sh2 / tot2
+        var = sp2 * sh2 / tot2
+        rad = trunc * math.sqrt(tot2)
+        x0, x1 = _window(cx[q], rad)
+        y0, y1 = _window(cy[q], rad)
+        wsum = 0.0
+        for y in range(y0, y1 + 1):
+            dy = cy[q] - (y + 0.5)
+            r = y % H
+            for x in range(x0, x1 + 1):
+                dx = cx[q] - (x + 0.5)
+                c = x % W
+                w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+                wsum += w
+                j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
+                mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
+                my = s_el[r, c, 1] + f * (j10 * dx + j11 * dy)
+                a = var * (j00 * j00 + j01 * j01)
+                b = var * (j00 * j10 + j01 * j11)
+                d = var * (j10 * j10 + j11 * j11)
+                half = 0.5 * (a + d)
+                dif = math.sqrt(0.25 * (a - d) * (a - d) + b * b)
+                nu1 = half + dif
+                nu2 = max(half - dif, 0.0)
+                reach = trunc * math.sqrt(nu1 + sr * sr)
+                if mx + reach < lo or mx - reach > hi or my + reach < lo or my - reach > hi:
+                    continue
+                siso = math.sqrt(sr * sr + nu2)
+                kappa = math.sqrt(max(nu1 - nu2, 0.0))
+                if kappa < 1e-3 * siso:
+                    _splat(img, px, py, mx, my, siso, w, lo, h, trunc)
+                    continue
+                # principal direction of J J^T
+                if a >= d:
+                    vx, vy = nu1 - d, b
+                else:
+                    vx, vy = b, nu1 - a
+                vn = math.sqrt(vx * vx + vy * vy)
+                vx /= vn
+                vy /= vn
+                if kappa <= 0.7 * siso:
+                    # 3-point Gauss-Hermite along v: exact mean, variance and kurtosis
+                    t = math.sqrt(3.0) * kappa
+                    _splat(img, px, py, mx, my, siso, w * (2.0 / 3.0), lo, h, trunc)
+                    _splat(img, px, py, mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, trunc)
+                    _splat(img, px, py, mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, trunc)
+                    continue
+                n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+                norm = 0.0
+                for k in range(n):
+                    tk = -trunc + 2.0 * trunc * k / (n - 1)
+                    norm += math.exp(-0.5 * tk * tk)
+                for k in range(n):
+                    tk = -trunc + 2.0 * trunc * k / (n - 1)
+                    wk = w * math.exp(-0.5 * tk * tk) / norm
+                    _splat(img, px, py, mx + kappa * tk * vx, my + kappa * tk * vy, siso, wk,
+                           lo, h, trunc)
+        scale = 1.0 / (wsum * h * h)
+        for i in range(R):
+            for j in range(R):
+                img[i, j] *= scale
+
+
+# ---------------------------------------------------------------------------------------------
+# public API
+
+
+def _prepared(normal_map, elements_=None):
+    if elements_ is not None:
+        s_el, J = elements_
+        return np.ascontiguousarray(s_el, dtype=np.float64), np.ascontiguousarray(J, dtype=np.float64)
+    return elements(normal_map)
+
+
+def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_ROUGHNESS, *,
+         elements_=None) -> np.ndarray:
+    """P-NDF ``D_p(s)`` of a Gaussian footprint, density w.r.t. projected normals ``s``.
+
+    Yan et al. 2016, eq. for the P-NDF of a Gaussian footprint (closed-form element integrals).
+
+    Parameters
+    ----------
+    normal_map : (H, W, 3) unit normals (periodic).
+    center : (..., 2) footprint centres ``(x, y)`` in texels.
+    sigma_p : (...) footprint standard deviations in texels.
+    s : (..., 2) projected half vectors; ``center``, ``sigma_p`` and ``s`` broadcast together.
+    intrinsic_roughness : std ``sigma_r`` of each element in ``s``.
+    elements_ : optional precomputed ``elements(normal_map)`` (skips recomputing the Jacobians).
+
+    Returns
+    -------
+    (...) densities; ``D(m) = D_p(m_xy)`` on the hemisphere (see module docstring).
+    """
+    s_el, J = _prepared(normal_map, elements_)
+    sr = _as_roughness(intrinsic_roughness)
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = _as_sigma_p(sigma_p)
+    q = as_float_array(s, "s", ndim_min=1, last_dim=2)
+    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, q.shape[:-1])
+    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
+    sp = np.broadcast_to(sp, shape).reshape(-1)
+    out = np.empty(c.shape[0])
+    _pndf_points(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
+                 np.ascontiguousarray(sp), np.ascontiguousarray(q[:, 0]),
+                 np.ascontiguousarray(q[:, 1]), sr, SIGMA_H, TRUNCATION, out)
+    return out.reshape(shape)
+
+
+def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: float = 0.5,
+               intrinsic_roughness: float = DEFAULT_ROUGHNESS, *, elements_=None) -> np.ndarray:
+    """NDF images of Gaussian footprints: pixel averages of ``D_p`` over ``[-support, support]^2``.
+
+    Yan et al. 2016 P-NDF, integrated exactly over each pixel (separable erf masses plus a
+    spectrally accurate line quadrature along each element's principal axis).
+
+    Parameters
+    ----------
+    normal_map : (H, W, 3) unit normals (periodic).
+    center : (..., 2) footprint centres in texels; sigma_p : (...) footprint stds in texels.
+    resolution : pixels per side ``R``; support : half-width of the square in ``s``.
+
+    Returns
+    -------
+    (..., R, R) images, row index along ``s_y``, column index along ``s_x``; the sum of an image
+    times the pixel area ``(2 support / R)^2`` is the mass of ``D_p`` inside the square (<= 1).
+    """
+    s_el, J = _prepared(normal_map, elements_)
+    sr = _as_roughness(intrinsic_roughness)
+    R = as_positive_int(resolution, "resolution")
+    S = _as_support(support)
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = _as_sigma_p(sigma_p)
+    shape = np.broadcast_shapes(c.shape[:-1], sp.shape)
+    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    sp = np.broadcast_to(sp, shape).reshape(-1)
+    out = np.zeros((c.shape[0], R, R))
+    _pndf_images(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
+                 np.ascontiguousarray(sp), sr, SIGMA_H, TRUNCATION, -S, 2.0 * S / R, out)
+    return out.reshape(shape + (R, R))
+
+
+def hemisphere_ndf(D_s, m) -> np.ndarray:
+    """NDF ``D(m)`` on the hemisphere from P-NDF values ``D_s`` evaluated at ``s = m_xy``.
+
+    ``D(m) = D_p(m_xy)`` for ``m_z > 0`` and 0 below (module docstring: both weight macro area),
+    so ``integral D(m) m_z dm = integral D_p(s) ds``.
+    """
+    m = as_float_array(m, "m", ndim_min=1, last_dim=3)
+    D = as_float_array(D_s, "D_s")
+    return np.where(m[..., 2] > 0.0, D, 0.0)

@@ -1,0 +1,184 @@
+"""The footprint pyramid of NDF images (glints tensor-prefiltering paper, sec. 4.1).
+
+Level ``l`` samples footprint centres on a periodic grid of stride ``stride0 * 2^l`` texels, at
+``u = (k_x stride_l + 0.5, k_y stride_l + 0.5)`` (texel centres sit at ``i + 0.5``), with Gaussian
+footprints of std ``sigma0 * 2^l``. Centres of level ``l`` are a subset of those of level ``l - 1``.
+
+Only level 0 is computed directly (``pndf_image``). The P-NDF is linear in the footprint and
+``G_{2 sigma} = G_sigma * G_{sqrt(3) sigma}``, so level ``l`` is the level ``l - 1`` image grid
+filtered by a periodic Gaussian of std ``sqrt(3) sigma_{l-1}`` and decimated by 2. The filter is
+sampled at the level-``l - 1`` stride; the sampled sum equals the integral up to aliasing of order
+``exp(-3 pi^2 / 2 (sigma / stride)^2)`` (< 4e-7 for ``sigma0 = stride0``), so the upper levels are
+exact P-NDFs, not approximations of them.
+
+Queries between samples use trilinear interpolation: bilinear over the (periodic) centre grid of
+two levels and linear in ``log2(sigma_p)`` between them; footprints smaller than ``sigma0`` or
+larger than the top level are clamped to it (the paper switches to the direct P-NDF below level 0).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from prefilter._validate import as_float_array, as_positive_int
+from prefilter.errors import PrefilterError
+
+
+@dataclass(frozen=True)
+class Pyramid:
+    """Geometry of the footprint pyramid of an ``height x width`` periodic normal map."""
+
+    height: int
+    width: int
+    stride0: int
+    sigma0: float
+    n_levels: int
+
+    def stride(self, level: int) -> int:
+        return self.stride0 << level
+
+    def sigma(self, level: int) -> float:
+        return self.sigma0 * 2.0**level
+
+    def shape(self, level: int) -> tuple[int, int]:
+        """Number of centres ``(ny, nx)`` of ``level``."""
+        st = self.stride(level)
+        return self.height // st, self.width // st
+
+    @property
+    def offsets(self) -> np.ndarray:
+        """Index of the first image of each level in the flat image list, plus the total."""
+        sizes = [int(np.prod(self.shape(lv))) for lv in range(self.n_levels)]
+        return np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+
+    @property
+    def n_images(self) -> int:
+        return int(self.offsets[-1])
+
+    def centers(self, level: int) -> np.ndarray:
+        """Footprint centres ``(ny, nx, 2)`` of ``level`` in texels ``(x, y)``."""
+        ny, nx = self.shape(level)
+        st = self.stride(level)
+        X, Y = np.meshgrid(np.arange(nx) * st + 0.5, np.arange(ny) * st + 0.5)
+        return np.stack([X, Y], axis=-1)
+
+    def with_levels(self, n_levels: int) -> "Pyramid":
+        return Pyramid(self.height, self.width, self.stride0, self.sigma0, n_levels)
+
+    def to_dict(self) -> dict:
+        return {"height": self.height, "width": self.width, "stride0": self.stride0,
+                "sigma0": self.sigma0, "n_levels": self.n_levels}
+
+
+def plan(height: int, width: int, stride0: int = 4, sigma0: float | None = None,
+         max_levels: int | None = None) -> Pyramid:
+    """The tallest pyramid for a map: levels while the stride divides both map sides.
+
+    The top level has one centre per axis when the sides are ``stride0`` times a power of two; its
+    footprint then covers the map.
+    """
+    H = as_positive_int(height, "height")
+    W = as_positive_int(width, "width")
+    st = as_positive_int(stride0, "stride0")
+    s0 = float(st if sigma0 is None else sigma0)
+    if not (0.5 * st <= s0 <= 4.0 * st):
+        raise PrefilterError(f"sigma0: expected a footprint std in [stride0/2, 4 stride0], got {s0}")
+    if H % st or W % st:
+        raise PrefilterError(f"stride0: expected a divisor of the map size {H}x{W}, got {st}")
+    n = 1
+    while H % (st << n) == 0 and W % (st << n) == 0 and (st << n) <= min(H, W):
+        n += 1
+    if max_levels is not None:
+        n = min(n, as_positive_int(max_levels, "max_levels"))
+    return Pyramid(H, W, st, s0, n)
+
+
+def next_level(images: np.ndarray, sigma_over_stride: float, out: np.ndarray | None = None,
+               chunk: int = 8) -> np.ndarray:
+    """Level ``l + 1`` images ``(ny/2, nx/2, R, R)`` from level ``l`` images ``(ny, nx, R, R)``.
+
+    Periodic separable Gaussian filter of std ``sqrt(3) sigma_l`` (in strides:
+    ``sqrt(3) * sigma_over_stride``) sampled at the even centres; weights normalised to sum 1.
+    """
+    ny, nx = images.shape[:2]
+    if ny % 2 or nx % 2:
+        raise PrefilterError(f"images: expected an even centre grid, got {ny}x{nx}")
+    std = math.sqrt(3.0) * sigma_over_stride
+    taps = np.arange(-math.ceil(4 * std), math.ceil(4 * std) + 1)
+    w = np.exp(-0.5 * (taps / std) ** 2)
+    w /= w.sum()
+    tmp = np.zeros((ny, nx // 2) + images.shape[2:], dtype=np.float32)
+    cols = np.arange(nx // 2) * 2
+    for y0 in range(0, ny, chunk):
+        block = np.asarray(images[y0:y0 + chunk], dtype=np.float64)
+        acc = np.zeros((block.shape[0], nx // 2) + images.shape[2:])
+        for t, wt in zip(taps, w):
+            acc += wt * block[:, (cols + t) % nx]
+        tmp[y0:y0 + chunk] = acc
+    if out is None:
+        out = np.zeros((ny // 2, nx // 2) + images.shape[2:], dtype=np.float32)
+    rows = np.arange(ny // 2) * 2
+    for x0 in range(0, nx // 2, chunk):
+        acc = np.zeros((ny // 2, min(chunk, nx // 2 - x0)) + images.shape[2:])
+        for t, wt in zip(taps, w):
+            acc += wt * tmp[(rows + t) % ny, x0:x0 + chunk]
+        out[:, x0:x0 + chunk] = acc
+    return out
+
+
+def level_difference(prev: np.ndarray, cur: np.ndarray) -> float:
+    """Relative L2 difference of level ``l`` images from level ``l - 1`` at the same centres."""
+    p = np.asarray(prev[::2, ::2], dtype=np.float64)
+    c = np.asarray(cur, dtype=np.float64)
+    return float(np.linalg.norm(c - p) / max(np.linalg.norm(c), 1e-300))
+
+
+def interp_weights(pyr: Pyramid, center, sigma_p) -> tuple[np.ndarray, np.ndarray]:
+    """Trilinear interpolation: 8 flat image indices ``(..., 8)`` and weights ``(..., 8)``.
+
+    Parameters
+    ----------
+    center : (..., 2) footprint centres in texels (any value; the map is periodic).
+    sigma_p : (...) footprint stds in texels, clamped to ``[sigma0, sigma_top]``.
+    """
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_float_array(sigma_p, "sigma_p")
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    shape = np.broadcast_shapes(c.shape[:-1], sp.shape)
+    c = np.broadcast_to(c, shape + (2,))
+    sp = np.broadcast_to(sp, shape)
+    top = pyr.n_levels - 1
+    with np.errstate(divide="ignore"):
+        t = np.clip(np.log2(np.maximum(sp, 1e-300) / pyr.sigma0), 0.0, float(top))
+    l0 = np.minimum(np.floor(t).astype(np.int64), max(top - 1, 0))
+    fl = t - l0
+    if top == 0:
+        fl = np.zeros_like(t)
+    idx = np.empty(shape + (8,), dtype=np.int64)
+    wts = np.empty(shape + (8,))
+    offs = pyr.offsets
+    strides = np.array([pyr.stride(lv) for lv in range(pyr.n_levels)])
+    shapes = np.array([pyr.shape(lv) for lv in range(pyr.n_levels)])
+    for dl in (0, 1):
+        lv = np.minimum(l0 + dl, top)
+        wl = fl if dl else 1.0 - fl
+        st = strides[lv]
+        ny, nx = shapes[lv, 0], shapes[lv, 1]
+        gx = (c[..., 0] - 0.5) / st
+        gy = (c[..., 1] - 0.5) / st
+        x0 = np.floor(gx).astype(np.int64)
+        y0 = np.floor(gy).astype(np.int64)
+        fx, fy = gx - x0, gy - y0
+        k = 4 * dl
+        for dy in (0, 1):
+            for dx in (0, 1):
+                ix = (x0 + dx) % nx
+                iy = (y0 + dy) % ny
+                idx[..., k] = offs[lv] + iy * nx + ix
+                wts[..., k] = wl * (fx if dx else 1 - fx) * (fy if dy else 1 - fy)
+                k += 1
+    return idx, wts
