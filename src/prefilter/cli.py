@@ -52,6 +52,7 @@ TOP_COMMANDS = {
     "compare": "prefilter.render.commands:compare",
     "demo": "prefilter.render.demo:demo",
     "validate": "prefilter.ltc.commands:validate",
+    "multiscale-fit": "prefilter.multiscale.commands:multiscale_fit",
 }
 
 

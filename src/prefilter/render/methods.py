@@ -55,12 +55,19 @@ Method = Callable[..., object]
 _REGISTRY: dict[str, Method | str] = {
     "ltc": "prefilter.render.pipeline:render_ltc",
     "reference": "prefilter.render.reference:render_reference",
+    "ltc-multiscale": "prefilter.multiscale.render:render_multiscale",
+    "ltc-multiscale-paper": "prefilter.multiscale.render:render_multiscale_paper",
+    "ltc-multiscale-mrl": "prefilter.multiscale.render:render_multiscale_mrl",
 }
 _DESCRIPTIONS: dict[str, str] = {
     "ltc": "area lights by the isotropic LTC table, normal and colour from the footprint's mip "
            "level (the naive method)",
     "reference": "ground truth: stratified supersampling, full-resolution textures, MIS Monte "
                  "Carlo of the true GGX BRDF",
+    "ltc-multiscale": "multi-scale LTC: meso roughness from the mean resultant length of the "
+                      "unnormalised mip-averaged normal, convolved with micro roughness (our fit)",
+    "ltc-multiscale-paper": "multi-scale LTC with the paper's fitted eqs. 5 and 7",
+    "ltc-multiscale-mrl": "multi-scale LTC with the closed-form product of mean resultant lengths",
 }
 
 
