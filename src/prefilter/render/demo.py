@@ -46,14 +46,18 @@ class DemoSettings:
 TEXELS_PER_UNIT = 256
 
 
-def showcase_scene(distance: float, width: int, height: int, *, normal_map: str = "gaussian",
-                   alpha: float = 0.1, seed: int = 1) -> dict:
+def showcase_scene(distance: float, width: int, height: int, *, normal_map: dict | None = None,
+                   alpha: float = 0.1) -> dict:
     """The demo scene as a plain dict (see ``docs/scenes.md``), camera ``distance`` times the base.
 
     Base configuration: the camera looks down at 20 degrees onto the plane ``y = 0``; the quad
     light hangs above the far side so its reflection crosses the image. Camera and light scale
-    with ``distance``; the plane and its texture do not.
+    with ``distance``; the plane and its texture do not. ``normal_map`` is a procedural texture
+    spec (``docs/scenes.md``); the default is isotropic Gaussian bumps.
     """
+    if normal_map is None:
+        normal_map = {"procedural": "gaussian", "size": 256, "seed": 1, "rms_slope": 0.25,
+                      "corr_length": 3}
     d = float(distance)
     elev = np.radians(20.0)
     base = 1.4  # world units from the camera to the target at distance 1
@@ -73,8 +77,7 @@ def showcase_scene(distance: float, width: int, height: int, *, normal_map: str 
             "uv_scale": [size * TEXELS_PER_UNIT / 256, size * TEXELS_PER_UNIT / 256],
             "material": {
                 "alpha": alpha, "base_color": [0.02, 0.02, 0.02], "f0": [0.9, 0.9, 0.9],
-                "normal_map": {"procedural": normal_map, "size": 256, "seed": seed,
-                               "rms_slope": 0.25, "corr_length": 3},
+                "normal_map": dict(normal_map),
             },
         }],
         "lights": [{
