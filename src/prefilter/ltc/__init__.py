@@ -4,3 +4,7 @@ from prefilter.ltc.ltc import LTC
 from prefilter.ltc.polygon import clamped_cosine_integral, polygon_integral, polygon_integral_minv
 
 __all__ = ["LTC", "clamped_cosine_integral", "polygon_integral", "polygon_integral_minv"]
+
+from prefilter.ltc.table import GGXTable, schlick_scale  # noqa: E402
+
+__all__ += ["GGXTable", "schlick_scale"]

@@ -1,0 +1,348 @@
+"""Fitting the isotropic GGX LTC table (Heitz, Dupuy, Hill, Neubelt 2016, section 4).
+
+For one view angle ``theta`` and roughness ``alpha`` the normalised cosine-weighted lobe
+``p(wi) = GGX.eval(wo, wi) / n`` (``n`` = albedo) is approximated by an LTC ``q = LTC(M).eval``.
+The view lies in the xz plane, ``wo = (sin theta, 0, cos theta)``, so the lobe is symmetric about
+that plane and ``M = [[a, 0, b], [0, c, 0], [d, 0, e]]``. Following the paper's reference code, ``M``
+is parameterised in the frame ``(X, Y, Z)`` whose ``Z`` is the lobe's average direction::
+
+    M = [X Y Z] @ [[m11, 0, m13], [0, m22, 0], [0, 0, 1]]
+
+with three free numbers (two scales and a skew); fitted as ``(log m11, log m22, m13 / m11)``.
+The objective is the integrated ``|p - q|^3`` estimated on two FIXED stratified sample sets (cosine
+samples mapped by ``M``, and visible-normal reflections of the GGX lobe) combined with the balance
+heuristic, so it is a deterministic, smooth function of the parameters; Nelder-Mead minimises it,
+warm-started from the neighbouring (larger) roughness along each view angle.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict, dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from scipy.optimize import minimize
+
+from prefilter._io import Checkpoints, save_npz_atomic
+from prefilter._validate import as_positive_int, as_roughness
+from prefilter.errors import PrefilterError
+from prefilter.microfacet import GGX, reflect
+from prefilter.sphere.sampling import cosine_hemisphere
+
+#: Version of the table layout written by :func:`bake_table` (checked by ``GGXTable.load``).
+TABLE_VERSION = 1
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """Everything that determines the baked bytes (stored in the table as JSON)."""
+
+    res_theta: int = 64
+    res_alpha: int = 64
+    alpha_min: float = 0.01
+    #: Last row's view angle (degrees); views beyond it are clamped to it at lookup.
+    theta_max_deg: float = 88.0
+    #: Stratified samples per axis of each fixed sample set (LTC and GGX): n_fit^2 each.
+    n_fit: int = 32
+    #: Gauss-Legendre nodes per axis for the magnitude, Fresnel and average-direction quadrature.
+    quad_nodes: int = 96
+    #: Exponent k of the fitting distance integral |p - q|^k (3 in the paper's reference code;
+    #: smaller k weighs the lobe's tails more, which lowers quad-light errors, see docs/ltc.md).
+    power: float = 0.5
+    seed: int = 0
+
+    def axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Table axes ``t = sqrt(1 - cos theta)`` (T,) and ``r = sqrt(alpha)`` (R,)."""
+        t_max = np.sqrt(1.0 - np.cos(np.radians(self.theta_max_deg)))
+        axis_t = np.linspace(0.0, t_max, self.res_theta)
+        axis_r = np.linspace(np.sqrt(self.alpha_min), 1.0, self.res_alpha)
+        return axis_t, axis_r
+
+
+def view_from_t(t) -> np.ndarray:
+    """View ``(..., 3)`` in the xz plane for table coordinate ``t = sqrt(1 - cos theta)``."""
+    cos_t = 1.0 - np.asarray(t, dtype=np.float64) ** 2
+    sin_t = np.sqrt(np.maximum(0.0, 1.0 - cos_t * cos_t))
+    return np.stack([sin_t, np.zeros_like(cos_t), cos_t], axis=-1)
+
+
+def lobe_moments(wo, alpha, nodes: int = 96) -> dict[str, np.ndarray]:
+    """Magnitude, Fresnel scalar and average direction of the isotropic GGX lobe.
+
+    Heitz et al. 2016, section 4 (``equations.md`` 2): ``n = integral f cos dwi`` (albedo, F = 1),
+    ``f5 = integral f cos (1 - wi.h)^5 dwi`` and the mean direction of ``f cos``. Deterministic
+    Gauss-Legendre quadrature in the unit square of visible-normal sampling, where the integrand
+    is ``G2 / G1`` times ``(1 - wo.m)^5`` or ``wi`` (``wi.h = wo.m`` for a reflection).
+
+    Parameters
+    ----------
+    wo : (..., 3) views above the surface.
+    alpha : (...) roughness.
+
+    Returns
+    -------
+    dict with ``magnitude`` (...), ``fresnel`` (...), ``direction`` (..., 3) (unit).
+    """
+    wo = np.asarray(wo, dtype=np.float64)
+    alpha = np.asarray(alpha, dtype=np.float64)
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    x = (x + 1.0) / 2.0
+    u = np.stack(np.meshgrid(x, x, indexing="ij"), -1).reshape(-1, 2)
+    wgt = (w[:, None] * w[None, :]).reshape(-1) / 4.0
+    model = GGX(alpha[..., None])
+    wo_b = wo[..., None, :]
+    m = model.sample_vndf(wo_b, u)
+    wi = reflect(wo_b, m)
+    lam_o = model.smith_lambda(wo_b)
+    lam_i = model.smith_lambda(wi)
+    ratio = np.where(wi[..., 2] > 0.0, (1.0 + lam_o) / (1.0 + lam_o + lam_i), 0.0) * wgt
+    n = ratio.sum(-1)
+    f5 = np.sum(ratio * (1.0 - np.clip(np.sum(wo_b * m, -1), 0.0, 1.0)) ** 5, -1)
+    d = np.sum(ratio[..., None] * wi, -2)
+    d = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    return {"magnitude": n, "fresnel": f5, "direction": d}
+
+
+def ltc_from_params(params) -> np.ndarray:
+    """``M (3, 3)`` from ``(log m11, log m22, m13 / m11, beta)``.
+
+    ``M = [X Y Z] @ [[m11, 0, m13], [0, m22, 0], [0, 0, 1]]`` with ``Z = (sin beta, 0, cos beta)``,
+    ``X = (cos beta, 0, -sin beta)``, ``Y = (0, 1, 0)``: the general xz-symmetric LTC
+    ``[[a, 0, b], [0, c, 0], [d, 0, e]]`` up to scale (4 degrees of freedom).
+    """
+    m11 = np.exp(params[0])
+    m22 = np.exp(params[1])
+    m13 = params[2] * m11
+    zx, zz = np.sin(params[3]), np.cos(params[3])
+    # columns X = (zz, 0, -zx), Y = (0, 1, 0), Z = (zx, 0, zz)
+    return np.array(
+        [
+            [zz * m11, 0.0, zz * m13 + zx],
+            [0.0, m22, 0.0],
+            [-zx * m11, 0.0, -zx * m13 + zz],
+        ]
+    )
+
+
+def normalize_ltc(M) -> np.ndarray:
+    """``M`` divided by the length of its third column (the stored normalisation)."""
+    M = np.asarray(M, dtype=np.float64)
+    return M / np.linalg.norm(M[..., :, 2], axis=-1)[..., None, None]
+
+
+def fixed_samples(n_fit: int, seed: int) -> np.ndarray:
+    """Jittered stratified uniforms ``(n_fit^2, 2)``, fixed for the whole bake by ``seed``."""
+    rng = np.random.default_rng(seed)
+    g = np.stack(np.meshgrid(np.arange(n_fit), np.arange(n_fit), indexing="ij"), -1).reshape(-1, 2)
+    return np.clip((g + rng.random(g.shape)) / n_fit, 1e-9, 1 - 1e-9)
+
+
+def _lobe_and_pdf(wo, wi, alpha, lam_o):
+    """Isotropic GGX ``eval(wo, wi)`` (cosine-weighted, ``equations.md`` 1) and the density of
+    visible-normal reflection, sharing ``D(h)``: ``pdf = G1(wo) D(h) / (4 wo_z)`` for wo.h > 0.
+
+    A fused form of ``GGX.eval`` and ``GGX.pdf_reflect`` for the fitting loop (no validation).
+    """
+    h = wi + wo
+    h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    a2 = alpha * alpha
+    t = (h[:, 0] ** 2 + h[:, 1] ** 2) / a2 + h[:, 2] ** 2
+    D = np.where(h[:, 2] > 0.0, 1.0 / (np.pi * a2 * t * t), 0.0)
+    wz2 = np.maximum(wi[:, 2] ** 2, 1e-300)
+    s2 = a2 * (wi[:, 0] ** 2 + wi[:, 1] ** 2) / wz2
+    lam_i = s2 / (1.0 + np.sqrt(1.0 + s2)) / 2.0
+    scale = D / (4.0 * wo[2])
+    f = np.where(wi[:, 2] > 0.0, scale / (1.0 + lam_o + lam_i), 0.0)
+    pdf = np.where(h @ wo > 0.0, scale / (1.0 + lam_o), 0.0)
+    return f, pdf
+
+
+class _Objective:
+    """``integral |p - q|^k / integral p^k`` for one (view, roughness), on fixed samples."""
+
+    def __init__(self, wo, alpha, magnitude, u, power=0.5):
+        self.power = power
+        self.wo = wo
+        self.alpha = alpha
+        model = GGX(alpha)
+        self.lam_o = float(model.smith_lambda(wo))
+        self.n = magnitude
+        self.c = cosine_hemisphere(u)  # cosine samples, mapped by M at every evaluation
+        self.count = len(u)
+        self.wb = reflect(wo, model.sample_vndf(wo, u))
+        f, self.pdf_b = _lobe_and_pdf(wo, self.wb, alpha, self.lam_o)
+        self.p_b = f / magnitude
+        self.pk = np.sum(self.p_b**power / np.maximum(self.pdf_b, 1e-300)) / self.count
+
+    def __call__(self, params) -> float:
+        M = ltc_from_params(params)
+        M_inv = np.linalg.inv(M)
+        det_inv = abs(np.linalg.det(M_inv))
+        wl = self.c @ M.T
+        wl /= np.linalg.norm(wl, axis=-1, keepdims=True)
+        w = np.concatenate([wl, self.wb])
+        lw = w @ M_inv.T
+        length = np.linalg.norm(lw, axis=-1)
+        q = np.maximum(0.0, lw[:, 2] / length) / np.pi * det_inv / length**3
+        f_l, pdf_l = _lobe_and_pdf(self.wo, wl, self.alpha, self.lam_o)
+        p = np.concatenate([f_l / self.n, self.p_b])
+        pdf_b = np.concatenate([pdf_l, self.pdf_b])
+        # balance heuristic over both sample sets: sum f / (N pdf_ltc + N pdf_b)
+        err = np.sum(np.abs(p - q) ** self.power / np.maximum(q + pdf_b, 1e-300)) / self.count
+        return float(err / self.pk)
+
+
+def fit_entry(theta, alpha, *, init=None, n_fit: int = 32, seed: int = 0, quad_nodes: int = 96,
+              power: float = 0.5):
+    """Fit the LTC of one table entry.
+
+    Parameters
+    ----------
+    theta : view angle from the normal (radians, in [0, pi/2)).
+    alpha : GGX roughness.
+    init : optional starting parameters ``(log m11, log m22, m13 / m11, beta)`` (a neighbour's
+        fit); default: a cosine scaled by ``alpha`` around the lobe's average direction.
+
+    Returns
+    -------
+    dict with ``M`` (3, 3) normalised by its third column, ``params`` (4,), ``magnitude``,
+    ``fresnel``, ``error`` (the relative ``L^power`` objective at the optimum).
+    """
+    theta = float(theta)
+    if not 0.0 <= theta < np.pi / 2:
+        raise PrefilterError(f"theta: expected an angle in [0, pi/2), got {theta}")
+    alpha = float(as_roughness(alpha, "alpha"))
+    wo = np.array([np.sin(theta), 0.0, np.cos(theta)])
+    return _fit(wo, alpha, init, fixed_samples(n_fit, seed), quad_nodes, power)
+
+
+_NM = {"xatol": 1e-5, "fatol": 1e-7, "maxiter": 4000}
+
+
+def _fit(wo, alpha, init, u, quad_nodes, power=0.5):
+    mom = lobe_moments(wo, alpha, quad_nodes)
+    obj = _Objective(wo, alpha, float(mom["magnitude"]), u, power)
+    isotropic = wo[0] < 1e-12  # normal view: rotationally symmetric lobe, M = diag(a, a, 1)
+    if init is None:
+        d = mom["direction"]
+        x0 = np.array([np.log(alpha), np.log(alpha), 0.0, np.arctan2(d[0], d[2])])
+    else:
+        x0 = np.asarray(init, dtype=np.float64)
+    if isotropic:
+        res = minimize(lambda s: obj(np.array([s[0], s[0], 0.0, 0.0])), x0[:1],
+                       method="Nelder-Mead",
+                       options={"initial_simplex": [[x0[0]], [x0[0] + 0.1]], **_NM})
+        params = np.array([res.x[0], res.x[0], 0.0, 0.0])
+    else:
+        simplex = x0 + np.vstack([np.zeros(4), np.diag([0.1, 0.1, 0.05, 0.05])])
+        res = minimize(obj, x0, method="Nelder-Mead", options={"initial_simplex": simplex, **_NM})
+        params = res.x
+    return {
+        "M": normalize_ltc(ltc_from_params(params)),
+        "params": params,
+        "magnitude": float(mom["magnitude"]),
+        "fresnel": float(mom["fresnel"]),
+        "error": float(res.fun),
+    }
+
+
+def fit_row(t: float, settings: FitSettings) -> dict[str, np.ndarray]:
+    """Fit every roughness of one view angle (table coordinate ``t``), from alpha = 1 down.
+
+    Returns arrays ``M`` (R, 3, 3), ``magnitude`` (R,), ``fresnel`` (R,), ``error`` (R,), in the
+    order of the roughness axis (ascending).
+    """
+    _, axis_r = settings.axes()
+    wo = view_from_t(t)
+    u = fixed_samples(settings.n_fit, settings.seed)
+    R = len(axis_r)
+    out = {"M": np.zeros((R, 3, 3)), "magnitude": np.zeros(R), "fresnel": np.zeros(R),
+           "error": np.zeros(R)}
+    init = None
+    for j in range(R - 1, -1, -1):
+        fit = _fit(wo, float(axis_r[j] ** 2), init, u, settings.quad_nodes, settings.power)
+        init = fit["params"].copy()
+        # the next (smaller) roughness scales both axes by about alpha_next / alpha
+        if j > 0:
+            init[:2] += 2.0 * np.log(axis_r[j - 1] / axis_r[j])
+        for k in ("M", "magnitude", "fresnel", "error"):
+            out[k][j] = fit[k]
+    return out
+
+
+def _row_job(args):
+    i, t, settings = args
+    return i, fit_row(t, settings)
+
+
+def default_table_path() -> Path:
+    """Where the shipped table lives (package data)."""
+    return Path(__file__).with_name("data") / "ggx_iso.npz"
+
+
+def bake_table(
+    out: str | os.PathLike | None = None,
+    settings: FitSettings | None = None,
+    *,
+    processes: int = 1,
+    progress: bool = True,
+    on_row: Callable[[int], None] | None = None,
+) -> Path:
+    """Fit the whole table row by row (resumable) and write it atomically to ``out``.
+
+    Each finished row is checkpointed in ``<out>.parts/``; rerunning with the same settings
+    resumes from there and gives the same bytes as an uninterrupted bake. ``on_row(i)`` is called
+    after row ``i`` is saved (tests use it to interrupt a bake).
+    """
+    settings = settings or FitSettings()
+    as_positive_int(settings.res_theta, "res_theta", lo=2)
+    as_positive_int(settings.res_alpha, "res_alpha", lo=2)
+    as_positive_int(processes, "processes")
+    out = Path(out) if out is not None else default_table_path()
+    axis_t, axis_r = settings.axes()
+    key = {"version": TABLE_VERSION, **asdict(settings)}
+    ck = Checkpoints(out, key)
+    todo = [(i, float(axis_t[i]), settings) for i in range(len(axis_t)) if not ck.done(i)]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(axis_t), initial=len(axis_t) - len(todo), desc="ltc-iso rows",
+                   unit="row")
+
+    def finish(i, row):
+        ck.save(i, **row)
+        if bar is not None:
+            bar.update(1)
+        if on_row is not None:
+            on_row(i)
+
+    try:
+        if processes > 1 and len(todo) > 1:
+            with get_context("spawn").Pool(min(processes, len(todo))) as pool:
+                for i, row in pool.imap_unordered(_row_job, todo):
+                    finish(i, row)
+        else:
+            for job in todo:
+                finish(*_row_job(job))
+    finally:
+        if bar is not None:
+            bar.close()
+    rows = [ck.load(i) for i in range(len(axis_t))]
+    save_npz_atomic(
+        out,
+        version=np.array(TABLE_VERSION, dtype=np.int64),
+        axis_t=axis_t,
+        axis_r=axis_r,
+        M=np.stack([r["M"] for r in rows]),
+        magnitude=np.stack([r["magnitude"] for r in rows]),
+        fresnel=np.stack([r["fresnel"] for r in rows]),
+        fit_error=np.stack([r["error"] for r in rows]),
+        settings=np.array(json.dumps(key, sort_keys=True)),
+    )
+    ck.clear()
+    return out

@@ -1,0 +1,176 @@
+"""The isotropic GGX LTC table: loading, validation and bilinear lookup.
+
+Heitz, Dupuy, Hill, Neubelt 2016, section 4: one LTC matrix, a magnitude and a Fresnel scalar per
+(view angle, roughness). The file layout is documented in ``docs/ltc.md`` and in
+:meth:`GGXTable.load`; the table is produced by ``prefilter bake ltc-iso``
+(:func:`prefilter.ltc.fit_iso.bake_table`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from prefilter._validate import as_float_array, as_roughness, as_upper_directions
+from prefilter.errors import TableFileError
+from prefilter.ltc.fit_iso import TABLE_VERSION, default_table_path
+
+
+def schlick_scale(magnitude, fresnel, f0) -> np.ndarray:
+    """Factor multiplying ``E(M^-1 P)`` for Schlick Fresnel with reflectance ``f0``.
+
+    Heitz et al. 2016 (``equations.md`` 2): ``F0 (n - f5) + f5``; broadcasts (e.g. RGB ``f0``).
+    """
+    return np.asarray(f0) * (np.asarray(magnitude) - np.asarray(fresnel)) + np.asarray(fresnel)
+
+
+class GGXTable:
+    """LTC fit of the isotropic GGX lobe over ``t = sqrt(1 - cos theta)`` and ``r = sqrt(alpha)``.
+
+    Attributes
+    ----------
+    axis_t : (T,) increasing, ``axis_t[0] = 0`` (normal view); views beyond ``axis_t[-1]`` clamp.
+    axis_r : (R,) increasing ``sqrt(alpha)``; ``axis_r[-1] = 1``.
+    M : (T, R, 3, 3) LTC matrices in the view's azimuthal frame (view in the xz plane), each
+        divided by the length of its third column.
+    magnitude, fresnel : (T, R) ``n`` and ``f5``.
+    settings : dict of the fit settings the table was baked with.
+    """
+
+    def __init__(self, axis_t, axis_r, M, magnitude, fresnel, settings=None, fit_error=None):
+        self.axis_t = np.asarray(axis_t, dtype=np.float64)
+        self.axis_r = np.asarray(axis_r, dtype=np.float64)
+        self.M = np.asarray(M, dtype=np.float64)
+        self.magnitude = np.asarray(magnitude, dtype=np.float64)
+        self.fresnel = np.asarray(fresnel, dtype=np.float64)
+        self.settings = dict(settings or {})
+        self.fit_error = None if fit_error is None else np.asarray(fit_error, dtype=np.float64)
+
+    def __repr__(self) -> str:
+        return (f"GGXTable(T={len(self.axis_t)}, R={len(self.axis_r)}, "
+                f"alpha in [{self.alpha_min:.4g}, 1], theta <= {np.degrees(self.theta_max):.3g} deg)")
+
+    @property
+    def alpha_min(self) -> float:
+        return float(self.axis_r[0] ** 2)
+
+    @property
+    def theta_max(self) -> float:
+        """Largest tabulated view angle (radians); larger angles use this row."""
+        return float(np.arccos(1.0 - self.axis_t[-1] ** 2))
+
+    @classmethod
+    def load(cls, path: str | os.PathLike | None = None) -> "GGXTable":
+        """Read and validate a table file (default: the table shipped with the package).
+
+        Expected ``.npz`` arrays: ``version`` (int, == 1), ``axis_t`` (T,), ``axis_r`` (R,),
+        ``M`` (T, R, 3, 3), ``magnitude`` (T, R), ``fresnel`` (T, R), ``settings`` (JSON string);
+        optional ``fit_error`` (T, R). Raises :class:`~prefilter.errors.TableFileError` when the
+        file is missing, unreadable, of another version, or has wrong shapes or non-finite values.
+        """
+        path = Path(path) if path is not None else default_table_path()
+        if not path.is_file():
+            raise TableFileError(f"LTC table {path}: file not found (bake it with "
+                                 f"`prefilter bake ltc-iso -o {path}`)")
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+            raise TableFileError(f"LTC table {path}: unreadable .npz ({exc})") from exc
+        need = ("version", "axis_t", "axis_r", "M", "magnitude", "fresnel", "settings")
+        missing = [k for k in need if k not in data]
+        if missing:
+            raise TableFileError(f"LTC table {path}: missing arrays {missing}")
+        try:
+            version = int(data["version"])
+        except (TypeError, ValueError) as exc:
+            raise TableFileError(f"LTC table {path}: version: expected an integer") from exc
+        if version != TABLE_VERSION:
+            raise TableFileError(
+                f"LTC table {path}: version: expected {TABLE_VERSION}, got {version}")
+        t, r = data["axis_t"], data["axis_r"]
+        if t.ndim != 1 or r.ndim != 1 or len(t) < 2 or len(r) < 2:
+            raise TableFileError(f"LTC table {path}: axis_t, axis_r: expected 1-D arrays of length"
+                                 f" >= 2, got shapes {t.shape}, {r.shape}")
+        T, R = len(t), len(r)
+        expect = {"M": (T, R, 3, 3), "magnitude": (T, R), "fresnel": (T, R)}
+        if "fit_error" in data:
+            expect["fit_error"] = (T, R)
+        for k, shape in expect.items():
+            if data[k].shape != shape:
+                raise TableFileError(
+                    f"LTC table {path}: {k}: expected shape {shape}, got {data[k].shape}")
+        for k in ("axis_t", "axis_r", *expect):
+            a = data[k]
+            if not np.issubdtype(a.dtype, np.floating) or not np.all(np.isfinite(a)):
+                raise TableFileError(f"LTC table {path}: {k}: expected finite floats")
+        if not (np.all(np.diff(t) > 0) and np.all(np.diff(r) > 0) and t[0] == 0.0 and t[-1] < 1.0
+                and r[0] > 0.0 and abs(r[-1] - 1.0) < 1e-12):
+            raise TableFileError(f"LTC table {path}: axes: expected increasing axis_t from 0 "
+                                 f"(< 1) and axis_r in (0, 1] ending at 1")
+        if np.any(np.abs(np.linalg.det(data["M"])) < 1e-300):
+            raise TableFileError(f"LTC table {path}: M: expected invertible matrices")
+        try:
+            settings = json.loads(str(data["settings"]))
+        except json.JSONDecodeError as exc:
+            raise TableFileError(f"LTC table {path}: settings: expected a JSON string") from exc
+        return cls(t, r, data["M"], data["magnitude"], data["fresnel"], settings,
+                   data.get("fit_error"))
+
+    def _coords(self, wo, alpha):
+        wo = as_upper_directions(wo, "wo")
+        alpha = as_roughness(alpha, "alpha", lo=self.alpha_min * (1 - 1e-12), hi=1.0)
+        shape = np.broadcast_shapes(wo.shape[:-1], alpha.shape)
+        wo = np.broadcast_to(wo, shape + (3,))
+        t = np.sqrt(np.maximum(0.0, 1.0 - wo[..., 2]))
+        ft = np.interp(t, self.axis_t, np.arange(len(self.axis_t), dtype=np.float64))
+        fr = np.interp(np.sqrt(np.broadcast_to(alpha, shape)), self.axis_r,
+                       np.arange(len(self.axis_r), dtype=np.float64))
+        return wo, ft, fr
+
+    def _bilinear(self, table, ft, fr):
+        i = np.minimum(np.floor(ft).astype(np.intp), len(self.axis_t) - 2)
+        j = np.minimum(np.floor(fr).astype(np.intp), len(self.axis_r) - 2)
+        a = ft - i
+        b = fr - j
+        extra = (None,) * (table.ndim - 2)
+        a = a[(...,) + extra]
+        b = b[(...,) + extra]
+        return ((1 - a) * (1 - b) * table[i, j] + a * (1 - b) * table[i + 1, j]
+                + (1 - a) * b * table[i, j + 1] + a * b * table[i + 1, j + 1])
+
+    def lookup_canonical(self, wo_z, alpha):
+        """Bilinear ``(M, magnitude, fresnel)`` in the view's azimuthal frame (view in xz)."""
+        wo_z = as_float_array(wo_z, "wo_z")
+        wo = np.stack([np.sqrt(np.maximum(0.0, 1 - wo_z**2)), np.zeros_like(wo_z), wo_z], -1)
+        _, ft, fr = self._coords(wo, alpha)
+        return (self._bilinear(self.M, ft, fr), self._bilinear(self.magnitude, ft, fr),
+                self._bilinear(self.fresnel, ft, fr))
+
+    def lookup(self, wo, alpha):
+        """LTC of the GGX lobe for views ``wo (..., 3)`` (local frame) and roughness ``alpha (...)``.
+
+        Bilinear interpolation in ``(sqrt(1 - cos theta), sqrt(alpha))``; views beyond the last
+        row's angle use that row. ``M`` is returned in the local frame: ``Rz(phi) M Rz(phi)^T``
+        with ``phi`` the view's azimuth.
+
+        Returns
+        -------
+        M : (..., 3, 3), magnitude : (...), fresnel : (...)
+        """
+        wo, ft, fr = self._coords(wo, alpha)
+        M = self._bilinear(self.M, ft, fr)
+        phi = np.arctan2(wo[..., 1], wo[..., 0])
+        c, s = np.cos(phi), np.sin(phi)
+        Rz = np.zeros(phi.shape + (3, 3))
+        Rz[..., 0, 0] = c
+        Rz[..., 0, 1] = -s
+        Rz[..., 1, 0] = s
+        Rz[..., 1, 1] = c
+        Rz[..., 2, 2] = 1.0
+        M = Rz @ M @ np.swapaxes(Rz, -1, -2)
+        return M, self._bilinear(self.magnitude, ft, fr), self._bilinear(self.fresnel, ft, fr)
