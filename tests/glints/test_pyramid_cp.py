@@ -1,0 +1,89 @@
+"""Footprint pyramid (filtering == direct P-NDF, interpolation weights) and non-negative CP."""
+
+import numpy as np
+import pytest
+from maps import sinusoid
+
+from prefilter.errors import PrefilterError
+from prefilter.glints import pndf_image
+from prefilter.glints.cp import cut_blocks, nn_cp, nn_cp_batch, prefix_sums, reconstruct
+from prefilter.glints.pyramid import interp_weights, level_difference, next_level, plan
+
+
+def test_filtered_levels_equal_the_direct_pndf():
+    nm = sinusoid(32, ax=0.25, ay=0.2, px=16, py=8)
+    pyr = plan(32, 32, 4)
+    assert pyr.n_levels == 4
+    R, S = 16, 0.4
+    level = pndf_image(nm, pyr.centers(0), pyr.sigma(0), R, S).astype(np.float32)
+    for lv in range(1, pyr.n_levels):
+        level = next_level(level, 1.0)
+        direct = pndf_image(nm, pyr.centers(lv), pyr.sigma(lv), R, S)
+        assert np.linalg.norm(level - direct) / np.linalg.norm(direct) < 1e-3
+
+
+def test_interp_weights_hit_the_samples_and_sum_to_one():
+    pyr = plan(64, 64, 4)
+    c = pyr.centers(2)[1, 3]
+    idx, w = interp_weights(pyr, c, pyr.sigma(2))
+    assert idx[np.argmax(w)] == pyr.offsets[2] + 1 * pyr.shape(2)[1] + 3
+    assert w.max() == pytest.approx(1.0)
+    rng = np.random.default_rng(0)
+    idx, w = interp_weights(pyr, rng.uniform(-100, 100, (50, 2)), rng.uniform(0, 200, 50))
+    np.testing.assert_allclose(w.sum(-1), 1.0)
+    assert np.all(w >= 0) and np.all((idx >= 0) & (idx < pyr.n_images))
+
+
+def test_interp_is_linear_in_position_and_log_sigma():
+    """Interpolating a quantity linear in (x, y, log2 sigma) on the sample grid is exact."""
+    pyr = plan(64, 64, 4)
+    val = np.concatenate([
+        (pyr.centers(lv)[..., 0] + 2 * pyr.centers(lv)[..., 1] + 5 * lv).ravel()
+        for lv in range(pyr.n_levels)])
+    c = np.array([[10.0, 12.0], [20.3, 7.9]])
+    sp = np.array([4 * 2**0.3, 8 * 2**0.5])
+    idx, w = interp_weights(pyr, c, sp)
+    got = (val[idx] * w).sum(-1)
+    np.testing.assert_allclose(got, c[:, 0] + 2 * c[:, 1] + 5 * np.log2(sp / 4), atol=1e-9)
+
+
+def test_level_difference_and_plan_errors():
+    a = np.ones((4, 4, 2, 2))
+    assert level_difference(a, a[::2, ::2]) == 0.0
+    with pytest.raises(PrefilterError, match="stride0"):
+        plan(30, 30, 4)
+
+
+def exact_tensor(rank=4, shape=(8, 8, 40), seed=0):
+    rng = np.random.default_rng(seed)
+    a, b, c = (rng.random((n, rank)) for n in shape)
+    return reconstruct(a, b, c)
+
+
+@pytest.mark.parametrize("method", ["hals", "tensorly"])
+def test_nn_cp_recovers_an_exact_nonnegative_tensor(method):
+    T = exact_tensor()
+    a, b, c, err = nn_cp(T, 4, n_iter_max=2000, tol=1e-12, method=method)
+    assert err < 2e-2
+    assert np.linalg.norm(reconstruct(a, b, c) - T) / np.linalg.norm(T) == pytest.approx(err)
+    assert min(a.min(), b.min(), c.min()) >= 0
+    np.testing.assert_allclose(a.sum(0), 1.0)
+    np.testing.assert_allclose(b.sum(0), 1.0)
+
+
+def test_hals_reaches_tensorly_error_on_ndf_blocks():
+    nm = sinusoid(32, ax=0.25, ay=0.2, px=16, py=8)
+    pyr = plan(32, 32, 4)
+    imgs = pndf_image(nm, pyr.centers(0), 4.0, 32, 0.4).reshape(-1, 32, 32)
+    T = np.ascontiguousarray(cut_blocks(imgs, 8)[:, 1, 2].transpose(1, 2, 0))
+    e_tl = nn_cp(T, 6, n_iter_max=300, tol=1e-7, method="tensorly")[3]
+    e_batch = nn_cp_batch([T, T[:, :, :20]], 6, n_iter_max=300, tol=1e-7)[0][3]
+    assert e_batch < 1.1 * e_tl + 1e-3
+
+
+def test_prefix_sums_and_blocks():
+    f = np.arange(6.0).reshape(3, 2)
+    np.testing.assert_allclose(prefix_sums(f), [[0, 0, 2, 6], [0, 1, 4, 9]])
+    img = np.arange(16.0).reshape(4, 4)
+    blk = cut_blocks(img, 2)
+    np.testing.assert_array_equal(blk[1, 0], [[8, 9], [12, 13]])

@@ -1,0 +1,164 @@
+"""Bake a small map, then check queries against the uncompressed NDF images, the range-query
+proposition, the loader's validation and the CLI."""
+
+import json
+
+import numpy as np
+import pytest
+from maps import sinusoid
+
+from prefilter.errors import PrefilterError, TableFileError
+from prefilter.glints import pndf_image
+from prefilter.glints.bake import bake
+from prefilter.glints.query import block_means, point, range_mean
+from prefilter.glints.store import ARRAYS, load, save
+
+R, S, BLK = 32, 0.4, 8
+
+
+@pytest.fixture(scope="module")
+def baked(tmp_path_factory):
+    nm = sinusoid(32, ax=0.25, ay=0.2, px=16, py=8)
+    out = tmp_path_factory.mktemp("gl") / "map.npz"
+    summary = bake(nm, out, rank=16, ndf_res=R, block=BLK, support=S, cell=16, converge=0.0,
+                   n_iter_max=300, tol=1e-7, progress=False)
+    return nm, out, summary, load(out)
+
+
+def pixel_grid():
+    h = 2 * S / R
+    x = (np.arange(R) + 0.5) * h - S
+    X, Y = np.meshgrid(x, x)
+    return np.stack([X, Y], -1), h
+
+
+def test_point_queries_reproduce_the_ndf_images(baked):
+    nm, _, summary, gm = baked
+    s, _ = pixel_grid()
+    pyr = gm.pyramid
+    c = pyr.centers(1)[1, 0]
+    ref = pndf_image(nm, c, pyr.sigma(1), R, S)
+    got = point(gm, c, pyr.sigma(1), s)
+    assert np.linalg.norm(got - ref) / np.linalg.norm(ref) < 2 * max(summary["rel_l2_error"], 0.01)
+    assert np.all(got >= 0)
+
+
+def test_summary_error_is_the_measured_error(baked):
+    nm, _, summary, gm = baked
+    s, _ = pixel_grid()
+    pyr = gm.pyramid
+    num = den = 0.0
+    for lv in range(pyr.n_levels):
+        cen = pyr.centers(lv).reshape(-1, 2)
+        ref = pndf_image(nm, cen, pyr.sigma(lv), R, S)
+        got = point(gm, cen[:, None, None, :], pyr.sigma(lv), s[None])
+        num += np.sum((got - ref) ** 2)
+        den += np.sum(ref**2)
+    assert np.sqrt(num / den) == pytest.approx(summary["rel_l2_error"], rel=0.02, abs=1e-3)
+
+
+def test_range_equals_mean_of_point_queries(baked):
+    """The appendix proposition, over rectangles spanning several blocks."""
+    _, _, _, gm = baked
+    s, h = pixel_grid()
+    rng = np.random.default_rng(0)
+    for _ in range(6):
+        i0, j0 = rng.integers(0, R - 1, 2)
+        i1, j1 = rng.integers(i0 + 1, R + 1), rng.integers(j0 + 1, R + 1)
+        c, sp = rng.uniform(0, 32, 2), rng.uniform(3, 40)
+        pts = point(gm, c, sp, s[i0:i1, j0:j1])
+        lo = np.array([j0 * h - S, i0 * h - S])
+        hi = np.array([j1 * h - S, i1 * h - S])
+        assert range_mean(gm, c, sp, lo, hi) == pytest.approx(pts.mean(), rel=1e-5, abs=1e-9)
+
+
+def test_fractional_range_and_vectorisation(baked):
+    _, _, _, gm = baked
+    lo = np.array([[-0.13, -0.05], [0.3, 0.35]])
+    hi = np.array([[0.021, 0.17], [0.6, 0.7]])  # the second leaves the support
+    c = np.array([[5.0, 9.0], [20.0, 1.0]])
+    got = range_mean(gm, c, 7.0, lo, hi)
+    n = 200
+    for q in range(2):
+        t = (np.arange(n) + 0.5) / n
+        X, Y = np.meshgrid(lo[q, 0] + t * (hi[q, 0] - lo[q, 0]), lo[q, 1] + t * (hi[q, 1] - lo[q, 1]))
+        dense = point(gm, c[q], 7.0, np.stack([X, Y], -1)).mean()
+        assert got[q] == pytest.approx(dense, rel=1e-2, abs=1e-6)
+
+
+def test_block_means_match_range_over_each_block(baked):
+    _, _, _, gm = baked
+    h = 2 * S / R
+    img = 3
+    means = block_means(gm, img)
+    pyr = gm.pyramid
+    c = pyr.centers(0).reshape(-1, 2)[img]
+    for bi, bj in [(1, 1), (2, 1), (0, 3)]:
+        lo = np.array([bj * BLK * h - S, bi * BLK * h - S])
+        rng_ = range_mean(gm, c, pyr.sigma(0), lo, lo + BLK * h)
+        assert means[bi, bj] == pytest.approx(rng_, rel=1e-4, abs=1e-9)
+
+
+def test_loader_rejects_bad_files(baked, tmp_path):
+    _, out, _, gm = baked
+    bad = tmp_path / "bad.npz"
+    with np.load(out) as z:
+        arrays = {k: z[k] for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    for mutate, match in [
+        (lambda a, h: h.update(version=99), "version"),
+        (lambda a, h: a.pop("C"), "missing"),
+        (lambda a, h: a.update(C=-a["C"] - 1), "negative"),
+        (lambda a, h: a.update(block_index=a["block_index"][:-1]), "block_index"),
+    ]:
+        a = dict(arrays)
+        h = dict(header)
+        mutate(a, h)
+        a["header"] = np.array(json.dumps(h))
+        np.savez(bad, **a)
+        with pytest.raises(TableFileError, match=match):
+            load(bad)
+    bad.write_bytes(b"not a zip")
+    with pytest.raises(TableFileError):
+        load(bad)
+
+
+def test_save_roundtrip_is_deterministic(baked, tmp_path):
+    _, out, _, gm = baked
+    save(tmp_path / "again.npz", gm)
+    g2 = load(tmp_path / "again.npz")
+    for k in ARRAYS:
+        np.testing.assert_array_equal(getattr(g2, k), getattr(gm, k))
+
+
+def test_bake_resumes_from_parts(tmp_path):
+    nm = sinusoid(16, px=16, py=8)
+    kw = dict(rank=4, ndf_res=16, block=8, support=S, cell=8, n_iter_max=20, progress=False)
+    s1 = bake(nm, tmp_path / "a.npz", keep_parts=True, **kw)
+    parts = tmp_path / "a.npz.parts"
+    assert parts.is_dir()
+    # a resumed bake reuses every finished part: results identical
+    s2 = bake(nm, tmp_path / "a.npz", **kw)
+    assert s2["rel_l2_error"] == s1["rel_l2_error"]
+    assert not parts.exists()
+
+
+def test_query_input_errors(baked):
+    _, _, _, gm = baked
+    with pytest.raises(PrefilterError, match="s_max"):
+        range_mean(gm, [1, 1], 4.0, [0.1, 0.1], [0.0, 0.2])
+    with pytest.raises(PrefilterError, match="gm"):
+        point(None, [1, 1], 4.0, [0, 0])
+
+
+def test_cli_bake(tmp_path):
+    from click.testing import CliRunner
+
+    from prefilter.glints.commands import bake_glints
+
+    np.save(tmp_path / "n.npy", sinusoid(16, px=16, py=8))
+    res = CliRunner().invoke(bake_glints, [str(tmp_path / "n.npy"), "-o", str(tmp_path / "o.npz"),
+                                           "--rank", "4", "--ndf-res", "16", "--block", "8",
+                                           "--cell", "8", "--iters", "10", "--quiet"])
+    assert res.exit_code == 0, res.output
+    assert "ratio" in res.output and load(tmp_path / "o.npz").rank == 4
