@@ -1,0 +1,42 @@
+"""``prefilter bake leadr``: bake LEADR moment maps (a thin layer over
+:func:`prefilter.leadr.moments` and :func:`prefilter.leadr.io.write_maps`)."""
+
+from __future__ import annotations
+
+import click
+
+
+@click.command("leadr")
+@click.argument("height", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--out", type=click.Path(file_okay=False), required=True,
+              help="Output directory: leadr_L<level>.exr (channels E_x E_y E_xx E_yy E_xy) and "
+                   "leadr.json.")
+@click.option("--texel-size", type=float, default=1.0, show_default=True,
+              help="Texel spacing in height units (heights in texels: 1).")
+@click.option("--base-roughness", type=float, default=0.0, show_default=True,
+              help="Slope std per axis below the texel scale (recorded in leadr.json).")
+@click.option("--normal-map", is_flag=True,
+              help="HEIGHT is a tangent-space normal map (RGB in [-1, 1] for EXR/.npy, "
+                   "[0, 1]-encoded for PNG) instead of a height map.")
+@click.option("--level0-only", is_flag=True, help="Write level 0 only (moments mip by box filter).")
+def bake_leadr(height, out, texel_size, base_roughness, normal_map, level0_only):
+    """Bake the slope moments of HEIGHT (EXR/PNG/.npy height map, first channel) into EXR maps.
+
+    Dupuy et al. 2013; slopes s = grad h by periodic central differences."""
+    from pathlib import Path
+
+    from prefilter.leadr.io import write_maps
+    from prefilter.leadr.maps import moments
+    from prefilter.texture.io import read_image
+
+    a = read_image(height)
+    if normal_map:
+        rgb = a[..., :3]
+        if Path(height).suffix.lower() == ".png":
+            rgb = 2.0 * rgb - 1.0
+        maps = moments(rgb, texel_size, base_roughness)
+    else:
+        maps = moments(a[..., 0], texel_size, base_roughness)
+    files = write_maps(maps, out, all_levels=not level0_only,
+                       meta={"source": str(height), "texel_size": texel_size})
+    click.echo(f"wrote {len(files)} levels to {out}")

@@ -1,0 +1,169 @@
+"""Lat-long environment maps: a solid-angle-weighted mip chain with LOD lookups, and order-2
+spherical-harmonic irradiance (Ramamoorthi & Hanrahan 2001; LEADR "Simplified Algorithm 2").
+
+Convention: ``w = (sin(theta) cos(phi), sin(theta) sin(phi), cos(theta))`` with z up; row ``i`` of
+an ``(H, W, C)`` map holds ``theta = (i + 0.5) pi / H``, column ``j`` holds
+``phi = (j + 0.5) 2 pi / W``. Lookups wrap in phi and clamp in theta.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from prefilter._validate import as_float_array
+from prefilter.errors import PrefilterError
+
+
+def direction_to_uv(w) -> np.ndarray:
+    """Continuous texel coordinates ``(..., 2)`` = (column, row) / size in [0, 1)."""
+    w = np.asarray(w, dtype=np.float64)
+    theta = np.arccos(np.clip(w[..., 2], -1.0, 1.0))
+    phi = np.arctan2(w[..., 1], w[..., 0]) % (2.0 * np.pi)
+    return np.stack([phi / (2.0 * np.pi), theta / np.pi], -1)
+
+
+def texel_directions(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
+    """Texel-centre directions ``(h, w, 3)`` and exact texel solid angles ``(h, w)``."""
+    theta_edges = np.linspace(0.0, np.pi, h + 1)
+    theta = 0.5 * (theta_edges[:-1] + theta_edges[1:])
+    phi = (np.arange(w) + 0.5) * 2.0 * np.pi / w
+    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
+    d = np.stack(np.broadcast_arrays(st * np.cos(phi), st * np.sin(phi), ct), -1)
+    omega = (np.cos(theta_edges[:-1]) - np.cos(theta_edges[1:]))[:, None] * (2.0 * np.pi / w)
+    return d, np.broadcast_to(omega, (h, w)).copy()
+
+
+class EnvMap:
+    """Lat-long radiance ``(H, W, C)`` (``W = 2 H``, powers of two) with a prefiltered mip chain.
+
+    Level ``l`` averages aligned ``2^l x 2^l`` blocks weighted by texel solid angle, so each coarse
+    texel holds the mean radiance over its solid angle.
+    """
+
+    def __init__(self, radiance):
+        a = as_float_array(radiance, "radiance", ndim_min=2)
+        if a.ndim == 2:
+            a = a[..., None]
+        h, w = a.shape[:2]
+        if a.ndim != 3 or w != 2 * h or h < 2 or (h & (h - 1)):
+            raise PrefilterError(
+                f"radiance: expected a lat-long map (H, 2H[, C]) with H a power of two, got {a.shape}"
+            )
+        _, omega = texel_directions(h, w)
+        self.levels = [a]
+        self.solid_angles = [omega]
+        while a.shape[0] > 1:
+            wa = a * omega[..., None]
+            om = omega[0::2, 0::2] + omega[1::2, 0::2] + omega[0::2, 1::2] + omega[1::2, 1::2]
+            s = wa[0::2, 0::2] + wa[1::2, 0::2] + wa[0::2, 1::2] + wa[1::2, 1::2]
+            a, omega = s / om[..., None], om
+            self.levels.append(a)
+            self.solid_angles.append(omega)
+
+    @property
+    def size(self) -> int:
+        """Rows ``H`` of level 0."""
+        return self.levels[0].shape[0]
+
+    @property
+    def texel_solid_angle(self) -> float:
+        """Solid angle of an equatorial level-0 texel, ``~ pi^2 / H^2``."""
+        h = self.size
+        return np.pi / h * 2.0 * np.sin(np.pi / (2 * h))
+
+    def _bilinear(self, level: int, uv: np.ndarray) -> np.ndarray:
+        tex = self.levels[level]
+        h, w = tex.shape[:2]
+        x = uv[..., 0] * w - 0.5
+        y = np.clip(uv[..., 1] * h - 0.5, 0.0, h - 1.0)
+        x0 = np.floor(x)
+        y0 = np.minimum(np.floor(y), max(h - 2, 0))
+        fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+        x0 = x0.astype(np.int64) % w
+        x1 = (x0 + 1) % w
+        y0 = y0.astype(np.int64)
+        y1 = np.minimum(y0 + 1, h - 1)
+        return ((tex[y0, x0] * (1 - fx) + tex[y0, x1] * fx) * (1 - fy)
+                + (tex[y1, x0] * (1 - fx) + tex[y1, x1] * fx) * fy)
+
+    def lookup(self, w, lod=0.0) -> np.ndarray:
+        """Trilinear radiance ``(..., C)`` in directions ``w (..., 3)`` at mip level ``lod``."""
+        uv = direction_to_uv(w)
+        lod = np.clip(np.broadcast_to(np.asarray(lod, np.float64), uv.shape[:-1]), 0.0,
+                      len(self.levels) - 1.0)
+        l0 = np.floor(lod).astype(np.int64)
+        t = (lod - l0)[..., None]
+        out = np.zeros(uv.shape[:-1] + (self.levels[0].shape[2],))
+        for lv in np.unique(l0):
+            sel = l0 == lv
+            c0 = self._bilinear(int(lv), uv[sel])
+            if lv + 1 < len(self.levels):
+                c1 = self._bilinear(int(lv) + 1, uv[sel])
+                out[sel] = c0 * (1 - t[sel]) + c1 * t[sel]
+            else:
+                out[sel] = c0
+        return out
+
+
+# -- order-2 spherical harmonics ---------------------------------------------------------------
+
+#: Real SH basis constants for l <= 2 (Ramamoorthi & Hanrahan 2001 eq. 3).
+_Y = (0.282095, 0.488603, 1.092548, 0.315392, 0.546274)
+#: Clamped-cosine convolution factors A_l (Ramamoorthi & Hanrahan 2001 eq. 8).
+_A = (np.pi, 2.0 * np.pi / 3.0, np.pi / 4.0)
+
+
+def sh9_basis(w) -> np.ndarray:
+    """Real SH basis ``(..., 9)`` for l <= 2 in the order (00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22)."""
+    w = np.asarray(w, dtype=np.float64)
+    x, y, z = w[..., 0], w[..., 1], w[..., 2]
+    return np.stack([
+        np.full_like(x, _Y[0]),
+        _Y[1] * y, _Y[1] * z, _Y[1] * x,
+        _Y[2] * x * y, _Y[2] * y * z, _Y[3] * (3.0 * z * z - 1.0), _Y[2] * x * z,
+        _Y[4] * (x * x - y * y),
+    ], -1)
+
+
+def sh9_project(env: EnvMap) -> np.ndarray:
+    """SH coefficients ``(9, C)`` of the radiance (midpoint quadrature over the texels)."""
+    d, omega = texel_directions(*env.levels[0].shape[:2])
+    return np.einsum("hwk,hwc->kc", sh9_basis(d) * omega[..., None], env.levels[0])
+
+
+def sh9_directional(directions, radiance) -> np.ndarray:
+    """SH coefficients ``(9, C)`` of directional lights (Simplified Algorithm 2's light loop).
+
+    ``directions (K, 3)`` unit vectors towards the lights, ``radiance (K, C)``: each light is a
+    delta of integral ``radiance`` in its direction.
+    """
+    d = as_float_array(directions, "directions", ndim_min=2, last_dim=3)
+    r = as_float_array(radiance, "radiance", ndim_min=2)
+    return np.einsum("kj,kc->jc", sh9_basis(d), r)
+
+
+def sh9_irradiance(coeffs, n) -> np.ndarray:
+    """Irradiance ``E(n) = integral L(w) max(0, n.w) dw`` ``(..., C)`` from SH ``coeffs (9, C)``.
+
+    Ramamoorthi & Hanrahan 2001 eq. 7 (order-2 truncation; exact for radiance of order <= 2).
+    """
+    c = np.asarray(coeffs, dtype=np.float64)
+    a = np.array([_A[0], _A[1], _A[1], _A[1], _A[2], _A[2], _A[2], _A[2], _A[2]])
+    return sh9_basis(n) @ (a[:, None] * c)
+
+
+def procedural_env(size: int = 64) -> np.ndarray:
+    """A test environment ``(size, 2 size, 3)``: sky gradient, warm sun, ground, window stripes.
+
+    Deterministic, with sharp features (sun, stripes) so that prefiltering matters.
+    """
+    d, _ = texel_directions(size, 2 * size)
+    z = d[..., 2]
+    sky = np.stack([0.3 + 0.2 * z, 0.45 + 0.25 * z, 0.8 + 0.2 * z], -1) * (z[..., None] > 0)
+    ground = np.array([0.25, 0.2, 0.15]) * (z[..., None] <= 0)
+    sun_dir = np.array([0.5, 0.3, 0.81])
+    sun_dir /= np.linalg.norm(sun_dir)
+    sun = np.exp(80.0 * (d @ sun_dir - 1.0))[..., None] * np.array([20.0, 17.0, 12.0])
+    phi = np.arctan2(d[..., 1], d[..., 0])
+    stripes = ((np.abs(z) < 0.4) & (np.cos(12.0 * phi) > 0.6))[..., None] * np.array([2.0, 2.0, 2.0])
+    return sky + ground + sun + stripes
