@@ -47,11 +47,14 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          support: float = 0.5, intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int = 4,
          sigma0: float | None = None, cell: int = 64, converge: float = 0.01,
          max_levels: int | None = None, blank_tol: float = 1e-4, n_iter_max: int = 50,
-         tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False) -> dict:
+         tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
+         levels_dir=None) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
     ``s`` (default 0.5: 128 pixels at the pitch of a 256-pixel image of the whole disk).
+    ``levels_dir``: keep the uncompressed pyramid there (keyed by the NDF settings only) so bakes
+    at several ranks share it; it is not removed at the end.
     """
     from tqdm import tqdm
 
@@ -76,34 +79,39 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                     seed=seed)
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
+    ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
+                "max_levels")
+    lk = ck if levels_dir is None else Checkpoints(
+        str(levels_dir).removesuffix(".parts"),
+        dict({k: settings[k] for k in ndf_keys}, map_sha1=digest, shape=[H, W]))
     el = elements(nm)
 
     # 1. level 0, one row of cells per chunk
     ny0, nx0 = pyr.shape(0)
     rows_per_chunk = cell // pyr.stride0
     n_chunks = ny0 // rows_per_chunk
-    levels = [_memmap(ck.dir / "level0.npy", (ny0, nx0, R, R), ck.done(LEVEL0_CHUNK + n_chunks))]
+    levels = [_memmap(lk.dir / "level0.npy", (ny0, nx0, R, R), lk.done(LEVEL0_CHUNK + n_chunks))]
     centers0 = pyr.centers(0)
     for ch in tqdm(range(n_chunks), desc="level 0 NDF images", disable=not progress):
-        if ck.done(LEVEL0_CHUNK + ch):
+        if lk.done(LEVEL0_CHUNK + ch):
             continue
         rows = slice(ch * rows_per_chunk, (ch + 1) * rows_per_chunk)
         levels[0][rows] = pndf_image(nm, centers0[rows], pyr.sigma(0), R, S, sr, elements_=el)
         levels[0].flush()
-        ck.save(LEVEL0_CHUNK + ch, done=np.array(1))
-    ck.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))
+        lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
+    lk.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))
 
     # 2. upper levels by filtering
     diffs = []
     for lv in range(1, pyr.n_levels):
         key = LEVEL_CHUNK + lv
-        arr = _memmap(ck.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R), ck.done(key))
-        if not ck.done(key):
+        arr = _memmap(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R), lk.done(key))
+        if not lk.done(key):
             next_level(levels[-1], pyr.sigma0 / pyr.stride0, out=arr)
             arr.flush()
-            ck.save(key, diff=np.array(level_difference(levels[-1], arr)))
+            lk.save(key, diff=np.array(level_difference(levels[-1], arr)))
         levels.append(arr)
-        diffs.append(float(ck.load(key)["diff"]))
+        diffs.append(float(lk.load(key)["diff"]))
         if diffs[-1] < converge:
             break
     pyr = pyr.with_levels(len(levels))

@@ -161,7 +161,6 @@ def nn_cp_batch(tensors: list[np.ndarray], rank: int, *, n_iter_max: int = 100,
     c[pad] = 0.0
     eps = (1e-9 * scale)[:, None]
     X12 = T.reshape(n, I * J, Km)  # Y = X12 @ c serves the MTTKRPs of modes a and b
-    X3 = np.ascontiguousarray(X12.transpose(0, 2, 1))
 
     def kr(x, y):
         return (x[:, :, None, :] * y[:, None, :, :]).reshape(n, -1, R)
@@ -187,7 +186,7 @@ def nn_cp_batch(tensors: list[np.ndarray], rank: int, *, n_iter_max: int = 100,
         gc = gram(c)
         update(a, np.einsum("gijr,gjr->gir", Y, b), gram(b) * gc)
         update(b, np.einsum("gijr,gir->gjr", Y, a), gram(a) * gc)
-        M = X3 @ kr(a, b)
+        M = np.matmul(kr(a, b).transpose(0, 2, 1), X12).transpose(0, 2, 1)
         G = gram(a) * gram(b)
         update(c, M, G, pad)
         err2 = normT2 - 2.0 * np.einsum("gkr,gkr->g", M, c) + np.einsum("grs,grs->g", G, gram(c))

@@ -1,0 +1,129 @@
+"""Glints part 1: constant-cost queries vs the direct P-NDF, bake time scaling, rank study.
+
+    python benchmarks/bench_glints.py                 # queries + bake scaling (a few minutes)
+    python benchmarks/bench_glints.py --ranks         # also ratio/error per map and rank 8-64
+    python benchmarks/bench_glints.py --size 256      # map size of the query benchmark
+
+The machine is shared, so every ratio is computed from timings of the same run; the absolute
+numbers are only indicative. Footprint "width" is 2 sigma_p (texels).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from prefilter.glints import pndf
+from prefilter.glints.bake import bake
+from prefilter.glints.pndf import elements
+from prefilter.glints.query import point, range_mean
+from prefilter.glints.store import load
+from prefilter.texture.procedural import normal_map
+
+WIDTHS = [1, 4, 16, 64, 256, 512, 1024]
+
+
+def _best(fn, repeat=3):
+    best = np.inf
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def bench_queries(gm, nm, n_queries=20000, seed=0):
+    rng = np.random.default_rng(seed)
+    H = nm.shape[0]
+    el = elements(nm)
+    S = gm.support
+    h = 2 * S / gm.resolution
+    rows = []
+    for w in WIDTHS:
+        sp = w / 2.0
+        c = rng.uniform(0, H, (n_queries, 2))
+        s = rng.normal(0.0, 0.15, (n_queries, 2))
+        lo = s - rng.uniform(1, 12, (n_queries, 2)) * h
+        hi = s + rng.uniform(1, 12, (n_queries, 2)) * h
+        point(gm, c[:10], sp, s[:10])
+        range_mean(gm, c[:10], sp, lo[:10], hi[:10])
+        tp = _best(lambda: point(gm, c, sp, s)) / n_queries
+        tr = _best(lambda: range_mean(gm, c, sp, lo, hi)) / n_queries
+        # direct P-NDF: enough queries for ~0.5 s (its cost grows with the footprint area)
+        n_direct = int(max(3, min(20000, 4e6 / (8 * max(sp, 0.5)) ** 2)))
+        pndf(nm, c[:2], sp, s[:2], elements_=el)
+        td = _best(lambda: pndf(nm, c[:n_direct], sp, s[:n_direct], elements_=el), 2) / n_direct
+        rows.append((w, tp, tr, td))
+    print(f"query cost per query (map {H}^2, {n_queries} queries, NUMBA threads "
+          f"{os.environ.get('NUMBA_NUM_THREADS', 'all')})")
+    print(f"{'width':>6} {'point us':>9} {'range us':>9} {'direct us':>11} {'direct/point':>13}")
+    for w, tp, tr, td in rows:
+        print(f"{w:6d} {tp * 1e6:9.3f} {tr * 1e6:9.3f} {td * 1e6:11.1f} {td / tp:13.1f}")
+    tps = [r[1] for r in rows]
+    trs = [r[2] for r in rows]
+    print(f"slowest/fastest footprint: point {max(tps) / min(tps):.2f}, range "
+          f"{max(trs) / min(trs):.2f} (target <= 1.5)")
+    for w in (64, 512):
+        r = next(r for r in rows if r[0] == w)
+        print(f"speed-up of the compressed point query over the direct P-NDF at width {w}: "
+              f"{r[3] / r[1]:.0f}x")
+
+
+def bench_bake_scaling(sizes, tmp):
+    print("bake time (defaults: rank 16, ndf-res 128, block 16, stride0 4, cell 64)")
+    for n in sizes:
+        nm = normal_map("gaussian", n, seed=0)
+        t = time.perf_counter()
+        s = bake(nm, Path(tmp) / f"g{n}.npz", progress=False, cell=min(64, n))
+        print(f"  {n:4d}^2: {time.perf_counter() - t:7.1f} s, ratio {100 * s['ratio']:.2f} %, "
+              f"rel L2 {100 * s['rel_l2_error']:.1f} %, images {s['n_images']}")
+
+
+def bench_ranks(size, tmp, ranks=(8, 16, 32, 64)):
+    print(f"rank study: {size}^2 procedural maps, ndf-res 128, block 16, levels shared")
+    print(f"{'map':>10} {'rank':>5} {'ratio %':>8} {'rel L2 %':>9} {'level 0 %':>9} "
+          f"{'top %':>6} {'CP s':>6}")
+    for kind in ("gaussian", "brushed", "flakes", "scratches"):
+        nm = normal_map(kind, size, seed=0)
+        lv = Path(tmp) / f"levels_{kind}"
+        for rank in ranks:
+            t = time.perf_counter()
+            s = bake(nm, Path(tmp) / f"{kind}_{rank}.npz", rank=rank, progress=False,
+                     cell=min(64, size), levels_dir=lv)
+            e = s["rel_l2_error_per_level"]
+            print(f"{kind:>10} {rank:5d} {100 * s['ratio']:8.2f} {100 * s['rel_l2_error']:9.2f} "
+                  f"{100 * e[0]:9.2f} {100 * e[-1]:6.2f} {time.perf_counter() - t:6.1f}",
+                  flush=True)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--size", type=int, default=128)
+    ap.add_argument("--ranks", action="store_true")
+    ap.add_argument("--rank-size", type=int, default=128)
+    ap.add_argument("--scaling", default="64,128,256")
+    ap.add_argument("--map", default=None, help="use this baked .npz for the query benchmark")
+    a = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        if a.map:
+            gm = load(a.map)
+            p = gm.pyramid
+            nm = normal_map("gaussian", p.height, seed=0)
+        else:
+            nm = normal_map("gaussian", a.size, seed=0)
+            bake(nm, Path(tmp) / "q.npz", progress=False, cell=min(64, a.size))
+            gm = load(Path(tmp) / "q.npz")
+        bench_queries(gm, nm)
+        if a.scaling:
+            bench_bake_scaling([int(x) for x in a.scaling.split(",")], tmp)
+        if a.ranks:
+            bench_ranks(a.rank_size, tmp)
+
+
+if __name__ == "__main__":
+    main()
