@@ -84,11 +84,11 @@ def bench_bake_scaling(sizes, tmp):
               f"rel L2 {100 * s['rel_l2_error']:.1f} %, images {s['n_images']}")
 
 
-def bench_ranks(size, tmp, ranks=(8, 16, 32, 64)):
+def bench_ranks(size, tmp, ranks=(8, 16, 32, 64), kinds=("gaussian", "brushed", "flakes", "scratches")):
     print(f"rank study: {size}^2 procedural maps, ndf-res 128, block 16, levels shared")
     print(f"{'map':>10} {'rank':>5} {'ratio %':>8} {'rel L2 %':>9} {'level 0 %':>9} "
           f"{'top %':>6} {'CP s':>6}")
-    for kind in ("gaussian", "brushed", "flakes", "scratches"):
+    for kind in kinds:
         nm = normal_map(kind, size, seed=0)
         lv = Path(tmp) / f"levels_{kind}"
         for rank in ranks:
@@ -106,6 +106,8 @@ def main():
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--ranks", action="store_true")
     ap.add_argument("--rank-size", type=int, default=128)
+    ap.add_argument("--rank-list", default="8,16,32,64")
+    ap.add_argument("--kinds", default="gaussian,brushed,flakes,scratches")
     ap.add_argument("--scaling", default="64,128,256")
     ap.add_argument("--map", default=None, help="use this baked .npz for the query benchmark")
     a = ap.parse_args()
@@ -122,7 +124,8 @@ def main():
         if a.scaling:
             bench_bake_scaling([int(x) for x in a.scaling.split(",")], tmp)
         if a.ranks:
-            bench_ranks(a.rank_size, tmp)
+            bench_ranks(a.rank_size, tmp, [int(r) for r in a.rank_list.split(",")],
+                        a.kinds.split(","))
 
 
 if __name__ == "__main__":

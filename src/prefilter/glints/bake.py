@@ -37,9 +37,13 @@ LEVEL_CHUNK = 10_000
 CELL_CHUNK = 100_000
 
 
-def _memmap(path, shape, done: bool):
-    if done and path.exists():
-        return np.load(path, mmap_mode="r+")
+def _memmap(path, shape):
+    """The float32 array at ``path``, reopened if present (partial results of a killed bake are
+    kept; which chunks are valid is recorded by the checkpoints), else created."""
+    if path.exists():
+        arr = np.load(path, mmap_mode="r+")
+        if arr.shape == tuple(shape) and arr.dtype == np.float32:
+            return arr
     return np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=shape)
 
 
@@ -90,7 +94,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     ny0, nx0 = pyr.shape(0)
     rows_per_chunk = cell // pyr.stride0
     n_chunks = ny0 // rows_per_chunk
-    levels = [_memmap(lk.dir / "level0.npy", (ny0, nx0, R, R), lk.done(LEVEL0_CHUNK + n_chunks))]
+    levels = [_memmap(lk.dir / "level0.npy", (ny0, nx0, R, R))]
     centers0 = pyr.centers(0)
     for ch in tqdm(range(n_chunks), desc="level 0 NDF images", disable=not progress):
         if lk.done(LEVEL0_CHUNK + ch):
@@ -105,7 +109,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     diffs = []
     for lv in range(1, pyr.n_levels):
         key = LEVEL_CHUNK + lv
-        arr = _memmap(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R), lk.done(key))
+        arr = _memmap(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R))
         if not lk.done(key):
             next_level(levels[-1], pyr.sigma0 / pyr.stride0, out=arr)
             arr.flush()
