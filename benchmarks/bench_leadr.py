@@ -9,6 +9,9 @@ light. Error: relative RMSE of the luminance over the configurations vs the N = 
 wall time per shading point (NumPy path, best of 3). ``paper5`` is the supplemental's 5 x 5 grid
 (spacing 0.9); other rows use the derived spacing of ``gaussian_grid``.
 
+Acceptance (``--acceptance``): :mod:`prefilter.leadr.acceptance` (LEADR, normal-mapped reference
+and naive mip-mapped normal mapping vs the displaced height field, 16 to 64 texels per pixel).
+
 Throughput (``--throughput``): shading points per second per light type and grid size on 2^16
 points. No assertions.
 """
@@ -106,9 +109,15 @@ def throughput(p: int = 1 << 16) -> None:
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--throughput", action="store_true")
+    ap.add_argument("--acceptance", action="store_true",
+                    help="far-field LEADR / normal-mapped / naive vs displaced reference table")
     ap.add_argument("--points", type=int, default=None)
     a = ap.parse_args()
-    if a.throughput:
+    if a.acceptance:
+        from prefilter.leadr.acceptance import run, table
+
+        print(table(run(log=lambda row: None)))
+    elif a.throughput:
         throughput(a.points or 1 << 16)
     else:
         convergence(a.points or 1000)
