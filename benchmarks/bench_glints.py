@@ -37,7 +37,7 @@ def _best(fn, repeat=3):
     return best
 
 
-def bench_queries(gm, nm, n_queries=20000, seed=0):
+def bench_queries(gm, nm, n_queries=50000, seed=0):
     rng = np.random.default_rng(seed)
     H = nm.shape[0]
     el = elements(nm)
@@ -52,8 +52,8 @@ def bench_queries(gm, nm, n_queries=20000, seed=0):
         hi = s + rng.uniform(1, 12, (n_queries, 2)) * h
         point(gm, c[:10], sp, s[:10])
         range_mean(gm, c[:10], sp, lo[:10], hi[:10])
-        tp = _best(lambda: point(gm, c, sp, s)) / n_queries
-        tr = _best(lambda: range_mean(gm, c, sp, lo, hi)) / n_queries
+        tp = _best(lambda: point(gm, c, sp, s), 7) / n_queries
+        tr = _best(lambda: range_mean(gm, c, sp, lo, hi), 7) / n_queries
         # direct P-NDF: enough queries for ~0.5 s (its cost grows with the footprint area)
         n_direct = int(max(3, min(20000, 4e6 / (8 * max(sp, 0.5)) ** 2)))
         pndf(nm, c[:2], sp, s[:2], elements_=el)

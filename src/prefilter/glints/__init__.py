@@ -2,8 +2,16 @@
 
 Implements sections 3-4 of the glints tensor-prefiltering paper on top of Yan et al. 2016's
 position-normal distributions. See ``docs/glints.md`` for conventions and measurements.
+
+``pndf`` / ``pndf_image``: direct P-NDF; ``bake``: normal map -> compressed pyramid file;
+``load``: validated :class:`GlintsMap`; ``point`` / ``range_mean`` (alias ``query.range``):
+constant-time queries.
 """
 
+from prefilter.glints.bake import bake
 from prefilter.glints.pndf import elements, hemisphere_ndf, pndf, pndf_image
+from prefilter.glints.query import block_means, point, range_mean
+from prefilter.glints.store import GlintsMap, load
 
-__all__ = ["elements", "hemisphere_ndf", "pndf", "pndf_image"]
+__all__ = ["GlintsMap", "bake", "block_means", "elements", "hemisphere_ndf", "load", "pndf",
+           "pndf_image", "point", "range_mean"]
