@@ -61,7 +61,9 @@ def run(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 96, sigm
                     vals = {m: [] for m in ("ref",) + tuple(err)}
                     for s in range(shifts):
                         i0 = j0 = s * 3
-                        mu, cov = shading_stats(window_moments(cells, i0, j0, block), sigma_b)
+                        # Lambertian micro-facets have no sub-texel roughness of their own.
+                        mu, cov = shading_stats(window_moments(cells, i0, j0, block),
+                                                sigma_b if specular else 0.0)
                         kw = dict(k=k, sigma_b=sigma_b, specular=specular)
                         ref = displaced_radiance(np.roll(h, (-i0, -j0), (0, 1)), block, 0, 0,
                                                  wo, wi, **kw)
