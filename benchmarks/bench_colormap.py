@@ -7,9 +7,10 @@ percentiles of the footprint sizes are printed).
 path; tested equal to the NumPy path); (d) the NumPy path, for information. Both methods of a case
 do everything their shading needs from the G-buffer on (anisotropic footprint lookups, Smith
 Lambda for the shadowing factor of (c)); the naive method reads a one-channel mean mip and row 0
-of the table, the filtered one the moments mip and the 2D table. Single-threaded (``numba.set_num_threads(1)``), best of 7 runs of each,
-interleaved, after a warm-up call (compilation); the ratio is the reportable number (issue 7 asks
-for <= 1.3 for (a)-(c)). No assertions.
+of the table, the filtered one the moments mip and the 2D table. Single-threaded
+(``numba.set_num_threads(1)``), best of 7 runs of each, interleaved, after a warm-up call
+(compilation); the ratio is the reportable number (issue 7 asks for <= 1.3 for (a)-(c)).
+No assertions.
 """
 
 from __future__ import annotations

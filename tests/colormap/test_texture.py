@@ -1,4 +1,4 @@
-"""Colour-mapped textures and noise (Heitz et al. 2013, section 4.2) against brute-force averages."""
+"""Colour-mapped textures and noise (Heitz et al. 2013, section 4.2) vs brute-force averages."""
 
 import numpy as np
 import pytest

@@ -5,7 +5,8 @@ integrand of eq. 1 factorises term by term. With the filtered colours ``C0_bar``
 ``Ch_bar`` (eq. 14, which already contains the light visibility ``V_bar``), ``Cs_bar`` (eq. 20)
 and ``V_bar`` (eq. 13):
 
-* linear ``C = k0 C0 + k1 Ch + k2 Cs``:  ``I = L rho [k0 C0_bar V_bar + k1 Ch_bar + k2 Cs_bar V_bar]``;
+* linear ``C = k0 C0 + k1 Ch + k2 Cs``:
+  ``I = L rho [k0 C0_bar V_bar + k1 Ch_bar + k2 Cs_bar V_bar]``;
 * product ``C = C0 Ch Cs``:  ``I = L rho C0_bar Ch_bar Cs_bar`` (the paper prints it without the
   filtered reflectance ``rho``; with ``rho = 1`` they agree).
 """

@@ -83,7 +83,8 @@ def _wrap(i: np.ndarray, size: int, mode: str) -> np.ndarray:
         return (size - 1) - np.where(a >= 0, a, -(1 + a))
     if mode == "GL_CLAMP_TO_EDGE":
         return np.clip(i, 0, size - 1)
-    raise PrefilterError(f"wrap mode: expected one of {', '.join(GLSL_WRAP.values())}, got {mode!r}")
+    raise PrefilterError(
+        f"wrap mode: expected one of {', '.join(GLSL_WRAP.values())}, got {mode!r}")
 
 
 def glsl_texture_twin(image, u, v, wrap_s: str, wrap_t: str = "GL_CLAMP_TO_EDGE") -> np.ndarray:

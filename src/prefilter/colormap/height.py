@@ -396,6 +396,7 @@ def height_footprint(mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h=1.0):
 
 
 def filter_height_footprint(table, mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h=1.0):
-    """``V_bar <C_h, D_h>`` over a footprint (eq. 14 with :func:`height_footprint`), ``(..., C)``."""
+    """``V_bar <C_h, D_h>`` over a footprint (eq. 14 with :func:`height_footprint`),
+    ``(..., C)``."""
     mean, std, v_bar = height_footprint(mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h)
     return v_bar[..., None] * table.lookup(mean, std)

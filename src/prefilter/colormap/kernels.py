@@ -5,7 +5,8 @@ The same computations as the NumPy path (:mod:`prefilter.colormap.texture`,
 them: footprint axes, anisotropic trilinear fetches of a mip chain (as
 :meth:`prefilter.texture.mip.MipChain.lookup_footprint`), then one table lookup. Each method reads
 only what it needs (naive: the one-channel mean mip and row 0 of the table; filtered: the moments
-mip and the 2D table), so their time ratio is the cost of filtering (``benchmarks/bench_colormap.py``).
+mip and the 2D table), so their time ratio is the cost of filtering
+(``benchmarks/bench_colormap.py``).
 The tests check these kernels against the NumPy path and brute-force footprint averages.
 """
 

@@ -34,8 +34,8 @@ from prefilter._validate import as_float_array, as_positive_int, as_upper_direct
 from prefilter.colormap.table import gaussian_operator
 from prefilter.errors import PrefilterError
 
-__all__ = ["SlopeColormapTable", "as_slope_colormap", "filter_slope", "slope_density", "slope_distribution",
-           "slope_prefilter_table"]
+__all__ = ["SlopeColormapTable", "as_slope_colormap", "filter_slope", "slope_density",
+           "slope_distribution", "slope_prefilter_table"]
 
 _SQRT_2_OVER_PI = 0.7978845608028654
 

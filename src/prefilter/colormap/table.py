@@ -1,4 +1,5 @@
-"""Pre-convolved colour-map tables: ``T(m, sigma) = [C * N(0, sigma^2)](m)`` (Heitz et al. 2013, eq. 10).
+"""Pre-convolved colour-map tables ``T(m, sigma) = [C * N(0, sigma^2)](m)`` (Heitz et al. 2013,
+eq. 10).
 
 A colour map is ``N`` colours sampled at the texel centres ``v_i = v0 + (i + 0.5) (v1 - v0) / N`` of
 its value range ``[v0, v1]`` and linearly interpolated between them, exactly as a GPU samples a 1D
