@@ -167,3 +167,13 @@ def procedural_env(size: int = 64) -> np.ndarray:
     phi = np.arctan2(d[..., 1], d[..., 0])
     stripes = ((np.abs(z) < 0.4) & (np.cos(12.0 * phi) > 0.6))[..., None] * np.array([2.0, 2.0, 2.0])
     return sky + ground + sun + stripes
+
+
+def packed_levels(env: EnvMap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """All mip levels flattened into one ``(sum H_l W_l, C)`` array, with per-level row offsets
+    and shapes ``(L, 2)`` (for the compiled kernels)."""
+    shapes = np.array([lv.shape[:2] for lv in env.levels], dtype=np.int64)
+    sizes = shapes[:, 0] * shapes[:, 1]
+    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
+    flat = np.ascontiguousarray(np.concatenate([lv.reshape(-1, lv.shape[2]) for lv in env.levels]))
+    return flat, offsets, shapes

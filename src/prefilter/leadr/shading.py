@@ -243,7 +243,7 @@ def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
 
 
 def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0=None,
-                 lod_bias: float = 0.0, to_world=None) -> np.ndarray:
+                 lod_bias: float = 0.0, to_world=None, backend: str = "numba") -> np.ndarray:
     """Rough specular microfacets under an environment map: Simplified Algorithm 1.
 
     Each grid micronormal reflects ``wo``; the radiance is read at the mip level whose texel solid
@@ -257,6 +257,8 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     wo : (..., 3); mean_slope : (..., 2); slope_cov : (..., 2, 2)
     n : int
         Grid size per axis (n^2 samples).
+    backend : {"numba", "numpy"}
+        Compiled kernel (:mod:`prefilter.leadr.kernels`) or the vectorised NumPy path.
 
     Returns
     -------
@@ -264,6 +266,11 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     """
     n = as_positive_int(n, "n")
     texel = env.texel_solid_angle
+    if backend not in ("numba", "numpy"):
+        raise PrefilterError(f"backend: expected 'numba' or 'numpy', got {backend!r}")
+    if backend == "numba":
+        return _env_specular_compiled(env, wo, mean_slope, slope_cov, n, spacing, f0, lod_bias,
+                                      to_world)
 
     def radiance(m, wi, jac, cell, tw):
         with np.errstate(divide="ignore"):
@@ -271,6 +278,30 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
         return env.lookup(_rotate(tw[:, None] if tw is not None else None, wi), lod)
 
     return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, f0, to_world)
+
+
+def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_world):
+    from prefilter.leadr.envmap import packed_levels
+    from prefilter.leadr.kernels import env_specular_kernel
+
+    wo = as_directions(wo, "wo")
+    mu, sxx, _, _ = _stats(mean, cov)
+    if to_world is not None:
+        to_world = as_float_array(to_world, "to_world", ndim_min=2)
+    shape = np.broadcast_shapes(wo.shape[:-1], mu.shape[:-1], sxx.shape,
+                                () if to_world is None else to_world.shape[:-2])
+    flat_shape = (int(np.prod(shape, dtype=np.int64)),)
+    b = lambda a, tail: np.ascontiguousarray(  # noqa: E731
+        np.broadcast_to(a, shape + tail).reshape(flat_shape + tail))
+    rot = b(np.eye(3) if to_world is None else to_world, (3, 3))
+    f0a = b(np.asarray(0.0 if f0 is None else f0, np.float64), ())
+    p, w, h = gaussian_grid(n, spacing)
+    flat, offsets, shapes = packed_levels(env)
+    out = np.empty(flat_shape + (flat.shape[1],))
+    env_specular_kernel(flat, offsets, shapes, env.texel_solid_angle, b(wo, (3,)), b(mu, (2,)),
+                        b(np.asarray(cov, np.float64), (2, 2)), rot, p, w, h, f0a, f0 is not None,
+                        float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, out)
+    return out.reshape(shape + (flat.shape[1],))
 
 
 def diffuse_sh(sh_coeffs, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None,

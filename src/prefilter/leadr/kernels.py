@@ -1,0 +1,111 @@
+"""Compiled Simplified Algorithm 1 (environment specular), one shading point per iteration.
+
+Same arithmetic as :func:`prefilter.leadr.shading.env_specular` (tested equal to the NumPy path):
+grid micronormals, the artificial micronormal of supplemental 3.7, the per-sample LOD from the
+Jacobian, trilinear lat-long lookups (wrap in phi, clamp in theta) and Schlick Fresnel.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from prefilter._numba import njit_parallel, prange
+
+
+@njit(fastmath=True, cache=True)
+def _bilinear(flat, offset, hh, ww, u, v, out, scale):  # pragma: no cover - compiled
+    x = u * ww - 0.5
+    y = min(max(v * hh - 0.5, 0.0), hh - 1.0)
+    x0 = math.floor(x)
+    y0 = min(math.floor(y), max(hh - 2, 0))
+    fx = x - x0
+    fy = y - y0
+    j0 = int(x0) % ww
+    j1 = (j0 + 1) % ww
+    i0 = int(y0)
+    i1 = min(i0 + 1, hh - 1)
+    for c in range(flat.shape[1]):
+        a = flat[offset + i0 * ww + j0, c] * (1 - fx) + flat[offset + i0 * ww + j1, c] * fx
+        b = flat[offset + i1 * ww + j0, c] * (1 - fx) + flat[offset + i1 * ww + j1, c] * fx
+        out[c] += scale * (a * (1 - fy) + b * fy)
+
+
+@njit(fastmath=True, cache=True)
+def _lookup(flat, offsets, shapes, wx, wy, wz, lod, out):  # pragma: no cover - compiled
+    for c in range(out.size):
+        out[c] = 0.0
+    theta = math.acos(min(max(wz, -1.0), 1.0))
+    phi = math.atan2(wy, wx) % (2.0 * math.pi)
+    u = phi / (2.0 * math.pi)
+    v = theta / math.pi
+    nl = offsets.size
+    lod = min(max(lod, 0.0), nl - 1.0)
+    l0 = int(math.floor(lod))
+    t = lod - l0
+    _bilinear(flat, offsets[l0], shapes[l0, 0], shapes[l0, 1], u, v, out, 1.0 - t if l0 + 1 < nl else 1.0)
+    if l0 + 1 < nl and t > 0.0:
+        _bilinear(flat, offsets[l0 + 1], shapes[l0 + 1, 0], shapes[l0 + 1, 1], u, v, out, t)
+
+
+@njit_parallel
+def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h, f0, use_f0,
+                        lod_bias, eps, w_art, out):  # pragma: no cover - compiled
+    """``out (P, C)`` for views ``wo (P, 3)``, mean slopes ``(P, 2)``, covariances ``(P, 2, 2)``,
+    local-to-world ``rot (P, 3, 3)``, 1D grid ``p, w`` of spacing ``h``, Schlick ``f0 (P,)``."""
+    npts = wo.shape[0]
+    nc = flat.shape[1]
+    n = p.size
+    for q in prange(npts):
+        ox, oy, oz = wo[q, 0], wo[q, 1], wo[q, 2]
+        sxx, syy, sxy = cov[q, 0, 0], cov[q, 1, 1], cov[q, 0, 1]
+        sx, sy = math.sqrt(sxx), math.sqrt(syy)
+        r = sxy / (sx * sy)
+        r_ = math.sqrt(max(1.0 - r * r, 0.0))
+        cell = h * h * math.sqrt(sxx * syy - sxy * sxy)
+        num = np.zeros(nc)
+        rad = np.empty(nc)
+        den = 0.0
+        for k in range(n * n + 1):
+            if k < n * n:
+                j, i = k // n, k % n
+                x = mu[q, 0] + p[j] * sx
+                y = mu[q, 1] + (p[j] * r + p[i] * r_) * sy
+                inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
+                mx, my, mz = -x * inv, -y * inv, inv
+                wt = w[j] * w[i]
+            else:
+                # Artificial micronormal (supplemental 3.7).
+                bx, by, bz = -mu[q, 0], -mu[q, 1], 1.0
+                bn = 1.0 / math.sqrt(bx * bx + by * by + 1.0)
+                bx, by, bz = bx * bn, by * bn, bz * bn
+                d = (bx * ox + by * oy + bz * oz) * eps
+                mx, my, mz = bx - d * ox, by - d * oy, bz - d * oz
+                tn = max(math.sqrt(mx * mx + my * my + mz * mz), 1e-300)
+                mx, my, mz = mx / tn, my / tn, mz / tn
+                wt = w_art
+            dot = mx * ox + my * oy + mz * oz
+            proj = max(dot, 0.0) / (mz if k < n * n else 1.0)
+            rx, ry, rz = 2 * dot * mx - ox, 2 * dot * my - oy, 2 * dot * mz - oz
+            jac = 4.0 * abs(dot) * abs(mz) ** 3
+            lod = 0.5 * math.log2(max(jac * cell, 1e-300) / texel) + lod_bias
+            gx = rot[q, 0, 0] * rx + rot[q, 0, 1] * ry + rot[q, 0, 2] * rz
+            gy = rot[q, 1, 0] * rx + rot[q, 1, 1] * ry + rot[q, 1, 2] * rz
+            gz = rot[q, 2, 0] * rx + rot[q, 2, 1] * ry + rot[q, 2, 2] * rz
+            _lookup(flat, offsets, shapes, gx, gy, gz, lod, rad)
+            fr = 1.0
+            if use_f0:
+                c = min(max(dot, 0.0), 1.0)
+                fr = f0[q] + (1.0 - f0[q]) * (1.0 - c) ** 5
+            ws = wt * proj
+            den += ws
+            for c in range(nc):
+                num[c] += ws * fr * rad[c]
+        for c in range(nc):
+            if den > 1e-300:
+                out[q, c] = num[c] / den
+            else:
+                out[q, c] = rad[c] * fr
+    return out
