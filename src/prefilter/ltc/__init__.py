@@ -8,3 +8,7 @@ __all__ = ["LTC", "clamped_cosine_integral", "polygon_integral", "polygon_integr
 from prefilter.ltc.table import GGXTable, schlick_scale  # noqa: E402
 
 __all__ += ["GGXTable", "schlick_scale"]
+
+from prefilter.ltc.aniso import AnisoGGXTable  # noqa: E402
+
+__all__ += ["AnisoGGXTable"]

@@ -1,0 +1,201 @@
+"""Baking the anisotropic GGX LTC table (anisotropic-LTC paper, section 9, "Precomputations").
+
+Per entry: SW fit from the identity (:func:`.fit.fit_sw`), an optional point-wise L1
+polish kept only where it lowers the L1 distance (:func:`.fit.fit_pointwise`), alignment
+(:func:`.align.align`, eq. 12), normalisation by the third column (section 7); then over the whole grid the symmetry
+post-processing (:func:`.symmetry.enforce`, eq. 16) and the magnitude / Fresnel quadrature.
+Entries are fitted in chunks, each one tensor program; every finished chunk is checkpointed so a
+killed bake resumes from the last finished chunk, and the table is written atomically.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from prefilter._io import Checkpoints
+from prefilter._validate import as_positive_int
+from prefilter.errors import PrefilterError
+from prefilter.ltc.aniso.align import align
+from prefilter.ltc.aniso.fit import (
+    SWSettings,
+    fit_pointwise,
+    fit_sw,
+    l1_distance,
+    lobe_moments,
+)
+from prefilter.ltc.aniso.symmetry import enforce
+from prefilter.ltc.aniso.table import TABLE_VERSION, AnisoGGXTable, default_table_path
+
+
+@dataclass(frozen=True)
+class BakeSettings:
+    """Everything that determines the baked bytes (stored in the table as JSON)."""
+
+    res_theta: int = 8
+    res_phi: int = 8
+    res_alpha: int = 8
+    res_ratio: int = 8
+    #: Last view angle of the grid (degrees); larger angles use the last row.
+    theta_max_deg: float = 86.0
+    alpha_min: float = 0.05
+    ratio_min: float = 0.05
+    #: Entries per tensor program (and per checkpoint).
+    chunk: int = 512
+    moment_nodes: int = 64
+    #: Monte Carlo samples of the per-entry L1 diagnostic (0: skip it).
+    l1_samples: int = 4096
+    sw: SWSettings = field(default_factory=SWSettings)
+    #: Steps of the point-wise L1 polish started from each SW fit (0: none). Per entry, the
+    #: polished matrix is kept only if its L1 distance (Monte Carlo, ``polish_check`` fresh
+    #: samples) is lower than the SW fit's: the polish can never make an entry worse.
+    polish_steps: int = 100
+    polish_samples: int = 256
+    polish_lr: float = 0.003
+    polish_check: int = 2048
+
+    def axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Nodes: theta and phi uniform, alpha and ratio uniform in their square roots."""
+        for name in ("res_theta", "res_phi", "res_alpha", "res_ratio"):
+            as_positive_int(getattr(self, name), name, lo=2)
+        if not (0 < self.theta_max_deg < 90 and 0 < self.alpha_min < 1 and
+                0 < self.ratio_min < 1):
+            raise PrefilterError(f"bake settings: expected 0 < theta_max_deg < 90 and alpha_min, "
+                                 f"ratio_min in (0, 1), got {self.theta_max_deg}, "
+                                 f"{self.alpha_min}, {self.ratio_min}")
+        return (np.linspace(0.0, np.radians(self.theta_max_deg), self.res_theta),
+                np.linspace(0.0, np.pi / 2, self.res_phi),
+                np.linspace(np.sqrt(self.alpha_min), 1.0, self.res_alpha) ** 2,
+                np.linspace(np.sqrt(self.ratio_min), 1.0, self.res_ratio) ** 2)
+
+    def to_dict(self) -> dict:
+        return {"version": TABLE_VERSION, **asdict(self)}
+
+
+def grid_entries(settings: BakeSettings) -> dict[str, np.ndarray]:
+    """The entries that are fitted: every grid node except ``theta = 0, phi > 0`` (same lobe).
+
+    Returns ``index`` (E, 4) grid indices, ``wo`` (E, 3), ``alpha_x`` (E,), ``alpha_y`` (E,).
+    """
+    th, ph, al, ra = settings.axes()
+    idx = np.stack(np.meshgrid(*(np.arange(len(a)) for a in (th, ph, al, ra)), indexing="ij"),
+                   -1).reshape(-1, 4)
+    idx = idx[(idx[:, 0] > 0) | (idx[:, 1] == 0)]
+    t, p = th[idx[:, 0]], ph[idx[:, 1]]
+    wo = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
+    a = al[idx[:, 2]]
+    return {"index": idx, "wo": wo, "alpha_x": a, "alpha_y": a * ra[idx[:, 3]]}
+
+
+def _fill(settings, entries, values):
+    """Scatter per-entry ``values (E, ...)`` onto the grid, copying ``theta = 0`` across phi."""
+    shape = tuple(len(a) for a in settings.axes())
+    out = np.zeros(shape + values.shape[1:])
+    i = entries["index"]
+    out[i[:, 0], i[:, 1], i[:, 2], i[:, 3]] = values
+    out[0, 1:] = out[0, :1]
+    return out
+
+
+def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool = True,
+               on_chunk: Callable[[int], None] | None = None) -> Path:
+    """Fit, align, post-process and write the table; returns the output path.
+
+    Resumable: chunk results live in ``<out>.parts/`` (keyed by the settings) until the table is
+    written. ``on_chunk(i)`` is called after chunk ``i`` is checkpointed (tests interrupt bakes
+    with it). Wall times are stored in the table's ``settings["timing"]`` (not in the key).
+    """
+    settings = settings or BakeSettings()
+    out = Path(out) if out is not None else default_table_path()
+    axes = settings.axes()
+    entries = grid_entries(settings)
+    E = len(entries["wo"])
+    chunk = as_positive_int(settings.chunk, "chunk")
+    n_chunks = -(-E // chunk)
+    ck = Checkpoints(out, settings.to_dict())
+    todo = [c for c in range(n_chunks) if not ck.done(c)]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_chunks * settings.sw.steps, initial=(n_chunks - len(todo))
+                   * settings.sw.steps, desc="ltc-aniso SW fit", unit="step")
+    t0 = time.perf_counter()
+    try:
+        for c in todo:
+            sl = slice(c * chunk, min(E, (c + 1) * chunk))
+            sw = replace(settings.sw, seed=settings.sw.seed * 100_003 + c)
+            done = [0]
+
+            def tick(step, done=done):
+                if bar is not None:
+                    bar.update(step - done[0])
+                done[0] = step
+
+            wo, ax, ay = entries["wo"][sl], entries["alpha_x"][sl], entries["alpha_y"][sl]
+            res = fit_sw(wo, ax, ay, sw, progress=tick)
+            M, polished = res["M"], np.zeros(len(wo), bool)
+            if settings.polish_steps:
+                pol = fit_pointwise(wo, ax, ay, steps=settings.polish_steps,
+                                    n_samples=settings.polish_samples, lr=settings.polish_lr,
+                                    lr_final=settings.polish_lr / 30, power=1.0, seed=sw.seed,
+                                    M0=M, double=False)["M"]
+                bad = ~np.all(np.isfinite(pol), axis=(1, 2))
+                bad |= np.linalg.cond(np.where(bad[:, None, None], np.eye(3), pol)) > 1e7
+                pol[bad] = M[bad]  # a diverged polish keeps the SW fit
+                rng = np.random.default_rng(sw.seed + 7)
+                d_sw = l1_distance(M, wo, ax, ay, settings.polish_check, rng)
+                d_pol = l1_distance(pol, wo, ax, ay, settings.polish_check, rng)
+                polished = d_pol < d_sw
+                M = np.where(polished[:, None, None], pol, M)
+            ck.save(c, M=M, loss=res["loss"], polished=polished)
+            if on_chunk is not None:
+                on_chunk(c)
+    finally:
+        if bar is not None:
+            bar.close()
+    t_fit = time.perf_counter() - t0
+    parts = [ck.load(c) for c in range(n_chunks)]
+    M_raw = np.concatenate([p["M"] for p in parts])
+    loss = np.concatenate([p["loss"] for p in parts])
+    table = finish_table(settings, entries, M_raw, loss, progress=progress)
+    table.diagnostics["polished"] = _fill(settings, entries,
+                                          np.concatenate([p["polished"] for p in parts]))
+    table.settings["timing"] = {"fit_s_this_run": round(t_fit, 1),
+                                "post_s": round(time.perf_counter() - t0 - t_fit, 1)}
+    table.save(out)
+    ck.clear()
+    return out
+
+
+def finish_table(settings: BakeSettings, entries, M_raw, loss=None, *,
+                 progress: bool = False) -> AnisoGGXTable:
+    """Alignment, eq. 16 post-processing, moments and diagnostics for fitted ``M_raw (E, 3, 3)``."""
+    axes = settings.axes()
+    aligned = align(M_raw)["M"]
+    aligned /= np.linalg.norm(aligned[..., :, 2], axis=-1)[..., None, None]
+    grid_aligned = _fill(settings, entries, aligned)
+    M = enforce(grid_aligned, axes[0], axes[1], axes[3])
+    th, ph, al, ra = np.meshgrid(*axes, indexing="ij")
+    wo = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
+    mom = lobe_moments(wo.reshape(-1, 3), al.reshape(-1), (al * ra).reshape(-1),
+                       settings.moment_nodes)
+    diagnostics = {"symmetry_change": np.abs(M - grid_aligned).max(axis=(-2, -1)),
+                   "M_unaligned": _fill(settings, entries, M_raw)}
+    if loss is not None:
+        diagnostics["sw_loss"] = _fill(settings, entries, np.asarray(loss))
+    if settings.l1_samples:
+        l1 = np.zeros(len(wo.reshape(-1, 3)))
+        rng = np.random.default_rng(settings.sw.seed + 1)
+        Mf, wf, af, rf = M.reshape(-1, 3, 3), wo.reshape(-1, 3), al.reshape(-1), ra.reshape(-1)
+        for s in range(0, len(l1), 256):
+            e = slice(s, s + 256)
+            l1[e] = l1_distance(Mf[e], wf[e], af[e], af[e] * rf[e], settings.l1_samples, rng)
+        diagnostics["l1"] = l1.reshape(M.shape[:4])
+    shape = M.shape[:4]
+    return AnisoGGXTable(axes, M, mom["magnitude"].reshape(shape), mom["fresnel"].reshape(shape),
+                         settings.to_dict(), diagnostics)

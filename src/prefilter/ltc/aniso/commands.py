@@ -1,0 +1,41 @@
+"""``prefilter bake ltc-aniso``: bake the anisotropic GGX LTC table (thin layer over
+:func:`prefilter.ltc.aniso.bake.bake_table`)."""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+
+@click.command("ltc-aniso")
+@click.option("--res", default=8, show_default=True, type=click.IntRange(2, 64),
+              help="Resolution of each of the four axes (theta, phi, alpha, ratio).")
+@click.option("--steps", default=300, show_default=True, type=click.IntRange(1),
+              help="Gradient steps of the sliced-Wasserstein fit.")
+@click.option("--chunk", default=512, show_default=True, type=click.IntRange(1),
+              help="Entries fitted together as one tensor program (and per checkpoint).")
+@click.option("--seed", default=0, show_default=True, type=int)
+@click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
+              help="Output .npz (default: the table shipped with the package).")
+@click.option("--export", "export_dir", type=click.Path(file_okay=False), default=None,
+              help="Also write the float32 / half-float texture layouts and GLSL here.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def bake_ltc_aniso(res, steps, chunk, seed, out, export_dir, quiet):
+    """Fit the anisotropic GGX LTC table (resumable: rerun the same command after a kill)."""
+    from dataclasses import replace
+
+    from prefilter.ltc.aniso.bake import BakeSettings, bake_table
+    from prefilter.ltc.aniso.fit import SWSettings
+
+    settings = BakeSettings(res_theta=res, res_phi=res, res_alpha=res, res_ratio=res,
+                            chunk=chunk, sw=replace(SWSettings(), steps=steps, seed=seed))
+    t0 = time.perf_counter()
+    path = bake_table(out, settings, progress=not quiet)
+    click.echo(f"wrote {path} ({res}^4) in {time.perf_counter() - t0:.1f} s")
+    if export_dir:
+        from prefilter.ltc.aniso.export import export_all
+        from prefilter.ltc.aniso.table import AnisoGGXTable
+
+        for f in export_all(AnisoGGXTable.load(path), export_dir):
+            click.echo(f"wrote {f}")

@@ -1,0 +1,25 @@
+"""The ``ltc-aniso`` render method on a small version of the demo scene, against the reference."""
+
+import numpy as np
+import pytest
+
+from prefilter.ltc.aniso.demo import demo_scene
+from prefilter.render.methods import available
+from prefilter.render.pipeline import render
+
+
+def test_registered():
+    assert "ltc-aniso" in available()
+
+
+def test_ltc_aniso_close_to_reference():
+    scene = demo_scene(48, 36)
+    ref = render(scene, "reference", spp=16, seed=1)
+    img = render(scene, "ltc-aniso")
+    assert img.shape == (36, 48, 3) and np.all(np.isfinite(img)) and np.all(img >= 0)
+    lit = ref.mean(-1) > 0.05
+    assert lit.sum() > 50
+    # mean radiance over the lit pixels within 10 %, and the per-pixel error is mostly small
+    assert img[lit].mean() == pytest.approx(ref[lit].mean(), rel=0.1)
+    rel = np.abs(img[lit].mean(-1) - ref[lit].mean(-1)) / ref[lit].mean(-1)
+    assert np.median(rel) < 0.25

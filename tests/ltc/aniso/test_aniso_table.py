@@ -1,0 +1,128 @@
+"""The shipped table: file layout, conditioning, moments, accuracy, resumable bake."""
+
+import json
+
+import numpy as np
+import pytest
+
+from prefilter.errors import PrefilterError, TableFileError
+from prefilter.ltc import AnisoGGXTable
+from prefilter.ltc.aniso.accept import (
+    estimates,
+    random_aniso_configurations,
+    references,
+    statistics,
+)
+from prefilter.microfacet import GGX
+
+#: Documented bound (docs/ltc-aniso.md) on the condition number of every stored matrix.
+COND_BOUND = 5e3
+
+
+def test_shipped_table_layout(table):
+    assert table.shape == (8, 8, 8, 8)
+    assert table.settings["version"] == 1
+    assert "AnisoGGXTable(shape=(8, 8, 8, 8)" in repr(table)
+
+
+def test_conditioning(table):
+    """Every stored M: det > 0 and condition number below the documented bound; blends too."""
+    M = table.M.reshape(-1, 3, 3)
+    assert np.all(np.linalg.det(M) > 0)
+    assert np.linalg.cond(M).max() < COND_BOUND
+    rng = np.random.default_rng(0)
+    n = 20000
+    t = np.radians(rng.uniform(0, 89.5, n))
+    p = rng.uniform(-np.pi, np.pi, n)
+    wo = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
+    Mi, _, _ = table.lookup(wo, rng.uniform(1e-3, 1, n), rng.uniform(1e-3, 1, n))
+    assert np.all(np.linalg.det(Mi) > 0)
+    assert np.linalg.cond(Mi).max() < COND_BOUND
+
+
+def test_magnitude_matches_albedo(table):
+    th, ph, al, ra = np.meshgrid(*table.axes, indexing="ij")
+    sel = (slice(None), 3, slice(None, None, 3), slice(None, None, 3))
+    wo = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)[sel]
+    alb = GGX(al[sel], (al * ra)[sel]).albedo(wo)
+    np.testing.assert_allclose(table.magnitude[sel], alb, rtol=2e-3, atol=1e-4)
+    assert np.all(table.fresnel <= table.magnitude) and np.all(table.fresnel >= 0)
+
+
+def test_lookup_validates_inputs(table):
+    with pytest.raises(PrefilterError, match="wo"):
+        table.lookup([0.0, 0.0, -1.0], 0.3, 0.3)
+    with pytest.raises(PrefilterError, match="alpha_y"):
+        table.lookup([0.0, 0.0, 1.0], 0.3, -0.1)
+    with pytest.raises(PrefilterError, match="broadcast"):
+        table.lookup(np.tile([0.0, 0.0, 1.0], (3, 1)), np.ones(2) * 0.3, 0.3)
+
+
+def test_file_errors(tmp_path, table):
+    with pytest.raises(TableFileError, match="not found"):
+        AnisoGGXTable.load(tmp_path / "none.npz")
+    p = tmp_path / "t.npz"
+    table.save(p)
+    back = AnisoGGXTable.load(p)
+    np.testing.assert_array_equal(back.M, table.M)
+    np.testing.assert_array_equal(back.magnitude, table.magnitude)
+    with np.load(p) as z:
+        data = {k: z[k] for k in z.files}
+    bad = dict(data, version=np.int64(7))
+    np.savez(tmp_path / "v.npz", **bad)
+    with pytest.raises(TableFileError, match="version"):
+        AnisoGGXTable.load(tmp_path / "v.npz")
+    M = data["M"].copy()
+    M[1, 1, 1, 1] = M[1, 1, 1, 1] @ np.diag([1.0, -1, 1])
+    np.savez(tmp_path / "d.npz", **dict(data, M=M))
+    with pytest.raises(TableFileError, match="determinant"):
+        AnisoGGXTable.load(tmp_path / "d.npz")
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    with pytest.raises(TableFileError, match="unreadable"):
+        AnisoGGXTable.load(tmp_path / "junk.npz")
+
+
+def test_accuracy_small_sample(table):
+    """A quick version of the acceptance (the full one is slow): 120 configurations."""
+    cfg = random_aniso_configurations(120, 7)
+    ref, se = references(cfg, 20000, 8)
+    stats = statistics(estimates(table, cfg), ref, cfg)
+    assert stats["median"] < 0.08 and stats["p90"] < 0.35, stats
+
+
+@pytest.mark.slow
+def test_accuracy_acceptance(table):
+    cfg = random_aniso_configurations(2000, 0)
+    ref, se = references(cfg, 50000, 1)
+    stats = statistics(estimates(table, cfg), ref, cfg)
+    assert stats["median"] <= 0.05 and stats["p90"] <= 0.15, stats
+
+
+def test_bake_is_resumable(tmp_path):
+    pytest.importorskip("torch")
+    from prefilter.ltc.aniso.bake import BakeSettings, bake_table
+    from prefilter.ltc.aniso.fit import SWSettings
+
+    s = BakeSettings(res_theta=2, res_phi=2, res_alpha=2, res_ratio=3, chunk=4, l1_samples=0,
+                     moment_nodes=16, polish_steps=3, polish_samples=32, polish_check=64,
+                     sw=SWSettings(steps=6, pool=256, n_samples=32, n_dirs=4))
+    full = bake_table(tmp_path / "a.npz", s, progress=False)
+
+    class Kill(Exception):
+        pass
+
+    def kill(i):
+        if i == 1:
+            raise Kill
+
+    with pytest.raises(Kill):
+        bake_table(tmp_path / "b.npz", s, progress=False, on_chunk=kill)
+    assert not (tmp_path / "b.npz").exists()
+    assert (tmp_path / "b.npz.parts" / "000001.npz").exists()
+    calls = []
+    bake_table(tmp_path / "b.npz", s, progress=False, on_chunk=calls.append)
+    assert calls == [2, 3, 4]  # chunks 0 and 1 were not refitted
+    a, b = AnisoGGXTable.load(full), AnisoGGXTable.load(tmp_path / "b.npz")
+    np.testing.assert_array_equal(a.M, b.M)
+    assert json.dumps(a.settings["sw"]) == json.dumps(b.settings["sw"])
+    assert not (tmp_path / "b.npz.parts").exists()
