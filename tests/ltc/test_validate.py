@@ -6,13 +6,20 @@ import numpy as np
 import pytest
 
 from prefilter.errors import PrefilterError
+from prefilter.ltc import LTC
+from prefilter.ltc.polygon import polygon_integral
 from prefilter.ltc.validate import (
+    clip_to_horizon,
     error_statistics,
     format_statistics,
     random_configurations,
     reference_quad_integral,
 )
 from prefilter.microfacet import GGX
+
+# measured on the shipped table by `prefilter validate` (docs/ltc.md), plus a small margin
+ACCEPT_MEDIAN_MEASURED = 0.04
+ACCEPT_P90_MEASURED = 0.30
 
 
 def _quadrature(model, wo, quad, k=1000):
@@ -106,7 +113,8 @@ def test_error_statistics_known_values():
     est = np.array([1.01, 0.98, 1.05, 1.2, 0.0])
     theta = np.radians([10.0, 30.0, 50.0, 80.0, 10.0])
     alpha = np.array([0.06, 0.15, 0.3, 0.9, 0.5])
-    s = error_statistics(est, ref, theta, alpha)
+    s = error_statistics(est, ref, theta, alpha, albedo=np.full(5, 2.0))
+    assert [b["count"] for b in s["by_fraction"]] == [0, 0, 0, 0, 4]
     assert s["count"] == 4 and s["excluded"] == 1
     assert s["median"] == pytest.approx(np.median([0.01, 0.02, 0.05, 0.2]))
     assert s["p90"] == pytest.approx(np.percentile([0.01, 0.02, 0.05, 0.2], 90))
@@ -116,3 +124,57 @@ def test_error_statistics_known_values():
     assert [b["count"] for b in s["by_alpha"]] == [1, 1, 1, 0, 1]
     json.dumps(s)
     assert "median" in format_statistics(s)
+
+
+def test_clip_to_horizon_square():
+    # square in the plane x = 1 spanning z in [-1, 1]: the clipped part is z in [0, 1]
+    sq = np.array([[1.0, -1, -1], [1, 1, -1], [1, 1, 1], [1, -1, 1]])
+    c = clip_to_horizon(sq)
+    assert c.shape == (5, 3)
+    assert np.all(c[:, 2] >= 0)
+    corners = {tuple(v) for v in np.round(c, 12)}
+    assert corners == {(1, 1, 0), (1, 1, 1), (1, -1, 1), (1, -1, 0)}
+    assert np.all(clip_to_horizon(sq - [0, 0, 3]) == 0)
+    assert np.allclose(clip_to_horizon(sq + [0, 0, 3])[:4], sq + [0, 0, 3])
+
+
+def test_clipped_ltc_integral_matches_ltc_monte_carlo():
+    """LTC mass on the part of a straddling quad above the surface, vs sampling the LTC."""
+    M = np.array([[0.45, 0.0, -0.5], [0.0, 0.5, 0.0], [0.25, 0.0, 0.6]])
+    cfg = random_configurations(30, 1, straddle_fraction=1.0)
+    rng = np.random.default_rng(2)
+    w = LTC(M).sample(rng.random((400_000, 2)))
+    for q in cfg["quad"][:5]:
+        nq = np.cross(q[1] - q[0], q[2] - q[0])
+        t = (nq @ q[0]) / (w @ nq)
+        p = t[:, None] * w
+        inside = (t > 0) & (w[:, 2] > 0)
+        for k in range(4):
+            inside &= (np.cross(q[(k + 1) % 4] - q[k], p - q[k]) @ nq) >= 0
+        mc = inside.mean()
+        got = polygon_integral(M, clip_to_horizon(q))
+        assert abs(got - mc) < 4 * np.sqrt(mc * (1 - mc) / len(w)) + 1e-4
+
+
+@pytest.fixture(scope="module")
+def acceptance():
+    from prefilter.ltc import GGXTable
+    from prefilter.ltc.validate import run_acceptance
+
+    return run_acceptance(GGXTable.load(), 2000, 100_000, 0)["stats"]
+
+
+@pytest.mark.slow
+def test_acceptance_no_regression(acceptance):
+    """2000 configurations, 1e5 MC samples each: the shipped table's measured level (docs/ltc.md)."""
+    assert acceptance["count"] >= 1800
+    assert acceptance["median"] <= ACCEPT_MEDIAN_MEASURED
+    assert acceptance["p90"] <= ACCEPT_P90_MEASURED
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="issue target p90 <= 10 % is not met: a single LTC cannot "
+                   "follow GGX's tails, quads catching < 3 % of the lobe dominate (docs/ltc.md)")
+def test_acceptance_issue_targets(acceptance):
+    assert acceptance["median"] <= 0.03
+    assert acceptance["p90"] <= 0.10

@@ -3,16 +3,17 @@
 For one view angle ``theta`` and roughness ``alpha`` the normalised cosine-weighted lobe
 ``p(wi) = GGX.eval(wo, wi) / n`` (``n`` = albedo) is approximated by an LTC ``q = LTC(M).eval``.
 The view lies in the xz plane, ``wo = (sin theta, 0, cos theta)``, so the lobe is symmetric about
-that plane and ``M = [[a, 0, b], [0, c, 0], [d, 0, e]]``. Following the paper's reference code, ``M``
-is parameterised in the frame ``(X, Y, Z)`` whose ``Z`` is the lobe's average direction::
+that plane and ``M = [[a, 0, b], [0, c, 0], [d, 0, e]]`` (4 degrees of freedom up to scale)::
 
-    M = [X Y Z] @ [[m11, 0, m13], [0, m22, 0], [0, 0, 1]]
+    M = [X Y Z] @ [[m11, 0, m13], [0, m22, 0], [0, 0, 1]],  Z = (sin beta, 0, cos beta)
 
-with three free numbers (two scales and a skew); fitted as ``(log m11, log m22, m13 / m11)``.
-The objective is the integrated ``|p - q|^3`` estimated on two FIXED stratified sample sets (cosine
-samples mapped by ``M``, and visible-normal reflections of the GGX lobe) combined with the balance
-heuristic, so it is a deterministic, smooth function of the parameters; Nelder-Mead minimises it,
-warm-started from the neighbouring (larger) roughness along each view angle.
+fitted as ``(log m11, log m22, m13 / m11, beta)``. The paper's reference code pins ``Z`` to the
+lobe's average direction (3 numbers); freeing ``beta`` halves the L1 distance at grazing views
+(docs/ltc.md). The objective is ``integral |p - q|^k`` (``k = FitSettings.power``) estimated on two
+FIXED stratified sample sets (cosine samples mapped by ``M``, and visible-normal reflections of the
+GGX lobe) combined with the balance heuristic, so it is a deterministic function of the
+parameters; Nelder-Mead minimises it, warm-started from the neighbouring (larger) roughness along
+each view angle (cold start at alpha = 1 around the lobe's average direction).
 """
 
 from __future__ import annotations
@@ -180,8 +181,13 @@ class _Objective:
 
     def __call__(self, params) -> float:
         M = ltc_from_params(params)
-        M_inv = np.linalg.inv(M)
+        try:
+            M_inv = np.linalg.inv(M)
+        except np.linalg.LinAlgError:
+            return np.inf  # a scale under/overflowed: Nelder-Mead steps back
         det_inv = abs(np.linalg.det(M_inv))
+        if not (np.isfinite(det_inv) and det_inv > 0.0):
+            return np.inf
         wl = self.c @ M.T
         wl /= np.linalg.norm(wl, axis=-1, keepdims=True)
         w = np.concatenate([wl, self.wb])

@@ -21,6 +21,8 @@ REFERENCE_THRESHOLD = 1e-3
 
 THETA_BINS_DEG = (0.0, 20.0, 40.0, 60.0, 75.0, 85.0)
 ALPHA_BINS = (0.05, 0.1, 0.2, 0.4, 0.7, 1.0)
+#: Bins of the fraction of the lobe's energy a quad catches (reference / albedo).
+FRACTION_BINS = (0.0, 0.01, 0.03, 0.1, 0.3, 1.0)
 
 
 def _orthonormal(n, rng, k):
@@ -205,13 +207,15 @@ def reference_quad_integral(model, wo, quad, n_samples: int, rng) -> tuple[float
 
 
 def error_statistics(estimate, reference, theta, alpha, *,
-                     threshold: float = REFERENCE_THRESHOLD) -> dict:
+                     threshold: float = REFERENCE_THRESHOLD, albedo=None) -> dict:
     """Relative-error summary of ``estimate`` vs ``reference`` (all ``(n,)``).
 
     Configurations with ``reference < threshold`` are excluded from the relative statistics and
     summarised by their absolute error. Returns a JSON-serialisable dict: ``median``, ``p90``,
     ``mean``, ``count``, ``excluded``, ``excluded_max_abs``, and per-bin ``by_theta`` /
-    ``by_alpha`` lists of ``{lo, hi, count, median, p90}`` (theta in degrees).
+    ``by_alpha`` lists of ``{lo, hi, count, median, p90}`` (theta in degrees); with ``albedo``
+    (n,) also ``by_fraction``, binned by the fraction ``reference / albedo`` of the lobe's energy
+    that the quad catches.
     """
     est = np.asarray(estimate, float)
     ref = np.asarray(reference, float)
@@ -235,8 +239,13 @@ def error_statistics(estimate, reference, theta, alpha, *,
         return out
 
     all_ = summary(np.ones_like(keep))
+    extra = {}
+    if albedo is not None:
+        frac = ref / np.maximum(np.asarray(albedo, float), 1e-300)
+        extra["by_fraction"] = binned(frac, FRACTION_BINS)
     return {
         **all_,
+        **extra,
         "mean": float(rel[keep].mean()) if keep.any() else None,
         "threshold": threshold,
         "excluded": int((~keep).sum()),
@@ -267,6 +276,11 @@ def format_statistics(stats: dict) -> str:
     for b in stats["by_alpha"]:
         lines.append(f"  {b['lo']:5.2f}-{b['hi']:5.2f}   {b['count']:6d}  {pct(b['median'])}  "
                      f"{pct(b['p90'])}")
+    if "by_fraction" in stats:
+        lines.append("reference/albedo  count  median     p90")
+        for b in stats["by_fraction"]:
+            lines.append(f"  {b['lo']:5.2f}-{b['hi']:5.2f}   {b['count']:6d}  {pct(b['median'])}  "
+                         f"{pct(b['p90'])}")
     return "\n".join(lines)
 
 
@@ -298,4 +312,4 @@ def run_acceptance(table, n_configs: int = 2000, n_samples: int = 100_000, seed=
     theta = np.arccos(np.clip(cfg["wo"][:, 2], -1, 1))
     return {"estimate": est, "reference": ref, "standard_error": se, "theta": theta,
             "alpha": cfg["alpha"], "straddle": cfg["straddle"],
-            "stats": error_statistics(est, ref, theta, cfg["alpha"])}
+            "stats": error_statistics(est, ref, theta, cfg["alpha"], albedo=mag)}
