@@ -94,7 +94,8 @@ def test_sh_irradiance_error_on_a_sharp_environment_is_small():
 
 def test_diffuse_sh_for_constant_radiance_is_the_radiance():
     env = EnvMap(np.full((16, 32, 3), 0.7))
-    v = diffuse_sh(sh9_project(env), _unit([0.2, 0.3, 0.9]), (0.3, -0.2), ((0.1, 0.02), (0.02, 0.05)), 9)
+    v = diffuse_sh(sh9_project(env), _unit([0.2, 0.3, 0.9]), (0.3, -0.2),
+                   ((0.1, 0.02), (0.02, 0.05)), 9)
     # E = pi L for every micronormal, so the outgoing radiance is L (albedo 1).
     np.testing.assert_allclose(v, 0.7, rtol=2e-3)
 
@@ -123,7 +124,8 @@ def test_compiled_env_specular_matches_the_numpy_path():
     cov = a @ np.swapaxes(a, -1, -2) + 1e-4 * np.eye(2)
     ang = rng.uniform(0, 2 * np.pi, 200)
     rot = np.zeros((200, 3, 3))
-    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = np.cos(ang), -np.sin(ang), np.sin(ang), np.cos(ang)
+    c, s = np.cos(ang), np.sin(ang)
+    rot[:, 0, 0], rot[:, 0, 1], rot[:, 1, 0], rot[:, 1, 1] = c, -s, s, c
     rot[:, 2, 2] = 1.0
     for n, f0 in ((5, 0.04), (9, None)):
         fast = env_specular(env, wo, mu, cov, n, f0=f0, to_world=rot)

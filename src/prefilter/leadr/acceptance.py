@@ -94,7 +94,8 @@ def run(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 96, sigm
 def table(rows) -> str:
     """Markdown table of :func:`run`'s rows (relative errors in percent)."""
     out = ["| surface | shading | texels/pixel | LEADR err | normal-mapped err | naive err | "
-           "LEADR / naive | LEADR flicker | naive flicker |", "|---|---|---|---|---|---|---|---|---|"]
+           "LEADR / naive | LEADR flicker | naive flicker |",
+           "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         out.append(
             f"| {r['surface']} | {r['shading']} | {r['block']} | {100 * r['err leadr']:.1f}% | "

@@ -106,7 +106,8 @@ def block_moments(height, block: int) -> np.ndarray:
     m = cell_moments(height)
     hh, ww = m.shape[:2]
     if hh % block or ww % block:
-        raise PrefilterError(f"block: expected a divisor of the map size {m.shape[:2]}, got {block}")
+        raise PrefilterError(
+            f"block: expected a divisor of the map size {m.shape[:2]}, got {block}")
     return m.reshape(hh // block, block, ww // block, block, 5).mean(axis=(1, 3))
 
 

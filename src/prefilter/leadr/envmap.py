@@ -47,7 +47,8 @@ class EnvMap:
         h, w = a.shape[:2]
         if a.ndim != 3 or w != 2 * h or h < 2 or (h & (h - 1)):
             raise PrefilterError(
-                f"radiance: expected a lat-long map (H, 2H[, C]) with H a power of two, got {a.shape}"
+                "radiance: expected a lat-long map (H, 2H[, C]) with H a power of two, got "
+                f"{a.shape}"
             )
         _, omega = texel_directions(h, w)
         self.levels = [a]
@@ -114,7 +115,7 @@ _A = (np.pi, 2.0 * np.pi / 3.0, np.pi / 4.0)
 
 
 def sh9_basis(w) -> np.ndarray:
-    """Real SH basis ``(..., 9)`` for l <= 2 in the order (00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22)."""
+    """Real SH basis ``(..., 9)`` for l <= 2, order (00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22)."""
     w = np.asarray(w, dtype=np.float64)
     x, y, z = w[..., 0], w[..., 1], w[..., 2]
     return np.stack([
@@ -165,7 +166,7 @@ def procedural_env(size: int = 64) -> np.ndarray:
     sun_dir /= np.linalg.norm(sun_dir)
     sun = np.exp(80.0 * (d @ sun_dir - 1.0))[..., None] * np.array([20.0, 17.0, 12.0])
     phi = np.arctan2(d[..., 1], d[..., 0])
-    stripes = ((np.abs(z) < 0.4) & (np.cos(12.0 * phi) > 0.6))[..., None] * np.array([2.0, 2.0, 2.0])
+    stripes = ((np.abs(z) < 0.4) & (np.cos(12.0 * phi) > 0.6))[..., None] * 2.0
     return sky + ground + sun + stripes
 
 

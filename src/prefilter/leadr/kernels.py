@@ -45,7 +45,8 @@ def _lookup(flat, offsets, shapes, wx, wy, wz, lod, out):  # pragma: no cover - 
     lod = min(max(lod, 0.0), nl - 1.0)
     l0 = int(math.floor(lod))
     t = lod - l0
-    _bilinear(flat, offsets[l0], shapes[l0, 0], shapes[l0, 1], u, v, out, 1.0 - t if l0 + 1 < nl else 1.0)
+    w0 = 1.0 - t if l0 + 1 < nl else 1.0
+    _bilinear(flat, offsets[l0], shapes[l0, 0], shapes[l0, 1], u, v, out, w0)
     if l0 + 1 < nl and t > 0.0:
         _bilinear(flat, offsets[l0 + 1], shapes[l0 + 1, 0], shapes[l0 + 1, 1], u, v, out, t)
 

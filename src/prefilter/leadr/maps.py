@@ -120,7 +120,8 @@ def moments(data, texel_size: float = 1.0, base_roughness: float = 0.0) -> Leadr
             s = slopes_from_normals(a)
         else:
             raise PrefilterError(
-                f"data: expected heights (H, W), slopes (H, W, 2) or normals (H, W, 3), got {a.shape}"
+                "data: expected heights (H, W), slopes (H, W, 2) or normals (H, W, 3), got "
+                f"{a.shape}"
             )
     x, y = s[..., 0], s[..., 1]
     chain = MipChain(np.stack([x, y, x * x, y * y, x * y], axis=-1))

@@ -37,8 +37,8 @@ def _stats(mean, cov):
     sxx, syy, sxy = c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
     if np.any(sxx <= 0) or np.any(syy <= 0) or np.any(sxx * syy - sxy * sxy <= 0):
         raise PrefilterError(
-            "slope_cov: expected positive definite covariances (use leadr.shading_stats, which adds "
-            "the base roughness), got a singular or indefinite one"
+            "slope_cov: expected positive definite covariances (leadr.shading_stats adds the "
+            "base roughness), got a singular or indefinite one"
         )
     return mu, sxx, syy, sxy
 
