@@ -152,22 +152,31 @@ class AnisoGGXTable:
         shape = self.shape
         i0 = [np.minimum(np.floor(f[..., k]).astype(np.intp), shape[k] - 2) for k in range(4)]
         t = [f[..., k] - i0[k] for k in range(4)]
-        extra = (None,) * (table.ndim - 4)
+        trailing = table.shape[4:]
+        flat = table.reshape((-1,) + trailing)
+        strides = np.cumprod((1,) + shape[:0:-1])[::-1]  # row-major strides of the 4 axes
+        base = sum(i0[k] * strides[k] for k in range(4))
+        extra = (None,) * len(trailing)
         out = 0.0
         for corner in range(16):
             b = [(corner >> k) & 1 for k in range(4)]
             w = np.ones_like(t[0])
             for k in range(4):
                 w = w * (t[k] if b[k] else 1.0 - t[k])
-            out = out + w[(...,) + extra] * table[tuple(i0[k] + b[k] for k in range(4))]
+            off = int(sum(b[k] * strides[k] for k in range(4)))
+            out = out + w[(...,) + extra] * flat[base + off]
         return out
 
     def lookup_canonical(self, v, alpha, ratio):
         """Interpolated ``(M, magnitude, fresnel)`` for folded configurations (no symmetry)."""
         f = self.fractional_index(np.asarray(v, float), np.asarray(alpha, float),
                                   np.asarray(ratio, float))
-        return (self.interpolate(self.M, f), self.interpolate(self.magnitude, f),
-                self.interpolate(self.fresnel, f))
+        if getattr(self, "_packed", None) is None:
+            # one gather per corner for all 11 numbers (M, n, f5)
+            self._packed = np.concatenate([self.M.reshape(self.shape + (9,)),
+                                           self.magnitude[..., None], self.fresnel[..., None]], -1)
+        x = self.interpolate(self._packed, f)
+        return x[..., :9].reshape(x.shape[:-1] + (3, 3)), x[..., 9], x[..., 10]
 
     def lookup(self, wo, alpha_x, alpha_y):
         """LTC of the GGX(alpha_x, alpha_y) lobe seen from ``wo``.
