@@ -37,7 +37,9 @@ def _best(fn, repeat=3):
     return best
 
 
-def bench_queries(gm, nm, n_queries=50000, seed=0):
+def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False):
+    """Per-query cost. ``coherent`` sorts the queries by footprint centre (rows of 8 texels), as
+    a renderer's neighbouring pixels would be; random order measures cache misses as well."""
     rng = np.random.default_rng(seed)
     H = nm.shape[0]
     el = elements(nm)
@@ -47,6 +49,8 @@ def bench_queries(gm, nm, n_queries=50000, seed=0):
     for w in WIDTHS:
         sp = w / 2.0
         c = rng.uniform(0, H, (n_queries, 2))
+        if coherent:
+            c = c[np.lexsort((c[:, 0], c[:, 1] // 8))]
         s = rng.normal(0.0, 0.15, (n_queries, 2))
         lo = s - rng.uniform(1, 12, (n_queries, 2)) * h
         hi = s + rng.uniform(1, 12, (n_queries, 2)) * h
@@ -59,7 +63,8 @@ def bench_queries(gm, nm, n_queries=50000, seed=0):
         pndf(nm, c[:2], sp, s[:2], elements_=el)
         td = _best(lambda: pndf(nm, c[:n_direct], sp, s[:n_direct], elements_=el), 2) / n_direct
         rows.append((w, tp, tr, td))
-    print(f"query cost per query (map {H}^2, {n_queries} queries, NUMBA threads "
+    print(f"query cost per query ({'coherent' if coherent else 'random'} order, map {H}^2, "
+          f"{n_queries} queries, NUMBA threads "
           f"{os.environ.get('NUMBA_NUM_THREADS', 'all')})")
     print(f"{'width':>6} {'point us':>9} {'range us':>9} {'direct us':>11} {'direct/point':>13}")
     for w, tp, tr, td in rows:
@@ -121,6 +126,7 @@ def main():
             bake(nm, Path(tmp) / "q.npz", progress=False, cell=min(64, a.size))
             gm = load(Path(tmp) / "q.npz")
         bench_queries(gm, nm)
+        bench_queries(gm, nm, coherent=True)
         if a.scaling:
             bench_bake_scaling([int(x) for x in a.scaling.split(",")], tmp)
         if a.ranks:
