@@ -44,6 +44,7 @@ BAKE_COMMANDS = {
     "ltc-iso": "prefilter.ltc.commands:bake_ltc_iso",
     "ltc-aniso": "prefilter.ltc.aniso.commands:bake_ltc_aniso",
     "colormap": "prefilter.colormap.commands:bake_colormap",
+    "leadr": "prefilter.leadr.commands:bake_leadr",
     "glints": "prefilter.glints.commands:bake_glints",
 }
 
