@@ -59,6 +59,7 @@ _REGISTRY: dict[str, Method | str] = {
     "ltc-multiscale-paper": "prefilter.multiscale.render:render_multiscale_paper",
     "ltc-multiscale-mrl": "prefilter.multiscale.render:render_multiscale_mrl",
     "leadr-point": "prefilter.leadr.render:render_leadr_point",
+    "ltc-aniso": "prefilter.ltc.aniso.render:render_ltc_aniso",
 }
 _DESCRIPTIONS: dict[str, str] = {
     "ltc": "area lights by the isotropic LTC table, normal and colour from the footprint's mip "
@@ -70,6 +71,7 @@ _DESCRIPTIONS: dict[str, str] = {
     "ltc-multiscale-paper": "multi-scale LTC with the paper's fitted eqs. 5 and 7",
     "ltc-multiscale-mrl": "multi-scale LTC with the closed-form product of mean resultant lengths",
     "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2)",
+    "ltc-aniso": "area lights by the anisotropic GGX LTC table (alpha_x, alpha_y, tangent frame)",
 }
 
 
