@@ -18,7 +18,7 @@ from prefilter.ltc.validate import (
 from prefilter.microfacet import GGX
 
 # measured on the shipped table by `prefilter validate` (docs/ltc.md), plus a small margin
-ACCEPT_MEDIAN_MEASURED = 0.04
+ACCEPT_MEDIAN_MEASURED = 0.035
 ACCEPT_P90_MEASURED = 0.30
 
 
@@ -167,7 +167,7 @@ def acceptance():
 @pytest.mark.slow
 def test_acceptance_no_regression(acceptance):
     """2000 configurations, 1e5 MC samples each: the shipped table's measured level (docs/ltc.md)."""
-    assert acceptance["count"] >= 1800
+    assert acceptance["count"] >= 1700
     assert acceptance["median"] <= ACCEPT_MEDIAN_MEASURED
     assert acceptance["p90"] <= ACCEPT_P90_MEASURED
 
