@@ -39,9 +39,15 @@ def test_conditioning(table):
     t = np.radians(rng.uniform(0, 89.5, n))
     p = rng.uniform(-np.pi, np.pi, n)
     wo = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
-    Mi, _, _ = table.lookup(wo, rng.uniform(1e-3, 1, n), rng.uniform(1e-3, 1, n))
+    ax, ay = rng.uniform(1e-3, 1, n), rng.uniform(1e-3, 1, n)
+    Mi, _, _ = table.lookup(wo, ax, ay)
     assert np.all(np.linalg.det(Mi) > 0)
-    assert np.linalg.cond(Mi).max() < COND_BOUND
+    ci = np.linalg.cond(Mi)
+    assert ci.max() < COND_BOUND
+    # the same bound with the roughness clamped to the table's range, as lookup does
+    a = np.clip(np.maximum(ax, ay), table.axis_alpha[0], 1)
+    r = np.clip(np.minimum(ax, ay) / np.maximum(ax, ay), table.axis_ratio[0], 1)
+    assert np.all(ci * a * r < 10.0)
 
 
 def test_magnitude_matches_albedo(table):
@@ -130,3 +136,18 @@ def test_bake_is_resumable(tmp_path):
     np.testing.assert_array_equal(a.M, b.M)
     assert json.dumps(a.settings["sw"]) == json.dumps(b.settings["sw"])
     assert not (tmp_path / "b.npz.parts").exists()
+
+
+def test_bake_command(tmp_path):
+    pytest.importorskip("torch")
+    from click.testing import CliRunner
+
+    from prefilter.ltc.aniso.commands import bake_ltc_aniso
+
+    out = tmp_path / "t.npz"
+    res = CliRunner().invoke(bake_ltc_aniso, ["--res", "2", "--steps", "3", "-o", str(out),
+                                              "--export", str(tmp_path / "exp"), "--quiet"])
+    assert res.exit_code == 0, res.output
+    t = AnisoGGXTable.load(out)
+    assert t.shape == (2, 2, 2, 2) and t.settings["sw"]["steps"] == 3
+    assert (tmp_path / "exp" / "ltc_aniso.glsl").is_file()

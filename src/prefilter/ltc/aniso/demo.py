@@ -14,8 +14,8 @@ def demo_scene(width: int = 200, height: int = 150) -> dict:
     brushing: ``alpha_x = 0.08``, ``alpha_y = 0.45``) and a sphere brushed along its latitudes
     (``alpha_x = 0.45`` along the tangent, ``0.06`` across), lit by one quad light."""
     return {
-        "camera": {"origin": [0.0, 1.6, 4.2], "target": [0.0, 0.3, 0.0], "up": [0, 1, 0],
-                   "fov": 45, "width": width, "height": height},
+        "camera": {"origin": [0.0, 1.3, 4.6], "target": [0.2, 0.6, 0.0], "up": [0, 1, 0],
+                   "fov": 50, "width": width, "height": height},
         "objects": [
             {"type": "plane", "center": [0, 0, 0], "normal": [0, 1, 0], "tangent": [1, 0, 0],
              "size": [8, 8],
