@@ -166,7 +166,7 @@ def acceptance():
 
 @pytest.mark.slow
 def test_acceptance_no_regression(acceptance):
-    """2000 configurations, 1e5 MC samples each: the shipped table's measured level (docs/ltc.md)."""
+    """2000 configurations, 1e5 MC samples each: the shipped table's measured level."""
     assert acceptance["count"] >= 1700
     assert acceptance["median"] <= ACCEPT_MEDIAN_MEASURED
     assert acceptance["p90"] <= ACCEPT_P90_MEASURED

@@ -1,7 +1,8 @@
 """Command-line entry points for the isotropic GGX LTC table (a thin layer over the library).
 
 ``prefilter bake ltc-iso`` refits the table (:func:`prefilter.ltc.fit_iso.bake_table`);
-``prefilter validate`` runs the quad-light acceptance test (:func:`prefilter.ltc.validate.run_acceptance`).
+``prefilter validate`` runs the quad-light acceptance test
+(:func:`prefilter.ltc.validate.run_acceptance`).
 """
 
 from __future__ import annotations

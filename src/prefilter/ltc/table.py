@@ -52,7 +52,8 @@ class GGXTable:
 
     def __repr__(self) -> str:
         return (f"GGXTable(T={len(self.axis_t)}, R={len(self.axis_r)}, "
-                f"alpha in [{self.alpha_min:.4g}, 1], theta <= {np.degrees(self.theta_max):.3g} deg)")
+                f"alpha in [{self.alpha_min:.4g}, 1], "
+                f"theta <= {np.degrees(self.theta_max):.3g} deg)")
 
     @property
     def alpha_min(self) -> float:
@@ -152,7 +153,7 @@ class GGXTable:
                 self._bilinear(self.fresnel, ft, fr))
 
     def lookup(self, wo, alpha):
-        """LTC of the GGX lobe for views ``wo (..., 3)`` (local frame) and roughness ``alpha (...)``.
+        """LTC of the GGX lobe for views ``wo (..., 3)`` (local frame), roughness ``alpha (...)``.
 
         Bilinear interpolation in ``(sqrt(1 - cos theta), sqrt(alpha))``; views beyond the last
         row's angle use that row. ``M`` is returned in the local frame: ``Rz(phi) M Rz(phi)^T``
