@@ -13,13 +13,21 @@ def test_registered():
 
 
 def test_ltc_aniso_close_to_reference():
+    """Brushed metal: ltc-aniso tracks the Monte Carlo reference; the isotropic ltc method (mean
+    roughness) does not."""
+    from prefilter.errors import TableFileError
+    from prefilter.render.metrics import rmse
+
     scene = demo_scene(48, 36)
-    ref = render(scene, "reference", spp=16, seed=1)
+    ref = render(scene, "reference", spp=64, seed=1)
     img = render(scene, "ltc-aniso")
     assert img.shape == (36, 48, 3) and np.all(np.isfinite(img)) and np.all(img >= 0)
     lit = ref.mean(-1) > 0.05
     assert lit.sum() > 50
-    # mean radiance over the lit pixels within 10 %, and the per-pixel error is mostly small
+    # mean radiance over the lit pixels within 10 %
     assert img[lit].mean() == pytest.approx(ref[lit].mean(), rel=0.1)
-    rel = np.abs(img[lit].mean(-1) - ref[lit].mean(-1)) / ref[lit].mean(-1)
-    assert np.median(rel) < 0.25
+    try:
+        iso = render(scene, "ltc")
+    except TableFileError:
+        pytest.skip("isotropic table not available")
+    assert rmse(img, ref) < 0.5 * rmse(iso, ref)
