@@ -226,6 +226,9 @@ def fit_entry(theta, alpha, *, init=None, n_fit: int = 32, seed: int = 0, quad_n
     return _fit(wo, alpha, init, fixed_samples(n_fit, seed), quad_nodes, power)
 
 
+#: Relative fit error above which a warm-started entry is refitted from a fresh start.
+RESTART_ERROR = 0.3
+
 _NM = {"xatol": 1e-5, "fatol": 1e-7, "maxiter": 4000}
 
 
@@ -270,7 +273,14 @@ def fit_row(t: float, settings: FitSettings) -> dict[str, np.ndarray]:
            "error": np.zeros(R)}
     init = None
     for j in range(R - 1, -1, -1):
-        fit = _fit(wo, float(axis_r[j] ** 2), init, u, settings.quad_nodes, settings.power)
+        alpha = float(axis_r[j] ** 2)
+        fit = _fit(wo, alpha, init, u, settings.quad_nodes, settings.power)
+        if init is not None and fit["error"] > RESTART_ERROR:
+            # Marching down in roughness can lose a sharp lobe at grazing views (the simplex
+            # collapses onto a wide LTC); a fresh start from the lobe's mean direction recovers it.
+            fresh = _fit(wo, alpha, None, u, settings.quad_nodes, settings.power)
+            if fresh["error"] < fit["error"]:
+                fit = fresh
         init = fit["params"].copy()
         # the next (smaller) roughness scales both axes by about alpha_next / alpha
         if j > 0:

@@ -347,7 +347,7 @@ def polygon_integral(M, vertices, *, two_sided: bool = False) -> np.ndarray:
     to ``z >= 0``, the support of ``Do``). The clipping is exact in the cosine's space; when ``M``
     tilts the lobe below the shading horizon, the part of ``P`` below it still counts (as in
     Heitz et al.'s shaders). To integrate over the upper hemisphere only, clip ``P`` to ``z >= 0``
-    first (``prefilter.ltc.validate.clip_to_horizon``). For ``M = I`` the two coincide.
+    first (:func:`clip_to_horizon`). For ``M = I`` the two coincide.
 
     Parameters
     ----------
@@ -447,3 +447,37 @@ def _polygon_integral_numpy(M_inv, vertices, two_sided: bool = False) -> np.ndar
     e = np.where(edge_on, 0.0, e)
     e = np.abs(e) if two_sided else np.maximum(0.0, e)
     return e.reshape(batch)
+
+
+def clip_to_horizon(vertices) -> np.ndarray:
+    """Convex polygons ``(..., n, 3)`` clipped to the upper hemisphere ``z >= 0``.
+
+    Sutherland-Hodgman against the surface plane, so parts of a light below the horizon are
+    removed before the LTC transform (``polygon_integral`` clips ``M^-1 P`` in the cosine's own
+    space, which keeps the LTC's mass below the horizon). Returns ``(..., n + 1, 3)``: the clipped
+    polygon padded by repeating its last vertex (zero-length edges add nothing to the edge sum);
+    all-zero vertices when nothing is above the horizon.
+    """
+    V = as_float_array(vertices, "vertices", ndim_min=2, last_dim=3)
+    n = V.shape[-2]
+    batch = V.shape[:-2]
+    Vf = V.reshape(-1, n, 3)
+    rows = np.arange(len(Vf))
+    out = np.zeros((len(Vf), n + 1, 3))
+    count = np.zeros(len(Vf), np.intp)
+    for i in range(n):
+        a, b = Vf[:, i - 1], Vf[:, i]
+        a_in, b_in = a[:, 2] >= 0.0, b[:, 2] >= 0.0
+        cross = a_in != b_in
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = np.where(cross, a[:, 2] / (a[:, 2] - b[:, 2]), 0.0)
+        q = a + t[:, None] * (b - a)
+        q[:, 2] = 0.0
+        out[rows[cross], count[cross]] = q[cross]
+        count += cross
+        out[rows[b_in], count[b_in]] = b[b_in]
+        count += b_in
+    last = out[rows, np.maximum(count - 1, 0)]
+    pad = np.arange(n + 1)[None, :] >= count[:, None]
+    out = np.where(pad[..., None], last[:, None, :], out)
+    return out.reshape(batch + (n + 1, 3))

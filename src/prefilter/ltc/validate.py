@@ -13,6 +13,7 @@ import numpy as np
 
 from prefilter._validate import as_float_array, as_positive_int, as_rng, as_upper_directions
 from prefilter.errors import PrefilterError
+from prefilter.ltc.polygon import clip_to_horizon  # noqa: F401  (re-exported for callers)
 from prefilter.microfacet import reflect
 
 #: References below this value (cosine-weighted reflectance) are reported separately: their
@@ -100,40 +101,6 @@ def random_configurations(
     straddle = np.arange(n) < ns
     perm = rng.permutation(n)
     return {"wo": wo, "alpha": a, "quad": quads[perm], "straddle": straddle[perm]}
-
-
-def clip_to_horizon(vertices) -> np.ndarray:
-    """Convex polygons ``(..., n, 3)`` clipped to the upper hemisphere ``z >= 0``.
-
-    Sutherland-Hodgman against the surface plane, so parts of a light below the horizon are
-    removed before the LTC transform (``polygon_integral`` clips ``M^-1 P`` in the cosine's own
-    space, which keeps the LTC's mass below the horizon). Returns ``(..., n + 1, 3)``: the clipped
-    polygon padded by repeating its last vertex (zero-length edges add nothing to the edge sum);
-    all-zero vertices when nothing is above the horizon.
-    """
-    V = as_float_array(vertices, "vertices", ndim_min=2, last_dim=3)
-    n = V.shape[-2]
-    batch = V.shape[:-2]
-    Vf = V.reshape(-1, n, 3)
-    rows = np.arange(len(Vf))
-    out = np.zeros((len(Vf), n + 1, 3))
-    count = np.zeros(len(Vf), np.intp)
-    for i in range(n):
-        a, b = Vf[:, i - 1], Vf[:, i]
-        a_in, b_in = a[:, 2] >= 0.0, b[:, 2] >= 0.0
-        cross = a_in != b_in
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = np.where(cross, a[:, 2] / (a[:, 2] - b[:, 2]), 0.0)
-        q = a + t[:, None] * (b - a)
-        q[:, 2] = 0.0
-        out[rows[cross], count[cross]] = q[cross]
-        count += cross
-        out[rows[b_in], count[b_in]] = b[b_in]
-        count += b_in
-    last = out[rows, np.maximum(count - 1, 0)]
-    pad = np.arange(n + 1)[None, :] >= count[:, None]
-    out = np.where(pad[..., None], last[:, None, :], out)
-    return out.reshape(batch + (n + 1, 3))
 
 
 def _polygon_frame(quad):

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.ltc.polygon import clamped_cosine_integral, polygon_integral_minv
+from prefilter.ltc.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
 from prefilter.microfacet import GGX, half_vector
 from prefilter.render.lights import LightSet
 from prefilter.sphere.sampling import to_local
@@ -158,7 +158,9 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
         P = quad_local(ql, position, ts, bs, ns)
         front = (position - ql.vertices[0]) @ ql.normal > 0.0
         e_d = clamped_cosine_integral(P)
-        e_s = polygon_integral_minv(M_inv, P)
+        # The light is cut at the shading horizon before the LTC transform: the kernel clips
+        # M^-1 P in the cosine's space, which would keep the lobe's mass below the surface.
+        e_s = polygon_integral_minv(M_inv, clip_to_horizon(P))
         rad = base_color * e_d[:, None] + spec_scale * e_s[:, None]
         out += np.where(front[:, None], rad, 0.0) * ql.radiance
     return out

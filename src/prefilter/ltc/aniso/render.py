@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.ltc.polygon import clamped_cosine_integral, polygon_integral_minv
+from prefilter.ltc.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
 
 
 def shade_ltc_aniso(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y, base_color, f0,
@@ -39,7 +39,7 @@ def shade_ltc_aniso(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
         P = quad_local(ql, position, ts, bs, ns)
         front = (position - ql.vertices[0]) @ ql.normal > 0.0
         rad = base_color * clamped_cosine_integral(P)[:, None] \
-            + spec * polygon_integral_minv(M_inv, P)[:, None]
+            + spec * polygon_integral_minv(M_inv, clip_to_horizon(P))[:, None]
         out += np.where(front[:, None], rad, 0.0) * ql.radiance
     return out
 
