@@ -18,8 +18,9 @@ independent fits run in lock-step. Differences from the paper, all for speed on 
 - The projection directions are redrawn every ``redraw`` steps rather than every step, so the
   sorted target projections are reused in between; the LTC side is sorted every step.
 
-:func:`fit_pointwise` is the point-wise density loss of Heitz et al. 2016 with the same optimiser,
-kept to show (tests) why the paper abandoned it for sharp lobes.
+:func:`fit_pointwise` is the point-wise density loss of Heitz et al. 2016 with the same optimiser:
+from the identity it shows (tests) why the paper abandoned it for sharp lobes; from an SW fit,
+with the bounded L1 loss, it is the bake's optional polish (``docs/ltc-aniso.md``).
 """
 
 from __future__ import annotations
@@ -89,7 +90,6 @@ def lobe_samples(wo, alpha_x, alpha_y, n: int, rng) -> np.ndarray:
     wo, ax, ay = _check_entries(wo, alpha_x, alpha_y)
     rng = as_rng(rng)
     B = len(wo)
-    model = GGX(ax[:, None], ay[:, None])
     lam_o = GGX(ax, ay).smith_lambda(wo)
     out = np.zeros((B, n, 3))
     count = np.zeros(B, np.intp)
@@ -111,7 +111,6 @@ def lobe_samples(wo, alpha_x, alpha_y, n: int, rng) -> np.ndarray:
         r = np.broadcast_to(rows[todo], keep.shape)
         out[r[keep], pos[keep]] = wi[keep]
         count[todo] = np.minimum(n, count[todo] + acc.sum(1))
-    del model
     return out
 
 
