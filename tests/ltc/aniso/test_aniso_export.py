@@ -12,8 +12,8 @@ from prefilter.ltc.aniso.export import (
     texture_layout,
     texture_params,
 )
-from prefilter.ltc.polygon import polygon_integral, polygon_integral_minv
-from prefilter.ltc.validate import clip_to_horizon, random_quads
+from prefilter.ltc.polygon import clip_to_horizon, polygon_integral, polygon_integral_minv
+from prefilter.ltc.validate import random_quads
 
 
 def configs(n, seed):

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter._validate import as_rng
+from prefilter.ltc.polygon import clip_to_horizon
 from prefilter.ltc.validate import (
-    clip_to_horizon,
     error_statistics,
     random_configurations,
     reference_quad_integral,
