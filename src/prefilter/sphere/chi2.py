@@ -56,16 +56,18 @@ def chi2_sphere(
     res: tuple[int, int] = (16, 32),
     quad: int = 6,
     min_expected: float = 5.0,
-    max_refine: int = 5,
-    refine_tol: float = 0.02,
+    max_refine: int = 8,
+    refine_tol: float = 0.05,
     max_in_empty: int = 10,
+    max_cells: int = 16384,
 ) -> Chi2Result:
     """Chi-square test of ``samples (n, 3)`` against the solid-angle density ``pdf(w (..., 3))``.
 
     Bins: ``res[0]`` rings of equal solid angle in ``cos`` of the angle to ``axis`` within
     ``theta_max``, times ``res[1]`` azimuthal sectors, plus the outside of the cap. Each bin's
     mass uses ``quad x quad`` Gauss-Legendre nodes, split adaptively (up to ``max_refine`` times)
-    until a split changes it by less than ``refine_tol`` standard deviations of its count.
+    until a split changes it by less than ``refine_tol`` standard deviations of its count
+    (at most ``max_cells`` new cells per level, the worst first).
     More than ``max_in_empty`` samples in bins of zero density fail the test outright.
     """
     samples = np.asarray(samples, dtype=np.float64)
@@ -127,9 +129,15 @@ def chi2_sphere(
         tol = refine_tol * np.sqrt(np.maximum(np.abs(fine), 1e-12) / max(n, 1))
         # Samples in a bin whose quadrature saw no mass: a thin sliver may have been missed.
         missed = force & (observed[idx] > 0) & (fine * n < 1e-3)
-        ok = (np.abs(fine - coarse) <= tol) & ~missed
+        err = np.abs(fine - coarse)
+        ok = (err <= tol) & ~missed
         if level == max_refine:
             ok[:] = True
+        elif (~ok).sum() > max_cells // 4:
+            # Bound memory and time: split only the cells with the largest excess error.
+            excess = np.where(ok, -np.inf, np.where(missed, np.inf, err / tol))
+            keep = np.argsort(excess)[: excess.size - max_cells // 4]
+            ok[keep] = True
         np.add.at(mass, idx[ok], fine[ok])
         if np.all(ok):
             break
