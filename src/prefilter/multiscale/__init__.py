@@ -46,3 +46,6 @@ _register("ltc-multiscale-paper", "prefilter.multiscale.render:render_multiscale
           description="multi-scale LTC with the paper's published eqs. 5 and 7")
 _register("ltc-multiscale-mrl", "prefilter.multiscale.render:render_multiscale_mrl",
           description="multi-scale LTC combining scales by mean resultant length (closed form)")
+_register("ltc-multiscale-aniso", "prefilter.multiscale.aniso:render_multiscale_aniso",
+          description="multi-scale LTC, anisotropic: LEAN slope moments of the normal map plus "
+                      "micro roughness, anisotropic LTC table in the covariance's principal frame")

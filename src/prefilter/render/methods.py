@@ -58,6 +58,7 @@ _REGISTRY: dict[str, Method | str] = {
     "ltc-multiscale": "prefilter.multiscale.render:render_multiscale",
     "ltc-multiscale-paper": "prefilter.multiscale.render:render_multiscale_paper",
     "ltc-multiscale-mrl": "prefilter.multiscale.render:render_multiscale_mrl",
+    "ltc-multiscale-aniso": "prefilter.multiscale.aniso:render_multiscale_aniso",
     "leadr-point": "prefilter.leadr.render:render_leadr_point",
     "ltc-aniso": "prefilter.ltc.aniso.render:render_ltc_aniso",
 }
