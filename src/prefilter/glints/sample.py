@@ -1,0 +1,251 @@
+"""Exact hierarchical importance sampling of footprint NDFs (glints paper, sec. 5.2).
+
+For a footprint ``(center, sigma_p)`` the NDF image is the trilinear blend of 8 compressed pyramid
+images (as in :func:`prefilter.glints.point`). Sampling, per query (one Numba kernel):
+
+1. choose an angular block with probability proportional to its mass (block means of the blended
+   image, from the CP prefix sums: ``sum_c w_c sum_r c_r[k_c] (A_r[B] - A_r[0]) (B_r[B] - B_r[0])``);
+2. descend the block's quadtree: split the current rectangle of pixels into (up to) four, the
+   children's masses by range queries (eq. 7, products of prefix-sum differences), choose one
+   proportionally, until one pixel remains;
+3. jitter uniformly inside the pixel.
+
+The image is piecewise constant and the child masses add up exactly to the parent's, so the pdf
+of ``s`` is ``value(pixel) / (M h^2)`` with ``M`` the sum of all pixel values and ``h`` the pixel
+pitch: the sampler returns the product of the probabilities it actually used (over ``h^2``), and
+the tests check that it equals the evaluated normalised NDF :func:`ndf_pdf`.
+
+Directions: the half vector ``m = (s, sqrt(1 - |s|^2))`` has solid-angle pdf ``pdf_s(s) m_z``
+(``dw = ds / m_z``), i.e. samples follow ``D(m) m_z / M``; ``wi = reflect(wo, m)`` has pdf
+``pdf_m / (4 |wo.m|)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter._validate import as_float_array, as_rng
+from prefilter.errors import PrefilterError
+from prefilter.glints.pyramid import interp_weights
+from prefilter.glints.query import point
+from prefilter.glints.store import GlintsMap
+
+
+@njit_serial
+def _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q, bi, bj, i0, i1, j0, j1):
+    """Sum of the blended image's pixel values over rows ``[i0, i1)``, columns ``[j0, j1)`` of
+    block ``(bi, bj)`` (block-local pixel indices)."""
+    nb = block_index.shape[1]
+    acc = 0.0
+    for c in range(idx.shape[1]):
+        w = wts[q, c]
+        if w == 0.0:
+            continue
+        img = idx[q, c]
+        k = block_index[img, bi, bj]
+        if k < 0:
+            continue
+        g = image_cell[img] * nb * nb + bi * nb + bj
+        s = 0.0
+        for r in range(C.shape[1]):
+            s += C[k, r] * ((A[g, r, i1] - A[g, r, i0]) * (Bp[g, r, j1] - Bp[g, r, j0]))
+        acc += w * s
+    return acc
+
+
+@njit_parallel
+def _block_masses(A, Bp, C, block_index, image_cell, idx, wts, out):
+    """Masses ``out (N, nb, nb)`` (sums of pixel values) of every block of the blended images."""
+    B = A.shape[2] - 1
+    nb = block_index.shape[1]
+    for q in prange(out.shape[0]):
+        for bi in range(nb):
+            for bj in range(nb):
+                out[q, bi, bj] = _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q,
+                                            bi, bj, 0, B, 0, B)
+
+
+@njit_serial
+def _choose(masses, n, u):
+    """Index in ``[0, n)`` with probability ``masses[k] / sum``; -1 if all are zero."""
+    tot = 0.0
+    for k in range(n):
+        tot += masses[k]
+    if not tot > 0.0:
+        return -1, 0.0
+    t = u * tot
+    last = -1
+    run = 0.0
+    for k in range(n):
+        if masses[k] > 0.0:
+            last = k
+            run += masses[k]
+            if t < run:
+                return k, masses[k] / tot
+    return last, masses[last] / tot
+
+
+@njit_parallel
+def _sample_kernel(A, Bp, C, block_index, image_cell, idx, wts, u, lo, h, out_s, out_pdf):
+    B = A.shape[2] - 1
+    nb = block_index.shape[1]
+    for q in prange(out_pdf.shape[0]):
+        bm = np.empty(nb * nb)
+        for bi in range(nb):
+            for bj in range(nb):
+                bm[bi * nb + bj] = _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q,
+                                              bi, bj, 0, B, 0, B)
+        kb, p = _choose(bm, nb * nb, u[q, 0])
+        if kb < 0:
+            out_s[q, 0] = 0.0
+            out_s[q, 1] = 0.0
+            out_pdf[q] = 0.0
+            continue
+        bi, bj = kb // nb, kb % nb
+        i0, i1, j0, j1 = 0, B, 0, B
+        lev = 1
+        cm = np.empty(4)
+        ci0 = np.empty(4, np.int64)
+        ci1 = np.empty(4, np.int64)
+        cj0 = np.empty(4, np.int64)
+        cj1 = np.empty(4, np.int64)
+        while i1 - i0 > 1 or j1 - j0 > 1:
+            im = (i0 + i1) // 2 if i1 - i0 > 1 else i1
+            jm = (j0 + j1) // 2 if j1 - j0 > 1 else j1
+            n = 0
+            for a0, a1 in ((i0, im), (im, i1)):
+                if a1 <= a0:
+                    continue
+                for b0, b1 in ((j0, jm), (jm, j1)):
+                    if b1 <= b0:
+                        continue
+                    ci0[n], ci1[n], cj0[n], cj1[n] = a0, a1, b0, b1
+                    cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q,
+                                       bi, bj, a0, a1, b0, b1)
+                    n += 1
+            k, pk = _choose(cm, n, u[q, lev])
+            p *= pk
+            i0, i1, j0, j1 = ci0[k], ci1[k], cj0[k], cj1[k]
+            lev += 1
+        out_s[q, 0] = lo + (bj * B + j0 + u[q, lev]) * h
+        out_s[q, 1] = lo + (bi * B + i0 + u[q, lev + 1]) * h
+        out_pdf[q] = p / (h * h)
+
+
+def n_uniforms(gm: GlintsMap) -> int:
+    """Uniform numbers used per sample: block choice, one per quadtree level, 2 for the jitter."""
+    return 3 + int(math.ceil(math.log2(max(gm.block, 1)))) if gm.block > 1 else 3
+
+
+def _prep(gm, center, sigma_p):
+    if not isinstance(gm, GlintsMap):
+        raise PrefilterError(f"gm: expected a GlintsMap (prefilter.glints.load), got "
+                             f"{type(gm).__name__}")
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_float_array(sigma_p, "sigma_p")
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    shape = np.broadcast_shapes(c.shape[:-1], sp.shape)
+    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    sp = np.broadcast_to(sp, shape).reshape(-1)
+    idx, w = interp_weights(gm.pyramid, c, sp)
+    arrs = (gm.A, gm.Bp, gm.C, gm.block_index, gm.image_cell)
+    return shape, arrs, np.ascontiguousarray(idx), np.ascontiguousarray(w)
+
+
+def block_masses(gm: GlintsMap, center, sigma_p) -> np.ndarray:
+    """Sum of pixel values of each angular block ``(..., nb, nb)`` of the footprints' blended
+    NDF images (the paper's block means times ``B^2``)."""
+    shape, arrs, idx, w = _prep(gm, center, sigma_p)
+    nb = gm.block_index.shape[1]
+    out = np.empty((idx.shape[0], nb, nb))
+    _block_masses(*arrs, idx, w, out)
+    return out.reshape(shape + (nb, nb))
+
+
+def mass(gm: GlintsMap, center, sigma_p) -> np.ndarray:
+    """Integral ``M_s`` of the footprints' NDF images over the support (``(...)``; <= ~1)."""
+    h = 2.0 * gm.support / gm.resolution
+    return block_masses(gm, center, sigma_p).sum(axis=(-2, -1)) * h * h
+
+
+def ndf_pdf(gm: GlintsMap, center, sigma_p, s) -> np.ndarray:
+    """Normalised footprint NDF ``D_P(s) / M_s``: the density w.r.t. ``s`` that :func:`sample_s`
+    samples (0 where the image is empty)."""
+    s = as_float_array(s, "s", ndim_min=1, last_dim=2)
+    v = point(gm, center, sigma_p, s)
+    M = np.broadcast_to(mass(gm, center, sigma_p), v.shape)
+    return np.where(M > 0, v / np.where(M > 0, M, 1.0), 0.0)
+
+
+def _uniforms(gm, n, rng, u):
+    k = n_uniforms(gm)
+    if u is None:
+        return as_rng(rng).random((n, k))
+    a = as_float_array(u, "u")
+    if a.shape != (n, k) or np.any((a < 0) | (a >= 1)):
+        raise PrefilterError(f"u: expected uniform numbers in [0, 1) of shape {(n, k)}, got shape "
+                             f"{a.shape}")
+    return np.ascontiguousarray(a)
+
+
+def sample_s(gm: GlintsMap, center, sigma_p, rng=0, *, u=None):
+    """Projected half vectors ``s (..., 2)`` distributed as the footprints' NDF images.
+
+    Parameters
+    ----------
+    gm : GlintsMap.
+    center : (..., 2) footprint centres (texels); sigma_p : (...) stds (texels); they broadcast and
+        give the sample shape ``(...)`` (repeat a footprint to draw many samples of it).
+    rng : numpy Generator or int seed (ignored when ``u`` is given).
+    u : optional ``(n, n_uniforms(gm))`` uniforms in ``[0, 1)``, ``n`` = number of samples.
+
+    Returns
+    -------
+    s : (..., 2) samples; pdf : (...) their density w.r.t. ``s`` (product of the hierarchical
+    choice probabilities over the pixel area); 0 (and ``s = 0``) for an empty image.
+    """
+    shape, arrs, idx, w = _prep(gm, center, sigma_p)
+    uu = _uniforms(gm, idx.shape[0], rng, u)
+    h = 2.0 * gm.support / gm.resolution
+    s = np.empty((idx.shape[0], 2))
+    pdf = np.empty(idx.shape[0])
+    _sample_kernel(*arrs, idx, w, uu, -gm.support, h, s, pdf)
+    return s.reshape(shape + (2,)), pdf.reshape(shape)
+
+
+def half_from_s(s) -> np.ndarray:
+    """Half vectors ``(..., 3)`` on the upper hemisphere from projected ones (``|s| <= 1``)."""
+    s = np.asarray(s, dtype=np.float64)
+    z = np.sqrt(np.maximum(1.0 - np.sum(s * s, axis=-1), 0.0))
+    return np.concatenate([s, z[..., None]], axis=-1)
+
+
+def sample_wi(gm: GlintsMap, center, sigma_p, wo, rng=0, *, u=None):
+    """Light directions by NDF sampling: ``m ~ D(m) m_z / M``, ``wi = 2 (wo.m) m - wo``.
+
+    Parameters
+    ----------
+    wo : (..., 3) unit view directions in the geometric tangent frame (broadcast with the
+        footprints).
+
+    Returns
+    -------
+    wi : (..., 3); pdf : (...) solid-angle density of ``wi`` (``pdf_s m_z / (4 |wo.m|)``);
+    samples with ``pdf == 0`` (empty image, ``|s| >= 1``, ``wo.m <= 0``) carry no estimate.
+    """
+    wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_float_array(sigma_p, "sigma_p")
+    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, wo.shape[:-1])
+    s, ps = sample_s(gm, np.broadcast_to(c, shape + (2,)), np.broadcast_to(sp, shape), rng, u=u)
+    wo = np.broadcast_to(wo, shape + (3,))
+    m = half_from_s(s)
+    wom = np.sum(wo * m, axis=-1)
+    ok = (ps > 0) & (np.sum(s * s, axis=-1) < 1.0) & (wom > 0)
+    wi = 2.0 * wom[..., None] * m - wo
+    pdf = np.where(ok, ps * m[..., 2] / (4.0 * np.where(ok, wom, 1.0)), 0.0)
+    return wi, pdf
