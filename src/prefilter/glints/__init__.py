@@ -15,3 +15,10 @@ from prefilter.glints.store import GlintsMap, load
 
 __all__ = ["GlintsMap", "bake", "block_means", "elements", "hemisphere_ndf", "load", "pndf",
            "pndf_image", "point", "range_mean"]
+
+# part 2 (issue 9): BRDF and sampling
+from prefilter.glints.brdf import GlintSurface, glint_brdf_cos, glint_ndf, surface  # noqa: E402
+from prefilter.glints.sample import ndf_pdf, sample_s, sample_wi  # noqa: E402
+
+__all__ += ["GlintSurface", "glint_brdf_cos", "glint_ndf", "ndf_pdf", "sample_s", "sample_wi",
+            "surface"]

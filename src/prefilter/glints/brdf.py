@@ -1,0 +1,192 @@
+"""The glint microfacet BRDF (glints tensor-prefiltering paper, eq. 1 and sec. 5.1).
+
+``f(wo, wi) = F(wi.h) G(wo, wi, h) D_P(h) / (4 |wo.n| |wi.n|)`` in the *geometric* tangent frame
+(``x`` along texture ``+u`` = normal-map columns, ``y`` along ``+v`` = rows, ``z`` the macro
+normal), where the NDF ``D_P`` is the P-NDF of the pixel footprint:
+
+* ``sigma_p >= sigma0`` (the finest pyramid level): the compressed point query, trilinear over the
+  pyramid (:func:`prefilter.glints.point`); footprints larger than the top level are clamped to it
+  (the top has converged to a smooth NDF, sec. 5.1);
+* ``sigma_p < sigma0``: the direct P-NDF of Yan et al. 2016 (:func:`prefilter.glints.pndf`), cheap
+  for such footprints; without the normal map the footprint is clamped to level 0 instead.
+
+``D(m) = D_p(m_xy)`` on the hemisphere (see ``pndf``): a density w.r.t. projected normals that
+weights macro area, so ``integral D(m) m_z dm`` is the mass of ``D_p`` (1, or the mass inside the
+stored support for the compressed NDF).
+
+Masking-shadowing: the V-cavity term of Cook and Torrance 1982,
+``G(wo, wi, m) = min(1, 2 m_z wo_z / (wo.m), 2 m_z wi_z / (wi.m))``. A Smith term needs a
+Lambda of the NDF, which a tabulated glint NDF does not have in closed form; the V-cavity term is
+defined for any NDF, reciprocal, and satisfies the projected-area normalisation for symmetric NDFs
+(tested on GGX). Fresnel: Schlick with reflectance ``f0`` at normal incidence (as the renderer's
+material model).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from prefilter._validate import as_float_array
+from prefilter.errors import PrefilterError
+from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map, elements, pndf
+from prefilter.glints.query import point
+from prefilter.glints.store import GlintsMap
+
+
+@dataclass(frozen=True)
+class GlintSurface:
+    """A compressed glints map with (optionally) the normal map it was baked from.
+
+    Build it with :func:`surface`. ``normal_map`` and ``elements_`` are ``None`` when the
+    direct-P-NDF fallback below the finest level is not available (then level 0 is used).
+    """
+
+    gm: GlintsMap | None
+    normal_map: np.ndarray | None
+    elements_: tuple | None
+    intrinsic_roughness: float
+
+    @property
+    def sigma0(self) -> float:
+        return self.gm.pyramid.sigma0 if self.gm is not None else np.inf
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        if self.normal_map is not None:
+            return self.normal_map.shape[:2]
+        p = self.gm.pyramid
+        return p.height, p.width
+
+
+def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True) -> GlintSurface:
+    """Bundle a baked map and its normal map (the direct P-NDF for tiny footprints).
+
+    ``gm=None`` gives a direct-only surface (every query by :func:`prefilter.glints.pndf`, the
+    ``glints-direct`` method). ``check`` verifies that ``normal_map`` is the one ``gm`` was baked
+    from (SHA-1 of the float64 normals recorded by the bake).
+    """
+    if gm is None and normal_map is None:
+        raise PrefilterError("surface: expected a GlintsMap, a normal map, or both; got neither")
+    if gm is not None and not isinstance(gm, GlintsMap):
+        raise PrefilterError(f"gm: expected a GlintsMap (prefilter.glints.load), got "
+                             f"{type(gm).__name__}")
+    nm = el = None
+    if normal_map is not None:
+        nm = as_normal_map(normal_map)
+        el = elements(nm)
+        if gm is not None and check:
+            digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
+            baked = gm.header.get("map_sha1")
+            if baked is not None and baked != digest:
+                raise PrefilterError("normal_map: expected the normal map the glints map was baked "
+                                     f"from (SHA-1 {baked[:12]}...), got one with SHA-1 "
+                                     f"{digest[:12]}...")
+    if gm is not None:
+        sr = float(gm.header.get("settings", {}).get("intrinsic_roughness", DEFAULT_ROUGHNESS))
+    else:
+        sr = DEFAULT_ROUGHNESS
+    return GlintSurface(gm, nm, el, sr)
+
+
+def _as_surface(surf) -> GlintSurface:
+    if isinstance(surf, GlintSurface):
+        return surf
+    if isinstance(surf, GlintsMap):
+        return surface(surf)
+    raise PrefilterError(f"surf: expected a GlintSurface (prefilter.glints.brdf.surface) or a "
+                         f"GlintsMap, got {type(surf).__name__}")
+
+
+def glint_ndf(surf, center, sigma_p, s) -> np.ndarray:
+    """Footprint NDF ``D_P(s)`` (density w.r.t. projected half vectors ``s``), sec. 5.1.
+
+    Parameters
+    ----------
+    surf : GlintSurface (or GlintsMap: no fallback, tiny footprints use level 0).
+    center : (..., 2) footprint centres in texels; sigma_p : (...) stds in texels.
+    s : (..., 2) projected half vectors; all broadcast.
+
+    Returns
+    -------
+    (...) compressed point query (trilinear) for ``sigma_p >= sigma0``, direct P-NDF below when
+    the normal map is known; top-level clamp above the pyramid.
+    """
+    surf = _as_surface(surf)
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_float_array(sigma_p, "sigma_p")
+    q = as_float_array(s, "s", ndim_min=1, last_dim=2)
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, q.shape[:-1])
+    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
+    sp = np.broadcast_to(sp, shape).reshape(-1)
+    out = np.zeros(c.shape[0])
+    direct = sp < surf.sigma0 if surf.normal_map is not None else np.zeros(sp.shape, bool)
+    if np.any(direct):
+        out[direct] = pndf(surf.normal_map, c[direct], sp[direct], q[direct],
+                           surf.intrinsic_roughness, elements_=surf.elements_)
+    if surf.gm is not None and not np.all(direct):
+        k = ~direct
+        out[k] = point(surf.gm, c[k], sp[k], q[k])
+    return out.reshape(shape)
+
+
+def vcavity_g1(w, m) -> np.ndarray:
+    """V-cavity masking ``min(1, 2 m_z w_z / (w.m))`` for ``w.m > 0`` (Cook and Torrance 1982),
+    else 0; ``w``, ``m`` ``(..., 3)`` unit vectors in the tangent frame."""
+    w = np.asarray(w, dtype=np.float64)
+    m = np.asarray(m, dtype=np.float64)
+    wm = np.sum(w * m, axis=-1)
+    g = 2.0 * m[..., 2] * w[..., 2] / np.where(wm > 0.0, wm, 1.0)
+    return np.where((wm > 0.0) & (w[..., 2] > 0.0), np.clip(g, 0.0, 1.0), 0.0)
+
+
+def vcavity_g2(wo, wi, m) -> np.ndarray:
+    """V-cavity masking-shadowing ``min(G1(wo, m), G1(wi, m))`` (Cook and Torrance 1982)."""
+    return np.minimum(vcavity_g1(wo, m), vcavity_g1(wi, m))
+
+
+def schlick(f0, cos_theta) -> np.ndarray:
+    """Schlick Fresnel ``f0 + (1 - f0)(1 - cos)^5``; ``f0 (..., C)``, ``cos_theta (...)``."""
+    c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+    f0 = np.asarray(f0, dtype=np.float64)
+    return f0 + (1.0 - f0) * ((1.0 - c) ** 5)[..., None]
+
+
+def _half(wo, wi):
+    h = wo + wi
+    ln = np.linalg.norm(h, axis=-1, keepdims=True)
+    return h / np.maximum(ln, 1e-300)
+
+
+def glint_brdf_cos(surf, center, sigma_p, wo, wi, f0=1.0) -> np.ndarray:
+    """Cosine-weighted glint BRDF ``f(wo, wi) wi_z`` (paper eq. 1 with ``D`` = footprint NDF).
+
+    Parameters
+    ----------
+    surf : GlintSurface (or GlintsMap).
+    center : (..., 2) footprint centres (texels); sigma_p : (...) footprint stds (texels).
+    wo, wi : (..., 3) unit view / light directions in the geometric tangent frame.
+    f0 : (..., C) or scalar Schlick reflectance at normal incidence.
+
+    Returns
+    -------
+    (..., C) ``F(wi.h) G(wo, wi, h) D_P(h_xy) / (4 wo_z)`` (``C = 1`` for a scalar ``f0``); zero
+    when ``wo`` or ``wi`` is below the horizon.
+    """
+    wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
+    wi = as_float_array(wi, "wi", ndim_min=1, last_dim=3)
+    f0 = np.atleast_1d(as_float_array(f0, "f0"))
+    if np.any((f0 < 0) | (f0 > 1)):
+        raise PrefilterError(f"f0: expected reflectances in [0, 1], got min {f0.min()} max "
+                             f"{f0.max()}")
+    h = _half(wo, wi)
+    D = glint_ndf(surf, center, sigma_p, h[..., :2])
+    G = vcavity_g2(wo, wi, h)
+    ok = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0) & (h[..., 2] > 0.0)
+    val = np.where(ok, D * G / (4.0 * np.where(ok, wo[..., 2], 1.0)), 0.0)
+    return val[..., None] * schlick(f0, np.sum(wi * h, axis=-1))

@@ -1,0 +1,168 @@
+"""Glint BRDF (paper eq. 1, sec. 5.1): V-cavity normalisation on GGX by quadrature, the flat-map
+BRDF against its closed form (Gaussian NDF, exact pixel averages), the direct-P-NDF fallback and
+top clamp, compressed vs direct NDF images, reciprocity, validation."""
+
+import math
+
+import numpy as np
+import pytest
+from maps import sinusoid
+from scipy.special import erf
+
+from prefilter.errors import PrefilterError
+from prefilter.glints import bake, load, pndf, pndf_image
+from prefilter.glints.brdf import glint_brdf_cos, glint_ndf, surface, vcavity_g1, vcavity_g2
+from prefilter.microfacet import GGX
+
+R, S = 64, 0.5
+H = 2 * S / R
+NM = sinusoid(64, ax=0.25, ay=0.2, px=16, py=8)
+
+
+@pytest.fixture(scope="module")
+def surf(tmp_path_factory):
+    out = tmp_path_factory.mktemp("gb") / "map.npz"
+    bake(NM, out, rank=16, ndf_res=R, block=16, support=S, cell=32, converge=0.0, progress=False)
+    return surface(load(out), NM)
+
+
+@pytest.fixture(scope="module")
+def flat(tmp_path_factory):
+    out = tmp_path_factory.mktemp("gf") / "flat.npz"
+    nm = np.zeros((32, 32, 3))
+    nm[..., 2] = 1.0
+    bake(nm, out, rank=4, ndf_res=R, block=16, support=S, cell=32, intrinsic_roughness=0.05,
+         progress=False)
+    return surface(load(out), nm)
+
+
+def hemisphere_grid(n=400):
+    th = (np.arange(n) + 0.5) / n * np.pi / 2
+    ph = (np.arange(2 * n) + 0.5) / (2 * n) * 2 * np.pi
+    T, P = np.meshgrid(th, ph, indexing="ij")
+    m = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1)
+    return m, np.sin(T) * (np.pi / 2 / n) * (np.pi / n)
+
+
+@pytest.mark.parametrize("theta", [0.2, 0.9, 1.35])
+def test_vcavity_projected_area(theta):
+    """integral G1(wo, m) <wo, m>+ D(m) dm = wo_z for a symmetric NDF (GGX, quadrature)."""
+    m, dw = hemisphere_grid()
+    wo = np.array([math.sin(theta) * 0.6, math.sin(theta) * 0.8, math.cos(theta)])
+    D = GGX(0.4, 0.4).D(m)
+    val = np.sum(vcavity_g1(wo, m) * np.maximum(m @ wo, 0) * D * dw)
+    assert val == pytest.approx(wo[2], rel=2e-3)
+
+
+def test_vcavity_bounds_and_symmetry():
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(1000, 3))
+    b = rng.normal(size=(1000, 3))
+    a[:, 2] = np.abs(a[:, 2])
+    b[:, 2] = np.abs(b[:, 2])
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    b /= np.linalg.norm(b, axis=-1, keepdims=True)
+    h = (a + b) / np.linalg.norm(a + b, axis=-1, keepdims=True)
+    g = vcavity_g2(a, b, h)
+    assert np.all((g >= 0) & (g <= 1))
+    np.testing.assert_array_equal(g, vcavity_g2(b, a, h))
+    # normal incidence on the macro normal: no masking
+    z = np.array([0.0, 0.0, 1.0])
+    assert vcavity_g2(z, z, z) == 1.0
+
+
+def schlick_ref(f0, c):
+    return f0 + (1 - f0) * (1 - c) ** 5
+
+
+def test_flat_map_closed_form(flat):
+    """Flat map: D_P is the intrinsic Gaussian N(s; 0, sr^2); compressed = its pixel average."""
+    sr = 0.05
+    rng = np.random.default_rng(2)
+    n = 400
+    wo = rng.normal(size=(n, 3)) * [0.3, 0.3, 1]
+    wo[:, 2] = np.abs(wo[:, 2])
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    h = rng.normal(size=(n, 3)) * [0.06, 0.06, 1]
+    h[:, 2] = np.abs(h[:, 2])
+    h /= np.linalg.norm(h, axis=-1, keepdims=True)
+    wi = 2 * np.sum(wo * h, -1, keepdims=True) * h - wo
+    ok = wi[:, 2] > 0.05
+    wo, wi, h = wo[ok], wi[ok], h[ok]
+    c = rng.uniform(0, 32, (len(wo), 2))
+    f0 = np.array([0.9, 0.5, 0.1])
+    F = schlick_ref(f0, np.sum(wi * h, -1)[:, None])
+    Gv = np.minimum(1, np.minimum(2 * h[:, 2] * wo[:, 2] / np.sum(wo * h, -1),
+                                  2 * h[:, 2] * wi[:, 2] / np.sum(wi * h, -1)))
+    # compressed: pixel average of the Gaussian (separable erf masses over the pixel)
+    e0 = np.floor((h[:, :2] + S) / H) * H - S
+    cdf = lambda x: 0.5 * (1 + erf(x / (math.sqrt(2) * sr)))  # noqa: E731
+    mass = np.prod(cdf(e0 + H) - cdf(e0), axis=-1) / H**2
+    got = glint_brdf_cos(flat, c, 6.0, wo, wi, f0)
+    ref = (mass * Gv / (4 * wo[:, 2]))[:, None] * F
+    np.testing.assert_allclose(got, ref, rtol=2e-3, atol=1e-4 * ref.max())
+    # direct (footprint below sigma0): the Gaussian itself, but the flat bake used sr = 0.05
+    d = np.exp(-0.5 * np.sum(h[:, :2] ** 2, -1) / sr**2) / (2 * math.pi * sr**2)
+    got = glint_brdf_cos(flat, c, 1.0, wo, wi, f0)
+    ref = (d * Gv / (4 * wo[:, 2]))[:, None] * F
+    np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-9 * ref.max())  # 4-sigma cut
+
+
+def test_fallback_and_clamp(surf):
+    rng = np.random.default_rng(3)
+    c = rng.uniform(0, 64, (300, 2))
+    s = rng.uniform(-0.3, 0.3, (300, 2))
+    # below the finest level: Yan et al. 2016 direct P-NDF with the bake's roughness
+    np.testing.assert_allclose(glint_ndf(surf, c, 2.0, s), pndf(NM, c, 2.0, s), rtol=1e-12)
+    # above the coarsest level: clamped to it
+    top = surf.gm.pyramid.sigma(surf.gm.pyramid.n_levels - 1)
+    np.testing.assert_allclose(glint_ndf(surf, c, 10 * top, s), glint_ndf(surf, c, top, s),
+                               rtol=1e-12)
+    # a GlintsMap alone (no normal map) clamps small footprints to level 0
+    np.testing.assert_allclose(glint_ndf(surf.gm, c, 2.0, s), glint_ndf(surf, c, 4.0, s),
+                               rtol=1e-12)
+
+
+@pytest.mark.parametrize("sp", [4.0, 8.0, 11.3])
+def test_compressed_matches_direct_images(surf, sp):
+    """Point queries at the pixel centres vs direct NDF images: the compression and the spatial
+    (bilinear) interpolation error only, for footprints on and between the pyramid samples."""
+    rng = np.random.default_rng(4)
+    c = rng.uniform(0, 64, (4, 2))
+    x = (np.arange(R) + 0.5) * H - S
+    X, Y = np.meshgrid(x, x)
+    grid = np.stack([X, Y], -1)
+    for cc in c:
+        cc = np.round(cc / 4) * 4 + 0.5 if sp == 4.0 else cc  # on the level-0 centres
+        ref = pndf_image(NM, cc, sp, R, S)
+        got = glint_ndf(surf, cc, sp, grid)
+        err = np.linalg.norm(got - ref) / np.linalg.norm(ref)
+        assert err < (0.08 if sp == 4.0 else 0.25), err
+
+
+def test_reciprocity(surf):
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(500, 3)) * [0.2, 0.2, 1]
+    b = rng.normal(size=(500, 3)) * [0.2, 0.2, 1]
+    a[:, 2], b[:, 2] = np.abs(a[:, 2]), np.abs(b[:, 2])
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    b /= np.linalg.norm(b, axis=-1, keepdims=True)
+    c = rng.uniform(0, 64, (500, 2))
+    for sp in (1.5, 9.0):
+        fab = glint_brdf_cos(surf, c, sp, a, b)[:, 0] / b[:, 2]
+        fba = glint_brdf_cos(surf, c, sp, b, a)[:, 0] / a[:, 2]
+        np.testing.assert_allclose(fab, fba, rtol=1e-12, atol=1e-300)
+        assert np.any(fab > 0)
+    below = a * [1, 1, -1]
+    assert np.all(glint_brdf_cos(surf, c, 9.0, a, below) == 0)
+
+
+def test_validation(surf):
+    with pytest.raises(PrefilterError, match="normal_map"):
+        surface(surf.gm, sinusoid(64, ax=0.1))
+    with pytest.raises(PrefilterError, match="f0"):
+        glint_brdf_cos(surf, (1.0, 1.0), 4.0, (0, 0, 1.0), (0, 0, 1.0), f0=1.5)
+    with pytest.raises(PrefilterError, match="sigma_p"):
+        glint_ndf(surf, (1.0, 1.0), -1.0, (0.0, 0.0))
+    with pytest.raises(PrefilterError, match="surf"):
+        glint_ndf("x", (1.0, 1.0), 1.0, (0.0, 0.0))
