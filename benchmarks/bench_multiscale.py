@@ -12,6 +12,12 @@ against ``reference``, and flicker over K = 8 jitters. The reference is two inde
 renders: their difference estimates the reference's own noise, which is reported next to the
 errors (``noise / error`` must stay below 0.1 for the numbers to count) and removed from the
 squared RMSE (``RMSE_debiased^2 = RMSE^2 - noise^2``). ``--table PATH`` selects an LTC table.
+
+``--study [--maps brushed,gaussian]``: the issue-5 follow-up at the far / mid / near distances:
+``ltc``, ``ltc-multiscale``, ``ltc-multiscale-aniso`` and both multi-scale methods with the
+anisotropic (multi-tap) footprint; RMSE (debiased), FLIP and flicker per method, and the flicker
+of ``ltc`` on the same plane *without* the normal map (the geometric floor: what a 1-spp shader
+flickers from the light's and the plane's edges alone).
 """
 
 from __future__ import annotations
@@ -101,6 +107,67 @@ def acceptance(table, quick: bool, seed: int = 0) -> list[dict]:
     return rows
 
 
+def _variant(name: str, **kw):
+    """A render function ``(scene_dict, jitter) -> image`` for a method variant."""
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.scene import load_scene
+
+    def run(sc, table, jitter=(0.0, 0.0)):
+        if not kw:
+            return render(sc, name, table=table, jitter=jitter)
+        mod = __import__("prefilter.multiscale." + ("aniso" if "aniso" in name else "render"),
+                         fromlist=["x"])
+        fn = mod.render_multiscale_aniso if "aniso" in name else mod.render_multiscale
+        st = RenderSettings(table=table, jitter=tuple(float(x) for x in jitter))
+        return np.asarray(fn(load_scene(sc), st, **kw), np.float32)
+    return run
+
+
+STUDY = {
+    "ltc": _variant("ltc"),
+    "ms": _variant("ltc-multiscale"),
+    "ms-aniso": _variant("ltc-multiscale-aniso"),
+    "ms+ewa": _variant("ltc-multiscale", anisotropic_footprint=True),
+    "ms-aniso+ewa": _variant("ltc-multiscale-aniso", anisotropic_footprint=True),
+}
+
+
+def study(table, maps, spp: int = 1024, seed: int = 0, width: int = 96, height: int = 60):
+    k = 160.0 / height
+    jit = jitter_offsets(8)
+    rows = []
+    for nm in maps:
+        for alpha in (0.03, 0.3):
+            for name, d in {"near": 1.0 / k, "mid": 4.0 / k, "far": 16.0 / k}.items():
+                sc = scene(d, width, height, alpha, nm)
+                r1 = render(sc, "reference", spp=spp // 2, seed=seed)
+                r2 = render(sc, "reference", spp=spp // 2, seed=seed + 1)
+                ref, noise = 0.5 * (r1 + r2), rmse(r1, r2) / 2.0
+                flat = scene(d, width, height, alpha, nm)
+                del flat["objects"][0]["material"]["normal_map"]
+                row = {"map": nm, "alpha": alpha, "distance": name, "noise": noise,
+                       "flicker_flat_ltc": flicker(np.stack([render(flat, "ltc", table=table,
+                                                                    jitter=tuple(j))
+                                                             for j in jit]))}
+                for label, run in STUDY.items():
+                    img = run(sc, table)
+                    e = rmse(img, ref)
+                    row[label] = {"rmse": float(np.sqrt(max(e * e - noise**2, 0.0))),
+                                  "flip": flip(ref, img).mean,
+                                  "flicker": flicker(np.stack([run(sc, table, tuple(j))
+                                                               for j in jit]))}
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+    print("\nmap alpha dist noise | RMSE " + " ".join(STUDY) + " | FLIP | flicker (+ flat ltc)")
+    for r in rows:
+        print(f"{r['map']} {r['alpha']} {r['distance']} {r['noise']:.4f} | "
+              + " ".join(f"{r[m]['rmse']:.4f}" for m in STUDY) + " | "
+              + " ".join(f"{r[m]['flip']:.3f}" for m in STUDY) + " | "
+              + " ".join(f"{r[m]['flicker']:.4f}" for m in STUDY)
+              + f" {r['flicker_flat_ltc']:.4f}")
+    return rows
+
+
 def summary(rows: list[dict]) -> None:
     print("\nmap        alpha dist | noise/err | RMSE ltc  ms   ratio | FLIP ltc  ms   ratio"
           " | flicker ltc  ms  ratio | paper RMSE FLIP")
@@ -121,11 +188,21 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--table", default=None)
     ap.add_argument("--out", default=None, help="write the acceptance rows as JSON")
+    ap.add_argument("--study", action="store_true", help="aniso / footprint study (no timing)")
+    ap.add_argument("--maps", default="brushed,gaussian")
+    ap.add_argument("--spp", type=int, default=1024)
     args = ap.parse_args()
     try:
         table = GGXTable.load(args.table)
     except Exception as exc:  # noqa: BLE001  (no table shipped yet: say so, do not crash make)
         print(f"skipped: no LTC table ({exc})")
+        return
+    if args.study:
+        rows = study(table, args.maps.split(","), spp=args.spp)
+        if args.out:
+            from prefilter._io import save_json_atomic
+
+            save_json_atomic(args.out, rows)
         return
     bench_cost(table)
     if args.acceptance:

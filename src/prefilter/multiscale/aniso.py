@@ -148,7 +148,7 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
 
 
 def render_multiscale_aniso(scene, settings, *, combine: str = "lean",
-                            anisotropic_footprint: bool = False) -> np.ndarray:
+                            anisotropic_footprint: bool = False, max_aniso: int = 8) -> np.ndarray:
     """The ``ltc-multiscale-aniso`` method (see the module docstring)."""
     from prefilter.ltc.aniso.render import shade_ltc_aniso
     from prefilter.ltc.aniso.table import AnisoGGXTable
@@ -159,7 +159,7 @@ def render_multiscale_aniso(scene, settings, *, combine: str = "lean",
 
     def shade(g, _u):
         a = aniso_attributes(scene, g, combine=combine,
-                             anisotropic_footprint=anisotropic_footprint)
+                             anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso)
         return shade_ltc_aniso(g.position, a["t"], a["b"], a["n"], g.view, a["alpha_x"],
                                a["alpha_y"], a["base_color"], a["f0"], lights, table)
 

@@ -28,14 +28,18 @@ def _alpha_meso_fast(r: np.ndarray, variant: str) -> np.ndarray:
     return _alpha_from_r(r)
 
 
-def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit") -> dict:
+def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
+                          anisotropic_footprint: bool = False, max_aniso: int = 8) -> dict:
     """Shading frame, material and multi-scale roughness per hit sample of a flat G-buffer.
 
     As :func:`prefilter.render.pipeline.surface_attributes` with ``filtered=True``, plus ``r``
     (N,), the length of the footprint's averaged normal (1 without a normal map), and
     ``alpha`` (N,), the isotropic ``alpha_total`` to shade with. ``meso``: ``alpha_meso`` variant
     (``"exact"`` or ``"paper"``, eq. 5); ``total``: ``alpha_total`` variant (``"fit"``,
-    ``"paper"`` (eq. 7) or ``"mrl"``).
+    ``"paper"`` (eq. 7) or ``"mrl"``). ``anisotropic_footprint``: average ``ceil(major / minor)``
+    (at most ``max_aniso``) taps along the footprint's major axis at the minor axis' LOD
+    (``MipChain.lookup_footprint``) instead of one tap at the major axis' LOD; the unnormalised
+    normals are averaged over the elongated footprint, so ``r`` sees its true spread.
     """
     from prefilter.render.shading import shading_frame
     from prefilter.texture.procedural import slopes_to_normals
@@ -53,7 +57,9 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit") 
         mat = scene.objects[int(k)].material
         nts = None
         if mat.normal_map is not None:
-            nts = mat.normal_map.mip().lookup_footprint(g.uv[m], g.dudv[m])
+            nts = mat.normal_map.mip().lookup_footprint(g.uv[m], g.dudv[m],
+                                                        anisotropic=anisotropic_footprint,
+                                                        max_aniso=max_aniso)
             r[m] = np.minimum(np.sqrt(np.einsum("ij,ij->i", nts, nts)), 1.0)
         elif mat.height_map is not None:
             nts = slopes_to_normals(mat.height_map.mip().lookup_footprint(g.uv[m],
@@ -71,25 +77,31 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit") 
             "base_color": base, "f0": f0}
 
 
-def _render(scene, settings, meso: str, total: str, name: str) -> np.ndarray:
+def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> np.ndarray:
     from prefilter.ltc.table import GGXTable
-    from prefilter.render.pipeline import render_samples, supported_lights
-    from prefilter.render.shading import shade_ltc
+    from prefilter.render.lighttex import shade_ltc_textured, split_lights
+    from prefilter.render.pipeline import render_samples
 
-    lights = supported_lights(scene, name)
+    # textured quad lights: prefiltered light texture lookup (Heitz et al. 2016, section 5.3)
+    lights, textured = split_lights(scene, name)
     table = settings.table if settings.table is not None else GGXTable.load()
 
     def shade(g, _u):
-        a = multiscale_attributes(scene, g, meso=meso, total=total)
-        return shade_ltc(g.position, a["t"], a["b"], a["n"], g.view, a["alpha"],
-                         a["base_color"], a["f0"], lights, table)
+        a = multiscale_attributes(scene, g, meso=meso, total=total, **footprint)
+        return shade_ltc_textured(g.position, a["t"], a["b"], a["n"], g.view, a["alpha"],
+                                  a["base_color"], a["f0"], lights, textured, table)
 
     return render_samples(scene, settings, shade, stratified=settings.spp > 1, desc=name)
 
 
-def render_multiscale(scene, settings) -> np.ndarray:
-    """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7."""
-    return _render(scene, settings, "exact", "fit", "ltc-multiscale")
+def render_multiscale(scene, settings, *, anisotropic_footprint: bool = False,
+                      max_aniso: int = 8) -> np.ndarray:
+    """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7.
+
+    ``anisotropic_footprint`` / ``max_aniso``: see :func:`multiscale_attributes` (not the
+    registered default; measured in ``docs/multiscale.md``)."""
+    return _render(scene, settings, "exact", "fit", "ltc-multiscale",
+                   anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso)
 
 
 def render_multiscale_paper(scene, settings) -> np.ndarray:

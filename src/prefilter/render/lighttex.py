@@ -1,0 +1,255 @@
+"""Textured quad lights for LTC shading: the prefiltered light texture lookup (Heitz et al. 2016,
+section 5.3 "Textured lights").
+
+The integral of an LTC lobe ``D`` times a textured radiance ``L`` over the light polygon ``P`` is
+split as ``integral_P D L ~= E(M^-1 P) * L_avg``: the untextured polygon integral times the
+``D``-weighted average of the texture over the polygon. ``L_avg`` is approximated by one lookup in
+a prefiltered texture: in the lobe's cosine space (``M^-1`` applied to the polygon) the cosine is
+centred on ``z``, so the lookup point is the orthogonal projection of the origin onto the
+transformed light plane, and the filter width grows with the distance ``d`` of that plane:
+a clamped cosine seen on a plane at distance ``d`` has irradiance density
+``d^2 / (d^2 + rho^2)^2``, half of it within ``rho = d``; the Gaussian with the same half-mass
+radius has ``sigma = d / sqrt(2 ln 2) = 0.85 d``.
+
+Prefiltering (our choice): level ``l >= 1`` is the *normalised* Gaussian convolution of the
+texture restricted to the light, ``G * (L 1_P) / G * 1_P`` with ``sigma_l = 2^(l-1)`` texels, so a
+wide lobe near an edge averages only texels that emit (the paper pads the texture with a blurred
+border instead). Lookups outside the light clamp to its edge; ``lod`` interpolates linearly between
+levels, texels bilinearly.
+
+Texture coordinates of a quad light ``v0..v3`` (a parallelogram): ``p = v0 + u (v1 - v0) +
+v (v3 - v0)``; ``u`` along image columns, ``v`` along rows (as :class:`prefilter.texture.MipChain`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from prefilter._validate import as_float_array
+from prefilter.errors import PrefilterError
+
+__all__ = ["LightTexture", "TexturedQuad", "light_texture_lookup_point", "shade_textured_quads",
+           "split_lights", "texture_uv"]
+
+#: Gaussian sigma per plane distance of the clamped cosine's footprint (same half-mass radius).
+SIGMA_PER_DISTANCE = 1.0 / np.sqrt(2.0 * np.log(2.0))
+
+
+class LightTexture:
+    """Prefiltered pyramid of a light texture ``(H, W)`` or ``(H, W, C)`` (linear radiance scale).
+
+    Attributes
+    ----------
+    levels : list of numpy.ndarray, each ``(H, W, C)``; level 0 is the texture, level ``l`` its
+        normalised Gaussian convolution with ``sigma = 2^(l-1)`` texels (module docstring).
+    """
+
+    def __init__(self, image):
+        from scipy.ndimage import gaussian_filter
+
+        a = as_float_array(image, "light texture", ndim_min=2)
+        if a.ndim == 2:
+            a = a[..., None]
+        if a.ndim != 3 or min(a.shape[:2]) < 1:
+            raise PrefilterError(f"light texture: expected shape (H, W) or (H, W, C), got "
+                                 f"{a.shape}")
+        if not np.all(np.isfinite(a)) or np.any(a < 0):
+            raise PrefilterError("light texture: expected finite values >= 0")
+        h, w = a.shape[:2]
+        self.levels = [a]
+        ones = np.ones((h, w))
+        sigma = 1.0
+        while True:
+            g = gaussian_filter(ones, sigma, mode="constant", truncate=4.0)
+            lv = np.stack([gaussian_filter(a[..., c], sigma, mode="constant", truncate=4.0)
+                           for c in range(a.shape[2])], -1) / g[..., None]
+            self.levels.append(lv)
+            if sigma >= 2 * max(h, w):
+                break
+            sigma *= 2.0
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.levels[0].shape
+
+    def _bilinear(self, level: int, uv: np.ndarray) -> np.ndarray:
+        tex = self.levels[level]
+        h, w = tex.shape[:2]
+        x = np.clip(uv[:, 0], 0.0, 1.0) * w - 0.5
+        y = np.clip(uv[:, 1], 0.0, 1.0) * h - 0.5
+        x0, y0 = np.floor(x), np.floor(y)
+        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        j0 = np.clip(x0.astype(np.int64), 0, w - 1)
+        i0 = np.clip(y0.astype(np.int64), 0, h - 1)
+        j1, i1 = np.minimum(j0 + 1, w - 1), np.minimum(i0 + 1, h - 1)
+        top = tex[i0, j0] * (1 - fx) + tex[i0, j1] * fx
+        bottom = tex[i1, j0] * (1 - fx) + tex[i1, j1] * fx
+        return top * (1 - fy) + bottom * fy
+
+    def lookup(self, uv, sigma_texels) -> np.ndarray:
+        """Filtered texture ``(N, C)`` at ``uv (N, 2)`` (clamped to the light) with a Gaussian of
+        ``sigma_texels (N,)``: ``lod = 1 + log2(sigma)``, linear between levels (0 below 0.5)."""
+        uv = as_float_array(uv, "uv", ndim_min=2, last_dim=2).reshape(-1, 2)
+        s = np.broadcast_to(as_float_array(sigma_texels, "sigma_texels"), uv.shape[:1])
+        top = len(self.levels) - 1
+        # sigma 0.5 -> level 0 (a texel), 1 -> level 1, doubling per level
+        lod = np.clip(np.log2(np.maximum(s, 1e-300) * 2.0), 0.0, top)
+        l0 = np.minimum(np.floor(lod).astype(np.int64), max(top - 1, 0))
+        t = (lod - l0)[:, None]
+        out = np.zeros((uv.shape[0], self.shape[2]))
+        for level in np.unique(l0):  # a loop over levels, not texels
+            m = l0 == level
+            lo = self._bilinear(int(level), uv[m])
+            hi = self._bilinear(int(level) + 1, uv[m]) if top > 0 else lo
+            out[m] = lo * (1 - t[m]) + hi * t[m]
+        return out
+
+
+@dataclass(frozen=True)
+class TexturedQuad:
+    """A parallelogram quad light ``(4, 3)`` with constant radiance times a :class:`LightTexture`."""
+
+    vertices: np.ndarray
+    radiance: np.ndarray
+    texture: LightTexture
+
+    def __post_init__(self):
+        from prefilter.render.lights import QuadLight
+
+        q = QuadLight(self.vertices, self.radiance)  # planarity, convexity, rgb checks
+        v = q.vertices
+        skew = np.linalg.norm(v[0] + v[2] - v[1] - v[3])
+        if skew > 1e-6 * max(1.0, np.sqrt(q.area)):
+            raise PrefilterError(f"textured quad light vertices: expected a parallelogram "
+                                 f"(v0 + v2 = v1 + v3), got {v.tolist()}")
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "radiance", q.radiance)
+
+    @property
+    def normal(self) -> np.ndarray:
+        from prefilter.render.lights import quad_normal_area
+
+        return quad_normal_area(self.vertices)[0]
+
+
+def texture_uv(vertices, points) -> np.ndarray:
+    """Texture coordinates ``(..., 2)`` of ``points (..., 3)`` in the plane of the parallelogram
+    ``vertices (..., 4, 3)`` (``p = v0 + u (v1 - v0) + v (v3 - v0)``, least squares off-plane)."""
+    v = np.asarray(vertices, float)
+    p = np.asarray(points, float) - v[..., 0, :]
+    e1, e2 = v[..., 1, :] - v[..., 0, :], v[..., 3, :] - v[..., 0, :]
+    g11, g12, g22 = (np.sum(a * b, -1) for a, b in ((e1, e1), (e1, e2), (e2, e2)))
+    r1, r2 = np.sum(p * e1, -1), np.sum(p * e2, -1)
+    det = g11 * g22 - g12 * g12
+    return np.stack([(g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det], -1)
+
+
+def light_texture_lookup_point(M_inv, P) -> tuple[np.ndarray, np.ndarray]:
+    """Where and how wide to read the light texture for an LTC lobe (Heitz et al. 2016, 5.3).
+
+    Parameters
+    ----------
+    M_inv : (N, 3, 3) the lobe's inverse matrix (any positive scale).
+    P : (N, 4, 3) the light's corners in the shading frame (unclipped).
+
+    Returns
+    -------
+    uv : (N, 2) texture coordinates of the orthogonal projection of the origin onto the light
+        plane in cosine space; ``width`` : (N,) the Gaussian sigma in units of ``sqrt(area)``
+        of the transformed light (``0.85 d / sqrt(A)``).
+    """
+    Q = np.matmul(P, np.swapaxes(M_inv, -1, -2))
+    nrm = np.cross(Q[:, 1] - Q[:, 0], Q[:, 3] - Q[:, 0])
+    a2 = np.maximum(np.sum(nrm * nrm, -1), 1e-300)
+    h = np.sum(nrm * Q[:, 0], -1)
+    foot = (h / a2)[:, None] * nrm
+    d = np.abs(h) / np.sqrt(a2)
+    return texture_uv(Q, foot), SIGMA_PER_DISTANCE * d / a2 ** 0.25
+
+
+def split_lights(scene, method: str):
+    """``(LightSet, textured)``: the scene's untextured lights and its textured quads as
+    :class:`TexturedQuad`; environment lights are rejected with a message naming ``method``."""
+    from prefilter.render.lights import LightSet, QuadLight
+
+    plain = scene.light_set()
+    textured, keep = [], []
+    for i, spec in enumerate(scene.lights):
+        if spec.type == "environment":
+            raise PrefilterError(f"lights[{i}]: environment lights are not supported by method "
+                                 f"{method!r}; expected quad (textured or not), point or "
+                                 "directional lights")
+        if spec.type != "quad":
+            continue
+        if getattr(spec, "texture", None) is None:
+            keep.append(QuadLight(spec.vertices, spec.radiance))
+        else:
+            try:
+                textured.append(TexturedQuad(spec.vertices, spec.radiance,
+                                             _light_texture(spec.texture)))
+            except PrefilterError as exc:
+                raise PrefilterError(f"lights[{i}]: {exc}") from None
+    return LightSet(quads=tuple(keep), points=plain.points,
+                    directionals=plain.directionals), tuple(textured)
+
+
+_CACHE: dict = {}
+
+
+def _light_texture(ref) -> LightTexture:
+    key = ref._key()
+    if key not in _CACHE:
+        _CACHE[key] = LightTexture(ref.load())
+    return _CACHE[key]
+
+
+def _rgb(x: np.ndarray) -> np.ndarray:
+    return x if x.shape[1] == 3 else np.broadcast_to(x[:, :1], (x.shape[0], 3))
+
+
+def shade_textured_quads(position, ts, bs, ns, wo, M_inv, spec_scale, base_color,
+                         quads) -> np.ndarray:
+    """Radiance ``(N, 3)`` from textured quads: diffuse ``base_color E(P) T(uv_d)`` plus specular
+    ``spec_scale E(M^-1 P) T(uv_s)`` (Heitz et al. 2016, section 5.3).
+
+    ``wo`` (N, 3) is the local view (unused but for the front test's symmetry with
+    :func:`prefilter.render.shading.shade_ltc`); ``M_inv`` (N, 3, 3) from the LTC table,
+    ``spec_scale`` (N, 3) the Fresnel-weighted magnitude.
+    """
+    from prefilter.ltc.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
+    from prefilter.render.shading import quad_local
+
+    out = np.zeros((len(position), 3))
+    eye = np.broadcast_to(np.eye(3), M_inv.shape)
+    for ql in quads:
+        P = quad_local(ql, position, ts, bs, ns)
+        front = (position - ql.vertices[0]) @ ql.normal > 0.0
+        h, w = ql.texture.shape[:2]
+        texels = np.sqrt(h * w)
+        uv_d, wd = light_texture_lookup_point(eye, P)
+        uv_s, wsp = light_texture_lookup_point(M_inv, P)
+        t_d = _rgb(ql.texture.lookup(uv_d, wd * texels))
+        t_s = _rgb(ql.texture.lookup(uv_s, wsp * texels))
+        e_d = clamped_cosine_integral(P)
+        e_s = polygon_integral_minv(M_inv, clip_to_horizon(P))
+        rad = base_color * (e_d[:, None] * t_d) + spec_scale * (e_s[:, None] * t_s)
+        out += np.where(front[:, None], rad, 0.0) * ql.radiance
+    return out
+
+
+def shade_ltc_textured(position, ts, bs, ns, view, alpha, base_color, f0, lights, textured,
+                       table) -> np.ndarray:
+    """:func:`prefilter.render.shading.shade_ltc` for ``lights`` plus the textured quads
+    ``textured`` with the same isotropic table lookup."""
+    from prefilter.render.shading import local_view, scaled_inverse, shade_ltc
+
+    out = shade_ltc(position, ts, bs, ns, view, alpha, base_color, f0, lights, table)
+    if not textured:
+        return out
+    wo = local_view(view, ts, bs, ns)
+    M, magnitude, fresnel = table.lookup(wo, np.clip(alpha, table.alpha_min, 1.0))
+    spec_scale = f0 * (magnitude - fresnel)[:, None] + fresnel[:, None]
+    return out + shade_textured_quads(position, ts, bs, ns, wo, scaled_inverse(M), spec_scale,
+                                      base_color, textured)
