@@ -113,3 +113,32 @@ def test_textured_quad_checks_its_shape():
         TexturedQuad(bad, np.ones(3), LightTexture(np.ones((4, 4))))
     with pytest.raises(PrefilterError, match="light texture"):
         LightTexture(np.full((4, 4), -1.0))
+
+
+def _light_scene(tmp_path, texture) -> dict:
+    sc = {
+        "camera": {"origin": [0, 2, 3], "target": [0, 0, 0], "fov": 40, "width": 24,
+                   "height": 16},
+        "objects": [{"type": "plane", "size": [6, 6],
+                     "material": {"alpha": 0.2, "f0": 0.9, "base_color": 0.3}}],
+        "lights": [{"type": "quad", "radiance": 4.0,
+                    "vertices": [[-1, 1.5, -1.0], [1, 1.5, -1.0], [1, 0.5, -1.5],
+                                 [-1, 0.5, -1.5]]}],
+    }
+    if texture is not None:
+        np.save(tmp_path / "L.npy", texture)
+        sc["lights"][0]["texture"] = {"path": "L.npy"}
+    return sc
+
+
+def test_multiscale_renders_a_constant_textured_light_like_a_dimmer_one(tmp_path):
+    import prefilter.multiscale  # noqa: F401
+    from prefilter.render import load_scene
+    from prefilter.render.pipeline import render
+
+    tex = load_scene(_light_scene(tmp_path, np.full((8, 8, 3), 0.5)), base_dir=tmp_path)
+    plain = load_scene(_light_scene(tmp_path, None), base_dir=tmp_path)
+    a = render(tex, "ltc-multiscale")
+    b = render(plain, "ltc-multiscale")
+    assert b.max() > 0.05
+    np.testing.assert_allclose(a, 0.5 * b, rtol=1e-5, atol=1e-7)
