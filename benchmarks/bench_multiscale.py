@@ -62,18 +62,21 @@ def best_of(fn, repeats: int = 5) -> float:
 
 def bench_cost(table, width: int = 384, height: int = 240) -> None:
     sc = scene(4.0, width, height, 0.03, "gaussian")
-    for m in METHODS[:2]:
+    names = ("ltc", "ltc-multiscale", "ltc-multiscale-aniso")
+    for m in names:
         render(sc, m, table=table)  # warm-up: textures, mips, Numba
-    # interleave so load changes on the shared machine hit both alike
-    t = {m: [] for m in METHODS[:2]}
+    # interleave so load changes on the shared machine hit all alike
+    t = {m: [] for m in names}
     for _ in range(9):
-        for m in METHODS[:2]:
+        for m in names:
             t[m].append(best_of(lambda: render(sc, m, table=table), 1))
-    t_ltc, t_ms = min(t["ltc"]), min(t["ltc-multiscale"])
-    pairs = np.median(np.array(t["ltc-multiscale"]) / np.array(t["ltc"]))
-    print(f"showcase x4 {width}x{height}, alpha 0.03: ltc {t_ltc * 1e3:.1f} ms, "
-          f"ltc-multiscale {t_ms * 1e3:.1f} ms (best of 9 each), ratio of bests "
-          f"{t_ms / t_ltc:.3f}, median ratio of back-to-back pairs {pairs:.3f}")
+    best = {m: min(v) for m, v in t.items()}
+    print(f"showcase x4 {width}x{height}, alpha 0.03 (best of 9 each): "
+          + ", ".join(f"{m} {best[m] * 1e3:.1f} ms" for m in names))
+    for m in names[1:]:
+        pairs = np.median(np.array(t[m]) / np.array(t["ltc"]))
+        print(f"  {m} / ltc: ratio of bests {best[m] / best['ltc']:.3f}, median ratio of "
+              f"back-to-back pairs {pairs:.3f}")
 
 
 def acceptance(table, quick: bool, seed: int = 0) -> list[dict]:

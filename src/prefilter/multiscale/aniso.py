@@ -152,19 +152,40 @@ def render_multiscale_aniso(scene, settings, *, combine: str = "lean",
     """The ``ltc-multiscale-aniso`` method (see the module docstring)."""
     from prefilter.ltc.aniso.render import shade_ltc_aniso
     from prefilter.ltc.aniso.table import AnisoGGXTable
-    from prefilter.render.pipeline import render_samples, supported_lights
+    from prefilter.render.lighttex import split_lights
+    from prefilter.render.pipeline import render_samples
 
-    lights = supported_lights(scene, "ltc-multiscale-aniso")
+    lights, textured = split_lights(scene, "ltc-multiscale-aniso")
     table = settings.table if isinstance(settings.table, AnisoGGXTable) else _aniso_table()
 
     def shade(g, _u):
         a = aniso_attributes(scene, g, combine=combine,
                              anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso)
-        return shade_ltc_aniso(g.position, a["t"], a["b"], a["n"], g.view, a["alpha_x"],
-                               a["alpha_y"], a["base_color"], a["f0"], lights, table)
+        out = shade_ltc_aniso(g.position, a["t"], a["b"], a["n"], g.view, a["alpha_x"],
+                              a["alpha_y"], a["base_color"], a["f0"], lights, table)
+        if textured:
+            out += _textured(g, a, textured, table)
+        return out
 
     return render_samples(scene, settings, shade, stratified=settings.spp > 1,
                           desc="ltc-multiscale-aniso")
+
+
+def _textured(g, a, textured, table) -> np.ndarray:
+    # the same lookup as shade_ltc_aniso, then the prefiltered light texture (Heitz et al. 2016)
+    from prefilter.render.lighttex import shade_textured_quads
+    from prefilter.render.shading import local_view, scaled_inverse
+
+    wo = local_view(g.view, a["t"], a["b"], a["n"])
+    wo_t = wo.copy()
+    wo_t[:, 2] = np.maximum(wo_t[:, 2], 1e-4)
+    wo_t /= np.linalg.norm(wo_t, axis=-1, keepdims=True)
+    M, magnitude, fresnel = table.lookup(wo_t, np.clip(a["alpha_x"], 1e-4, 1),
+                                         np.clip(a["alpha_y"], 1e-4, 1))
+    spec = np.where((wo[:, 2] > 0)[:, None],
+                    a["f0"] * (magnitude - fresnel)[:, None] + fresnel[:, None], 0.0)
+    return shade_textured_quads(g.position, a["t"], a["b"], a["n"], wo, scaled_inverse(M), spec,
+                                a["base_color"], textured)
 
 
 @functools.lru_cache(maxsize=1)
