@@ -13,7 +13,8 @@ lobe is combined in slope space with the variance ``alpha^2 / 2`` per axis (LEAD
 ``C = GGX_PER_BECKMANN``: a Gaussian slope distribution of roughness ``alpha_B = sqrt(2 sigma^2)``
 is best fitted (maximum likelihood, ``fit_alpha_ml``) by the GGX lobe of roughness ``0.78 alpha_B``
 (isotropic; 0.73 for a one-dimensional spread); the heavier GGX tails need the smaller alpha.
-Without ``C`` the brushed-map highlight loses half its energy. The result is shaded with the anisotropic LTC table (``prefilter.ltc.AnisoGGXTable``) in the principal
+Without ``C`` the brushed-map highlight loses half its energy. The result is shaded with the
+anisotropic LTC table (``prefilter.ltc.AnisoGGXTable``) in the principal
 frame of ``Sigma`` (x = eigenvector of the larger eigenvalue ``lambda_1``).
 """
 
@@ -25,8 +26,8 @@ import numpy as np
 
 from prefilter.texture.mip import moment_chain
 
-__all__ = ["COMBINE", "GGX_PER_BECKMANN", "aniso_attributes", "principal_axes", "render_multiscale_aniso",
-           "slope_moments_chain"]
+__all__ = ["COMBINE", "GGX_PER_BECKMANN", "aniso_attributes", "principal_axes",
+           "render_multiscale_aniso", "slope_moments_chain"]
 
 #: How micro and meso roughness combine: ``"lean"`` (variances add, default) or ``"fit"``
 #: (our refit of eq. 7 per principal axis, ``alpha_meso_i = C sqrt(2 lambda_i(Sigma_meso))``).

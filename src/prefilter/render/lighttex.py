@@ -109,7 +109,7 @@ class LightTexture:
 
 @dataclass(frozen=True)
 class TexturedQuad:
-    """A parallelogram quad light ``(4, 3)`` with constant radiance times a :class:`LightTexture`."""
+    """A parallelogram quad light ``(4, 3)``: constant radiance times a :class:`LightTexture`."""
 
     vertices: np.ndarray
     radiance: np.ndarray
@@ -218,7 +218,8 @@ def shade_textured_quads(position, ts, bs, ns, wo, M_inv, spec_scale, base_color
     :func:`prefilter.render.shading.shade_ltc`); ``M_inv`` (N, 3, 3) from the LTC table,
     ``spec_scale`` (N, 3) the Fresnel-weighted magnitude.
     """
-    from prefilter.ltc.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
+    from prefilter.ltc.polygon import (clamped_cosine_integral, clip_to_horizon,
+                                       polygon_integral_minv)
     from prefilter.render.shading import quad_local
 
     out = np.zeros((len(position), 3))
