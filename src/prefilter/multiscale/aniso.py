@@ -73,14 +73,15 @@ def principal_axes(cov):
 
 
 def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: bool = False,
-                     max_aniso: int = 8) -> dict:
+                     max_aniso: int = 8, lod_bias: float = 0.0) -> dict:
     """Shading frame (principal axes), material and roughness per hit sample of a flat G-buffer.
 
     Returns a dict with ``t, b, n`` (N, 3) (``t`` along the major axis of the combined slope
     covariance), ``alpha_x >= alpha_y`` (N,), ``base_color, f0`` (N, 3). Materials without a
     normal map use the micro roughness in the geometric frame (height maps: their slope moments,
     as ``leadr``). ``anisotropic_footprint`` averages ``ceil(major / minor)`` taps along the
-    footprint's major axis (``MipChain.lookup_footprint``) instead of one isotropic tap.
+    footprint's major axis (``MipChain.lookup_footprint``) instead of one isotropic tap;
+    ``lod_bias`` scales the footprint by ``2^lod_bias``.
     """
     from prefilter.multiscale.convolution import _alpha_total
     from prefilter.render.shading import shading_frame
@@ -111,7 +112,7 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
             mean = np.zeros((cnt, 2))
             cov_meso = np.zeros((cnt, 2, 2))
         else:
-            mom = chain.lookup_footprint(g.uv[m], g.dudv[m], **kw)
+            mom = chain.lookup_footprint(g.uv[m], g.dudv[m] * 2.0 ** lod_bias, **kw)
             mean = mom[:, :2]
             cxx = np.maximum(mom[:, 2] - mean[:, 0] ** 2, 0.0)
             cyy = np.maximum(mom[:, 3] - mean[:, 1] ** 2, 0.0)
@@ -149,7 +150,8 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
 
 
 def render_multiscale_aniso(scene, settings, *, combine: str = "lean",
-                            anisotropic_footprint: bool = False, max_aniso: int = 8) -> np.ndarray:
+                            anisotropic_footprint: bool = False, max_aniso: int = 8,
+                            lod_bias: float = 0.0) -> np.ndarray:
     """The ``ltc-multiscale-aniso`` method (see the module docstring)."""
     from prefilter.ltc.aniso.render import shade_ltc_aniso
     from prefilter.ltc.aniso.table import AnisoGGXTable
@@ -161,7 +163,8 @@ def render_multiscale_aniso(scene, settings, *, combine: str = "lean",
 
     def shade(g, _u):
         a = aniso_attributes(scene, g, combine=combine,
-                             anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso)
+                             anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
+                             lod_bias=lod_bias)
         out = shade_ltc_aniso(g.position, a["t"], a["b"], a["n"], g.view, a["alpha_x"],
                               a["alpha_y"], a["base_color"], a["f0"], lights, table)
         if textured:

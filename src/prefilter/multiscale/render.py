@@ -29,7 +29,8 @@ def _alpha_meso_fast(r: np.ndarray, variant: str) -> np.ndarray:
 
 
 def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
-                          anisotropic_footprint: bool = False, max_aniso: int = 8) -> dict:
+                          anisotropic_footprint: bool = False, max_aniso: int = 8,
+                          lod_bias: float = 0.0) -> dict:
     """Shading frame, material and multi-scale roughness per hit sample of a flat G-buffer.
 
     As :func:`prefilter.render.pipeline.surface_attributes` with ``filtered=True``, plus ``r``
@@ -40,6 +41,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
     (at most ``max_aniso``) taps along the footprint's major axis at the minor axis' LOD
     (``MipChain.lookup_footprint``) instead of one tap at the major axis' LOD; the unnormalised
     normals are averaged over the elongated footprint, so ``r`` sees its true spread.
+    ``lod_bias``: the footprint is scaled by ``2^lod_bias`` (levels coarser by ``lod_bias``).
     """
     from prefilter.render.shading import shading_frame
     from prefilter.texture.procedural import slopes_to_normals
@@ -57,7 +59,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
         mat = scene.objects[int(k)].material
         nts = None
         if mat.normal_map is not None:
-            nts = mat.normal_map.mip().lookup_footprint(g.uv[m], g.dudv[m],
+            nts = mat.normal_map.mip().lookup_footprint(g.uv[m], g.dudv[m] * 2.0 ** lod_bias,
                                                         anisotropic=anisotropic_footprint,
                                                         max_aniso=max_aniso)
             r[m] = np.minimum(np.sqrt(np.einsum("ij,ij->i", nts, nts)), 1.0)
@@ -95,13 +97,14 @@ def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> n
 
 
 def render_multiscale(scene, settings, *, anisotropic_footprint: bool = False,
-                      max_aniso: int = 8) -> np.ndarray:
+                      max_aniso: int = 8, lod_bias: float = 0.0) -> np.ndarray:
     """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7.
 
-    ``anisotropic_footprint`` / ``max_aniso``: see :func:`multiscale_attributes` (not the
+    ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias``: see :func:`multiscale_attributes` (not the
     registered default; measured in ``docs/multiscale.md``)."""
     return _render(scene, settings, "exact", "fit", "ltc-multiscale",
-                   anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso)
+                   anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
+                   lod_bias=lod_bias)
 
 
 def render_multiscale_paper(scene, settings) -> np.ndarray:
