@@ -14,6 +14,10 @@ FIXED stratified sample sets (cosine samples mapped by ``M``, and visible-normal
 GGX lobe) combined with the balance heuristic, so it is a deterministic function of the
 parameters; Nelder-Mead minimises it, warm-started from the neighbouring (larger) roughness along
 each view angle (cold start at alpha = 1 around the lobe's average direction).
+
+:func:`refine_entry` is a second fitting stage that was tried and not adopted (docs/ltc.md,
+"Probe-light refit"): Nelder-Mead on the log-ratio of the LTC's integrals over fixed probe
+quads to their Monte Carlo references. It lowers the mean quad-light error and raises the median.
 """
 
 from __future__ import annotations
@@ -362,3 +366,233 @@ def bake_table(
     )
     ck.clear()
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# Second stage: refit on the quad-light integrals the table is used for
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ProbeSettings:
+    """The probe-light refit (:func:`refine_entry`): an experiment, not used by the bake.
+
+    ``probes_random`` quads from the acceptance distribution and ``probes_lobe`` quads around the
+    lobe, drawn with ``seed`` (never 0, the acceptance seed); their MIS references use
+    ``lobe_samples`` shared lobe samples and ``light_samples`` area samples per probe; the
+    objective is ``mean |log((n E + eps n) / (r + eps n))|^power``.
+    """
+
+    probes_random: int = 64
+    probes_lobe: int = 32
+    seed: int = 1
+    lobe_samples: int = 2048
+    light_samples: int = 256
+    eps: float = 1e-3
+    power: float = 1.0
+
+
+def params_from_ltc(M) -> np.ndarray:
+    """Inverse of :func:`ltc_from_params` up to scale: ``(log m11, log m22, m13 / m11, beta)``.
+
+    ``M (3, 3)`` of the form ``[[a, 0, b], [0, c, 0], [d, 0, e]]`` with ``det > 0``: the first
+    column is ``m11 X``, the second ``m22 Y``, the third ``m13 X + Z`` (times a common scale).
+    """
+    M = np.asarray(M, dtype=np.float64)
+    X = M[:, 0] / np.linalg.norm(M[:, 0])
+    beta = np.arctan2(-X[2], X[0])
+    Z = np.array([np.sin(beta), 0.0, np.cos(beta)])
+    s = float(M[:, 2] @ Z)
+    m11 = np.linalg.norm(M[:, 0]) / s
+    return np.array([np.log(m11), np.log(M[1, 1] / s), float(M[:, 2] @ X) / s / m11, beta])
+
+
+def _quads_around(c, rng) -> np.ndarray:
+    """Parallelograms ``(k, 4, 3)`` centred at distance 1 in unit directions ``c (k, 3)``, as
+    ``validate.random_quads`` draws them (half-sizes in [0.05, 0.6], tilt <= 60 deg, CCW from 0).
+    """
+    k = len(c)
+    a = np.where(np.abs(c[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    t1 = np.cross(c, a)
+    t1 /= np.linalg.norm(t1, axis=-1, keepdims=True)
+    t2 = np.cross(c, t1)
+    g = rng.uniform(0, 2 * np.pi, (k, 1))
+    tilt = np.radians(60) * np.sqrt(rng.random((k, 1)))
+    nq = np.cos(tilt) * -c + np.sin(tilt) * (np.cos(g) * t1 + np.sin(g) * t2)
+    b = np.where(np.abs(nq[:, :1]) < 0.9, np.array([[1.0, 0, 0]]), np.array([[0, 1.0, 0]]))
+    e1 = np.cross(nq, b)
+    e1 /= np.linalg.norm(e1, axis=-1, keepdims=True)
+    e2 = np.cross(nq, e1)
+    h = rng.uniform(0.05, 0.6, (k, 2))
+    ea, eb = e1 * h[:, :1], e2 * h[:, 1:]
+    # e1 x e2 = nq points towards the origin: this order is counter-clockwise seen from it
+    return np.stack([c - ea - eb, c + ea - eb, c + ea + eb, c - ea + eb], 1)
+
+
+def probe_quads(wo, alpha, settings: ProbeSettings) -> np.ndarray:
+    """The fixed probe lights ``(K, 4, 3)`` of one table entry (view ``wo`` in the xz plane).
+
+    ``probes_random`` quads from the acceptance distribution (``validate.random_quads``, 20 %
+    straddling the horizon) drawn with ``settings.seed`` (never the acceptance seed 0), the same for
+    every entry, plus ``probes_lobe`` quads centred on directions drawn from the entry's own lobe
+    (visible-normal reflections), so that the peak is probed at every roughness.
+    """
+    from prefilter.ltc.validate import random_quads
+
+    if settings.seed == 0:
+        raise PrefilterError("seed: expected a seed other than 0 (the acceptance seed)")
+    rng = np.random.default_rng([settings.seed, 1])
+    ns = int(round(0.2 * settings.probes_random))
+    quads = [random_quads(ns, rng, straddle=True),
+             random_quads(settings.probes_random - ns, rng)]
+    if settings.probes_lobe:
+        u = rng.random((settings.probes_lobe, 2))
+        c = reflect(wo, GGX(alpha).sample_vndf(wo, u))
+        # keep the centres above the horizon (a grazing lobe's reflections can dip below it)
+        c[:, 2] = np.maximum(c[:, 2], 0.02)
+        c /= np.linalg.norm(c, axis=-1, keepdims=True)
+        quads.append(_quads_around(c, rng))
+    return np.concatenate(quads)
+
+
+def probe_references(wo, alpha, quads, n_lobe: int, n_light: int, seed) -> np.ndarray:
+    """MIS estimates ``(K,)`` of ``integral_P f cos dwi`` over parallelograms ``quads (K, 4, 3)``.
+
+    As ``validate.reference_quad_integral`` (balance heuristic, Veach 1997 eq. 9.15, between
+    visible-normal reflections and uniform area samples of the light) but vectorised over the
+    probes: ``n_lobe`` lobe samples shared by all probes, ``n_light`` area samples per probe.
+    """
+    rng = np.random.default_rng(seed)
+    model = GGX(alpha)
+    lam_o = float(model.smith_lambda(wo))
+    v0, v1, v3 = quads[:, 0], quads[:, 1], quads[:, 3]
+    ea, eb = v1 - v0, v3 - v0
+    nrm = np.cross(ea, eb)
+    area = np.linalg.norm(nrm, axis=-1)
+    nq = nrm / area[:, None]
+    d = np.sum(nq * v0, -1)
+
+    def pdf_light(w):  # w (N, 3) -> (K, N): r^2 / (A |cos|) where the ray hits the quad
+        cos = nq @ w.T
+        safe = np.where(np.abs(cos) > 1e-12, cos, 1.0)
+        t = np.where(np.abs(cos) > 1e-12, d[:, None] / safe, -1.0)
+        p = t[..., None] * w[None] - v0[:, None]
+        # parallelogram coordinates of the hit point
+        aa, ab, bb = (np.sum(ea * ea, -1)[:, None], np.sum(ea * eb, -1)[:, None],
+                      np.sum(eb * eb, -1)[:, None])
+        pa, pb = np.sum(p * ea[:, None], -1), np.sum(p * eb[:, None], -1)
+        det = aa * bb - ab * ab
+        s1, s2 = (bb * pa - ab * pb) / det, (aa * pb - ab * pa) / det
+        hit = (t > 0) & (s1 >= 0) & (s1 <= 1) & (s2 >= 0) & (s2 <= 1)
+        return np.where(hit, t * t / (area[:, None] * np.maximum(np.abs(cos), 1e-300)), 0.0)
+
+    wb = reflect(wo, model.sample_vndf(wo, rng.random((n_lobe, 2))))
+    f_b, pb_b = _lobe_and_pdf(wo, wb, alpha, lam_o)
+    pl_b = pdf_light(wb)
+    z_b = np.where(pl_b > 0, f_b / np.maximum(n_lobe * pb_b + n_light * pl_b, 1e-300), 0.0)
+    u = rng.random((len(quads), n_light, 2))
+    pts = v0[:, None] + u[..., :1] * ea[:, None] + u[..., 1:] * eb[:, None]
+    r = np.linalg.norm(pts, axis=-1)
+    wl = (pts / r[..., None]).reshape(-1, 3)
+    f_l, pb_l = _lobe_and_pdf(wo, wl, alpha, lam_o)
+    f_l, pb_l = f_l.reshape(r.shape), pb_l.reshape(r.shape)
+    pl_l = r * r / (area[:, None] * np.maximum(np.abs(np.sum(pts / r[..., None] * nq[:, None],
+                                                                  -1)), 1e-300))
+    z_l = f_l / np.maximum(n_lobe * pb_l + n_light * pl_l, 1e-300)
+    return z_b.sum(-1) + z_l.sum(-1)
+
+
+class _ProbeObjective:
+    """``mean_k |log((n E_k(M) + eps) / (r_k + eps))|`` over the probe lights of one entry."""
+
+    def __init__(self, quads, references, magnitude, eps, power=1.0):
+        from prefilter.ltc.polygon import clip_to_horizon
+
+        self.clipped = clip_to_horizon(quads)
+        self.n = magnitude
+        self.eps = eps
+        self.power = power
+        self.log_ref = np.log(np.maximum(references, 0.0) + eps)
+
+    def __call__(self, params) -> float:
+        from prefilter.ltc.polygon import polygon_integral
+
+        M = ltc_from_params(params)
+        det = np.linalg.det(M)
+        if not (np.isfinite(det) and abs(det) > 1e-200 and np.all(np.isfinite(M))):
+            return np.inf
+        E = polygon_integral(M, self.clipped)
+        return float(np.mean(np.abs(np.log(self.n * E + self.eps) - self.log_ref) ** self.power))
+
+
+def refine_entry(wo, alpha, M, magnitude, settings: ProbeSettings) -> dict:
+    """Second fitting stage: Nelder-Mead on the probe-light objective from ``M`` (warm start).
+
+    Returns dict with ``M`` (3, 3) normalised, ``error`` (probe objective at the optimum) and
+    ``error_start`` (at ``M``).
+    """
+    wo = np.asarray(wo, dtype=np.float64)
+    quads = probe_quads(wo, alpha, settings)
+    ref = probe_references(wo, alpha, quads, settings.lobe_samples,
+                           settings.light_samples, [settings.seed, 2])
+    obj = _ProbeObjective(quads, ref, magnitude, settings.eps * magnitude,
+                          settings.power)
+    x0 = params_from_ltc(M)
+    f0 = obj(x0)
+    if wo[0] < 1e-12:  # normal view: keep M = diag(a, a, 1)
+        res = minimize(lambda s: obj(np.array([s[0], s[0], 0.0, 0.0])), x0[:1],
+                       method="Nelder-Mead",
+                       options={"initial_simplex": [[x0[0]], [x0[0] + 0.05]], **_NM_PROBE})
+        params = np.array([res.x[0], res.x[0], 0.0, 0.0])
+    else:
+        simplex = x0 + np.vstack([np.zeros(4), np.diag([0.05, 0.05, 0.03, 0.03])])
+        res = minimize(obj, x0, method="Nelder-Mead",
+                       options={"initial_simplex": simplex, **_NM_PROBE})
+        params = res.x
+    if not res.fun < f0:
+        return {"M": normalize_ltc(M), "error": f0, "error_start": f0}
+    return {"M": normalize_ltc(ltc_from_params(params)), "error": float(res.fun),
+            "error_start": f0}
+
+
+_NM_PROBE = {"xatol": 1e-4, "fatol": 1e-6, "maxiter": 800}
+
+
+def probe_refit_study(n_configs: int = 200, settings: ProbeSettings | None = None, *,
+                      n_samples: int = 20_000, table=None) -> dict:
+    """Quad-light errors of the table vs. the probe refit at each configuration's exact entry.
+
+    The first ``n_configs`` acceptance configurations (``validate.random_configurations``, seed 0)
+    are evaluated with ``table.lookup`` (default: the shipped table) and with
+    :func:`refine_entry` started from the table's matrix at the configuration's exact view angle
+    and roughness (probes from ``settings.seed``, never the acceptance seed). References:
+    ``validate.reference_quad_integral`` with ``n_samples`` samples (seed 123).
+
+    Returns dict with ``table`` and ``refined`` (``validate.error_statistics`` of each) and the
+    mean probe objective before and after the refit (``objective_start``, ``objective_end``).
+    """
+    from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+    from prefilter.ltc.table import GGXTable
+    from prefilter.ltc.validate import (error_statistics, random_configurations,
+                                        reference_quad_integral)
+
+    settings = settings or ProbeSettings()
+    table = table or GGXTable.load()
+    cfg = random_configurations(as_positive_int(n_configs, "n_configs"), 0)
+    rng = np.random.default_rng(123)
+    rows = []
+    for wo, alpha, quad in zip(cfg["wo"], cfg["alpha"], cfg["quad"]):
+        phi = np.arctan2(wo[1], wo[0])
+        c, s = np.cos(phi), np.sin(phi)
+        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        q = clip_to_horizon(quad @ R)  # the view's azimuthal frame
+        M0, n, _ = table.lookup_canonical(wo[2], alpha)
+        n = float(n)
+        fit = refine_entry(view_from_t(np.sqrt(1.0 - wo[2])), alpha, M0, n, settings)
+        ref, _ = reference_quad_integral(GGX(alpha), wo, quad, n_samples, rng)
+        rows.append((np.arccos(wo[2]), alpha, n, ref, n * polygon_integral(M0, q),
+                     n * polygon_integral(fit["M"], q), fit["error_start"], fit["error"]))
+    th, a, n, ref, e0, e1, o0, o1 = np.array(rows).T
+    return {"table": error_statistics(e0, ref, th, a, albedo=n),
+            "refined": error_statistics(e1, ref, th, a, albedo=n),
+            "objective_start": float(o0.mean()), "objective_end": float(o1.mean())}
