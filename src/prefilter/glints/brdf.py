@@ -31,7 +31,7 @@ import numpy as np
 
 from prefilter._validate import as_float_array
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map, elements, pndf
+from prefilter.glints.pndf import DEFAULT_ROUGHNESS, _as_roughness, as_normal_map, elements, pndf
 from prefilter.glints.query import point
 from prefilter.glints.store import GlintsMap
 
@@ -61,12 +61,14 @@ class GlintSurface:
         return p.height, p.width
 
 
-def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True) -> GlintSurface:
+def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
+            intrinsic_roughness: float | None = None) -> GlintSurface:
     """Bundle a baked map and its normal map (the direct P-NDF for tiny footprints).
 
     ``gm=None`` gives a direct-only surface (every query by :func:`prefilter.glints.pndf`, the
     ``glints-direct`` method). ``check`` verifies that ``normal_map`` is the one ``gm`` was baked
-    from (SHA-1 of the float64 normals recorded by the bake).
+    from (SHA-1 of the float64 normals recorded by the bake). ``intrinsic_roughness``: that of
+    the direct P-NDF (default: the bake's, else Yan et al.'s 0.005).
     """
     if gm is None and normal_map is None:
         raise PrefilterError("surface: expected a GlintsMap, a normal map, or both; got neither")
@@ -88,6 +90,8 @@ def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True)
         sr = float(gm.header.get("settings", {}).get("intrinsic_roughness", DEFAULT_ROUGHNESS))
     else:
         sr = DEFAULT_ROUGHNESS
+    if intrinsic_roughness is not None:
+        sr = _as_roughness(intrinsic_roughness)
     return GlintSurface(gm, nm, el, sr)
 
 

@@ -61,6 +61,9 @@ _REGISTRY: dict[str, Method | str] = {
     "ltc-multiscale-aniso": "prefilter.multiscale.aniso:render_multiscale_aniso",
     "leadr-point": "prefilter.leadr.render:render_leadr_point",
     "ltc-aniso": "prefilter.ltc.aniso.render:render_ltc_aniso",
+    "glints": "prefilter.glints.render:render_glints",
+    "glints-direct": "prefilter.glints.render:render_glints_direct",
+    "glints-reference": "prefilter.glints.render:render_glints_reference",
 }
 _DESCRIPTIONS: dict[str, str] = {
     "ltc": "area lights by the isotropic LTC table, normal and colour from the footprint's mip "
@@ -73,6 +76,9 @@ _DESCRIPTIONS: dict[str, str] = {
     "ltc-multiscale-mrl": "multi-scale LTC with the closed-form product of mean resultant lengths",
     "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2)",
     "ltc-aniso": "area lights by the anisotropic GGX LTC table (alpha_x, alpha_y, tangent frame)",
+    "glints": "glints: compressed footprint P-NDF (point query), point/directional lights",
+    "glints-direct": "glints: direct P-NDF of every footprint (Yan et al. 2016)",
+    "glints-reference": "glints ground truth: footprint supersampling, point P-NDF of the map",
 }
 
 
