@@ -1,9 +1,11 @@
 """Renderer throughput and the reference's convergence (``make bench``; no assertions).
 
-Prints:
+Prints, each for the Numba path ("new") and the NumPy path it replaced ("old", kept as the
+tests' cross-check), in the same run:
 * primary-ray + G-buffer throughput (Mpixel/s) for a 512 x 512 view of a plane;
 * ``ltc`` shading throughput (Mpixel/s, one quad light): the shader alone over flat arrays, and the
   whole ``ltc`` method (G-buffer + mip lookups + shading) on a normal-mapped plane;
+  wall time (best of 3) and the CPU time of the process (less sensitive to other jobs' load);
 * ``reference`` cost per sample (microseconds, one quad light, normal-mapped plane);
 * with ``--convergence``: RMSE of ``reference`` vs a high-spp image for spp = 4 .. 1024 on a small
   normal-mapped scene, and the fitted slope of log RMSE vs log spp (docs/reference.md).
@@ -13,14 +15,18 @@ Thread count follows NUMBA_NUM_THREADS (the polygon kernel); NumPy parts are sin
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 
 import numpy as np
 
+import prefilter.render.pipeline as pipeline
 from prefilter.render import gbuffer, load_scene
+from prefilter.render.camera import _intersect_numpy, generate_rays, rays_at
+from prefilter.render.methods import RenderSettings
 from prefilter.render.pipeline import render, surface_attributes
-from prefilter.render.shading import shade_ltc
+from prefilter.render.shading import _shade_ltc_numpy, shade_ltc
 
 
 def scene(width: int, height: int, normal_map: bool = True) -> dict:
@@ -40,20 +46,64 @@ def scene(width: int, height: int, normal_map: bool = True) -> dict:
 
 
 def best_of(fn, repeats: int = 3) -> float:
-    times = []
+    return best_of_cpu(fn, repeats)[0]
+
+
+def best_of_cpu(fn, repeats: int = 3) -> tuple[float, float]:
+    """Best wall time and best process CPU time (all threads) of ``repeats`` calls."""
+    walls, cpus = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
+        walls.append(time.perf_counter() - t0)
+        cpus.append(time.process_time() - c0)
+    return min(walls), min(cpus)
+
+
+@contextlib.contextmanager
+def numpy_stages():
+    """The pre-Numba G-buffer and footprint lookups inside the row driver (the "old" path)."""
+    saved = pipeline.gbuffer_at, pipeline.footprint_lookup
+    pipeline.gbuffer_at = lambda sc, xy: _intersect_numpy(sc, rays_at(sc.camera, xy))
+    pipeline.footprint_lookup = lambda chain, uv, dudv: chain.lookup_footprint(uv, dudv)
+    try:
+        yield
+    finally:
+        pipeline.gbuffer_at, pipeline.footprint_lookup = saved
+
+
+def render_ltc_old(s, table):
+    """The ``ltc`` method through the NumPy stages (same image as ``render(s, "ltc")``)."""
+    lights = s.light_set()
+    settings = RenderSettings(spp=1, seed=0, jitter=(0.0, 0.0), progress=False,
+                              chunk_samples=1 << 18, table=table)
+
+    def shade(g, _u):
+        a = surface_attributes(s, g, filtered=True)
+        return _shade_ltc_numpy(g.position, a["t"], a["b"], a["n"], g.view,
+                                np.sqrt(a["alpha_x"] * a["alpha_y"]), a["base_color"], a["f0"],
+                                lights, table)
+
+    with numpy_stages():
+        return pipeline.render_samples(s, settings, shade, stratified=False)
+
+
+def line(what: str, n: int, new, old=None) -> None:
+    t, c = new
+    msg = f"{what:38s} new {n / t / 1e6:6.3f} Mpixel/s ({t * 1e3:6.1f} ms, cpu {c * 1e3:6.1f} ms)"
+    if old is not None:
+        msg += f"   old {n / old[0] / 1e6:6.3f} Mpixel/s ({old[0] * 1e3:6.1f} ms)"
+        msg += f"   x{old[0] / t:.1f}"
+    print(msg)
 
 
 def bench_throughput() -> None:
     s = load_scene(scene(512, 512))
     npix = 512 * 512
-    gbuffer(s)  # warm-up
-    t = best_of(lambda: gbuffer(s))
-    print(f"primary rays + G-buffer, 512x512 plane:  {npix / t / 1e6:7.3f} Mpixel/s  ({t:.3f} s)")
+    gbuffer(s)  # warm-up (and JIT)
+    new = best_of_cpu(lambda: gbuffer(s))
+    old = best_of_cpu(lambda: _intersect_numpy(s, generate_rays(s.camera)))
+    line("primary rays + G-buffer, 512x512 plane", npix, new, old)
 
     try:
         from prefilter.ltc.table import GGXTable
@@ -69,14 +119,13 @@ def bench_throughput() -> None:
         args = (g.position, a["t"], a["b"], a["n"], g.view, np.full(len(g.hit), 0.2),
                 a["base_color"], a["f0"], s.light_set(), table)
         shade_ltc(*args)
-        t = best_of(lambda: shade_ltc(*args))
         n = len(g.hit)
-        print(f"ltc shading only, 1 quad light:          {n / t / 1e6:7.3f} Mpixel/s  "
-              f"({n} hit pixels, {t:.3f} s)")
+        line(f"ltc shader alone ({n} points)", n, best_of_cpu(lambda: shade_ltc(*args)),
+             best_of_cpu(lambda: _shade_ltc_numpy(*args)))
         render(s, "ltc", table=table)
-        t = best_of(lambda: render(s, "ltc", table=table), repeats=2)
-        print(f"ltc method end to end, 512x512:          {npix / t / 1e6:7.3f} Mpixel/s  "
-              f"({t:.3f} s)")
+        line("ltc end to end, 512x512", npix,
+             best_of_cpu(lambda: render(s, "ltc", table=table)),
+             best_of_cpu(lambda: render_ltc_old(s, table), repeats=2))
 
     s2 = load_scene(scene(128, 128))
     spp = 16

@@ -121,3 +121,58 @@ def test_misses_and_nearest_object():
     assert g.object_id[16, 16] == 1 and g.distance[16, 16] == pytest.approx(3.5, abs=0.01)
     assert not g.hit[0, 0] and g.object_id[0, 0] == -1 and np.isinf(g.distance[0, 0])
     assert np.allclose(np.linalg.norm(g.view, axis=-1), 1.0)
+
+
+def _assert_same_gbuffer(g, want):
+    from dataclasses import fields
+
+    for f in fields(g):
+        a, b = getattr(g, f.name), getattr(want, f.name)
+        assert a.shape == b.shape and a.dtype == b.dtype, f.name
+        if a.dtype == bool or a.dtype.kind == "i":
+            assert np.array_equal(a, b), f.name
+        else:
+            assert np.allclose(a, b, rtol=1e-9, atol=1e-9, equal_nan=False), f.name
+
+
+def test_numba_gbuffer_matches_the_numpy_path_on_random_scenes():
+    from prefilter.render.camera import _intersect_numpy
+
+    rng = np.random.default_rng(7)
+    for trial in range(4):
+        objects = [{"type": "plane", "center": rng.normal(size=3).tolist(),
+                    "normal": rng.normal(size=3).tolist(), "tangent": rng.normal(size=3).tolist(),
+                    "size": rng.uniform(6, 14, 2).tolist(),
+                    "uv_scale": rng.uniform(1, 5, 2).tolist()},
+                   {"type": "sphere", "center": (rng.normal(size=3) * [1, 1, 0.5]).tolist(),
+                    "radius": float(rng.uniform(0.8, 1.8)), "pole": rng.normal(size=3).tolist(),
+                    "axis_x": rng.normal(size=3).tolist(), "uv_scale": [3, 2]}]
+        s = _scene(_cam(rng.normal(size=3) * 0.3 + [0, 0, 5], (0, 0, 0), fov=70.0, w=40, h=30),
+                   objects)
+        xy = rng.uniform([-5, -5], [45, 35], (500, 2))  # also off-image positions
+        want = _intersect_numpy(s, rays_at(s.camera, xy))
+        assert want.hit.sum() > 40 and (~want.hit).sum() > 10
+        _assert_same_gbuffer(gbuffer_at(s, xy), want)
+        # and the kernel for given rays, with per-ray origins (not only the camera's)
+        r = rays_at(s.camera, xy)
+        shifted = type(r)(r.origin + rng.normal(size=(500, 3)) * 0.2, r.direction, r.ddx, r.ddy)
+        from prefilter.render.camera import intersect
+
+        _assert_same_gbuffer(intersect(s, shifted), _intersect_numpy(s, shifted))
+
+
+def test_gbuffer_does_not_depend_on_the_thread_count():
+    import numba
+
+    s = _scene(_cam((0.3, 2, 4), (0, 0, -3), fov=50), [
+        {"type": "plane", "size": [40, 40], "uv_scale": [7, 3]},
+        {"type": "sphere", "center": [1, 1, -2], "radius": 1.0}])
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        a = gbuffer(s)
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        b = gbuffer(s)
+    finally:
+        numba.set_num_threads(before)
+    assert a.position.tobytes() == b.position.tobytes() and a.dudv.tobytes() == b.dudv.tobytes()

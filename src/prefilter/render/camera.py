@@ -12,6 +12,10 @@ on a surface with normal ``n`` reached by the direction ``d(x, y)``, the hit poi
 tangent plane as ``dp/dx = t (dd/dx - (n . dd/dx) / (n . d) d)`` (same for y), which is the exact
 first derivative on planes and spheres alike (the tangent plane has first-order contact); the UV
 Jacobian is ``d(uv)/d(pixel) = (d uv / d p) (dp/dx, dp/dy)``.
+
+:func:`gbuffer`, :func:`gbuffer_at` and :func:`intersect` run one Numba pass per sample
+(:mod:`prefilter.render.kernels`: ray, nearest hit, frame, uv and footprint, no masked gathers);
+``_intersect_numpy`` is the NumPy implementation they are tested against.
 """
 
 from __future__ import annotations
@@ -244,8 +248,8 @@ def _sphere_geometry(obj, p):
 _SHAPES = {"plane": (_hit_plane, _plane_geometry), "sphere": (_hit_sphere, _sphere_geometry)}
 
 
-def intersect(scene, rays: Rays) -> GBuffer:
-    """Nearest hits of ``rays`` with ``scene.objects`` and the surface data at them."""
+def _intersect_numpy(scene, rays: Rays) -> GBuffer:
+    """NumPy implementation of :func:`intersect` (cross-checks the Numba kernel in the tests)."""
     o, d = np.asarray(rays.origin, float), np.asarray(rays.direction, float)
     shape = d.shape[:-1]
     best = np.full(shape, np.inf)
@@ -281,6 +285,60 @@ def intersect(scene, rays: Rays) -> GBuffer:
     return g
 
 
+
+def _empty_gbuffer(shape) -> dict:
+    n = int(np.prod(shape, dtype=np.int64))
+    return {"hit": np.empty(n, bool), "object_id": np.empty(n, np.int32),
+            "position": np.empty((n, 3)), "normal": np.empty((n, 3)), "tangent": np.empty((n, 3)),
+            "bitangent": np.empty((n, 3)), "uv": np.empty((n, 2)), "dudv": np.empty((n, 2, 2)),
+            "dpdx": np.empty((n, 3)), "dpdy": np.empty((n, 3)), "distance": np.empty(n),
+            "view": np.empty((n, 3)), "direction": np.empty((n, 3))}
+
+
+_ORDER = ("hit", "object_id", "position", "normal", "tangent", "bitangent", "uv", "dudv", "dpdx",
+          "dpdy", "distance", "view", "direction")
+
+
+def _finish(out: dict, shape) -> GBuffer:
+    return GBuffer(**{k: v.reshape(tuple(shape) + v.shape[1:]) for k, v in out.items()})
+
+
+def intersect(scene, rays: Rays) -> GBuffer:
+    """Nearest hits of ``rays`` with ``scene.objects`` and the surface data at them."""
+    from prefilter.render.kernels import gbuffer_rays_kernel, pack_objects
+
+    d = np.asarray(rays.direction, float)
+    shape = d.shape[:-1]
+
+    def flat(a):
+        return np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), d.shape)).reshape(-1, 3)
+
+    types, params = pack_objects(scene.objects)
+    out = _empty_gbuffer(shape)
+    gbuffer_rays_kernel(flat(rays.origin), flat(d), flat(rays.ddx), flat(rays.ddy), types, params,
+                        *(out[k] for k in _ORDER))
+    return _finish(out, shape)
+
+
+def _camera_params(cam: Camera) -> np.ndarray:
+    r, u, f = cam.basis()
+    th = np.tan(np.radians(cam.fov) / 2.0)
+    return np.concatenate([np.asarray(cam.origin, float), r, u, f,
+                           [2.0 * th / cam.height, cam.width, cam.height, 0.0]])
+
+
+def _gbuffer_camera(scene, cam: Camera, xy: np.ndarray) -> GBuffer:
+    """Rays through ``xy (..., 2)`` and their G-buffer in one Numba pass (no ray arrays)."""
+    from prefilter.render.kernels import gbuffer_camera_kernel, pack_objects
+
+    shape = xy.shape[:-1]
+    types, params = pack_objects(scene.objects)
+    out = _empty_gbuffer(shape)
+    gbuffer_camera_kernel(_camera_params(cam), np.ascontiguousarray(xy).reshape(-1, 2), types,
+                          params, *(out[k] for k in _ORDER))
+    return _finish(out, shape)
+
+
 def gbuffer(scene, camera: Camera | None = None, *, jitter=None, offsets=None) -> GBuffer:
     """G-buffer of ``scene`` seen by ``camera`` (default ``scene.camera``).
 
@@ -288,10 +346,10 @@ def gbuffer(scene, camera: Camera | None = None, *, jitter=None, offsets=None) -
     sub-pixel ``offsets (S, 2)`` / ``(H, W, S, 2)``; see :func:`pixel_positions`.
     """
     cam = scene.camera if camera is None else camera
-    return intersect(scene, generate_rays(cam, jitter=jitter, offsets=offsets))
+    return _gbuffer_camera(scene, cam, pixel_positions(cam, jitter=jitter, offsets=offsets))
 
 
 def gbuffer_at(scene, xy, camera: Camera | None = None) -> GBuffer:
     """G-buffer at arbitrary continuous pixel positions ``xy (..., 2)``."""
     cam = scene.camera if camera is None else camera
-    return intersect(scene, rays_at(cam, xy))
+    return _gbuffer_camera(scene, cam, as_float_array(xy, "xy", ndim_min=1, last_dim=2))

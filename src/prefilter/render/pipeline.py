@@ -11,6 +11,11 @@ the chunk size. Pixels whose samples miss every object are black (no background)
 
 Surfaces are two-sided: a hit seen from behind its geometric normal is shaded with the frame
 flipped (``n, b -> -n, -b``, still right-handed).
+
+The ``ltc`` method with quad lights only runs one fused Numba kernel per row chunk (ray, hit,
+footprint texture reads, shading frame, LTC shader; :func:`_render_ltc_fused`); with point or
+directional lights it uses the stages above (G-buffer, :func:`surface_attributes`,
+:func:`prefilter.render.shading.shade_ltc`), which give the same image.
 """
 
 from __future__ import annotations
@@ -85,6 +90,36 @@ def row_rng(seed: int, row: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(row,)))
 
 
+def chunk_positions(settings: RenderSettings, rows, w: int, stratified: bool,
+                    random_dims: int = 0):
+    """Sub-pixel sample positions ``xy (len(rows), W, S, 2)`` of image rows ``rows`` and, when
+    ``random_dims > 0``, a list of ``(W * S, random_dims)`` uniforms per row, each row from its
+    own generator (:func:`row_rng`)."""
+    from prefilter.render.reference import stratified_offsets
+
+    s = settings.spp
+    offs, us = [], []
+    if not (stratified or s > 1 or random_dims):  # pixel centres: no random numbers needed
+        offs = [np.full((len(rows), w, 1, 2), 0.5)]
+        rows_ = []
+    else:
+        rows_ = rows
+    for y in rows_:
+        rng = row_rng(settings.seed, y)
+        if stratified or s > 1:
+            o = stratified_offsets(s, w, rng)
+        else:
+            o = np.full((w, 1, 2), 0.5)
+        offs.append(o)
+        if random_dims:
+            us.append(rng.random((w * s, random_dims)))
+    o = offs[0] if rows_ == [] else np.stack(offs)  # (rows, W, S, 2) in [0, 1)
+    xy = o + np.asarray(settings.jitter, dtype=np.float64)
+    xy[..., 0] += np.arange(w, dtype=np.float64)[None, :, None]
+    xy[..., 1] += np.asarray(rows, dtype=np.float64)[:, None, None]
+    return xy, us
+
+
 def render_samples(scene: Scene, settings: RenderSettings, shade, *, random_dims: int = 0,
                    stratified: bool = True, desc: str = "render") -> np.ndarray:
     """Drive a method over row chunks: trace sub-pixel samples, shade hits, average per pixel.
@@ -101,40 +136,42 @@ def render_samples(scene: Scene, settings: RenderSettings, shade, *, random_dims
         (:func:`prefilter.render.reference.stratified_offsets`); ``False`` with ``spp == 1``:
         the pixel centre.
     """
-    from prefilter.render.reference import stratified_offsets
-
     cam = scene.camera
     h, w, s = cam.height, cam.width, settings.spp
     rows_per_chunk = max(1, settings.chunk_samples // (w * s))
     image = np.zeros((h, w, 3))
-    jit = np.asarray(settings.jitter, dtype=np.float64)
-    xs = np.arange(w, dtype=np.float64)
     with tqdm(total=h, desc=desc, unit="row", delay=1.0, leave=False,
               disable=not settings.progress) as bar:
         for r0 in range(0, h, rows_per_chunk):
             rows = range(r0, min(h, r0 + rows_per_chunk))
-            offs, us = [], []
-            for y in rows:
-                rng = row_rng(settings.seed, y)
-                if stratified or s > 1:
-                    o = stratified_offsets(s, w, rng)
-                else:
-                    o = np.full((w, 1, 2), 0.5)
-                offs.append(o)
-                if random_dims:
-                    us.append(rng.random((w * s, random_dims)))
-            o = np.stack(offs)  # (rows, W, S, 2) in [0, 1)
-            xy = o + jit
-            xy[..., 0] += xs[None, :, None]
-            xy[..., 1] += np.asarray(rows, dtype=np.float64)[:, None, None]
+            xy, us = chunk_positions(settings, rows, w, stratified, random_dims)
             g = gbuffer_at(scene, xy).reshape(-1)
             rad = np.zeros((g.hit.size, 3))
             if np.any(g.hit):
                 u = np.concatenate(us)[g.hit] if random_dims else None
                 rad[g.hit] = shade(g.select(g.hit), u)
-            image[r0:r0 + len(rows)] = rad.reshape(len(rows), w, s, 3).mean(axis=2)
+            rad = rad.reshape(len(rows), w, s, 3)
+            # the mean of one sample is that sample: skip the reduction
+            image[r0:r0 + len(rows)] = rad[:, :, 0] if s == 1 else rad.mean(axis=2)
             bar.update(len(rows))
     return image
+
+
+def footprint_lookup(chain, uv, dudv) -> np.ndarray:
+    """``chain.lookup_footprint(uv, dudv)`` (isotropic trilinear) by a Numba kernel.
+
+    ``chain``: a :class:`prefilter.texture.MipChain`; ``uv (N, 2)``, ``dudv (N, 2, 2)`` ->
+    ``(N, C)``.
+    """
+    from prefilter.render.kernels import footprint_lookup_kernel, pack_mip
+
+    data, info = pack_mip(chain)
+    c = chain.shape[2]
+    uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
+    out = np.empty((len(uv), c))
+    footprint_lookup_kernel(data, info, c, uv,
+                            np.ascontiguousarray(dudv, dtype=np.float64).reshape(-1, 2, 2), out)
+    return out
 
 
 def surface_attributes(scene: Scene, g, *, filtered: bool):
@@ -164,7 +201,7 @@ def surface_attributes(scene: Scene, g, *, filtered: bool):
 
     def tex(ref, m):
         if filtered:
-            return ref.mip().lookup_footprint(g.uv[m], g.dudv[m])
+            return footprint_lookup(ref.mip(), g.uv[m], g.dudv[m])
         return ref.mip().lookup(g.uv[m], 0.0)
 
     for k in np.unique(g.object_id):
@@ -198,6 +235,10 @@ def render_ltc(scene: Scene, settings: RenderSettings) -> np.ndarray:
 
     lights = supported_lights(scene, "ltc")
     table = settings.table if settings.table is not None else GGXTable.load()
+    if not (lights.points or lights.directionals):
+        image = _render_ltc_fused(scene, settings, lights, table)
+        if image is not None:
+            return image
 
     def shade(g, _u):
         a = surface_attributes(scene, g, filtered=True)
@@ -206,6 +247,52 @@ def render_ltc(scene: Scene, settings: RenderSettings) -> np.ndarray:
                          lights, table)
 
     return render_samples(scene, settings, shade, stratified=settings.spp > 1, desc="ltc")
+
+
+def _render_ltc_fused(scene: Scene, settings: RenderSettings, lights, table):
+    """:func:`render_ltc` for quad lights only, one Numba pass per row chunk
+    (:func:`prefilter.render.kernels.ltc_samples_kernel`): the same sample positions, footprint
+    lookups, frames and shader as the NumPy stages, without intermediate arrays. ``None`` when
+    the scene needs the general path (textures with too few channels, a table-like object)."""
+    from prefilter.render.camera import _camera_params
+    from prefilter.render.kernels import ltc_samples_kernel, pack_materials, pack_objects
+    from prefilter.render.shading import VIEW_Z_MIN
+
+    if not all(hasattr(table, k) for k in ("axis_t", "axis_r", "M", "magnitude", "fresnel")):
+        return None
+    packed = pack_materials(scene.objects)
+    if packed is None:
+        return None
+    types, params = pack_objects(scene.objects)
+    quads = lights.quads
+    qv = np.ascontiguousarray([q.vertices for q in quads], dtype=np.float64).reshape(-1, 4, 3)
+    qn = np.ascontiguousarray([q.normal for q in quads], dtype=np.float64).reshape(-1, 3)
+    qr = np.ascontiguousarray([q.radiance for q in quads], dtype=np.float64).reshape(-1, 3)
+    tab = [np.ascontiguousarray(a, dtype=np.float64)
+           for a in (table.axis_t, table.axis_r, table.M, table.magnitude, table.fresnel)]
+    cam = scene.camera
+    campar = _camera_params(cam)
+    h, w, s = cam.height, cam.width, settings.spp
+    rows_per_chunk = max(1, settings.chunk_samples // (w * s))
+    image = np.zeros((h, w, 3))
+    with tqdm(total=h, desc="ltc", unit="row", delay=1.0, leave=False,
+              disable=not settings.progress) as bar:
+        for r0 in range(0, h, rows_per_chunk):
+            rows = range(r0, min(h, r0 + rows_per_chunk))
+            xy, _ = chunk_positions(settings, rows, w, settings.spp > 1)
+            xy = np.ascontiguousarray(xy).reshape(-1, 2)
+            rad = np.empty((len(xy), 3))
+            status = np.zeros(len(xy), np.uint8)
+            ltc_samples_kernel(campar, xy, types, params, *packed, qv, qn, qr, *tab, VIEW_Z_MIN,
+                               rad, status)
+            if status.any():
+                raise PrefilterError("table: expected invertible LTC matrices, got a singular "
+                                     "interpolated one")
+            rad = rad.reshape(len(rows), w, s, 3)
+            # the mean of one sample is that sample: skip the reduction
+            image[r0:r0 + len(rows)] = rad[:, :, 0] if s == 1 else rad.mean(axis=2)
+            bar.update(len(rows))
+    return image
 
 
 def with_settings(settings: RenderSettings, **changes) -> RenderSettings:

@@ -10,6 +10,10 @@ colours ``(N, 3)``; it returns radiance ``(N, 3)``.
 The view is clamped to the shading hemisphere (``wo_z >= VIEW_Z_MIN``, see :func:`local_view`)
 because a normal map can tilt the shading normal away from a visible point; every method uses the
 same clamp, so they converge to the same image.
+
+:func:`shade_ltc` integrates quad lights in one fused Numba kernel per shading point
+(:func:`prefilter.render.kernels.ltc_quads_kernel`); ``_shade_ltc_numpy`` is the NumPy
+implementation it is tested against (and the path for table-like objects without table arrays).
 """
 
 from __future__ import annotations
@@ -141,6 +145,55 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
     ``(f0 (n - f5) + f5) E(M^-1 P)`` with ``(M, n, f5)`` from the table. Polygons are clipped at
     the shading horizon. Point and directional lights use the true BRDF.
     """
+    from prefilter.errors import PrefilterError
+    from prefilter.render.kernels import ltc_quads_kernel
+
+    position = np.asarray(position, dtype=np.float64)
+    ts, bs, ns = (np.asarray(a, dtype=np.float64) for a in (frame_t, frame_b, frame_n))
+    alpha = np.asarray(alpha, dtype=np.float64)
+    base_color = np.asarray(base_color, dtype=np.float64)
+    f0 = np.asarray(f0, dtype=np.float64)
+    if lights.points or lights.directionals:
+        wo = local_view(view, ts, bs, ns)
+        out = shade_delta_lights(position, ts, bs, ns, wo, alpha, alpha, base_color, f0, lights)
+    else:
+        out = np.zeros((len(position), 3))
+    if not lights.quads:
+        return out
+    if not all(hasattr(table, k) for k in ("axis_t", "axis_r", "M", "magnitude", "fresnel")):
+        # a table-like object without the GGXTable arrays (test stand-ins): the NumPy path
+        return _shade_ltc_numpy(position, ts, bs, ns, view, alpha, base_color, f0, lights, table)
+    n = len(position)
+
+    def c3(a):
+        return np.ascontiguousarray(np.broadcast_to(a, (n, 3)), dtype=np.float64)
+
+    status = np.zeros(n, np.uint8)
+    # Roughness below the table's range uses its smoothest row (the kernel clamps alpha to
+    # [alpha_min, 1], documented in docs/reference.md); the light is cut at the shading horizon
+    # before the LTC transform, as in the NumPy path.
+    ltc_quads_kernel(c3(position), c3(ts), c3(bs), c3(ns), c3(view),
+                     np.ascontiguousarray(np.broadcast_to(alpha, (n,)), dtype=np.float64),
+                     c3(base_color), c3(f0),
+                     np.ascontiguousarray([q.vertices for q in lights.quads], dtype=np.float64),
+                     np.ascontiguousarray([q.normal for q in lights.quads], dtype=np.float64),
+                     np.ascontiguousarray([q.radiance for q in lights.quads], dtype=np.float64),
+                     np.ascontiguousarray(table.axis_t, dtype=np.float64),
+                     np.ascontiguousarray(table.axis_r, dtype=np.float64),
+                     np.ascontiguousarray(table.M, dtype=np.float64),
+                     np.ascontiguousarray(table.magnitude, dtype=np.float64),
+                     np.ascontiguousarray(table.fresnel, dtype=np.float64), VIEW_Z_MIN, out,
+                     status)
+    if status.any():
+        k = int(np.flatnonzero(status)[0])
+        raise PrefilterError(f"M_inv: expected invertible matrices, got a singular LTC matrix "
+                             f"at shading point {k}")
+    return out
+
+
+def _shade_ltc_numpy(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
+              lights: LightSet, table) -> np.ndarray:
+    """NumPy implementation of :func:`shade_ltc` (cross-checks the fused kernel in the tests)."""
     position = np.asarray(position, dtype=np.float64)
     ts, bs, ns = (np.asarray(a, dtype=np.float64) for a in (frame_t, frame_b, frame_n))
     alpha = np.asarray(alpha, dtype=np.float64)
