@@ -15,7 +15,7 @@ squared RMSE (``RMSE_debiased^2 = RMSE^2 - noise^2``). ``--table PATH`` selects 
 
 ``--study [--maps brushed,gaussian]``: the issue-5 follow-up at the far / mid / near distances:
 ``ltc``, ``ltc-multiscale``, ``ltc-multiscale-aniso`` and both multi-scale methods with the
-anisotropic (multi-tap) footprint; RMSE (debiased), FLIP and flicker per method, and the flicker
+anisotropic (multi-tap) footprint or a LOD bias of one level; RMSE (debiased), FLIP and flicker per method, and the flicker
 of ``ltc`` on the same plane *without* the normal map (the geometric floor: what a 1-spp shader
 flickers from the light's and the plane's edges alone).
 """
@@ -132,6 +132,8 @@ STUDY = {
     "ms-aniso": _variant("ltc-multiscale-aniso"),
     "ms+ewa": _variant("ltc-multiscale", anisotropic_footprint=True),
     "ms-aniso+ewa": _variant("ltc-multiscale-aniso", anisotropic_footprint=True),
+    "ms+bias1": _variant("ltc-multiscale", lod_bias=1.0),
+    "ms-aniso+bias1": _variant("ltc-multiscale-aniso", lod_bias=1.0),
 }
 
 
