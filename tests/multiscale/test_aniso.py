@@ -120,3 +120,23 @@ def test_brushed_far_error_below_isotropic_multiscale():
         return np.sqrt(max(e * e - noise * noise, 0.0))
 
     assert err("ltc-multiscale-aniso") <= 0.85 * err("ltc-multiscale")
+
+
+@pytest.mark.parametrize("kw", [{"lod_bias": 8.0}, {"anisotropic_footprint": True}])
+def test_footprint_options_keep_the_closed_form_where_it_holds(tmp_path, kw):
+    # lod_bias 8 reads the 1 x 1 level (the map's mean) everywhere; the multi-tap footprint on a
+    # far checkerboard still averages many texels: both give the closed-form r = cos(theta)
+    from prefilter.multiscale.render import multiscale_attributes
+
+    theta = 0.3
+    scale = 0.1 if "lod_bias" in kw else 200.0
+    sc = load_scene(_scene(_checker_axis(theta, 0), tmp_path, uv_scale=scale),
+                    base_dir=tmp_path)
+    g = gbuffer(sc).reshape(-1)
+    g = g.select(g.hit)
+    np.testing.assert_allclose(multiscale_attributes(sc, g, **kw)["r"], np.cos(theta), atol=1e-9)
+    a = aniso_attributes(sc, g, **kw)
+    want = np.sqrt(GGX_PER_BECKMANN ** 2 * 2 * np.tan(theta) ** 2 + 0.01)
+    np.testing.assert_allclose(a["alpha_x"], want, atol=1e-6)
+    if "lod_bias" in kw:  # without the bias, sub-texel footprints read (blends of) texels
+        assert np.ptp(multiscale_attributes(sc, g)["r"]) > 0.01
