@@ -296,11 +296,11 @@ def _showcase_section(report, settings: DemoSettings, seed: int, log) -> None:
                      rows, caption="Errors against the reference at each distance (the "
                      "reference rows give its render time).")
     if curves:
-        report.add_plot(line_plot_safe(list(settings.distances), curves), caption="Error "
+        report.add_plot(_distance_plot(list(settings.distances), curves), caption="Error "
                         "against distance.")
 
 
-def line_plot_safe(x, curves):
+def _distance_plot(x, curves):
     from prefilter.render.report import line_plot
 
     return line_plot(x, curves, xlabel="camera distance (x)", ylabel="mean FLIP vs reference",
