@@ -185,3 +185,71 @@ def render_glints_reference(scene, settings) -> np.ndarray:
             image[r0:r0 + len(rows)] = rad.reshape(len(rows), w, s, 3).mean(axis=2)
             bar.update(len(rows))
     return image.astype(np.float32)
+
+
+# ------------------------------------------------------------------------------- measurements
+
+
+def measurement_scene(distance: float, kind: str = "flakes", size: int = 128, width: int = 64,
+                      height: int = 48) -> dict:
+    """A glinty plane seen from ``distance`` (camera and point light scaled together, so the
+    image is the same apart from the footprint size, ~proportional to the distance)."""
+    d = float(distance)
+    return {"camera": {"origin": [0, 0.6 * d, d], "target": [0, 0, 0], "up": [0, 1, 0],
+                       "fov": 30, "width": width, "height": height},
+            "objects": [{"type": "plane", "center": [0, 0, 0], "normal": [0, 1, 0],
+                         "tangent": [1, 0, 0], "size": [40 * d, 40 * d],
+                         "uv_scale": [160 * d] * 2,
+                         "material": {"alpha": 0.1, "base_color": [0, 0, 0],
+                                      "f0": [0.9, 0.9, 0.9],
+                                      "normal_map": {"procedural": kind, "size": size,
+                                                     "seed": 1}}}],
+            "lights": [{"type": "point", "position": [0, 0.6 * d, -d],
+                        "intensity": [5 * d * d] * 3}]}
+
+
+def measure(distances=(0.5, 2.0, 8.0), kind: str = "flakes", size: int = 128,
+            ref_spp: int = 64) -> list[dict]:
+    """Frame times (best of 2) of ``glints`` and ``glints-direct`` at each distance in one run,
+    FLIP between them and against ``glints-reference`` (``ref_spp``)."""
+    import time
+
+    from prefilter.render.metrics import flip
+    from prefilter.render.pipeline import render
+    from prefilter.render.scene import load_scene
+
+    rows = []
+    for d in distances:
+        sc = load_scene(measurement_scene(d, kind, size))
+        render(sc, "glints")  # bake / compile outside the timing
+        t = {}
+        img = {}
+        for m in ("glints", "glints-direct"):
+            best = np.inf
+            for _ in range(2 if m == "glints" else 1):
+                t0 = time.perf_counter()
+                img[m] = render(sc, m)
+                best = min(best, time.perf_counter() - t0)
+            t[m] = best
+        img["ref"] = render(sc, "glints-reference", spp=ref_spp)
+        from prefilter.render.camera import gbuffer_at
+
+        xy = np.stack(np.meshgrid(np.arange(sc.camera.width) + 0.5,
+                                  np.arange(sc.camera.height) + 0.5), -1)
+        g = gbuffer_at(sc, xy).reshape(-1)
+        _, sp = footprints(g.select(g.hit), (size, size))
+        rows.append(dict(distance=d, sigma_p_median=float(np.median(sp)),
+                         t_glints=t["glints"], t_direct=t["glints-direct"],
+                         speedup=t["glints-direct"] / t["glints"],
+                         flip_glints_direct=float(flip(img["glints"], img["glints-direct"]).mean),
+                         flip_glints_ref=float(flip(img["glints"], img["ref"]).mean),
+                         flip_direct_ref=float(flip(img["glints-direct"], img["ref"]).mean),
+                         mean_ratio=float(img["glints"].mean() / img["glints-direct"].mean())))
+        print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
+if __name__ == "__main__":  # python -m prefilter.glints.render [kind]
+    import sys
+
+    measure(kind=sys.argv[1] if len(sys.argv) > 1 else "flakes")
