@@ -84,6 +84,7 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
     ``lod_bias`` scales the footprint by ``2^lod_bias``.
     """
     from prefilter.multiscale.convolution import _alpha_total
+    from prefilter.multiscale.render import _lookup
     from prefilter.render.shading import shading_frame
 
     if combine not in COMBINE:
@@ -96,7 +97,6 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
     base, f0 = np.zeros((n_samples, 3)), np.zeros((n_samples, 3))
     flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
     gn, gt, gb = g.normal * flip, g.tangent, g.bitangent * flip
-    kw = {"anisotropic": anisotropic_footprint, "max_aniso": max_aniso}
     for k in np.unique(g.object_id):
         m = g.object_id == k
         cnt = int(m.sum())
@@ -112,7 +112,8 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
             mean = np.zeros((cnt, 2))
             cov_meso = np.zeros((cnt, 2, 2))
         else:
-            mom = chain.lookup_footprint(g.uv[m], g.dudv[m] * 2.0 ** lod_bias, **kw)
+            mom = _lookup(chain, g.uv[m], g.dudv[m] * 2.0 ** lod_bias, anisotropic_footprint,
+                          max_aniso)
             mean = mom[:, :2]
             cxx = np.maximum(mom[:, 2] - mean[:, 0] ** 2, 0.0)
             cyy = np.maximum(mom[:, 3] - mean[:, 1] ** 2, 0.0)
@@ -141,7 +142,7 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
         ax[m], ay[m] = np.minimum(a1, 1.0), np.minimum(a2, 1.0)
         col = np.broadcast_to(mat.base_color, (cnt, 3))
         if mat.color_map is not None:
-            cm = mat.color_map.mip().lookup_footprint(g.uv[m], g.dudv[m])
+            cm = _lookup(mat.color_map.mip(), g.uv[m], g.dudv[m], False, 8)
             col = col * (cm[:, :3] if cm.shape[1] >= 3 else cm[:, :1])
         base[m] = col
         f0[m] = mat.f0

@@ -28,6 +28,15 @@ def _alpha_meso_fast(r: np.ndarray, variant: str) -> np.ndarray:
     return _alpha_from_r(r)
 
 
+def _lookup(chain, uv, dudv, anisotropic: bool, max_aniso: int) -> np.ndarray:
+    # the isotropic lookup by the pipeline's compiled kernel (same result as the NumPy path)
+    if anisotropic:
+        return chain.lookup_footprint(uv, dudv, anisotropic=True, max_aniso=max_aniso)
+    from prefilter.render.pipeline import footprint_lookup
+
+    return footprint_lookup(chain, uv, dudv)
+
+
 def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
                           anisotropic_footprint: bool = False, max_aniso: int = 8,
                           lod_bias: float = 0.0) -> dict:
@@ -59,9 +68,8 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
         mat = scene.objects[int(k)].material
         nts = None
         if mat.normal_map is not None:
-            nts = mat.normal_map.mip().lookup_footprint(g.uv[m], g.dudv[m] * 2.0 ** lod_bias,
-                                                        anisotropic=anisotropic_footprint,
-                                                        max_aniso=max_aniso)
+            nts = _lookup(mat.normal_map.mip(), g.uv[m], g.dudv[m] * 2.0 ** lod_bias,
+                          anisotropic_footprint, max_aniso)
             r[m] = np.minimum(np.sqrt(np.einsum("ij,ij->i", nts, nts)), 1.0)
         elif mat.height_map is not None:
             nts = slopes_to_normals(mat.height_map.mip().lookup_footprint(g.uv[m],
@@ -70,7 +78,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
         alpha_micro[m] = np.sqrt(mat.alpha_x * mat.alpha_y)
         c = np.broadcast_to(mat.base_color, (int(m.sum()), 3))
         if mat.color_map is not None:
-            cm = mat.color_map.mip().lookup_footprint(g.uv[m], g.dudv[m])
+            cm = _lookup(mat.color_map.mip(), g.uv[m], g.dudv[m], False, 8)
             c = c * (cm[:, :3] if cm.shape[1] >= 3 else cm[:, :1])
         base[m] = c
         f0[m] = mat.f0
