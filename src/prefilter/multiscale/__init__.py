@@ -2,7 +2,9 @@
 
 ``mean_resultant_length`` / ``alpha_meso`` (eqs. 4-5): meso-scale roughness from the length of
 an unnormalised mip-averaged normal; ``alpha_total`` (eqs. 6-7): micro- and meso-scale roughness
-combined; the render method ``ltc-multiscale`` lives in :mod:`prefilter.multiscale.render`.
+combined; the render method ``ltc-multiscale`` lives in :mod:`prefilter.multiscale.render`, its
+anisotropic extension ``ltc-multiscale-aniso`` (LEAN slope moments, anisotropic LTC table) in
+:mod:`prefilter.multiscale.aniso`.
 """
 
 from prefilter.multiscale.convolution import (
