@@ -90,7 +90,7 @@ def _rel_l2(gm, c, sp, n, seed):
 
 def test_histogram_matches_ndf_image_fast(gm):
     """300k samples: relative L2 within 1.3x the multinomial noise expected at this count
-    (~4.8 %: sqrt(sum p (1 - p) / n) / |p|); the 10M version (slow) checks the 2 % acceptance bound."""
+    (~4.8 %: sqrt(sum p (1 - p) / n) / |p|); the 10M version (slow) checks the 2 % bound."""
     c, sp = (33.0, 5.2), 6.0
     n = 300_000
     err, img = _rel_l2(gm, c, sp, n, 3)

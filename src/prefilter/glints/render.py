@@ -249,7 +249,55 @@ def measure(distances=(0.5, 2.0, 8.0), kind: str = "flakes", size: int = 128,
     return rows
 
 
-if __name__ == "__main__":  # python -m prefilter.glints.render [kind]
+def ndf_errors(kinds=("gaussian", "brushed", "flakes", "scratches"), size: int = 64,
+               sigmas=(4.0, 8.0, 16.0), n: int = 6, seed: int = 0) -> list[dict]:
+    """Relative L2 error of NDF images against the direct P-NDF images (pixel averages) for
+    ``n`` random footprints per size: the compressed query, and a smooth lobe (a Gaussian NDF of
+    ``s`` with the footprint's mean and covariance: a plain microfacet model with matched
+    moments)."""
+    from prefilter.glints import pndf_image, point
+    from prefilter.texture.procedural import normal_map
+
+    R, S = BAKE_SETTINGS["ndf_res"], BAKE_SETTINGS["support"]
+    sr, h = BAKE_SETTINGS["intrinsic_roughness"], 2 * BAKE_SETTINGS["support"] / R
+    x = (np.arange(R) + 0.5) * h - S
+    X, Y = np.meshgrid(x, x)
+    grid = np.stack([X, Y], -1)
+    rng = np.random.default_rng(seed)
+    rows = []
+    for kind in kinds:
+        nm = normal_map(kind, size=size, seed=1)
+        surf = baked_surface(nm)
+        row = {"map": kind, "bake_error": surf.gm.header["summary"]["rel_l2_error"]}
+        for sp in sigmas:
+            c = rng.uniform(0, size, (n, 2))
+            ref = pndf_image(nm, c, sp, R, S, sr)
+            got = point(surf.gm, c[:, None, None], sp, grid[None])
+            w = ref * h * h
+            m = w.sum((1, 2))
+            mx, my = (w * X).sum((1, 2)) / m, (w * Y).sum((1, 2)) / m
+            dx, dy = X - mx[:, None, None], Y - my[:, None, None]
+            cxx, cyy = (w * dx * dx).sum((1, 2)) / m, (w * dy * dy).sum((1, 2)) / m
+            cxy = (w * dx * dy).sum((1, 2)) / m
+            det = (cxx * cyy - cxy**2)[:, None, None]
+            q = (cyy[:, None, None] * dx * dx - 2 * cxy[:, None, None] * dx * dy
+                 + cxx[:, None, None] * dy * dy) / det
+            smooth = m[:, None, None] * np.exp(-0.5 * q) / (2 * np.pi * np.sqrt(det))
+
+            def err(a):
+                d = np.linalg.norm((a - ref).reshape(n, -1), axis=1)
+                return float(np.mean(d / np.linalg.norm(ref.reshape(n, -1), axis=1)))
+
+            row[f"sigma_p={sp:g}"] = {"glints": err(got), "smooth": err(smooth)}
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    return rows
+
+
+if __name__ == "__main__":  # python -m prefilter.glints.render [frames KIND | ndf]
     import sys
 
-    measure(kind=sys.argv[1] if len(sys.argv) > 1 else "flakes")
+    if len(sys.argv) > 1 and sys.argv[1] == "ndf":
+        ndf_errors()
+    else:
+        measure(kind=sys.argv[2] if len(sys.argv) > 2 else "flakes")

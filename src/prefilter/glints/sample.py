@@ -4,7 +4,8 @@ For a footprint ``(center, sigma_p)`` the NDF image is the trilinear blend of 8 
 images (as in :func:`prefilter.glints.point`). Sampling, per query (one Numba kernel):
 
 1. choose an angular block with probability proportional to its mass (block means of the blended
-   image, from the CP prefix sums: ``sum_c w_c sum_r c_r[k_c] (A_r[B] - A_r[0]) (B_r[B] - B_r[0])``);
+   image, from the CP prefix sums:
+   ``sum_c w_c sum_r c_r[k_c] (A_r[B] - A_r[0]) (B_r[B] - B_r[0])``);
 2. descend the block's quadtree: split the current rectangle of pixels into (up to) four, the
    children's masses by range queries (eq. 7, products of prefix-sum differences), choose one
    proportionally, until one pixel remains;
