@@ -305,7 +305,7 @@ def _finish(out: dict, shape) -> GBuffer:
 
 def intersect(scene, rays: Rays) -> GBuffer:
     """Nearest hits of ``rays`` with ``scene.objects`` and the surface data at them."""
-    from prefilter.render.kernels import gbuffer_rays_kernel, pack_objects
+    from prefilter.render.kernels import gbuffer_rays_kernel, pack_objects, serial
 
     d = np.asarray(rays.direction, float)
     shape = d.shape[:-1]
@@ -315,8 +315,9 @@ def intersect(scene, rays: Rays) -> GBuffer:
 
     types, params = pack_objects(scene.objects)
     out = _empty_gbuffer(shape)
-    gbuffer_rays_kernel(flat(rays.origin), flat(d), flat(rays.ddx), flat(rays.ddy), types, params,
-                        *(out[k] for k in _ORDER))
+    kernel = serial(gbuffer_rays_kernel, len(out["hit"]))
+    kernel(flat(rays.origin), flat(d), flat(rays.ddx), flat(rays.ddy), types, params,
+           *(out[k] for k in _ORDER))
     return _finish(out, shape)
 
 
@@ -329,13 +330,14 @@ def _camera_params(cam: Camera) -> np.ndarray:
 
 def _gbuffer_camera(scene, cam: Camera, xy: np.ndarray) -> GBuffer:
     """Rays through ``xy (..., 2)`` and their G-buffer in one Numba pass (no ray arrays)."""
-    from prefilter.render.kernels import gbuffer_camera_kernel, pack_objects
+    from prefilter.render.kernels import gbuffer_camera_kernel, pack_objects, serial
 
     shape = xy.shape[:-1]
     types, params = pack_objects(scene.objects)
     out = _empty_gbuffer(shape)
-    gbuffer_camera_kernel(_camera_params(cam), np.ascontiguousarray(xy).reshape(-1, 2), types,
-                          params, *(out[k] for k in _ORDER))
+    kernel = serial(gbuffer_camera_kernel, len(out["hit"]))
+    kernel(_camera_params(cam), np.ascontiguousarray(xy).reshape(-1, 2), types, params,
+           *(out[k] for k in _ORDER))
     return _finish(out, shape)
 
 

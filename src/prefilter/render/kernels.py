@@ -20,6 +20,9 @@ from prefilter.ltc.polygon import _AREA_RTOL, _DET_RTOL2, _INV_2PI, _PLANE_RTOL,
 _EPS = 1e-9  # smallest ray parameter of a hit (as camera._EPS)
 _TWO_PI = 2.0 * math.pi
 _BLOCK = 256  # shading points per scratch buffer in the fused shader
+#: Batches smaller than this run the serial twin of a kernel: waking the thread pool costs more
+#: than the work (see ``serial``).
+SERIAL_BELOW = 2048
 
 # -- G-buffer ---------------------------------------------------------------------------------
 
@@ -787,3 +790,17 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, qv
                 rad[k, 2] = res[2]
             else:
                 status[k] = 1
+
+
+_SERIAL = {}
+
+
+def serial(kernel, n: int):
+    """``kernel`` for a batch of ``n`` items: its serial twin (the same Python source compiled
+    with ``prange`` as ``range``, hence the same results) below :data:`SERIAL_BELOW`."""
+    if n >= SERIAL_BELOW:
+        return kernel
+    twin = _SERIAL.get(kernel)
+    if twin is None:
+        twin = _SERIAL[kernel] = njit_serial(kernel.py_func)
+    return twin

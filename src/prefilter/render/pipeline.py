@@ -163,13 +163,13 @@ def footprint_lookup(chain, uv, dudv) -> np.ndarray:
     ``chain``: a :class:`prefilter.texture.MipChain`; ``uv (N, 2)``, ``dudv (N, 2, 2)`` ->
     ``(N, C)``.
     """
-    from prefilter.render.kernels import footprint_lookup_kernel, pack_mip
+    from prefilter.render.kernels import footprint_lookup_kernel, pack_mip, serial
 
     data, info = pack_mip(chain)
     c = chain.shape[2]
     uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
     out = np.empty((len(uv), c))
-    footprint_lookup_kernel(data, info, c, uv,
+    serial(footprint_lookup_kernel, len(uv))(data, info, c, uv,
                             np.ascontiguousarray(dudv, dtype=np.float64).reshape(-1, 2, 2), out)
     return out
 
@@ -255,7 +255,7 @@ def _render_ltc_fused(scene: Scene, settings: RenderSettings, lights, table):
     lookups, frames and shader as the NumPy stages, without intermediate arrays. ``None`` when
     the scene needs the general path (textures with too few channels, a table-like object)."""
     from prefilter.render.camera import _camera_params
-    from prefilter.render.kernels import ltc_samples_kernel, pack_materials, pack_objects
+    from prefilter.render.kernels import ltc_samples_kernel, pack_materials, pack_objects, serial
     from prefilter.render.shading import VIEW_Z_MIN
 
     if not all(hasattr(table, k) for k in ("axis_t", "axis_r", "M", "magnitude", "fresnel")):
@@ -283,8 +283,8 @@ def _render_ltc_fused(scene: Scene, settings: RenderSettings, lights, table):
             xy = np.ascontiguousarray(xy).reshape(-1, 2)
             rad = np.empty((len(xy), 3))
             status = np.zeros(len(xy), np.uint8)
-            ltc_samples_kernel(campar, xy, types, params, *packed, qv, qn, qr, *tab, VIEW_Z_MIN,
-                               rad, status)
+            serial(ltc_samples_kernel, len(xy))(campar, xy, types, params, *packed, qv, qn, qr,
+                                                *tab, VIEW_Z_MIN, rad, status)
             if status.any():
                 raise PrefilterError("table: expected invertible LTC matrices, got a singular "
                                      "interpolated one")

@@ -146,7 +146,7 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
     the shading horizon. Point and directional lights use the true BRDF.
     """
     from prefilter.errors import PrefilterError
-    from prefilter.render.kernels import ltc_quads_kernel
+    from prefilter.render.kernels import ltc_quads_kernel, serial
 
     position = np.asarray(position, dtype=np.float64)
     ts, bs, ns = (np.asarray(a, dtype=np.float64) for a in (frame_t, frame_b, frame_n))
@@ -172,7 +172,7 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
     # Roughness below the table's range uses its smoothest row (the kernel clamps alpha to
     # [alpha_min, 1], documented in docs/reference.md); the light is cut at the shading horizon
     # before the LTC transform, as in the NumPy path.
-    ltc_quads_kernel(c3(position), c3(ts), c3(bs), c3(ns), c3(view),
+    serial(ltc_quads_kernel, n)(c3(position), c3(ts), c3(bs), c3(ns), c3(view),
                      np.ascontiguousarray(np.broadcast_to(alpha, (n,)), dtype=np.float64),
                      c3(base_color), c3(f0),
                      np.ascontiguousarray([q.vertices for q in lights.quads], dtype=np.float64),
