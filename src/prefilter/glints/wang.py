@@ -1,0 +1,157 @@
+"""Wang tiles for glinty normal maps: synthesis, implicit tiling, P-NDFs across tiles (sec. 5.5).
+
+**Tiles.** 16 tiles of ``T x T`` texels, 2 colours per edge direction (Cohen et al. 2003). Each
+colour of the horizontal edges is a ``T x T`` source patch ``H_c`` of the input (random periodic
+offset), each colour of the vertical edges a patch ``V_c``. A tile with colours ``(n, e, s, w)`` is
+made of four triangles cut by its diagonals: the north triangle is the lower half of ``H_n``
+(tile row ``y`` = patch row ``y + T/2``), the south one the upper half of ``H_s``, west/east
+the right/left halves of ``V_w``/``V_e``. Two tiles sharing an edge colour therefore continue the
+same patch across that edge: edges match exactly. **Seams** are inside the tiles, along the
+diagonals: projected normals are cross-faded linearly over ``band`` texels (weights
+``clip(1 + (m_r - max_r m_r) / band, 0, 1)`` normalised, with ``m_r`` the distance-to-centre
+margin towards edge ``r``), then renormalised; only the ``band``-texel squares at the tile
+corners, where two diagonal seams meet the edge, are not continuous across tiles.
+
+**Implicit tiling** (Lagae and Dutre 2005, as modified by the paper): grid vertex ``(i, j)`` hashes
+to two bits, the colours of the edge to its right (horizontal) and below it (vertical); tile
+``(i, j)`` has ``n = right(i, j)``, ``s = right(i, j + 1)``, ``w = below(i, j)``,
+``e = below(i + 1, j)``, index ``n + 2 s + 4 w + 8 e``. Only the 16 tiles and a seed are stored,
+whatever the synthesised area.
+
+**P-NDFs across tiles.** A footprint's NDF is the direct P-NDF of the texels under it: the tiles
+under its truncation window (plus a 2-texel margin for the Jacobians) are looked up implicitly and
+assembled locally, so storage stays constant; the explicit variant uses a stored index map of a
+finite area and its assembled normal map (the paper's Fig. 14 comparison). Not done: per-tile
+compressed pyramids and sampling across tiles.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from prefilter._validate import as_float_array, as_positive_int, as_rng
+from prefilter.errors import PrefilterError
+from prefilter.glints.pndf import DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_normal_map, pndf
+
+
+@dataclass(frozen=True)
+class WangTiles:
+    """16 tiles ``(16, T, T, 3)`` indexed by ``n + 2 s + 4 w + 8 e`` and the hashing seed."""
+
+    tiles: np.ndarray
+    seed: int
+
+    @property
+    def size(self) -> int:
+        return int(self.tiles.shape[1])
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.tiles.nbytes)
+
+
+def synthesize(normal_map, tile: int = 32, band: float = 4.0, rng=0) -> WangTiles:
+    """Build the 16 Wang tiles of ``tile`` texels from a periodic input normal map (see module
+    docstring for the seam method)."""
+    nm = as_normal_map(normal_map)
+    T = as_positive_int(tile, "tile", lo=4)
+    if T % 2:
+        raise PrefilterError(f"tile: expected an even tile size, got {T}")
+    if not (0.0 < float(band) <= T / 2):
+        raise PrefilterError(f"band: expected a seam width in (0, {T / 2}], got {band}")
+    gen = as_rng(rng)
+    Hh, W = nm.shape[:2]
+    r = np.arange(T)
+
+    def patch():
+        oy, ox = gen.integers(0, Hh), gen.integers(0, W)
+        return nm[(oy + r)[:, None] % Hh, (ox + r)[None, :] % W]
+
+    Hp = [patch(), patch()]
+    Vp = [patch(), patch()]
+    y = r[:, None] + 0.5 - T / 2
+    x = r[None, :] + 0.5 - T / 2
+    marg = np.stack(np.broadcast_arrays(-y, x, y, -x))  # n, e, s, w
+    wts = np.clip(1.0 + (marg - marg.max(axis=0)) / float(band), 0.0, 1.0)
+    wts /= wts.sum(axis=0)
+    h2 = T // 2
+    tiles = np.empty((16, T, T, 3))
+    for idx in range(16):
+        n, s, w, e = idx & 1, (idx >> 1) & 1, (idx >> 2) & 1, (idx >> 3) & 1
+        srcs = [np.roll(Hp[n], -h2, axis=0), np.roll(Vp[e], h2, axis=1),
+                np.roll(Hp[s], h2, axis=0), np.roll(Vp[w], -h2, axis=1)]
+        sxy = sum(wt[..., None] * src[..., :2] for wt, src in zip(wts, srcs))
+        z = np.sqrt(np.maximum(1.0 - np.sum(sxy * sxy, -1), 1e-6))
+        t = np.concatenate([sxy, z[..., None]], -1)
+        tiles[idx] = t / np.linalg.norm(t, axis=-1, keepdims=True)
+    return WangTiles(tiles, int(gen.integers(0, 2**31)))
+
+
+def _hash_bits(i, j, seed):
+    """Two pseudo-random bits per grid vertex (a 64-bit integer mix of its coordinates)."""
+    h = (np.asarray(i, np.int64).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
+         ^ np.asarray(j, np.int64).astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F)
+         ^ np.uint64(seed) * np.uint64(0x165667B19E3779F9))
+    h ^= h >> np.uint64(29)
+    h *= np.uint64(0xBF58476D1CE4E5B9)
+    h ^= h >> np.uint64(32)
+    return (h & np.uint64(1)).astype(np.int64), ((h >> np.uint64(1)) & np.uint64(1)).astype(np.int64)
+
+
+def tile_index(wt: WangTiles, i, j) -> np.ndarray:
+    """Implicit tile index at tile coordinates ``(i, j)`` (column, row), any integers."""
+    i = np.asarray(i, np.int64)
+    j = np.asarray(j, np.int64)
+    with np.errstate(over="ignore"):
+        right_ij, below_ij = _hash_bits(i, j, wt.seed)
+        right_below, _ = _hash_bits(i, j + 1, wt.seed)
+        _, below_right = _hash_bits(i + 1, j, wt.seed)
+    return right_ij + 2 * right_below + 4 * below_ij + 8 * below_right
+
+
+def index_map(wt: WangTiles, ny: int, nx: int, i0: int = 0, j0: int = 0) -> np.ndarray:
+    """Explicit ``(ny, nx)`` index map of tiles ``(i0 .. i0 + nx - 1, j0 .. j0 + ny - 1)``."""
+    J, I = np.meshgrid(np.arange(ny) + j0, np.arange(nx) + i0, indexing="ij")
+    return tile_index(wt, I, J)
+
+
+def assemble(wt: WangTiles, index: np.ndarray) -> np.ndarray:
+    """Normal map ``(ny T, nx T, 3)`` of an index map ``(ny, nx)``."""
+    idx = np.asarray(index)
+    t = wt.tiles[idx]  # (ny, nx, T, T, 3)
+    ny, nx, T = idx.shape[0], idx.shape[1], wt.size
+    return t.transpose(0, 2, 1, 3, 4).reshape(ny * T, nx * T, 3)
+
+
+def _window(wt, c, sp):
+    T = wt.size
+    rad = TRUNCATION * math.sqrt(float(sp) ** 2 + SIGMA_H**2) + 2.0
+    i0, i1 = math.floor((c[0] - rad) / T), math.floor((c[0] + rad) / T)
+    j0, j1 = math.floor((c[1] - rad) / T), math.floor((c[1] + rad) / T)
+    # one extra tile each side keeps the periodic wrap of the local map out of the window
+    return i0 - 1, j0 - 1, i1 - i0 + 3, j1 - j0 + 3
+
+
+def pndf_implicit(wt: WangTiles, center, sigma_p, s,
+                  intrinsic_roughness: float = DEFAULT_ROUGHNESS) -> np.ndarray:
+    """Direct P-NDF over the implicitly tiled plane: one footprint ``center (2,)`` (texels, any
+    position), ``sigma_p`` scalar, ``s (..., 2)``; the tiles under the footprint are looked up by
+    hashing and assembled locally."""
+    c = as_float_array(center, "center")
+    if c.shape != (2,):
+        raise PrefilterError(f"center: expected one footprint centre (x, y), got shape {c.shape}")
+    sp = float(sigma_p)
+    i0, j0, nx, ny = _window(wt, c, sp)
+    local = assemble(wt, index_map(wt, ny, nx, i0, j0))
+    T = wt.size
+    return pndf(local, c - np.array([i0 * T, j0 * T]), sp, s, intrinsic_roughness)
+
+
+def pndf_explicit(wt: WangTiles, index: np.ndarray, center, sigma_p, s,
+                  intrinsic_roughness: float = DEFAULT_ROUGHNESS) -> np.ndarray:
+    """Direct P-NDF on the normal map assembled from a stored index map (tiles ``(0, 0)`` at
+    the origin; footprints must stay inside it, the assembled map is periodic)."""
+    return pndf(assemble(wt, index), center, sigma_p, s, intrinsic_roughness)
