@@ -98,7 +98,8 @@ def _hash_bits(i, j, seed):
     h ^= h >> np.uint64(29)
     h *= np.uint64(0xBF58476D1CE4E5B9)
     h ^= h >> np.uint64(32)
-    return (h & np.uint64(1)).astype(np.int64), ((h >> np.uint64(1)) & np.uint64(1)).astype(np.int64)
+    one = np.uint64(1)
+    return (h & one).astype(np.int64), ((h >> one) & one).astype(np.int64)
 
 
 def tile_index(wt: WangTiles, i, j) -> np.ndarray:
