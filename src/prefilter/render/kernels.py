@@ -10,6 +10,7 @@ so results do not depend on the thread count. The NumPy implementations they rep
 from __future__ import annotations
 
 import math
+import types
 import weakref
 
 import numpy as np
@@ -802,5 +803,12 @@ def serial(kernel, n: int):
         return kernel
     twin = _SERIAL.get(kernel)
     if twin is None:
-        twin = _SERIAL[kernel] = njit_serial(kernel.py_func)
+        # Numba's on-disk cache is keyed by qualified name and signature, not by the parallel
+        # flag: a twin of the same function would overwrite (and be loaded as) the parallel one.
+        f = kernel.py_func
+        g = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial", f.__defaults__,
+                               f.__closure__)
+        g.__qualname__ = f.__qualname__ + "_serial"
+        g.__doc__ = f.__doc__
+        twin = _SERIAL[kernel] = njit_serial(g)
     return twin
