@@ -225,11 +225,14 @@ def half_from_s(s) -> np.ndarray:
     return np.concatenate([s, z[..., None]], axis=-1)
 
 
-def sample_wi(gm: GlintsMap, center, sigma_p, wo, rng=0, *, u=None):
+def sample_wi(gm, center, sigma_p, wo, rng=0, *, u=None):
     """Light directions by NDF sampling: ``m ~ D(m) m_z / M``, ``wi = 2 (wo.m) m - wo``.
 
     Parameters
     ----------
+    gm : GlintsMap, or a :class:`prefilter.glints.brdf.GlintSurface` with its normal map, in which
+        case footprints below the finest level are drawn from the direct P-NDF
+        (:func:`sample_s_direct`, as :func:`prefilter.glints.brdf.glint_ndf` evaluates them).
     wo : (..., 3) unit view directions in the geometric tangent frame (broadcast with the
         footprints).
 
@@ -238,11 +241,28 @@ def sample_wi(gm: GlintsMap, center, sigma_p, wo, rng=0, *, u=None):
     wi : (..., 3); pdf : (...) solid-angle density of ``wi`` (``pdf_s m_z / (4 |wo.m|)``);
     samples with ``pdf == 0`` (empty image, ``|s| >= 1``, ``wo.m <= 0``) carry no estimate.
     """
+    from prefilter.glints.brdf import GlintSurface
+
     wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = as_float_array(sigma_p, "sigma_p")
     shape = np.broadcast_shapes(c.shape[:-1], sp.shape, wo.shape[:-1])
-    s, ps = sample_s(gm, np.broadcast_to(c, shape + (2,)), np.broadcast_to(sp, shape), rng, u=u)
+    c = np.broadcast_to(c, shape + (2,))
+    sp = np.broadcast_to(sp, shape)
+    if isinstance(gm, GlintSurface):
+        surf = gm
+        small = (sp < surf.sigma0) if surf.normal_map is not None else np.zeros(shape, bool)
+        gen = as_rng(rng)
+        s = np.zeros(shape + (2,))
+        ps = np.zeros(shape)
+        if np.any(small):
+            s[small], ps[small] = sample_s_direct(surf, c[small], sp[small], gen)
+        if np.any(~small):
+            if surf.gm is None:
+                raise PrefilterError("gm: footprints at or above sigma0 need a compressed map")
+            s[~small], ps[~small] = sample_s(surf.gm, c[~small], sp[~small], gen)
+    else:
+        s, ps = sample_s(gm, c, sp, rng, u=u)
     wo = np.broadcast_to(wo, shape + (3,))
     m = half_from_s(s)
     wom = np.sum(wo * m, axis=-1)
@@ -250,3 +270,90 @@ def sample_wi(gm: GlintsMap, center, sigma_p, wo, rng=0, *, u=None):
     wi = 2.0 * wom[..., None] * m - wo
     pdf = np.where(ok, ps * m[..., 2] / (4.0 * np.where(ok, wom, 1.0)), 0.0)
     return wi, pdf
+
+
+# ---------------------------------------------------------------------- direct P-NDF sampling
+
+
+@njit_parallel
+def _direct_kernel(s_el, J, cx, cy, sp, sr, sh, trunc, u, out):
+    """Draw from the element mixture of Yan et al. 2016: element ``i`` with probability
+    ``w_i / sum w``, then its Gaussian ``N(n_i + J_i mu_i, sr^2 I + var J_i J_i^T)``."""
+    H, W = s_el.shape[0], s_el.shape[1]
+    sh2 = sh * sh
+    for q in prange(out.shape[0]):
+        sp2 = sp[q] * sp[q]
+        tot2 = sp2 + sh2
+        f = sh2 / tot2
+        var = sp2 * sh2 / tot2
+        rad = trunc * math.sqrt(tot2)
+        x0 = int(math.ceil(cx[q] - rad - 0.5))
+        x1 = int(math.floor(cx[q] + rad - 0.5))
+        y0 = int(math.ceil(cy[q] - rad - 0.5))
+        y1 = int(math.floor(cy[q] + rad - 0.5))
+        wsum = 0.0
+        for y in range(y0, y1 + 1):
+            dy = cy[q] - (y + 0.5)
+            for x in range(x0, x1 + 1):
+                dx = cx[q] - (x + 0.5)
+                wsum += math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+        t = u[q, 0] * wsum
+        run = 0.0
+        bx, by = x1, y1
+        done = False
+        for y in range(y0, y1 + 1):
+            dy = cy[q] - (y + 0.5)
+            for x in range(x0, x1 + 1):
+                dx = cx[q] - (x + 0.5)
+                run += math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+                if t < run:
+                    bx, by = x, y
+                    done = True
+                    break
+            if done:
+                break
+        dx = cx[q] - (bx + 0.5)
+        dy = cy[q] - (by + 0.5)
+        r, c = by % H, bx % W
+        j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
+        mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
+        my = s_el[r, c, 1] + f * (j10 * dx + j11 * dy)
+        a = sr * sr + var * (j00 * j00 + j01 * j01)
+        b = var * (j00 * j10 + j01 * j11)
+        d = sr * sr + var * (j10 * j10 + j11 * j11)
+        # Cholesky of [[a, b], [b, d]] applied to a Box-Muller pair
+        l11 = math.sqrt(a)
+        l21 = b / l11
+        l22 = math.sqrt(max(d - l21 * l21, 0.0))
+        rr = math.sqrt(-2.0 * math.log(1.0 - u[q, 1]))
+        z1 = rr * math.cos(2.0 * math.pi * u[q, 2])
+        z2 = rr * math.sin(2.0 * math.pi * u[q, 2])
+        out[q, 0] = mx + l11 * z1
+        out[q, 1] = my + l21 * z1 + l22 * z2
+
+
+def sample_s_direct(surf, center, sigma_p, rng=0):
+    """Projected half vectors ``(..., 2)`` from the *direct* P-NDF of ``surf`` (a
+    :class:`prefilter.glints.brdf.GlintSurface` with its normal map) and their density
+    ``pndf(s)`` (the exact mixture density, Yan et al. 2016). For footprints below the finest
+    pyramid level, where :func:`prefilter.glints.brdf.glint_ndf` evaluates the direct P-NDF."""
+    from prefilter.glints.brdf import _as_surface
+    from prefilter.glints.pndf import SIGMA_H, TRUNCATION, pndf
+
+    surf = _as_surface(surf)
+    if surf.normal_map is None:
+        raise PrefilterError("surf: direct sampling needs the normal map (surface(gm, normal_map))")
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_float_array(sigma_p, "sigma_p")
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    shape = np.broadcast_shapes(c.shape[:-1], sp.shape)
+    cf = np.ascontiguousarray(np.broadcast_to(c, shape + (2,)).reshape(-1, 2))
+    spf = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1), dtype=np.float64)
+    u = as_rng(rng).random((cf.shape[0], 3))
+    s = np.empty((cf.shape[0], 2))
+    s_el, J = surf.elements_
+    _direct_kernel(s_el, J, np.ascontiguousarray(cf[:, 0]), np.ascontiguousarray(cf[:, 1]), spf,
+                   surf.intrinsic_roughness, SIGMA_H, TRUNCATION, u, s)
+    pdf = pndf(surf.normal_map, cf, spf, s, surf.intrinsic_roughness, elements_=surf.elements_)
+    return s.reshape(shape + (2,)), pdf.reshape(shape)
