@@ -18,7 +18,7 @@ __all__ = ["GlintsMap", "bake", "block_means", "elements", "hemisphere_ndf", "lo
 
 # part 2 (issue 9): BRDF and sampling
 from prefilter.glints.brdf import GlintSurface, glint_brdf_cos, glint_ndf, surface  # noqa: E402
-from prefilter.glints.sample import ndf_pdf, sample_s, sample_wi  # noqa: E402
+from prefilter.glints.sample import ndf_pdf, sample_s, sample_s_direct, sample_wi  # noqa: E402
 
-__all__ += ["GlintSurface", "glint_brdf_cos", "glint_ndf", "ndf_pdf", "sample_s", "sample_wi",
-            "surface"]
+__all__ += ["GlintSurface", "glint_brdf_cos", "glint_ndf", "ndf_pdf", "sample_s",
+            "sample_s_direct", "sample_wi", "surface"]
