@@ -10,12 +10,11 @@ so results do not depend on the thread count. The NumPy implementations they rep
 from __future__ import annotations
 
 import math
-import types
 import weakref
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter._numba import SERIAL_BELOW, njit_parallel, njit_serial, prange, serial  # noqa: F401
 from prefilter.ltc.polygon import _AREA_RTOL, _DET_RTOL2, _INV_2PI, _PLANE_RTOL, _edge
 
 _EPS = 1e-9  # smallest ray parameter of a hit (as camera._EPS)
@@ -23,7 +22,6 @@ _TWO_PI = 2.0 * math.pi
 _BLOCK = 256  # shading points per scratch buffer in the fused shader
 #: Batches smaller than this run the serial twin of a kernel: waking the thread pool costs more
 #: than the work (see ``serial``).
-SERIAL_BELOW = 2048
 
 # -- G-buffer ---------------------------------------------------------------------------------
 
@@ -793,22 +791,3 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, qv
                 status[k] = 1
 
 
-_SERIAL = {}
-
-
-def serial(kernel, n: int):
-    """``kernel`` for a batch of ``n`` items: its serial twin (the same Python source compiled
-    with ``prange`` as ``range``, hence the same results) below :data:`SERIAL_BELOW`."""
-    if n >= SERIAL_BELOW:
-        return kernel
-    twin = _SERIAL.get(kernel)
-    if twin is None:
-        # Numba's on-disk cache is keyed by qualified name and signature, not by the parallel
-        # flag: a twin of the same function would overwrite (and be loaded as) the parallel one.
-        f = kernel.py_func
-        g = types.FunctionType(f.__code__, f.__globals__, f.__name__ + "_serial", f.__defaults__,
-                               f.__closure__)
-        g.__qualname__ = f.__qualname__ + "_serial"
-        g.__doc__ = f.__doc__
-        twin = _SERIAL[kernel] = njit_serial(g)
-    return twin
