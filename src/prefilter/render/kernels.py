@@ -15,7 +15,7 @@ import weakref
 import numpy as np
 
 from prefilter._numba import SERIAL_BELOW, njit_parallel, njit_serial, prange, serial  # noqa: F401
-from prefilter.ltc.polygon import _AREA_RTOL, _DET_RTOL2, _INV_2PI, _PLANE_RTOL, _edge
+from prefilter.ltc.polygon import _DET_RTOL2, _INV_2PI, _clipped_edge_sum
 
 _EPS = 1e-9  # smallest ray parameter of a hit (as camera._EPS)
 _TWO_PI = 2.0 * math.pi
@@ -342,77 +342,10 @@ def _polygon(t, verts, n):
     ``t verts[:n]`` (one-sided), as ``prefilter.ltc.polygon._polygon_kernel`` with
     ``invert=False``: ``t[:9]`` an invertible matrix (row-major, largest entry 1), ``t[9]`` the
     sign of its determinant."""
-    t00, t01, t02, t10, t11, t12, t20, t21, t22 = (t[0], t[1], t[2], t[3], t[4], t[5], t[6],
-                                                   t[7], t[8])
-    sgn = t[9]
-    x = verts[0, 0]
-    y = verts[0, 1]
-    z = verts[0, 2]
-    fx = t00 * x + t01 * y + t02 * z
-    fy = t10 * x + t11 * y + t12 * z
-    fz = t20 * x + t21 * y + t22 * z
-    px, py, pz = fx, fy, fz
-    nx = 0.0
-    ny = 0.0
-    nz = 0.0
-    sx = fx
-    sy = fy
-    sz = fz
-    vmax = max(abs(fx), abs(fy), abs(fz))
-    acc = 0.0
-    ex = 0.0
-    ey = 0.0
-    has_exit = False
-    gx = 0.0
-    gy = 0.0
-    has_first = False
-    for j in range(1, n + 1):
-        if j < n:
-            x = verts[j, 0]
-            y = verts[j, 1]
-            z = verts[j, 2]
-            qx = t00 * x + t01 * y + t02 * z
-            qy = t10 * x + t11 * y + t12 * z
-            qz = t20 * x + t21 * y + t22 * z
-            sx += qx
-            sy += qy
-            sz += qz
-            vmax = max(vmax, abs(qx), abs(qy), abs(qz))
-        else:
-            qx, qy, qz = fx, fy, fz
-        nx += py * qz - pz * qy
-        ny += pz * qx - px * qz
-        nz += px * qy - py * qx
-        if pz >= 0.0:
-            if qz >= 0.0:
-                acc += _edge(px, py, pz, qx, qy, qz)
-            else:
-                s = pz / (pz - qz)
-                ex = px + s * (qx - px)
-                ey = py + s * (qy - py)
-                acc += _edge(px, py, pz, ex, ey, 0.0)
-                has_exit = True
-        elif qz >= 0.0:
-            s = pz / (pz - qz)
-            ix = px + s * (qx - px)
-            iy = py + s * (qy - py)
-            if has_exit:
-                acc += _edge(ex, ey, 0.0, ix, iy, 0.0)
-                has_exit = False
-            else:
-                gx = ix
-                gy = iy
-                has_first = True
-            acc += _edge(ix, iy, 0.0, qx, qy, qz)
-        px, py, pz = qx, qy, qz
-    if has_exit and has_first:
-        acc += _edge(ex, ey, 0.0, gx, gy, 0.0)
-    nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-    if nn <= _AREA_RTOL * n * vmax * vmax or (
-        abs(nx * sx + ny * sy + nz * sz) <= _PLANE_RTOL * n * nn * vmax
-    ):
+    acc, ok = _clipped_edge_sum(t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8], verts, n)
+    if not ok:
         return 0.0
-    return max(0.0, -sgn * acc * _INV_2PI)
+    return max(0.0, -t[9] * acc * _INV_2PI)
 
 
 @njit_serial
