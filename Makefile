@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 PYTEST_ARGS ?=
 
-.PHONY: demo test test-all bench lint clean
+.PHONY: demo test test-all bench lint clean clean-cache browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,10 +19,20 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/prefilter demo --out out/demo
 
-test: $(STAMP)
+# The viewer's tests drive Debian's Chromium headless (WebGL2 on SwiftShader) through chromedriver;
+# browsers downloaded by test tools do not work here, so the system packages are installed.
+browser:
+	@if [ -x /usr/bin/chromium ] && [ -x /usr/bin/chromedriver ]; then :; \
+	elif [ -n "$$PREFILTER_SKIP_BROWSER" ]; then echo "skipping Chromium install (PREFILTER_SKIP_BROWSER)"; \
+	else SUDO=$$( [ "$$(id -u)" = 0 ] || echo sudo ); \
+	  $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium chromium-driver >/dev/null \
+	  || { $$SUDO apt-get update -q >/dev/null && \
+	       $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium chromium-driver >/dev/null; }; fi
+
+test: $(STAMP) browser
 	$(PY) -m pytest -n 2 $(PYTEST_ARGS)
 
-test-all: $(STAMP)
+test-all: $(STAMP) browser
 	$(PY) -m pytest -n 2 -m "" $(PYTEST_ARGS)
 
 bench: $(STAMP)
@@ -30,6 +40,11 @@ bench: $(STAMP)
 
 lint: $(STAMP)
 	$(PY) -m pip install -q ruff && $(VENV)/bin/ruff check src tests benchmarks
+
+# Numba's on-disk cache keys a kernel by its own file: after editing a helper in another module,
+# drop the cache so kernels recompile.
+clean-cache:
+	find src -name '*.nbi' -o -name '*.nbc' | xargs rm -f
 
 clean:
 	rm -rf $(VENV) out build *.egg-info src/*.egg-info

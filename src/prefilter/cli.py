@@ -54,6 +54,8 @@ TOP_COMMANDS = {
     "demo": "prefilter.render.demo:demo",
     "validate": "prefilter.ltc.commands:validate",
     "multiscale-fit": "prefilter.multiscale.commands:multiscale_fit",
+    "view": "prefilter.viewer.commands:view",
+    "export": "prefilter.viewer.commands:export",
 }
 
 
