@@ -9,17 +9,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_directions, as_positive_int, as_rng, as_upper_directions
+from prefilter._validate import (
+    as_directions,
+    as_float_array,
+    as_positive_int,
+    as_rng,
+    as_upper_directions,
+)
 
 
 def reflect(wo: np.ndarray, m: np.ndarray) -> np.ndarray:
     """Mirror ``wo (..., 3)`` about microfacet normals ``m (..., 3)``: ``2 (wo.m) m - wo``."""
+    wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
+    m = as_float_array(m, "m", ndim_min=1, last_dim=3)
     return 2.0 * np.sum(wo * m, axis=-1, keepdims=True) * m - wo
 
 
 def half_vector(wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
     """``normalize(wo + wi)``; zero-length sums (opposite directions) give ``(0, 0, 1)``."""
-    h = wo + wi
+    h = as_float_array(wo, "wo", ndim_min=1, last_dim=3) + as_float_array(wi, "wi", ndim_min=1,
+                                                                           last_dim=3)
     n = np.linalg.norm(h, axis=-1, keepdims=True)
     safe = n > 1e-12
     return np.where(safe, h / np.where(safe, n, 1.0), np.array([0.0, 0.0, 1.0]))
@@ -55,7 +64,7 @@ class MicrofacetModel:
         ``w_z`` for centred NDFs (mean normal = z); ``(...,)`` for ``w (..., 3)``. LEADR
         supplemental 1.5, eq. 9. May be negative (``w`` below the mean surface).
         """
-        return np.asarray(w, dtype=np.float64)[..., 2]
+        return as_directions(w, "w")[..., 2]
 
     def projected_area(self, w) -> np.ndarray:
         """Back-face-culled projected area ``integral max(0, w.m) D(m) dm`` for ``w (..., 3)``.
@@ -63,7 +72,7 @@ class MicrofacetModel:
         Smith's identity (LEADR supplemental eq. 9): ``(1 + Lambda(w))`` times the mean surface's
         projected area. It normalises the visible-normal density :meth:`pdf_vndf`.
         """
-        w = np.asarray(w, dtype=np.float64)
+        w = as_directions(w, "w")
         return self.mean_projected_area(w) * (1.0 + self.smith_lambda(w))
 
     # -- shared ----------------------------------------------------------------------------------

@@ -248,7 +248,7 @@ class Beckmann(MicrofacetModel):
 
     def mean_projected_area(self, w) -> np.ndarray:
         """``A(w) = w_z - mu . w_xy = (n_bar.w) / (n_bar.z)`` for ``w (..., 3)``."""
-        w = np.asarray(w, dtype=np.float64)
+        w = as_directions(w, "w")
         return self._slope_stats(w)[0]
 
     def projected_area(self, w) -> np.ndarray:
@@ -257,7 +257,7 @@ class Beckmann(MicrofacetModel):
         Closed form ``d Phi(t) + sigma phi(t)``, ``t = d / sigma``; positive even below the mean
         surface, where it is written ``sigma phi(t) (1 - |t| R(|t|))`` (Mills' ratio ``R``).
         """
-        w = np.asarray(w, dtype=np.float64)
+        w = as_directions(w, "w")
         d, sigma = self._slope_stats(w)
         pos = sigma > 0.0
         t = d / np.where(pos, sigma, 1.0)

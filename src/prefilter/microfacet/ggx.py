@@ -45,7 +45,7 @@ class GGX(MicrofacetModel):
         Written as ``a2 / (1 + sqrt(1 + a2)) / 2`` with ``a2 = (...) / wz^2`` to avoid cancellation
         near normal incidence. Evaluated with ``|wz|`` (the horizon test lives in ``G1``/``G2``).
         """
-        w = np.asarray(w, dtype=np.float64)
+        w = as_directions(w, "w", normalize=False)  # scale invariant: no need to renormalise
         wz2 = np.maximum(w[..., 2] ** 2, 1e-300)
         a2 = ((self.alpha_x * w[..., 0]) ** 2 + (self.alpha_y * w[..., 1]) ** 2) / wz2
         return a2 / (1.0 + np.sqrt(1.0 + a2)) / 2.0
@@ -123,7 +123,8 @@ class GGX(MicrofacetModel):
         cp = qx * py - qy * px
         half = r * np.sqrt(qq)
         x1, x2 = (-half - cb) / cp, (half - cb) / cp
-        x_top = np.minimum(np.maximum(x1, x2), wz / np.where(pos, sigma, 1e-300))
+        with np.errstate(over="ignore"):  # normal incidence: no ramp cut-off (inf)
+            x_top = np.minimum(np.maximum(x1, x2), wz / np.where(pos, sigma, 1e-300))
         psi_lo = np.arctan(np.minimum(x1, x2))
         psi_hi = np.maximum(np.arctan(x_top), psi_lo)
         dpsi = psi_hi - psi_lo
