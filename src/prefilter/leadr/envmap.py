@@ -4,14 +4,25 @@ spherical-harmonic irradiance (Ramamoorthi & Hanrahan 2001; LEADR "Simplified Al
 Convention: ``w = (sin(theta) cos(phi), sin(theta) sin(phi), cos(theta))`` with z up; row ``i`` of
 an ``(H, W, C)`` map holds ``theta = (i + 0.5) pi / H``, column ``j`` holds
 ``phi = (j + 0.5) 2 pi / W``. Lookups wrap in phi and clamp in theta.
+
+Scene environment lights (world y up) map world directions ``d`` to these map coordinates by
+:data:`ENV_FROM_WORLD`: ``w = (d_z, -d_x, d_y)``, i.e. ``u = 0`` looks towards +z, ``u = 1/4``
+towards -x, ``u = 1/2`` towards -z (the image centre), ``u = 3/4`` towards +x, ``v = 0`` is +y.
+Seen from inside, facing the image centre, +x is on the right as in the image (a panorama, not
+its mirror image), which makes the map an improper (det -1) change of coordinates; lookups and
+SH irradiance only need it orthogonal.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter._validate import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
+
+
+#: World (y up) -> lat-long map coordinates of scene environment lights (rows: map x, y, z).
+ENV_FROM_WORLD = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
 def direction_to_uv(w) -> np.ndarray:
@@ -31,6 +42,45 @@ def texel_directions(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
     d = np.stack(np.broadcast_arrays(st * np.cos(phi), st * np.sin(phi), ct), -1)
     omega = (np.cos(theta_edges[:-1]) - np.cos(theta_edges[1:]))[:, None] * (2.0 * np.pi / w)
     return d, np.broadcast_to(omega, (h, w)).copy()
+
+
+def latlong_resample(image, rows: int) -> np.ndarray:
+    """Bilinear resampling ``(rows, 2 rows, C)`` of a lat-long image ``(H, W, C)`` at the new
+    texel centres (wrap in u, clamp in v); used to bring any equirectangular file to the
+    power-of-two ``(H, 2H)`` shape of :class:`EnvMap`."""
+    a = as_float_array(image, "image", ndim_min=3)
+    h, w = a.shape[:2]
+    rows = as_positive_int(rows, "rows")
+    y = np.clip((np.arange(rows) + 0.5) / rows * h - 0.5, 0.0, h - 1.0)
+    x = (np.arange(2 * rows) + 0.5) / (2 * rows) * w - 0.5
+    y0 = np.minimum(np.floor(y).astype(np.int64), max(h - 2, 0))
+    x0 = np.floor(x).astype(np.int64)
+    fy, fx = (y - y0)[:, None, None], (x - x0)[None, :, None]
+    y1, x0, x1 = np.minimum(y0 + 1, h - 1), x0 % w, (x0 + 1) % w
+    top = a[y0][:, x0] * (1 - fx) + a[y0][:, x1] * fx
+    bot = a[y1][:, x0] * (1 - fx) + a[y1][:, x1] * fx
+    return top * (1 - fy) + bot * fy
+
+
+def env_from_image(image, scale: float = 1.0) -> "EnvMap":
+    """:class:`EnvMap` of an equirectangular image ``(H, W[, C])`` of any size, times ``scale``.
+
+    Grey images give three equal channels, alpha is dropped; sizes that are not ``(2^k, 2^(k+1))``
+    are resampled bilinearly up to the next power-of-two height (``>= max(H, W / 2)``).
+    """
+    a = as_float_array(image, "image", ndim_min=2)
+    if a.ndim == 2:
+        a = a[..., None]
+    if a.ndim != 3 or a.shape[2] not in (1, 2, 3, 4) or min(a.shape[:2]) < 1:
+        raise PrefilterError(f"image: expected an (H, W, C) image with C in 1..4, got {a.shape}")
+    if not np.all(np.isfinite(a)) or np.any(a < 0):
+        raise PrefilterError("image: expected finite non-negative radiance")
+    a = np.repeat(a[..., :1], 3, axis=2) if a.shape[2] <= 2 else a[..., :3]
+    h, w = a.shape[:2]
+    rows = 1 << max(1, int(np.ceil(np.log2(max(h, w / 2.0)))))
+    if (h, w) != (rows, 2 * rows):
+        a = latlong_resample(a, rows)
+    return EnvMap(a * float(scale))
 
 
 class EnvMap:

@@ -1,4 +1,6 @@
-"""LEADR render method for point and directional lights (``leadr-point``).
+"""LEADR render methods: ``leadr-point`` (point and directional lights), ``leadr-env``
+(environment + point/directional lights), ``leadr-irradiance`` (diffuse microfacets, SH
+irradiance), and the naive counterparts ``leadr-env-naive`` / ``leadr-irradiance-naive``.
 
 Per G-buffer sample: the slope moments of the material's height map at the footprint's mip level
 (the renderer's moments chain of the slopes, trilinear) give the mean slope and covariance
@@ -6,7 +8,21 @@ Per G-buffer sample: the slope moments of the material's height map at the footp
 ``alpha^2 / 2`` per axis (GGX alpha taken as the Beckmann alpha). Shading is in the *geometric*
 frame: the mesonormal is carried by the mean slope. Specular: the closed form of supplemental 3.3
 with Schlick Fresnel; diffuse: the grid of Simplified Algorithm 3 with ``E(m) = <m, wi>``
-(5 x 5). Quad and environment lights are rejected.
+(5 x 5). Quad and environment lights are rejected by ``leadr-point``.
+
+``leadr-env``: specular by Simplified Algorithm 1 (``ENV_GRID`` x ``ENV_GRID`` Gaussian grid,
+mip LOD per sample from the Jacobian, :func:`prefilter.leadr.shading.env_specular`) over the sum
+of the scene's environment lights, plus the diffuse layer by Simplified Algorithms 2/3 (order-2 SH
+of the environment, ``DIFFUSE_GRID`` grid), plus point/directional lights as in ``leadr-point``.
+Schlick Fresnel per grid sample is linear in ``f0``, so rgb ``f0`` costs two scalar passes
+(``f0 = 1`` and ``f0 = 0``) blended per channel. ``leadr-irradiance``: the diffuse layer only
+(``base_color``; the specular layer is not rendered): environment and directional lights go into
+one SH irradiance (Simplified Algorithm 2), point lights use ``E(m) = I / d^2 <m, wl>``.
+The environment orientation is :data:`prefilter.leadr.envmap.ENV_FROM_WORLD` (``docs/leadr.md``).
+
+The ``-naive`` variants are naive mip-mapped normal mapping under the same integrators: the mean
+slope of the footprint (the mip-averaged height-map normal) with the micro roughness only, i.e.
+without the meso-scale slope covariance.
 """
 
 from __future__ import annotations
@@ -14,18 +30,27 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter.errors import PrefilterError
+from prefilter.leadr.envmap import (ENV_FROM_WORLD, env_from_image, latlong_resample,
+                                    sh9_directional, sh9_project)
 from prefilter.leadr.maps import shading_stats
-from prefilter.leadr.shading import diffuse_directional, point_light, schlick
+from prefilter.leadr.shading import (diffuse_directional, diffuse_sh, env_specular, point_light,
+                                     schlick)
 
 DIFFUSE_GRID = 5
+#: Specular grid of ``leadr-env``: 9 x 9 is within ~3% of the N = 128 grid for isotropic lobes
+#: (docs/leadr.md convergence table), 5 x 5 within 7-14%.
+ENV_GRID = 9
 
 
 def _local(w, t, b, n):
     return np.stack([np.sum(w * t, -1), np.sum(w * b, -1), np.sum(w * n, -1)], -1)
 
 
-def leadr_stats(scene, g):
-    """Mean slope ``(N, 2)`` and covariance ``(N, 2, 2)`` per hit sample, plus materials."""
+def leadr_stats(scene, g, *, meso: bool = True):
+    """Mean slope ``(N, 2)`` and covariance ``(N, 2, 2)`` per hit sample, plus materials.
+
+    ``meso=False`` keeps the mean slope and drops the footprint's slope covariance (naive
+    mip-mapped normal mapping: the micro roughness only)."""
     n = g.hit.size
     mean = np.zeros((n, 2))
     cov = np.zeros((n, 2, 2))
@@ -39,6 +64,8 @@ def leadr_stats(scene, g):
         else:
             mom = np.zeros((int(m.sum()), 5))
         mu, c = shading_stats(mom, 0.0)
+        if not meso:
+            c = np.zeros_like(c)
         c[:, 0, 0] += 0.5 * mat.alpha_x**2
         c[:, 1, 1] += 0.5 * mat.alpha_y**2
         mean[m], cov[m] = mu, c
@@ -47,13 +74,19 @@ def leadr_stats(scene, g):
     return mean, cov, base, f0
 
 
-def shade_leadr_delta(scene, g, lights) -> np.ndarray:
-    """Radiance ``(N, 3)`` of the hit samples ``g`` under point and directional lights."""
+def _frame(g):
+    """Shading frame of two-sided hits (flipped when seen from behind) and the local view."""
     flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
     t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
-    mean, cov, base, f0 = leadr_stats(scene, g)
     wo = _local(g.view, t, b, n)
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    return t, b, n, wo
+
+
+def shade_leadr_delta(scene, g, lights, *, meso: bool = True) -> np.ndarray:
+    """Radiance ``(N, 3)`` of the hit samples ``g`` under point and directional lights."""
+    t, b, n, wo = _frame(g)
+    mean, cov, base, f0 = leadr_stats(scene, g, meso=meso)
     incoming = []
     for pl in lights.points:
         d = pl.position - g.position
@@ -71,6 +104,120 @@ def shade_leadr_delta(scene, g, lights) -> np.ndarray:
         diff = base * diffuse_directional(wo, wi, mean, cov, DIFFUSE_GRID)[:, None]
         out += (spec + diff) * e
     return out
+
+
+def scene_environment(scene):
+    """The sum of the scene's environment lights as a :class:`prefilter.leadr.envmap.EnvMap`
+    (``None`` without any); several maps are resampled to the largest one's size."""
+    imgs = []
+    for light in scene.lights:
+        if light.type == "environment":
+            env = env_from_image(light.image.load(), light.scale)
+            imgs.append(env.levels[0])
+    if not imgs:
+        return None
+    rows = max(a.shape[0] for a in imgs)
+    return env_from_image(sum(a if a.shape[0] == rows else latlong_resample(a, rows)
+                              for a in imgs))
+
+
+def _env_rotation(t, b, n) -> np.ndarray:
+    """Local shading frame -> environment-map coordinates, ``(N, 3, 3)``."""
+    return np.einsum("ij,njk->nik", ENV_FROM_WORLD, np.stack([t, b, n], -1))
+
+
+def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int = ENV_GRID,
+                    diffuse_grid: int = DIFFUSE_GRID) -> np.ndarray:
+    """Radiance ``(N, 3)`` of hits ``g``: environment specular (Simplified Algorithm 1) + SH
+    diffuse (Simplified Algorithm 3) + point/directional lights."""
+    t, b, n, wo = _frame(g)
+    mean, cov, base, f0 = leadr_stats(scene, g, meso=meso)
+    rot = _env_rotation(t, b, n)
+    out = np.zeros((len(wo), 3))
+    if env is not None:
+        if np.any(f0 != 0.0):
+            # Schlick is linear in f0: F = f0 * 1 + (1 - f0) * (1 - c)^5.
+            one = env_specular(env, wo, mean, cov, n_grid, f0=1.0, to_world=rot)
+            out += f0 * one
+            if np.any(f0 != 1.0):
+                zero = env_specular(env, wo, mean, cov, n_grid, f0=0.0, to_world=rot)
+                out += (1.0 - f0) * zero
+        else:
+            out += env_specular(env, wo, mean, cov, n_grid, f0=0.0, to_world=rot)
+        if np.any(base != 0.0):
+            out += base * diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=rot)
+    if lights.points or lights.directionals:
+        out += shade_leadr_delta(scene, g, lights, meso=meso)
+    return out
+
+
+def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
+                           diffuse_grid: int = DIFFUSE_GRID) -> np.ndarray:
+    """Diffuse radiance ``(N, 3)`` of hits ``g``: SH irradiance ``sh (9, 3)`` (environment and
+    directional lights, map coordinates) by Simplified Algorithm 3, point lights directly."""
+    t, b, n, wo = _frame(g)
+    mean, cov, base, _ = leadr_stats(scene, g, meso=meso)
+    out = diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=_env_rotation(t, b, n))
+    for pl in lights.points:
+        d = pl.position - g.position
+        d2 = np.maximum(np.sum(d * d, -1), 1e-300)
+        wl = _local(d / np.sqrt(d2)[:, None], t, b, n)
+        wl /= np.linalg.norm(wl, axis=-1, keepdims=True)
+        e = diffuse_directional(wo, wl, mean, cov, diffuse_grid)
+        out += e[:, None] * pl.intensity / d2[:, None]
+    return base * out
+
+
+def _lights_without_quads(scene, method):
+    if any(light.type == "quad" for light in scene.lights):
+        raise PrefilterError(f"method {method!r}: quad lights are not supported; expected "
+                             "environment, point and directional lights")
+    return scene.light_set()
+
+
+def _render_env(scene, settings, meso: bool, name: str) -> np.ndarray:
+    from prefilter.render.pipeline import render_samples
+
+    lights = _lights_without_quads(scene, name)
+    env = scene_environment(scene)
+    sh = sh9_project(env) if env is not None else np.zeros((9, 3))
+    return render_samples(scene, settings,
+                          lambda g, _u: shade_leadr_env(scene, g, env, sh, lights, meso=meso),
+                          stratified=settings.spp > 1, desc=name)
+
+
+def _render_irradiance(scene, settings, meso: bool, name: str) -> np.ndarray:
+    from prefilter.render.pipeline import render_samples
+
+    lights = _lights_without_quads(scene, name)
+    env = scene_environment(scene)
+    sh = sh9_project(env) if env is not None else np.zeros((9, 3))
+    if lights.directionals:
+        dirs = np.stack([-dl.direction for dl in lights.directionals]) @ ENV_FROM_WORLD.T
+        sh = sh + sh9_directional(dirs, np.stack([dl.irradiance for dl in lights.directionals]))
+    return render_samples(scene, settings,
+                          lambda g, _u: shade_leadr_irradiance(scene, g, sh, lights, meso=meso),
+                          stratified=settings.spp > 1, desc=name)
+
+
+def render_leadr_env(scene, settings) -> np.ndarray:
+    """The ``leadr-env`` method (environment, point and directional lights)."""
+    return _render_env(scene, settings, True, "leadr-env")
+
+
+def render_leadr_env_naive(scene, settings) -> np.ndarray:
+    """``leadr-env-naive``: as ``leadr-env`` with the mip-averaged normal and micro roughness."""
+    return _render_env(scene, settings, False, "leadr-env-naive")
+
+
+def render_leadr_irradiance(scene, settings) -> np.ndarray:
+    """The ``leadr-irradiance`` method (diffuse layer; environment, point, directional lights)."""
+    return _render_irradiance(scene, settings, True, "leadr-irradiance")
+
+
+def render_leadr_irradiance_naive(scene, settings) -> np.ndarray:
+    """``leadr-irradiance-naive``: ``leadr-irradiance`` with the mip-averaged normal only."""
+    return _render_irradiance(scene, settings, False, "leadr-irradiance-naive")
 
 
 def render_leadr_point(scene, settings) -> np.ndarray:
