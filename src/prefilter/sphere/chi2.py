@@ -15,7 +15,24 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
+from prefilter._validate import as_directions, as_float_array, as_positive_int
+from prefilter.errors import PrefilterError
 from prefilter.sphere.sampling import frame_from_normal, to_local, to_world
+
+
+def _as_samples(samples) -> np.ndarray:
+    s = as_float_array(samples, "samples", ndim_min=2, last_dim=3)
+    if s.ndim != 2 or s.shape[0] == 0:
+        raise PrefilterError(f"samples: expected shape (n, 3) with n >= 1, got {s.shape}")
+    return as_directions(s, "samples")
+
+
+def _as_axis(axis) -> np.ndarray:
+    a = as_float_array(axis, "axis", ndim_min=1, last_dim=3)
+    norm = np.linalg.norm(a)
+    if a.shape != (3,) or not norm > 0.0:
+        raise PrefilterError(f"axis: expected a non-zero vector of shape (3,), got {a.tolist()}")
+    return a / norm
 
 
 @dataclass(frozen=True)
@@ -38,12 +55,15 @@ def lobe_cap(samples, quantile: float = 0.995) -> tuple[np.ndarray, float]:
 
     Use pilot samples (a different seed from the tested ones) so the bins do not depend on them.
     """
-    s = np.asarray(samples, float)
+    s = _as_samples(samples)
+    q = float(as_float_array(quantile, "quantile"))
+    if not 0.0 < q <= 1.0:
+        raise PrefilterError(f"quantile: expected a number in (0, 1], got {quantile!r}")
     axis = s.mean(axis=0)
     norm = np.linalg.norm(axis)
     axis = np.array([0.0, 0.0, 1.0]) if norm < 1e-6 else axis / norm
     ang = np.arccos(np.clip(s @ axis, -1.0, 1.0))
-    theta_max = float(min(np.pi, np.quantile(ang, quantile) * 1.05 + 1e-6))
+    theta_max = float(min(np.pi, np.quantile(ang, q) * 1.05 + 1e-6))
     return axis, theta_max
 
 
@@ -70,11 +90,19 @@ def chi2_sphere(
     (at most ``max_cells`` new cells per level, the worst first).
     More than ``max_in_empty`` samples in bins of zero density fail the test outright.
     """
-    samples = np.asarray(samples, dtype=np.float64)
+    samples = _as_samples(samples)
     n = samples.shape[0]
-    axis = np.asarray(axis, float) / np.linalg.norm(axis)
+    axis = _as_axis(axis)
+    if not callable(pdf):
+        raise PrefilterError(f"pdf: expected a callable density, got {type(pdf).__name__}")
+    theta_max = float(as_float_array(theta_max, "theta_max"))
+    if not 0.0 < theta_max <= np.pi:
+        raise PrefilterError(f"theta_max: expected an angle in (0, pi], got {theta_max!r}")
+    if not (isinstance(res, (tuple, list)) and len(res) == 2):
+        raise PrefilterError(f"res: expected (n_theta, n_phi), got {res!r}")
+    n_th, n_ph = (as_positive_int(r, "res") for r in res)
+    quad = as_positive_int(quad, "quad")
     t, b = frame_from_normal(axis)
-    n_th, n_ph = res
     cmin = np.cos(theta_max)
 
     # Histogram in the cap frame.
@@ -106,6 +134,10 @@ def chi2_sphere(
         sn = np.sqrt(np.maximum(0.0, 1.0 - C * C))
         local = np.stack(np.broadcast_arrays(sn * np.cos(P), sn * np.sin(P), C), axis=-1)
         dens = np.asarray(pdf(to_world(local, t, b, axis)), dtype=np.float64)
+        if not np.all(np.isfinite(dens) & (dens >= 0.0)):
+            # a NaN density would turn the statistic into NaN, a silent failure
+            bad = dens[~(np.isfinite(dens) & (dens >= 0.0))]
+            raise PrefilterError(f"pdf: expected finite densities >= 0, got {bad[:4]}")
         w2 = wq[:, None] * wq[None, :] / 4
         return np.sum(dens * w2, axis=(-2, -1)) * (c_b - c_a) * (p_b - p_a)
 
