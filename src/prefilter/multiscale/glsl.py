@@ -1,0 +1,94 @@
+"""GLSL of the multi-scale roughness as the ``ltc-multiscale`` method computes it, and the data it
+reads.
+
+Tao et al. 2021: ``alpha_meso(r)`` inverts eq. 4 (the mean resultant length of the footprint's
+normals) and ``alpha_total`` combines micro and meso roughness (eq. 7 form). The Python default
+(:mod:`prefilter.multiscale.meso`, ``variant="exact"``) interpolates the exact inverse linearly at
+4097 nodes uniform in ``x = sqrt(3 (1 - r))``; the shader reads the same nodes from a float32
+texture of ``ALPHA_MESO_WIDTH`` texels per row (:func:`alpha_meso_nodes`) and interpolates them
+the same way. ``alpha_total`` is our refit (:data:`prefilter.multiscale.FIT_COEFFS`) in closed
+form. :func:`alpha_meso_twin` is the shader's ``alphaMeso`` in NumPy.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from prefilter._io import atomic_path
+
+__all__ = ["ALPHA_MESO_WIDTH", "GLSL", "alpha_meso_nodes", "alpha_meso_twin", "export_all",
+           "glsl_source"]
+
+#: Texels per row of the ``alpha_meso`` node texture (WebGL2 guarantees 2048).
+ALPHA_MESO_WIDTH = 64
+
+GLSL = """\
+// Multi-scale LTC roughness (Tao et al. 2021, eqs. 4-7; prefilter `multiscale/glsl.py`).
+// alphaMesoNodes: {n} floats alpha(x_k), x_k = k / {last}, x = sqrt(3 (1 - r)), {w} per row.
+uniform highp sampler2D alphaMesoNodes;
+const int MS_NODES = {n}, MS_ROW = {w};
+
+float msNode(int k) {{ return texelFetch(alphaMesoNodes, ivec2(k % MS_ROW, k / MS_ROW), 0).r; }}
+
+// eq. 4 inverted: meso roughness from the length r of the footprint's averaged normal
+float alphaMeso(float r) {{
+    float x = sqrt(clamp(3.0 * (1.0 - r), 0.0, 1.0)) * float(MS_NODES - 1);
+    int k = min(int(floor(x)), MS_NODES - 2);
+    return mix(msNode(k), msNode(k + 1), x - float(k));
+}}
+
+// eqs. 6-7, our refit: alpha^2 = a^2 + b^2 + ab (c0 + p (c1 + c2 p) + c3 ab), p = a + b
+float alphaTotal(float a, float b) {{
+    float p = a + b, q = a * b;
+    float t2 = a * a + b * b + q * ({c0:.9g} + p * ({c1:.9g} + {c2:.9g} * p) + {c3:.9g} * q);
+    return clamp(sqrt(max(t2, 0.0)), 0.0, 1.0);
+}}
+"""
+
+
+def alpha_meso_nodes() -> np.ndarray:
+    """The nodes ``alpha(x_k)`` of the default ``alpha_meso`` as float32, padded with the last
+    value to rows of :data:`ALPHA_MESO_WIDTH`: shape ``(rows, ALPHA_MESO_WIDTH)``."""
+    from prefilter.multiscale.meso import _A_NODES
+
+    n = len(_A_NODES)
+    rows = -(-n // ALPHA_MESO_WIDTH)
+    out = np.full(rows * ALPHA_MESO_WIDTH, _A_NODES[-1], np.float32)
+    out[:n] = _A_NODES
+    return out.reshape(rows, ALPHA_MESO_WIDTH)
+
+
+def glsl_source() -> str:
+    """:data:`GLSL` with the node count and :data:`~prefilter.multiscale.FIT_COEFFS` filled in."""
+    from prefilter.multiscale.convolution import FIT_COEFFS
+    from prefilter.multiscale.meso import _A_NODES
+
+    c0, c1, c2, c3 = FIT_COEFFS
+    n = len(_A_NODES)
+    return GLSL.format(n=n, last=n - 1, w=ALPHA_MESO_WIDTH, c0=c0, c1=c1, c2=c2, c3=c3)
+
+
+def alpha_meso_twin(nodes, r) -> np.ndarray:
+    """``alphaMeso(r)`` of :data:`GLSL` on ``nodes`` (from :func:`alpha_meso_nodes`), ``(...)``."""
+    from prefilter.multiscale.meso import _A_NODES
+
+    flat = np.asarray(nodes, np.float64).reshape(-1)
+    n = len(_A_NODES)
+    x = np.sqrt(np.clip(3.0 * (1.0 - np.asarray(r, np.float64)), 0.0, 1.0)) * (n - 1)
+    k = np.minimum(np.floor(x).astype(np.intp), n - 2)
+    return flat[k] + (x - k) * (flat[k + 1] - flat[k])
+
+
+def export_all(out_dir) -> list[Path]:
+    """Write ``alpha_meso_f32.bin`` (raw little-endian float32 :func:`alpha_meso_nodes`) and
+    ``multiscale.glsl``; returns the paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    b, g = out / "alpha_meso_f32.bin", out / "multiscale.glsl"
+    with atomic_path(b, suffix=".bin") as tmp:
+        tmp.write_bytes(alpha_meso_nodes().astype("<f4").tobytes())
+    with atomic_path(g, suffix=".glsl") as tmp:
+        tmp.write_text(glsl_source())
+    return [b, g]

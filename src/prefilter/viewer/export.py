@@ -1,0 +1,222 @@
+"""A scene -> the viewer's static folder: page, GLSL, tables, texture atlas and ``viewer.json``.
+
+The folder layout and the binary formats are documented in ``docs/viewer.md``. Everything the
+page draws comes from here: the isotropic table as :func:`prefilter.ltc.glsl.export_all` writes
+it, the anisotropic table as ``prefilter bake ltc-aniso --export`` writes it
+(:func:`prefilter.ltc.aniso.export.export_all`), the multi-scale roughness from
+:func:`prefilter.multiscale.glsl.export_all`, and the scene's normal maps as the box-filtered mip
+chains the Python renderer reads (:class:`prefilter.texture.MipChain`; for
+``ltc-multiscale-aniso`` the slope-moment chains of :func:`prefilter.multiscale.aniso.slope_moments_chain`).
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from prefilter._io import atomic_path, save_json_atomic
+from prefilter.errors import PrefilterError
+
+__all__ = ["BUILTIN_MAPS", "MAX_OBJECTS", "MAX_QUADS", "METHODS", "default_scene",
+           "export_scene", "viewer_scene"]
+
+#: Render methods the page implements (GLSL names in ``static/shaders/viewer.frag.glsl``).
+METHODS = ("ltc", "ltc-multiscale", "ltc-aniso", "ltc-multiscale-aniso")
+MAX_OBJECTS = 4
+MAX_QUADS = 4
+#: Texels per row of the texture atlas.
+ATLAS_WIDTH = 2048
+#: The page's normal-map choices besides the scene's own: the procedural built-ins at 256^2.
+BUILTIN_MAPS = {
+    "gaussian": {"procedural": "gaussian", "size": 256, "seed": 1, "rms_slope": 0.25,
+                 "corr_length": 3},
+    "anisotropic": {"procedural": "anisotropic", "size": 256, "seed": 1},
+    "brushed": {"procedural": "brushed", "size": 256, "seed": 1, "rms_slope": 0.25,
+                "length": 64, "width": 1.5},
+    "scratches": {"procedural": "scratches", "size": 256, "seed": 1},
+    "flakes": {"procedural": "flakes", "size": 256, "seed": 1, "rms_slope": 0.25,
+               "flake_size": 4},
+}
+
+STATIC_DIR = Path(__file__).resolve().parent / "static"
+
+
+def default_scene(width: int = 512, height: int = 384) -> dict:
+    """The page's default scene: a Gaussian-bump plane and a flakes sphere under one quad light."""
+    return {
+        "camera": {"origin": [0.0, 1.3, 3.6], "target": [0.0, 0.2, 0.0], "up": [0, 1, 0],
+                   "fov": 40, "width": int(width), "height": int(height)},
+        "objects": [
+            {"type": "plane", "center": [0, 0, 0], "normal": [0, 1, 0], "tangent": [1, 0, 0],
+             "size": [8, 8], "uv_scale": [8, 8],
+             "material": {"alpha": 0.15, "base_color": 0.02, "f0": 0.9,
+                          "normal_map": dict(BUILTIN_MAPS["gaussian"])}},
+            {"type": "sphere", "center": [0.9, 0.5, 0.2], "radius": 0.5, "uv_scale": [4, 2],
+             "material": {"alpha_x": 0.3, "alpha_y": 0.1, "base_color": [0.2, 0.3, 0.6],
+                          "f0": 0.04}},
+        ],
+        "lights": [{"type": "quad", "vertices": [[-1, 0.4, -2], [1, 0.4, -2], [1, 1.6, -2.3],
+                                                 [-1, 1.6, -2.3]], "radiance": 5.0}],
+    }
+
+
+def _check_supported(scene) -> None:
+    if len(scene.objects) > MAX_OBJECTS:
+        raise PrefilterError(f"objects: the viewer draws at most {MAX_OBJECTS} objects, got "
+                             f"{len(scene.objects)}")
+    quads = 0
+    for i, light in enumerate(scene.lights):
+        if light.type != "quad" or light.texture is not None:
+            what = "textured quad" if light.type == "quad" else light.type
+            raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad lights "
+                                 f"only, got a {what} light")
+        quads += 1
+    if quads > MAX_QUADS:
+        raise PrefilterError(f"lights: the viewer draws at most {MAX_QUADS} quad lights, got "
+                             f"{quads}")
+    for i, obj in enumerate(scene.objects):
+        for k in ("height_map", "color_map"):
+            if getattr(obj.material, k) is not None:
+                raise PrefilterError(f"objects[{i}].material.{k}: not supported by the viewer "
+                                     "(normal maps only)")
+
+
+def viewer_scene(scene, map_index=None) -> dict:
+    """The flat scene the page reads (``viewer.json`` field ``scene``; ``docs/viewer.md``).
+
+    ``map_index``: object index -> index into the manifest's ``maps`` (``-1``: no map).
+    """
+    c = scene.camera
+    objs = []
+    for i, o in enumerate(scene.objects):
+        m = o.material
+        row = {"type": 0 if o.type == "plane" else 1, "center": o.center.tolist(),
+               "uv_scale": o.uv_scale.tolist(),
+               "material": {"alpha_x": m.alpha_x, "alpha_y": m.alpha_y,
+                            "base_color": m.base_color.tolist(), "f0": m.f0.tolist(),
+                            "map": -1 if map_index is None else map_index.get(i, -1)}}
+        if o.type == "plane":
+            row.update(n=o.normal.tolist(), t=o.tangent.tolist(),
+                       b=np.cross(o.normal, o.tangent).tolist(), size=o.size.tolist(), radius=0.0)
+        else:
+            row.update(n=o.pole.tolist(), t=o.axis_x.tolist(),
+                       b=np.cross(o.axis_x, o.pole).tolist(), size=[0.0, 0.0], radius=o.radius)
+        objs.append(row)
+    quads = [{"vertices": q.vertices.tolist(), "normal": q.normal.tolist(),
+              "radiance": q.radiance.tolist()} for q in scene.light_set().quads]
+    return {"camera": {"origin": c.origin.tolist(), "target": c.target.tolist(),
+                       "up": c.up.tolist(), "fov": c.fov, "width": c.width, "height": c.height},
+            "objects": objs, "lights": quads}
+
+
+class _Atlas:
+    """Mip chains packed as RGBA float32 texels (``stride`` texels per texel of the chain)."""
+
+    def __init__(self):
+        self.parts, self.levels, self.size = [], [], 0
+
+    def add(self, chain) -> list[int]:
+        first = len(self.levels)
+        c = chain.shape[2]
+        stride = -(-c // 4)
+        for lv in chain.levels:
+            h, w = lv.shape[:2]
+            x = np.zeros((h, w, 4 * stride), np.float32)
+            x[..., :c] = lv
+            self.parts.append(x.reshape(-1))
+            self.levels.append([self.size, h, w, stride])
+            self.size += h * w * stride
+        return [first, len(chain.levels)]
+
+    def data(self) -> np.ndarray:
+        rows = max(1, -(-self.size // ATLAS_WIDTH))
+        out = np.zeros(rows * ATLAS_WIDTH * 4, np.float32)
+        if self.parts:
+            flat = np.concatenate(self.parts)
+            out[:flat.size] = flat
+        return out
+
+
+def _write(path: Path, data: bytes) -> None:
+    with atomic_path(path, suffix=path.suffix) as tmp:
+        tmp.write_bytes(data)
+
+
+def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
+                 iso_table=None, aniso_table=None) -> Path:
+    """Write the viewer's static folder for ``scene`` (a :class:`Scene`, a JSON path, a dict or
+    ``None`` for :func:`default_scene`) to ``out_dir``; returns ``out_dir``.
+
+    ``builtin_maps``: also pack the :data:`BUILTIN_MAPS` for the page's normal-map choice.
+    ``iso_table`` / ``aniso_table``: the tables (default: the shipped ones).
+    """
+    from prefilter.ltc import glsl as iso_glsl
+    from prefilter.ltc.aniso import export as aniso_export
+    from prefilter.ltc.aniso.table import AnisoGGXTable
+    from prefilter.ltc.table import GGXTable
+    from prefilter.multiscale import glsl as ms_glsl
+    from prefilter.multiscale.aniso import slope_moments_chain
+    from prefilter.render.scene import Scene, TextureRef, load_scene
+    from prefilter.texture import MipChain
+
+    if scene is None:
+        scene = default_scene()
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    _check_supported(scene)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    shutil.copytree(STATIC_DIR, out, dirs_exist_ok=True,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    data = out / "data"
+    iso = iso_table if iso_table is not None else GGXTable.load()
+    aniso = aniso_table if aniso_table is not None else AnisoGGXTable.load()
+    iso_glsl.export_all(iso, data)
+    aniso_export.export_all(aniso, data)
+    ms_glsl.export_all(data)
+
+    atlas, maps, map_index, seen = _Atlas(), [], {}, {}
+
+    def add_map(name: str, ref: TextureRef) -> int:
+        key = ref._key()
+        if key in seen:
+            return seen[key]
+        normals = ref.load()
+        maps.append({"name": name, "normals": atlas.add(MipChain(normals)),
+                     "slopes": atlas.add(slope_moments_chain(normals)),
+                     "size": list(normals.shape[:2])})
+        seen[key] = len(maps) - 1
+        return seen[key]
+
+    for i, o in enumerate(scene.objects):
+        if o.material.normal_map is not None:
+            map_index[i] = add_map(f"scene: objects[{i}]", o.material.normal_map)
+    if builtin_maps:
+        for name, spec in BUILTIN_MAPS.items():
+            add_map(name, TextureRef("normal_map", spec, f"builtin {name}"))
+    _write(data / "atlas_f32.bin", atlas.data().astype("<f4").tobytes())
+    _write(data / "levels_i32.bin", np.asarray(atlas.levels or [[0, 1, 1, 1]],
+                                               "<i4").reshape(-1).tobytes())
+    at = iso_glsl.texture_params(iso)
+    an = aniso_export.texture_params(aniso)
+    manifest = {
+        "version": 1,
+        "methods": list(METHODS),
+        "ltc_iso": {"f32": "ggx_iso_f32.bin", "f16": "ggx_iso_f16.bin", "glsl": "ltc_iso.glsl",
+                    "width": at["T"], "height": at["R"], "layers": 3},
+        "ltc_aniso": {"f32": "ggx_aniso_f32.bin", "f16": "ggx_aniso_f16.bin",
+                      "glsl": "ltc_aniso.glsl", "width": an["T"], "height": an["F"],
+                      "depth": an["A"] * an["R"], "layers": 3},
+        "alpha_meso": {"f32": "alpha_meso_f32.bin", "glsl": "multiscale.glsl",
+                       "width": ms_glsl.ALPHA_MESO_WIDTH,
+                       "height": int(ms_glsl.alpha_meso_nodes().shape[0])},
+        "atlas": {"f32": "atlas_f32.bin", "width": ATLAS_WIDTH,
+                  "height": max(1, -(-atlas.size // ATLAS_WIDTH)),
+                  "levels": "levels_i32.bin", "n_levels": max(1, len(atlas.levels))},
+        "maps": maps,
+        "scene": viewer_scene(scene, map_index),
+    }
+    save_json_atomic(data / "viewer.json", manifest)
+    return out

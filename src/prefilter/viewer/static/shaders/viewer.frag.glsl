@@ -1,0 +1,260 @@
+// The viewer's shader: the Python renderer's `ltc`, `ltc-multiscale`, `ltc-aniso` and
+// `ltc-multiscale-aniso` methods per pixel (prefilter.render.pipeline, camera, shading;
+// prefilter.multiscale.render / aniso; prefilter.ltc.aniso.render), in float32. Included after
+// ltc_iso.glsl, ltc_aniso.glsl and multiscale.glsl (the exported snippets).
+#define MAX_OBJECTS 4
+#define MAX_QUADS 4
+#define METHOD_LTC 0
+#define METHOD_MULTISCALE 1
+#define METHOD_ANISO 2
+#define METHOD_MULTISCALE_ANISO 3
+
+uniform highp sampler2D uAtlas;     // mip chains, RGBA32F, uAtlasWidth texels per row
+uniform highp isampler2D uLevels;   // per mip level: (offset, height, width, stride)
+uniform int uAtlasWidth;
+uniform vec3 uCamO, uCamR, uCamU, uCamF;  // origin, right, true up, forward (unit)
+uniform float uCamSy;                     // image-plane units per pixel: 2 tan(fov/2) / height
+uniform vec2 uSize;                       // image width, height (pixels)
+uniform int uNumObjects;
+uniform int uObjType[MAX_OBJECTS];        // 0 plane, 1 sphere
+uniform vec3 uObjC[MAX_OBJECTS], uObjN[MAX_OBJECTS], uObjT[MAX_OBJECTS], uObjB[MAX_OBJECTS];
+uniform vec4 uObjP[MAX_OBJECTS];          // plane size (2), sphere radius, unused
+uniform vec2 uObjUV[MAX_OBJECTS];         // uv_scale
+uniform vec2 uMatAlpha[MAX_OBJECTS];      // alpha_x, alpha_y
+uniform vec3 uMatBase[MAX_OBJECTS], uMatF0[MAX_OBJECTS];
+uniform ivec4 uMatMap[MAX_OBJECTS];       // normal chain (first level, levels), slope chain
+uniform int uNumQuads;
+uniform vec3 uQuadV[4 * MAX_QUADS], uQuadN[MAX_QUADS], uQuadL[MAX_QUADS];
+uniform int uMethodLeft, uMethodRight;    // methods left / right of the split
+uniform float uSplit;                     // split position in pixels from the left
+uniform int uLinear;                      // 1: linear radiance out (float target), 0: display
+uniform float uExposure;
+out vec4 fragColor;
+
+const float PI = 3.14159265358979;
+const float VIEW_Z_MIN = 1e-3;           // prefilter.render.shading.VIEW_Z_MIN
+
+// -- G-buffer (prefilter.render.kernels._trace) ----------------------------------------------
+
+struct Hit { int id; vec3 p, n, t, b; vec2 uv; vec4 dudv; };  // dudv = (du/dx, du/dy, dv/dx, dv/dy)
+
+bool trace(vec3 o, vec3 d, vec3 ddx, vec3 ddy, out Hit h) {
+    float best = 1e30;
+    int kb = -1;
+    for (int k = 0; k < MAX_OBJECTS; ++k) {
+        if (k >= uNumObjects) break;
+        vec3 c = uObjC[k];
+        float t;
+        if (uObjType[k] == 0) {
+            float den = dot(d, uObjN[k]);
+            if (!(abs(den) > 1e-12)) continue;
+            t = dot(c - o, uObjN[k]) / den;
+            vec3 q = o + t * d - c;
+            if (!(t > 1e-6 && abs(dot(q, uObjT[k])) <= uObjP[k].x / 2.0
+                  && abs(dot(q, uObjB[k])) <= uObjP[k].y / 2.0)) continue;
+        } else {
+            vec3 oc = o - c;
+            float b = dot(oc, d), cc = dot(oc, oc) - uObjP[k].z * uObjP[k].z;
+            float disc = b * b - cc;
+            if (!(disc >= 0.0)) continue;
+            float s = sqrt(disc);
+            t = -b - s;
+            if (!(t > 1e-6)) t = -b + s;
+            if (!(t > 1e-6)) continue;
+        }
+        if (t < best) { best = t; kb = k; }
+    }
+    h.id = kb;
+    if (kb < 0) return false;
+    float t = best;
+    vec3 p = o + t * d, c = uObjC[kb];
+    vec2 s0 = uObjUV[kb];
+    vec3 n, tg, bt;
+    float gu, gv;
+    if (uObjType[kb] == 0) {
+        n = uObjN[kb]; tg = uObjT[kb]; bt = uObjB[kb];
+        vec3 q = p - c;
+        float su = s0.x / uObjP[kb].x, sv = s0.y / uObjP[kb].y;
+        h.uv = vec2(dot(q, tg) * su + 0.5 * s0.x, dot(q, bt) * sv + 0.5 * s0.y);
+        gu = su; gv = sv;
+    } else {
+        float r = uObjP[kb].z;
+        vec3 ex = uObjT[kb], ey = uObjN[kb], ez = uObjB[kb];
+        vec3 q = (p - c) / r;
+        float x = dot(q, ex), y = clamp(dot(q, ey), -1.0, 1.0), z = dot(q, ez);
+        float theta = acos(y), phi = atan(z, x);
+        if (phi < 0.0) phi += 2.0 * PI;
+        float st = max(sqrt(x * x + z * z), 1e-12);
+        float cp = x / st, sp = z / st;
+        n = q / length(q);
+        tg = -sp * ex + cp * ez;
+        bt = y * cp * ex - st * ey + y * sp * ez;
+        h.uv = vec2(phi / (2.0 * PI) * s0.x, theta / PI * s0.y);
+        gu = s0.x / (2.0 * PI * r * st); gv = s0.y / (PI * r);
+    }
+    // Igehy 1999: the hit point moves on the tangent plane
+    float dn = dot(d, n);
+    vec3 dpdx = t * (ddx - dot(ddx, n) / dn * d), dpdy = t * (ddy - dot(ddy, n) / dn * d);
+    h.p = p; h.n = n; h.t = tg; h.b = bt;
+    h.dudv = vec4(gu * dot(tg, dpdx), gu * dot(tg, dpdy), gv * dot(bt, dpdx), gv * dot(bt, dpdy));
+    return true;
+}
+
+// -- mip chains (prefilter.render.kernels._footprint_into) ---------------------------------------
+
+int imod(int a, int m) { int r = a % m; return r < 0 ? r + m : r; }
+
+vec4 atlasTexel(int k) { return texelFetch(uAtlas, ivec2(k % uAtlasWidth, k / uAtlasWidth), 0); }
+
+// wrapped bilinear lookup of level `level` (8 channels: A = 0..3, B = 4..7), weight added
+void bilinearAdd(int level, vec2 uv, float wgt, inout vec4 A, inout vec4 B) {
+    ivec4 L = texelFetch(uLevels, ivec2(level, 0), 0);
+    // period 1: wrapping first keeps float32 texel coordinates exact for large uv
+    vec2 f = uv - floor(uv);
+    float x = f.x * float(L.z) - 0.5, y = f.y * float(L.y) - 0.5;
+    float x0 = floor(x), y0 = floor(y), fx = x - x0, fy = y - y0;
+    int i0 = imod(int(y0), L.y), j0 = imod(int(x0), L.z);
+    int i1 = (i0 + 1) % L.y, j1 = (j0 + 1) % L.z;
+    int k00 = L.x + (i0 * L.z + j0) * L.w, k01 = L.x + (i0 * L.z + j1) * L.w;
+    int k10 = L.x + (i1 * L.z + j0) * L.w, k11 = L.x + (i1 * L.z + j1) * L.w;
+    float w00 = (1.0 - fx) * (1.0 - fy), w01 = fx * (1.0 - fy);
+    float w10 = (1.0 - fx) * fy, w11 = fx * fy;
+    A += wgt * (w00 * atlasTexel(k00) + w01 * atlasTexel(k01) + w10 * atlasTexel(k10)
+                + w11 * atlasTexel(k11));
+    if (L.w > 1) {
+        B += wgt * (w00 * atlasTexel(k00 + 1) + w01 * atlasTexel(k01 + 1)
+                    + w10 * atlasTexel(k10 + 1) + w11 * atlasTexel(k11 + 1));
+    }
+}
+
+// isotropic trilinear lookup at lod = log2(major axis of the footprint in texels)
+void footprint(ivec2 chain, vec2 uv, vec4 dudv, out vec4 A, out vec4 B) {
+    A = vec4(0.0); B = vec4(0.0);
+    ivec4 L0 = texelFetch(uLevels, ivec2(chain.x, 0), 0);
+    float w0 = float(L0.z), h0 = float(L0.y);
+    float j00 = dudv.x * w0, j01 = dudv.y * w0, j10 = dudv.z * h0, j11 = dudv.w * h0;
+    float p = j00 * j00 + j01 * j01, r = j10 * j10 + j11 * j11, q = j00 * j10 + j01 * j11;
+    float disc = sqrt(max(0.25 * (p - r) * (p - r) + q * q, 0.0));
+    float major = sqrt(0.5 * (p + r) + disc);
+    float n = float(chain.y);
+    float lod = clamp(log2(max(major, 1.0)), 0.0, n - 1.0);
+    if (chain.y > 1) {
+        int l0 = min(int(floor(lod)), chain.y - 2);
+        float t = lod - float(l0);
+        bilinearAdd(chain.x + l0, uv, 1.0 - t, A, B);
+        bilinearAdd(chain.x + l0 + 1, uv, t, A, B);
+    } else {
+        bilinearAdd(chain.x, uv, 1.0, A, B);
+    }
+}
+
+// -- shading (prefilter.render.shading) -----------------------------------------------------------
+
+// shading_frame: the normal m (tangent space, need not be unit), tangent re-orthogonalised
+void shadingFrame(vec3 t, vec3 b, vec3 n, vec3 m, out vec3 ts, out vec3 bs, out vec3 ns) {
+    ns = m.x * t + m.y * b + m.z * n;
+    float ln = length(ns);
+    ns = ln > 1e-12 ? ns / ln : n;
+    ts = t - dot(t, ns) * ns;
+    float lt = length(ts);
+    ts = lt > 1e-9 ? ts / lt : normalize(cross(b, ns));
+    bs = (dot(cross(n, t), b) >= 0.0 ? 1.0 : -1.0) * cross(ns, ts);
+}
+
+vec3 localView(vec3 v, vec3 ts, vec3 bs, vec3 ns) {
+    return normalize(vec3(dot(v, ts), dot(v, bs), max(dot(v, ns), VIEW_Z_MIN)));
+}
+
+vec3 shadeQuads(vec3 pos, vec3 ts, vec3 bs, vec3 ns, mat3 Minv, vec3 base, vec3 spec) {
+    vec3 L = vec3(0.0);
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumQuads) break;
+        vec3 Q[4] = vec3[4](uQuadV[4 * q], uQuadV[4 * q + 1], uQuadV[4 * q + 2], uQuadV[4 * q + 3]);
+        L += ltcQuad(Q, uQuadN[q], uQuadL[q], pos, ts, bs, ns, Minv, base, spec);
+    }
+    return L;
+}
+
+vec3 shade(Hit h, vec3 view, int method) {
+    int k = h.id;
+    ivec4 map = uMatMap[k];
+    vec3 gn = h.n, gt = h.t, gb = h.b;
+    if (dot(view, gn) < 0.0) { gn = -gn; gb = -gb; }  // two-sided: flip n, b
+    vec3 base = uMatBase[k], f0 = uMatF0[k];
+    float ax = uMatAlpha[k].x, ay = uMatAlpha[k].y;
+    vec3 ts = gt, bs = gb, ns = gn;
+    mat3 Minv;
+    float mag, f5;
+    if (method == METHOD_MULTISCALE_ANISO) {
+        // prefilter.multiscale.aniso.aniso_attributes, combine = "lean"
+        vec2 mean = vec2(0.0);
+        vec3 cm = vec3(0.0);  // meso covariance (xx, yy, xy)
+        if (map.z >= 0) {
+            vec4 A, B;
+            footprint(map.zw, h.uv, h.dudv, A, B);
+            mean = A.xy;
+            cm = vec3(max(A.z - mean.x * mean.x, 0.0), max(A.w - mean.y * mean.y, 0.0),
+                      B.x - mean.x * mean.y);
+        }
+        const float C2 = 0.78 * 0.78;  // GGX_PER_BECKMANN^2
+        float a = C2 * cm.x + 0.5 * ax * ax, c = C2 * cm.y + 0.5 * ay * ay, b = C2 * cm.z;
+        float mid = 0.5 * (a + c), disc = sqrt(0.25 * (a - c) * (a - c) + b * b);
+        float l1 = mid + disc, l2 = max(mid - disc, 0.0);
+        // numpy's arctan2(0, 0) = 0 (GLSL leaves it undefined)
+        float phi = (b == 0.0 && a - c == 0.0) ? 0.0 : 0.5 * atan(2.0 * b, a - c);
+        float co = cos(phi), si = sin(phi);
+        vec3 tr = co * gt + si * gb, br = -si * gt + co * gb;
+        vec3 m = vec3(-co * mean.x - si * mean.y, si * mean.x - co * mean.y, 1.0);
+        shadingFrame(tr, br, gn, m, ts, bs, ns);
+        ax = min(sqrt(2.0 * l1), 1.0);
+        ay = min(sqrt(2.0 * l2), 1.0);
+    } else if (map.x >= 0) {
+        vec4 A, B;
+        footprint(map.xy, h.uv, h.dudv, A, B);
+        shadingFrame(gt, gb, gn, A.xyz, ts, bs, ns);
+        if (method == METHOD_MULTISCALE) {
+            float am = alphaMeso(min(length(A.xyz), 1.0));
+            ax = ay = alphaTotal(min(sqrt(ax * ay), 1.0), am);
+        }
+    } else if (method == METHOD_MULTISCALE) {
+        ax = ay = alphaTotal(min(sqrt(ax * ay), 1.0), alphaMeso(1.0));
+    }
+    vec3 wo = localView(view, ts, bs, ns);
+    if (method == METHOD_ANISO || method == METHOD_MULTISCALE_ANISO) {
+        vec3 w = normalize(vec3(wo.xy, max(wo.z, 1e-4)));
+        ltcAnisoLookup(w, clamp(ax, 1e-4, 1.0), clamp(ay, 1e-4, 1.0), Minv, mag, f5);
+    } else {
+        ltcIsoLookup(wo, sqrt(ax * ay), Minv, mag, f5);
+    }
+    vec3 spec = f0 * (mag - f5) + f5;
+    return shadeQuads(h.p, ts, bs, ns, Minv, base, spec);
+}
+
+vec3 srgb(vec3 c) {
+    c = clamp(c, 0.0, 1.0);
+    return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
+}
+
+void main() {
+    // pixel (row i, column j) has its centre at (j + 0.5, i + 0.5), row 0 at the top
+    vec2 xy = vec2(gl_FragCoord.x, uSize.y - gl_FragCoord.y);
+    vec2 pp = vec2(xy.x - uSize.x / 2.0, uSize.y / 2.0 - xy.y) * uCamSy;
+    vec3 d = uCamF + pp.x * uCamR + pp.y * uCamU;
+    float inv = 1.0 / length(d);
+    d *= inv;
+    // derivatives of d / |d| (camera.rays_at)
+    vec3 ex = uCamSy * uCamR, ey = -uCamSy * uCamU;
+    vec3 ddx = (ex - dot(d, ex) * d) * inv, ddy = (ey - dot(d, ey) * d) * inv;
+    Hit h;
+    vec3 L = vec3(0.0);
+    int method = gl_FragCoord.x < uSplit ? uMethodLeft : uMethodRight;
+    if (trace(uCamO, d, ddx, ddy, h)) L = shade(h, -d, method);
+    if (uLinear == 1) {
+        fragColor = vec4(L, h.id >= 0 ? 1.0 : 0.0);
+    } else {
+        vec3 c = srgb(L * uExposure);
+        if (abs(gl_FragCoord.x - uSplit) < 1.0 && uSplit > 0.0 && uSplit < uSize.x)
+            c = vec3(1.0, 0.8, 0.2);
+        fragColor = vec4(c, 1.0);
+    }
+}
