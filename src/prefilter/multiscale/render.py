@@ -9,6 +9,13 @@ difference from the ``ltc`` method is the roughness.
 
 Height-mapped materials carry slope moments, not normals; they are shaded as by ``ltc``
 (``alpha_meso = 0``).
+
+With quad lights only (and the isotropic footprint) the methods run the ``ltc`` method's fused
+Numba kernel (:func:`prefilter.render.pipeline._render_ltc_fused`) with per-material roughness
+rows (:func:`multiscale_roughness`): the same arithmetic, ``alpha_meso`` interpolated in the same
+table as :func:`prefilter.multiscale.alpha_meso`. :func:`multiscale_attributes` and the NumPy
+shader remain the general path (point, directional or textured lights, the anisotropic
+footprint) and the reference the fused path is tested against.
 """
 
 from __future__ import annotations
@@ -16,9 +23,60 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter.multiscale.convolution import _alpha_total
-from prefilter.multiscale.meso import _alpha_from_r, _paper_eq5, R_COSINE
+from prefilter.multiscale.meso import _alpha_from_r, _mrl, _paper_eq5, R_COSINE
 
-__all__ = ["multiscale_attributes", "render_multiscale", "render_multiscale_paper"]
+__all__ = ["MESO_TABLE_SIZE", "meso_table", "multiscale_attributes", "multiscale_roughness",
+           "render_multiscale", "render_multiscale_mrl", "render_multiscale_paper"]
+
+#: Nodes of the compiled shader's ``alpha_meso`` table, uniform in ``x = sqrt(3 (1 - r))``
+#: (the nodes of :func:`prefilter.multiscale.alpha_meso`'s own interpolant, so the fused path
+#: reproduces it; 32 KiB).
+MESO_TABLE_SIZE = 4097
+
+_MESO_TAB = None
+
+
+def meso_table() -> np.ndarray:
+    """``alpha_meso`` (exact inverse of Tao et al. 2021 eq. 4) at ``x = linspace(0, 1,
+    MESO_TABLE_SIZE)``, ``r = 1 - x^2 / 3``: the table the compiled shader interpolates
+    linearly in ``x`` (:func:`prefilter.render.kernels._multiscale_alpha`)."""
+    global _MESO_TAB
+    if _MESO_TAB is None:
+        from prefilter.multiscale.meso import alpha_meso
+
+        x = np.linspace(0.0, 1.0, MESO_TABLE_SIZE)
+        _MESO_TAB = alpha_meso(np.clip(1.0 - x * x / 3.0, R_COSINE, 1.0))
+        _MESO_TAB.setflags(write=False)
+    return _MESO_TAB
+
+
+def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
+                         lod_bias: float = 0.0):
+    """Per-material roughness rows for the fused shader
+    (:func:`prefilter.render.kernels.ltc_samples_kernel`): ``(rows (K, RGH_WIDTH), meso_tab)``,
+    or ``None`` for a combination it does not implement (mean-resultant-length matching needs
+    the exact inverse)."""
+    from prefilter.multiscale.convolution import FIT_COEFFS, PAPER_EQ7
+    from prefilter.multiscale.meso import PAPER_EQ5
+    from prefilter.render import kernels as kn
+
+    modes = {"fit": kn.ROUGH_FIT, "paper": kn.ROUGH_EQ7, "mrl": kn.ROUGH_MRL}
+    if total not in modes or meso not in ("exact", "paper") or (total == "mrl"
+                                                                 and meso != "exact"):
+        return None
+    rows = np.zeros((len(objects), kn.RGH_WIDTH))
+    for k, obj in enumerate(objects):
+        m = obj.material
+        a = min(float(np.sqrt(m.alpha_x * m.alpha_y)), 1.0)
+        row = rows[k]
+        row[kn.RGH_MODE] = modes[total]
+        row[kn.RGH_MESO] = kn.MESO_TABLE if meso == "exact" else kn.MESO_EQ5
+        row[kn.RGH_ALPHA] = a
+        row[kn.RGH_COEF:kn.RGH_COEF + 4] = FIT_COEFFS if total == "fit" else PAPER_EQ7
+        row[kn.RGH_MRL] = float(_mrl(np.array(a)))
+        row[kn.RGH_EQ5:kn.RGH_EQ5 + 9] = (*PAPER_EQ5[0], *PAPER_EQ5[1])
+        row[kn.RGH_NSCALE] = 2.0 ** lod_bias
+    return rows, meso_table()
 
 
 def _alpha_meso_fast(r: np.ndarray, variant: str) -> np.ndarray:
@@ -90,11 +148,19 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
 def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> np.ndarray:
     from prefilter.ltc.table import GGXTable
     from prefilter.render.lighttex import shade_ltc_textured, split_lights
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.pipeline import _render_ltc_fused, render_samples
 
     # textured quad lights: prefiltered light texture lookup (Heitz et al. 2016, section 5.3)
     lights, textured = split_lights(scene, name)
     table = settings.table if settings.table is not None else GGXTable.load()
+    if not (lights.points or lights.directionals or textured
+            or footprint.get("anisotropic_footprint")):
+        # quad lights only: the ``ltc`` method's fused kernel with this roughness
+        rough = multiscale_roughness(scene.objects, meso, total, footprint.get("lod_bias", 0.0))
+        if rough is not None:
+            image = _render_ltc_fused(scene, settings, lights, table, rough, desc=name)
+            if image is not None:
+                return image
 
     def shade(g, _u):
         a = multiscale_attributes(scene, g, meso=meso, total=total, **footprint)

@@ -543,6 +543,67 @@ def ltc_quads_kernel(position, ts, bs, ns, view, alpha, base, f0, qv, qn, qrad, 
 
 MAT_WIDTH = 8  # alpha_x, alpha_y, base colour (3), f0 (3)
 
+# Per-material roughness rows of :func:`ltc_samples_kernel` (``RGH_*`` are column offsets):
+# how the shading roughness follows from the footprint (``RGH_MODE``), the meso-scale inverse of
+# Tao et al. 2021 eq. 4 (``RGH_MESO``), alpha_micro, the coefficients of alpha_total, r(alpha_micro)
+# for mean-resultant-length matching, eq. 5's rational coefficients (num r^4..r^0, den r^3..r^0)
+# and the footprint scale of the normal-map lookup (2^lod_bias).
+RGH_MODE, RGH_MESO, RGH_ALPHA, RGH_COEF, RGH_MRL, RGH_EQ5, RGH_NSCALE = 0, 1, 2, 3, 7, 8, 17
+RGH_WIDTH = 18
+#: ``RGH_MODE`` values: ``sqrt(alpha_x alpha_y)`` (the ``ltc`` method); our form of eq. 7
+#: (``multiscale.convolution``, "fit"); eq. 7's polynomial ("paper"); mean-resultant-length
+#: matching ("mrl").
+ROUGH_LTC, ROUGH_FIT, ROUGH_EQ7, ROUGH_MRL = 0, 1, 2, 3
+#: ``RGH_MESO`` values: the tabulated exact inverse of eq. 4, or eq. 5 (clamped as the paper).
+MESO_TABLE, MESO_EQ5 = 0, 1
+
+
+def plain_roughness(n_objects: int) -> tuple[np.ndarray, np.ndarray]:
+    """Roughness rows of the ``ltc`` method (``sqrt(alpha_x alpha_y)``) and an unused table."""
+    rough = np.zeros((n_objects, RGH_WIDTH))
+    rough[:, RGH_NSCALE] = 1.0
+    return rough, np.zeros(2)
+
+
+@njit_serial
+def _interp_uniform(x, tab):
+    """Linear interpolation of ``tab`` sampled at ``linspace(0, 1, len(tab))``, ``x`` clamped."""
+    n = tab.shape[0]
+    f = min(max(x, 0.0), 1.0) * (n - 1)
+    i = min(np.int64(f), n - 2)
+    t = f - i
+    return tab[i] * (1.0 - t) + tab[i + 1] * t
+
+
+@njit_serial
+def _multiscale_alpha(row, r, meso_tab):
+    """Tao et al. 2021, eqs. 4-7: ``alpha_total`` from the length ``r`` of the footprint's
+    averaged normal. ``meso_tab``: ``alpha_meso`` at ``x = sqrt(3 (1 - r))`` uniform in [0, 1]
+    (``x`` makes the inverse of eq. 4 nearly linear)."""
+    a = row[RGH_ALPHA]
+    rc = min(max(r, 2.0 / 3.0), 1.0)
+    if row[RGH_MESO] == MESO_TABLE:
+        b = _interp_uniform(math.sqrt(min(max(3.0 * (1.0 - r), 0.0), 1.0)), meso_tab)
+    else:
+        e = RGH_EQ5
+        num = (((row[e] * rc + row[e + 1]) * rc + row[e + 2]) * rc + row[e + 3]) * rc + row[e + 4]
+        den = ((row[e + 5] * rc + row[e + 6]) * rc + row[e + 7]) * rc + row[e + 8]
+        b = min(max(num / den, 0.0), 1.0)
+    c = RGH_COEF
+    mode = row[RGH_MODE]
+    if mode == ROUGH_FIT:
+        p = a + b
+        q = a * b
+        out = math.sqrt(max(a * a + b * b + q * (row[c] + p * (row[c + 1] + row[c + 2] * p)
+                                                 + row[c + 3] * q), 0.0))
+    elif mode == ROUGH_EQ7:
+        out = row[c] * a * a + row[c + 1] * a + row[c + 2] * b + row[c + 3] * a * b
+    else:
+        # mean resultant lengths multiply under convolution; r(alpha_meso) is r itself (clamped)
+        rr = row[RGH_MRL] * rc
+        out = _interp_uniform(math.sqrt(min(max(3.0 * (1.0 - rr), 0.0), 1.0)), meso_tab)
+    return min(max(out, 0.0), 1.0)
+
 
 def pack_materials(objects):
     """Materials and their textures for :func:`ltc_samples_kernel`, or ``None`` when a texture
@@ -590,12 +651,17 @@ def _gscratch():
 
 
 @njit_parallel
-def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, qv, qn, qrad,
-                       axis_t, axis_r, tab_m, tab_mag, tab_fres, view_z_min, rad, status):
+def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, rough, meso_tab,
+                       qv, qn, qrad, axis_t, axis_r, tab_m, tab_mag, tab_fres, view_z_min, rad,
+                       status):
     """The ``ltc`` method for quad lights per sample, without intermediate arrays: the primary
     ray through ``xy (N, 2)`` (``cam`` as in :func:`gbuffer_camera_kernel`), its hit, the
     footprint's trilinear texture reads, the shading frame (as ``shading.shading_frame``, the
-    frame flipped on back faces) and :func:`_ltc_point`. Writes ``rad (N, 3)`` (0 on misses)."""
+    frame flipped on back faces) and :func:`_ltc_point`. Writes ``rad (N, 3)`` (0 on misses).
+
+    ``rough (K, RGH_WIDTH)``: per-material roughness rows (:func:`plain_roughness` for ``ltc``;
+    the ``ltc-multiscale`` methods take ``alpha_total`` of the averaged normal's length,
+    :func:`_multiscale_alpha`, with ``meso_tab``)."""
     ox, oy, oz = cam[0], cam[1], cam[2]
     rx, ry, rz = cam[3], cam[4], cam[5]
     ux, uy, uz = cam[6], cam[7], cam[8]
@@ -646,8 +712,9 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, qv
             t_n = mat_i[o, 0]
             t_h = mat_i[o, 1]
             if t_n >= 0:
+                ns = rough[o, RGH_NSCALE]
                 _footprint_into(data, info, tex[t_n, 0], tex[t_n, 1], tex[t_n, 2], 3, u, v,
-                                du00, du01, du10, du11, tx, 0)
+                                du00 * ns, du01 * ns, du10 * ns, du11 * ns, tx, 0)
                 m0, m1, m2 = tx[0, 0], tx[0, 1], tx[0, 2]
                 has_map = True
             elif t_h >= 0:
@@ -713,8 +780,13 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, qv
                                 du01, du10, du11, tx, 0)
                 for c in range(3):
                     mat[1 + c] *= tx[0, c] if nc >= 3 else tx[0, 0]
-            # the isotropic table at sqrt(alpha_x alpha_y)
-            mat[0] = math.sqrt(mat_f[o, 0] * mat_f[o, 1])
+            if rough[o, RGH_MODE] == ROUGH_LTC:
+                # the isotropic table at sqrt(alpha_x alpha_y)
+                mat[0] = math.sqrt(mat_f[o, 0] * mat_f[o, 1])
+            else:
+                # the unnormalised average's length; height maps and plain materials are flat
+                r = min(math.sqrt(m0 * m0 + m1 * m1 + m2 * m2), 1.0) if t_n >= 0 else 1.0
+                mat[0] = _multiscale_alpha(rough[o], r, meso_tab)
             if _ltc_point(geo, mat, qv, qn, qrad, axis_t, axis_r, tab_m, tab_mag, tab_fres,
                           view_z_min, P, C, ident, tm, mm, res):
                 rad[k, 0] = res[0]

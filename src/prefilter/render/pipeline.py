@@ -13,9 +13,10 @@ Surfaces are two-sided: a hit seen from behind its geometric normal is shaded wi
 flipped (``n, b -> -n, -b``, still right-handed).
 
 The ``ltc`` method with quad lights only runs one fused Numba kernel per row chunk (ray, hit,
-footprint texture reads, shading frame, LTC shader; :func:`_render_ltc_fused`); with point or
-directional lights it uses the stages above (G-buffer, :func:`surface_attributes`,
-:func:`prefilter.render.shading.shade_ltc`), which give the same image.
+footprint texture reads, shading frame, LTC shader; :func:`_render_ltc_fused`, shared with the
+``ltc-multiscale`` methods, which only change the roughness); with point, directional or textured
+quad lights it uses the stages above (G-buffer, :func:`surface_attributes`,
+:func:`prefilter.render.shading.shade_ltc`), which give the same image for untextured lights.
 """
 
 from __future__ import annotations
@@ -230,32 +231,43 @@ def render_ltc(scene: Scene, settings: RenderSettings) -> np.ndarray:
 
     Anisotropic materials use the isotropic table with ``alpha = sqrt(alpha_x alpha_y)``.
     With ``spp > 1`` the pixel is supersampled at stratified positions (same as the reference).
+    Textured quad lights use the prefiltered light-texture lookup
+    (:func:`prefilter.render.lighttex.shade_ltc_textured`, Heitz et al. 2016, section 5.3).
     """
     from prefilter.ltc.table import GGXTable
+    from prefilter.render.lighttex import shade_ltc_textured, split_lights
 
-    lights = supported_lights(scene, "ltc")
+    lights, textured = split_lights(scene, "ltc")
     table = settings.table if settings.table is not None else GGXTable.load()
-    if not (lights.points or lights.directionals):
+    if not (lights.points or lights.directionals or textured):
         image = _render_ltc_fused(scene, settings, lights, table)
         if image is not None:
             return image
 
     def shade(g, _u):
         a = surface_attributes(scene, g, filtered=True)
-        return shade_ltc(g.position, a["t"], a["b"], a["n"], g.view,
-                         np.sqrt(a["alpha_x"] * a["alpha_y"]), a["base_color"], a["f0"],
-                         lights, table)
+        alpha = np.sqrt(a["alpha_x"] * a["alpha_y"])
+        if textured:
+            return shade_ltc_textured(g.position, a["t"], a["b"], a["n"], g.view, alpha,
+                                      a["base_color"], a["f0"], lights, textured, table)
+        return shade_ltc(g.position, a["t"], a["b"], a["n"], g.view, alpha, a["base_color"],
+                         a["f0"], lights, table)
 
     return render_samples(scene, settings, shade, stratified=settings.spp > 1, desc="ltc")
 
 
-def _render_ltc_fused(scene: Scene, settings: RenderSettings, lights, table):
+def _render_ltc_fused(scene: Scene, settings: RenderSettings, lights, table, rough=None,
+                      desc: str = "ltc"):
     """:func:`render_ltc` for quad lights only, one Numba pass per row chunk
     (:func:`prefilter.render.kernels.ltc_samples_kernel`): the same sample positions, footprint
     lookups, frames and shader as the NumPy stages, without intermediate arrays. ``None`` when
-    the scene needs the general path (textures with too few channels, a table-like object)."""
+    the scene needs the general path (textures with too few channels, a table-like object).
+
+    ``rough``: ``(rows (K, RGH_WIDTH), meso_tab)`` of the per-material roughness
+    (:mod:`prefilter.render.kernels`; the ``ltc-multiscale`` methods), default ``ltc``'s."""
     from prefilter.render.camera import _camera_params
-    from prefilter.render.kernels import ltc_samples_kernel, pack_materials, pack_objects, serial
+    from prefilter.render.kernels import (ltc_samples_kernel, pack_materials, pack_objects,
+                                          plain_roughness, serial)
     from prefilter.render.shading import VIEW_Z_MIN
 
     if not all(hasattr(table, k) for k in ("axis_t", "axis_r", "M", "magnitude", "fresnel")):
@@ -263,6 +275,9 @@ def _render_ltc_fused(scene: Scene, settings: RenderSettings, lights, table):
     packed = pack_materials(scene.objects)
     if packed is None:
         return None
+    rows, meso_tab = plain_roughness(len(scene.objects)) if rough is None else rough
+    rows = np.ascontiguousarray(rows, dtype=np.float64)
+    meso_tab = np.ascontiguousarray(meso_tab, dtype=np.float64)
     types, params = pack_objects(scene.objects)
     quads = lights.quads
     qv = np.ascontiguousarray([q.vertices for q in quads], dtype=np.float64).reshape(-1, 4, 3)
@@ -275,23 +290,24 @@ def _render_ltc_fused(scene: Scene, settings: RenderSettings, lights, table):
     h, w, s = cam.height, cam.width, settings.spp
     rows_per_chunk = max(1, settings.chunk_samples // (w * s))
     image = np.zeros((h, w, 3))
-    with tqdm(total=h, desc="ltc", unit="row", delay=1.0, leave=False,
+    with tqdm(total=h, desc=desc, unit="row", delay=1.0, leave=False,
               disable=not settings.progress) as bar:
         for r0 in range(0, h, rows_per_chunk):
-            rows = range(r0, min(h, r0 + rows_per_chunk))
-            xy, _ = chunk_positions(settings, rows, w, settings.spp > 1)
+            chunk = range(r0, min(h, r0 + rows_per_chunk))
+            xy, _ = chunk_positions(settings, chunk, w, settings.spp > 1)
             xy = np.ascontiguousarray(xy).reshape(-1, 2)
             rad = np.empty((len(xy), 3))
             status = np.zeros(len(xy), np.uint8)
-            serial(ltc_samples_kernel, len(xy))(campar, xy, types, params, *packed, qv, qn, qr,
-                                                *tab, VIEW_Z_MIN, rad, status)
+            serial(ltc_samples_kernel, len(xy))(campar, xy, types, params, *packed, rows,
+                                                meso_tab, qv, qn, qr, *tab, VIEW_Z_MIN, rad,
+                                                status)
             if status.any():
                 raise PrefilterError("table: expected invertible LTC matrices, got a singular "
                                      "interpolated one")
-            rad = rad.reshape(len(rows), w, s, 3)
+            rad = rad.reshape(len(chunk), w, s, 3)
             # the mean of one sample is that sample: skip the reduction
-            image[r0:r0 + len(rows)] = rad[:, :, 0] if s == 1 else rad.mean(axis=2)
-            bar.update(len(rows))
+            image[r0:r0 + len(chunk)] = rad[:, :, 0] if s == 1 else rad.mean(axis=2)
+            bar.update(len(chunk))
     return image
 
 
