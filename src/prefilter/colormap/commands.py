@@ -53,22 +53,18 @@ def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear,
     import hashlib
     from pathlib import Path
 
-    from prefilter._io import atomic_path, save_json_atomic
+    from prefilter._io import atomic_path
     from prefilter.colormap.glsl import glsl_snippet
     from prefilter.colormap.table import prefilter_table
-    from prefilter.texture.io import write_image
 
     c = load_colormap_image(colormap, srgb=not linear)
     table = prefilter_table(c, value_range, sigma_max, size=size, edge=edge, n_sigma=n_sigma)
-    out = Path(out)
-    write_image(out, table.table, bits=16)
+    digest = hashlib.sha256(Path(colormap).read_bytes()).hexdigest()
+    out, side = table.save(out, meta=dict(source=str(colormap), source_sha256=digest,
+                                          source_encoding="linear" if linear else "srgb"))
     meta = table.metadata()
-    meta.update(source=str(colormap), source_sha256=hashlib.sha256(
-        Path(colormap).read_bytes()).hexdigest(), source_encoding="linear" if linear else "srgb",
-        table_file=out.name)
-    save_json_atomic(out.with_suffix(".json"), meta)
     click.echo(f"wrote {out} ({table.n_sigma} x {table.n_mean} x {table.table.shape[2]}) and "
-               f"{out.with_suffix('.json').name}")
+               f"{side.name}")
     if glsl_out:
         with atomic_path(glsl_out) as tmp:
             Path(tmp).write_text(glsl_snippet(meta))

@@ -23,18 +23,23 @@ approximation when ``sigma > 0``), ``sigma`` is clamped to ``[0, sigma_max]``.
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.special import ndtr
 
 from prefilter._validate import as_float_array, as_positive_int
-from prefilter.errors import PrefilterError
+from prefilter.errors import PrefilterError, TableFileError
 
 __all__ = ["EDGES", "ColormapTable", "as_colormap", "gaussian_operator", "lookup",
            "prefilter_table"]
 
 EDGES = ("clamp", "mirror", "periodic")
+#: Format name and version of the JSON sidecar of a baked table (:meth:`ColormapTable.save`).
+FORMAT = "prefilter-colormap-table"
+VERSION = 1
 _INV_SQRT_2PI = 0.3989422804014327
 # Samples within this many standard deviations of a table entry contribute to it (exp(-32) ~ 1e-14).
 _REACH = 8.0
@@ -250,8 +255,8 @@ class ColormapTable:
     def metadata(self) -> dict:
         """JSON-ready description of the table layout (for baked files and shaders)."""
         return {
-            "format": "prefilter-colormap-table",
-            "version": 1,
+            "format": FORMAT,
+            "version": VERSION,
             "value_range": list(self.value_range),
             "sigma_max": self.sigma_max,
             "edge": self.edge,
@@ -261,6 +266,87 @@ class ColormapTable:
             "layout": "rows = sigma (row j: sigma_max * j / (n_sigma - 1), row 0 first); columns ="
                       " mean at texel centres lo + (i + 0.5) (hi - lo) / n_mean",
         }
+
+
+    # -- files --------------------------------------------------------------------------------
+    def save(self, path, *, meta: dict | None = None) -> tuple[Path, Path]:
+        """Write the table image ``path`` (``.png``: 16-bit, ``.exr``: float32, ``.npy``:
+        float64; rows = sigma) and its sidecar ``path.with_suffix(".json")`` (:meth:`metadata`
+        plus ``meta``, ``table_file`` and ``sha256``, the digest of the stored pixels as
+        :func:`prefilter.texture.read_image` returns them), each atomically, the sidecar last."""
+        from prefilter._io import array_digest, save_json_atomic
+        from prefilter.texture.io import read_image, write_image
+
+        path = Path(path)
+        write_image(path, self.table, bits=16)
+        info = dict(meta or {})
+        info.update(self.metadata(), table_file=path.name,
+                    sha256=array_digest({"table": read_image(path)}))
+        side = path.with_suffix(".json")
+        save_json_atomic(side, info)
+        return path, side
+
+    @classmethod
+    def load(cls, path) -> "ColormapTable":
+        """Read a table written by :meth:`save` (or ``prefilter bake colormap``) and its JSON
+        sidecar; every field, the image shape and the checksum (when present) are verified and
+        a failure raises :class:`~prefilter.errors.TableFileError` naming the file and field."""
+        from prefilter._io import array_digest
+        from prefilter.texture.io import read_image
+
+        path = Path(path)
+        side = path.with_suffix(".json")
+        if side == path:
+            raise TableFileError(f"{path}: expected the table image, not its JSON sidecar")
+        if not side.is_file():
+            raise TableFileError(f"{side}: colour-table metadata not found (written next to "
+                                 f"{path.name} by `prefilter bake colormap`)")
+        try:
+            info = json.loads(side.read_text())
+        except (ValueError, OSError) as exc:
+            raise TableFileError(f"{side}: unreadable JSON ({type(exc).__name__}: {exc})"
+                                 ) from None
+        if not isinstance(info, dict):
+            raise TableFileError(f"{side}: expected a JSON object, got {type(info).__name__}")
+
+        def need(key, ok, what):
+            if key not in info:
+                raise TableFileError(f"{side}: {key}: required field is missing")
+            if not ok(info[key]):
+                raise TableFileError(f"{side}: {key}: expected {what}, got {info[key]!r}")
+            return info[key]
+
+        def num(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+
+        def count(lo):
+            return lambda v: isinstance(v, int) and not isinstance(v, bool) and lo <= v <= 1 << 20
+
+        need("format", lambda v: v == FORMAT, repr(FORMAT))
+        need("version", lambda v: v == VERSION and not isinstance(v, bool), str(VERSION))
+        vr = need("value_range", lambda v: isinstance(v, list) and len(v) == 2
+                  and all(map(num, v)) and v[0] < v[1], "[lo, hi] with lo < hi")
+        smax = need("sigma_max", lambda v: num(v) and v > 0, "a number > 0")
+        edge = need("edge", lambda v: v in EDGES, f"one of {', '.join(EDGES)}")
+        shape = (need("n_sigma", count(2), "an integer >= 2"),
+                 need("n_mean", count(2), "an integer >= 2"),
+                 need("channels", count(1), "an integer >= 1"))
+        if "table_file" in info and info["table_file"] != path.name:
+            raise TableFileError(f"{side}: table_file: expected {path.name!r}, got "
+                                 f"{info['table_file']!r}")
+        try:
+            img = read_image(path)
+        except TableFileError:
+            raise
+        except PrefilterError as exc:
+            raise TableFileError(str(exc)) from None
+        if img.shape != shape:
+            raise TableFileError(f"{path}: expected a table of shape {shape} (n_sigma, n_mean, "
+                                 f"channels from {side.name}), got {img.shape}")
+        if "sha256" in info and array_digest({"table": img}) != info["sha256"]:
+            raise TableFileError(f"{path}: sha256: checksum mismatch with {side.name} (expected "
+                                 f"{info['sha256']}): the file is corrupt or from another bake")
+        return cls(img, (float(vr[0]), float(vr[1])), float(smax), edge)
 
 
 def _extend_index(i: np.ndarray, n: int, edge: str) -> np.ndarray:

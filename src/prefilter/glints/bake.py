@@ -43,9 +43,12 @@ def _memmap(path, shape):
     """The float32 array at ``path``, reopened if present (partial results of a killed bake are
     kept; which chunks are valid is recorded by the checkpoints), else created."""
     if path.exists():
-        arr = np.load(path, mmap_mode="r+")
-        if arr.shape == tuple(shape) and arr.dtype == np.float32:
-            return arr
+        try:
+            arr = np.load(path, mmap_mode="r+")
+            if arr.shape == tuple(shape) and arr.dtype == np.float32:
+                return arr
+        except (ValueError, OSError, EOFError):
+            pass  # killed while the file was being created: start it again
     return np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=shape)
 
 
@@ -221,9 +224,11 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         mean_mass_in_support=float(np.concatenate(masses).mean()), n_images=pyr.n_images,
         seconds=elapsed,
     )
+    # the wall time stays out of the file: the same bake must give the same bytes
     gm.header = dict(pyramid=pyr.to_dict(), ndf=dict(resolution=R, support=S, block=B, rank=rank,
                                                      intrinsic_roughness=sr, sigma_h=SIGMA_H),
-                     settings=settings, map_sha1=digest, summary=summary)
+                     settings=settings, map_sha1=digest,
+                     summary={k: v for k, v in summary.items() if k != "seconds"})
     save(out, gm)
     if not keep_parts:
         ck.clear()

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._io import atomic_path
+from prefilter._io import META_KEY, read_npz, save_npz_atomic, verify_npz
 from prefilter.errors import TableFileError
 from prefilter.glints.pyramid import Pyramid
 
@@ -79,66 +79,76 @@ class GlintsMap:
 
 
 def save(path: str | os.PathLike, gm: GlintsMap) -> None:
-    """Write ``gm`` atomically (uncompressed ``np.savez``: deterministic bytes, mmap-able)."""
+    """Write ``gm`` atomically (uncompressed ``np.savez``: deterministic bytes, mmap-able) with
+    the ``__meta__`` checksum entry of :func:`prefilter._io.save_npz_atomic`."""
     header = dict(gm.header, format=FORMAT, version=VERSION)
-    with atomic_path(path, suffix=".npz") as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, header=np.array(json.dumps(header, sort_keys=True)),
-                     **{k: getattr(gm, k) for k in ARRAYS})
+    save_npz_atomic(path, format_name=FORMAT, format_version=VERSION,
+                    header=np.array(json.dumps(header, sort_keys=True)),
+                    **{k: getattr(gm, k) for k in ARRAYS})
 
 
 def _fail(path, msg):
-    raise TableFileError(f"{path}: {msg}")
+    raise TableFileError(f"glints map {path}: {msg}")
 
 
 def load(path: str | os.PathLike) -> GlintsMap:
-    """Load and validate a baked glints map; any inconsistency raises ``TableFileError``."""
+    """Load and validate a baked glints map; any inconsistency (including a checksum mismatch)
+    raises ``TableFileError`` naming the file and the field."""
+    # the layout is checked before the checksum so a malformed file gets the precise message
+    raw_data = read_npz(path, "glints map")
+    data = {k: v for k, v in raw_data.items() if k != META_KEY}
+    missing = [k for k in ("header",) + ARRAYS if k not in data]
+    if missing:
+        _fail(path, f"missing arrays {missing}; expected {('header',) + ARRAYS}")
+    unknown = [k for k in data if k not in ("header",) + ARRAYS]
+    if unknown:
+        _fail(path, f"unknown arrays {unknown}; expected {('header',) + ARRAYS}")
+    raw = data["header"]
     try:
-        with np.load(path, allow_pickle=False) as z:
-            files = set(z.files)
-            missing = [k for k in ("header",) + ARRAYS if k not in files]
-            if missing:
-                _fail(path, f"missing arrays {missing}; expected {('header',) + ARRAYS}")
-            header = json.loads(str(z["header"]))
-            arrays = {k: z[k] for k in ARRAYS}
-    except TableFileError:
-        raise
-    except (OSError, ValueError, json.JSONDecodeError) as exc:
-        raise TableFileError(f"{path}: not a readable glints map ({exc})") from exc
+        if raw.dtype.kind != "U" or raw.shape != ():
+            raise ValueError
+        header = json.loads(str(raw))
+        if not isinstance(header, dict):
+            raise ValueError
+    except ValueError:
+        _fail(path, f"header: expected a JSON object string, got {raw.dtype} {raw.shape}")
+    arrays = {k: data[k] for k in ARRAYS}
     if header.get("format") != FORMAT:
-        _fail(path, f"format {header.get('format')!r}, expected {FORMAT!r}")
+        _fail(path, f"header.format: expected {FORMAT!r}, got {header.get('format')!r}")
     if header.get("version") != VERSION:
-        _fail(path, f"version {header.get('version')!r}, expected {VERSION}")
+        _fail(path, f"header.version: expected {VERSION}, got {header.get('version')!r}")
     try:
         gm = GlintsMap(header=header, **arrays)
         pyr, R, B, rank = gm.pyramid, gm.resolution, gm.block, gm.rank
-    except (KeyError, TypeError, ValueError) as exc:
-        raise TableFileError(f"{path}: header field missing or invalid ({exc})") from exc
-    if R % B:
-        _fail(path, f"ndf.block {B} does not divide ndf.resolution {R}")
+        n_images = pyr.n_images
+    except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
+        raise TableFileError(f"glints map {path}: header field missing or invalid "
+                             f"({type(exc).__name__}: {exc})") from None
+    if min(R, B, rank) < 1 or R % B:
+        _fail(path, f"header.ndf: expected positive resolution, block and rank with block "
+                    f"dividing resolution, got {R}, {B}, {rank}")
     nb = R // B
-    G = gm.A.shape[0]
+    G = gm.A.shape[0] if gm.A.ndim == 3 else -1
     checks = [
-        (gm.A.dtype == np.float32 and gm.A.shape == (G, rank, B + 1), f"A shape {gm.A.shape}"),
-        (gm.Bp.dtype == np.float32 and gm.Bp.shape == gm.A.shape, f"Bp shape {gm.Bp.shape}"),
-        (gm.C.dtype == np.float32 and gm.C.ndim == 2 and gm.C.shape[1] == rank,
-         f"C shape {gm.C.shape}"),
-        (gm.block_index.dtype == np.int32 and gm.block_index.shape == (pyr.n_images, nb, nb),
-         f"block_index shape {gm.block_index.shape}, expected {(pyr.n_images, nb, nb)}"),
-        (gm.image_cell.dtype == np.int32 and gm.image_cell.shape == (pyr.n_images,),
-         f"image_cell shape {gm.image_cell.shape}"),
+        ("A", gm.A, np.float32, (G, rank, B + 1)),
+        ("Bp", gm.Bp, np.float32, (G, rank, B + 1)),
+        ("C", gm.C, np.float32, (gm.C.shape[0] if gm.C.ndim == 2 else -1, rank)),
+        ("block_index", gm.block_index, np.int32, (n_images, nb, nb)),
+        ("image_cell", gm.image_cell, np.int32, (n_images,)),
     ]
-    for ok, what in checks:
-        if not ok:
-            _fail(path, f"inconsistent layout: {what}")
+    for name, arr, dtype, shape in checks:
+        if arr.dtype != dtype or arr.shape != shape:
+            _fail(path, f"{name}: expected {np.dtype(dtype)} of shape {shape}, got {arr.dtype} "
+                        f"of shape {arr.shape}")
     if gm.block_index.size and (gm.block_index.max() >= gm.C.shape[0] or gm.block_index.min() < -1):
-        _fail(path, "block_index points outside C")
+        _fail(path, f"block_index: expected rows of C in [-1, {gm.C.shape[0]})")
     if gm.image_cell.size and (gm.image_cell.min() < 0 or (gm.image_cell.max() + 1) * nb * nb > G):
-        _fail(path, "image_cell points outside the groups")
+        _fail(path, f"image_cell: expected cells of the {G} groups")
     for name in ("A", "Bp", "C"):
         a = getattr(gm, name)
         if not np.all(np.isfinite(a)) or np.any(a < 0):
-            _fail(path, f"{name} has negative or non-finite values")
+            _fail(path, f"{name}: expected finite, non-negative values")
     if np.any(np.diff(gm.A, axis=-1) < -1e-6) or np.any(np.diff(gm.Bp, axis=-1) < -1e-6):
-        _fail(path, "prefix sums are not non-decreasing")
+        _fail(path, "A, Bp: expected non-decreasing prefix sums")
+    verify_npz(path, "glints map", raw_data, format_name=FORMAT, format_version=VERSION)
     return gm

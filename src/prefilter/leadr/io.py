@@ -1,56 +1,61 @@
 """EXR files of LEADR moment maps for engines.
 
 One file per mip level, ``leadr_L{level}.exr``, float32, ZIP, five named channels
-``E_x, E_y, E_xx, E_yy, E_xy`` (:data:`prefilter.leadr.maps.CHANNELS`), plus ``leadr.json`` with
-the slope convention, the base roughness and the level shapes.
+``E_x, E_y, E_xx, E_yy, E_xy`` (:data:`prefilter.leadr.maps.CHANNELS`) and the checksum attribute
+``prefilter_sha256`` (:mod:`prefilter.texture.io`), plus ``leadr.json`` with the format name and
+version, the slope convention, the base roughness and, per level, its file, shape and the SHA-256
+of its channels. :func:`read_maps` checks all of it.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import atomic_path, save_json_atomic
-from prefilter.errors import PrefilterError
+from prefilter._io import array_digest, atomic_path, save_json_atomic
+from prefilter.errors import PrefilterError, TableFileError
 from prefilter.leadr.maps import CHANNELS, LeadrMaps
+from prefilter.texture.io import read_exr_channels, write_exr_channels
+
+FORMAT = "prefilter-leadr"
+VERSION = 1
 
 CONVENTION = ("slope s = grad h = (dh/dx, dh/dy) = (-n_x/n_z, -n_y/n_z); x along columns (u), "
               "y along rows (v); covariance = [E[ss^T] - E[s]E[s]^T]_+ + base_roughness^2 I")
 
 
-def write_moment_exr(path, level: np.ndarray) -> Path:
-    """Write one ``(H, W, 5)`` moment level as an EXR with channels :data:`CHANNELS`."""
-    import OpenEXR
-
+def _channels(level: np.ndarray) -> dict[str, np.ndarray]:
     a = np.asarray(level, dtype=np.float64)
     if a.ndim != 3 or a.shape[2] != len(CHANNELS):
         raise PrefilterError(f"level: expected shape (H, W, 5), got {a.shape}")
-    chans = {n: np.ascontiguousarray(a[..., i], dtype=np.float32) for i, n in enumerate(CHANNELS)}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    return {n: np.ascontiguousarray(a[..., i], dtype=np.float32) for i, n in enumerate(CHANNELS)}
+
+
+def write_moment_exr(path, level: np.ndarray) -> Path:
+    """Write one ``(H, W, 5)`` moment level as an EXR with channels :data:`CHANNELS`."""
+    chans = _channels(level)
     path = Path(path)
     with atomic_path(path, suffix=".exr") as tmp:
-        with OpenEXR.File(header, chans) as f:
-            f.write(str(tmp))
+        write_exr_channels(tmp, chans)
     return path
 
 
 def read_moment_exr(path) -> np.ndarray:
-    """Read an EXR written by :func:`write_moment_exr` as ``(H, W, 5)`` float64."""
-    import OpenEXR
-
+    """Read an EXR written by :func:`write_moment_exr` as ``(H, W, 5)`` float64 (checksum
+    verified when present)."""
     path = Path(path)
     if not path.is_file():
-        raise PrefilterError(f"{path}: moment map not found")
-    try:
-        with OpenEXR.File(str(path), separate_channels=True) as f:
-            ch = {k: np.asarray(v.pixels, np.float64) for k, v in f.channels().items()}
-    except (RuntimeError, OSError) as exc:
-        raise PrefilterError(f"{path}: unreadable or corrupt EXR ({exc})") from None
+        raise TableFileError(f"{path}: moment map not found")
+    ch = read_exr_channels(path)
     missing = [n for n in CHANNELS if n not in ch]
     if missing:
-        raise PrefilterError(f"{path}: expected channels {', '.join(CHANNELS)}; missing {missing}")
-    return np.stack([ch[n] for n in CHANNELS], axis=-1)
+        raise TableFileError(f"{path}: expected channels {', '.join(CHANNELS)}; missing {missing}")
+    if len({ch[n].shape for n in CHANNELS}) != 1:
+        raise TableFileError(f"{path}: expected channels of one shape, got "
+                             f"{[ch[n].shape for n in CHANNELS]}")
+    return np.stack([ch[n].astype(np.float64) for n in CHANNELS], axis=-1)
 
 
 def write_maps(maps: LeadrMaps, out_dir, *, all_levels: bool = True, meta: dict | None = None):
@@ -58,14 +63,71 @@ def write_maps(maps: LeadrMaps, out_dir, *, all_levels: bool = True, meta: dict 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     levels = maps.chain.levels if all_levels else maps.chain.levels[:1]
-    files = [write_moment_exr(out / f"leadr_L{i}.exr", lv).name for i, lv in enumerate(levels)]
+    entries = []
+    for i, lv in enumerate(levels):
+        f = write_moment_exr(out / f"leadr_L{i}.exr", lv).name
+        entries.append({"file": f, "shape": list(lv.shape[:2]),
+                        "sha256": array_digest(_channels(lv))})
     info = {
+        "format": FORMAT,
+        "version": VERSION,
         "channels": list(CHANNELS),
         "convention": CONVENTION,
         "base_roughness": maps.base_roughness,
-        "levels": [{"file": f, "shape": list(lv.shape[:2])} for f, lv in zip(files, levels)],
+        "levels": entries,
         "mip_filter": "2x2 box average of the level above (moments are linear)",
     }
     info.update(meta or {})
+    # written last: a bake killed before this point leaves no (or the previous) index, whose
+    # checksums then reject the new level files
     save_json_atomic(out / "leadr.json", info)
-    return [out / f for f in files]
+    return [out / e["file"] for e in entries]
+
+
+def read_maps(out_dir) -> tuple[list[np.ndarray], dict]:
+    """The moment levels ``(H_l, W_l, 5)`` float64 and the ``leadr.json`` index of a baked
+    directory, every field and checksum verified (:class:`~prefilter.errors.TableFileError`
+    naming the file and field otherwise)."""
+    out = Path(out_dir)
+    index = out / "leadr.json"
+    if not index.is_file():
+        raise TableFileError(f"{index}: LEADR index not found (bake it with "
+                             f"`prefilter bake leadr HEIGHT -o {out}`)")
+    try:
+        info = json.loads(index.read_text())
+    except (ValueError, OSError) as exc:  # JSON and Unicode errors are ValueErrors
+        raise TableFileError(f"{index}: unreadable JSON ({type(exc).__name__}: {exc})") from None
+    if not isinstance(info, dict):
+        raise TableFileError(f"{index}: expected a JSON object, got {type(info).__name__}")
+    if info.get("format", FORMAT) != FORMAT:
+        raise TableFileError(f"{index}: format: expected {FORMAT!r}, got {info.get('format')!r}")
+    if info.get("version", VERSION) != VERSION:
+        raise TableFileError(f"{index}: version: expected {VERSION}, got {info.get('version')!r}")
+    if info.get("channels") != list(CHANNELS):
+        raise TableFileError(f"{index}: channels: expected {list(CHANNELS)}, got "
+                             f"{info.get('channels')!r}")
+    br = info.get("base_roughness")
+    if isinstance(br, bool) or not isinstance(br, (int, float)) or not (np.isfinite(br) and br >= 0):
+        raise TableFileError(f"{index}: base_roughness: expected a number >= 0, got {br!r}")
+    entries = info.get("levels")
+    if not isinstance(entries, list) or not entries:
+        raise TableFileError(f"{index}: levels: expected a non-empty list, got {entries!r}")
+    levels = []
+    for i, e in enumerate(entries):
+        at = f"{index}: levels[{i}]"
+        if not (isinstance(e, dict) and isinstance(e.get("file"), str)
+                and isinstance(e.get("shape"), list)):
+            raise TableFileError(f"{at}: expected {{'file': str, 'shape': [H, W], 'sha256': str}}"
+                                 f", got {e!r}")
+        f = out / e["file"]
+        if Path(e["file"]).name != e["file"]:
+            raise TableFileError(f"{at}.file: expected a file name in {out}, got {e['file']!r}")
+        lv = read_moment_exr(f)
+        if list(lv.shape[:2]) != e["shape"]:
+            raise TableFileError(f"{f}: shape: expected {e['shape']} (leadr.json), got "
+                                 f"{list(lv.shape[:2])}")
+        if "sha256" in e and array_digest(_channels(lv)) != e["sha256"]:
+            raise TableFileError(f"{f}: sha256: checksum mismatch with {index.name} (expected "
+                                 f"{e['sha256']}): the file is corrupt or from another bake")
+        levels.append(lv)
+    return levels, info

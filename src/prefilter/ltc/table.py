@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import json
 import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from prefilter._io import META_KEY, expect_array, read_npz, verify_npz
 from prefilter._validate import as_float_array, as_roughness, as_upper_directions
 from prefilter.errors import TableFileError
 from prefilter.ltc.fit_iso import TABLE_VERSION, default_table_path
@@ -70,55 +70,54 @@ class GGXTable:
 
         Expected ``.npz`` arrays: ``version`` (int, == 1), ``axis_t`` (T,), ``axis_r`` (R,),
         ``M`` (T, R, 3, 3), ``magnitude`` (T, R), ``fresnel`` (T, R), ``settings`` (JSON string);
-        optional ``fit_error`` (T, R). Raises :class:`~prefilter.errors.TableFileError` when the
-        file is missing, unreadable, of another version, or has wrong shapes or non-finite values.
+        optional ``fit_error`` (T, R); ``__meta__`` (JSON with the SHA-256 of the arrays, see
+        :mod:`prefilter._io`; verified when present). Raises
+        :class:`~prefilter.errors.TableFileError` naming the file and field when the file is
+        missing, unreadable, corrupt (checksum), of another version, or has wrong shapes, dtypes
+        or non-finite values.
         """
         path = Path(path) if path is not None else default_table_path()
         if not path.is_file():
             raise TableFileError(f"LTC table {path}: file not found (bake it with "
                                  f"`prefilter bake ltc-iso -o {path}`)")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-            raise TableFileError(f"LTC table {path}: unreadable .npz ({exc})") from exc
+        where = f"LTC table {path}"
+        # layout first, checksum last: a malformed file gets the precise message
+        raw_data = read_npz(path, "LTC table")
+        data = {k: v for k, v in raw_data.items() if k != META_KEY}
         need = ("version", "axis_t", "axis_r", "M", "magnitude", "fresnel", "settings")
         missing = [k for k in need if k not in data]
         if missing:
-            raise TableFileError(f"LTC table {path}: missing arrays {missing}")
-        try:
-            version = int(data["version"])
-        except (TypeError, ValueError) as exc:
-            raise TableFileError(f"LTC table {path}: version: expected an integer") from exc
-        if version != TABLE_VERSION:
-            raise TableFileError(
-                f"LTC table {path}: version: expected {TABLE_VERSION}, got {version}")
-        t, r = data["axis_t"], data["axis_r"]
-        if t.ndim != 1 or r.ndim != 1 or len(t) < 2 or len(r) < 2:
-            raise TableFileError(f"LTC table {path}: axis_t, axis_r: expected 1-D arrays of length"
+            raise TableFileError(f"{where}: missing arrays {missing}; expected {list(need)}")
+        v = expect_array(data, "version", where, kind="i", shape=())
+        if int(v) != TABLE_VERSION:
+            raise TableFileError(f"{where}: version: expected {TABLE_VERSION}, got {int(v)}")
+        t = expect_array(data, "axis_t", where, ndim=1)
+        r = expect_array(data, "axis_r", where, ndim=1)
+        if len(t) < 2 or len(r) < 2:
+            raise TableFileError(f"{where}: axis_t, axis_r: expected 1-D arrays of length"
                                  f" >= 2, got shapes {t.shape}, {r.shape}")
         T, R = len(t), len(r)
         expect = {"M": (T, R, 3, 3), "magnitude": (T, R), "fresnel": (T, R)}
         if "fit_error" in data:
             expect["fit_error"] = (T, R)
         for k, shape in expect.items():
-            if data[k].shape != shape:
-                raise TableFileError(
-                    f"LTC table {path}: {k}: expected shape {shape}, got {data[k].shape}")
-        for k in ("axis_t", "axis_r", *expect):
-            a = data[k]
-            if not np.issubdtype(a.dtype, np.floating) or not np.all(np.isfinite(a)):
-                raise TableFileError(f"LTC table {path}: {k}: expected finite floats")
+            expect_array(data, k, where, shape=shape)
         if not (np.all(np.diff(t) > 0) and np.all(np.diff(r) > 0) and t[0] == 0.0 and t[-1] < 1.0
                 and r[0] > 0.0 and abs(r[-1] - 1.0) < 1e-12):
-            raise TableFileError(f"LTC table {path}: axes: expected increasing axis_t from 0 "
+            raise TableFileError(f"{where}: axes: expected increasing axis_t from 0 "
                                  f"(< 1) and axis_r in (0, 1] ending at 1")
         if np.any(np.abs(np.linalg.det(data["M"])) < 1e-300):
-            raise TableFileError(f"LTC table {path}: M: expected invertible matrices")
+            raise TableFileError(f"{where}: M: expected invertible matrices")
+        if np.any(data["magnitude"] < 0):
+            raise TableFileError(f"{where}: magnitude: expected values >= 0")
+        expect_array(data, "settings", where, kind="U", shape=())
         try:
             settings = json.loads(str(data["settings"]))
-        except json.JSONDecodeError as exc:
-            raise TableFileError(f"LTC table {path}: settings: expected a JSON string") from exc
+            if not isinstance(settings, dict):
+                raise ValueError
+        except ValueError:
+            raise TableFileError(f"{where}: settings: expected a JSON object string") from None
+        verify_npz(path, "LTC table", raw_data, format_version=TABLE_VERSION)
         return cls(t, r, data["M"], data["magnitude"], data["fresnel"], settings,
                    data.get("fit_error"))
 

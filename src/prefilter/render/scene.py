@@ -1,4 +1,4 @@
-"""Scenes as data: JSON (or a dict) -> a tree of frozen dataclasses, validated field by field.
+"""Scenes as data: JSON or TOML (or a dict) -> frozen dataclasses, validated field by field.
 
 The format is documented in ``docs/scenes.md``. Every error is a
 :class:`~prefilter.errors.PrefilterError` naming the field path and what was expected, e.g.
@@ -429,29 +429,36 @@ def _light(v, path, base):
                             o.number("scale", 1.0, lo=0.0))
 
 
-def load_scene(path_or_dict, *, base_dir: str | os.PathLike | None = None) -> Scene:
-    """Load and validate a scene from a JSON file path or an already-parsed dict.
-
-    Texture paths are relative to the scene file's directory (``base_dir`` for dicts, default the
-    current directory). Raises :class:`PrefilterError` naming the offending field.
-    """
-    if isinstance(path_or_dict, dict):
-        data, base = path_or_dict, Path(base_dir or ".")
-    elif isinstance(path_or_dict, (str, os.PathLike)):
-        p = Path(path_or_dict)
-        if not p.is_file():
-            raise PrefilterError(f"{p}: scene file not found")
+def _read_scene_file(p: Path):
+    """The parsed JSON (or, for ``.toml``, TOML) document of a scene file."""
+    if not p.is_file():
+        raise PrefilterError(f"{p}: scene file not found")
+    try:
+        text = p.read_bytes().decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise PrefilterError(f"{p}: expected UTF-8 text, got an invalid byte at offset "
+                             f"{exc.start}") from None
+    except OSError as exc:
+        raise PrefilterError(f"{p}: unreadable scene file ({exc})") from None
+    if p.suffix.lower() == ".toml":
         try:
-            data = json.loads(p.read_text())
-        except json.JSONDecodeError as exc:
-            raise PrefilterError(f"{p}: invalid JSON at line {exc.lineno}, column {exc.colno}: "
-                                 f"{exc.msg}") from None
-        except (OSError, UnicodeDecodeError) as exc:
-            raise PrefilterError(f"{p}: unreadable scene file ({exc})") from None
-        base = Path(base_dir) if base_dir is not None else p.parent
-    else:
-        raise PrefilterError(
-            f"scene: expected a JSON file path or a dict, got {type(path_or_dict).__name__}")
+            import tomllib
+        except ImportError:  # Python 3.10
+            raise PrefilterError(f"{p}: TOML scenes need Python >= 3.11 (tomllib)") from None
+        try:
+            return tomllib.loads(text)
+        except tomllib.TOMLDecodeError as exc:
+            raise PrefilterError(f"{p}: invalid TOML: {exc}") from None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise PrefilterError(f"{p}: invalid JSON at line {exc.lineno}, column {exc.colno}: "
+                             f"{exc.msg}") from None
+    except RecursionError:
+        raise PrefilterError(f"{p}: invalid JSON: nested too deeply") from None
+
+
+def _parse(data, base: Path) -> Scene:
     o = _Obj(data, "", ("camera", "objects", "lights"))
     camera = _camera(o.raw("camera"), "camera")
     objects = tuple(_object(v, f"objects[{i}]", base)
@@ -459,3 +466,24 @@ def load_scene(path_or_dict, *, base_dir: str | os.PathLike | None = None) -> Sc
     lights = tuple(_light(v, f"lights[{i}]", base)
                    for i, v in enumerate(_list(o.raw("lights", []), "lights")))
     return Scene(camera, objects, lights, source=data)
+
+
+def load_scene(path_or_dict, *, base_dir: str | os.PathLike | None = None) -> Scene:
+    """Load and validate a scene from a JSON (or ``.toml``) file path or a parsed dict.
+
+    Texture paths are relative to the scene file's directory (``base_dir`` for dicts, default the
+    current directory). Raises :class:`PrefilterError` naming the offending field (prefixed with
+    the file for scene files).
+    """
+    if isinstance(path_or_dict, dict):
+        return _parse(path_or_dict, Path(base_dir or "."))
+    if not isinstance(path_or_dict, (str, os.PathLike)):
+        raise PrefilterError(
+            f"scene: expected a JSON file path or a dict, got {type(path_or_dict).__name__}")
+    p = Path(path_or_dict)
+    data = _read_scene_file(p)
+    base = Path(base_dir) if base_dir is not None else p.parent
+    try:
+        return _parse(data, base)
+    except PrefilterError as exc:
+        raise PrefilterError(f"{p}: {exc}") from None

@@ -6,6 +6,10 @@ values are mapped to [0, 1] (``v / 255`` or ``v / 65535``); they are taken as li
 
 Pillow reads 16-bit *colour* PNGs as 8-bit, so those are read and written by the small codec here
 (zlib + the five PNG row filters, RFC 2083); everything else goes through Pillow.
+
+Corrupt files raise :class:`~prefilter.errors.PrefilterError` naming the file: every PNG chunk's
+CRC is checked before decoding, and EXRs written here carry the SHA-256 of their channels in the
+header attribute ``prefilter_sha256``, verified at reading (EXR has no checksum of its own).
 """
 
 from __future__ import annotations
@@ -17,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import atomic_path
+from prefilter._io import array_digest, atomic_path
 from prefilter._numba import njit_serial
 from prefilter.errors import PrefilterError
 
@@ -90,17 +94,28 @@ def _unfilter(raw, h, stride, bpp):  # pragma: no cover - compiled
 
 
 def _png_chunks(data: bytes, where: str):
+    """``(kind, body)`` of every chunk, CRC-checked (RFC 2083 section 3.2), ending with IEND."""
     if not data.startswith(_PNG_SIG):
         raise PrefilterError(f"{where}: not a PNG file (bad signature)")
     pos = len(_PNG_SIG)
-    while pos + 8 <= len(data):
+    while True:
+        if pos + 12 > len(data):
+            raise PrefilterError(f"{where}: truncated PNG (no IEND chunk)")
         (n,) = struct.unpack(">I", data[pos : pos + 4])
         kind = data[pos + 4 : pos + 8]
-        body = data[pos + 8 : pos + 8 + n]
-        if len(body) != n or pos + 12 + n > len(data):
+        if pos + 12 + n > len(data):
             raise PrefilterError(f"{where}: truncated PNG chunk {kind!r}")
+        body = data[pos + 8 : pos + 8 + n]
+        (crc,) = struct.unpack(">I", data[pos + 8 + n : pos + 12 + n])
+        if zlib.crc32(kind + body) & 0xFFFFFFFF != crc:
+            raise PrefilterError(f"{where}: corrupt PNG chunk {kind!r} at byte {pos} (CRC "
+                                 f"mismatch)")
         yield kind, body
         pos += 12 + n
+        if kind == b"IEND":
+            break
+    if pos != len(data):
+        raise PrefilterError(f"{where}: {len(data) - pos} unexpected bytes after the PNG IEND chunk")
 
 
 def _read_png16_colour(data: bytes, where: str):
@@ -146,7 +161,7 @@ def _read_png(path: Path) -> np.ndarray:
 
     where = str(path)
     data = path.read_bytes()
-    a = _read_png16_colour(data, where)
+    a = _read_png16_colour(data, where)  # also checks every chunk's CRC
     if a is not None:
         return a
     try:
@@ -161,8 +176,13 @@ def _read_png(path: Path) -> np.ndarray:
             if mode.startswith("I;16") or mode == "I":
                 return np.asarray(im, np.float64) / 65535.0
             raise PrefilterError(f"{where}: unsupported PNG mode {mode!r}")
+    except PrefilterError:
+        raise
     except (UnidentifiedImageError, OSError, SyntaxError) as exc:
         raise PrefilterError(f"{where}: unreadable or corrupt PNG ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - any other decoding failure of a corrupt file
+        raise PrefilterError(f"{where}: unreadable or corrupt PNG ({type(exc).__name__}: "
+                             f"{exc})") from None
 
 
 def _write_png(path: Path, a: np.ndarray, bits: int) -> None:
@@ -187,14 +207,40 @@ def _write_png(path: Path, a: np.ndarray, bits: int) -> None:
 _EXR_LAYOUTS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
 
-def _read_exr(path: Path) -> np.ndarray:
+#: Custom EXR header attribute holding :func:`prefilter._io.array_digest` of the channels.
+EXR_CHECKSUM = "prefilter_sha256"
+
+
+def read_exr_channels(path: Path) -> dict[str, np.ndarray]:
+    """The channels of an EXR file as stored (float16/32 ``(H, W)``), checksum verified.
+
+    Files written by this package carry :data:`EXR_CHECKSUM` (EXR itself has no checksum: a
+    flipped bit in pixel data decodes silently to other values); it must match when present.
+    """
     import OpenEXR
 
     try:
         with OpenEXR.File(str(path), separate_channels=True) as f:
-            ch = {k: np.asarray(v.pixels, np.float64) for k, v in f.channels().items()}
-    except (RuntimeError, OSError) as exc:
-        raise PrefilterError(f"{path}: unreadable or corrupt EXR ({exc})") from None
+            ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
+            want = f.header().get(EXR_CHECKSUM)
+    except Exception as exc:  # noqa: BLE001 - RuntimeError, ValueError, UnicodeDecodeError, ...
+        raise PrefilterError(f"{path}: unreadable or corrupt EXR ({type(exc).__name__}: "
+                             f"{exc})") from None
+    if not ch or any(a.ndim != 2 or a.dtype.kind not in "fu" for a in ch.values()):
+        raise PrefilterError(f"{path}: expected EXR channels of 2-D pixel arrays, got "
+                             f"{ {k: (str(a.dtype), a.shape) for k, a in ch.items()} }")
+    if want is not None:
+        if isinstance(want, bytes):
+            want = want.decode("latin-1")
+        found = array_digest(ch)
+        if want != found:
+            raise PrefilterError(f"{path}: {EXR_CHECKSUM}: checksum mismatch (expected {want!s}, "
+                                 f"found {found}): the file is corrupt or was modified")
+    return ch
+
+
+def _read_exr(path: Path) -> np.ndarray:
+    ch = {k: v.astype(np.float64) for k, v in read_exr_channels(path).items()}
     for names in (("R", "G", "B", "A"), ("R", "G", "B"), ("Y", "A"), ("Y",)):
         if all(n in ch for n in names):
             return np.stack([ch[n] for n in names], axis=-1)
@@ -204,15 +250,22 @@ def _read_exr(path: Path) -> np.ndarray:
         f"{path}: expected EXR channels R,G,B[,A] or Y[,A], got {', '.join(sorted(ch))}")
 
 
-def _write_exr(path: Path, a: np.ndarray, half: bool) -> None:
+def write_exr_channels(path: Path, chans: dict[str, np.ndarray]) -> None:
+    """Write ``(H, W)`` float16/32 channels as a ZIP-compressed scanline EXR with the checksum
+    attribute :data:`EXR_CHECKSUM` (not atomic: pass a temporary path)."""
     import OpenEXR
 
-    dtype = np.float16 if half else np.float32
-    chans = {n: np.ascontiguousarray(a[..., i], dtype=dtype)
-             for i, n in enumerate(_EXR_LAYOUTS[a.shape[2]])}
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    chans = {k: np.ascontiguousarray(v) for k, v in chans.items()}
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+              EXR_CHECKSUM: array_digest(chans)}
     with OpenEXR.File(header, chans) as f:
         f.write(str(path))
+
+
+def _write_exr(path: Path, a: np.ndarray, half: bool) -> None:
+    dtype = np.float16 if half else np.float32
+    write_exr_channels(path, {n: np.ascontiguousarray(a[..., i], dtype=dtype)
+                              for i, n in enumerate(_EXR_LAYOUTS[a.shape[2]])})
 
 
 # -- public API ----------------------------------------------------------------------------------
@@ -241,8 +294,11 @@ def read_image(path: str | os.PathLike, *, srgb: bool = False) -> np.ndarray:
     else:
         try:
             a = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as exc:
-            raise PrefilterError(f"{path}: unreadable or corrupt .npy ({exc})") from None
+        except Exception as exc:  # noqa: BLE001 - any decoding failure of a corrupt file
+            raise PrefilterError(f"{path}: unreadable or corrupt .npy ({type(exc).__name__}: "
+                                 f"{exc})") from None
+        if not isinstance(a, np.ndarray):
+            raise PrefilterError(f"{path}: expected a .npy array, got an .npz archive")
         if a.dtype.kind not in "biuf":
             raise PrefilterError(f"{path}: expected a numeric array, got dtype {a.dtype}")
         a = a.astype(np.float64)
@@ -258,7 +314,7 @@ def write_image(path: str | os.PathLike, image, *, bits: int = 8, srgb: bool = F
 
     PNG: values are clipped to [0, 1] (after sRGB encoding of colour channels when ``srgb``) and
     quantised to ``bits`` = 8 or 16. EXR: float32 (``half=True``: float16), ZIP-compressed,
-    channels Y / YA / RGB / RGBA. ``.npy``: float64 as given.
+    channels Y / YA / RGB / RGBA, checksum attribute ``prefilter_sha256``. ``.npy``: float64.
     """
     path = Path(path)
     kind = _suffix(path)

@@ -10,7 +10,6 @@ killed bake resumes from the last finished chunk, and the table is written atomi
 
 from __future__ import annotations
 
-import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Callable
@@ -107,7 +106,7 @@ def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool
 
     Resumable: chunk results live in ``<out>.parts/`` (keyed by the settings) until the table is
     written. ``on_chunk(i)`` is called after chunk ``i`` is checkpointed (tests interrupt bakes
-    with it). Wall times are stored in the table's ``settings["timing"]`` (not in the key).
+    with it). Wall times are not stored: the same settings give the same bytes, resumed or not.
     """
     settings = settings or BakeSettings()
     out = Path(out) if out is not None else default_table_path()
@@ -124,7 +123,6 @@ def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool
 
         bar = tqdm(total=n_chunks * settings.sw.steps, initial=(n_chunks - len(todo))
                    * settings.sw.steps, desc="ltc-aniso SW fit", unit="step")
-    t0 = time.perf_counter()
     try:
         for c in todo:
             sl = slice(c * chunk, min(E, (c + 1) * chunk))
@@ -158,15 +156,12 @@ def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool
     finally:
         if bar is not None:
             bar.close()
-    t_fit = time.perf_counter() - t0
     parts = [ck.load(c) for c in range(n_chunks)]
     M_raw = np.concatenate([p["M"] for p in parts])
     loss = np.concatenate([p["loss"] for p in parts])
     table = finish_table(settings, entries, M_raw, loss, progress=progress)
     table.diagnostics["polished"] = _fill(settings, entries,
                                           np.concatenate([p["polished"] for p in parts]))
-    table.settings["timing"] = {"fit_s_this_run": round(t_fit, 1),
-                                "post_s": round(time.perf_counter() - t0 - t_fit, 1)}
     table.save(out)
     ck.clear()
     return out

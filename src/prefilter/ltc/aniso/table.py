@@ -16,18 +16,19 @@ from __future__ import annotations
 
 import json
 import os
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import save_npz_atomic
+from prefilter._io import META_KEY, expect_array, read_npz, save_npz_atomic, verify_npz
 from prefilter._validate import as_roughness, as_upper_directions
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.ltc.aniso import symmetry
 
 #: Version of the file layout written by :meth:`AnisoGGXTable.save`.
 TABLE_VERSION = 1
+#: Format name recorded in the file's ``__meta__`` checksum entry.
+FORMAT = "prefilter-ltc-aniso"
 
 AXES = ("axis_theta", "axis_phi", "axis_alpha", "axis_ratio")
 
@@ -83,7 +84,8 @@ class AnisoGGXTable:
     def save(self, path: str | os.PathLike) -> None:
         """Write the ``.npz`` layout documented in :meth:`load` (atomically)."""
         extra = {f"diag_{k}": np.asarray(v) for k, v in self.diagnostics.items()}
-        save_npz_atomic(path, version=np.int64(TABLE_VERSION),
+        save_npz_atomic(path, format_name=FORMAT, format_version=TABLE_VERSION,
+                        version=np.int64(TABLE_VERSION),
                         **{n: getattr(self, n) for n in AXES}, M=self.M,
                         magnitude=self.magnitude, fresnel=self.fresnel,
                         settings=np.array(json.dumps(self.settings, sort_keys=True)), **extra)
@@ -94,47 +96,56 @@ class AnisoGGXTable:
 
         ``.npz`` arrays: ``version`` (== 1), ``axis_theta`` (T,), ``axis_phi`` (F,),
         ``axis_alpha`` (A,), ``axis_ratio`` (R,), ``M`` (T, F, A, R, 3, 3), ``magnitude`` and
-        ``fresnel`` (T, F, A, R), ``settings`` (JSON string); optional ``diag_*`` arrays. Raises
-        :class:`~prefilter.errors.TableFileError` for missing or malformed files.
+        ``fresnel`` (T, F, A, R), ``settings`` (JSON string); optional ``diag_*`` arrays;
+        ``__meta__`` (format, version and SHA-256 of the arrays, :mod:`prefilter._io`; verified
+        when present). Raises :class:`~prefilter.errors.TableFileError` naming the file and
+        field for missing, corrupt (checksum), unknown-version or malformed files.
         """
         path = Path(path) if path is not None else default_table_path()
         if not path.is_file():
             raise TableFileError(f"anisotropic LTC table {path}: file not found (bake it with "
                                  f"`prefilter bake ltc-aniso -o {path}`)")
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
-            raise TableFileError(f"anisotropic LTC table {path}: unreadable .npz ({exc})") from exc
+        where = f"anisotropic LTC table {path}"
+        # layout first, checksum last: a malformed file gets the precise message
+        raw_data = read_npz(path, "anisotropic LTC table")
+        data = {k: v for k, v in raw_data.items() if k != META_KEY}
         need = ("version", *AXES, "M", "magnitude", "fresnel", "settings")
         missing = [k for k in need if k not in data]
         if missing:
-            raise TableFileError(f"anisotropic LTC table {path}: missing arrays {missing}")
-        if int(data["version"]) != TABLE_VERSION:
-            raise TableFileError(f"anisotropic LTC table {path}: version: expected "
-                                 f"{TABLE_VERSION}, got {int(data['version'])}")
-        axes = [data[n] for n in AXES]
-        if any(a.ndim != 1 or len(a) < 2 or not np.all(np.diff(a) > 0) for a in axes):
-            raise TableFileError(f"anisotropic LTC table {path}: axes: expected increasing 1-D "
-                                 f"arrays of length >= 2")
+            raise TableFileError(f"{where}: missing arrays {missing}; expected {list(need)}")
+        v = expect_array(data, "version", where, kind="i", shape=())
+        if int(v) != TABLE_VERSION:
+            raise TableFileError(f"{where}: version: expected {TABLE_VERSION}, got {int(v)}")
+        axes = [expect_array(data, n, where, ndim=1) for n in AXES]
+        if any(len(a) < 2 or not np.all(np.diff(a) > 0) for a in axes):
+            raise TableFileError(f"{where}: axes: expected increasing 1-D arrays of length >= 2, "
+                                 f"got lengths {[len(a) for a in axes]}")
         shape = tuple(len(a) for a in axes)
         for k, s in (("M", shape + (3, 3)), ("magnitude", shape), ("fresnel", shape)):
-            if data[k].shape != s or not np.all(np.isfinite(data[k])):
-                raise TableFileError(f"anisotropic LTC table {path}: {k}: expected finite values "
-                                     f"of shape {s}, got {data[k].shape}")
+            expect_array(data, k, where, shape=s)
         th, ph, al, ra = axes
         if not (th[0] == 0 and th[-1] < np.pi / 2 and abs(ph[0]) < 1e-12
                 and abs(ph[-1] - np.pi / 2) < 1e-12 and al[0] > 0 and abs(al[-1] - 1) < 1e-12
                 and ra[0] > 0 and abs(ra[-1] - 1) < 1e-12):
-            raise TableFileError(f"anisotropic LTC table {path}: axes: expected theta from 0, "
+            raise TableFileError(f"{where}: axes: expected theta from 0, "
                                  f"phi over [0, pi/2], alpha and ratio in (0, 1] ending at 1")
         if np.any(np.linalg.det(data["M"]) <= 0):
-            raise TableFileError(f"anisotropic LTC table {path}: M: expected positive "
-                                 f"determinants")
+            raise TableFileError(f"{where}: M: expected positive determinants")
+        if np.any(data["magnitude"] < 0):
+            raise TableFileError(f"{where}: magnitude: expected values >= 0")
+        expect_array(data, "settings", where, kind="U", shape=())
         try:
             settings = json.loads(str(data["settings"]))
-        except json.JSONDecodeError as exc:
-            raise TableFileError(f"anisotropic LTC table {path}: settings: expected JSON") from exc
+            if not isinstance(settings, dict):
+                raise ValueError
+        except ValueError:
+            raise TableFileError(f"{where}: settings: expected a JSON object string") from None
+        unknown = [k for k in data if k not in need and not k.startswith("diag_")]
+        if unknown:
+            raise TableFileError(f"{where}: unknown arrays {unknown}; expected {list(need)} "
+                                 f"and diag_*")
+        verify_npz(path, "anisotropic LTC table", raw_data, format_name=FORMAT,
+                   format_version=TABLE_VERSION)
         diagnostics = {k[5:]: data[k] for k in data if k.startswith("diag_")}
         return cls(axes, data["M"], data["magnitude"], data["fresnel"], settings, diagnostics)
 
