@@ -1,0 +1,52 @@
+"""``prefilter view`` and ``prefilter export``: the WebGL2 viewer from the command line (thin
+layers over :func:`prefilter.viewer.export_scene` and :func:`prefilter.viewer.serve`)."""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+
+import click
+
+
+@click.command("export")
+@click.argument("scene", type=click.Path(exists=True, dir_okay=False))
+@click.option("--out", "-o", "out", required=True, type=click.Path(file_okay=False),
+              help="Folder to write (page + data); it opens from any static web server.")
+@click.option("--no-builtin-maps", is_flag=True,
+              help="Leave out the procedural normal maps of the page's normal-map choice.")
+def export(scene, out, no_builtin_maps):
+    """Write the viewer for SCENE (a scene JSON, docs/scenes.md) as a static folder."""
+    from prefilter.viewer.export import export_scene
+
+    path = export_scene(scene, out, builtin_maps=not no_builtin_maps)
+    click.echo(f"wrote {path} (serve it, e.g. `python -m http.server -d {path}`)")
+
+
+@click.command("view")
+@click.argument("scene", required=False, type=click.Path(exists=True, dir_okay=False))
+@click.option("--port", default=8000, show_default=True, type=click.IntRange(0, 65535),
+              help="Port on 127.0.0.1 (0: any free port).")
+@click.option("--no-browser", is_flag=True, help="Only print the URL.")
+def view(scene, port, no_browser):
+    """Serve the WebGL2 viewer of SCENE (default: a plane and a sphere under a quad light)."""
+    from prefilter.viewer.export import export_scene
+    from prefilter.viewer.server import serve
+
+    tmp = tempfile.mkdtemp(prefix="prefilter-view-")
+    try:
+        export_scene(scene, tmp)
+        server, url = serve(tmp, port, background=False)
+        click.echo(f"serving {url} (Ctrl-C to stop)", err=False)
+        if not no_browser:
+            import webbrowser
+
+            webbrowser.open(url)
+        try:
+            server.serve_forever()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            server.server_close()
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)

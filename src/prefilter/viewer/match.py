@@ -1,0 +1,170 @@
+"""End-to-end checks of the viewer: the same scene by the Python renderer and by WebGL2 in
+headless Chromium (pixel match), screenshots per mode, and the frame time.
+
+``python -m prefilter.viewer.match`` prints the pixel-match table and the frame time.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from prefilter.errors import PrefilterError
+from prefilter.viewer.export import BUILTIN_MAPS, METHODS, default_scene, export_scene
+
+__all__ = ["SCENES", "frame_time", "pixel_match", "scene", "screenshots"]
+
+
+def _quad(z=-2.0, y0=0.4, y1=1.6, hw=1.0, tilt=0.3, radiance=5.0):
+    return {"type": "quad", "radiance": radiance,
+            "vertices": [[-hw, y0, z], [hw, y0, z], [hw, y1, z - tilt], [-hw, y1, z - tilt]]}
+
+
+def _plane(material, size=8.0, uv=8.0):
+    return {"type": "plane", "center": [0, 0, 0], "normal": [0, 1, 0], "tangent": [1, 0, 0],
+            "size": [size, size], "uv_scale": [uv, uv], "material": material}
+
+
+def _camera(width, height):
+    return {"origin": [0.0, 1.3, 3.6], "target": [0.0, 0.2, 0.0], "up": [0, 1, 0], "fov": 40,
+            "width": width, "height": height}
+
+
+#: The pixel-match scenes: a flat anisotropic plane, the default scene (Gaussian-bump plane and
+#: an anisotropic sphere) and a brushed plane (anisotropic normal distribution).
+SCENES = ("flat", "bumps-sphere", "brushed")
+
+
+def scene(name: str, width: int = 160, height: int = 120) -> dict:
+    """The pixel-match scene ``name`` (one of :data:`SCENES`) as a dict."""
+    if name == "flat":
+        return {"camera": _camera(width, height), "lights": [_quad()],
+                "objects": [_plane({"alpha_x": 0.25, "alpha_y": 0.08, "base_color": 0.05,
+                                    "f0": [0.9, 0.7, 0.5]})]}
+    if name == "bumps-sphere":
+        return default_scene(width, height)
+    if name == "brushed":
+        return {"camera": _camera(width, height), "lights": [_quad()],
+                "objects": [_plane({"alpha": 0.1, "base_color": 0.02, "f0": 0.9,
+                                    "normal_map": dict(BUILTIN_MAPS["brushed"])})]}
+    raise PrefilterError(f"scene: expected one of {', '.join(SCENES)}, got {name!r}")
+
+
+@contextlib.contextmanager
+def _session(scenes: dict, driver=None, builtin_maps=False):
+    """Export ``scenes`` (name -> dict) under one served folder; yields ``(driver, url_of)``."""
+    from prefilter.viewer.browser import chromium
+    from prefilter.viewer.server import serve
+
+    with tempfile.TemporaryDirectory(prefix="prefilter-viewer-") as tmp:
+        root = Path(tmp)
+        for name, sc in scenes.items():
+            export_scene(sc, root / name, builtin_maps=builtin_maps)
+        (root / "index.html").write_text("prefilter viewer sessions\n")
+        server, url = serve(root)
+        own = driver is None
+        drv = chromium(root / "profile") if own else driver
+        try:
+            yield drv, (lambda name: f"{url}{name}/index.html")
+        finally:
+            if own:
+                drv.quit()
+            server.shutdown()
+            server.server_close()
+
+
+def _errors(img, ref, covered) -> dict:
+    e = (img - ref)[covered]
+    r = ref[covered]
+    return {"rel_rmse": float(np.sqrt(np.mean(e * e)) / max(np.sqrt(np.mean(r * r)), 1e-30)),
+            "max_abs": float(np.max(np.abs(e))) if e.size else 0.0,
+            "max_rel": float(np.max(np.abs(e)) / max(float(np.max(np.abs(r))), 1e-30))
+            if e.size else 0.0,
+            "covered": int(covered.sum())}
+
+
+def pixel_match(scenes=SCENES, methods=METHODS, precisions=("f32", "f16"), *, width=160,
+                height=120, driver=None) -> list[dict]:
+    """Render each scene x method x table precision in the browser and with
+    :func:`prefilter.render.render`; compare linear radiance over the covered pixels.
+
+    Returns rows ``{scene, method, precision, rel_rmse, max_abs, max_rel, covered}``:
+    ``rel_rmse = |browser - python|_2 / |python|_2`` over covered pixels and channels,
+    ``max_abs`` the largest absolute difference, ``max_rel`` it over the largest radiance.
+    ``driver``: a WebDriver to reuse (default: a fresh headless Chromium).
+    """
+    from prefilter.render.pipeline import render
+    from prefilter.viewer.browser import open_viewer, render_linear
+
+    dicts = {s: scene(s, width, height) for s in scenes}
+    rows = []
+    with _session(dicts, driver) as (drv, url_of):
+        for s, sc in dicts.items():
+            open_viewer(drv, url_of(s))
+            for m in methods:
+                ref = render(sc, m)
+                for p in precisions:
+                    img, covered = render_linear(drv, m, p)
+                    rows.append({"scene": s, "method": m, "precision": p,
+                                 **_errors(img, ref, covered)})
+    return rows
+
+
+def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> list[Path]:
+    """A PNG of the page's canvas per method and one split view (method | naive) in
+    ``out_dir`` (``viewer_<method>.png``, ``viewer_split.png``); returns the paths.
+    ``scene`` defaults to :func:`default_scene` at ``width x height``."""
+    from prefilter.viewer.browser import open_viewer, screenshot
+
+    out = Path(out_dir)
+    sc = scene if scene is not None else default_scene(width, height)
+    paths = []
+    with _session({"shots": sc}, driver) as (drv, url_of):
+        open_viewer(drv, url_of("shots"))
+        for m in METHODS:
+            drv.execute_script("const v = window.prefilterViewer.viewer;"
+                               "Object.assign(v.params, {methodLeft: arguments[0], "
+                               "methodRight: arguments[0], split: -1});", m)
+            paths.append(screenshot(drv, out / f"viewer_{m}.png"))
+        drv.execute_script("const v = window.prefilterViewer.viewer;"
+                           "Object.assign(v.params, {methodLeft: 'ltc-multiscale', "
+                           "methodRight: 'ltc', split: 0.5});")
+        paths.append(screenshot(drv, out / "viewer_split.png"))
+    return paths
+
+
+def frame_time(width: int = 512, height: int = 512, method: str = "ltc", frames: int = 10, *,
+               driver=None) -> float:
+    """Mean frame time in ms of the default scene at ``width x height`` drawn by ``method``
+    (synchronised by a one-pixel read-back per frame)."""
+    from prefilter.viewer.browser import open_viewer
+
+    with _session({"timing": default_scene(width, height)}, driver) as (drv, url_of):
+        open_viewer(drv, url_of("timing"))
+        drv.execute_script("const v = window.prefilterViewer.viewer;"
+                           "Object.assign(v.params, {methodLeft: arguments[0], "
+                           "methodRight: arguments[0], split: -1});", method)
+        ms = float(drv.execute_script("return window.prefilterViewer.frameTime(arguments[0]);",
+                                      frames))
+    if not math.isfinite(ms):
+        raise PrefilterError(f"frame time: expected a finite number, got {ms}")
+    return ms
+
+
+def _main() -> None:
+    rows = pixel_match()
+    print("| scene | method | tables | relative RMSE | max abs error | max error / max radiance |")
+    print("|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| {r['scene']} | {r['method']} | {r['precision']} | {r['rel_rmse']:.2e} | "
+              f"{r['max_abs']:.2e} | {r['max_rel']:.2e} |")
+    for m in METHODS:
+        print(f"frame time 512x512 {m}: {frame_time(method=m):.1f} ms")
+
+
+if __name__ == "__main__":
+    _main()
