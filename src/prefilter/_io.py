@@ -65,8 +65,10 @@ def array_digest(arrays: Mapping[str, np.ndarray]) -> str:
     return h.hexdigest()
 
 
-def bytes_digest(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
+def json_digest(obj) -> str:
+    """SHA-256 of the canonical JSON text of ``obj`` (sorted keys, no spaces)."""
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, separators=(",", ":"))
+                          .encode()).hexdigest()
 
 
 def save_npz_atomic(path: str | os.PathLike, /, *, format_name: str | None = None,

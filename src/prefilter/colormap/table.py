@@ -272,9 +272,10 @@ class ColormapTable:
     def save(self, path, *, meta: dict | None = None) -> tuple[Path, Path]:
         """Write the table image ``path`` (``.png``: 16-bit, ``.exr``: float32, ``.npy``:
         float64; rows = sigma) and its sidecar ``path.with_suffix(".json")`` (:meth:`metadata`
-        plus ``meta``, ``table_file`` and ``sha256``, the digest of the stored pixels as
-        :func:`prefilter.texture.read_image` returns them), each atomically, the sidecar last."""
-        from prefilter._io import array_digest, save_json_atomic
+        plus ``meta``, ``table_file``, ``sha256``, the digest of the stored pixels as
+        :func:`prefilter.texture.read_image` returns them, and ``meta_sha256``, the digest of all
+        other fields), each atomically, the sidecar last."""
+        from prefilter._io import array_digest, json_digest, save_json_atomic
         from prefilter.texture.io import read_image, write_image
 
         path = Path(path)
@@ -282,6 +283,7 @@ class ColormapTable:
         info = dict(meta or {})
         info.update(self.metadata(), table_file=path.name,
                     sha256=array_digest({"table": read_image(path)}))
+        info["meta_sha256"] = json_digest(info)
         side = path.with_suffix(".json")
         save_json_atomic(side, info)
         return path, side
@@ -291,7 +293,7 @@ class ColormapTable:
         """Read a table written by :meth:`save` (or ``prefilter bake colormap``) and its JSON
         sidecar; every field, the image shape and the checksum (when present) are verified and
         a failure raises :class:`~prefilter.errors.TableFileError` naming the file and field."""
-        from prefilter._io import array_digest
+        from prefilter._io import array_digest, json_digest
         from prefilter.texture.io import read_image
 
         path = Path(path)
@@ -308,6 +310,11 @@ class ColormapTable:
                                  ) from None
         if not isinstance(info, dict):
             raise TableFileError(f"{side}: expected a JSON object, got {type(info).__name__}")
+        if "meta_sha256" in info:
+            want = info.pop("meta_sha256")
+            if json_digest(info) != want:
+                raise TableFileError(f"{side}: meta_sha256: checksum mismatch (expected {want!r})"
+                                     f": the metadata is corrupt or was edited")
 
         def need(key, ok, what):
             if key not in info:

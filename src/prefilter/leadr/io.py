@@ -4,7 +4,8 @@ One file per mip level, ``leadr_L{level}.exr``, float32, ZIP, five named channel
 ``E_x, E_y, E_xx, E_yy, E_xy`` (:data:`prefilter.leadr.maps.CHANNELS`) and the checksum attribute
 ``prefilter_sha256`` (:mod:`prefilter.texture.io`), plus ``leadr.json`` with the format name and
 version, the slope convention, the base roughness and, per level, its file, shape and the SHA-256
-of its channels. :func:`read_maps` checks all of it.
+of its channels, and ``meta_sha256``, the SHA-256 of all its other fields. :func:`read_maps`
+checks all of it.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import array_digest, atomic_path, save_json_atomic
+from prefilter._io import array_digest, atomic_path, json_digest, save_json_atomic
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.leadr.maps import CHANNELS, LeadrMaps
 from prefilter.texture.io import read_exr_channels, write_exr_channels
@@ -78,6 +79,7 @@ def write_maps(maps: LeadrMaps, out_dir, *, all_levels: bool = True, meta: dict 
         "mip_filter": "2x2 box average of the level above (moments are linear)",
     }
     info.update(meta or {})
+    info["meta_sha256"] = json_digest(info)
     # written last: a bake killed before this point leaves no (or the previous) index, whose
     # checksums then reject the new level files
     save_json_atomic(out / "leadr.json", info)
@@ -99,6 +101,11 @@ def read_maps(out_dir) -> tuple[list[np.ndarray], dict]:
         raise TableFileError(f"{index}: unreadable JSON ({type(exc).__name__}: {exc})") from None
     if not isinstance(info, dict):
         raise TableFileError(f"{index}: expected a JSON object, got {type(info).__name__}")
+    if "meta_sha256" in info:
+        want = info.pop("meta_sha256")
+        if json_digest(info) != want:
+            raise TableFileError(f"{index}: meta_sha256: checksum mismatch (expected {want!r}): "
+                                 f"the index is corrupt or was edited")
     if info.get("format", FORMAT) != FORMAT:
         raise TableFileError(f"{index}: format: expected {FORMAT!r}, got {info.get('format')!r}")
     if info.get("version", VERSION) != VERSION:
