@@ -9,8 +9,13 @@ light. Error: relative RMSE of the luminance over the configurations vs the N = 
 wall time per shading point (NumPy path, best of 3). ``paper5`` is the supplemental's 5 x 5 grid
 (spacing 0.9); other rows use the derived spacing of ``gaussian_grid``.
 
+The same table with more cases (diffuse at every sigma) and per-N timings of the compiled
+specular kernel: ``--convergence`` (:func:`prefilter.leadr.acceptance.convergence`).
+
 Acceptance (``--acceptance``): :mod:`prefilter.leadr.acceptance` (LEADR, normal-mapped reference
-and naive mip-mapped normal mapping vs the displaced height field, 16 to 64 texels per pixel).
+and naive mip-mapped normal mapping vs the displaced height field, 16 to 64 texels per pixel);
+``--acceptance-env`` the same under the procedural environment (add ``--no-shadowing`` for a
+reference without self-shadowing, the model of the simplified algorithms).
 
 Throughput (``--throughput``): shading points per second per light type and grid size on 2^16
 points. No assertions.
@@ -111,9 +116,22 @@ if __name__ == "__main__":
     ap.add_argument("--throughput", action="store_true")
     ap.add_argument("--acceptance", action="store_true",
                     help="far-field LEADR / normal-mapped / naive vs displaced reference table")
+    ap.add_argument("--acceptance-env", action="store_true",
+                    help="the far-field table under environment light")
+    ap.add_argument("--no-shadowing", action="store_true")
+    ap.add_argument("--convergence", action="store_true",
+                    help="N x N vs N = 128 (prefilter.leadr.acceptance.convergence)")
     ap.add_argument("--points", type=int, default=None)
     a = ap.parse_args()
-    if a.acceptance:
+    if a.acceptance_env:
+        from prefilter.leadr.acceptance import env_table, run_env
+
+        print(env_table(run_env(shadowing=not a.no_shadowing, log=lambda row: None)))
+    elif a.convergence:
+        from prefilter.leadr.acceptance import convergence as conv, convergence_table
+
+        print(convergence_table(conv(points=a.points or 1000, log=lambda row: None)))
+    elif a.acceptance:
         from prefilter.leadr.acceptance import run, table
 
         print(table(run(log=lambda row: None)))
