@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_positive_int, as_rng
+from prefilter._validate import as_directions, as_float_array, as_positive_int, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.multiscale.meso import _alpha_from_r, _mrl
 from prefilter.sphere.sampling import cosine_hemisphere, frame_from_normal, to_world
@@ -73,9 +73,16 @@ def sample_ltc_iso(alpha, u) -> np.ndarray:
     Heitz et al. 2016, section 3: cosine sample, then ``M w / |M w|``.
     """
     c = cosine_hemisphere(u)
-    a = np.asarray(alpha, dtype=np.float64)[..., None]
+    a = as_float_array(alpha, "alpha")
+    if np.any(a < 0.0):
+        raise PrefilterError(f"alpha: expected roughness >= 0, got minimum {a.min():.4g}")
+    a = a[..., None]
     w = np.concatenate([c[..., :2] * a, np.broadcast_to(c[..., 2:], np.broadcast_shapes(
         c[..., 2:].shape, a.shape))], axis=-1)
+    # alpha = 0 with a cosine sample on the horizon gives w = 0: the lobe is the normal itself;
+    # scaling by the largest component first keeps tiny alpha (1e-162) from underflowing |w|^2
+    big = np.max(np.abs(w), axis=-1, keepdims=True)
+    w = np.where(big > 0.0, w / np.where(big > 0.0, big, 1.0), np.array([0.0, 0.0, 1.0]))
     return w / np.linalg.norm(w, axis=-1, keepdims=True)
 
 
@@ -110,8 +117,13 @@ def fit_alpha_ml(m, *, iterations: int = 12) -> np.ndarray:
     ``a = sqrt(x)`` with ``x`` the root in ``[0, 4]`` of ``h(x) = mean(c x / (s + c x)) - 1/2``
     (module docstring), by Newton's method safeguarded with bisection (``h`` is increasing).
     """
-    m = as_float_array(m, "m", ndim_min=2, last_dim=3)
+    m = as_directions(as_float_array(m, "m", ndim_min=2, last_dim=3), "m")
+    iterations = as_positive_int(iterations, "iterations")
     up = m[..., 2] > 0.0
+    if np.any(~up.any(-1)):
+        # no data: the likelihood is flat and the root search would return its bracket end (2)
+        raise PrefilterError("m: expected at least one direction above the horizon (m_z > 0) "
+                             f"per batch entry, got none in {int((~up.any(-1)).sum())} of them")
     c = np.where(up, m[..., 2] ** 2, 0.0)
     s = 1.0 - c
     inv_count = 1.0 / np.maximum(up.sum(-1), 1)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter._validate import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 
 __all__ = ["PAPER_EQ5", "alpha_meso", "alpha_meso_exact", "mean_resultant_length"]
@@ -60,7 +60,8 @@ def mean_resultant_length(alpha) -> np.ndarray:
 
 def _mrl(a: np.ndarray) -> np.ndarray:
     a = np.asarray(a, dtype=np.float64)
-    s = 1.0 - a * a
+    with np.errstate(over="ignore"):  # a > 1e154: s = -inf only selects the branch
+        s = 1.0 - a * a
     out = np.empty_like(a)
     near = np.abs(s) < _SERIES_S
     lo = (~near) & (s > 0.0)
@@ -79,8 +80,12 @@ def _mrl(a: np.ndarray) -> np.ndarray:
             t = np.where(al > 0.0, al * al * (np.log1p(k) - np.log(al)), 0.0)
         out[lo] = (1.0 - t / k) / (k * k)
     if np.any(hi):
-        q = np.sqrt(-s[hi])
-        out[hi] = (a[hi] ** 2 * np.arctan(q) / q - 1.0) / (q * q)
+        # (a^2 atan(q) / q - 1) / q^2 with q = sqrt(a^2 - 1), as ((a/q)^2 atan(q) - 1/q) / q:
+        # no a^2 or q^2 to overflow for huge a (the limit is pi / (2 a))
+        ah = a[hi]
+        ratio = 1.0 / np.sqrt(1.0 - (1.0 / ah) ** 2)  # a / q
+        q = ah / ratio
+        out[hi] = (ratio * ratio * np.arctan(q) - 1.0 / q) / q
     return out
 
 
@@ -88,6 +93,7 @@ def alpha_meso_exact(r, *, iterations: int = 60) -> np.ndarray:
     """The exact inverse of eq. 4 by bisection (slow reference; :func:`alpha_meso` interpolates
     it). ``r (...)`` in ``[2/3, 1]``; returns ``alpha (...)`` in ``[0, 1]`` to ``2^-iterations``."""
     r = as_float_array(r, "r")
+    iterations = as_positive_int(iterations, "iterations")
     lo = np.zeros_like(r)
     hi = np.ones_like(r)
     for _ in range(iterations):  # r(a) is decreasing

@@ -1,0 +1,116 @@
+"""Property-based tests of prefilter.multiscale: eqs. 4-7 of Tao et al. 2021 at the edges."""
+
+import numpy as np
+import pytest
+from hypothesis import example, given, settings
+from hypothesis import strategies as st
+
+from prefilter.errors import PrefilterError
+from prefilter.multiscale import (
+    alpha_meso,
+    alpha_meso_exact,
+    alpha_total,
+    convolve_samples,
+    fit_alpha_ml,
+    mean_resultant_length,
+    sample_ltc_iso,
+)
+
+N = settings.default.max_examples
+alpha01 = st.one_of(st.sampled_from([0.0, 1e-3, 1.0]), st.floats(0.0, 1.0))
+
+
+def expect_error(fn, name):
+    with pytest.raises(PrefilterError) as err:
+        fn()
+    assert name in str(err.value), str(err.value)
+
+
+_GL = np.polynomial.legendre.leggauss(400)  # slow to compute (0.4 s): once
+
+
+def mrl_quadrature(alpha):
+    # E[b_z] for b ~ LTC(diag(alpha, alpha, 1)): b_z = 1 / sqrt(1 + alpha^2 tan^2 t) with
+    # cos t ~ cosine-weighted, i.e. x = cos^2 t uniform on [0, 1] (Gauss-Legendre in sqrt)
+    y, w = _GL
+    s = (y + 1) / 2  # x = 1 - s^2 packs nodes near the horizon, where b_z varies fastest
+    x = 1.0 - s * s
+    bz = np.sqrt(x) / np.sqrt(x + alpha * alpha * (1.0 - x))
+    return np.sum(bz * 2 * s * w / 2)
+
+
+@settings(max_examples=N)
+@given(st.one_of(st.sampled_from([0.0, 1e-3, 1.0, 1.1180339887, 1e154, 1e200, 1e308]),
+                 st.floats(0.0, 1e3)))
+@example(1e200)  # overflowed to NaN (a * a = inf)
+def test_mean_resultant_length(a):
+    r = mean_resultant_length(a)
+    assert np.isfinite(r) and 0.0 < r <= 1.0
+    if a <= 1e3:
+        assert r == pytest.approx(mrl_quadrature(a), rel=1e-6, abs=1e-9)
+    else:
+        assert r == pytest.approx(np.pi / (2 * a), rel=1e-9)  # large-alpha limit
+
+
+@settings(max_examples=N)
+@given(st.floats(0.0, 1.0 + 1e-6), st.sampled_from(["exact", "paper"]))
+def test_alpha_meso_inverts_eq4(r, variant):
+    a = alpha_meso(r, variant)
+    assert np.isfinite(a) and 0.0 <= a <= 1.0
+    if variant == "exact" and 2 / 3 + 1e-6 < r < 1.0 - 1e-9:
+        assert mean_resultant_length(a) == pytest.approx(r, abs=1e-6)
+        assert alpha_meso_exact(r) == pytest.approx(a, abs=1e-6)
+
+
+@settings(max_examples=N)
+@given(alpha01, alpha01, st.sampled_from(["fit", "paper", "mrl"]))
+def test_alpha_total_in_range(a, b, variant):
+    t = alpha_total(a, b, variant)
+    assert np.isfinite(t) and 0.0 <= t <= 1.0
+    if variant == "mrl":  # convolution only roughens (resultant lengths multiply)
+        assert t >= max(a, b) - 1e-6
+
+
+@settings(max_examples=N // 3)
+@given(alpha01, alpha01, st.integers(0, 2**31))
+def test_convolution_samples_and_ml_fit(a, b, seed):
+    m = convolve_samples(a, b, 256, seed)
+    assert m.shape == (256, 3) and np.allclose(np.linalg.norm(m, axis=-1), 1.0)
+    if np.any(m[:, 2] > 0):
+        fit = fit_alpha_ml(m[None])
+        assert np.all(np.isfinite(fit)) and np.all((fit >= 0.0) & (fit <= 2.0))
+
+
+@settings(max_examples=N)
+@given(st.floats(0.0, 10.0), st.floats(0.0, 1.0), st.floats(0.0, 1.0))
+@example(0.0, 0.0, 0.0)  # flat meso-scale, cosine sample on the horizon: was 0 / 0 = NaN
+@example(2.457856245784976e-162, 0.0, 0.0)  # |w|^2 underflowed: a non-unit result
+def test_sample_ltc_iso_unit_upper(a, u1, u2):
+    w = sample_ltc_iso(a, np.array([u1, u2]))
+    assert np.isclose(np.linalg.norm(w), 1.0) and w[2] >= 0.0
+
+
+def test_ml_fit_recovers_known_roughness():
+    # samples of the LTC itself: the ML roughness converges to the true one (Monte Carlo, 4e4)
+    rng = np.random.default_rng(5)
+    m = sample_ltc_iso(0.4, rng.random((40000, 2)))
+    assert fit_alpha_ml(m[None])[0] == pytest.approx(0.4, abs=0.01)
+
+
+def test_multiscale_rejects_bad_input():
+    expect_error(lambda: mean_resultant_length(-0.1), "alpha")
+    expect_error(lambda: mean_resultant_length(np.nan), "alpha")
+    expect_error(lambda: alpha_meso(1.1), "r")
+    expect_error(lambda: alpha_meso(0.9, "bogus"), "variant")
+    expect_error(lambda: alpha_meso_exact(0.9, iterations=-1), "iterations")
+    expect_error(lambda: alpha_total(1.5, 0.1), "alpha_micro")
+    expect_error(lambda: alpha_total(0.1, np.nan), "alpha_meso")
+    expect_error(lambda: alpha_total(0.1, 0.1, "x"), "variant")
+    expect_error(lambda: convolve_samples(0.1, 0.1, 0, 0), "n")
+    expect_error(lambda: convolve_samples(0.1, 0.1, 10, None), "rng")
+    expect_error(lambda: sample_ltc_iso(np.nan, [0.5, 0.5]), "alpha")
+    expect_error(lambda: sample_ltc_iso(0.5, [0.5, 2.0]), "u")
+    # no direction above the horizon: used to return alpha = 2 silently
+    expect_error(lambda: fit_alpha_ml(np.array([[[0.0, 0.0, -1.0]] * 3])), "m")
+    expect_error(lambda: fit_alpha_ml(np.array([[[0.0, 0.0, 3.0]] * 3])), "m")
+    expect_error(lambda: fit_alpha_ml(np.zeros((3, 2))), "m")
