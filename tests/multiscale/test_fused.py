@@ -145,14 +145,46 @@ def test_fused_images_match_the_numpy_path(name, monkeypatch):
     assert np.abs(naive - got).max() > 1e-2 * got.max()
 
 
-def test_fused_lod_bias_matches_the_numpy_path():
+@pytest.mark.parametrize("start", [None, 2.0])
+def test_fused_lod_bias_matches_the_numpy_path(start):
     from prefilter.multiscale.render import render_multiscale
 
     table = _table()
     sc = load_scene(_scene())
     st = RenderSettings(table=table)
-    got = render_multiscale(sc, st, lod_bias=1.0)
-    want = _numpy_path(sc, st, "exact", "fit", lod_bias=1.0)
+    got = render_multiscale(sc, st, lod_bias=1.0, lod_bias_start=start)
+    lights = sc.light_set()
+
+    def shade(g, _u):
+        a = multiscale_attributes(sc, g, lod_bias=1.0, lod_bias_start=start)
+        return shade_ltc(g.position, a["t"], a["b"], a["n"], g.view, a["alpha"],
+                         a["base_color"], a["f0"], lights, table)
+
+    want = render_samples(sc, st, shade, stratified=False)
     rel = np.abs(got - want) / np.maximum(np.abs(want), 1e-3 * want.max())
     assert rel.max() < 1e-4
     assert np.abs(render_multiscale(sc, st) - got).max() > 1e-3 * got.max()
+
+
+def test_ramped_lod_bias_leaves_small_footprints_alone():
+    from prefilter.multiscale.render import render_multiscale
+    from prefilter.texture.mip import footprint_axes
+
+    table = _table()
+    sc = load_scene(_scene())
+    st = RenderSettings(table=table)
+    plain = render_multiscale(sc, st)
+    ramped = render_multiscale(sc, st, lod_bias=1.0, lod_bias_start=2.0)
+    const = render_multiscale(sc, st, lod_bias=1.0)
+    # the big plane's footprints (object 0) in texels of its 64^2 normal map
+    g = load_scene  # noqa: F841
+    from prefilter.render import gbuffer
+
+    gb = gbuffer(sc)
+    major = footprint_axes(gb.dudv, (64, 64))[0]
+    on_plane = gb.hit & (gb.object_id == 0)
+    small = on_plane & (major < 3.9)
+    large = on_plane & (major > 8.1)
+    assert small.sum() > 20 and large.sum() > 20
+    np.testing.assert_array_equal(ramped[small], plain[small])
+    np.testing.assert_allclose(ramped[large], const[large], rtol=1e-6, atol=1e-7)

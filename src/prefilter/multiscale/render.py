@@ -51,11 +51,11 @@ def meso_table() -> np.ndarray:
 
 
 def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
-                         lod_bias: float = 0.0):
+                         lod_bias: float = 0.0, lod_bias_start=None):
     """Per-material roughness rows for the fused shader
     (:func:`prefilter.render.kernels.ltc_samples_kernel`): ``(rows (K, RGH_WIDTH), meso_tab)``,
     or ``None`` for a combination it does not implement (mean-resultant-length matching needs
-    the exact inverse)."""
+    the exact inverse). ``lod_bias`` / ``lod_bias_start``: see :func:`multiscale_attributes`."""
     from prefilter.multiscale.convolution import FIT_COEFFS, PAPER_EQ7
     from prefilter.multiscale.meso import PAPER_EQ5
     from prefilter.render import kernels as kn
@@ -76,7 +76,21 @@ def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
         row[kn.RGH_MRL] = float(_mrl(np.array(a)))
         row[kn.RGH_EQ5:kn.RGH_EQ5 + 9] = (*PAPER_EQ5[0], *PAPER_EQ5[1])
         row[kn.RGH_NSCALE] = 2.0 ** lod_bias
+        row[kn.RGH_BIAS] = lod_bias
+        row[kn.RGH_RAMP] = lod_bias_start is not None
+        row[kn.RGH_START] = 0.0 if lod_bias_start is None else float(lod_bias_start)
     return rows, meso_table()
+
+
+def _bias_scale(dudv, shape, lod_bias: float, lod_bias_start) -> np.ndarray:
+    """Footprint scale ``2^bias`` per sample ``(N, 1, 1)`` (or a scalar for a constant bias)."""
+    if lod_bias_start is None:
+        return 2.0 ** lod_bias
+    from prefilter.texture.mip import footprint_axes
+
+    major = footprint_axes(dudv, shape)[0]
+    lod = np.log2(np.maximum(major, 1.0))
+    return (2.0 ** np.clip(lod - lod_bias_start, 0.0, lod_bias))[:, None, None]
 
 
 def _alpha_meso_fast(r: np.ndarray, variant: str) -> np.ndarray:
@@ -97,7 +111,7 @@ def _lookup(chain, uv, dudv, anisotropic: bool, max_aniso: int) -> np.ndarray:
 
 def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
                           anisotropic_footprint: bool = False, max_aniso: int = 8,
-                          lod_bias: float = 0.0) -> dict:
+                          lod_bias: float = 0.0, lod_bias_start=None) -> dict:
     """Shading frame, material and multi-scale roughness per hit sample of a flat G-buffer.
 
     As :func:`prefilter.render.pipeline.surface_attributes` with ``filtered=True``, plus ``r``
@@ -109,6 +123,10 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
     (``MipChain.lookup_footprint``) instead of one tap at the major axis' LOD; the unnormalised
     normals are averaged over the elongated footprint, so ``r`` sees its true spread.
     ``lod_bias``: the footprint is scaled by ``2^lod_bias`` (levels coarser by ``lod_bias``).
+    ``lod_bias_start``: ``None`` (constant bias) or ``s``: the bias ramps in with the footprint,
+    ``clip(lod - s, 0, lod_bias)`` with ``lod = log2`` of its major axis in texels, so footprints
+    below ``2^s`` texels are read unbiased (distance-dependent stabilisation, see
+    ``docs/multiscale.md``).
     """
     from prefilter.render.shading import shading_frame
     from prefilter.texture.procedural import slopes_to_normals
@@ -126,8 +144,9 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
         mat = scene.objects[int(k)].material
         nts = None
         if mat.normal_map is not None:
-            nts = _lookup(mat.normal_map.mip(), g.uv[m], g.dudv[m] * 2.0 ** lod_bias,
-                          anisotropic_footprint, max_aniso)
+            chain = mat.normal_map.mip()
+            scale = _bias_scale(g.dudv[m], chain.levels[0].shape[:2], lod_bias, lod_bias_start)
+            nts = _lookup(chain, g.uv[m], g.dudv[m] * scale, anisotropic_footprint, max_aniso)
             r[m] = np.minimum(np.sqrt(np.einsum("ij,ij->i", nts, nts)), 1.0)
         elif mat.height_map is not None:
             nts = slopes_to_normals(mat.height_map.mip().lookup_footprint(g.uv[m],
@@ -156,7 +175,8 @@ def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> n
     if not (lights.points or lights.directionals or textured
             or footprint.get("anisotropic_footprint")):
         # quad lights only: the ``ltc`` method's fused kernel with this roughness
-        rough = multiscale_roughness(scene.objects, meso, total, footprint.get("lod_bias", 0.0))
+        rough = multiscale_roughness(scene.objects, meso, total, footprint.get("lod_bias", 0.0),
+                                     footprint.get("lod_bias_start"))
         if rough is not None:
             image = _render_ltc_fused(scene, settings, lights, table, rough, desc=name)
             if image is not None:
@@ -171,14 +191,16 @@ def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> n
 
 
 def render_multiscale(scene, settings, *, anisotropic_footprint: bool = False,
-                      max_aniso: int = 8, lod_bias: float = 0.0) -> np.ndarray:
+                      max_aniso: int = 8, lod_bias: float = 0.0,
+                      lod_bias_start=None) -> np.ndarray:
     """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7.
 
-    ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias``: see :func:`multiscale_attributes` (not the
-    registered default; measured in ``docs/multiscale.md``)."""
+    ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias`` / ``lod_bias_start``: see
+    :func:`multiscale_attributes` (not the registered default; measured in
+    ``docs/multiscale.md``)."""
     return _render(scene, settings, "exact", "fit", "ltc-multiscale",
                    anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
-                   lod_bias=lod_bias)
+                   lod_bias=lod_bias, lod_bias_start=lod_bias_start)
 
 
 def render_multiscale_paper(scene, settings) -> np.ndarray:

@@ -277,22 +277,26 @@ def _bilinear_add(data, info, level, stride, c, u, v, wgt, out, k):
 
 
 @njit_serial
-def _footprint_into(data, info, first, n_levels, stride, c, u, v, d00, d01, d10, d11, out, k):
-    """``MipChain.lookup_footprint`` (isotropic) of the chain whose levels are
-    ``info[first:first + n_levels]`` (``stride`` channels per texel) at ``uv = (u, v)``,
-    Jacobian ``d..``: channels ``:c`` into ``out[k, :c]``."""
-    h0, w0 = info[first, 1], info[first, 2]
+def _major_texels(h0, w0, d00, d01, d10, d11):
+    """Major axis (texels of an ``h0 x w0`` level 0) of the footprint ellipse of the Jacobian
+    ``d..``: the largest singular value of ``diag(w0, h0) dudv`` (``texture.footprint_axes``)."""
     j00 = d00 * w0
     j01 = d01 * w0
     j10 = d10 * h0
     j11 = d11 * h0
-    # major axis of the footprint ellipse: the largest singular value of J (texels)
     p = j00 * j00 + j01 * j01
     r = j10 * j10 + j11 * j11
     q = j00 * j10 + j01 * j11
     disc = math.sqrt(max(0.25 * (p - r) ** 2 + q * q, 0.0))
-    major = math.sqrt(0.5 * (p + r) + disc)
-    lod = math.log2(max(major, 1.0))
+    return math.sqrt(0.5 * (p + r) + disc)
+
+
+@njit_serial
+def _footprint_into(data, info, first, n_levels, stride, c, u, v, d00, d01, d10, d11, out, k):
+    """``MipChain.lookup_footprint`` (isotropic) of the chain whose levels are
+    ``info[first:first + n_levels]`` (``stride`` channels per texel) at ``uv = (u, v)``,
+    Jacobian ``d..``: channels ``:c`` into ``out[k, :c]``."""
+    lod = math.log2(max(_major_texels(info[first, 1], info[first, 2], d00, d01, d10, d11), 1.0))
     lod = min(max(lod, 0.0), n_levels - 1.0)
     for ch in range(c):
         out[k, ch] = 0.0
@@ -547,9 +551,12 @@ MAT_WIDTH = 8  # alpha_x, alpha_y, base colour (3), f0 (3)
 # how the shading roughness follows from the footprint (``RGH_MODE``), the meso-scale inverse of
 # Tao et al. 2021 eq. 4 (``RGH_MESO``), alpha_micro, the coefficients of alpha_total, r(alpha_micro)
 # for mean-resultant-length matching, eq. 5's rational coefficients (num r^4..r^0, den r^3..r^0)
-# and the footprint scale of the normal-map lookup (2^lod_bias).
+# the footprint scale of the normal-map lookup (2^lod_bias) and, for a bias that ramps in with
+# the footprint (``RGH_RAMP = 1``: ``bias = clip(lod - start, 0, lod_bias)``), ``lod_bias`` and
+# ``start`` (a flag, not a NaN sentinel: fastmath folds isnan away).
 RGH_MODE, RGH_MESO, RGH_ALPHA, RGH_COEF, RGH_MRL, RGH_EQ5, RGH_NSCALE = 0, 1, 2, 3, 7, 8, 17
-RGH_WIDTH = 18
+RGH_BIAS, RGH_START, RGH_RAMP = 18, 19, 20
+RGH_WIDTH = 21
 #: ``RGH_MODE`` values: ``sqrt(alpha_x alpha_y)`` (the ``ltc`` method); our form of eq. 7
 #: (``multiscale.convolution``, "fit"); eq. 7's polynomial ("paper"); mean-resultant-length
 #: matching ("mrl").
@@ -713,6 +720,11 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, ro
             t_h = mat_i[o, 1]
             if t_n >= 0:
                 ns = rough[o, RGH_NSCALE]
+                if rough[o, RGH_RAMP] != 0.0:  # a bias that ramps in with the footprint
+                    f0_ = tex[t_n, 0]
+                    lod0 = math.log2(max(_major_texels(info[f0_, 1], info[f0_, 2], du00, du01,
+                                                       du10, du11), 1.0))
+                    ns = 2.0 ** min(max(lod0 - rough[o, RGH_START], 0.0), rough[o, RGH_BIAS])
                 _footprint_into(data, info, tex[t_n, 0], tex[t_n, 1], tex[t_n, 2], 3, u, v,
                                 du00 * ns, du01 * ns, du10 * ns, du11 * ns, tx, 0)
                 m0, m1, m2 = tx[0, 0], tx[0, 1], tx[0, 2]
