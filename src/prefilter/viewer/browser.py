@@ -49,11 +49,19 @@ def open_viewer(driver, url: str, timeout: float = 60.0) -> None:
     driver.set_script_timeout(timeout)
     driver.get(url)
     try:
-        driver.execute_script("return await window.prefilterViewer.ready;")
-    except Exception as exc:  # the page's own message is more useful than WebDriver's
-        msg = driver.execute_script(
-            "return window.prefilterViewer ? window.prefilterViewer.error() : 'no viewer'")
-        raise PrefilterError(f"viewer at {url} failed to load: {msg or exc}") from None
+        # the module script may still be running when `get` returns: wait for it, then for it
+        # to finish loading
+        driver.execute_async_script(
+            "const done = arguments[arguments.length - 1];"
+            "const poll = () => window.prefilterViewer ? window.prefilterViewer.ready.then("
+            "() => done('ok'), e => done('error: ' + (e && e.message || e)))"
+            " : setTimeout(poll, 20);"
+            "poll();")
+    except Exception as exc:
+        raise PrefilterError(f"viewer at {url} failed to load: {exc}") from None
+    msg = driver.execute_script("return window.prefilterViewer.error();")
+    if msg:
+        raise PrefilterError(f"viewer at {url} failed to load: {msg}")
 
 
 def render_linear(driver, method: str = "ltc", precision: str = "f32") -> np.ndarray:
