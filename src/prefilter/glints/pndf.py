@@ -299,9 +299,27 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, out):
 
 def _prepared(normal_map, elements_=None):
     if elements_ is not None:
-        s_el, J = elements_
-        return np.ascontiguousarray(s_el, dtype=np.float64), np.ascontiguousarray(J, dtype=np.float64)
+        # the kernels index these arrays without bounds checks: validate their layout here
+        if not (isinstance(elements_, (tuple, list)) and len(elements_) == 2):
+            raise PrefilterError("elements_: expected the pair (s, J) returned by elements(), got "
+                                 f"{type(elements_).__name__}")
+        s_el = as_float_array(elements_[0], "elements_[0] (s)", ndim_min=3, last_dim=2)
+        J = as_float_array(elements_[1], "elements_[1] (J)", ndim_min=4)
+        if s_el.ndim != 3 or J.shape != s_el.shape[:2] + (2, 2) or min(s_el.shape[:2]) < 2:
+            raise PrefilterError(f"elements_: expected s (H, W, 2) and J (H, W, 2, 2) with "
+                                 f"H, W >= 2, got {s_el.shape} and {J.shape}")
+        return np.ascontiguousarray(s_el), np.ascontiguousarray(J)
     return elements(normal_map)
+
+
+def broadcast_batch(**shapes) -> tuple:
+    """The common batch shape of named arguments, or a PrefilterError naming them."""
+    try:
+        return np.broadcast_shapes(*shapes.values())
+    except ValueError:
+        desc = ", ".join(f"{k} {v}" for k, v in shapes.items())
+        raise PrefilterError(f"{', '.join(shapes)}: batch shapes do not broadcast ({desc})") \
+            from None
 
 
 def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_ROUGHNESS, *,
@@ -328,7 +346,7 @@ def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_RO
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = _as_sigma_p(sigma_p)
     q = as_float_array(s, "s", ndim_min=1, last_dim=2)
-    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, q.shape[:-1])
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
@@ -363,7 +381,7 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     S = _as_support(support)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = _as_sigma_p(sigma_p)
-    shape = np.broadcast_shapes(c.shape[:-1], sp.shape)
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     out = np.zeros((c.shape[0], R, R))

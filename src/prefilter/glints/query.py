@@ -14,6 +14,7 @@ import numpy as np
 from prefilter._validate import as_float_array
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import point_kernel, range_kernel
+from prefilter.glints.pndf import _as_sigma_p, broadcast_batch
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.store import GlintsMap
 
@@ -23,9 +24,10 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points):
         raise PrefilterError(f"gm: expected a GlintsMap (prefilter.glints.store.load), got "
                              f"{type(gm).__name__}")
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = as_float_array(sigma_p, "sigma_p")
+    sp = _as_sigma_p(sigma_p)
     pts = [as_float_array(p, name, ndim_min=1, last_dim=2) for p, name in points]
-    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, *[p.shape[:-1] for p in pts])
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape,
+                            **{name: p.shape[:-1] for p, (_, name) in zip(pts, points)})
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     idx, w = interp_weights(gm.pyramid, c, sp)
@@ -68,7 +70,14 @@ range = range_mean  # the issue's name; ``range_mean`` avoids shadowing the buil
 def block_means(gm: GlintsMap, image: np.ndarray) -> np.ndarray:
     """Mean value of every block ``(..., nb, nb)`` of pyramid images ``image (...)`` (flat
     indices): ``sum_r c_r[k] / B^2`` since the ``a``, ``b`` factors sum to 1 (for sampling)."""
-    img = np.asarray(image, dtype=np.int64)
+    raw = np.asarray(image)
+    if not np.issubdtype(raw.dtype, np.integer):
+        raise PrefilterError(f"image: expected integer image indices, got dtype {raw.dtype}")
+    img = raw.astype(np.int64)
+    n = gm.block_index.shape[0]
+    if img.size and (img.min() < 0 or img.max() >= n):
+        raise PrefilterError(f"image: expected indices in [0, {n}), got range [{img.min()}, "
+                             f"{img.max()}]")
     k = gm.block_index[img]
     vals = gm.C.sum(axis=1, dtype=np.float64)[np.maximum(k, 0)] / gm.block**2
     return np.where(k >= 0, vals, 0.0)
