@@ -53,7 +53,7 @@ def default_scene(width: int = 512, height: int = 384) -> dict:
              "size": [8, 8], "uv_scale": [8, 8],
              "material": {"alpha": 0.15, "base_color": 0.02, "f0": 0.9,
                           "normal_map": dict(BUILTIN_MAPS["gaussian"])}},
-            {"type": "sphere", "center": [0.9, 0.5, 0.2], "radius": 0.5, "uv_scale": [4, 2],
+            {"type": "sphere", "center": [1.4, 0.5, -1.5], "radius": 0.5, "uv_scale": [4, 2],
              "material": {"alpha_x": 0.3, "alpha_y": 0.1, "base_color": [0.2, 0.3, 0.6],
                           "f0": 0.04}},
         ],
@@ -182,9 +182,10 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
     def add_map(name: str, ref: TextureRef) -> int:
         key = ref._key()
         if key in seen:
+            maps[seen[key]]["names"].append(name)
             return seen[key]
         normals = ref.load()
-        maps.append({"name": name, "normals": atlas.add(MipChain(normals)),
+        maps.append({"name": name, "names": [name], "normals": atlas.add(MipChain(normals)),
                      "slopes": atlas.add(slope_moments_chain(normals)),
                      "size": list(normals.shape[:2])})
         seen[key] = len(maps) - 1

@@ -123,7 +123,7 @@ export class Viewer {
     return this;
   }
 
-  mapNames() { return ['scene', 'none', ...this.manifest.maps.map(x => x.name).filter(x => !x.startsWith('scene'))]; }
+  mapNames() { return ['scene', 'none', ...this.manifest.maps.flatMap(x => x.names).filter(x => !x.startsWith('scene'))]; }
 
   _u(name, fn, ...args) { const l = this.uniforms[name]; if (l !== undefined && l !== null) this.gl[fn](l, ...args); }
 
@@ -194,7 +194,7 @@ export class Viewer {
     const P = this.params;
     if (P.map === 'scene') return sceneIndex;
     if (P.map === 'none') return -1;
-    return this.manifest.maps.findIndex(x => x.name === P.map);
+    return this.manifest.maps.findIndex(x => x.names.includes(P.map));
   }
 
   // light sliders: translate by lightOffset, scale about the centroid by lightScale

@@ -36,7 +36,7 @@ const float VIEW_Z_MIN = 1e-3;           // prefilter.render.shading.VIEW_Z_MIN
 
 // -- G-buffer (prefilter.render.kernels._trace) ----------------------------------------------
 
-struct Hit { int id; vec3 p, n, t, b; vec2 uv; vec4 dudv; };  // dudv = (du/dx, du/dy, dv/dx, dv/dy)
+struct Hit { int id; float dist; vec3 p, n, t, b; vec2 uv; vec4 dudv; };  // dudv = (du/dx, du/dy, dv/dx, dv/dy)
 
 bool trace(vec3 o, vec3 d, vec3 ddx, vec3 ddy, out Hit h) {
     float best = 1e30;
@@ -65,6 +65,7 @@ bool trace(vec3 o, vec3 d, vec3 ddx, vec3 ddy, out Hit h) {
         if (t < best) { best = t; kb = k; }
     }
     h.id = kb;
+    h.dist = best;
     if (kb < 0) return false;
     float t = best;
     vec3 p = o + t * d, c = uObjC[kb];
@@ -230,6 +231,28 @@ vec3 shade(Hit h, vec3 view, int method) {
     return shadeQuads(h.p, ts, bs, ns, Minv, base, spec);
 }
 
+// display only (the Python renderer does not draw emitters): the nearest quad light in front of
+// the ray's hit, seen from its lit side
+bool hitLight(vec3 o, vec3 d, float tmax, out vec3 L) {
+    bool found = false;
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumQuads) break;
+        vec3 n = uQuadN[q], v0 = uQuadV[4 * q];
+        float den = dot(d, n);
+        if (den >= 0.0) continue;
+        float t = dot(v0 - o, n) / den;
+        if (!(t > 0.0 && t < tmax)) continue;
+        vec3 p = o + t * d;
+        bool inside = true;
+        for (int k = 0; k < 4; ++k) {
+            vec3 a = uQuadV[4 * q + k], b = uQuadV[4 * q + (k + 1) % 4];
+            if (dot(cross(b - a, p - a), n) < 0.0) inside = false;
+        }
+        if (inside) { tmax = t; L = uQuadL[q]; found = true; }
+    }
+    return found;
+}
+
 vec3 srgb(vec3 c) {
     c = clamp(c, 0.0, 1.0);
     return mix(12.92 * c, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(0.0031308, c));
@@ -252,6 +275,8 @@ void main() {
     if (uLinear == 1) {
         fragColor = vec4(L, h.id >= 0 ? 1.0 : 0.0);
     } else {
+        vec3 Le;
+        if (hitLight(uCamO, d, h.id >= 0 ? h.dist : 1e30, Le)) L = Le;
         vec3 c = srgb(L * uExposure);
         if (abs(gl_FragCoord.x - uSplit) < 1.0 && uSplit > 0.0 && uSplit < uSize.x)
             c = vec3(1.0, 0.8, 0.2);
