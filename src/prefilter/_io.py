@@ -14,6 +14,7 @@ existed, still load) and turns every decoding failure into a
 
 from __future__ import annotations
 
+import glob
 import hashlib
 import json
 import os
@@ -194,6 +195,7 @@ class Checkpoints:
     """
 
     def __init__(self, out: str | os.PathLike, key: dict):
+        self.out = Path(out)
         self.dir = Path(str(out) + ".parts")
         self.key = json.dumps(key, sort_keys=True)
         meta = self.dir / "settings.json"
@@ -223,4 +225,8 @@ class Checkpoints:
         return load_npz_checked(self._file(chunk), "checkpoint")
 
     def clear(self) -> None:
+        """Remove the parts, and temporary files of :func:`atomic_path` that a bake killed while
+        writing its output left beside it (``.<out name>.*``)."""
         shutil.rmtree(self.dir, ignore_errors=True)
+        for stale in self.out.parent.glob(f".{glob.escape(self.out.name)}.*"):
+            stale.unlink(missing_ok=True)

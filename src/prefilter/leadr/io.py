@@ -114,7 +114,7 @@ def read_maps(out_dir) -> tuple[list[np.ndarray], dict]:
         raise TableFileError(f"{index}: channels: expected {list(CHANNELS)}, got "
                              f"{info.get('channels')!r}")
     br = info.get("base_roughness")
-    if isinstance(br, bool) or not isinstance(br, (int, float)) or not (np.isfinite(br) and br >= 0):
+    if isinstance(br, bool) or not isinstance(br, (int, float)) or not np.isfinite(br) or br < 0:
         raise TableFileError(f"{index}: base_roughness: expected a number >= 0, got {br!r}")
     entries = info.get("levels")
     if not isinstance(entries, list) or not entries:

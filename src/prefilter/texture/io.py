@@ -113,9 +113,7 @@ def _png_chunks(data: bytes, where: str):
         yield kind, body
         pos += 12 + n
         if kind == b"IEND":
-            break
-    if pos != len(data):
-        raise PrefilterError(f"{where}: {len(data) - pos} unexpected bytes after the PNG IEND chunk")
+            break  # bytes after IEND are ignored, like other PNG readers do
 
 
 def _read_png16_colour(data: bytes, where: str):

@@ -1,0 +1,235 @@
+"""Kill-restart bakes (issue 10): SIGKILL a running ``prefilter bake`` at a random (seeded) point,
+rerun the same command, and compare the output byte for byte with an uninterrupted bake.
+
+Chunked bakes (ltc-iso rows, ltc-aniso entry chunks, glints level-0 rows / levels / cells) are
+killed after their first checkpoint appears in ``<out>.parts/``, at a random delay within the
+time the remaining chunks take; the colour-map and LEADR bakes have no chunks (each takes well
+under a second of work), so they are killed at a random time after start. The fast suite runs
+one trial of ltc-iso and glints; ``-m slow`` runs three more trials of every bake.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import pytest
+
+TIMEOUT = 600
+
+
+@dataclass(frozen=True)
+class Bake:
+    """``args(inputs, out)``: the words after ``prefilter bake``; ``out``: output name in the
+    work directory; ``chunked``: checkpoints in ``<out>.parts/``; ``delay``: range (s) of the
+    random kill delay after the first checkpoint (or after start when not chunked)."""
+
+    args: Callable[[Path, Path], list[str]]
+    out: str
+    chunked: bool
+    delay: tuple[float, float]
+
+
+def _colormap_input(d: Path) -> Path:
+    from prefilter.texture.io import write_image
+
+    x = np.linspace(0, 1, 64)
+    return write_image(d / "ramp.png", np.stack([x, x**2, 1 - x], -1)[None], bits=16)
+
+
+def _height_input(d: Path) -> Path:
+    from prefilter.texture.io import write_image
+
+    rng = np.random.default_rng(11)
+    return write_image(d / "height.exr", rng.normal(size=(256, 256)))
+
+
+BAKES = {
+    "ltc-iso": Bake(lambda i, o: ["ltc-iso", "--res", "4", "--samples", "8", "-o", str(o)],
+                    "iso.npz", True, (0.0, 0.8)),
+    "ltc-aniso": Bake(lambda i, o: ["ltc-aniso", "--res", "2", "--steps", "20", "--chunk", "3",
+                                    "-o", str(o)], "aniso.npz", True, (0.0, 1.0)),
+    "glints": Bake(lambda i, o: ["glints", "procedural:gaussian:64:1", "--ndf-res", "16",
+                                 "--block", "8", "--rank", "4", "--cell", "16", "--iters", "20",
+                                 "-o", str(o)], "glints.npz", True, (0.0, 0.8)),
+    "colormap": Bake(lambda i, o: ["colormap", str(_colormap_input(i)), "--sigma-max", "0.2",
+                                   "--size", "512", "-o", str(o)], "table.exr", False,
+                     (0.5, 3.0)),
+    "leadr": Bake(lambda i, o: ["leadr", str(_height_input(i)), "-o", str(o),
+                                "--base-roughness", "0.05"], "leadr", False, (0.5, 3.0)),
+}
+
+
+def _cmd(bake: Bake, inputs: Path, work: Path) -> list[str]:
+    quiet = ["--quiet"] if bake.chunked else []  # the chunked bakes have progress bars
+    return [sys.executable, "-m", "prefilter.cli", "bake", *bake.args(inputs, work / bake.out),
+            *quiet]
+
+
+def _outputs(work: Path) -> dict[str, bytes]:
+    """Every file under ``work`` (hidden temporary files of a killed atomic write excluded)."""
+    return {str(p.relative_to(work)): p.read_bytes() for p in sorted(work.rglob("*"))
+            if p.is_file() and not p.name.startswith(".")}
+
+
+def _run(cmd, cwd) -> None:
+    r = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT)
+    assert r.returncode == 0, r.stderr[-2000:]
+
+
+class References:
+    """Uninterrupted bakes, started on first use (concurrently with the first trial: the
+    machine's cores are otherwise idle while a trial sleeps) and shared by later trials."""
+
+    def __init__(self, factory):
+        self.factory, self.procs, self.done = factory, {}, {}
+
+    def start(self, kind: str) -> None:
+        if kind in self.procs:
+            return
+        root = self.factory.mktemp(f"ref-{kind}")
+        inputs, work = root / "in", root / "work"
+        inputs.mkdir()
+        work.mkdir()
+        proc = subprocess.Popen(_cmd(BAKES[kind], inputs, work), cwd=root,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        self.procs[kind] = (proc, work)
+
+    def get(self, kind: str) -> dict[str, bytes]:
+        self.start(kind)
+        if kind not in self.done:
+            proc, work = self.procs[kind]
+            _, err = proc.communicate(timeout=TIMEOUT)
+            assert proc.returncode == 0, err[-2000:]
+            self.done[kind] = _outputs(work)
+            assert self.done[kind], f"{kind}: the bake wrote nothing"
+        return self.done[kind]
+
+
+@pytest.fixture(scope="module")
+def references(tmp_path_factory):
+    refs = References(tmp_path_factory)
+    yield refs
+    for proc, _ in refs.procs.values():
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def _checkpoints(parts: Path) -> int:
+    try:
+        return sum(1 for p in parts.iterdir() if p.suffix == ".npz" and not p.name.startswith("."))
+    except FileNotFoundError:
+        return 0
+
+
+def kill_restart(kind: str, seed: int, root: Path) -> dict:
+    """One trial: start, SIGKILL at a seeded random point, rerun to completion.
+
+    Returns the outputs and what happened: ``killed`` (the process died of SIGKILL, not by
+    finishing first) and ``parts`` (checkpoints on disk at the kill).
+    """
+    bake = BAKES[kind]
+    rng = np.random.default_rng([zlib.crc32(kind.encode()), seed])
+    inputs, work = root / "in", root / "work"
+    inputs.mkdir()
+    work.mkdir()
+    cmd = _cmd(bake, inputs, work)
+    parts = work / (bake.out + ".parts")
+    proc = subprocess.Popen(cmd, cwd=root, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        if bake.chunked:
+            while _checkpoints(parts) == 0 and proc.poll() is None:
+                assert time.monotonic() < deadline, "no checkpoint appeared"
+                time.sleep(0.01)
+        time.sleep(float(rng.uniform(*bake.delay)))
+        n_parts = _checkpoints(parts)
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait(timeout=TIMEOUT)
+    killed = proc.returncode == -signal.SIGKILL
+    _run(cmd, root)
+    return {"outputs": _outputs(work), "killed": killed, "parts": n_parts,
+            "leftover_parts": parts.exists()}
+
+
+def _check(kind, seed, references, tmp_path):
+    references.start(kind)
+    res = kill_restart(kind, seed, tmp_path)
+    ref = references.get(kind)
+    assert res["killed"], f"{kind}: the bake finished before the kill (trial not interrupted)"
+    if BAKES[kind].chunked:
+        assert res["parts"] >= 1
+        assert not res["leftover_parts"], "the parts directory survived a finished bake"
+    assert res["outputs"].keys() == ref.keys()
+    for name, data in ref.items():
+        assert res["outputs"][name] == data, f"{kind}: {name} differs from the uninterrupted bake"
+
+
+@pytest.mark.parametrize("kind", ["ltc-iso", "glints"])
+def test_kill_restart_fast(kind, references, tmp_path):
+    _check(kind, 0, references, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2, 3])
+@pytest.mark.parametrize("kind", list(BAKES))
+def test_kill_restart(kind, seed, references, tmp_path):
+    _check(kind, seed, references, tmp_path)
+
+
+@pytest.mark.slow  # tests/ltc/test_fit_iso.py covers the same in the fast suite
+def test_checkpoint_per_chunk_and_resume(tmp_path):
+    """In process: a bake interrupted after row 1 keeps rows 0-1 as parts, and the resumed bake
+    fits only the remaining rows and writes the same bytes as an uninterrupted one."""
+    from prefilter.ltc.fit_iso import FitSettings, bake_table
+
+    s = FitSettings(res_theta=3, res_alpha=3, n_fit=6, quad_nodes=24)
+    ref = bake_table(tmp_path / "ref.npz", s, progress=False)
+
+    class Stop(Exception):
+        pass
+
+    def stop_after_1(i):
+        if i == 1:
+            raise Stop
+
+    out = tmp_path / "t.npz"
+    with pytest.raises(Stop):
+        bake_table(out, s, progress=False, on_row=stop_after_1)
+    parts = sorted(p.name for p in (tmp_path / "t.npz.parts").glob("0*.npz"))
+    assert parts == ["000000.npz", "000001.npz"] and not out.exists()
+    fitted = []
+    bake_table(out, s, progress=False, on_row=fitted.append)
+    assert fitted == [2]
+    assert out.read_bytes() == ref.read_bytes()
+    assert not (tmp_path / "t.npz.parts").exists()
+
+
+def test_atomic_write_leaves_target_intact(tmp_path):
+    """A writer that dies inside ``atomic_path`` leaves the previous file untouched and no
+    temporary file once the bake's checkpoints are cleared."""
+    from prefilter._io import Checkpoints, atomic_path, save_npz_atomic
+
+    out = tmp_path / "t.npz"
+    save_npz_atomic(out, a=np.arange(3))
+    before = out.read_bytes()
+    with pytest.raises(RuntimeError):
+        with atomic_path(out) as tmp:
+            tmp.write_bytes(b"half")
+            raise RuntimeError
+    assert out.read_bytes() == before
+    # a SIGKILL skips the cleanup above: simulate its leftover, which clear() removes
+    (tmp_path / ".t.npz.abc123.npz").write_bytes(b"half")
+    Checkpoints(out, {"k": 1}).clear()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.npz"]
+    assert os.path.getsize(out) == len(before)
