@@ -91,3 +91,22 @@ def as_positive_int(n, name: str, *, lo: int = 1) -> int:
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or int(n) < lo:
         raise PrefilterError(f"{name}: expected an integer >= {lo}, got {n!r}")
     return int(n)
+
+
+def broadcast_batch(**shapes) -> tuple:
+    """The common batch shape of named arguments' batch ``shapes``, or a PrefilterError naming
+    them (instead of NumPy's anonymous broadcasting ValueError)."""
+    try:
+        return np.broadcast_shapes(*shapes.values())
+    except ValueError:
+        desc = ", ".join(f"{k} {tuple(v)}" for k, v in shapes.items())
+        raise PrefilterError(f"{', '.join(shapes)}: batch shapes do not broadcast ({desc})") \
+            from None
+
+
+def as_unit_interval(x, name: str) -> np.ndarray:
+    """Finite numbers in ``[0, 1]`` (reflectances, probabilities)."""
+    a = as_float_array(x, name)
+    if np.any((a < 0.0) | (a > 1.0)):
+        raise PrefilterError(f"{name}: expected numbers in [0, 1], got {_describe(a)}")
+    return a

@@ -34,7 +34,12 @@ import math
 import numpy as np
 
 from prefilter._numba import njit_parallel, njit_serial, prange
-from prefilter._validate import as_float_array, as_positive_int, as_upper_directions
+from prefilter._validate import (
+    as_float_array,
+    as_positive_int,
+    as_upper_directions,
+    broadcast_batch,
+)
 from prefilter.errors import PrefilterError
 
 SIGMA_H = 1.0 / (2.0 * math.sqrt(2.0 * math.log(2.0)))  # FWHM of one texel (Yan et al. 2016)
@@ -310,16 +315,6 @@ def _prepared(normal_map, elements_=None):
                                  f"H, W >= 2, got {s_el.shape} and {J.shape}")
         return np.ascontiguousarray(s_el), np.ascontiguousarray(J)
     return elements(normal_map)
-
-
-def broadcast_batch(**shapes) -> tuple:
-    """The common batch shape of named arguments, or a PrefilterError naming them."""
-    try:
-        return np.broadcast_shapes(*shapes.values())
-    except ValueError:
-        desc = ", ".join(f"{k} {v}" for k, v in shapes.items())
-        raise PrefilterError(f"{', '.join(shapes)}: batch shapes do not broadcast ({desc})") \
-            from None
 
 
 def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_ROUGHNESS, *,

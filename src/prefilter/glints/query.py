@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter._validate import as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import point_kernel, range_kernel
-from prefilter.glints.pndf import _as_sigma_p, broadcast_batch
+from prefilter.glints.pndf import _as_sigma_p
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.store import GlintsMap
 

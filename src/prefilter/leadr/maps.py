@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter._validate import as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.texture.mip import MipChain
 
@@ -152,6 +152,9 @@ def stats_to_moments(mean, cov) -> np.ndarray:
     """Inverse of :func:`shading_stats` with ``base_roughness = 0``: moments ``(..., 5)``."""
     mean = as_float_array(mean, "mean", ndim_min=1, last_dim=2)
     cov = as_float_array(cov, "cov", ndim_min=2)
+    if cov.shape[-2:] != (2, 2):
+        raise PrefilterError(f"cov: expected shape (..., 2, 2), got {cov.shape}")
+    broadcast_batch(mean=mean.shape[:-1], cov=cov.shape[:-2])
     mx, my = mean[..., 0], mean[..., 1]
     return np.stack([mx, my, cov[..., 0, 0] + mx * mx, cov[..., 1, 1] + my * my,
                      cov[..., 0, 1] + mx * my], -1)

@@ -15,7 +15,13 @@ from functools import lru_cache
 import numpy as np
 from scipy import optimize
 
-from prefilter._validate import as_directions, as_float_array, as_positive_int
+from prefilter._validate import (
+    as_directions,
+    as_float_array,
+    as_positive_int,
+    as_unit_interval,
+    broadcast_batch,
+)
 from prefilter.errors import PrefilterError
 from prefilter.microfacet.beckmann import beckmann_lambda, smith_lambda_walter
 
@@ -35,6 +41,9 @@ def _stats(mean, cov):
     if c.shape[-2:] != (2, 2):
         raise PrefilterError(f"slope_cov: expected shape (..., 2, 2), got {c.shape}")
     sxx, syy, sxy = c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
+    if np.any(np.abs(c[..., 0, 1] - c[..., 1, 0]) > 1e-9 * np.maximum(np.abs(sxx), np.abs(syy))):
+        raise PrefilterError("slope_cov: expected symmetric covariances, got different "
+                             "off-diagonal entries")
     if np.any(sxx <= 0) or np.any(syy <= 0) or np.any(sxx * syy - sxy * sxy <= 0):
         raise PrefilterError(
             "slope_cov: expected positive definite covariances (leadr.shading_stats adds the "
@@ -55,7 +64,8 @@ def _lambda(w, mu, sxx, syy, sxy, fit: str):
 
 def schlick(f0, cos_theta) -> np.ndarray:
     """Schlick's Fresnel ``f0 + (1 - f0) (1 - cos)^5`` (Schlick 1994 eq. 24)."""
-    c = np.clip(np.asarray(cos_theta, np.float64), 0.0, 1.0)
+    f0 = as_unit_interval(f0, "f0")
+    c = np.clip(as_float_array(cos_theta, "cos_theta"), 0.0, 1.0)
     return f0 + (1.0 - f0) * (1.0 - c) ** 5
 
 
@@ -89,6 +99,9 @@ def point_light(wo, wi, mean_slope, slope_cov, *, f0=None, shadowing: bool = Tru
     wo = as_directions(wo, "wo")
     wi = as_directions(wi, "wi")
     mu, sxx, syy, sxy = _stats(mean_slope, slope_cov)
+    f0 = None if f0 is None else as_unit_interval(f0, "f0")
+    broadcast_batch(wo=wo.shape[:-1], wi=wi.shape[:-1], mean_slope=mu.shape[:-1],
+                    slope_cov=sxx.shape, **({} if f0 is None else {"f0": f0.shape}))
     h = wo + wi
     hn = np.linalg.norm(h, axis=-1, keepdims=True)
     h = h / np.where(hn > 1e-12, hn, 1.0)
@@ -107,7 +120,7 @@ def point_light(wo, wi, mean_slope, slope_cov, *, f0=None, shadowing: bool = Tru
     ok = up & (area > 0) & np.isfinite(lam)
     val = d / (4.0 * np.where(ok, area, 1.0) * (1.0 + np.where(ok, lam, 0.0)))
     if f0 is not None:
-        val = val * schlick(np.asarray(f0, np.float64), np.sum(h * wi, axis=-1))
+        val = val * schlick(f0, np.sum(h * wi, axis=-1))
     return np.where(ok, val, 0.0)
 
 
@@ -142,7 +155,10 @@ def gaussian_grid(n: int, spacing: float | None = None) -> tuple[np.ndarray, np.
     if spacing is None:
         h = _grid_spacing(n) if n > 1 else 1.0
     else:
-        h = float(spacing)
+        try:
+            h = float(spacing)
+        except (TypeError, ValueError):
+            raise PrefilterError(f"spacing: expected a positive number, got {spacing!r}") from None
         if not (np.isfinite(h) and h > 0):
             raise PrefilterError(f"spacing: expected a positive number, got {spacing!r}")
     p = (np.arange(n) - (n - 1) / 2) * h
@@ -177,7 +193,9 @@ def artificial_micronormal(wo, mean_slope) -> np.ndarray:
     It faces ``wo`` (``n~.wo = (1 - eps)(n_bar.wo) / |.| > 0``) exactly when the mesonormal
     ``n_bar`` faces away; ``n_bar = -wo`` gives ``n~ = wo``.
     """
-    mu = np.asarray(mean_slope, np.float64)
+    wo = as_directions(wo, "wo")
+    mu = as_float_array(mean_slope, "mean_slope", ndim_min=1, last_dim=2)
+    broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1])
     nb = np.stack(np.broadcast_arrays(-mu[..., 0], -mu[..., 1], np.ones_like(mu[..., 0])), -1)
     nb /= np.linalg.norm(nb, axis=-1, keepdims=True)
     d = np.sum(nb * wo, axis=-1, keepdims=True)
@@ -185,6 +203,15 @@ def artificial_micronormal(wo, mean_slope) -> np.ndarray:
     tn = np.linalg.norm(t, axis=-1, keepdims=True)
     # |t| = 0 only if n_bar = wo and eps = 1; eps = 1.01 keeps it away from 0.
     return t / np.maximum(tn, 1e-300)
+
+
+def _as_rotation(to_world):
+    if to_world is None:
+        return None
+    r = as_float_array(to_world, "to_world", ndim_min=2)
+    if r.shape[-2:] != (3, 3):
+        raise PrefilterError(f"to_world: expected shape (..., 3, 3), got {r.shape}")
+    return r
 
 
 def _reflect(wo, m):
@@ -200,10 +227,11 @@ def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
     micronormal; ``radiance_fn(m, wi, J, cell, to_world) -> (..., K, C)``."""
     wo = as_directions(wo, "wo")
     mu, sxx, syy, sxy = _stats(mean, cov)
-    if to_world is not None:
-        to_world = as_float_array(to_world, "to_world", ndim_min=2)
-    shape = np.broadcast_shapes(wo.shape[:-1], mu.shape[:-1], sxx.shape,
-                                () if to_world is None else to_world.shape[:-2])
+    to_world = _as_rotation(to_world)
+    f0 = None if f0 is None else as_unit_interval(f0, "f0")
+    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
+                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}),
+                            **({} if f0 is None else {"f0": f0.shape}))
     wo = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
     mu = np.broadcast_to(mu, shape + (2,)).reshape(-1, 2)
     cov = np.broadcast_to(np.asarray(cov, np.float64), shape + (2, 2)).reshape(-1, 2, 2)
@@ -264,7 +292,12 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     -------
     numpy.ndarray (..., C)
     """
+    from prefilter.leadr.envmap import EnvMap
+
+    if not isinstance(env, EnvMap):
+        raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
     n = as_positive_int(n, "n")
+    lod_bias = float(as_float_array(lod_bias, "lod_bias"))
     texel = env.texel_solid_angle
     if backend not in ("numba", "numpy"):
         raise PrefilterError(f"backend: expected 'numba' or 'numpy', got {backend!r}")
@@ -286,10 +319,12 @@ def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_worl
 
     wo = as_directions(wo, "wo")
     mu, sxx, _, _ = _stats(mean, cov)
-    if to_world is not None:
-        to_world = as_float_array(to_world, "to_world", ndim_min=2)
-    shape = np.broadcast_shapes(wo.shape[:-1], mu.shape[:-1], sxx.shape,
-                                () if to_world is None else to_world.shape[:-2])
+    to_world = _as_rotation(to_world)
+    f0 = None if f0 is None else as_unit_interval(f0, "f0")
+    lod_bias = float(as_float_array(lod_bias, "lod_bias"))
+    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
+                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}),
+                            **({} if f0 is None else {"f0": f0.shape}))
     flat_shape = (int(np.prod(shape, dtype=np.int64)),)
     b = lambda a, tail: np.ascontiguousarray(  # noqa: E731
         np.broadcast_to(a, shape + tail).reshape(flat_shape + tail))
@@ -314,7 +349,9 @@ def diffuse_sh(sh_coeffs, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None
     from prefilter.leadr.envmap import sh9_irradiance
 
     n = as_positive_int(n, "n")
-    c = np.asarray(sh_coeffs, np.float64)
+    c = as_float_array(sh_coeffs, "sh_coeffs", ndim_min=1)
+    if c.shape[0] != 9 or c.ndim > 2:
+        raise PrefilterError(f"sh_coeffs: expected shape (9,) or (9, C), got {c.shape}")
 
     def radiance(m, wi, jac, cell, tw):
         return sh9_irradiance(c, _rotate(tw[:, None] if tw is not None else None, m)) / np.pi
@@ -332,7 +369,9 @@ def diffuse_directional(wo, wl, mean_slope, slope_cov, n: int = 5, *, spacing=No
         return (np.maximum(np.sum(m * wl_b, axis=-1), 0.0) / np.pi)[..., None]
 
     wo = as_directions(wo, "wo")
-    shape = np.broadcast_shapes(wo.shape[:-1], wl.shape[:-1])
+    mu0, sxx0, _, _ = _stats(mean_slope, slope_cov)
+    shape = broadcast_batch(wo=wo.shape[:-1], wl=wl.shape[:-1], mean_slope=mu0.shape[:-1],
+                            slope_cov=sxx0.shape)
     wl_all = np.broadcast_to(wl, shape + (3,)).reshape(-1, 3)
     # The light varies per pixel: integrate in one chunk per light direction set.
     out = np.empty(int(np.prod(shape, dtype=np.int64)))
