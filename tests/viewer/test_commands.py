@@ -73,3 +73,22 @@ def test_view_prints_url_and_serves(tmp_path):
     finally:
         os.kill(proc.pid, signal.SIGINT)
         proc.wait(timeout=20)
+
+
+def test_export_uses_the_given_table_file(tmp_path):
+    """--iso-table: the exported texture holds that file's numbers (a table with every
+    magnitude halved), not the shipped table's."""
+    import numpy as np
+
+    from prefilter.ltc.table import GGXTable
+
+    t = GGXTable.load()
+    p = tmp_path / "half.npz"
+    np.savez(p, version=np.int64(1), axis_t=t.axis_t, axis_r=t.axis_r, M=t.M,
+             magnitude=0.5 * t.magnitude, fresnel=t.fresnel, settings=np.array("{}"))
+    res = CliRunner().invoke(export, [str(_scene_file(tmp_path)), "--out", str(tmp_path / "s"),
+                                      "--no-builtin-maps", "--iso-table", str(p)])
+    assert res.exit_code == 0, res.output
+    raw = np.fromfile(tmp_path / "s/data/ggx_iso_f32.bin", "<f4").reshape(
+        3, len(t.axis_r), len(t.axis_t), 4)
+    np.testing.assert_allclose(raw[2, 5, 7, 1], 0.5 * t.magnitude[7, 5], rtol=1e-6)
