@@ -35,8 +35,9 @@ def _camera(width, height):
 
 
 #: The pixel-match scenes: a flat anisotropic plane, the default scene (Gaussian-bump plane and
-#: an anisotropic sphere) and a brushed plane (anisotropic normal distribution).
-SCENES = ("flat", "bumps-sphere", "brushed")
+#: an anisotropic sphere), a brushed plane (anisotropic normal distribution) and a light that
+#: crosses the plane seen by a close sphere (horizon clipping everywhere).
+SCENES = ("flat", "bumps-sphere", "brushed", "horizon")
 
 
 def scene(name: str, width: int = 160, height: int = 120) -> dict:
@@ -51,6 +52,13 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
         return {"camera": _camera(width, height), "lights": [_quad()],
                 "objects": [_plane({"alpha": 0.1, "base_color": 0.02, "f0": 0.9,
                                     "normal_map": dict(BUILTIN_MAPS["brushed"])})]}
+    if name == "horizon":
+        return {"camera": {**_camera(width, height), "origin": [0.0, 0.9, 2.2]},
+                "lights": [_quad(z=-1.2, y0=-0.6, y1=0.9, hw=0.8, tilt=0.2, radiance=3.0)],
+                "objects": [_plane({"alpha": 0.3, "base_color": 0.3, "f0": 0.5}),
+                            {"type": "sphere", "center": [0.55, 0.35, -0.3], "radius": 0.35,
+                             "uv_scale": [4, 2], "material": {"alpha": 0.2, "base_color": 0.2,
+                                                              "f0": 0.9}}]}
     raise PrefilterError(f"scene: expected one of {', '.join(SCENES)}, got {name!r}")
 
 
