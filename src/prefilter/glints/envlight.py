@@ -12,6 +12,12 @@ epsilon-support ``theta_eps = acos(1 + ln(eps / mu) / lambda)`` (equations.md 6;
 2009) moves ``wi`` by up to ``theta_eps``, which moves the half vector by half that angle, ~the same
 distance in ``s`` near the pole. The estimate is then a blurred (biased) NDF with much less
 variance at equal samples (Fig. 11 of the paper); ``eps`` is relative to ``|mu|``.
+
+Axes ``p`` may also be per shading sample, ``(N, K, 3)`` (each sample's tangent frame).
+:func:`fit_sg` fits an equirectangular environment image by a fixed set of lobes (Fibonacci axes,
+one sharpness, non-negative least squares amplitudes); :func:`equirect_directions` gives the
+image's orientation convention (that of the renderer's sphere ``uv``: ``phi = 2 pi u`` from
+``+x`` towards ``+z``, ``theta = pi v`` from ``+y``, the top row).
 """
 
 from __future__ import annotations
@@ -28,7 +34,7 @@ def _lobes(mu, lam, p):
     mu = as_float_array(mu, "mu", ndim_min=2, last_dim=3)
     lam = as_float_array(lam, "lam", ndim_min=1)
     p = as_float_array(p, "p", ndim_min=2, last_dim=3)
-    if not (mu.shape[0] == lam.shape[0] == p.shape[0]) or lam.ndim != 1:
+    if not (mu.shape[0] == lam.shape[0] == p.shape[-2]) or lam.ndim != 1 or p.ndim > 3:
         raise PrefilterError(f"lam: expected K lobes matching mu {mu.shape} and p {p.shape}, got "
                              f"{lam.shape}")
     if np.any(mu < 0) or np.any(lam <= 0):
@@ -36,11 +42,18 @@ def _lobes(mu, lam, p):
     return mu, lam, p / np.linalg.norm(p, axis=-1, keepdims=True)
 
 
+def _dots(w, p):
+    """``w.p_k`` ``(..., K)`` for shared axes ``(K, 3)`` or per-sample axes ``(N, K, 3)``."""
+    w = np.asarray(w, dtype=np.float64)
+    if p.ndim == 2:
+        return w @ p.T
+    return np.einsum("nc,nkc->nk", w, p)
+
+
 def sg_eval(w, mu, lam, p) -> np.ndarray:
     """Radiance ``(..., 3)`` of the SG environment at directions ``w (..., 3)``."""
     mu, lam, p = _lobes(mu, lam, p)
-    w = np.asarray(w, dtype=np.float64)
-    e = np.exp(lam * (w @ p.T - 1.0))  # (..., K)
+    e = np.exp(lam * (_dots(w, p) - 1.0))  # (..., K)
     return e @ mu
 
 
@@ -78,8 +91,9 @@ def sample_sg(mu, lam, p, u) -> tuple[np.ndarray, np.ndarray]:
     cos = np.clip(cos, -1.0, 1.0)
     sin = np.sqrt(np.maximum(1.0 - cos * cos, 0.0))
     phi = 2.0 * np.pi * u[:, 2]
-    t, b = _frame(p[k])
-    w = (sin * np.cos(phi))[:, None] * t + (sin * np.sin(phi))[:, None] * b + cos[:, None] * p[k]
+    pk = p[k] if p.ndim == 2 else p[np.arange(len(k)), k]
+    t, b = _frame(pk)
+    w = (sin * np.cos(phi))[:, None] * t + (sin * np.sin(phi))[:, None] * b + cos[:, None] * pk
     return w, sg_pdf(w, mu, lam, p)
 
 
@@ -88,17 +102,20 @@ def sg_pdf(w, mu, lam, p) -> np.ndarray:
     mu, lam, p = _lobes(mu, lam, p)
     wgt = mu.mean(axis=1) * sg_energy(lam)
     P = wgt / wgt.sum()
-    dens = np.exp(lam * (np.asarray(w) @ p.T - 1.0)) / sg_energy(lam)
+    dens = np.exp(lam * (_dots(w, p) - 1.0)) / sg_energy(lam)
     return dens @ P
 
 
 def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 16, rng=0,
-             prefilter: bool = True, eps: float = 0.1) -> np.ndarray:
+             prefilter: bool = True, eps: float = 0.1, u=None, base_color=None) -> np.ndarray:
     """Specular radiance ``(N, 3)`` of footprints ``(center (N, 2), sigma_p (N,))`` seen from
     ``wo (N, 3)`` (tangent frame) under the SG environment; ``n_samples`` light samples each.
 
     ``prefilter=True``: the NDF is the range mean over ``h_xy +- theta_eps / 2`` of the chosen
-    lobe (needs a compressed map); ``False``: the point NDF of :func:`glint_ndf` (unbiased)."""
+    lobe (needs a compressed map; footprints below its finest level keep the point NDF, which is
+    the direct P-NDF there); ``False``: the point NDF of :func:`glint_ndf` (unbiased). ``p`` is
+    ``(K, 3)`` or per sample ``(N, K, 3)``. ``u``: optional ``(N, 3 n_samples)`` uniforms (else
+    drawn from ``rng``). ``base_color (3,)``: adds the Lambertian term from the same samples."""
     surf = _as_surface(surf)
     mu, lam, p = _lobes(mu, lam, p)
     c = as_float_array(center, "center", ndim_min=2, last_dim=2)
@@ -107,14 +124,23 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
     f0 = np.atleast_1d(np.asarray(f0, dtype=np.float64))
     if prefilter and surf.gm is None:
         raise PrefilterError("surf: prefiltering needs a compressed map (range queries)")
-    gen = as_rng(rng)
     N = c.shape[0]
+    if u is None:
+        uu = as_rng(rng).random((N, 3 * n_samples))
+    else:
+        uu = as_float_array(u, "u")
+        if uu.shape != (N, 3 * n_samples) or np.any((uu < 0) | (uu >= 1)):
+            raise PrefilterError(f"u: expected uniforms in [0, 1) of shape {(N, 3 * n_samples)}, "
+                                 f"got {uu.shape}")
+    if p.ndim == 3 and p.shape[0] != N:
+        raise PrefilterError(f"p: expected per-sample axes ({N}, K, 3), got {p.shape}")
     out = np.zeros((N, 3))
     half_eps = 0.5 * eps_support(mu, lam, eps)
     wgt = mu.mean(axis=1) * sg_energy(lam)
     cum = np.cumsum(wgt / wgt.sum())
-    for _ in range(n_samples):
-        u = gen.random((N, 3))
+    small = (sp < surf.sigma0) if surf.normal_map is not None else np.zeros(N, bool)
+    for j in range(n_samples):
+        u = uu[:, 3 * j:3 * j + 3]
         wi, pdf = sample_sg(mu, lam, p, u)
         k = np.minimum(np.searchsorted(cum, u[:, 0], side="right"), len(cum) - 1)
         h = wo + wi
@@ -122,10 +148,73 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
         ok = (wi[:, 2] > 0) & (h[:, 2] > 0) & (pdf > 0)
         if prefilter:
             r = np.maximum(half_eps[k], 1e-6)[:, None]
-            D = range_mean(surf.gm, c, sp, h[:, :2] - r, h[:, :2] + r)
+            D = np.empty(N)
+            D[~small] = range_mean(surf.gm, c[~small], sp[~small], h[~small, :2] - r[~small],
+                                   h[~small, :2] + r[~small])
+            if np.any(small):
+                D[small] = glint_ndf(surf, c[small], sp[small], h[small, :2])
         else:
             D = glint_ndf(surf, c, sp, h[:, :2])
         G = vcavity_g2(wo, wi, h)
-        val = np.where(ok, D * G / (4.0 * wo[:, 2] * np.where(ok, pdf, 1.0)), 0.0)
-        out += val[:, None] * schlick(f0, np.sum(wi * h, -1)) * sg_eval(wi, mu, lam, p)
+        val = np.where(ok, D * G / (4.0 * np.where(ok, wo[:, 2] * pdf, 1.0)), 0.0)
+        L = sg_eval(wi, mu, lam, p)
+        out += val[:, None] * schlick(f0, np.sum(wi * h, -1)) * L
+        if base_color is not None:
+            lam_ok = (wi[:, 2] > 0) & (pdf > 0)
+            cosw = np.where(lam_ok, wi[:, 2] / np.where(lam_ok, pdf, 1.0), 0.0)
+            out += np.asarray(base_color, dtype=np.float64) / np.pi * L * cosw[:, None]
     return out / n_samples
+
+
+def equirect_directions(height: int, width: int) -> np.ndarray:
+    """Unit world directions ``(H, W, 3)`` of the pixel centres of an equirectangular image:
+    ``u = (col + 0.5) / W``, ``v = (row + 0.5) / H``, ``phi = 2 pi u``, ``theta = pi v``,
+    ``w = (sin theta cos phi, cos theta, sin theta sin phi)`` (y up; row 0 is the zenith; the
+    renderer's sphere ``uv`` convention with pole ``+y`` and ``axis_x = +x``)."""
+    v = (np.arange(height) + 0.5) / height
+    u = (np.arange(width) + 0.5) / width
+    th, ph = np.meshgrid(np.pi * v, 2.0 * np.pi * u, indexing="ij")
+    return np.stack([np.sin(th) * np.cos(ph), np.cos(th), np.sin(th) * np.sin(ph)], -1)
+
+
+def fibonacci_axes(n: int) -> np.ndarray:
+    """``n`` nearly uniform unit vectors ``(n, 3)`` (spherical Fibonacci lattice)."""
+    i = np.arange(n) + 0.5
+    z = 1.0 - 2.0 * i / n
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * i
+    r = np.sqrt(np.maximum(1.0 - z * z, 0.0))
+    return np.stack([r * np.cos(phi), z, r * np.sin(phi)], -1)
+
+
+def fit_sg(image, n_lobes: int = 32, *, max_res: int = 64):
+    """Spherical-Gaussian fit ``(mu (K, 3), lam (K,), p (K, 3))`` of an equirectangular image
+    ``(H, W, C)`` (linear radiance; C = 1 is grey) in world axes (:func:`equirect_directions`).
+
+    Axes on a Fibonacci lattice, one sharpness for all (a lobe falls to 1/2 at half the mean
+    axis spacing, so neighbours overlap), amplitudes by non-negative least squares per channel
+    on the image box-filtered to at most ``max_res`` columns, weighted by pixel solid angle
+    (Tsai and Shih 2006 fit all three; fixed axes keep the fit linear and deterministic)."""
+    from scipy.optimize import nnls
+
+    img = as_float_array(image, "image", ndim_min=2)
+    if img.ndim == 2:
+        img = img[..., None]
+    if img.ndim != 3 or img.shape[2] not in (1, 3, 4) or np.any(img < 0):
+        raise PrefilterError(f"image: expected a non-negative (H, W, 1|3|4) image, got {img.shape}")
+    img = np.broadcast_to(img[..., :3], img.shape[:2] + (3,)) if img.shape[2] >= 3 else \
+        np.repeat(img, 3, axis=2)
+    H, W = img.shape[:2]
+    f = max(1, W // max_res)
+    Hs, Ws = H // f, W // f
+    if Hs < 2 or Ws < 2:
+        raise PrefilterError(f"image: expected at least 2 x 2 pixels after filtering, got {img.shape}")
+    small = img[:Hs * f, :Ws * f].reshape(Hs, f, Ws, f, 3).mean(axis=(1, 3))
+    d = equirect_directions(Hs, Ws).reshape(-1, 3)
+    sa = (np.sin(np.pi * (np.arange(Hs) + 0.5) / Hs)[:, None] * np.ones(Ws)).ravel()
+    p = fibonacci_axes(int(n_lobes))
+    spacing = np.sqrt(4.0 * np.pi / len(p))
+    lam = np.full(len(p), np.log(2.0) / (1.0 - np.cos(0.5 * spacing)))
+    A = np.exp(lam * (d @ p.T - 1.0)) * np.sqrt(sa)[:, None]
+    mu = np.stack([nnls(A, small.reshape(-1, 3)[:, ch] * np.sqrt(sa), maxiter=50 * len(p))[0]
+                   for ch in range(3)], -1)
+    return mu, lam, p

@@ -95,12 +95,170 @@ def _local(w, t, b, n):
     return np.stack([np.sum(w * t, -1), np.sum(w * b, -1), np.sum(w * n, -1)], -1)
 
 
-def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None) -> np.ndarray:
-    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point and directional lights.
+def _world(w, t, b, n):
+    return w[:, :1] * t + w[:, 1:2] * b + w[:, 2:] * n
+
+
+#: Quad lights: each MIS estimate takes ``QUAD_MIS`` light samples and as many BRDF samples per
+#: shading sample; uniforms per pair: 2 (light) + 7 (hierarchical NDF sampler, B = 16).
+QUAD_MIS = 4
+_U_PAIR = 9
+#: Range-query path of quad lights: the light is split into ``QUAD_SUB^2`` patches; each patch's
+#: half-vector region must have a bounding box narrower than ``RANGE_MAX`` in ``s`` (the BRDF's
+#: smooth factors are taken at the patch centre) and fill at least ``FILL_MIN`` of it (the range
+#: mean is over the box).
+QUAD_SUB = 2
+RANGE_MAX = 0.08
+FILL_MIN = 0.5
+_HORIZON = 1e-3
+
+
+def _brdf_terms(wo, wi, f0):
+    """``F G / (4 wo_z)`` (..., C) and the half vector: everything of ``f cos`` but ``D``."""
+    h = wo + wi
+    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    ok = (wo[..., 2] > 0) & (wi[..., 2] > 0) & (h[..., 2] > 0)
+    from prefilter.glints.brdf import schlick, vcavity_g2
+
+    k = np.where(ok, vcavity_g2(wo, wi, h) / (4.0 * np.where(ok, wo[..., 2], 1.0)), 0.0)
+    return k[..., None] * schlick(f0, np.sum(wi * h, -1)), h
+
+
+def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *,
+               n_sub: int = QUAD_SUB):
+    """Specular radiance of a quad light by range queries over its half-vector footprint.
+
+    ``int_quad f cos L dwi = int_S D(s) F G L (wi.h) / (wo_z h_z) ds`` (``dwi = 4 (wi.h) dw_h``,
+    ``dw_h = ds / h_z``) over the light's half-vector region ``S``: per patch of an
+    ``n_sub x n_sub`` split of the quad, the smooth factor at the patch centre times the patch's
+    ``s``-polygon area times the range mean of the footprint NDF over the polygon's bounding box
+    (glints paper, sec. 3 and eq. 7: the angularly prefiltered NDF).
+
+    Parameters
+    ----------
+    surf : GlintSurface with a compressed map; center (N, 2), sigma_p (N,): footprints.
+    wo : (N, 3) local view directions; corners : (N, 4, 3) quad corners relative to the shading
+        point in the local frame (counter-clockwise seen from the lit side).
+    radiance : (3,); f0 : (3,) or scalar.
+
+    Returns
+    -------
+    value (N, 3) and valid (N,): where the approximation holds (front face, light above the
+    horizon, every patch's box narrower than ``RANGE_MAX`` and filled >= ``FILL_MIN``, footprint
+    at or above the finest level); ``value`` is 0 elsewhere (use :func:`quad_mis` there).
+    """
+    from prefilter.glints.query import range_mean
+
+    N = corners.shape[0]
+    f0 = np.atleast_1d(np.asarray(f0, dtype=np.float64))
+    g = (np.arange(n_sub + 1) / n_sub)
+    A, B = np.meshgrid(g, g, indexing="ij")
+    a, b = A.ravel()[None, :, None], B.ravel()[None, :, None]
+    v0, v1, v2, v3 = (corners[:, k][:, None, :] for k in range(4))
+    P = (1 - a) * (1 - b) * v0 + a * (1 - b) * v1 + a * b * v2 + (1 - a) * b * v3  # (N, G, 3)
+    d = P / np.linalg.norm(P, axis=-1, keepdims=True)
+    h = d + wo[:, None, :]
+    h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    S = h[..., :2].reshape(N, n_sub + 1, n_sub + 1, 2)
+    q = np.stack([S[:, :-1, :-1], S[:, 1:, :-1], S[:, 1:, 1:], S[:, :-1, 1:]], axis=3)  # (N,n,n,4,2)
+    x, y = q[..., 0], q[..., 1]
+    area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, -1) - np.roll(x, -1, -1) * y, axis=-1))
+    lo, hi = q.min(axis=3), q.max(axis=3)
+    box = np.prod(hi - lo, axis=-1)
+    normal = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    front = np.sum(normal * corners[:, 0], -1) < 0.0  # the point is on the emitting side
+    valid = (front & np.all(d[..., 2] > _HORIZON, axis=1) & np.all(h[..., 2] > 0, axis=1)
+             & (wo[:, 2] > 0) & np.all(hi - lo < RANGE_MAX, axis=(1, 2, 3))
+             & np.all(area >= FILL_MIN * box, axis=(1, 2))
+             & (np.asarray(sigma_p) >= surf.sigma0) & (surf.gm is not None))
+    out = np.zeros((N, len(np.broadcast_to(f0, (3,)))))
+    if not np.any(valid):
+        return out, valid
+    nv = int(valid.sum())
+    m = n_sub * n_sub
+    eps = 1e-9
+    lo_v, hi_v = lo[valid].reshape(-1, 2), hi[valid].reshape(-1, 2) + eps
+    cen = np.repeat(np.asarray(center)[valid], m, 0)
+    spv = np.repeat(np.asarray(sigma_p)[valid], m, 0)
+    mean = range_mean(surf.gm, cen, spv, lo_v, hi_v).reshape(nv, m)
+    # smooth factor at each patch centre direction
+    ac = ((np.arange(n_sub) + 0.5) / n_sub)
+    Ac, Bc = np.meshgrid(ac, ac, indexing="ij")
+    a, b = Ac.ravel()[None, :, None], Bc.ravel()[None, :, None]
+    cv = corners[valid]
+    Pc = ((1 - a) * (1 - b) * cv[:, None, 0] + a * (1 - b) * cv[:, None, 1]
+          + a * b * cv[:, None, 2] + (1 - a) * b * cv[:, None, 3])
+    wi = Pc / np.linalg.norm(Pc, axis=-1, keepdims=True)
+    wov = np.broadcast_to(wo[valid][:, None, :], wi.shape)
+    k, hc = _brdf_terms(wov, wi, f0)
+    # k = F G / (4 wo_z): f cos dwi = k D dwi, and dwi = 4 (wi.h) / h_z ds
+    jac = 4.0 * np.sum(wi * hc, -1) / np.maximum(hc[..., 2], 1e-300)
+    val = k * (jac * area[valid].reshape(nv, m) * mean)[..., None]
+    out[valid] = val.sum(axis=1) * np.asarray(radiance, dtype=np.float64)
+    return out, valid
+
+
+def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u):
+    """Specular radiance of ``light`` by multiple importance sampling (balance heuristic): per
+    shading sample ``n`` light samples (uniform on the quad's area) and ``n`` BRDF samples
+    (:func:`prefilter.glints.sample.sample_wi`: the hierarchical NDF sampler, or the direct
+    P-NDF sampler below the finest level / without a compressed map).
+
+    Parameters
+    ----------
+    position : (N, 3) world shading points; frame : (t, b, n) each (N, 3) (world);
+    light : QuadLight; u : (N, n * 9) uniforms in ``[0, 1)``.
+
+    Returns
+    -------
+    (N, 3) the unbiased estimate of ``int_quad f cos L dwi``.
+    """
+    from prefilter.glints.brdf import glint_brdf_cos
+    from prefilter.glints.sample import pdf_wi, sample_wi
+    from prefilter.render.lights import quad_light_pdf, quad_light_sample
+
+    t, b, n = frame
+    N = len(wo)
+    n_pairs = u.shape[1] // _U_PAIR
+    L = np.asarray(light.radiance, dtype=np.float64)
+    out = np.zeros((N, 3))
+    for j in range(n_pairs):
+        uj = u[:, j * _U_PAIR:(j + 1) * _U_PAIR]
+        # light sample
+        wl, pl = quad_light_sample(light, position, uj[:, :2])
+        wl_loc = _local(wl, t, b, n)
+        fl = glint_brdf_cos(surf, center, sigma_p, wo, wl_loc, f0)
+        pb = pdf_wi(surf, center, sigma_p, wo, wl_loc)
+        w = np.where(pl > 0, 1.0 / np.where(pl > 0, pl + pb, 1.0), 0.0)
+        out += fl * w[:, None]
+        # BRDF sample
+        wb_loc, pb2 = sample_wi(surf, center, sigma_p, wo, u=uj[:, 2:])
+        ok = pb2 > 0
+        wb_loc = np.where(ok[:, None], wb_loc, np.array([0.0, 0.0, 1.0]))
+        wb = _world(wb_loc, t, b, n)
+        pl2 = quad_light_pdf(light, position, wb)
+        fb = glint_brdf_cos(surf, center, sigma_p, wo, wb_loc, f0)
+        w2 = np.where(ok & (pl2 > 0), 1.0 / np.where(ok, pb2 + pl2, 1.0), 0.0)
+        out += fb * w2[:, None]
+    return out * L / max(n_pairs, 1)
+
+
+def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
+                 use_range: bool | None = None) -> np.ndarray:
+    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's lights.
 
     ``mode``: ``"compressed"`` or ``"direct"``; ``sigma`` overrides the footprint stds (the
-    reference passes zeros)."""
+    reference passes zeros). Point and directional lights: the BRDF at the light direction
+    (point query). Quad lights: :func:`quad_range` where valid (``use_range``, default for the
+    compressed mode), else :func:`quad_mis` with the uniforms ``u (N, n_quads * QUAD_MIS * 9)``;
+    the diffuse term by Lambert's polygon formula. Environment lights: see
+    :func:`environment_radiance` (uniforms after the quads')."""
+    from prefilter.ltc import clamped_cosine_integral
+
     lights = scene.light_set()
+    env = [lt for lt in scene.lights if lt.type == "environment"]
+    if use_range is None:
+        use_range = mode == "compressed"
     flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
     t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
     wo = _local(g.view, t, b, n)
@@ -113,6 +271,7 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None) -> np.ndarray
     for dl in lights.directionals:
         incoming.append((np.broadcast_to(-dl.direction, g.position.shape), dl.irradiance))
     out = np.zeros((len(wo), 3))
+    nq = len(lights.quads)
     for k in np.unique(g.object_id):
         m = g.object_id == k
         mat = scene.objects[int(k)].material
@@ -124,18 +283,89 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None) -> np.ndarray
         if sigma is not None:
             sp = np.broadcast_to(sigma, m.shape)[m]
         base = np.asarray(mat.base_color, dtype=np.float64)
+        f0 = np.asarray(mat.f0, dtype=np.float64)
         for w, e in incoming:
             wi = _local(w[m], t[m], b[m], n[m])
             wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
-            spec = glint_brdf_cos(surf, c, sp, wo[m], wi, mat.f0)
+            spec = glint_brdf_cos(surf, c, sp, wo[m], wi, f0)
             diff = base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]
             out[m] += (spec + diff) * e[m] if np.ndim(e) == 2 else (spec + diff) * e
+        frame = (t[m], b[m], n[m])
+        for qi, ql in enumerate(lights.quads):
+            corners = np.stack([_local(v - g.position[m], *frame) for v in ql.vertices], 1)
+            if np.any(base > 0):
+                out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
+            val = np.zeros((int(m.sum()), 3))
+            done = np.zeros(int(m.sum()), bool)
+            if use_range and surf.gm is not None:
+                val, done = quad_range(surf, c, sp, wo[m], corners, ql.radiance, f0)
+            rest = ~done
+            if np.any(rest):
+                uq = u[m][:, qi * QUAD_MIS * _U_PAIR:(qi + 1) * QUAD_MIS * _U_PAIR]
+                val[rest] = quad_mis(surf, c[rest], sp[rest], wo[m][rest],
+                                     g.position[m][rest], tuple(f[rest] for f in frame), ql,
+                                     f0, uq[rest])
+            out[m] += val
+        if env:
+            ue = None if u is None else u[m][:, nq * QUAD_MIS * _U_PAIR:]
+            out[m] += environment_radiance(env, surf, c, sp, wo[m], frame, f0, base, ue,
+                                           prefilter=(mode == "compressed"))
     return out
 
 
+#: Environment lights: SG samples per shading sample and lobes of the fit (:func:`fit_sg`).
+ENV_SAMPLES = 8
+ENV_LOBES = 32
+ENV_EPS = 0.1
+_SG_FITS: dict = {}
+
+
+def environment_sgs(light):
+    """The spherical-Gaussian fit ``(mu, lam, p)`` (world axes) of an environment light, times
+    its ``scale`` (:func:`prefilter.glints.envlight.fit_sg`; cached per image)."""
+    from prefilter.glints.envlight import fit_sg
+
+    key = light.image._key()
+    if key not in _SG_FITS:
+        _SG_FITS[key] = fit_sg(light.image.load(), ENV_LOBES)
+    mu, lam, p = _SG_FITS[key]
+    return mu * light.scale, lam, p
+
+
+def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
+                         prefilter: bool) -> np.ndarray:
+    """Radiance ``(N, 3)`` (specular and Lambert) from environment lights by SG sampling
+    (:func:`prefilter.glints.envlight.shade_sg`, ``ENV_SAMPLES`` per shading sample); the NDF is
+    range-prefiltered over the lobe's compact epsilon-support when ``prefilter`` (sec. 5.4)."""
+    from prefilter.glints.envlight import shade_sg
+
+    t, b, n = frame
+    out = np.zeros((len(wo), 3))
+    for j, light in enumerate(env):
+        mu, lam, p = environment_sgs(light)
+        pl = np.stack([p @ t.T, p @ b.T, p @ n.T], -1).transpose(1, 0, 2)  # (N, K, 3)
+        uj = None if u is None else u[:, j * 3 * ENV_SAMPLES:(j + 1) * 3 * ENV_SAMPLES]
+        if uj is not None and uj.shape[1] < 3 * ENV_SAMPLES:
+            uj = None
+        out += shade_sg(surf, center, sigma_p, wo, mu, lam, pl, f0, n_samples=ENV_SAMPLES,
+                        rng=0, prefilter=prefilter and surf.gm is not None, eps=ENV_EPS, u=uj,
+                        base_color=base)
+    return out
+
+
+def random_dims(scene) -> int:
+    """Uniforms per shading sample the glints methods need (quad MIS, environment samples)."""
+    lights = scene.light_set()
+    env = any(lt.type == "environment" for lt in scene.lights)
+    n_env = sum(lt.type == "environment" for lt in scene.lights)
+    return len(lights.quads) * QUAD_MIS * _U_PAIR + n_env * ENV_SAMPLES * 3
+
+
 def _check_lights(scene, name):
-    if any(light.type in ("quad", "environment") for light in scene.lights):
-        raise PrefilterError(f"method {name!r}: expected only point and directional lights")
+    for i, light in enumerate(scene.lights):
+        if getattr(light, "texture", None) is not None:
+            raise PrefilterError(f"lights[{i}]: method {name!r} expected untextured quad, point, "
+                                 "directional or environment lights, got a textured quad")
 
 
 def _render(scene, settings, mode, name):
@@ -143,45 +373,52 @@ def _render(scene, settings, mode, name):
 
     _check_lights(scene, name)
     spp = settings.spp
+    k = random_dims(scene)
     return render_samples(scene, settings,
-                          lambda g, _u: shade_glints(scene, g, mode=mode, spp=spp),
-                          stratified=spp > 1, desc=name)
+                          lambda g, u: shade_glints(scene, g, mode=mode, spp=spp, u=u),
+                          random_dims=k, stratified=spp > 1, desc=name)
 
 
 def render_glints(scene, settings) -> np.ndarray:
-    """The ``glints`` method: compressed footprint NDF (point query) under point lights."""
+    """The ``glints`` method: compressed footprint NDF (point query; range queries for quad
+    lights where valid, else MIS; SG-prefiltered environment)."""
     return _render(scene, settings, "compressed", "glints")
 
 
 def render_glints_direct(scene, settings) -> np.ndarray:
-    """The ``glints-direct`` method: direct P-NDF of every footprint (Yan et al. 2016)."""
+    """The ``glints-direct`` method: direct P-NDF of every footprint (Yan et al. 2016); quad and
+    environment lights by Monte Carlo (MIS / SG sampling)."""
     return _render(scene, settings, "direct", "glints-direct")
 
 
 def render_glints_reference(scene, settings) -> np.ndarray:
     """The ``glints-reference`` method: ``spp`` sub-pixel samples from the pixel Gaussian, each
-    shaded with the point P-NDF of the full-resolution normal map (``sigma_p = 0``)."""
+    shaded with the point P-NDF of the full-resolution normal map (``sigma_p = 0``); quad and
+    environment lights by Monte Carlo as in ``glints-direct``."""
     from prefilter.render.camera import gbuffer_at
     from prefilter.render.pipeline import row_rng
 
     _check_lights(scene, "glints-reference")
     cam = scene.camera
     h, w, s = cam.height, cam.width, settings.spp
+    k = random_dims(scene)
     rows_per_chunk = max(1, settings.chunk_samples // (w * s))
     image = np.zeros((h, w, 3))
     with tqdm(total=h, desc="glints-reference", unit="row", delay=1.0, leave=False,
               disable=not settings.progress) as bar:
         for r0 in range(0, h, rows_per_chunk):
             rows = range(r0, min(h, r0 + rows_per_chunk))
-            offs = np.stack([row_rng(settings.seed, y).normal(0.0, PIXEL_SIGMA, (w, s, 2))
-                             for y in rows])
+            gens = [row_rng(settings.seed, y) for y in rows]
+            offs = np.stack([gen.normal(0.0, PIXEL_SIGMA, (w, s, 2)) for gen in gens])
+            us = np.concatenate([gen.random((w * s, k)) for gen in gens])
             xy = offs + 0.5 + np.asarray(settings.jitter, dtype=np.float64)
             xy[..., 0] += np.arange(w)[None, :, None]
             xy[..., 1] += np.asarray(rows, dtype=np.float64)[:, None, None]
             g = gbuffer_at(scene, xy).reshape(-1)
             rad = np.zeros((g.hit.size, 3))
             if np.any(g.hit):
-                rad[g.hit] = shade_glints(scene, g.select(g.hit), mode="direct", sigma=0.0)
+                rad[g.hit] = shade_glints(scene, g.select(g.hit), mode="direct", sigma=0.0,
+                                          u=us[g.hit])
             image[r0:r0 + len(rows)] = rad.reshape(len(rows), w, s, 3).mean(axis=2)
             bar.update(len(rows))
     return image.astype(np.float32)

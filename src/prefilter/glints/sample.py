@@ -235,6 +235,10 @@ def sample_wi(gm, center, sigma_p, wo, rng=0, *, u=None):
         (:func:`sample_s_direct`, as :func:`prefilter.glints.brdf.glint_ndf` evaluates them).
     wo : (..., 3) unit view directions in the geometric tangent frame (broadcast with the
         footprints).
+    u : optional ``(n, k)`` uniforms in ``[0, 1)``, ``n`` = number of samples: ``k =
+        n_uniforms(gm)`` for a GlintsMap; for a GlintSurface ``k >= 3`` (its map's
+        ``n_uniforms`` when footprints use the compressed sampler), the direct sampler uses the
+        first 3 columns.
 
     Returns
     -------
@@ -255,12 +259,22 @@ def sample_wi(gm, center, sigma_p, wo, rng=0, *, u=None):
         gen = as_rng(rng)
         s = np.zeros(shape + (2,))
         ps = np.zeros(shape)
+        uf = None
+        if u is not None:
+            uf = as_float_array(u, "u")
+            n = int(np.prod(shape))
+            if uf.ndim != 2 or uf.shape[0] != n or uf.shape[1] < 3:
+                raise PrefilterError(f"u: expected uniforms of shape ({n}, k >= 3), got "
+                                     f"{uf.shape}")
+            uf = uf.reshape(shape + (uf.shape[1],))
         if np.any(small):
-            s[small], ps[small] = sample_s_direct(surf, c[small], sp[small], gen)
+            s[small], ps[small] = sample_s_direct(
+                surf, c[small], sp[small], gen, u=None if uf is None else uf[small][:, :3])
         if np.any(~small):
             if surf.gm is None:
                 raise PrefilterError("gm: footprints at or above sigma0 need a compressed map")
-            s[~small], ps[~small] = sample_s(surf.gm, c[~small], sp[~small], gen)
+            s[~small], ps[~small] = sample_s(surf.gm, c[~small], sp[~small], gen,
+                                             u=None if uf is None else uf[~small])
     else:
         s, ps = sample_s(gm, c, sp, rng, u=u)
     wo = np.broadcast_to(wo, shape + (3,))
@@ -270,6 +284,44 @@ def sample_wi(gm, center, sigma_p, wo, rng=0, *, u=None):
     wi = 2.0 * wom[..., None] * m - wo
     pdf = np.where(ok, ps * m[..., 2] / (4.0 * np.where(ok, wom, 1.0)), 0.0)
     return wi, pdf
+
+
+def pdf_wi(surf, center, sigma_p, wo, wi) -> np.ndarray:
+    """Solid-angle density ``(...)`` with which :func:`sample_wi` (given ``surf``, a
+    :class:`prefilter.glints.brdf.GlintSurface` or a GlintsMap) draws ``wi (..., 3)`` from ``wo``:
+    ``pdf_s(h_xy) h_z / (4 wo.h)`` with ``h`` the half vector; ``pdf_s`` is the direct P-NDF below
+    the finest level (or everywhere for a surface without a compressed map), else
+    :func:`ndf_pdf`. For multiple importance sampling with light samples."""
+    from prefilter.glints.brdf import GlintSurface, _as_surface
+    from prefilter.glints.pndf import pndf
+
+    surf = surf if isinstance(surf, GlintSurface) else _as_surface(surf)
+    wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
+    wi = as_float_array(wi, "wi", ndim_min=1, last_dim=3)
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_float_array(sigma_p, "sigma_p")
+    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, wo.shape[:-1], wi.shape[:-1])
+    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    sp = np.broadcast_to(sp, shape).reshape(-1)
+    wo = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
+    wi = np.broadcast_to(wi, shape + (3,)).reshape(-1, 3)
+    h = wo + wi
+    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    woh = np.sum(wo * h, -1)
+    ok = (h[:, 2] > 0) & (woh > 0) & (wo[:, 2] > 0)
+    small = (sp < surf.sigma0) if surf.normal_map is not None else np.zeros(sp.shape, bool)
+    ps = np.zeros(sp.shape)
+    d = ok & small
+    if np.any(d):
+        ps[d] = pndf(surf.normal_map, c[d], sp[d], h[d, :2], surf.intrinsic_roughness,
+                     elements_=surf.elements_)
+    k = ok & ~small
+    if np.any(k):
+        if surf.gm is None:
+            raise PrefilterError("gm: footprints at or above sigma0 need a compressed map")
+        ps[k] = ndf_pdf(surf.gm, c[k], sp[k], h[k, :2])
+    pdf = np.where(ok, ps * h[:, 2] / (4.0 * np.where(ok, woh, 1.0)), 0.0)
+    return pdf.reshape(shape)
 
 
 # ---------------------------------------------------------------------- direct P-NDF sampling
@@ -332,11 +384,12 @@ def _direct_kernel(s_el, J, cx, cy, sp, sr, sh, trunc, u, out):
         out[q, 1] = my + l21 * z1 + l22 * z2
 
 
-def sample_s_direct(surf, center, sigma_p, rng=0):
+def sample_s_direct(surf, center, sigma_p, rng=0, *, u=None):
     """Projected half vectors ``(..., 2)`` from the *direct* P-NDF of ``surf`` (a
     :class:`prefilter.glints.brdf.GlintSurface` with its normal map) and their density
     ``pndf(s)`` (the exact mixture density, Yan et al. 2016). For footprints below the finest
-    pyramid level, where :func:`prefilter.glints.brdf.glint_ndf` evaluates the direct P-NDF."""
+    pyramid level, where :func:`prefilter.glints.brdf.glint_ndf` evaluates the direct P-NDF.
+    ``u``: optional ``(n, 3)`` uniforms in ``[0, 1)`` (element choice, Box-Muller pair)."""
     from prefilter.glints.brdf import _as_surface
     from prefilter.glints.pndf import SIGMA_H, TRUNCATION, pndf
 
@@ -350,7 +403,14 @@ def sample_s_direct(surf, center, sigma_p, rng=0):
     shape = np.broadcast_shapes(c.shape[:-1], sp.shape)
     cf = np.ascontiguousarray(np.broadcast_to(c, shape + (2,)).reshape(-1, 2))
     spf = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1), dtype=np.float64)
-    u = as_rng(rng).random((cf.shape[0], 3))
+    if u is None:
+        u = as_rng(rng).random((cf.shape[0], 3))
+    else:
+        u = as_float_array(u, "u")
+        if u.shape != (cf.shape[0], 3) or np.any((u < 0) | (u >= 1)):
+            raise PrefilterError(f"u: expected uniforms in [0, 1) of shape {(cf.shape[0], 3)}, "
+                                 f"got shape {u.shape}")
+        u = np.ascontiguousarray(u)
     s = np.empty((cf.shape[0], 2))
     s_el, J = surf.elements_
     _direct_kernel(s_el, J, np.ascontiguousarray(cf[:, 0]), np.ascontiguousarray(cf[:, 1]), spf,
