@@ -12,8 +12,8 @@ from prefilter.ltc import glsl as iso_glsl
 from prefilter.ltc.table import GGXTable
 from prefilter.multiscale import glsl as ms_glsl
 from prefilter.multiscale.meso import alpha_meso_exact
-from prefilter.viewer import default_scene, export_scene, viewer_scene
 from prefilter.render.scene import load_scene
+from prefilter.viewer import default_scene, export_scene, viewer_scene
 
 
 @pytest.fixture(scope="module")

@@ -11,15 +11,16 @@ TOL = 0.01
 
 @pytest.fixture(scope="module")
 def rows(browser):
-    return pixel_match(scenes=("flat", "bumps-sphere", "horizon"), driver=browser, width=96, height=72)
+    return pixel_match(scenes=("flat", "bumps-sphere", "horizon"), driver=browser, width=96,
+                       height=72)
 
 
 @pytest.mark.parametrize("precision", ["f32", "f16"])
 @pytest.mark.parametrize("method", METHODS)
 @pytest.mark.parametrize("scene", ["flat", "bumps-sphere", "horizon"])
 def test_browser_matches_python(rows, scene, method, precision):
-    (r,) = [r for r in rows if (r["scene"], r["method"], r["precision"]) == (scene, method,
-                                                                            precision)]
+    key = (scene, method, precision)
+    (r,) = [r for r in rows if (r["scene"], r["method"], r["precision"]) == key]
     assert r["covered"] > 0.3 * 96 * 72
     assert r["rel_rmse"] <= TOL, r
 

@@ -6,7 +6,8 @@ it, the anisotropic table as ``prefilter bake ltc-aniso --export`` writes it
 (:func:`prefilter.ltc.aniso.export.export_all`), the multi-scale roughness from
 :func:`prefilter.multiscale.glsl.export_all`, and the scene's normal maps as the box-filtered mip
 chains the Python renderer reads (:class:`prefilter.texture.MipChain`; for
-``ltc-multiscale-aniso`` the slope-moment chains of :func:`prefilter.multiscale.aniso.slope_moments_chain`).
+``ltc-multiscale-aniso`` the slope-moment chains of
+:func:`prefilter.multiscale.aniso.slope_moments_chain`).
 """
 
 from __future__ import annotations
