@@ -69,9 +69,12 @@ BAKES = {
 
 
 def _cmd(bake: Bake, inputs: Path, work: Path) -> list[str]:
+    """The command, run from ``inputs.parent`` with relative paths: bakes record their input
+    path (colour-map sidecar), which must not differ between the trial and the reference."""
+    root = str(inputs.parent) + os.sep
     quiet = ["--quiet"] if bake.chunked else []  # the chunked bakes have progress bars
-    return [sys.executable, "-m", "prefilter.cli", "bake", *bake.args(inputs, work / bake.out),
-            *quiet]
+    args = [a.removeprefix(root) for a in bake.args(inputs, work / bake.out)]
+    return [sys.executable, "-m", "prefilter.cli", "bake", *args, *quiet]
 
 
 def _outputs(work: Path) -> dict[str, bytes]:

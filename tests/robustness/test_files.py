@@ -160,6 +160,21 @@ def _load_image(p: Path) -> dict:
     return {"img": read_image(p)}
 
 
+def _make_normals_npy(d: Path) -> Path:
+    from prefilter.texture.procedural import normal_map
+
+    p = d / "normals.npy"
+    np.save(p, normal_map("gaussian", 8, 1))
+    return p
+
+
+def _load_normals_npy(p: Path) -> None:
+    from prefilter.glints.commands import load_normal_map
+
+    load_normal_map(str(p))
+    return None  # user data without a checksum: any valid parse is accepted
+
+
 SCENE = {
     "camera": {"origin": [0, 1, 3], "target": [0, 0, 0], "fov": 40, "width": 8, "height": 6},
     "objects": [{"type": "plane", "size": [4, 4],
@@ -312,6 +327,12 @@ def _scene_edit(fn: Callable[[dict], None]):
     return corrupt
 
 
+def _npz_bytes(p: Path) -> bytes:
+    q = p.with_name("x.npz")
+    np.savez(q, a=np.zeros(3))
+    return q.read_bytes()
+
+
 def _magic(p: Path) -> None:
     data = bytearray(p.read_bytes())
     data[:4] = b"\x00JNK"
@@ -404,6 +425,11 @@ FORMATS = {
     "exr": Fmt(_make_image("i.exr", (6, 5, 4)), _load_image, {
         "wrong_format": _other_format(".png")}),
     "exr_half": Fmt(_make_image("h.exr", (6, 5, 1), half=True), _load_image, {}),
+    "normals_npy": Fmt(_make_normals_npy, _load_normals_npy, {
+        "dtype": lambda p: np.save(p, np.array(["a", "b"])),
+        "shape": lambda p: np.save(p, np.zeros((4, 4, 2))),
+        "npz": lambda p: p.write_bytes(_npz_bytes(p)),
+    }),
     "scene_json": Fmt(_make_scene, _load_scene, {
         "dtype": _scene_edit(lambda s: s["camera"].update(fov="40")),
         "shape": _scene_edit(lambda s: s["camera"].update(origin=[0, 1])),
@@ -463,7 +489,7 @@ def _outcome(fmt: Fmt, p: Path, expected) -> str:
         msg = str(exc)
         assert p.name in msg or p.parent.name in msg, f"error does not name {p}: {msg}"
         return "error"
-    if expected is None:  # hand-written scene: another valid scene is acceptable
+    if expected is None:  # scenes, user .npy: no checksum, another valid file is acceptable
         return "parsed"
     assert _same(got, expected), f"{p}: corrupted file loaded with a different result"
     return "same"

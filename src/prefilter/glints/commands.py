@@ -27,12 +27,17 @@ def load_normal_map(spec: str) -> np.ndarray:
     path = Path(spec)
     if not path.is_file():
         raise PrefilterError(f"NORMAL_MAP: no such file {spec!r}")
-    if path.suffix.lower() == ".npy":
-        return np.load(path, allow_pickle=False)
+    from prefilter.glints.pndf import as_normal_map
     from prefilter.texture.io import read_image
     from prefilter.texture.normalmap import decode_normals
 
-    return decode_normals(read_image(path))
+    img = read_image(path)  # file errors name the file
+    try:
+        # .npy holds unit normals as they are; images are [0, 1]-encoded (OpenGL convention)
+        with np.errstate(over="ignore"):  # huge values: lengths overflow to inf, then rejected
+            return as_normal_map(img if path.suffix.lower() == ".npy" else decode_normals(img))
+    except PrefilterError as exc:
+        raise PrefilterError(f"{path}: {exc}") from None
 
 
 @click.command("glints")
