@@ -215,7 +215,17 @@ class Checkpoints:
         return self.dir / f"{chunk:06d}.npz"
 
     def done(self, chunk: int) -> bool:
-        return self._file(chunk).exists()
+        """Whether chunk ``chunk`` is saved and intact; a damaged part (checksum) is removed so
+        the bake recomputes it."""
+        f = self._file(chunk)
+        if not f.exists():
+            return False
+        try:
+            load_npz_checked(f, "checkpoint")
+        except TableFileError:
+            f.unlink(missing_ok=True)
+            return False
+        return True
 
     def save(self, chunk: int, **arrays: np.ndarray) -> None:
         save_npz_atomic(self._file(chunk), **arrays)

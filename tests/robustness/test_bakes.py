@@ -236,3 +236,30 @@ def test_atomic_write_leaves_target_intact(tmp_path):
     Checkpoints(out, {"k": 1}).clear()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.npz"]
     assert os.path.getsize(out) == len(before)
+
+
+def test_damaged_checkpoint_is_recomputed(tmp_path):
+    """A part damaged on disk fails its checksum and is fitted again, not trusted: the output
+    equals that of an uninterrupted bake."""
+    from prefilter.ltc.fit_iso import FitSettings, bake_table
+
+    s = FitSettings(res_theta=2, res_alpha=2, n_fit=4, quad_nodes=16)
+    ref = bake_table(tmp_path / "ref.npz", s, progress=False).read_bytes()
+
+    class Stop(Exception):
+        pass
+
+    def stop(i):
+        raise Stop
+
+    out = tmp_path / "t.npz"
+    with pytest.raises(Stop):
+        bake_table(out, s, progress=False, on_row=stop)
+    part = tmp_path / "t.npz.parts" / "000000.npz"
+    data = bytearray(part.read_bytes())
+    data[len(data) // 2] ^= 0x01
+    part.write_bytes(bytes(data))
+    fitted = []
+    bake_table(out, s, progress=False, on_row=fitted.append)
+    assert sorted(fitted) == [0, 1]
+    assert out.read_bytes() == ref
