@@ -1,0 +1,105 @@
+"""The exported GLSL polygon integral (``prefilter.ltc.glsl``: ``ltcPolygon``, ``ltcClipHorizon``)
+run in WebGL2 against ``prefilter.ltc.polygon_integral_minv`` / ``clip_to_horizon`` (float64),
+over random transforms (mirrored ones included) and quads crossing the horizon."""
+
+import numpy as np
+import pytest
+
+from prefilter.ltc import glsl as iso_glsl
+from prefilter.ltc.polygon import clip_to_horizon, polygon_integral_minv
+from prefilter.ltc.table import GGXTable
+from prefilter.viewer import serve
+
+_RUN = """
+const [src, data, n] = arguments;
+const c = document.createElement('canvas');
+const gl = c.getContext('webgl2');
+gl.getExtension('EXT_color_buffer_float');
+const head = '#version 300 es\\nprecision highp float;\\nprecision highp int;\\n';
+const sh = (t, s) => { const x = gl.createShader(t); gl.shaderSource(x, head + s);
+  gl.compileShader(x); if (!gl.getShaderParameter(x, gl.COMPILE_STATUS))
+  throw new Error(gl.getShaderInfoLog(x)); return x; };
+const p = gl.createProgram();
+gl.attachShader(p, sh(gl.VERTEX_SHADER, 'void main() { gl_Position = vec4(vec2[3](vec2(-1.0, ' +
+  '-1.0), vec2(3.0, -1.0), vec2(-1.0, 3.0))[gl_VertexID], 0.0, 1.0); }'));
+gl.attachShader(p, sh(gl.FRAGMENT_SHADER, src));
+gl.linkProgram(p);
+const tex = (w, arr) => { const t = gl.createTexture(); gl.bindTexture(gl.TEXTURE_2D, t);
+  gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, w, 1, 0, gl.RGBA, gl.FLOAT, arr);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.NEAREST); return t; };
+const inp = tex(8 * n, new Float32Array(data));
+const out = tex(n, null);
+const fb = gl.createFramebuffer();
+gl.bindFramebuffer(gl.FRAMEBUFFER, fb);
+gl.framebufferTexture2D(gl.FRAMEBUFFER, gl.COLOR_ATTACHMENT0, gl.TEXTURE_2D, out, 0);
+gl.useProgram(p);
+gl.activeTexture(gl.TEXTURE0); gl.bindTexture(gl.TEXTURE_2D, inp);
+gl.uniform1i(gl.getUniformLocation(p, 'uIn'), 0);
+gl.viewport(0, 0, n, 1);
+gl.drawArrays(gl.TRIANGLES, 0, 3);
+const px = new Float32Array(4 * n);
+gl.readPixels(0, 0, n, 1, gl.RGBA, gl.FLOAT, px);
+return Array.from(px);
+"""
+
+_MAIN = """
+uniform highp sampler2D uIn;  // per case: 3 texels of matrix rows, 4 texels of quad corners
+out vec4 o;
+void main() {
+    int k = int(gl_FragCoord.x) * 8;
+    vec4 a = texelFetch(uIn, ivec2(k, 0), 0), b = texelFetch(uIn, ivec2(k + 1, 0), 0);
+    vec4 c = texelFetch(uIn, ivec2(k + 2, 0), 0);
+    mat3 T = transpose(mat3(a.xyz, b.xyz, c.xyz));
+    vec3 P[5], C[5];
+    for (int i = 0; i < 4; ++i) P[i] = texelFetch(uIn, ivec2(k + 3 + i, 0), 0).xyz;
+    P[4] = P[3];
+    ltcClipHorizon(P, C);
+    o = vec4(ltcPolygon(T, C, 5), ltcPolygon(mat3(1.0), P, 4), 0.0, 1.0);
+}
+"""
+
+
+@pytest.fixture(scope="module")
+def page(browser, tmp_path_factory):
+    d = tmp_path_factory.mktemp("glsl")
+    (d / "index.html").write_text("<!doctype html><title>glsl</title>")
+    server, url = serve(d)
+    browser.get(url + "index.html")
+    yield browser
+    server.shutdown()
+    server.server_close()
+
+
+def _cases(rng, n):
+    # quads around the z axis, tilted so that most cross the horizon
+    centre = np.stack([rng.normal(0, 0.6, n), rng.normal(0, 0.6, n), rng.uniform(-0.3, 1.0, n)],
+                      -1)
+    u = rng.normal(size=(n, 3))
+    v = np.cross(u, rng.normal(size=(n, 3)))
+    u *= rng.uniform(0.2, 0.8, (n, 1)) / np.linalg.norm(u, axis=-1, keepdims=True)
+    v *= rng.uniform(0.2, 0.8, (n, 1)) / np.linalg.norm(v, axis=-1, keepdims=True)
+    quads = centre[:, None] + np.stack([-u - v, u - v, u + v, -u + v], 1)
+    T = np.eye(3) + rng.normal(0, 0.5, (n, 3, 3))
+    T[: n // 4, 0] *= -1.0  # mirrored transforms (negative determinant)
+    return T, quads
+
+
+def test_polygon_integral_matches_python(page):
+    rng = np.random.default_rng(3)
+    n = 256
+    T, quads = _cases(rng, n)
+    data = np.zeros((n, 8, 4), np.float32)
+    data[:, :3, :3] = T
+    data[:, 3:7, :3] = quads
+    src = iso_glsl.glsl_source(GGXTable.load()) + _MAIN
+    out = np.array(page.execute_script(_RUN, src, data.reshape(-1).tolist(), n)).reshape(n, 4)
+    clipped = clip_to_horizon(quads)
+    ref_s = polygon_integral_minv(T, clipped)
+    ref_d = polygon_integral_minv(np.broadcast_to(np.eye(3), T.shape), quads)
+    crossing = (quads[..., 2].min(-1) < 0) & (quads[..., 2].max(-1) > 0)
+    assert crossing.sum() > n // 4 and (ref_s > 1e-3).sum() > n // 4
+    print("max abs error spec %.2e diffuse %.2e" % (np.abs(out[:, 0] - ref_s).max(),
+                                                   np.abs(out[:, 1] - ref_d).max()))
+    np.testing.assert_allclose(out[:, 0], ref_s, rtol=1e-4, atol=1e-5)
+    np.testing.assert_allclose(out[:, 1], ref_d, rtol=1e-4, atol=1e-5)
