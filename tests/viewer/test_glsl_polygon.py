@@ -152,7 +152,8 @@ for (let k = 0; k < 3; ++k) {
   gl.activeTexture(gl.TEXTURE1 + k); gl.bindTexture(gl.TEXTURE_3D, t3);
   const raw = arguments[4][k];
   gl.texImage3D(gl.TEXTURE_3D, 0, half ? gl.RGBA16F : gl.RGBA32F, W, H, D, 0, gl.RGBA,
-                half ? gl.HALF_FLOAT : gl.FLOAT, half ? new Uint16Array(raw) : new Float32Array(raw));
+                half ? gl.HALF_FLOAT : gl.FLOAT,
+                half ? new Uint16Array(raw) : new Float32Array(raw));
   for (const [a, b] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
        [gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE], [gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE],
        [gl.TEXTURE_WRAP_R, gl.CLAMP_TO_EDGE]]) gl.texParameteri(gl.TEXTURE_3D, a, b);
