@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter._validate import as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 
 __all__ = ["combine_linear", "combine_product"]
@@ -46,7 +46,9 @@ def combine_linear(kappa, c0, ch, cs, v_bar, *, l_bar=1.0, rho_bar=1.0) -> np.nd
     ch = as_float_array(ch, "ch", ndim_min=1)
     cs = as_float_array(cs, "cs", ndim_min=1)
     v = as_float_array(v_bar, "v_bar")[..., None]
-    return _light(l_bar, rho_bar) * (k[0] * c0 * v + k[1] * ch + k[2] * cs * v)
+    light = _light(l_bar, rho_bar)
+    broadcast_batch(c0=c0.shape, ch=ch.shape, cs=cs.shape, v_bar=v.shape, light=np.shape(light))
+    return light * (k[0] * c0 * v + k[1] * ch + k[2] * cs * v)
 
 
 def combine_product(c0, ch, cs, *, l_bar=1.0, rho_bar=1.0) -> np.ndarray:
@@ -54,7 +56,9 @@ def combine_product(c0, ch, cs, *, l_bar=1.0, rho_bar=1.0) -> np.ndarray:
     c0 = as_float_array(c0, "c0", ndim_min=1)
     ch = as_float_array(ch, "ch", ndim_min=1)
     cs = as_float_array(cs, "cs", ndim_min=1)
-    return _light(l_bar, rho_bar) * c0 * ch * cs
+    light = _light(l_bar, rho_bar)
+    broadcast_batch(c0=c0.shape, ch=ch.shape, cs=cs.shape, light=np.shape(light))
+    return light * c0 * ch * cs
 
 
 def _light(l_bar, rho_bar) -> np.ndarray:

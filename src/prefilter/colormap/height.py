@@ -21,7 +21,13 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import erfc, erfcx, log_ndtr
 
-from prefilter._validate import as_float_array, as_upper_directions
+from prefilter._validate import (
+    as_directions,
+    as_float_array,
+    as_upper_directions,
+    broadcast_batch,
+)
+from prefilter.colormap.table import as_table
 from prefilter.errors import PrefilterError
 
 __all__ = [
@@ -80,7 +86,11 @@ def smith_lambda(cot_theta, sigma_s) -> np.ndarray:
     -------
     numpy.ndarray, shape (...)
     """
-    c = np.asarray(cot_theta, dtype=np.float64)
+    try:
+        c = np.asarray(cot_theta, dtype=np.float64)  # +inf allowed: normal incidence
+    except (TypeError, ValueError):
+        raise PrefilterError(f"cot_theta: expected a numeric array, got "
+                             f"{type(cot_theta).__name__}") from None
     s = as_float_array(sigma_s, "sigma_s")
     if np.any(np.isnan(c)) or np.any(c <= 0.0):
         raise PrefilterError("cot_theta: expected cotangents > 0 (directions above the surface, "
@@ -131,9 +141,16 @@ def smith_lambda_direction(w, slope_cov) -> np.ndarray:
     w = as_upper_directions(w, "w")
     cov = _as_cov(slope_cov)
     r = np.hypot(w[..., 0], w[..., 1])
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", over="ignore"):  # r denormal: cot = inf
         cot = np.where(r > 0.0, w[..., 2] / np.where(r > 0, r, 1.0), np.inf)
     return smith_lambda(cot, _slope_std_along(w, cov))
+
+
+def _as_noise_sigma(noise_sigma) -> np.ndarray:
+    sr = as_float_array(noise_sigma, "noise_sigma")
+    if np.any(sr < 0.0):
+        raise PrefilterError(f"noise_sigma: expected a std >= 0, got min {sr.min()!r}")
+    return sr
 
 
 def _as_lambda(lam, name: str) -> np.ndarray:
@@ -141,6 +158,13 @@ def _as_lambda(lam, name: str) -> np.ndarray:
     if np.any(a < 0.0):
         raise PrefilterError(f"{name}: expected Lambda values >= 0, got min {a.min()!r}")
     return a
+
+
+def _as_sigma_h(sigma_h, name: str = "sigma_h") -> np.ndarray:
+    sh = as_float_array(sigma_h, name)
+    if np.any(sh <= 0.0):
+        raise PrefilterError(f"{name}: expected a height std > 0, got min {sh.min()!r}")
+    return sh
 
 
 def mean_visibility(lambda_o, lambda_i) -> np.ndarray:
@@ -208,8 +232,11 @@ def height_moments_approx(lam, sigma_h=1.0, params: HeightParams = PAPER_PARAMS)
     mu_d, sigma_d : numpy.ndarray
     """
     lam = _as_lambda(lam, "lam")
-    sh = as_float_array(sigma_h, "sigma_h")
-    a_mu, b_mu, a_s, b_s = (float(p) for p in params)
+    sh = _as_sigma_h(sigma_h)
+    p = as_float_array(tuple(params), "params")
+    if p.shape != (4,) or np.any(p < 0.0):
+        raise PrefilterError(f"params: expected four constants >= 0 (HeightParams), got {p}")
+    a_mu, b_mu, a_s, b_s = (float(x) for x in p)
     mu = a_mu * sh * np.log1p(b_mu * lam)
     sd = sh / (1.0 + a_s * np.log1p(b_s * lam))
     return mu, sd
@@ -282,12 +309,19 @@ def height_distribution(wo, wi, slope_cov, sigma_h=1.0, params: HeightParams | N
     Returns
     -------
     mu_d, sigma_d, v_bar : numpy.ndarray, shape (...)
-        Eqs. 17, 18 and 13.
+        Eqs. 17, 18 and 13. A light at or below the horizon (``wi_z <= 0``) leaves the surface
+        unlit: ``v_bar = 0`` (``Lambda_i = inf``), and ``mu_d, sigma_d`` are those of the view
+        alone (finite; the colour they select is multiplied by 0).
     """
+    wo = as_upper_directions(wo, "wo")
+    wi = as_directions(wi, "wi")
+    broadcast_batch(wo=wo.shape[:-1], wi=wi.shape[:-1])
+    lit = wi[..., 2] > 0.0
     lam_o = smith_lambda_direction(wo, slope_cov)
-    lam_i = smith_lambda_direction(wi, slope_cov)
+    lam_i = np.where(lit, smith_lambda_direction(np.where(lit[..., None], wi, [0.0, 0.0, 1.0]),
+                                                 slope_cov), 0.0)
     mu, sd = height_moments_approx(lam_o + lam_i, sigma_h, OWN_PARAMS if params is None else params)
-    return mu, sd, mean_visibility(lam_o, lam_i)
+    return mu, sd, np.where(lit, mean_visibility(lam_o, lam_i), 0.0)
 
 
 def filter_height(table, wo, wi, slope_cov, sigma_h=1.0, *, noise_mean=0.0, noise_sigma=0.0,
@@ -299,17 +333,19 @@ def filter_height(table, wo, wi, slope_cov, sigma_h=1.0, *, noise_mean=0.0, nois
     ``table`` is a :class:`~prefilter.colormap.table.ColormapTable` over heights. Returns
     ``(..., C)``: it includes the light visibility ``V_bar`` as eq. 14 does.
     """
+    as_table(table)
     mu, sd, vbar = height_distribution(wo, wi, slope_cov, sigma_h, params)
     mr = as_float_array(noise_mean, "noise_mean")
-    sr = as_float_array(noise_sigma, "noise_sigma")
+    sr = _as_noise_sigma(noise_sigma)
     return vbar[..., None] * table.lookup(mu + mr, np.sqrt(sd * sd + sr * sr))
 
 
 def naive_height(table, sigma_h=1.0, *, noise_mean=0.0, noise_sigma=0.0) -> np.ndarray:
     """View-independent filtering of a height colour map (the Gaussian height distribution, no
     visibility): the "texture filtering" baseline of Heitz et al. 2013, fig. 8."""
-    sh = as_float_array(sigma_h, "sigma_h")
-    sr = as_float_array(noise_sigma, "noise_sigma")
+    as_table(table)
+    sh = _as_sigma_h(sigma_h)
+    sr = _as_noise_sigma(noise_sigma)
     return table.lookup(as_float_array(noise_mean, "noise_mean"), np.sqrt(sh * sh + sr * sr))
 
 
@@ -398,5 +434,6 @@ def height_footprint(mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h=1.0):
 def filter_height_footprint(table, mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h=1.0):
     """``V_bar <C_h, D_h>`` over a footprint (eq. 14 with :func:`height_footprint`),
     ``(..., C)``."""
+    as_table(table)
     mean, std, v_bar = height_footprint(mu_fp, sigma_fp, lambda_o, lambda_i, sigma_h)
     return v_bar[..., None] * table.lookup(mean, std)

@@ -30,7 +30,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import erfcx
 
-from prefilter._validate import as_float_array, as_positive_int, as_upper_directions
+from prefilter._validate import (
+    as_float_array,
+    as_positive_int,
+    as_upper_directions,
+    broadcast_batch,
+)
 from prefilter.colormap.table import gaussian_operator
 from prefilter.errors import PrefilterError
 
@@ -45,6 +50,11 @@ def _as_mean_cov(mean, cov):
     c = as_float_array(cov, "cov", ndim_min=2)
     if c.shape[-2:] != (2, 2):
         raise PrefilterError(f"cov: expected shape (..., 2, 2), got {c.shape}")
+    if np.any(np.abs(c[..., 0, 1] - c[..., 1, 0])
+              > 1e-9 * (np.abs(c[..., 0, 0]) + np.abs(c[..., 1, 1])) + 1e-300):
+        raise PrefilterError("cov: expected symmetric 2x2 covariances, got different "
+                             "off-diagonal entries")
+    broadcast_batch(mean=mu.shape[:-1], cov=c.shape[:-2])
     tr = c[..., 0, 0] + c[..., 1, 1]
     disc = np.sqrt(0.25 * (c[..., 0, 0] - c[..., 1, 1]) ** 2 + c[..., 0, 1] * c[..., 1, 0])
     # rank-deficient covariances come out of arithmetic with slightly negative eigenvalues
@@ -82,7 +92,7 @@ def slope_distribution(wo, mean, cov) -> tuple[np.ndarray, np.ndarray]:
     """
     w = as_upper_directions(wo, "wo")
     mu, c = _as_mean_cov(mean, cov)
-    batch = np.broadcast_shapes(w.shape[:-1], mu.shape[:-1], c.shape[:-2])
+    batch = broadcast_batch(wo=w.shape[:-1], mean=mu.shape[:-1], cov=c.shape[:-2])
     w = np.broadcast_to(w, batch + (3,))
     mu = np.broadcast_to(mu, batch + (2,))
     c = np.broadcast_to(c, batch + (2, 2))
@@ -94,8 +104,12 @@ def slope_distribution(wo, mean, cov) -> tuple[np.ndarray, np.ndarray]:
     lam = _SQRT_2_OVER_PI / erfcx(-alpha / np.sqrt(2.0))  # phi(alpha) / Phi(alpha), stably
     m1 = alpha + lam
     m2 = alpha * alpha + 1.0 + alpha * lam
-    m3 = alpha**3 + 3.0 * alpha + (alpha * alpha + 2.0) * lam
-    var_u = np.clip(m3 / m1 - (m2 / m1) ** 2, 0.0, 1.0)
+    pos = alpha >= 0.0
+    ap = np.where(pos, 1.0, alpha)  # alpha**3 overflows (and m3/m1 - (m2/m1)^2 cancels) for
+    m3 = ap**3 + 3.0 * ap + (ap * ap + 2.0) * lam  # large alpha: there use the identity
+    # m3 m1 - m2^2 = (alpha + lam)(alpha + 2 lam) - 1, i.e. var = 1 + lam / m1 - 1 / m1^2
+    var_u = np.where(pos, 1.0 + lam / m1 - 1.0 / (m1 * m1), m3 / m1 - (m2 / m1) ** 2)
+    var_u = np.clip(var_u, 0.0, 1.0)
     shift = np.where(deg, 0.0, 1.0 / (sd * m1))
     mean_d = mu + sa * shift[..., None]
     shrink = np.where(deg, 0.0, (1.0 - var_u) / np.where(deg, 1.0, v_t))
@@ -162,8 +176,9 @@ class SlopeColormapTable:
 
     def _trilinear(self, s, sigma):
         n, nl, e = self.n, self.stack.shape[0], self.extent
-        x = (s[..., 0] + e) / (2 * e) * n - 0.5
-        y = (s[..., 1] + e) / (2 * e) * n - 0.5
+        # clamped map: saturate before the int64 cast (|s| > 1e17 wrapped to the wrong edge)
+        x = np.clip((s[..., 0] + e) / (2 * e) * n - 0.5, -1.0, float(n))
+        y = np.clip((s[..., 1] + e) / (2 * e) * n - 0.5, -1.0, float(n))
         x0, y0 = np.floor(x), np.floor(y)
         fx, fy = (x - x0)[..., None], (y - y0)[..., None]
         i0 = np.clip(y0.astype(np.int64), 0, n - 1)
@@ -260,6 +275,9 @@ def slope_prefilter_table(colormap, extent: float = 1.0, sigma_max: float = 0.5,
 def filter_slope(table: SlopeColormapTable, wo, mean, cov, n_taps: int = 7) -> np.ndarray:
     """Filtered slope-correlated colour ``C_s_bar(wo) = <C_s, D_s>`` (Heitz et al. 2013, eq. 20)
     with ``D_s`` replaced by the Gaussian of its exact moments. Shape ``(..., C)``."""
+    from prefilter.colormap.table import as_table
+
+    as_table(table, SlopeColormapTable)
     m, c = slope_distribution(wo, mean, cov)
     return table.lookup(m, c, n_taps)
 

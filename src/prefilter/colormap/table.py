@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from scipy.special import ndtr
 
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter._validate import as_float_array, as_positive_int, broadcast_batch
 from prefilter.errors import PrefilterError, TableFileError
 
 __all__ = ["EDGES", "ColormapTable", "as_colormap", "gaussian_operator", "lookup",
@@ -96,8 +96,9 @@ def _smoothed_ramp(x, sigma):
     """``E[max(0, x + sigma Z)]``, ``Z ~ N(0, 1)``: a ramp convolved with a Gaussian."""
     if sigma == 0.0:
         return np.maximum(x, 0.0)
-    z = x / sigma
-    return x * ndtr(z) + sigma * _INV_SQRT_2PI * np.exp(-0.5 * z * z)
+    with np.errstate(over="ignore"):  # denormal sigma: z = +-inf gives the ramp itself
+        z = x / sigma
+        return x * ndtr(z) + sigma * _INV_SQRT_2PI * np.exp(-0.5 * z * z)
 
 
 def _hat_kernel(sigma_samples: float, reach: int) -> np.ndarray:
@@ -224,10 +225,17 @@ class ColormapTable:
         s = as_float_array(sigma, "sigma")
         if np.any(s < 0.0):
             raise PrefilterError(f"sigma: expected standard deviations >= 0, got min {s.min()!r}")
+        broadcast_batch(mean=m.shape, sigma=s.shape)
         m, s = np.broadcast_arrays(m, s)
         lo, hi = self.value_range
         n, ns = self.n_mean, self.n_sigma
         x = (m - lo) / (hi - lo) * n - 0.5
+        # bring x into a range whose floor fits an int64 (|mean| > 1e17 wrapped to the wrong
+        # edge): clamping saturates, mirror and periodic edges repeat with period 2n and n
+        if self.edge == "clamp":
+            x = np.clip(x, -1.0, float(n))
+        else:
+            x = np.mod(x, 2.0 * n if self.edge == "mirror" else float(n))
         x0 = np.floor(x)
         fx = (x - x0)[..., None]
         i0 = x0.astype(np.int64)
@@ -407,8 +415,15 @@ def prefilter_table(colormap, value_range=(0.0, 1.0), sigma_max: float = 0.25, s
     return ColormapTable(table, (lo, hi), smax, edge)
 
 
+def as_table(table, cls=None, name: str = "table"):
+    """``table`` if it is a :class:`ColormapTable` (or ``cls``), else a PrefilterError."""
+    cls = ColormapTable if cls is None else cls
+    if not isinstance(table, cls):
+        raise PrefilterError(f"{name}: expected a {cls.__name__} (prefilter_table / "
+                             f"{cls.__name__}.load), got {type(table).__name__}")
+    return table
+
+
 def lookup(table: ColormapTable, mean, sigma) -> np.ndarray:
     """``table.lookup(mean, sigma)``: bilinear lookup of a :class:`ColormapTable` (eq. 10)."""
-    if not isinstance(table, ColormapTable):
-        raise PrefilterError(f"table: expected a ColormapTable, got {type(table).__name__}")
-    return table.lookup(mean, sigma)
+    return as_table(table).lookup(mean, sigma)

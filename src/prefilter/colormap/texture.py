@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter._validate import as_float_array
+from prefilter.colormap.table import as_table
 from prefilter.errors import PrefilterError
 from prefilter.texture.mip import (
     MipChain,
@@ -142,12 +143,14 @@ def texture_stats(chain: MipChain, uv, dudv, *, anisotropic: bool = False, max_a
 def filter_texture(table, chain: MipChain, uv, dudv, **kw) -> np.ndarray:
     """Filtered colour ``<C, N(f_bar, sigma_f^2)>`` of a colour-mapped texture (eqs. 8, 10),
     shape ``(..., C)``."""
+    as_table(table)
     mean, sigma = texture_stats(chain, uv, dudv, **kw)
     return table.lookup(mean, sigma)
 
 
 def naive_texture(table, chain: MipChain, uv, dudv, **kw) -> np.ndarray:
     """The naive ``C(f_bar)``: the colour map applied to the mip-mapped mean, ``(..., C)``."""
+    as_table(table)
     mean, _ = texture_stats(chain, uv, dudv, **kw)
     return table.naive(mean)
 
@@ -172,7 +175,13 @@ class NoiseStd:
         if v.ndim != 1 or v.size < 1 or np.any(v < 0):
             raise PrefilterError(f"level_variance: expected a 1D array of variances >= 0, got "
                                  f"shape {v.shape}")
-        s2 = v[0] if sigma is None else float(sigma) ** 2
+        if sigma is None:
+            s2 = v[0]
+        else:
+            s = float(as_float_array(sigma, "sigma"))
+            if s < 0.0:
+                raise PrefilterError(f"sigma: expected a noise std >= 0, got {sigma!r}")
+            s2 = s * s
         self.variance = np.maximum(s2 - v, 0.0)  # within-footprint variance per level
 
     @classmethod
@@ -206,6 +215,9 @@ def filter_noise(table, noise_chain: MipChain, noise_std: NoiseStd, uv, dudv, *,
     filtered, naive : numpy.ndarray, shape (..., C)
         ``<C, N(mean, sigma(lod)^2)>`` and ``C(mean)``.
     """
+    as_table(table)
+    if not isinstance(noise_std, NoiseStd):
+        raise PrefilterError(f"noise_std: expected a NoiseStd, got {type(noise_std).__name__}")
     if not isinstance(noise_chain, MipChain) or noise_chain.shape[2] != 1:
         raise PrefilterError("noise_chain: expected a one-channel MipChain of the noise")
     h, w = noise_chain.shape[:2]
