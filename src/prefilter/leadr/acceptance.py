@@ -156,19 +156,14 @@ def diffuse_exact(env, wo, mean, cov, n, shadowing: bool = False) -> np.ndarray:
     return (s @ e) / (s.sum() * np.pi)
 
 
-def env_specular_shadowed(env, wo, mean, cov, n, lod_bias: float = 0.0) -> np.ndarray:
+def env_specular_shadowed(env, wo, mean, cov, n) -> np.ndarray:
     """The paper's Algorithm 1 *with* self-shadowing for one view ``wo (3,)`` and one footprint,
-    ``(C,)``: Simplified Algorithm 1 with each grid sample weighted by ``G2 / G1`` (NumPy;
-    the renderer's kernel drops shadowing, as the supplemental's simplified algorithm does)."""
-    m, w, cell = grid_normals(mean, cov, n)
-    dot = m @ wo
-    s = w * np.maximum(dot, 0.0) / m[..., 2]
-    wi = 2.0 * dot[:, None] * m - wo
-    jac = 4.0 * np.abs(dot) * np.abs(m[:, 2]) ** 3
-    with np.errstate(divide="ignore"):
-        lod = 0.5 * np.log2(np.maximum(jac * cell, 1e-300) / env.texel_solid_angle) + lod_bias
-    rad = env.lookup(wi, lod) * _shadowing(mean, cov, wo, wi)[:, None]
-    return (s @ rad) / s.sum()
+    ``(C,)`` (:func:`prefilter.leadr.render.env_specular_shadowed`; the renderer's default
+    kernel drops shadowing, as the supplemental's simplified algorithm does)."""
+    from prefilter.leadr.render import env_specular_shadowed as batch
+
+    return batch(env, np.asarray(wo, np.float64)[None], np.asarray(mean, np.float64)[None],
+                 np.asarray(cov, np.float64)[None], n)[0]
 
 
 def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, spp: int = 16,

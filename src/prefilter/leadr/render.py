@@ -33,8 +33,9 @@ from prefilter.errors import PrefilterError
 from prefilter.leadr.envmap import (ENV_FROM_WORLD, env_from_image, latlong_resample,
                                     sh9_directional, sh9_project)
 from prefilter.leadr.maps import shading_stats
-from prefilter.leadr.shading import (diffuse_directional, diffuse_sh, env_specular, point_light,
-                                     schlick)
+from prefilter.leadr.shading import (diffuse_directional, diffuse_sh, env_specular,
+                                     grid_normals, point_light, schlick)
+from prefilter.microfacet import beckmann_lambda
 
 DIFFUSE_GRID = 5
 #: Specular grid of ``leadr-env``: 9 x 9 is within ~3% of the N = 128 grid for isotropic lobes
@@ -127,15 +128,18 @@ def _env_rotation(t, b, n) -> np.ndarray:
 
 
 def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int = ENV_GRID,
-                    diffuse_grid: int = DIFFUSE_GRID) -> np.ndarray:
-    """Radiance ``(N, 3)`` of hits ``g``: environment specular (Simplified Algorithm 1) + SH
-    diffuse (Simplified Algorithm 3) + point/directional lights."""
+                    diffuse_grid: int = DIFFUSE_GRID, shadowed: bool = False) -> np.ndarray:
+    """Radiance ``(N, 3)`` of hits ``g``: environment specular (Simplified Algorithm 1, or
+    Algorithm 1 with self-shadowing if ``shadowed``) + SH diffuse (Simplified Algorithm 3) +
+    point/directional lights."""
     t, b, n, wo = _frame(g)
     mean, cov, base, f0 = leadr_stats(scene, g, meso=meso)
     rot = _env_rotation(t, b, n)
     out = np.zeros((len(wo), 3))
     if env is not None:
-        if np.any(f0 != 0.0):
+        if shadowed:
+            out += env_specular_shadowed(env, wo, mean, cov, n_grid, f0=f0, to_world=rot)
+        elif np.any(f0 != 0.0):
             # Schlick is linear in f0: F = f0 * 1 + (1 - f0) * (1 - c)^5.
             one = env_specular(env, wo, mean, cov, n_grid, f0=1.0, to_world=rot)
             out += f0 * one
@@ -168,6 +172,73 @@ def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
     return base * out
 
 
+def _gauss_lambda(w, mu, cov):
+    """Smith ``Lambda`` of non-centred Gaussian slopes ``N(mu (P, 2), cov (P, 2, 2))`` for
+    directions ``w (P, K, 3)`` (LEADR supplemental 3.2); ``inf`` below the mean surface."""
+    d = w[..., 2] - mu[:, None, 0] * w[..., 0] - mu[:, None, 1] * w[..., 1]
+    s2 = (cov[:, None, 0, 0] * w[..., 0] ** 2 + 2.0 * cov[:, None, 0, 1] * w[..., 0] * w[..., 1]
+          + cov[:, None, 1, 1] * w[..., 1] ** 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(s2 > 0, d / np.sqrt(2.0 * np.maximum(s2, 0.0)),
+                     np.where(d > 0, np.inf, -np.inf))
+    return beckmann_lambda(a)
+
+
+def env_specular_shadowed(env, wo, mean, cov, n: int = ENV_GRID, *, f0=None, to_world=None,
+                          chunk: int = 4096) -> np.ndarray:
+    """Algorithm 1 of the paper *with* self-shadowing, ``(P, C)``: Simplified Algorithm 1 (same
+    grid, LOD per sample from the Jacobian) with each sample weighted by
+    ``G2 / G1 = (1 + Lambda(wo)) / (1 + Lambda(wo) + Lambda(wi))`` (0 for ``wi`` below the
+    geometric plane); the projected-area sum still
+    stands for ``(n_bar.g / n_bar.o) / (1 + Lambda(wo))`` (supplemental eq. 10).
+
+    ``wo (P, 3)``, ``mean (P, 2)``, ``cov (P, 2, 2)`` local; ``f0 (P, C)`` Schlick (``None``:
+    F = 1); ``to_world (P, 3, 3)`` local -> map coordinates. Points whose grid sees nothing
+    (backfacing mesonormal) fall back to the simplified kernel's artificial micronormal.
+    """
+    wo = np.asarray(wo, np.float64).reshape(-1, 3)
+    mean = np.asarray(mean, np.float64).reshape(-1, 2)
+    cov = np.asarray(cov, np.float64).reshape(-1, 2, 2)
+    p = len(wo)
+    nc = env.levels[0].shape[2]
+    out = np.empty((p, nc))
+    texel = env.texel_solid_angle
+    for s0 in range(0, p, chunk):
+        sl = slice(s0, min(p, s0 + chunk))
+        o, mu, c = wo[sl], mean[sl], cov[sl]
+        m, w, cell = grid_normals(mu, c, n)
+        dot = np.einsum("pkj,pj->pk", m, o)
+        area = w * np.maximum(dot, 0.0) / m[..., 2]
+        wi = 2.0 * dot[..., None] * m - o[:, None, :]
+        jac = 4.0 * np.abs(dot) * np.abs(m[..., 2]) ** 3
+        with np.errstate(divide="ignore"):
+            lod = 0.5 * np.log2(np.maximum(jac * cell[:, None], 1e-300) / texel)
+        look = wi if to_world is None else np.einsum("pij,pkj->pki", to_world[sl], wi)
+        rad = env.lookup(look, lod)
+        lam_o = _gauss_lambda(o[:, None, :], mu, c)[:, 0]
+        lam_i = _gauss_lambda(wi, mu, c)
+        with np.errstate(invalid="ignore"):
+            g = (1.0 + lam_o[:, None]) / (1.0 + lam_o[:, None] + lam_i)
+        # Light from below the geometric plane is blocked by the height field itself (a shadow
+        # ray going down always hits it), as in the microfacet module's G2.
+        g = np.where(np.isfinite(lam_i) & np.isfinite(lam_o[:, None]) & (wi[..., 2] > 0.0), g,
+                     0.0)
+        wgt = area * g
+        if f0 is not None:
+            f = np.asarray(f0, np.float64).reshape(-1, nc)[sl]
+            fr = f[:, None, :] + (1.0 - f[:, None, :]) * (
+                1.0 - np.clip(dot, 0.0, 1.0))[..., None] ** 5
+            rad = rad * fr
+        den = area.sum(axis=1)
+        ok = den > 1e-300
+        out[sl] = np.einsum("pk,pkc->pc", wgt, rad) / np.where(ok, den, 1.0)[:, None]
+        if not np.all(ok):
+            bad = np.flatnonzero(~ok) + s0
+            out[bad] = env_specular(env, wo[bad], mean[bad], cov[bad], n,
+                                    to_world=None if to_world is None else to_world[bad])
+    return out
+
+
 def _lights_without_quads(scene, method):
     if any(light.type == "quad" for light in scene.lights):
         raise PrefilterError(f"method {method!r}: quad lights are not supported; expected "
@@ -175,14 +246,15 @@ def _lights_without_quads(scene, method):
     return scene.light_set()
 
 
-def _render_env(scene, settings, meso: bool, name: str) -> np.ndarray:
+def _render_env(scene, settings, meso: bool, name: str, shadowed: bool = False) -> np.ndarray:
     from prefilter.render.pipeline import render_samples
 
     lights = _lights_without_quads(scene, name)
     env = scene_environment(scene)
     sh = sh9_project(env) if env is not None else np.zeros((9, 3))
     return render_samples(scene, settings,
-                          lambda g, _u: shade_leadr_env(scene, g, env, sh, lights, meso=meso),
+                          lambda g, _u: shade_leadr_env(scene, g, env, sh, lights, meso=meso,
+                                                        shadowed=shadowed),
                           stratified=settings.spp > 1, desc=name)
 
 
@@ -203,6 +275,12 @@ def _render_irradiance(scene, settings, meso: bool, name: str) -> np.ndarray:
 def render_leadr_env(scene, settings) -> np.ndarray:
     """The ``leadr-env`` method (environment, point and directional lights)."""
     return _render_env(scene, settings, True, "leadr-env")
+
+
+def render_leadr_env_shadowed(scene, settings) -> np.ndarray:
+    """``leadr-env-shadowed``: ``leadr-env`` with self-shadowing in the environment specular
+    (the paper's Algorithm 1, NumPy path; diffuse and delta lights as ``leadr-env``)."""
+    return _render_env(scene, settings, True, "leadr-env-shadowed", shadowed=True)
 
 
 def render_leadr_env_naive(scene, settings) -> np.ndarray:
