@@ -64,13 +64,20 @@ def open_viewer(driver, url: str, timeout: float = 60.0) -> None:
         raise PrefilterError(f"viewer at {url} failed to load: {msg}")
 
 
-def render_linear(driver, method: str = "ltc", precision: str = "f32") -> np.ndarray:
+def render_linear(driver, method: str = "ltc", precision: str = "f32", *, split=None,
+                  method_right: str = "ltc"):
     """Linear radiance ``(H, W, 3)`` float32 of the open viewer's scene (row 0 at the top) and
-    the coverage mask ``(H, W)`` (alpha = 1 where a ray hit an object)."""
+    the coverage mask ``(H, W)`` (alpha = 1 where a ray hit an object).
+
+    ``split``: fraction of the width (from the left) drawn by ``method``, the rest by
+    ``method_right`` (the page's split view); ``None`` draws ``method`` everywhere."""
     size = driver.execute_script("const c = window.prefilterViewer.viewer.camera;"
                                  "return [c.width, c.height];")
+    opts = {"method": method, "precision": precision}
+    if split is not None:
+        opts.update(split=float(split), methodRight=method_right)
     b64 = driver.execute_script("return window.prefilterViewer.renderLinear(arguments[0]);",
-                                {"method": method, "precision": precision})
+                                opts)
     a = np.frombuffer(base64.b64decode(b64), "<f4").reshape(size[1], size[0], 4)
     return a[..., :3].copy(), a[..., 3] > 0.5
 

@@ -81,10 +81,13 @@ window.prefilterViewer = {
   })(),
   get viewer() { return viewer; },
   // linear radiance (base64 float32 RGBA, row 0 at the top) of `method` at the scene camera
+  // (opts: method, precision, split = fraction of the width drawn by `method`, methodRight)
   renderLinear(opts = {}) {
     const P = viewer.params;
     const keep = {...P, precision: viewer.precision};
-    Object.assign(P, {methodLeft: opts.method || 'ltc', methodRight: opts.method || 'ltc', split: -1});
+    const m = opts.method || 'ltc';
+    Object.assign(P, {methodLeft: m, methodRight: opts.methodRight || m,
+                      split: opts.split === undefined ? -1 : opts.split});
     viewer.precision = opts.precision || 'f32';
     const px = viewer.renderLinear(opts.width, opts.height);
     viewer.precision = keep.precision; delete keep.precision;
