@@ -23,12 +23,19 @@ import click
               help="Worker processes (rows are fitted independently).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
               help="Output .npz (default: the table shipped with the package).")
+@click.option("--objective", default="density", show_default=True,
+              type=click.Choice(["density", "quads"]),
+              help="density: fit |p - q|^power; quads: then refit each row on quad-light "
+                   "integrals (the acceptance test's relative error, docs/ltc.md).")
+@click.option("--power", default=0.5, show_default=True, type=click.FloatRange(0.1, 4.0),
+              help="Exponent k of the density objective integral |p - q|^k.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def bake_ltc_iso(res, seed, n_fit, processes, out, quiet):
+def bake_ltc_iso(res, seed, n_fit, processes, out, objective, power, quiet):
     """Fit the isotropic GGX LTC table (resumable: rerun the same command after a kill)."""
     from prefilter.ltc.fit_iso import FitSettings, bake_table
 
-    settings = FitSettings(res_theta=res, res_alpha=res, n_fit=n_fit, seed=seed)
+    settings = FitSettings(res_theta=res, res_alpha=res, n_fit=n_fit, seed=seed,
+                           objective=objective, power=power)
     t0 = time.perf_counter()
     path = bake_table(out, settings, processes=processes, progress=not quiet)
     click.echo(f"wrote {path} ({res}x{res}) in {time.perf_counter() - t0:.1f} s")
