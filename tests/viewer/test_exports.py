@@ -113,8 +113,8 @@ def test_export_folder(tmp_path):
 
 
 @pytest.mark.parametrize("change, field", [
-    (lambda d: d["lights"].append({"type": "point", "position": [0, 1, 0], "intensity": 1}),
-     "lights[1]"),
+    (lambda d: d["lights"].append({**d["lights"][0], "texture": {"procedural": "noise",
+                                                                  "size": 16}}), "lights[1]"),
     (lambda d: d["objects"][1]["material"].update(
         color_map={"procedural": "noise", "size": 16}), "objects[1].material.color_map"),
 ])

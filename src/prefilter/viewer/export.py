@@ -67,16 +67,17 @@ def _check_supported(scene) -> None:
     if len(scene.objects) > MAX_OBJECTS:
         raise PrefilterError(f"objects: the viewer draws at most {MAX_OBJECTS} objects, got "
                              f"{len(scene.objects)}")
-    quads = 0
+    count = {"quad": 0, "point": 0, "directional": 0}
     for i, light in enumerate(scene.lights):
-        if light.type != "quad" or light.texture is not None:
+        if light.type == "environment" or getattr(light, "texture", None) is not None:
             what = "textured quad" if light.type == "quad" else light.type
-            raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad lights "
-                                 f"only, got a {what} light")
-        quads += 1
-    if quads > MAX_QUADS:
-        raise PrefilterError(f"lights: the viewer draws at most {MAX_QUADS} quad lights, got "
-                             f"{quads}")
+            raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad, point and "
+                                 f"directional lights, got a {what} light")
+        count[light.type] += 1
+    for kind, n in count.items():
+        if n > MAX_QUADS:
+            raise PrefilterError(f"lights: the viewer draws at most {MAX_QUADS} {kind} lights, "
+                                 f"got {n}")
     for i, obj in enumerate(scene.objects):
         for k in ("height_map", "color_map"):
             if getattr(obj.material, k) is not None:
@@ -105,11 +106,16 @@ def viewer_scene(scene, map_index=None) -> dict:
             row.update(n=o.pole.tolist(), t=o.axis_x.tolist(),
                        b=np.cross(o.axis_x, o.pole).tolist(), size=[0.0, 0.0], radius=o.radius)
         objs.append(row)
+    ls = scene.light_set()
     quads = [{"vertices": q.vertices.tolist(), "normal": q.normal.tolist(),
-              "radiance": q.radiance.tolist()} for q in scene.light_set().quads]
+              "radiance": q.radiance.tolist()} for q in ls.quads]
+    points = [{"position": np.asarray(p.position, float).tolist(),
+               "intensity": np.asarray(p.intensity, float).tolist()} for p in ls.points]
+    dirs = [{"direction": np.asarray(d.direction, float).tolist(),
+             "irradiance": np.asarray(d.irradiance, float).tolist()} for d in ls.directionals]
     return {"camera": {"origin": c.origin.tolist(), "target": c.target.tolist(),
                        "up": c.up.tolist(), "fov": c.fov, "width": c.width, "height": c.height},
-            "objects": objs, "lights": quads}
+            "objects": objs, "lights": quads, "points": points, "directionals": dirs}
 
 
 class _Atlas:

@@ -36,8 +36,9 @@ def _camera(width, height):
 
 #: The pixel-match scenes: a flat anisotropic plane, the default scene (Gaussian-bump plane and
 #: an anisotropic sphere), a brushed plane (anisotropic normal distribution) and a light that
-#: crosses the plane seen by a close sphere (horizon clipping everywhere).
-SCENES = ("flat", "bumps-sphere", "brushed", "horizon")
+#: crosses the plane seen by a close sphere (horizon clipping everywhere), the default scene with
+#: a point and a directional light added.
+SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta")
 
 
 def scene(name: str, width: int = 160, height: int = 120) -> dict:
@@ -59,6 +60,12 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
                             {"type": "sphere", "center": [0.55, 0.35, -0.3], "radius": 0.35,
                              "uv_scale": [4, 2], "material": {"alpha": 0.2, "base_color": 0.2,
                                                               "f0": 0.9}}]}
+    if name == "delta":
+        sc = default_scene(width, height)
+        sc["lights"] += [{"type": "point", "position": [-1.0, 1.2, 0.5], "intensity": 1.5},
+                         {"type": "directional", "direction": [0.3, -1.0, -0.4],
+                          "irradiance": [0.4, 0.3, 0.2]}]
+        return sc
     raise PrefilterError(f"scene: expected one of {', '.join(SCENES)}, got {name!r}")
 
 

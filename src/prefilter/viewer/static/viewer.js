@@ -176,6 +176,17 @@ export class Viewer {
       this._u('uQuadN', 'uniform3fv', quads.flatMap(q => q.normal));
       this._u('uQuadL', 'uniform3fv', quads.flatMap(q => q.radiance));
     }
+    const pts = S.points || [], dirs = S.directionals || [];
+    this._u('uNumPoints', 'uniform1i', pts.length);
+    this._u('uNumDirs', 'uniform1i', dirs.length);
+    if (pts.length) {
+      this._u('uPointP', 'uniform3fv', pts.flatMap(p => p.position));
+      this._u('uPointI', 'uniform3fv', pts.flatMap(p => p.intensity));
+    }
+    if (dirs.length) {
+      this._u('uDirD', 'uniform3fv', dirs.flatMap(p => p.direction));
+      this._u('uDirE', 'uniform3fv', dirs.flatMap(p => p.irradiance));
+    }
     this._u('uMethodLeft', 'uniform1i', METHODS.indexOf(P.methodLeft));
     this._u('uMethodRight', 'uniform1i', METHODS.indexOf(P.methodRight));
     this._u('uSplit', 'uniform1f', P.split < 0 ? width + 1 : P.split * width);

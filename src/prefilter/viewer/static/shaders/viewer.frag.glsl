@@ -25,6 +25,9 @@ uniform vec3 uMatBase[MAX_OBJECTS], uMatF0[MAX_OBJECTS];
 uniform ivec4 uMatMap[MAX_OBJECTS];       // normal chain (first level, levels), slope chain
 uniform int uNumQuads;
 uniform vec3 uQuadV[4 * MAX_QUADS], uQuadN[MAX_QUADS], uQuadL[MAX_QUADS];
+uniform int uNumPoints, uNumDirs;
+uniform vec3 uPointP[MAX_QUADS], uPointI[MAX_QUADS];   // point lights: position, intensity
+uniform vec3 uDirD[MAX_QUADS], uDirE[MAX_QUADS];       // directional: direction of travel, irradiance
 uniform int uMethodLeft, uMethodRight;    // methods left / right of the split
 uniform float uSplit;                     // split position in pixels from the left
 uniform int uLinear;                      // 1: linear radiance out (float target), 0: display
@@ -176,6 +179,47 @@ vec3 shadeQuads(vec3 pos, vec3 ts, vec3 bs, vec3 ns, mat3 Minv, vec3 base, vec3 
     return L;
 }
 
+// GGX(ax, ay) with height-correlated Smith masking and Schlick Fresnel, cosine-weighted, plus
+// Lambert: prefilter.render.shading.brdf_cos (Walter et al. 2007 eq. 20; Heitz 2014 eq. 99)
+float ggxLambda(vec3 w, float ax, float ay) {
+    float a2 = ((ax * w.x) * (ax * w.x) + (ay * w.y) * (ay * w.y)) / max(w.z * w.z, 1e-30);
+    return a2 / (1.0 + sqrt(1.0 + a2)) / 2.0;
+}
+
+vec3 brdfCos(vec3 wo, vec3 wi, float ax, float ay, vec3 base, vec3 f0) {
+    if (!(wi.z > 0.0)) return vec3(0.0);
+    vec3 h = normalize(wo + wi);
+    float spec = 0.0;
+    if (wo.z > 0.0 && h.z > 0.0) {
+        float t = (h.x / ax) * (h.x / ax) + (h.y / ay) * (h.y / ay) + h.z * h.z;
+        float D = 1.0 / (PI * ax * ay * t * t);
+        spec = D / (1.0 + ggxLambda(wo, ax, ay) + ggxLambda(wi, ax, ay)) / (4.0 * wo.z);
+    }
+    float c = clamp(dot(wi, h), 0.0, 1.0);
+    vec3 F = f0 + (1.0 - f0) * pow(1.0 - c, 5.0);
+    return base / PI * wi.z + F * spec;
+}
+
+// point and directional lights: the BRDF evaluated directly (shading.shade_delta_lights)
+vec3 shadeDelta(vec3 pos, vec3 ts, vec3 bs, vec3 ns, vec3 wo, float ax, float ay, vec3 base,
+                vec3 f0) {
+    vec3 L = vec3(0.0);
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumPoints) break;
+        vec3 d = uPointP[q] - pos;
+        float d2 = max(dot(d, d), 1e-30);
+        vec3 w = d / sqrt(d2);
+        L += brdfCos(wo, vec3(dot(w, ts), dot(w, bs), dot(w, ns)), ax, ay, base, f0)
+             * uPointI[q] / d2;
+    }
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumDirs) break;
+        vec3 w = -uDirD[q];
+        L += brdfCos(wo, vec3(dot(w, ts), dot(w, bs), dot(w, ns)), ax, ay, base, f0) * uDirE[q];
+    }
+    return L;
+}
+
 vec3 shade(Hit h, vec3 view, int method) {
     int k = h.id;
     ivec4 map = uMatMap[k];
@@ -221,14 +265,18 @@ vec3 shade(Hit h, vec3 view, int method) {
         ax = ay = alphaTotal(min(sqrt(ax * ay), 1.0), alphaMeso(1.0));
     }
     vec3 wo = localView(view, ts, bs, ns);
-    if (method == METHOD_ANISO || method == METHOD_MULTISCALE_ANISO) {
+    bool aniso = method == METHOD_ANISO || method == METHOD_MULTISCALE_ANISO;
+    // the isotropic methods shade delta lights with the isotropic alpha they give the table
+    float ai = sqrt(ax * ay);
+    vec3 Ld = shadeDelta(h.p, ts, bs, ns, wo, aniso ? ax : ai, aniso ? ay : ai, base, f0);
+    if (aniso) {
         vec3 w = normalize(vec3(wo.xy, max(wo.z, 1e-4)));
         ltcAnisoLookup(w, clamp(ax, 1e-4, 1.0), clamp(ay, 1e-4, 1.0), Minv, mag, f5);
     } else {
         ltcIsoLookup(wo, sqrt(ax * ay), Minv, mag, f5);
     }
     vec3 spec = f0 * (mag - f5) + f5;
-    return shadeQuads(h.p, ts, bs, ns, Minv, base, spec);
+    return Ld + shadeQuads(h.p, ts, bs, ns, Minv, base, spec);
 }
 
 // display only (the Python renderer does not draw emitters): the nearest quad light in front of
