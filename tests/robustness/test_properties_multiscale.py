@@ -11,8 +11,10 @@ from prefilter.multiscale import (
     alpha_meso,
     alpha_meso_exact,
     alpha_total,
+    convolution_grid,
     convolve_samples,
     fit_alpha_ml,
+    fit_polynomial,
     mean_resultant_length,
     sample_ltc_iso,
 )
@@ -115,3 +117,29 @@ def test_multiscale_rejects_bad_input():
     expect_error(lambda: fit_alpha_ml(np.array([[[0.0, 0.0, -1.0]] * 3])), "m")
     expect_error(lambda: fit_alpha_ml(np.array([[[0.0, 0.0, 3.0]] * 3])), "m")
     expect_error(lambda: fit_alpha_ml(np.zeros((3, 2))), "m")
+
+
+@settings(max_examples=N // 6)
+@given(st.lists(alpha01, min_size=2, max_size=3, unique=True),
+       st.lists(alpha01, min_size=2, max_size=3, unique=True), st.integers(0, 2**31))
+def test_convolution_grid_and_fits(ami, ame, seed):
+    grid = convolution_grid(ami, ame, 512, seed)
+    for k in ("alpha_ml", "mrl", "below"):
+        assert grid[k].shape == (len(ami), len(ame)) and np.all(np.isfinite(grid[k]))
+    assert np.all((grid["below"] >= 0) & (grid["below"] <= 1)) and np.all(grid["mrl"] <= 1)
+    if len(ami) * len(ame) >= 4:
+        for form in ("ours", "paper"):
+            fit = fit_polynomial(grid, form)
+            assert np.all(np.isfinite(fit["coeffs"]))
+
+
+def test_fit_polynomial_rejects_bad_grids():
+    grid = convolution_grid([0.1, 0.5], [0.1, 0.5], 256, 0)
+    # a non-dict or a grid with fewer nodes than coefficients: was KeyError / scipy's TypeError
+    expect_error(lambda: fit_polynomial({"alpha_micro": [0.1]}), "grid")
+    expect_error(lambda: fit_polynomial(dict(grid, alpha_ml=grid["alpha_ml"][:1])),
+                 "grid['alpha_ml']")
+    small = convolution_grid([0.1], [0.1, 0.5], 64, 0)
+    expect_error(lambda: fit_polynomial(small), "grid['alpha_ml']")
+    expect_error(lambda: fit_polynomial(grid, "cubic"), "form")
+    expect_error(lambda: convolution_grid([0.1, 1.5], [0.1], 64), "alpha_micro")

@@ -206,8 +206,17 @@ def fit_polynomial(grid: dict, form: str = "ours") -> dict:
     dict with ``coeffs`` (4,), ``sse`` (sum of squared errors in alpha over the grid), ``rmse``,
     ``max_abs`` and ``max_rel`` (relative to the fitted alphas).
     """
-    A, B = np.meshgrid(grid["alpha_micro"], grid["alpha_meso"], indexing="ij")
-    y = grid["alpha_ml"]
+    if not isinstance(grid, dict) or any(k not in grid for k in ("alpha_micro", "alpha_meso",
+                                                                 "alpha_ml")):
+        raise PrefilterError("grid: expected the dict returned by convolution_grid (keys "
+                             "alpha_micro, alpha_meso, alpha_ml)")
+    ami = _as_alpha(grid["alpha_micro"], "grid['alpha_micro']").reshape(-1)
+    ame = _as_alpha(grid["alpha_meso"], "grid['alpha_meso']").reshape(-1)
+    y = as_float_array(grid["alpha_ml"], "grid['alpha_ml']")
+    if y.shape != (ami.size, ame.size) or y.size < 4:
+        raise PrefilterError(f"grid['alpha_ml']: expected shape ({ami.size}, {ame.size}) with at "
+                             f"least 4 nodes (4 coefficients), got {y.shape}")
+    A, B = np.meshgrid(ami, ame, indexing="ij")
     a, b, y = A.ravel(), B.ravel(), y.ravel()
     if form == "paper":
         X = np.stack([a * a, a, b, a * b], -1)
