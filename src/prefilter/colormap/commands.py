@@ -1,5 +1,6 @@
 """``prefilter bake colormap``: bake a pre-convolved colour-map table (a thin layer over
-:func:`prefilter.colormap.table.prefilter_table`)."""
+:func:`prefilter.colormap.table.prefilter_table`, computed in checkpointed chunks of rows by
+:func:`bake_table` so that a killed bake of a large table resumes)."""
 
 from __future__ import annotations
 
@@ -29,6 +30,37 @@ def load_colormap_image(path, *, srgb: bool = True):
     return np.ascontiguousarray(c)
 
 
+def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigma=None,
+               out, chunk: int = 32):
+    """:func:`~prefilter.colormap.table.prefilter_table`, computed ``chunk`` sigma rows at a time
+    with each chunk checkpointed in ``<out>.parts/`` (a large table takes minutes; a killed bake
+    resumes). The rows are the same computation as ``prefilter_table`` (same calls, same order),
+    so the table is bit-identical to it."""
+    import numpy as np
+
+    from prefilter._io import Checkpoints, array_digest
+    from prefilter.colormap.table import ColormapTable, gaussian_operator, prefilter_table
+
+    # two rows validate the arguments and resample the map exactly as the full table does
+    head = prefilter_table(colormap, value_range, sigma_max, size=size, edge=edge, n_sigma=2)
+    c = head.table[0]
+    lo, hi = head.value_range
+    n_sigma = size if n_sigma is None else n_sigma
+    sig = np.linspace(0.0, head.sigma_max, n_sigma) / (hi - lo)
+    ck = Checkpoints(out, {"format": "colormap-rows", "colormap_sha256": array_digest({"c": c}),
+                           "range": [lo, hi], "sigma_max": head.sigma_max, "edge": head.edge,
+                           "size": size, "n_sigma": n_sigma, "chunk": chunk})
+    rows = []
+    for k, start in enumerate(range(0, n_sigma, chunk)):
+        if not ck.done(k):
+            ck.save(k, rows=np.stack([gaussian_operator(size, s, head.edge) @ c
+                                      for s in sig[start:start + chunk]]))
+        rows.append(ck.load(k)["rows"])
+    table = np.concatenate(rows)
+    table[0] = c  # the sigma = 0 row is the colour map itself, bit for bit (as prefilter_table)
+    return ColormapTable(table, (lo, hi), head.sigma_max, head.edge), ck
+
+
 @click.command("colormap")
 @click.argument("colormap", type=click.Path(exists=True, dir_okay=False))
 @click.option("--sigma-max", type=float, required=True,
@@ -55,13 +87,14 @@ def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear,
 
     from prefilter._io import atomic_path
     from prefilter.colormap.glsl import glsl_snippet
-    from prefilter.colormap.table import prefilter_table
 
     c = load_colormap_image(colormap, srgb=not linear)
-    table = prefilter_table(c, value_range, sigma_max, size=size, edge=edge, n_sigma=n_sigma)
+    table, ck = bake_table(c, value_range, sigma_max, size=size, edge=edge, n_sigma=n_sigma,
+                           out=out)
     digest = hashlib.sha256(Path(colormap).read_bytes()).hexdigest()
     out, side = table.save(out, meta=dict(source=str(colormap), source_sha256=digest,
                                           source_encoding="linear" if linear else "srgb"))
+    ck.clear()
     meta = table.metadata()
     click.echo(f"wrote {out} ({table.n_sigma} x {table.n_mean} x {table.table.shape[2]}) and "
                f"{side.name}")
