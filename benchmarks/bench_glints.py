@@ -3,6 +3,8 @@
     python benchmarks/bench_glints.py                 # queries + bake scaling (a few minutes)
     python benchmarks/bench_glints.py --ranks         # also ratio/error per map and rank 8-64
     python benchmarks/bench_glints.py --size 256      # map size of the query benchmark
+    python benchmarks/bench_glints.py --frames        # only: glints frame time at 3 distances
+    python benchmarks/bench_glints.py --frames --direct   # also glints-direct, speed-up, FLIP
 
 The machine is shared, so every ratio is computed from timings of the same run; the absolute
 numbers are only indicative. Footprint "width" is 2 sigma_p (texels).
@@ -106,6 +108,40 @@ def bench_ranks(size, tmp, ranks=(8, 16, 32, 64), kinds=("gaussian", "brushed", 
                   flush=True)
 
 
+def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=False, lights="point"):
+    """Whole-frame time of ``glints`` at several distances in one run (the measurement scene of
+    :mod:`prefilter.glints.render`: 64 x 48 pixels, 128^2 map, footprint ~ distance). Rounds are
+    interleaved over the distances so that load changes hit all of them; best of ``repeat``."""
+    from prefilter.glints.render import measurement_scene
+    from prefilter.render.metrics import flip
+    from prefilter.render.pipeline import render
+    from prefilter.render.scene import load_scene
+
+    scenes = [load_scene(measurement_scene(d, kind, lights=lights)) for d in distances]
+    for sc in scenes:
+        render(sc, "glints")  # bake (disk cache) and compile outside the timing
+    best = [np.inf] * len(scenes)
+    for _ in range(repeat):
+        for i, sc in enumerate(scenes):
+            t = time.perf_counter()
+            render(sc, "glints")
+            best[i] = min(best[i], time.perf_counter() - t)
+    print(f"glints frame time ({lights} light, {kind} 128^2 map, 64x48 pixels, best of {repeat}, "
+          f"NUMBA threads {os.environ.get('NUMBA_NUM_THREADS', 'all')})")
+    for d, t in zip(distances, best):
+        line = f"  distance {d:4g}: glints {t * 1e3:8.1f} ms"
+        if direct:
+            sc = scenes[distances.index(d)]
+            t0 = time.perf_counter()
+            img_d = render(sc, "glints-direct")
+            td = time.perf_counter() - t0
+            fl = flip(render(sc, "glints"), img_d).mean
+            line += f", glints-direct {td * 1e3:9.1f} ms, speed-up {td / t:6.1f}x, FLIP {fl:.3f}"
+        print(line, flush=True)
+    print(f"max/min over distances: {max(best) / min(best):.2f} (target <= 1.5)")
+    return best
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=128)
@@ -115,7 +151,13 @@ def main():
     ap.add_argument("--kinds", default="gaussian,brushed,flakes,scratches")
     ap.add_argument("--scaling", default="64,128,256")
     ap.add_argument("--map", default=None, help="use this baked .npz for the query benchmark")
+    ap.add_argument("--frames", action="store_true", help="only the frame-time benchmark")
+    ap.add_argument("--direct", action="store_true", help="--frames: also glints-direct + FLIP")
+    ap.add_argument("--lights", default="point", help="--frames: point, quad or environment")
     a = ap.parse_args()
+    if a.frames:
+        bench_frames(direct=a.direct, lights=a.lights)
+        return
     with tempfile.TemporaryDirectory() as tmp:
         if a.map:
             gm = load(a.map)

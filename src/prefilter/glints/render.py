@@ -43,9 +43,13 @@ PIXEL_SIGMA = 0.5
 #: Bake settings of the render cache. The intrinsic roughness is twice Yan et al.'s 0.005 so that
 #: the NDF pixels (pitch 1/128) resolve the intrinsic lobe: with 0.005 a pixel is 1.6 std wide
 #: and the pixel averages differ from the direct P-NDF's point values at every sharp glint.
-BAKE_SETTINGS = dict(rank=16, ndf_res=128, block=16, support=0.5, stride0=4,
+#: The images cover the whole disk of projected half vectors (support 1, 256 pixels at the same
+#: pitch): with support 0.5 every half vector tilted more than 27 degrees per axis had a zero NDF
+#: (a fifth of the pixels of the measurement scene, FLIP 0.36 -> 0.21 at mid distance).
+BAKE_SETTINGS = dict(rank=16, ndf_res=256, block=16, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0)
 _SURFACES: dict = {}
+_BY_ID: dict = {}
 
 
 def cache_dir() -> Path:
@@ -62,8 +66,14 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
     from prefilter.glints.bake import bake
     from prefilter.glints.store import load
 
-    nm = as_normal_map(normal_map)
+    # the renderer passes the same (cached) texture array every frame: skip validating and
+    # hashing it again (~20 ms per frame for a 128^2 map)
     st = dict(BAKE_SETTINGS, **(settings or {}))
+    ident = (id(normal_map), direct, json.dumps(st, sort_keys=True), str(cache_dir()))
+    hit = _BY_ID.get(ident)
+    if hit is not None and hit[0] is normal_map:
+        return hit[1]
+    nm = as_normal_map(normal_map)
     H, W = nm.shape[:2]
     st.setdefault("cell", min(64, H, W))
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
@@ -78,6 +88,8 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
                 path.parent.mkdir(parents=True, exist_ok=True)
                 bake(nm, path, progress=progress, **st)
             _SURFACES[mem] = surface(load(path), nm, check=False)
+    if isinstance(normal_map, np.ndarray):
+        _BY_ID[ident] = (normal_map, _SURFACES[mem])
     return _SURFACES[mem]
 
 
@@ -313,10 +325,14 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
     return out
 
 
-#: Environment lights: SG samples per shading sample and lobes of the fit (:func:`fit_sg`).
+#: Environment lights: SG samples per shading sample, lobes of the fit (:func:`fit_sg`) and the
+#: epsilon of the compact support that sets the NDF blur (relative to the lobe's peak). The blur
+#: trades noise for bias: on the measurement scene (flakes, sigma_p 6 / 20, 8 samples) eps 0.1
+#: cuts the noise 10x / 3.5x but the mean is 25 % low; 0.5: 6x / 2.6x, 9 % low; 0.9: 3.4x / 2x,
+#: 2 % low (docs/glints-part2.md).
 ENV_SAMPLES = 8
 ENV_LOBES = 32
-ENV_EPS = 0.1
+ENV_EPS = 0.9
 _SG_FITS: dict = {}
 
 
@@ -342,7 +358,10 @@ def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
     t, b, n = frame
     out = np.zeros((len(wo), 3))
     for j, light in enumerate(env):
-        mu, lam, p = environment_sgs(light)
+        try:
+            mu, lam, p = environment_sgs(light)
+        except PrefilterError as exc:
+            raise PrefilterError(f"{light.image.where}: {exc}") from None
         pl = np.stack([p @ t.T, p @ b.T, p @ n.T], -1).transpose(1, 0, 2)  # (N, K, 3)
         uj = None if u is None else u[:, j * 3 * ENV_SAMPLES:(j + 1) * 3 * ENV_SAMPLES]
         if uj is not None and uj.shape[1] < 3 * ENV_SAMPLES:
@@ -427,11 +446,52 @@ def render_glints_reference(scene, settings) -> np.ndarray:
 # ------------------------------------------------------------------------------- measurements
 
 
+def measurement_environment() -> Path:
+    """An equirectangular ``.npy`` environment (64 x 128, written once to the cache directory):
+    a dim sky (0.3), a dark ground (0.05) and a bright window (20) of +-12 degrees around the
+    direction that the measurement scenes' plane mirrors towards the camera (``theta`` 59 degrees
+    from ``+y``, ``phi`` 270 degrees, i.e. towards ``-z``)."""
+    from prefilter.glints.envlight import equirect_directions
+
+    path = cache_dir() / "measurement-environment-v1.npy"
+    if not path.exists():
+        d = equirect_directions(64, 128)
+        img = np.where(d[..., 1:2] > 0, 0.3, 0.05) * np.ones(3)
+        w = np.array([0.0, 0.6, -1.0]) / np.linalg.norm([0.0, 0.6, -1.0])
+        img[d @ w > np.cos(np.radians(12.0))] = 20.0
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp.npy")
+        np.save(tmp, img)
+        os.replace(tmp, path)
+    return path
+
+
 def measurement_scene(distance: float, kind: str = "flakes", size: int = 128, width: int = 64,
-                      height: int = 48) -> dict:
-    """A glinty plane seen from ``distance`` (camera and point light scaled together, so the
-    image is the same apart from the footprint size, ~proportional to the distance)."""
+                      height: int = 48, lights: str = "point") -> dict:
+    """A glinty plane seen from ``distance`` (camera and light scaled together, so the image is
+    the same apart from the footprint size, ~proportional to the distance).
+
+    ``lights``: ``"point"``; ``"quad"`` (a square of side ``0.16 distance`` at the point light's
+    place, facing the plane's centre, with the point light's on-axis intensity); or
+    ``"environment"`` (:func:`measurement_environment`)."""
     d = float(distance)
+    if lights == "point":
+        light = [{"type": "point", "position": [0, 0.6 * d, -d], "intensity": [5 * d * d] * 3}]
+    elif lights == "quad":
+        c = np.array([0.0, 0.6 * d, -d])
+        nrm = -c / np.linalg.norm(c)
+        a = np.array([1.0, 0.0, 0.0])
+        b = np.cross(nrm, a)
+        h = 0.08 * d
+        v = [c - h * a - h * b, c + h * a - h * b, c + h * a + h * b, c - h * a + h * b]
+        if np.dot(np.cross(v[1] - v[0], v[2] - v[0]), nrm) < 0:
+            v = v[::-1]
+        light = [{"type": "quad", "vertices": [list(map(float, x)) for x in v],
+                  "radiance": [5.0 / (4 * 0.08**2)] * 3}]
+    elif lights == "environment":
+        light = [{"type": "environment", "image": str(measurement_environment())}]
+    else:
+        raise PrefilterError(f"lights: expected 'point', 'quad' or 'environment', got {lights!r}")
     return {"camera": {"origin": [0, 0.6 * d, d], "target": [0, 0, 0], "up": [0, 1, 0],
                        "fov": 30, "width": width, "height": height},
             "objects": [{"type": "plane", "center": [0, 0, 0], "normal": [0, 1, 0],
@@ -441,12 +501,11 @@ def measurement_scene(distance: float, kind: str = "flakes", size: int = 128, wi
                                       "f0": [0.9, 0.9, 0.9],
                                       "normal_map": {"procedural": kind, "size": size,
                                                      "seed": 1}}}],
-            "lights": [{"type": "point", "position": [0, 0.6 * d, -d],
-                        "intensity": [5 * d * d] * 3}]}
+            "lights": light}
 
 
 def measure(distances=(0.5, 2.0, 8.0), kind: str = "flakes", size: int = 128,
-            ref_spp: int = 64) -> list[dict]:
+            ref_spp: int = 64, lights: str = "point") -> list[dict]:
     """Frame times (best of 2) of ``glints`` and ``glints-direct`` at each distance in one run,
     FLIP between them and against ``glints-reference`` (``ref_spp``)."""
     import time
@@ -457,7 +516,7 @@ def measure(distances=(0.5, 2.0, 8.0), kind: str = "flakes", size: int = 128,
 
     rows = []
     for d in distances:
-        sc = load_scene(measurement_scene(d, kind, size))
+        sc = load_scene(measurement_scene(d, kind, size, lights=lights))
         render(sc, "glints")  # bake / compile outside the timing
         t = {}
         img = {}
@@ -531,10 +590,11 @@ def ndf_errors(kinds=("gaussian", "brushed", "flakes", "scratches"), size: int =
     return rows
 
 
-if __name__ == "__main__":  # python -m prefilter.glints.render [frames KIND | ndf]
+if __name__ == "__main__":  # python -m prefilter.glints.render [frames KIND [LIGHTS] | ndf]
     import sys
 
     if len(sys.argv) > 1 and sys.argv[1] == "ndf":
         ndf_errors()
     else:
-        measure(kind=sys.argv[2] if len(sys.argv) > 2 else "flakes")
+        measure(kind=sys.argv[2] if len(sys.argv) > 2 else "flakes",
+                lights=sys.argv[3] if len(sys.argv) > 3 else "point")
