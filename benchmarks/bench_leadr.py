@@ -17,6 +17,10 @@ and naive mip-mapped normal mapping vs the displaced height field, 16 to 64 texe
 ``--acceptance-env`` the same under the procedural environment (add ``--no-shadowing`` for a
 reference without self-shadowing, the model of the simplified algorithms).
 
+Render methods (``--render``): wall time of ``leadr-env``, ``leadr-env-shadowed``,
+``leadr-irradiance`` and the naive methods on a 160 x 90 plane + sphere scene with a Gaussian
+height map under ``procedural_env(128)``.
+
 Throughput (``--throughput``): shading points per second per light type and grid size on 2^16
 points. No assertions.
 """
@@ -111,6 +115,37 @@ def throughput(p: int = 1 << 16) -> None:
         print(f"| {name} | {p / t:,.0f} |", flush=True)
 
 
+METHODS = ("leadr-env", "leadr-env-shadowed", "leadr-env-naive", "leadr-irradiance",
+           "leadr-irradiance-naive")
+
+
+def render_times(width: int = 160, height: int = 90) -> None:
+    import tempfile
+    from pathlib import Path
+
+    from prefilter.render import load_scene, render
+    from prefilter.render.methods import available, register
+
+    for name in METHODS:
+        if name not in available():  # until prefilter.render.methods lists them
+            register(name, "prefilter.leadr.render:render_" + name.replace("-", "_"))
+    tmp = Path(tempfile.mkdtemp())
+    np.save(tmp / "sky.npy", procedural_env(128))
+    mat = {"alpha": 0.1, "f0": 0.04, "base_color": [0.3, 0.25, 0.2],
+           "height_map": {"procedural": "gaussian", "size": 256, "rms_slope": 0.4, "scale": 1.0}}
+    scene = load_scene({
+        "camera": {"origin": [0, 1.2, 4], "target": [0, 0.3, 0], "fov": 40, "width": width,
+                   "height": height},
+        "objects": [{"type": "plane", "size": [20, 20], "uv_scale": [40, 40], "material": mat},
+                    {"type": "sphere", "center": [0, 0.6, 0], "radius": 0.6,
+                     "uv_scale": [8, 4], "material": mat}],
+        "lights": [{"type": "environment", "image": "sky.npy"}]}, base_dir=tmp)
+    print("| method | ms per frame | Mpixel / s |\n|---|---|---|")
+    for method in METHODS:
+        _, t = _timed(lambda: render(scene, method), reps=2)
+        print(f"| {method} | {1e3 * t:.0f} | {width * height / t / 1e6:.3f} |", flush=True)
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--throughput", action="store_true")
@@ -121,9 +156,12 @@ if __name__ == "__main__":
     ap.add_argument("--no-shadowing", action="store_true")
     ap.add_argument("--convergence", action="store_true",
                     help="N x N vs N = 128 (prefilter.leadr.acceptance.convergence)")
+    ap.add_argument("--render", action="store_true", help="render-method frame times")
     ap.add_argument("--points", type=int, default=None)
     a = ap.parse_args()
-    if a.acceptance_env:
+    if a.render:
+        render_times()
+    elif a.acceptance_env:
         from prefilter.leadr.acceptance import env_table, run_env
 
         print(env_table(run_env(shadowing=not a.no_shadowing, log=lambda row: None)))
