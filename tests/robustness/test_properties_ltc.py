@@ -182,6 +182,18 @@ def test_aniso_lookup_gives_an_ltc(aniso, t, p, ax, ay):
     assert polygon_integral(M, CUBE).sum() == pytest.approx(1.0, abs=1e-6)
 
 
+@settings(max_examples=N)
+@given(theta_deg, st.floats(0.0, 2 * np.pi), alpha, alpha, polygons(), st.booleans())
+@example(89.9, 0.0, 1e-3, 1.0, np.array([[-1e7, -1e7, 1.0], [1e7, -1e7, 1.0], [1e7, 1e7, 1.0],
+                                          [-1e7, 1e7, 1.0]])[::-1], False)  # the sky
+def test_aniso_shade_in_unit_interval(aniso, t, p, ax, ay, P, two_sided):
+    th = np.radians(t)
+    wo = np.array([np.sin(th) * np.cos(p), np.sin(th) * np.sin(p), np.cos(th)])
+    e = aniso.shade(wo, ax, ay, P, two_sided=two_sided)
+    # magnitude (albedo <= 1) times an integral of a normalised distribution (<= 1)
+    assert np.isfinite(e) and 0.0 <= e <= 1.0 + 1e-3
+
+
 # -- invalid input -------------------------------------------------------------------------------
 
 
