@@ -202,7 +202,7 @@ class Checkpoints:
         if self.dir.exists():
             try:
                 same = meta.read_text() == self.key
-            except OSError:
+            except (OSError, ValueError):  # missing, or damaged (not UTF-8)
                 same = False
             if not same:
                 shutil.rmtree(self.dir)

@@ -591,3 +591,19 @@ def test_cli_reports_a_corrupt_table_in_one_line(originals, tmp_path):
     assert r.returncode == 2, r.stderr
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "bad.npz" in lines[0] and "Traceback" not in r.stderr
+
+
+def test_toml_scene_is_the_same_scene_as_json(tmp_path):
+    """The TOML reader gives the scene the equivalent JSON document describes."""
+    from prefilter.render.scene import load_scene
+
+    toml = load_scene(_make_scene_toml(tmp_path))
+    as_json = {"camera": SCENE["camera"], "objects": [dict(SCENE["objects"][0])],
+               "lights": [SCENE["lights"][1]]}
+    ref = load_scene(as_json)
+    assert toml.to_dict() == ref.to_dict()
+    a, b = toml.objects[0], ref.objects[0]
+    assert a.material.alpha_x == b.material.alpha_x == 0.3
+    np.testing.assert_array_equal(a.material.base_color, b.material.base_color)
+    np.testing.assert_array_equal(a.size, [4.0, 4.0])
+    np.testing.assert_array_equal(toml.lights[0].intensity, [2.0, 2.0, 2.0])
