@@ -123,7 +123,8 @@ def render_times(width: int = 160, height: int = 90) -> None:
     import tempfile
     from pathlib import Path
 
-    from prefilter.render import load_scene, render
+    from prefilter.render import load_scene
+    from prefilter.render.pipeline import render
     from prefilter.render.methods import available, register
 
     for name in METHODS:

@@ -139,6 +139,8 @@ def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int
     if env is not None:
         if shadowed:
             out += env_specular_shadowed(env, wo, mean, cov, n_grid, f0=f0, to_world=rot)
+        elif np.all(f0 == f0[:, :1]):
+            out += env_specular(env, wo, mean, cov, n_grid, f0=f0[:, 0], to_world=rot)
         elif np.any(f0 != 0.0):
             # Schlick is linear in f0: F = f0 * 1 + (1 - f0) * (1 - c)^5.
             one = env_specular(env, wo, mean, cov, n_grid, f0=1.0, to_world=rot)
