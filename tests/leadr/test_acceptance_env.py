@@ -4,7 +4,7 @@ non-centred Beckmann microsurface; slow: the far-field table and the grid conver
 import numpy as np
 import pytest
 
-from prefilter.leadr.acceptance import (CONVERGENCE_CASES, PAIRS, SURFACES, convergence,
+from prefilter.leadr.acceptance import (CONVERGENCE_CASES, SURFACES, convergence,
                                         diffuse_exact, env_specular_shadowed, run_env)
 from prefilter.leadr.envmap import EnvMap, procedural_env, sh9_project, texel_directions
 from prefilter.leadr.shading import diffuse_sh, env_specular

@@ -16,9 +16,9 @@ grid against the paper's N = 128 grid (error and time per N).
 
 from __future__ import annotations
 
-import numpy as np
-
 import time
+
+import numpy as np
 
 from prefilter.leadr.displaced import (cell_moments, displaced_env_radiance, displaced_radiance,
                                        naive_env_radiance, naive_radiance,
@@ -26,9 +26,9 @@ from prefilter.leadr.displaced import (cell_moments, displaced_env_radiance, dis
 from prefilter.leadr.envmap import (EnvMap, procedural_env, sh9_irradiance, sh9_project,
                                     texel_directions)
 from prefilter.leadr.maps import shading_stats
-from prefilter.microfacet import Beckmann
 from prefilter.leadr.shading import (diffuse_directional, diffuse_sh, env_specular,
                                      grid_normals, point_light)
+from prefilter.microfacet import Beckmann
 from prefilter.texture import height_map
 
 SURFACES = {
