@@ -74,3 +74,15 @@ def test_deterministic_and_validated():
         displaced_env_radiance(h, 8, 0, 0, WO, np.ones((4, 8, 3)))
     with pytest.raises(PrefilterError, match="wo"):
         displaced_env_radiance(h, 8, 0, 0, [1.0, 0.0, 0.0], env)
+
+
+def test_rotated_environment_points():
+    # local z (the flat surface's normal) is map +x: E = pi (1.5 + 2/3 * 1) for L = 1.5 + w_x
+    from prefilter.leadr.displaced import displaced_env_points
+
+    rot = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]])  # columns: local axes
+    d, _ = texel_directions(64, 128)
+    env = EnvMap(np.repeat(1.5 + d[..., :1] + 0.0 * d[..., 2:], 3, -1))
+    x, y = np.meshgrid(np.arange(8.0), np.arange(8.0))
+    r = displaced_env_points(np.zeros((16, 16)), x, y, WO, env, rot=rot, spp=16, specular=False)
+    assert r[:, 0].mean() == pytest.approx(1.5 + 2.0 / 3.0, rel=0.01)

@@ -254,18 +254,20 @@ def _frames(n):
     return t, np.cross(n, t)
 
 
-def _env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, visible=None):
+def _env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, visible=None,
+                   rot=None):
     """MIS estimates ``(P, C)`` of ``integral L(wi) f(wo, wi) <n, wi> V(p, wi) dwi`` at points with
-    unit normals ``n (P, 3)``: ``spp / 2`` micro-BRDF samples (Beckmann VNDF or cosine) and
-    ``spp / 2`` environment samples, balance heuristic. ``visible(idx, wi) -> bool`` tests
-    shadow rays of point ``idx`` (``None``: no shadowing)."""
+    unit normals ``n (P, 3)`` seen from ``wo (3,)`` or ``(P, 3)``: ``spp / 2`` micro-BRDF samples
+    (Beckmann VNDF or cosine) and ``spp / 2`` environment samples, balance heuristic.
+    ``visible(idx, wi) -> bool`` tests shadow rays of point ``idx`` (``None``: no shadowing);
+    ``rot (3, 3)`` maps local directions to the map's coordinates (``None``: identity)."""
     p = len(n)
     half = max(1, spp // 2)
     t, b = _frames(n)
     loc = lambda w, q: np.stack([np.sum(w * t[q], -1), np.sum(w * b[q], -1),  # noqa: E731
                                  np.sum(w * n[q], -1)], -1)
     idx = np.repeat(np.arange(p), half)
-    lo = loc(np.broadcast_to(wo, (idx.size, 3)), idx)
+    lo = loc(np.broadcast_to(wo, (p, 3))[idx], idx)
     model = Beckmann.isotropic(np.sqrt(2.0) * sigma_b) if specular else None
     # BRDF samples, in each point's micro frame.
     u = rng.random((idx.size, 2))
@@ -277,11 +279,14 @@ def _env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, vis
         li_b = np.stack([r * np.cos(ph), r * np.sin(ph), np.sqrt(np.maximum(1 - u[:, 0], 0))], -1)
     wi_b = li_b[:, :1] * t[idx] + li_b[:, 1:2] * b[idx] + li_b[:, 2:] * n[idx]
     wi_e, _ = sampler.sample(rng.random((idx.size, 3)))
+    if rot is not None:
+        wi_e = wi_e @ rot  # map -> local (rot is orthogonal)
     li_e = loc(wi_e, idx)
     all_idx = np.concatenate([idx, idx])
     wi = np.concatenate([wi_b, wi_e])
     li = np.concatenate([li_b, li_e])
     lo2 = np.concatenate([lo, lo])
+    wmap = wi if rot is None else wi @ rot.T
     ok = (lo2[:, 2] > 1e-9) & (li[:, 2] > 1e-9)
     f = np.zeros(len(wi))
     pb = np.zeros(len(wi))
@@ -291,7 +296,7 @@ def _env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, vis
     else:
         f[ok] = albedo / np.pi * li[ok, 2]
         pb[ok] = li[ok, 2] / np.pi
-    pdf = pb + sampler.pdf(wi)
+    pdf = pb + sampler.pdf(wmap)
     val = np.where(ok, f / np.where(pdf > 0, pdf, 1.0), 0.0)
     if visible is not None:
         cand = val > 0
@@ -300,10 +305,65 @@ def _env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, vis
         val = val * vis
     rad = np.zeros((len(wi), env.levels[0].shape[2]))
     nz = val > 0
-    rad[nz] = env.lookup(wi[nz], 0.0) * val[nz, None]
+    rad[nz] = env.lookup(wmap[nz], 0.0) * val[nz, None]
     out = np.zeros((p, rad.shape[1]))
     np.add.at(out, all_idx, rad)
     return out / half
+
+
+def displaced_env_points(height, x, y, wo, env, *, rot=None, spp: int = 8,
+                         sigma_b: float = 0.1, albedo: float = 1.0, specular: bool = True,
+                         shadowing: bool = True, step: float = 0.1, seed: int = 0) -> np.ndarray:
+    """Radiance ``(P, C)`` of the displaced surface along the rays that cross the mean plane at
+    texel coordinates ``x, y (P,)`` towards the viewer ``wo (3,)`` or ``(P, 3)`` (local frame, z
+    = mean-plane normal), lit by ``env`` (``rot (3, 3)``: local -> map coordinates).
+
+    Each ray is marched from above the highest bump down to its first hit (masking by the
+    geometry); the hit's reflected radiance is estimated with ``spp`` MIS samples (micro BRDF and
+    environment, balance heuristic), each with a shadow ray against the height field
+    (``shadowing``). Single scattering; seeded.
+    """
+    from prefilter.leadr.envmap import EnvMap
+
+    if not isinstance(env, EnvMap):
+        raise PrefilterError(f"env: expected a prefilter.leadr.envmap.EnvMap, got {type(env)}")
+    h = np.ascontiguousarray(as_float_array(height, "height", ndim_min=2))
+    x = np.asarray(x, np.float64).ravel()
+    y = np.asarray(y, np.float64).ravel()
+    wo = np.broadcast_to(as_directions(wo, "wo"), (x.size, 3))
+    if np.any(wo[:, 2] <= 0.05):
+        raise PrefilterError("wo: expected views above the mean plane (z > 0.05), got "
+                             f"min z = {wo[:, 2].min():.3g}")
+    spp = as_positive_int(spp, "spp", lo=2)
+    rng = np.random.default_rng(seed)
+    hmax, hmin = float(h.max()), float(h.min())
+    # Start each ray above every height, on the line through the mean-plane point along wo.
+    t_up = (hmax + 1e-6) / wo[:, 2]
+    ox, oy, oz = x + t_up * wo[:, 0], y + t_up * wo[:, 1], np.full(x.shape, hmax + 1e-6)
+    d = np.ascontiguousarray(-wo)
+    dn = step / float(np.min(np.maximum(np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2]))))
+    max_steps = int(4 * (h.shape[0] + h.shape[1]) / step) + 16
+    t = _march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
+               np.ascontiguousarray(d[:, 2]), hmin, hmax + 1e-3, dn, max_steps)
+    hit = np.isfinite(t)
+    px, py, pz = (ox + t * d[:, 0])[hit], (oy + t * d[:, 1])[hit], (oz + t * d[:, 2])[hit]
+    n = _normals(_gradient(h, px, py))
+
+    def visible(q, wi):
+        eps = 1e-4
+        sx, sy, sz = px[q] + eps * wi[:, 0], py[q] + eps * wi[:, 1], pz[q] + eps * wi[:, 2]
+        dn_i = step / np.maximum(np.hypot(wi[:, 0], wi[:, 1]), np.abs(wi[:, 2]))
+        # one step length for all rays: the smallest (safe) one
+        ts = _march(h, sx, sy, sz, np.ascontiguousarray(wi[:, 0]),
+                    np.ascontiguousarray(wi[:, 1]), np.ascontiguousarray(wi[:, 2]),
+                    hmin - 1.0, hmax, float(dn_i.min()), max_steps)
+        return ~np.isfinite(ts)
+
+    out = np.zeros((x.size, env.levels[0].shape[2]))
+    out[hit] = _env_estimates(env, EnvSampler(env), wo[hit], n, spp, rng, sigma_b, albedo,
+                              specular, visible if shadowing else None,
+                              None if rot is None else np.asarray(rot, np.float64))
+    return out
 
 
 def displaced_env_radiance(height, block: int, i0: int, j0: int, wo, env, *, k: int = 48,
@@ -312,51 +372,20 @@ def displaced_env_radiance(height, block: int, i0: int, j0: int, wo, env, *, k: 
                            seed: int = 0) -> np.ndarray:
     """Radiance ``(C,)`` towards ``wo`` of a block of the displaced surface lit by the
     environment ``env`` (an :class:`~prefilter.leadr.envmap.EnvMap` whose z axis is the mean
-    plane's normal), per projected area of the block.
+    plane's normal), per projected area of the block: the mean of
+    :func:`displaced_env_points` over ``k x k`` parallel view rays through the block.
 
-    ``k x k`` parallel view rays find the first hit (masking by the geometry); at each hit
-    ``spp`` directions estimate the reflected radiance by multiple importance sampling (balance
-    heuristic) of the micro BRDF (Beckmann visible normals or cosine) and of the environment
-    (luminance-weighted texels), each with a shadow ray against the height field
-    (``shadowing``). Single scattering: no interreflections. Seeded: same inputs, same bytes.
+    At each first hit (masking by the geometry) ``spp`` directions estimate the reflected
+    radiance by multiple importance sampling (balance heuristic) of the micro BRDF (Beckmann
+    visible normals or cosine) and of the environment (luminance-weighted texels), each with a
+    shadow ray against the height field (``shadowing``). Single scattering: no
+    interreflections. Seeded: same inputs, same bytes.
     """
-    from prefilter.leadr.envmap import EnvMap
-
-    if not isinstance(env, EnvMap):
-        raise PrefilterError(f"env: expected a prefilter.leadr.envmap.EnvMap, got {type(env)}")
-    h = np.ascontiguousarray(as_float_array(height, "height", ndim_min=2))
-    wo = as_directions(wo, "wo")
-    if wo[2] <= 0.05:
-        raise PrefilterError(f"wo: expected a view above the mean plane (z > 0.05), got {wo}")
     k = as_positive_int(k, "k")
-    spp = as_positive_int(spp, "spp", lo=2)
-    rng = np.random.default_rng(seed)
     x, y = _block_points(i0, j0, block, k)
-    hmax, hmin = float(h.max()), float(h.min())
-    t_up = (hmax + 1e-6) / wo[2]
-    ox, oy, oz = x + t_up * wo[0], y + t_up * wo[1], np.full(x.shape, hmax + 1e-6)
-    d = -wo
-    dn = step / max(np.hypot(d[0], d[1]), abs(d[2]))
-    max_steps = int(4 * (h.shape[0] + h.shape[1]) / step) + 16
-    t = _march(h, ox, oy, oz, np.full(x.shape, d[0]), np.full(x.shape, d[1]),
-               np.full(x.shape, d[2]), hmin, hmax + 1e-3, dn, max_steps)
-    hit = np.isfinite(t)
-    px, py, pz = (ox + t * d[0])[hit], (oy + t * d[1])[hit], (oz + t * d[2])[hit]
-    n = _normals(_gradient(h, px, py))
-
-    def visible(q, wi):
-        eps = 1e-4
-        sx, sy, sz = px[q] + eps * wi[:, 0], py[q] + eps * wi[:, 1], pz[q] + eps * wi[:, 2]
-        dn_i = step / np.maximum(np.hypot(wi[:, 0], wi[:, 1]), np.abs(wi[:, 2]))
-        # _march takes one step length: group by nothing, use the smallest (safe) step.
-        ts = _march(h, sx, sy, sz, np.ascontiguousarray(wi[:, 0]),
-                    np.ascontiguousarray(wi[:, 1]), np.ascontiguousarray(wi[:, 2]),
-                    hmin - 1.0, hmax, float(dn_i.min()), max_steps)
-        return ~np.isfinite(ts)
-
-    est = _env_estimates(env, EnvSampler(env), wo, n, spp, rng, sigma_b, albedo, specular,
-                         visible if shadowing else None)
-    return est.sum(axis=0) / x.size
+    return displaced_env_points(height, x, y, wo, env, spp=spp, sigma_b=sigma_b, albedo=albedo,
+                                specular=specular, shadowing=shadowing, step=step,
+                                seed=seed).mean(axis=0)
 
 
 def normal_mapped_env_radiance(height, block: int, i0: int, j0: int, wo, env, *, k: int = 48,
