@@ -137,16 +137,25 @@ def _variant(name: str, **kw):
 
 STUDY = {
     "ltc": _variant("ltc"),
-    "ms": _variant("ltc-multiscale"),
+    # the registered ltc-multiscale (its default footprint: the ramped bias "ramp2" below)
+    "ms-default": _variant("ltc-multiscale"),
+    # the paper's footprint: one isotropic mip level, no bias
+    "ms": _variant("ltc-multiscale", lod_bias=0.0, lod_bias_start=None),
     "ms-aniso": _variant("ltc-multiscale-aniso"),
-    "ms+ewa": _variant("ltc-multiscale", anisotropic_footprint=True),
+    "ms+ewa": _variant("ltc-multiscale", anisotropic_footprint=True, lod_bias=0.0,
+                       lod_bias_start=None),
     "ms-aniso+ewa": _variant("ltc-multiscale-aniso", anisotropic_footprint=True),
-    "ms+bias1": _variant("ltc-multiscale", lod_bias=1.0),
+    "ms+bias1": _variant("ltc-multiscale", lod_bias=1.0, lod_bias_start=None),
     "ms-aniso+bias1": _variant("ltc-multiscale-aniso", lod_bias=1.0),
+    # the bias ramps in above 4 texels per pixel: clip(lod - 2, 0, 1 or 2) levels
+    "ms+ramp1": _variant("ltc-multiscale", lod_bias=1.0, lod_bias_start=2.0),
+    "ms+ramp2": _variant("ltc-multiscale", lod_bias=2.0, lod_bias_start=2.0),
 }
 
 
-def study(table, maps, spp: int = 1024, seed: int = 0, width: int = 96, height: int = 60):
+def study(table, maps, spp: int = 1024, seed: int = 0, width: int = 96, height: int = 60,
+          variants=None):
+    runs = {m: STUDY[m] for m in (variants or STUDY)}
     k = 160.0 / height
     jit = jitter_offsets(8)
     rows = []
@@ -163,7 +172,7 @@ def study(table, maps, spp: int = 1024, seed: int = 0, width: int = 96, height: 
                        "flicker_flat_ltc": flicker(np.stack([render(flat, "ltc", table=table,
                                                                     jitter=tuple(j))
                                                              for j in jit]))}
-                for label, run in STUDY.items():
+                for label, run in runs.items():
                     img = run(sc, table)
                     e = rmse(img, ref)
                     row[label] = {"rmse": float(np.sqrt(max(e * e - noise**2, 0.0))),
@@ -172,12 +181,12 @@ def study(table, maps, spp: int = 1024, seed: int = 0, width: int = 96, height: 
                                                                for j in jit]))}
                 rows.append(row)
                 print(json.dumps(row), flush=True)
-    print("\nmap alpha dist noise | RMSE " + " ".join(STUDY) + " | FLIP | flicker (+ flat ltc)")
+    print("\nmap alpha dist noise | RMSE " + " ".join(runs) + " | FLIP | flicker (+ flat ltc)")
     for r in rows:
         print(f"{r['map']} {r['alpha']} {r['distance']} {r['noise']:.4f} | "
-              + " ".join(f"{r[m]['rmse']:.4f}" for m in STUDY) + " | "
-              + " ".join(f"{r[m]['flip']:.3f}" for m in STUDY) + " | "
-              + " ".join(f"{r[m]['flicker']:.4f}" for m in STUDY)
+              + " ".join(f"{r[m]['rmse']:.4f}" for m in runs) + " | "
+              + " ".join(f"{r[m]['flip']:.3f}" for m in runs) + " | "
+              + " ".join(f"{r[m]['flicker']:.4f}" for m in runs)
               + f" {r['flicker_flat_ltc']:.4f}")
     return rows
 
@@ -205,6 +214,8 @@ def main() -> None:
     ap.add_argument("--study", action="store_true", help="aniso / footprint study (no timing)")
     ap.add_argument("--maps", default="brushed,gaussian")
     ap.add_argument("--spp", type=int, default=1024)
+    ap.add_argument("--variants", default=None,
+                    help="comma-separated study variants (default: all of STUDY)")
     args = ap.parse_args()
     try:
         table = GGXTable.load(args.table)
@@ -212,7 +223,8 @@ def main() -> None:
         print(f"skipped: no LTC table ({exc})")
         return
     if args.study:
-        rows = study(table, args.maps.split(","), spp=args.spp)
+        rows = study(table, args.maps.split(","), spp=args.spp,
+                     variants=args.variants.split(",") if args.variants else None)
         if args.out:
             from prefilter._io import save_json_atomic
 

@@ -16,7 +16,7 @@ import pytest
 import prefilter.multiscale  # noqa: F401  (registers ltc-multiscale)
 from prefilter.ltc.ltc import LTC
 from prefilter.ltc.table import GGXTable
-from prefilter.multiscale.render import multiscale_attributes
+from prefilter.multiscale.render import LOD_BIAS, LOD_BIAS_START, multiscale_attributes
 from prefilter.render import gbuffer, load_scene
 from prefilter.render.lighttex import split_lights
 from prefilter.render.pipeline import render, surface_attributes
@@ -53,7 +53,8 @@ def _attributes(sc, g, method):
         a = surface_attributes(sc, g, filtered=True)
         a["alpha"] = np.sqrt(a["alpha_x"] * a["alpha_y"])
         return a
-    return multiscale_attributes(sc, g)
+    # the registered method's footprint (its ramped LOD bias)
+    return multiscale_attributes(sc, g, lod_bias=LOD_BIAS, lod_bias_start=LOD_BIAS_START)
 
 
 def monte_carlo_image(sc, method: str, table, n: int, seed: int = 0):
