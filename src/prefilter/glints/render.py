@@ -36,7 +36,7 @@ import numpy as np
 from tqdm import tqdm
 
 from prefilter.errors import PrefilterError
-from prefilter.glints.brdf import GlintSurface, glint_brdf_cos, surface
+from prefilter.glints.brdf import FALLBACK_TRUNCATION, GlintSurface, glint_brdf_cos, surface
 from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
 
 PIXEL_SIGMA = 0.5
@@ -296,10 +296,13 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
             sp = np.broadcast_to(sigma, m.shape)[m]
         base = np.asarray(mat.base_color, dtype=np.float64)
         f0 = np.asarray(mat.f0, dtype=np.float64)
+        # glints: the fast truncated fallback below the finest level; the direct method and the
+        # reference keep the exact P-NDF
+        trunc = FALLBACK_TRUNCATION if mode == "compressed" else None
         for w, e in incoming:
             wi = _local(w[m], t[m], b[m], n[m])
             wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
-            spec = glint_brdf_cos(surf, c, sp, wo[m], wi, f0)
+            spec = glint_brdf_cos(surf, c, sp, wo[m], wi, f0, fallback_truncation=trunc)
             diff = base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]
             out[m] += (spec + diff) * e[m] if np.ndim(e) == 2 else (spec + diff) * e
         frame = (t[m], b[m], n[m])
