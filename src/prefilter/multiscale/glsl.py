@@ -7,7 +7,8 @@ normals) and ``alpha_total`` combines micro and meso roughness (eq. 7 form). The
 4097 nodes uniform in ``x = sqrt(3 (1 - r))``; the shader reads the same nodes from a float32
 texture of ``ALPHA_MESO_WIDTH`` texels per row (:func:`alpha_meso_nodes`) and interpolates them
 the same way. ``alpha_total`` is our refit (:data:`prefilter.multiscale.FIT_COEFFS`) in closed
-form. :func:`alpha_meso_twin` is the shader's ``alphaMeso`` in NumPy.
+form. The normal-map footprint bias of each method's default (``lod_bias``, ``lod_bias_start``)
+is read from its signature. :func:`alpha_meso_twin` is the shader's ``alphaMeso`` in NumPy.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import numpy as np
 from prefilter._io import atomic_path
 
 __all__ = ["ALPHA_MESO_WIDTH", "GLSL", "alpha_meso_nodes", "alpha_meso_twin", "export_all",
-           "glsl_source"]
+           "footprint_bias", "glsl_source"]
 
 #: Texels per row of the ``alpha_meso`` node texture (WebGL2 guarantees 2048).
 ALPHA_MESO_WIDTH = 64
@@ -37,6 +38,16 @@ float alphaMeso(float r) {{
     float x = sqrt(clamp(3.0 * (1.0 - r), 0.0, 1.0)) * float(MS_NODES - 1);
     int k = min(int(floor(x)), MS_NODES - 2);
     return mix(msNode(k), msNode(k + 1), x - float(k));
+}}
+
+// The methods' default footprint bias: the normal map is read 2^s coarser, s = bias, or, with a
+// ramp start (>= 0), s = clamp(log2(max(major, 1)) - start, 0, bias) for a footprint whose major
+// axis is `major` texels (prefilter.multiscale.render._bias_scale).
+const float MS_LOD_BIAS = {bias!r}, MS_LOD_START = {start!r};        // ltc-multiscale
+const float MSA_LOD_BIAS = {abias!r}, MSA_LOD_START = {astart!r};    // ltc-multiscale-aniso
+float msLodScale(float major, float bias, float start) {{
+    if (start < 0.0) return exp2(bias);
+    return exp2(clamp(log2(max(major, 1.0)) - start, 0.0, bias));
 }}
 
 // eqs. 6-7, our refit: alpha^2 = a^2 + b^2 + ab (c0 + p (c1 + c2 p) + c3 ab), p = a + b
@@ -60,14 +71,35 @@ def alpha_meso_nodes() -> np.ndarray:
     return out.reshape(rows, ALPHA_MESO_WIDTH)
 
 
+def footprint_bias(fn) -> tuple[float, float]:
+    """``(lod_bias, lod_bias_start)`` defaults of a render method's signature (``start = -1``
+    for a constant bias; ``(0, -1)`` for methods without the options)."""
+    import inspect
+
+    params = inspect.signature(fn).parameters
+
+    def default(name, fallback):
+        p = params.get(name)
+        return fallback if p is None or p.default is inspect.Parameter.empty else p.default
+
+    start = default("lod_bias_start", None)
+    return float(default("lod_bias", 0.0)), -1.0 if start is None else float(start)
+
+
 def glsl_source() -> str:
-    """:data:`GLSL` with the node count and :data:`~prefilter.multiscale.FIT_COEFFS` filled in."""
+    """:data:`GLSL` with the node count, :data:`~prefilter.multiscale.FIT_COEFFS` and the
+    default footprint biases of ``render_multiscale`` / ``render_multiscale_aniso`` filled in."""
+    from prefilter.multiscale.aniso import render_multiscale_aniso
     from prefilter.multiscale.convolution import FIT_COEFFS
     from prefilter.multiscale.meso import _A_NODES
+    from prefilter.multiscale.render import render_multiscale
 
     c0, c1, c2, c3 = FIT_COEFFS
     n = len(_A_NODES)
-    return GLSL.format(n=n, last=n - 1, w=ALPHA_MESO_WIDTH, c0=c0, c1=c1, c2=c2, c3=c3)
+    bias, start = footprint_bias(render_multiscale)
+    abias, astart = footprint_bias(render_multiscale_aniso)
+    return GLSL.format(n=n, last=n - 1, w=ALPHA_MESO_WIDTH, c0=c0, c1=c1, c2=c2, c3=c3,
+                       bias=bias, start=start, abias=abias, astart=astart)
 
 
 def alpha_meso_twin(nodes, r) -> np.ndarray:

@@ -78,17 +78,13 @@ def _check_supported(scene) -> None:
         if n > MAX_QUADS:
             raise PrefilterError(f"lights: the viewer draws at most {MAX_QUADS} {kind} lights, "
                                  f"got {n}")
-    for i, obj in enumerate(scene.objects):
-        for k in ("height_map", "color_map"):
-            if getattr(obj.material, k) is not None:
-                raise PrefilterError(f"objects[{i}].material.{k}: not supported by the viewer "
-                                     "(normal maps only)")
 
 
-def viewer_scene(scene, map_index=None) -> dict:
+def viewer_scene(scene, map_index=None, color_chain=None) -> dict:
     """The flat scene the page reads (``viewer.json`` field ``scene``; ``docs/viewer.md``).
 
-    ``map_index``: object index -> index into the manifest's ``maps`` (``-1``: no map).
+    ``map_index``: object index -> index into the manifest's ``maps`` (``-1``: no map);
+    ``color_chain``: object index -> ``[first level, levels, channels]`` of its colour map.
     """
     c = scene.camera
     objs = []
@@ -98,7 +94,8 @@ def viewer_scene(scene, map_index=None) -> dict:
                "uv_scale": o.uv_scale.tolist(),
                "material": {"alpha_x": m.alpha_x, "alpha_y": m.alpha_y,
                             "base_color": m.base_color.tolist(), "f0": m.f0.tolist(),
-                            "map": -1 if map_index is None else map_index.get(i, -1)}}
+                            "map": -1 if map_index is None else map_index.get(i, -1),
+                            "color": (color_chain or {}).get(i, [-1, 0, 0])}}
         if o.type == "plane":
             row.update(n=o.normal.tolist(), t=o.tangent.tolist(),
                        b=np.cross(o.normal, o.tangent).tolist(), size=o.size.tolist(), radius=0.0)
@@ -184,23 +181,35 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
     aniso_export.export_all(aniso, data)
     ms_glsl.export_all(data)
 
-    atlas, maps, map_index, seen = _Atlas(), [], {}, {}
+    atlas, maps, map_index, seen, colors = _Atlas(), [], {}, {}, {}
 
     def add_map(name: str, ref: TextureRef) -> int:
         key = ref._key()
         if key in seen:
             maps[seen[key]]["names"].append(name)
             return seen[key]
-        normals = ref.load()
-        maps.append({"name": name, "names": [name], "normals": atlas.add(MipChain(normals)),
-                     "slopes": atlas.add(slope_moments_chain(normals)),
-                     "size": list(normals.shape[:2])})
+        if ref.role == "height_map":
+            # slope moments, as the renderer's height-map mip chain; no normal chain
+            chain = ref.mip()
+            maps.append({"name": name, "names": [name], "normals": [-1, 0],
+                         "slopes": atlas.add(chain), "size": list(chain.shape[:2])})
+        else:
+            normals = ref.load()
+            maps.append({"name": name, "names": [name], "normals": atlas.add(MipChain(normals)),
+                         "slopes": atlas.add(slope_moments_chain(normals)),
+                         "size": list(normals.shape[:2])})
         seen[key] = len(maps) - 1
         return seen[key]
 
     for i, o in enumerate(scene.objects):
-        if o.material.normal_map is not None:
-            map_index[i] = add_map(f"scene: objects[{i}]", o.material.normal_map)
+        m = o.material
+        if m.normal_map is not None:  # normal maps take precedence over height maps
+            map_index[i] = add_map(f"scene: objects[{i}]", m.normal_map)
+        elif m.height_map is not None:
+            map_index[i] = add_map(f"scene: objects[{i}] (height)", m.height_map)
+        if m.color_map is not None:
+            chain = m.color_map.mip()
+            colors[i] = atlas.add(chain) + [int(chain.shape[2])]
     if builtin_maps:
         for name, spec in BUILTIN_MAPS.items():
             add_map(name, TextureRef("normal_map", spec, f"builtin {name}"))
@@ -224,7 +233,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
                   "height": max(1, -(-atlas.size // ATLAS_WIDTH)),
                   "levels": "levels_i32.bin", "n_levels": max(1, len(atlas.levels))},
         "maps": maps,
-        "scene": viewer_scene(scene, map_index),
+        "scene": viewer_scene(scene, map_index, colors),
     }
     save_json_atomic(data / "viewer.json", manifest)
     return out

@@ -37,8 +37,8 @@ def _camera(width, height):
 #: The pixel-match scenes: a flat anisotropic plane, the default scene (Gaussian-bump plane and
 #: an anisotropic sphere), a brushed plane (anisotropic normal distribution) and a light that
 #: crosses the plane seen by a close sphere (horizon clipping everywhere), the default scene with
-#: a point and a directional light added.
-SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta")
+#: a point and a directional light added, a height-mapped plane and a sphere with colour maps.
+SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured")
 
 
 def scene(name: str, width: int = 160, height: int = 120) -> dict:
@@ -65,6 +65,17 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
         sc["lights"] += [{"type": "point", "position": [-1.0, 1.2, 0.5], "intensity": 1.5},
                          {"type": "directional", "direction": [0.3, -1.0, -0.4],
                           "irradiance": [0.4, 0.3, 0.2]}]
+        return sc
+    if name == "textured":
+        noise = {"procedural": "noise", "size": 64, "seed": 3, "corr_length": 3, "sigma": 1.0}
+        sc = default_scene(width, height)
+        plane, sphere = sc["objects"]
+        del plane["material"]["normal_map"]
+        plane["material"].update(height_map={"procedural": "gaussian", "size": 128, "seed": 2,
+                                             "rms_slope": 0.3, "corr_length": 4},
+                                 base_color=0.3, color_map=dict(noise))
+        sphere["material"].update(normal_map=dict(BUILTIN_MAPS["flakes"]),
+                                  color_map=dict(noise, seed=4))
         return sc
     raise PrefilterError(f"scene: expected one of {', '.join(SCENES)}, got {name!r}")
 

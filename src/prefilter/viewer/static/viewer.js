@@ -169,6 +169,7 @@ export class Viewer {
       const mp = m.maps[k];
       return [mp.normals[0], mp.normals[1], mp.slopes[0], mp.slopes[1]];
     }));
+    this._u('uMatColor', 'uniform4iv', flat(o => [...(o.material.color || [-1, 0, 0]), 0]));
     const quads = S.lights.map(q => this._light(q));
     this._u('uNumQuads', 'uniform1i', quads.length);
     if (quads.length) {

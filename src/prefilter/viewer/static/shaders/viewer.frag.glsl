@@ -23,6 +23,7 @@ uniform vec2 uObjUV[MAX_OBJECTS];         // uv_scale
 uniform vec2 uMatAlpha[MAX_OBJECTS];      // alpha_x, alpha_y
 uniform vec3 uMatBase[MAX_OBJECTS], uMatF0[MAX_OBJECTS];
 uniform ivec4 uMatMap[MAX_OBJECTS];       // normal chain (first level, levels), slope chain
+uniform ivec4 uMatColor[MAX_OBJECTS];     // colour chain (first level, levels, channels)
 uniform int uNumQuads;
 uniform vec3 uQuadV[4 * MAX_QUADS], uQuadN[MAX_QUADS], uQuadL[MAX_QUADS];
 uniform int uNumPoints, uNumDirs;
@@ -131,15 +132,20 @@ void bilinearAdd(int level, vec2 uv, float wgt, inout vec4 A, inout vec4 B) {
     }
 }
 
-// isotropic trilinear lookup at lod = log2(major axis of the footprint in texels)
-void footprint(ivec2 chain, vec2 uv, vec4 dudv, out vec4 A, out vec4 B) {
-    A = vec4(0.0); B = vec4(0.0);
+// major axis of the footprint in texels of the chain's level 0 (texture.mip.footprint_axes)
+float footprintMajor(ivec2 chain, vec4 dudv) {
     ivec4 L0 = texelFetch(uLevels, ivec2(chain.x, 0), 0);
     float w0 = float(L0.z), h0 = float(L0.y);
     float j00 = dudv.x * w0, j01 = dudv.y * w0, j10 = dudv.z * h0, j11 = dudv.w * h0;
     float p = j00 * j00 + j01 * j01, r = j10 * j10 + j11 * j11, q = j00 * j10 + j01 * j11;
     float disc = sqrt(max(0.25 * (p - r) * (p - r) + q * q, 0.0));
-    float major = sqrt(0.5 * (p + r) + disc);
+    return sqrt(0.5 * (p + r) + disc);
+}
+
+// isotropic trilinear lookup at lod = log2(major axis of the footprint in texels)
+void footprint(ivec2 chain, vec2 uv, vec4 dudv, out vec4 A, out vec4 B) {
+    A = vec4(0.0); B = vec4(0.0);
+    float major = footprintMajor(chain, dudv);
     float n = float(chain.y);
     float lod = clamp(log2(max(major, 1.0)), 0.0, n - 1.0);
     if (chain.y > 1) {
@@ -236,7 +242,9 @@ vec3 shade(Hit h, vec3 view, int method) {
         vec3 cm = vec3(0.0);  // meso covariance (xx, yy, xy)
         if (map.z >= 0) {
             vec4 A, B;
-            footprint(map.zw, h.uv, h.dudv, A, B);
+            vec4 fp = h.dudv * msLodScale(footprintMajor(map.zw, h.dudv), MSA_LOD_BIAS,
+                                          MSA_LOD_START);
+            footprint(map.zw, h.uv, fp, A, B);
             mean = A.xy;
             cm = vec3(max(A.z - mean.x * mean.x, 0.0), max(A.w - mean.y * mean.y, 0.0),
                       B.x - mean.x * mean.y);
@@ -255,14 +263,29 @@ vec3 shade(Hit h, vec3 view, int method) {
         ay = min(sqrt(2.0 * l2), 1.0);
     } else if (map.x >= 0) {
         vec4 A, B;
-        footprint(map.xy, h.uv, h.dudv, A, B);
+        vec4 fp = h.dudv;
+        if (method == METHOD_MULTISCALE)
+            fp *= msLodScale(footprintMajor(map.xy, h.dudv), MS_LOD_BIAS, MS_LOD_START);
+        footprint(map.xy, h.uv, fp, A, B);
         shadingFrame(gt, gb, gn, A.xyz, ts, bs, ns);
         if (method == METHOD_MULTISCALE) {
             float am = alphaMeso(min(length(A.xyz), 1.0));
             ax = ay = alphaTotal(min(sqrt(ax * ay), 1.0), am);
         }
+    } else if (map.z >= 0) {
+        // a height map: its mean slope gives the normal (texture.slopes_to_normals); r = 1
+        vec4 A, B;
+        footprint(map.zw, h.uv, h.dudv, A, B);
+        shadingFrame(gt, gb, gn, vec3(-A.x, -A.y, 1.0), ts, bs, ns);
+        if (method == METHOD_MULTISCALE) ax = ay = alphaTotal(min(sqrt(ax * ay), 1.0), 0.0);
     } else if (method == METHOD_MULTISCALE) {
         ax = ay = alphaTotal(min(sqrt(ax * ay), 1.0), alphaMeso(1.0));
+    }
+    ivec4 cmap = uMatColor[k];
+    if (cmap.x >= 0) {  // a colour map multiplies base_color (footprint's mip level)
+        vec4 A, B;
+        footprint(cmap.xy, h.uv, h.dudv, A, B);
+        base *= cmap.z >= 3 ? A.rgb : vec3(A.r);
     }
     vec3 wo = localView(view, ts, bs, ns);
     bool aniso = method == METHOD_ANISO || method == METHOD_MULTISCALE_ANISO;
