@@ -259,3 +259,19 @@ def test_reflect_half_vector_reject_bad_vectors(bad):
     expect_error(lambda: reflect([0.0, 0.0, 1.0], bad), "m")
     expect_error(lambda: half_vector(bad, [0.0, 0.0, 1.0]), "wo")
     expect_error(lambda: half_vector([0.0, 0.0, 1.0], bad), "wi")
+
+
+@settings(max_examples=N // 3)
+@given(theta_deg, phi, mean_slope, covariance(), st.integers(0, 2**31))
+@example(89.9, 0.0, (0.0017, 0.0), np.diag([1e-10, 1e-10]), 0)  # albedo 0, G1 > 0: looped forever
+def test_beckmann_sample_lobe_terminates(t, p, mu, cov, seed):
+    b = Beckmann(mu, cov)
+    wo = direction(t, p)
+    try:
+        wi = b.sample_lobe(wo, 16, seed)
+    except PrefilterError as err:  # an empty lobe is refused, naming the view
+        assert "wo" in str(err)
+        assert b.albedo(wo) * 1e9 < 16 or b.G1(wo) == 0.0
+        return
+    assert wi.shape == (16, 3) and np.allclose(np.linalg.norm(wi, axis=-1), 1.0)
+    assert np.all(wi[:, 2] > 0.0)

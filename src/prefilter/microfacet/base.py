@@ -34,6 +34,10 @@ def half_vector(wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
     return np.where(safe, h / np.where(safe, n, 1.0), np.array([0.0, 0.0, 1.0]))
 
 
+#: Largest expected number of VNDF proposals :meth:`MicrofacetModel.sample_lobe` accepts to draw.
+_MAX_PROPOSALS = 1e9
+
+
 class MicrofacetModel:
     """Base class: Smith masking, the cosine-weighted BRDF, exact lobe sampling, albedo."""
 
@@ -152,6 +156,18 @@ class MicrofacetModel:
 
             raise PrefilterError(
                 f"wo: the lobe is empty (G1 = 0, wo = {wo} faces away from the mean surface)"
+            )
+        # Every proposal is accepted with probability albedo(wo) (E_vndf[G2 / G1]): a lobe whose
+        # reflections all leave below the horizon (albedo 0 with G1 > 0, e.g. a near-mirror mean
+        # surface tilted away from a grazing view) would loop forever.
+        alb = float(self.albedo(wo))
+        if not n / max(alb, 1e-300) <= _MAX_PROPOSALS:
+            from prefilter.errors import PrefilterError
+
+            raise PrefilterError(
+                f"wo: the lobe is empty or nearly so (albedo {alb:.3g} at wo = {wo}: reflections "
+                f"leave below the horizon); {n} samples would need ~{n / max(alb, 1e-300):.3g} "
+                f"proposals (limit {_MAX_PROPOSALS:.0e})"
             )
         out = []
         have = 0

@@ -384,7 +384,7 @@ class Beckmann(MicrofacetModel):
         fdisc = fb * fb - 4.0 * fa * fc
         sq = np.sqrt(np.maximum(fdisc, 0.0))
         qq_ = -0.5 * (fb + np.where(fb >= 0.0, sq, -sq))
-        with np.errstate(divide="ignore", invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             ra, rb = qq_ / fa, fc / qq_
         r_lo = np.where(np.isfinite(ra) & np.isfinite(rb), np.minimum(ra, rb), -np.inf)
         r_hi = np.where(np.isfinite(ra) & np.isfinite(rb), np.maximum(ra, rb), np.inf)
