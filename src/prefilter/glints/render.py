@@ -3,8 +3,16 @@
 A material's ``normal_map`` is the microstructure; its NDF over each pixel footprint replaces the
 GGX lobe (``alpha_x``/``alpha_y`` are ignored; the intrinsic roughness is the bake's). Shading is
 in the *geometric* frame (``x`` = tangent = ``+u``, ``y`` = ``+v``): the normal map enters only
-through the NDF. Diffuse: Lambert with ``base_color``. Point and directional lights only (quad and
-environment lights are rejected).
+through the NDF. Diffuse: Lambert with ``base_color``.
+
+Lights: point and directional (the BRDF at the light direction); untextured quads (``glints``:
+range queries over the light's half-vector footprint where it is small and well filled,
+:func:`quad_range`; elsewhere, and always for ``glints-direct`` / ``glints-reference``, multiple
+importance sampling of light and NDF samples, :func:`quad_mis`; diffuse by Lambert's polygon
+formula); environment maps (fitted by spherical Gaussians, :func:`environment_sgs`, sampled lobe
+by lobe; ``glints`` blurs the NDF over each lobe's compact epsilon-support by a range query,
+sec. 5.4). Equirectangular convention: :func:`prefilter.glints.envlight.equirect_directions`
+(row 0 = ``+y``, ``u = 0.25`` looks along ``+z``). Textured quads are rejected.
 
 Footprints: the pixel is a Gaussian of std ``PIXEL_SIGMA`` pixels; through the texel-space
 Jacobian ``J = diag(W, H) dudv`` it becomes an ellipse, approximated by the isotropic Gaussian of
