@@ -75,10 +75,13 @@ def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
         row[kn.RGH_COEF:kn.RGH_COEF + 4] = FIT_COEFFS if total == "fit" else PAPER_EQ7
         row[kn.RGH_MRL] = float(_mrl(np.array(a)))
         row[kn.RGH_EQ5:kn.RGH_EQ5 + 9] = (*PAPER_EQ5[0], *PAPER_EQ5[1])
-        row[kn.RGH_NSCALE] = 2.0 ** lod_bias
+        ramp = lod_bias_start is not None
+        if ramp and lod_bias_start < 0:
+            return None  # the kernel adds the ramped bias in LOD: exact for start >= 0 only
+        row[kn.RGH_NSCALE] = 1.0 if ramp else 2.0 ** lod_bias
         row[kn.RGH_BIAS] = lod_bias
-        row[kn.RGH_RAMP] = lod_bias_start is not None
-        row[kn.RGH_START] = 0.0 if lod_bias_start is None else float(lod_bias_start)
+        row[kn.RGH_RAMP] = ramp
+        row[kn.RGH_START] = float(lod_bias_start) if ramp else 0.0
     return rows, meso_table()
 
 

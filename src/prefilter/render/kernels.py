@@ -298,6 +298,12 @@ def _footprint_into(data, info, first, n_levels, stride, c, u, v, d00, d01, d10,
     ``info[first:first + n_levels]`` (``stride`` channels per texel) at ``uv = (u, v)``,
     Jacobian ``d..``: channels ``:c`` into ``out[k, :c]``."""
     lod = math.log2(max(_major_texels(info[first, 1], info[first, 2], d00, d01, d10, d11), 1.0))
+    _trilinear_into(data, info, first, n_levels, stride, c, u, v, lod, out, k)
+
+
+@njit_serial
+def _trilinear_into(data, info, first, n_levels, stride, c, u, v, lod, out, k):
+    """The trilinear read of :func:`_footprint_into` at a given ``lod`` (clamped)."""
     lod = min(max(lod, 0.0), n_levels - 1.0)
     for ch in range(c):
         out[k, ch] = 0.0
@@ -720,14 +726,16 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, ro
             t_n = mat_i[o, 0]
             t_h = mat_i[o, 1]
             if t_n >= 0:
+                first = tex[t_n, 0]
+                # the footprint scaled by 2^lod_bias (1 for ``ltc``), as MipChain.lookup_footprint
                 ns = rough[o, RGH_NSCALE]
-                if rough[o, RGH_RAMP] != 0.0:  # a bias that ramps in with the footprint
-                    f0_ = tex[t_n, 0]
-                    lod0 = math.log2(max(_major_texels(info[f0_, 1], info[f0_, 2], du00, du01,
-                                                       du10, du11), 1.0))
-                    ns = 2.0 ** min(max(lod0 - rough[o, RGH_START], 0.0), rough[o, RGH_BIAS])
-                _footprint_into(data, info, tex[t_n, 0], tex[t_n, 1], tex[t_n, 2], 3, u, v,
-                                du00 * ns, du01 * ns, du10 * ns, du11 * ns, tx, 0)
+                lod = math.log2(max(ns * _major_texels(info[first, 1], info[first, 2], du00,
+                                                       du01, du10, du11), 1.0))
+                if rough[o, RGH_RAMP] != 0.0:
+                    # a bias that ramps in with the footprint (start >= 0, so the scaled
+                    # footprint is > 1 texel wherever the bias is > 0: plain addition in LOD)
+                    lod += min(max(lod - rough[o, RGH_START], 0.0), rough[o, RGH_BIAS])
+                _trilinear_into(data, info, first, tex[t_n, 1], tex[t_n, 2], 3, u, v, lod, tx, 0)
                 m0, m1, m2 = tx[0, 0], tx[0, 1], tx[0, 2]
                 has_map = True
             elif t_h >= 0:
