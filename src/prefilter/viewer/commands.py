@@ -53,6 +53,11 @@ def view(scene, port, no_browser, iso_table, aniso_table):
     from prefilter.viewer.export import export_scene
     from prefilter.viewer.server import serve
 
+    import signal
+    import sys
+
+    # SIGTERM ends the server like Ctrl-C, so the temporary folder is removed
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
     tmp = tempfile.mkdtemp(prefix="prefilter-view-")
     try:
         export_scene(scene, tmp, **_load_tables(iso_table, aniso_table))
