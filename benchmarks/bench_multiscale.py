@@ -15,11 +15,13 @@ renders: their difference estimates the reference's own noise, which is reported
 errors (``noise / error`` must stay below 0.1 for the numbers to count) and removed from the
 squared RMSE (``RMSE_debiased^2 = RMSE^2 - noise^2``). ``--table PATH`` selects an LTC table.
 
-``--study [--maps brushed,gaussian]``: the issue-5 follow-up at the far / mid / near distances:
-``ltc``, ``ltc-multiscale``, ``ltc-multiscale-aniso`` and both multi-scale methods with the
-anisotropic (multi-tap) footprint or a LOD bias of one level; RMSE (debiased), FLIP and flicker per method, and the flicker
-of ``ltc`` on the same plane *without* the normal map (the geometric floor: what a 1-spp shader
-flickers from the light's and the plane's edges alone).
+``--study [--maps brushed,gaussian] [--variants ltc,ms,...]``: the issue-5 follow-up at the far /
+mid / near distances: ``ltc``, ``ltc-multiscale`` (registered default and the paper's footprint,
+``ms``), ``ltc-multiscale-aniso`` and both multi-scale methods with the anisotropic (multi-tap)
+footprint, a LOD bias of one level, or a bias ramping in above 4 texels per pixel (:data:`STUDY`);
+RMSE (debiased), FLIP and flicker per method, and the flicker of ``ltc`` on the same plane
+*without* the normal map (the geometric floor: what a 1-spp shader flickers from the light's and
+the plane's edges alone).
 """
 
 from __future__ import annotations
