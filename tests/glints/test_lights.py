@@ -56,8 +56,9 @@ def _wo(tilt):
     return wo / np.linalg.norm(wo)
 
 
-@pytest.mark.parametrize("sp, size, tilt", [(6.0, 0.25, 0.2), (12.0, 0.3, 0.5)])
-def test_quad_range_matches_monte_carlo(surf, sp, size, tilt):
+@pytest.mark.parametrize("sp, size, tilt, n_sub", [(6.0, 0.25, 0.2, 2), (12.0, 0.3, 0.5, 2),
+                                                   (9.0, 0.5, 0.3, 4)])
+def test_quad_range_matches_monte_carlo(surf, sp, size, tilt, n_sub):
     """Small quads (valid half-vector footprint): the range-query value is within 3 sigma of a
     20k-sample Monte Carlo estimate of the glint BRDF integral over the quad."""
     rng = np.random.default_rng(1)
@@ -66,7 +67,7 @@ def test_quad_range_matches_monte_carlo(surf, sp, size, tilt):
     light = facing_quad(wo, size, 3.0)
     mc, err = mc_quad(surf, c, sp, wo[None], light, 20000, rng)
     val, valid = quad_range(surf, c, np.array([sp]), wo[None], light.vertices[None],
-                            light.radiance, 1.0)
+                            light.radiance, 1.0, n_sub=n_sub)
     assert valid[0]
     assert abs(val[0, 0] - mc) <= 3 * err, (val[0, 0], mc, err)
     assert err < 0.02 * mc  # the comparison is informative
@@ -213,5 +214,7 @@ def test_direct_ndf_truncation(surf):
                                rtol=1e-6, atol=1e-7 * ref.max())
     got = glint_ndf(surf, c, sp, s, fallback_truncation=3.0)
     assert np.linalg.norm(got - ref) < 0.02 * np.linalg.norm(ref)
+    np.testing.assert_allclose(glint_ndf(surf, c, sp, s, fallback_truncation=4.0), ref,
+                               rtol=1e-6, atol=1e-7 * ref.max())
     with pytest.raises(PrefilterError, match="truncation"):
         direct_ndf(surf, c, sp, s, truncation=0.1)

@@ -123,7 +123,8 @@ def _world(w, t, b, n):
 #: shading sample; uniforms per pair: 2 (light) + 7 (hierarchical NDF sampler, B = 16).
 QUAD_MIS = 4
 _U_PAIR = 9
-#: Range-query path of quad lights: the light is split into ``QUAD_SUB^2`` patches; each patch's
+#: Range-query path of quad lights: the light is split into ``QUAD_SUB^2`` patches (then
+#: ``(2 QUAD_SUB)^2`` where those are too large); each patch's
 #: half-vector region must have a bounding box narrower than ``RANGE_MAX`` in ``s`` (the BRDF's
 #: smooth factors are taken at the patch centre) and fill at least ``FILL_MIN`` of it (the range
 #: mean is over the box).
@@ -322,6 +323,13 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
             done = np.zeros(int(m.sum()), bool)
             if use_range and surf.gm is not None:
                 val, done = quad_range(surf, c, sp, wo[m], corners, ql.radiance, f0)
+                # lights too large for 2x2 patches: 4x4 (16 range queries) before MIS
+                r = np.flatnonzero(~done & (sp >= surf.sigma0))
+                if r.size:
+                    v4, d4 = quad_range(surf, c[r], sp[r], wo[m][r], corners[r], ql.radiance,
+                                        f0, n_sub=2 * QUAD_SUB)
+                    val[r[d4]] = v4[d4]
+                    done[r[d4]] = True
             rest = ~done
             if np.any(rest):
                 uq = u[m][:, qi * QUAD_MIS * _U_PAIR:(qi + 1) * QUAD_MIS * _U_PAIR]
