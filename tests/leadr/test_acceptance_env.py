@@ -102,3 +102,14 @@ def test_grid_convergence_claims():
     wi = 2.0 * (m @ WO)[:, None] * m - WO
     mc = env.lookup(wi).mean(axis=0)  # Simplified Algorithm 1 = mean radiance over visible normals
     np.testing.assert_allclose(env_specular(env, WO, np.zeros(2), cov, 128), mc, rtol=0.03)
+
+
+@pytest.mark.slow
+def test_image_level_specular_leadr_beats_naive():
+    from prefilter.leadr.acceptance import image_env
+
+    rows = image_env(sigma=0.25, texels_per_pixel=(16.0,), width=24, height=16, sub=4, spp=8,
+                     log=lambda r: None)
+    spec = next(r for r in rows if r["shading"] == "specular")
+    assert 12.0 < spec["texels/pixel"] < 20.0
+    assert spec["rmse leadr shadowed"] < 0.7 * spec["rmse naive"], spec
