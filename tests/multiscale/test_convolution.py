@@ -127,4 +127,4 @@ def test_rejects_bad_input():
     with pytest.raises(PrefilterError, match="rng"):
         convolve_samples(0.1, 0.1, 10, None)
     with pytest.raises(PrefilterError, match="form"):
-        fit_polynomial(convolution_grid([0.1], [0.1], 16), "cubic")
+        fit_polynomial(convolution_grid([0.1, 0.2], [0.1, 0.2], 16), "cubic")

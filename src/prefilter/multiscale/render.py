@@ -25,8 +25,9 @@ import numpy as np
 from prefilter.multiscale.convolution import _alpha_total
 from prefilter.multiscale.meso import _alpha_from_r, _mrl, _paper_eq5, R_COSINE
 
-__all__ = ["LOD_BIAS", "LOD_BIAS_START", "MESO_TABLE_SIZE", "meso_table", "multiscale_attributes", "multiscale_roughness",
-           "render_multiscale", "render_multiscale_mrl", "render_multiscale_paper"]
+__all__ = ["LOD_BIAS", "LOD_BIAS_START", "MESO_TABLE_SIZE", "meso_table", "multiscale_attributes",
+           "multiscale_roughness", "render_multiscale", "render_multiscale_mrl",
+           "render_multiscale_paper"]
 
 #: Nodes of the compiled shader's ``alpha_meso`` table, uniform in ``x = sqrt(3 (1 - r))``
 #: (the nodes of :func:`prefilter.multiscale.alpha_meso`'s own interpolant, so the fused path

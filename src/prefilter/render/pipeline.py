@@ -77,7 +77,8 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
 def supported_lights(scene: Scene, method: str):
     """The scene's :class:`~prefilter.render.lights.LightSet`; environment maps and textured quad
     lights are rejected with a message naming the light (for methods without light textures;
-    ``ltc`` and the ``ltc-multiscale`` methods use :func:`prefilter.render.lighttex.split_lights`)."""
+    ``ltc`` and the ``ltc-multiscale`` methods use
+    :func:`prefilter.render.lighttex.split_lights`)."""
     for i, light in enumerate(scene.lights):
         if light.type == "environment" or getattr(light, "texture", None) is not None:
             what = "environment" if light.type == "environment" else "textured quad"
