@@ -83,6 +83,8 @@ GLSL = """\
 // wo: view in the tangent frame (x = tangent, z = normal), wo.z > 0; ax, ay: GGX roughness.
 // Returns M^-1 (up to a positive factor) for the LTC polygon integral, the magnitude n and the
 // Fresnel scalar f5: shade = (F0 * (n - f5) + f5) * ltcIntegral(Minv, polygon).
+// GLSL ES 3.00 has no default precision for sampler3D.
+precision highp sampler3D;
 uniform sampler3D ltcAniso0, ltcAniso1, ltcAniso2;  // LINEAR, CLAMP_TO_EDGE
 const float LTC_T = {T}.0, LTC_F = {F}.0, LTC_A = {A}.0, LTC_R = {R}.0;
 const float LTC_THETA_MAX = {theta_max:.9f};
