@@ -32,7 +32,7 @@ NM = wavy()
 ELEM = elements(NM)
 
 centre = st.one_of(st.sampled_from([0.0, -1e6, 1e6]), st.floats(-100.0, 100.0))
-sigma_p = st.one_of(st.sampled_from([0.0, 1e-3, 0.5, 64.0]), st.floats(0.0, 40.0))
+sigma_p = st.one_of(st.sampled_from([0.0, 1e-3, 0.5, 64.0, 1e4, 1e6]), st.floats(0.0, 40.0))
 roughness = st.one_of(st.sampled_from([1e-4, 0.5]), st.floats(1e-3, 0.1))
 
 
@@ -46,9 +46,31 @@ def test_pndf_finite_nonnegative(cx, cy, sp, sx, sy, sr):
     assert np.isfinite(hemisphere_ndf(d, m))
 
 
+def wide_limit(s, sr):
+    # sigma_p -> inf: every texel once, N(s; n_i, sr^2 I + sigma_h^2 J_i J_i^T) averaged (the
+    # Gaussian footprint integral of each element, Yan et al. 2016), computed here directly
+    from prefilter.glints.pndf import SIGMA_H
+
+    n, J = ELEM
+    n, J = n.reshape(-1, 2), J.reshape(-1, 2, 2)
+    cov = sr * sr * np.eye(2) + SIGMA_H**2 * J @ np.swapaxes(J, -1, -2)
+    d = s - n
+    q = np.einsum("ki,kij,kj->k", d, np.linalg.inv(cov), d)
+    return np.mean(np.exp(-0.5 * q) / (2 * np.pi * np.sqrt(np.linalg.det(cov))))
+
+
+@settings(max_examples=N)
+@given(centre, centre, st.sampled_from([64.0, 1e4, 1e6]), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3))
+@example(0.0, 0.0, 1e6, 0.0, 0.19)  # hung: 6e13 texel copies under the footprint
+def test_pndf_of_footprints_larger_than_the_map(cx, cy, sp, sx, sy):
+    d = pndf(NM, [cx, cy], sp, [sx, sy], 0.02, elements_=ELEM)
+    assert d == pytest.approx(wide_limit(np.array([sx, sy]), 0.02), rel=1e-9, abs=1e-12)
+
+
 @settings(max_examples=N // 3)
 @given(centre, centre, sigma_p)
 @example(0.0, 0.0, 0.0)
+@example(0.0, 0.0, 1e6)
 @example(3.0, 5.0, 64.0)  # a footprint four times the tile
 def test_pndf_image_is_a_density(cx, cy, sp):
     # sigma_r = 0.02 keeps each element's Gaussian inside the support [-0.5, 0.5]^2 (normals

@@ -151,18 +151,30 @@ def _window(c, rad):
     return int(math.ceil(c - rad - 0.5)), int(math.floor(c + rad - 0.5))
 
 
+@njit_serial
+def _footprint(cx, cy, sp, sh2, trunc, H, W, lim2):
+    """Texel window, mean-shift factor ``f``, element variance ``var`` and whether the footprint
+    covers so many tiles that it is the sigma_p -> inf limit (``wide``: every texel once, equal
+    weights, no mean shift, ``var = sigma_h^2``). The limit is exact to ``exp(-2 pi^2 tot2 / L^2)``
+    (Poisson summation of the periodic weights) and ``(sigma_h^2 / tot2)`` in the shape; it
+    bounds the cost by the texel count (a footprint of 1e4 texels visited 6e9 copies)."""
+    sp2 = sp * sp
+    tot2 = sp2 + sh2
+    if tot2 >= lim2:
+        return 0, W - 1, 0, H - 1, 0.0, sh2, tot2, True
+    rad = trunc * math.sqrt(tot2)
+    x0, x1 = _window(cx, rad)
+    y0, y1 = _window(cy, rad)
+    return x0, x1, y0, y1, sh2 / tot2, sp2 * sh2 / tot2, tot2, False
+
+
 @njit_parallel
-def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, out):
+def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
     H, W = s_el.shape[0], s_el.shape[1]
     sh2 = sh * sh
     for q in prange(out.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = _window(cx[q], rad)
-        y0, y1 = _window(cy[q], rad)
+        x0, x1, y0, y1, f, var, tot2, wide = _footprint(cx[q], cy[q], sp[q], sh2, trunc, H, W,
+                                                        lim2)
         acc = 0.0
         wsum = 0.0
         for y in range(y0, y1 + 1):
@@ -171,7 +183,7 @@ def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, out):
             for x in range(x0, x1 + 1):
                 dx = cx[q] - (x + 0.5)
                 c = x % W
-                w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+                w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
                 wsum += w
                 j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
                 mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
@@ -217,7 +229,7 @@ def _splat(img, px, py, mx, my, siso, w, lo, h, trunc):
 
 
 @njit_parallel
-def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, out):
+def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
     """NDF images ``out (N, R, R)``: pixel averages of ``D_p`` (row = s_y, column = s_x).
 
     Each element's covariance ``sr^2 I + var J J^T`` is split exactly into an isotropic part
@@ -233,13 +245,8 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, out):
         img = out[q]
         px = np.zeros(R)
         py = np.zeros(R)
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = _window(cx[q], rad)
-        y0, y1 = _window(cy[q], rad)
+        x0, x1, y0, y1, f, var, tot2, wide = _footprint(cx[q], cy[q], sp[q], sh2, trunc, H, W,
+                                                        lim2)
         wsum = 0.0
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
@@ -247,7 +254,7 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, out):
             for x in range(x0, x1 + 1):
                 dx = cx[q] - (x + 0.5)
                 c = x % W
-                w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+                w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
                 wsum += w
                 j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
                 mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
@@ -317,6 +324,17 @@ def _prepared(normal_map, elements_=None):
     return elements(normal_map)
 
 
+#: Footprints with ``sigma_p^2 + sigma_h^2 >= WIDE_FOOTPRINT^2`` (in tiles, at least
+#: ``WIDE_MIN`` texels) use the sigma_p -> inf limit (:func:`_footprint`).
+WIDE_FOOTPRINT = 1.0
+WIDE_MIN = 32.0
+
+
+def _wide2(s_el) -> float:
+    L = max(WIDE_FOOTPRINT * max(s_el.shape[0], s_el.shape[1]), WIDE_MIN)
+    return float(L * L)
+
+
 def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_ROUGHNESS, *,
          elements_=None) -> np.ndarray:
     """P-NDF ``D_p(s)`` of a Gaussian footprint, density w.r.t. projected normals ``s``.
@@ -348,7 +366,7 @@ def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_RO
     out = np.empty(c.shape[0])
     _pndf_points(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
                  np.ascontiguousarray(sp), np.ascontiguousarray(q[:, 0]),
-                 np.ascontiguousarray(q[:, 1]), sr, SIGMA_H, TRUNCATION, out)
+                 np.ascontiguousarray(q[:, 1]), sr, SIGMA_H, TRUNCATION, _wide2(s_el), out)
     return out.reshape(shape)
 
 
@@ -381,7 +399,8 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     sp = np.broadcast_to(sp, shape).reshape(-1)
     out = np.zeros((c.shape[0], R, R))
     _pndf_images(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
-                 np.ascontiguousarray(sp), sr, SIGMA_H, TRUNCATION, -S, 2.0 * S / R, out)
+                 np.ascontiguousarray(sp), sr, SIGMA_H, TRUNCATION, -S, 2.0 * S / R, _wide2(s_el),
+                 out)
     return out.reshape(shape + (R, R))
 
 
