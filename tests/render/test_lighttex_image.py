@@ -176,3 +176,18 @@ def test_textured_light_image_matches_monte_carlo(tmp_path, method):
 @pytest.mark.parametrize("alpha", [0.05, 0.5])
 def test_textured_light_image_matches_monte_carlo_slow(tmp_path, method, alpha):
     _check(tmp_path, method, alpha, 8192, (48, 30))
+
+
+def test_ltc_constant_textured_light_is_a_dimmer_plain_light(tmp_path):
+    # a constant texture c: every lookup reads c, so the image is c times the untextured one
+    # (which the fused kernel renders)
+    table = _table()
+    tex = load_scene(_scene(tmp_path, 0.2, texture=np.full((8, 8, 3), 0.5), name="c.npy"),
+                     base_dir=tmp_path)
+    d = _scene(tmp_path, 0.2)
+    del d["lights"][0]["texture"]
+    plain = load_scene(d, base_dir=tmp_path)
+    a = render(tex, "ltc", table=table)
+    b = render(plain, "ltc", table=table)
+    assert b.max() > 0.05
+    np.testing.assert_allclose(a, 0.5 * b, rtol=1e-5, atol=1e-7)
