@@ -115,10 +115,12 @@ FALLBACK_TRUNCATION = 4.0
 
 
 @njit_parallel
-def _direct_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, out):
+def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
     """Yan et al. 2016 P-NDF at points (as ``pndf``'s kernel) with separable footprint weights
-    (one exp per row and column instead of one per texel) and the angular Gaussian evaluated only
-    within 6 of its stds (``exp(-18)`` relative)."""
+    (one exp per row and column instead of one per texel), the angular Gaussian evaluated only
+    within 6 of its stds (``exp(-18)`` relative), and texels rejected before their Jacobian is
+    read when even the bound ``|e| >= |q - n_i| - f |J|_F |d|``, ``quad >= |e|^2 / tr(cov)``
+    puts them beyond that (``jn`` = per-texel Frobenius norms of ``J``)."""
     H, W = s_el.shape[0], s_el.shape[1]
     sh2 = sh * sh
     sr2 = sr * sr
@@ -127,17 +129,21 @@ def _direct_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, out):
         tot2 = sp2 + sh2
         f = sh2 / tot2
         var = sp2 * sh2 / tot2
+        sv = math.sqrt(var)
         rad = trunc * math.sqrt(tot2)
         x0 = int(math.ceil(cx[q] - rad - 0.5))
         x1 = int(math.floor(cx[q] + rad - 0.5))
         y0 = int(math.ceil(cy[q] - rad - 0.5))
         y1 = int(math.floor(cy[q] + rad - 0.5))
-        wx = np.empty(x1 - x0 + 1)
+        nx = x1 - x0 + 1
+        wx = np.empty(nx)
+        col = np.empty(nx, np.int64)
         sx = 0.0
-        for x in range(x0, x1 + 1):
-            dx = cx[q] - (x + 0.5)
-            wx[x - x0] = math.exp(-dx * dx / (2.0 * tot2))
-            sx += wx[x - x0]
+        for i in range(nx):
+            dx = cx[q] - (x0 + i + 0.5)
+            wx[i] = math.exp(-dx * dx / (2.0 * tot2))
+            sx += wx[i]
+            col[i] = (x0 + i) % W
         acc = 0.0
         sy = 0.0
         for y in range(y0, y1 + 1):
@@ -145,9 +151,16 @@ def _direct_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, out):
             wy = math.exp(-dy * dy / (2.0 * tot2))
             sy += wy
             r = y % H
-            for x in range(x0, x1 + 1):
-                dx = cx[q] - (x + 0.5)
-                c = x % W
+            for i in range(nx):
+                c = col[i]
+                dx = cx[q] - (x0 + i + 0.5)
+                e0x = abs(qx[q] - s_el[r, c, 0])
+                e0y = abs(qy[q] - s_el[r, c, 1])
+                g = jn[r, c]
+                # |e| >= max|e0| - f g (|dx| + |dy|) and sqrt(tr cov) <= sqrt2 sr + sv g
+                if max(e0x, e0y) - f * g * (abs(dx) + abs(dy)) > 6.0 * (1.4142135623730951 * sr
+                                                                       + sv * g):
+                    continue
                 j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
                 ex = qx[q] - s_el[r, c, 0] - f * (j00 * dx + j01 * dy)
                 ey = qy[q] - s_el[r, c, 1] - f * (j10 * dx + j11 * dy)
@@ -160,9 +173,18 @@ def _direct_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, out):
                 det = a * d - b * b
                 quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
                 if quad < 36.0:
-                    acc += wy * wx[x - x0] * math.exp(-0.5 * quad) / (2.0 * math.pi
-                                                                       * math.sqrt(det))
+                    acc += wy * wx[i] * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
         out[q] = acc / (sx * sy)
+
+
+_JNORM: dict = {}
+
+
+def _jacobian_norms(J):
+    hit = _JNORM.get(id(J))
+    if hit is None or hit[0] is not J:
+        hit = _JNORM[id(J)] = (J, np.ascontiguousarray(np.sqrt(np.sum(J * J, axis=(-2, -1)))))
+    return hit[1]
 
 
 def direct_ndf(surf, center, sigma_p, s, *, truncation: float = FALLBACK_TRUNCATION):
@@ -177,10 +199,10 @@ def direct_ndf(surf, center, sigma_p, s, *, truncation: float = FALLBACK_TRUNCAT
     c = np.ascontiguousarray(center, dtype=np.float64)
     q = np.ascontiguousarray(s, dtype=np.float64)
     out = np.empty(c.shape[0])
-    _serial_below(_direct_points, c.shape[0])(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
-                   np.ascontiguousarray(sigma_p, dtype=np.float64), np.ascontiguousarray(q[:, 0]),
-                   np.ascontiguousarray(q[:, 1]), surf.intrinsic_roughness, SIGMA_H,
-                   float(truncation), out)
+    cc = np.ascontiguousarray
+    _serial_below(_direct_points, c.shape[0])(
+        s_el, J, _jacobian_norms(J), cc(c[:, 0]), cc(c[:, 1]), cc(sigma_p, dtype=np.float64),
+        cc(q[:, 0]), cc(q[:, 1]), surf.intrinsic_roughness, SIGMA_H, float(truncation), out)
     return out
 
 
