@@ -152,3 +152,13 @@ def test_queries_reject_bad_arguments(glints_map):
     expect_error(lambda: range_mean(gm, [0, 0], 1.0, [0, 0], [0, 0]), "s_max")
     expect_error(lambda: block_means(gm, np.array([10**9])), "image")
     expect_error(lambda: block_means(gm, np.array([0.5])), "image")
+
+
+def test_integer_normal_maps_need_decoding():
+    rgb = np.round((NM + 1) / 2 * 255).astype(np.uint8)
+    expect_error(lambda: elements(rgb), "decode_normals")
+    from prefilter.texture import decode_normals
+
+    # the decoded map is accepted and close to the float one (8-bit quantisation)
+    s, _ = elements(decode_normals(rgb, "directx"))
+    assert np.abs(s - ELEM[0]).max() < 2.0 / 255 + 1e-9

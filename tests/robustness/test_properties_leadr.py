@@ -213,3 +213,12 @@ def test_leadr_rejects_bad_arguments(white_env):
     expect_error(lambda: slopes_from_normals([0.0, 0.6, -0.8]), "normal_map")
     expect_error(lambda: shading_stats(np.zeros(4)), "moments")
     expect_error(lambda: stats_to_moments((0, 0), np.zeros((1, 1))), "cov")
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_integer_normal_maps_are_not_taken_for_normals(dtype):
+    # 8/16-bit colours have n_z > 0 everywhere: they used to give garbage slopes silently
+    rgb = np.full((4, 4, 3), np.iinfo(dtype).max // 2, dtype)
+    rgb[..., 2] = np.iinfo(dtype).max
+    expect_error(lambda: slopes_from_normals(rgb), "decode_normals")
+    expect_error(lambda: moments(rgb), "decode_normals")

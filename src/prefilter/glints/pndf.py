@@ -53,6 +53,12 @@ DEFAULT_ROUGHNESS = 0.005  # intrinsic roughness sigma_r (Yan et al. 2016)
 
 def as_normal_map(normal_map, name: str = "normal_map") -> np.ndarray:
     """A validated ``(H, W, 3)`` float64 normal map of unit normals with ``n_z > 0``."""
+    dtype = getattr(normal_map, "dtype", None)
+    if dtype is not None and (np.issubdtype(dtype, np.integer) or dtype == np.bool_):
+        raise PrefilterError(
+            f"{name}: expected unit normals (floats), got an integer ({dtype}) array: decode "
+            "8/16-bit normal-map colours first with prefilter.texture.decode_normals(rgb, "
+            "convention)")
     a = as_float_array(normal_map, name, ndim_min=3, last_dim=3)
     if a.ndim != 3 or a.shape[0] < 2 or a.shape[1] < 2:
         raise PrefilterError(f"{name}: expected shape (H, W, 3) with H, W >= 2, got {a.shape}")

@@ -62,6 +62,7 @@ def slopes_from_normals(normals) -> np.ndarray:
 
     Normals need not be unit length (slopes are scale invariant) but must point up (``n_z > 0``).
     """
+    _not_colours(normals, "normal_map")
     n = as_float_array(normals, "normal_map", ndim_min=1, last_dim=3)
     nz = n[..., 2]
     if np.any(nz <= 0.0):
@@ -70,6 +71,17 @@ def slopes_from_normals(normals) -> np.ndarray:
             f"{int(np.sum(nz <= 0.0))} texels with n_z <= 0 (min n_z = {nz.min():.4g})"
         )
     return -n[..., :2] / nz[..., None]
+
+
+def _not_colours(normals, name: str) -> None:
+    """Integer arrays are 8/16-bit normal-map colours, not normals: they would give garbage
+    slopes silently (every colour has n_z > 0)."""
+    dtype = getattr(normals, "dtype", None)
+    if dtype is not None and (np.issubdtype(dtype, np.integer) or dtype == np.bool_):
+        raise PrefilterError(
+            f"{name}: expected tangent-space normals (floats), got an integer ({dtype}) array: "
+            "decode normal-map colours first with prefilter.texture.decode_normals(rgb, "
+            "convention)")
 
 
 @dataclass(frozen=True)
@@ -111,6 +123,8 @@ def moments(data, texel_size: float = 1.0, base_roughness: float = 0.0) -> Leadr
     if hasattr(data, "slopes") and hasattr(data, "height"):
         s = as_float_array(data.slopes, "height_map.slopes", ndim_min=3, last_dim=2)
     else:
+        if np.ndim(data) == 3 and np.shape(data)[-1] == 3:
+            _not_colours(data, "data")
         a = as_float_array(data, "data", ndim_min=2)
         if a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 1):
             s = slopes_from_height(a, texel_size)
