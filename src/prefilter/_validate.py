@@ -18,11 +18,22 @@ def _describe(x: np.ndarray) -> str:
 
 
 def as_float_array(x, name: str, *, ndim_min: int = 0, last_dim: int | None = None) -> np.ndarray:
-    """``x`` as a finite float64 array, checking its trailing dimension."""
+    """``x`` as a finite float64 array, checking its trailing dimension.
+
+    Booleans, integers and floats are accepted; strings, bytes, complex numbers, ``None`` and
+    ragged lists are not (NumPy would parse ``"0.5"``, drop imaginary parts and turn ``None``
+    into NaN).
+    """
     try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise PrefilterError(f"{name}: expected a numeric array, got {type(x).__name__}") from exc
+        raw = x if isinstance(x, np.ndarray) else np.asarray(x)
+    except (TypeError, ValueError):  # ragged nested sequences
+        raise PrefilterError(f"{name}: expected a numeric array, got {type(x).__name__}") from None
+    kind = raw.dtype.kind
+    if kind not in "biuf" and not (kind == "O" and all(
+            isinstance(v, (int, float, np.integer, np.floating)) for v in raw.flat)):
+        what = type(x).__name__ if kind == "O" or raw.ndim == 0 else f"dtype {raw.dtype}"
+        raise PrefilterError(f"{name}: expected a numeric array, got {what}")
+    a = raw.astype(np.float64, copy=False)
     if a.ndim < ndim_min:
         raise PrefilterError(f"{name}: expected at least {ndim_min} dimensions, got shape {a.shape}")
     if last_dim is not None and (a.ndim == 0 or a.shape[-1] != last_dim):
