@@ -91,7 +91,8 @@ def bench_bake_scaling(sizes, tmp):
               f"rel L2 {100 * s['rel_l2_error']:.1f} %, images {s['n_images']}")
 
 
-def bench_ranks(size, tmp, ranks=(8, 16, 32, 64), kinds=("gaussian", "brushed", "flakes", "scratches")):
+def bench_ranks(size, tmp, ranks=(8, 16, 32, 64),
+                kinds=("gaussian", "brushed", "flakes", "scratches")):
     print(f"rank study: {size}^2 procedural maps, ndf-res 128, block 16, levels shared")
     print(f"{'map':>10} {'rank':>5} {'ratio %':>8} {'rel L2 %':>9} {'level 0 %':>9} "
           f"{'top %':>6} {'CP s':>6}")

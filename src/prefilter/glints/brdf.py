@@ -192,7 +192,8 @@ def direct_ndf(surf, center, sigma_p, s, *, truncation: float = FALLBACK_TRUNCAT
     ``center (N, 2)``, ``sigma_p (N,)`` and points ``s (N, 2)``, truncated at ``truncation``
     stds per axis (4 reproduces :func:`prefilter.glints.pndf` to rounding)."""
     if surf.elements_ is None:
-        raise PrefilterError("surf: the direct P-NDF needs the normal map (surface(gm, normal_map))")
+        raise PrefilterError("surf: the direct P-NDF needs the normal map "
+                             "(surface(gm, normal_map))")
     if not (1.0 <= float(truncation) <= 8.0):
         raise PrefilterError(f"truncation: expected a number of stds in [1, 8], got {truncation}")
     s_el, J = surf.elements_

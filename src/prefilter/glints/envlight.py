@@ -207,7 +207,8 @@ def fit_sg(image, n_lobes: int = 32, *, max_res: int = 64):
     f = max(1, W // max_res)
     Hs, Ws = H // f, W // f
     if Hs < 2 or Ws < 2:
-        raise PrefilterError(f"image: expected at least 2 x 2 pixels after filtering, got {img.shape}")
+        raise PrefilterError(f"image: expected at least 2 x 2 pixels after filtering, got "
+                             f"{img.shape}")
     small = img[:Hs * f, :Ws * f].reshape(Hs, f, Ws, f, 3).mean(axis=(1, 3))
     d = equirect_directions(Hs, Ws).reshape(-1, 3)
     sa = (np.sin(np.pi * (np.arange(Hs) + 0.5) / Hs)[:, None] * np.ones(Ws)).ravel()

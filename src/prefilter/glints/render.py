@@ -181,7 +181,8 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     h = d + wo[:, None, :]
     h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
     S = h[..., :2].reshape(N, n_sub + 1, n_sub + 1, 2)
-    q = np.stack([S[:, :-1, :-1], S[:, 1:, :-1], S[:, 1:, 1:], S[:, :-1, 1:]], axis=3)  # (N,n,n,4,2)
+    # patch corners (N, n, n, 4, 2), counter-clockwise in the patch's (a, b) parameters
+    q = np.stack([S[:, :-1, :-1], S[:, 1:, :-1], S[:, 1:, 1:], S[:, :-1, 1:]], axis=3)
     x, y = q[..., 0], q[..., 1]
     area = 0.5 * np.abs(np.sum(x * np.roll(y, -1, -1) - np.roll(x, -1, -1) * y, axis=-1))
     lo, hi = q.min(axis=3), q.max(axis=3)

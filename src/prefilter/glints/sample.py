@@ -292,8 +292,8 @@ def pdf_wi(surf, center, sigma_p, wo, wi) -> np.ndarray:
     ``pdf_s(h_xy) h_z / (4 wo.h)`` with ``h`` the half vector; ``pdf_s`` is the direct P-NDF below
     the finest level (or everywhere for a surface without a compressed map), else
     :func:`ndf_pdf`. For multiple importance sampling with light samples."""
-    from prefilter.glints.brdf import GlintSurface, _as_surface
-    from prefilter.glints.pndf import pndf
+    from prefilter.glints.brdf import GlintSurface, _as_surface, direct_ndf
+    from prefilter.glints.pndf import TRUNCATION
 
     surf = surf if isinstance(surf, GlintSurface) else _as_surface(surf)
     wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
@@ -313,8 +313,7 @@ def pdf_wi(surf, center, sigma_p, wo, wi) -> np.ndarray:
     ps = np.zeros(sp.shape)
     d = ok & small
     if np.any(d):
-        ps[d] = pndf(surf.normal_map, c[d], sp[d], h[d, :2], surf.intrinsic_roughness,
-                     elements_=surf.elements_)
+        ps[d] = direct_ndf(surf, c[d], sp[d], h[d, :2], truncation=TRUNCATION)
     k = ok & ~small
     if np.any(k):
         if surf.gm is None:
