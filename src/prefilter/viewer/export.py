@@ -7,7 +7,8 @@ it, the anisotropic table as ``prefilter bake ltc-aniso --export`` writes it
 :func:`prefilter.multiscale.glsl.export_all`, and the scene's normal maps as the box-filtered mip
 chains the Python renderer reads (:class:`prefilter.texture.MipChain`; for
 ``ltc-multiscale-aniso`` the slope-moment chains of
-:func:`prefilter.multiscale.aniso.slope_moments_chain`).
+:func:`prefilter.multiscale.aniso.slope_moments_chain`; for ``leadr-point`` the height maps'
+moment chains, also in float16), and LEADR's shading from :func:`prefilter.leadr.glsl.export_all`.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ __all__ = ["BUILTIN_MAPS", "MAX_OBJECTS", "MAX_QUADS", "METHODS", "default_scene
            "export_scene", "viewer_scene"]
 
 #: Render methods the page implements (GLSL names in ``static/shaders/viewer.frag.glsl``).
-METHODS = ("ltc", "ltc-multiscale", "ltc-aniso", "ltc-multiscale-aniso")
+METHODS = ("ltc", "ltc-multiscale", "ltc-aniso", "ltc-multiscale-aniso", "leadr-point")
 MAX_OBJECTS = 4
 MAX_QUADS = 4
 #: Texels per row of the texture atlas.
@@ -80,11 +81,13 @@ def _check_supported(scene) -> None:
                                  f"got {n}")
 
 
-def viewer_scene(scene, map_index=None, color_chain=None) -> dict:
+def viewer_scene(scene, map_index=None, color_chain=None, height_chain=None) -> dict:
     """The flat scene the page reads (``viewer.json`` field ``scene``; ``docs/viewer.md``).
 
     ``map_index``: object index -> index into the manifest's ``maps`` (``-1``: no map);
-    ``color_chain``: object index -> ``[first level, levels, channels]`` of its colour map.
+    ``color_chain``: object index -> ``[first level, levels, channels]`` of its colour map;
+    ``height_chain``: object index -> ``[first level, levels]`` of its height map's slope
+    moments (what ``leadr-point`` reads, whether or not a normal map takes precedence).
     """
     c = scene.camera
     objs = []
@@ -95,7 +98,8 @@ def viewer_scene(scene, map_index=None, color_chain=None) -> dict:
                "material": {"alpha_x": m.alpha_x, "alpha_y": m.alpha_y,
                             "base_color": m.base_color.tolist(), "f0": m.f0.tolist(),
                             "map": -1 if map_index is None else map_index.get(i, -1),
-                            "color": (color_chain or {}).get(i, [-1, 0, 0])}}
+                            "color": (color_chain or {}).get(i, [-1, 0, 0]),
+                            "height": (height_chain or {}).get(i, [-1, 0])}}
         if o.type == "plane":
             row.update(n=o.normal.tolist(), t=o.tangent.tolist(),
                        b=np.cross(o.normal, o.tangent).tolist(), size=o.size.tolist(), radius=0.0)
@@ -156,6 +160,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
     ``builtin_maps``: also pack the :data:`BUILTIN_MAPS` for the page's normal-map choice.
     ``iso_table`` / ``aniso_table``: the tables (default: the shipped ones).
     """
+    from prefilter.leadr import glsl as leadr_glsl
     from prefilter.ltc import glsl as iso_glsl
     from prefilter.ltc.aniso import export as aniso_export
     from prefilter.ltc.aniso.table import AnisoGGXTable
@@ -180,8 +185,9 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
     iso_glsl.export_all(iso, data)
     aniso_export.export_all(aniso, data)
     ms_glsl.export_all(data)
+    leadr_glsl.export_all(data)
 
-    atlas, maps, map_index, seen, colors = _Atlas(), [], {}, {}, {}
+    atlas, maps, map_index, seen, colors, heights = _Atlas(), [], {}, {}, {}, {}
 
     def add_map(name: str, ref: TextureRef) -> int:
         key = ref._key()
@@ -207,13 +213,21 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
             map_index[i] = add_map(f"scene: objects[{i}]", m.normal_map)
         elif m.height_map is not None:
             map_index[i] = add_map(f"scene: objects[{i}] (height)", m.height_map)
+        if m.height_map is not None:
+            key = m.height_map._key()
+            j = seen[key] if key in seen else add_map(f"scene: objects[{i}] (height)",
+                                                      m.height_map)
+            heights[i] = maps[j]["slopes"]
         if m.color_map is not None:
             chain = m.color_map.mip()
             colors[i] = atlas.add(chain) + [int(chain.shape[2])]
     if builtin_maps:
         for name, spec in BUILTIN_MAPS.items():
             add_map(name, TextureRef("normal_map", spec, f"builtin {name}"))
-    _write(data / "atlas_f32.bin", atlas.data().astype("<f4").tobytes())
+    packed = atlas.data()
+    _write(data / "atlas_f32.bin", packed.astype("<f4").tobytes())
+    # LEADR's moment maps as a real-time renderer would store them (the page's f16 option)
+    _write(data / "atlas_f16.bin", packed.astype("<f2").tobytes())
     _write(data / "levels_i32.bin", np.asarray(atlas.levels or [[0, 1, 1, 1]],
                                                "<i4").reshape(-1).tobytes())
     at = iso_glsl.texture_params(iso)
@@ -229,11 +243,12 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
         "alpha_meso": {"f32": "alpha_meso_f32.bin", "glsl": "multiscale.glsl",
                        "width": ms_glsl.ALPHA_MESO_WIDTH,
                        "height": int(ms_glsl.alpha_meso_nodes().shape[0])},
-        "atlas": {"f32": "atlas_f32.bin", "width": ATLAS_WIDTH,
+        "leadr": {"glsl": "leadr.glsl"},
+        "atlas": {"f32": "atlas_f32.bin", "f16": "atlas_f16.bin", "width": ATLAS_WIDTH,
                   "height": max(1, -(-atlas.size // ATLAS_WIDTH)),
                   "levels": "levels_i32.bin", "n_levels": max(1, len(atlas.levels))},
         "maps": maps,
-        "scene": viewer_scene(scene, map_index, colors),
+        "scene": viewer_scene(scene, map_index, colors, heights),
     }
     save_json_atomic(data / "viewer.json", manifest)
     return out

@@ -16,7 +16,7 @@ import numpy as np
 from prefilter.errors import PrefilterError
 from prefilter.viewer.export import BUILTIN_MAPS, METHODS, default_scene, export_scene
 
-__all__ = ["SCENES", "frame_time", "pixel_match", "scene", "screenshots"]
+__all__ = ["SCENES", "applies", "frame_time", "pixel_match", "scene", "screenshots"]
 
 
 def _quad(z=-2.0, y0=0.4, y1=1.6, hw=1.0, tilt=0.3, radiance=5.0):
@@ -37,8 +37,19 @@ def _camera(width, height):
 #: The pixel-match scenes: a flat anisotropic plane, the default scene (Gaussian-bump plane and
 #: an anisotropic sphere), a brushed plane (anisotropic normal distribution) and a light that
 #: crosses the plane seen by a close sphere (horizon clipping everywhere), the default scene with
-#: a point and a directional light added, a height-mapped plane and a sphere with colour maps.
-SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured")
+#: a point and a directional light added, a height-mapped plane and a sphere with colour maps,
+#: and height-mapped objects under point and directional lights only (``leadr-point``).
+SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr")
+
+
+def applies(sc, method: str) -> bool:
+    """Whether the Python renderer draws scene ``sc`` (dict or :class:`Scene`) with ``method``:
+    ``leadr-point`` takes point and directional lights only (quad lights raise)."""
+    if method != "leadr-point":
+        return True
+    lights = sc["lights"] if isinstance(sc, dict) else [{"type": x.type} for x in sc.lights]
+    kinds = {x["type"] for x in lights}
+    return bool(kinds) and kinds <= {"point", "directional"}
 
 
 def scene(name: str, width: int = 160, height: int = 120) -> dict:
@@ -77,6 +88,23 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
         sphere["material"].update(normal_map=dict(BUILTIN_MAPS["flakes"]),
                                   color_map=dict(noise, seed=4))
         return sc
+    if name == "leadr":
+        hmap = {"procedural": "gaussian", "size": 128, "seed": 2, "rms_slope": 0.3,
+                "corr_length": 4}
+        return {"camera": _camera(width, height),
+                "lights": [{"type": "point", "position": [-1.0, 1.2, 0.5], "intensity": 2.0},
+                           {"type": "point", "position": [1.0, 0.9, -2.2],
+                            "intensity": [1.5, 1.2, 0.8]},
+                           {"type": "directional", "direction": [0.3, -1.0, -0.4],
+                            "irradiance": [0.5, 0.4, 0.3]}],
+                "objects": [_plane({"alpha_x": 0.15, "alpha_y": 0.06, "base_color": 0.2,
+                                    "f0": [0.9, 0.7, 0.5], "height_map": hmap}),
+                            {"type": "sphere", "center": [1.0, 0.5, -1.2], "radius": 0.5,
+                             "uv_scale": [4, 2],
+                             "material": {"alpha": 0.2, "base_color": [0.2, 0.3, 0.6],
+                                          "f0": 0.04, "height_map": dict(
+                                              hmap, size=64, seed=5, rms_slope=0.4,
+                                              corr_length=2)}}]}
     raise PrefilterError(f"scene: expected one of {', '.join(SCENES)}, got {name!r}")
 
 
@@ -118,6 +146,9 @@ def pixel_match(scenes=SCENES, methods=METHODS, precisions=("f32", "f16"), *, wi
     """Render each scene x method x table precision in the browser and with
     :func:`prefilter.render.render`; compare linear radiance over the covered pixels.
 
+    Combinations the Python renderer refuses (:func:`applies`) are left out. ``precision``
+    selects the LTC tables (float32 / float16 textures) and, for ``leadr-point``, the moment maps.
+
     Returns rows ``{scene, method, precision, rel_rmse, max_abs, max_rel, covered}``:
     ``rel_rmse = |browser - python|_2 / |python|_2`` over covered pixels and channels,
     ``max_abs`` the largest absolute difference, ``max_rel`` it over the largest radiance.
@@ -132,6 +163,8 @@ def pixel_match(scenes=SCENES, methods=METHODS, precisions=("f32", "f16"), *, wi
         for s, sc in dicts.items():
             open_viewer(drv, url_of(s))
             for m in methods:
+                if not applies(sc, m):
+                    continue
                 ref = render(sc, m)
                 for p in precisions:
                     img, covered = render_linear(drv, m, p)
@@ -143,23 +176,40 @@ def pixel_match(scenes=SCENES, methods=METHODS, precisions=("f32", "f16"), *, wi
 def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> list[Path]:
     """A PNG of the page's canvas per method and one split view (method | naive) in
     ``out_dir`` (``viewer_<method>.png``, ``viewer_split.png``); returns the paths.
-    ``scene`` defaults to :func:`default_scene` at ``width x height``."""
+    ``scene`` defaults to :func:`default_scene` at ``width x height``; ``leadr-point`` (point and
+    directional lights only) is shot on the ``leadr`` scene of :func:`scene` at the same size
+    when ``scene`` has no point or directional light."""
+    from prefilter.render.scene import Scene, load_scene
     from prefilter.viewer.browser import open_viewer, screenshot
+    from prefilter.viewer.match import scene as named_scene  # shadowed by the argument
 
     out = Path(out_dir)
     sc = scene if scene is not None else default_scene(width, height)
+    loaded = sc if isinstance(sc, Scene) else load_scene(sc)
+    sessions = {"shots": sc}
+    if not any(x.type in ("point", "directional") for x in loaded.lights):
+        c = loaded.camera
+        sessions["leadr"] = named_scene("leadr", c.width, c.height)
     paths = []
-    with _session({"shots": sc}, driver) as (drv, url_of):
+    show = ("const v = window.prefilterViewer.viewer;"
+            "Object.assign(v.params, {methodLeft: arguments[0], methodRight: arguments[0], "
+            "split: -1});")
+    with _session(sessions, driver) as (drv, url_of):
         open_viewer(drv, url_of("shots"))
         for m in METHODS:
-            drv.execute_script("const v = window.prefilterViewer.viewer;"
-                               "Object.assign(v.params, {methodLeft: arguments[0], "
-                               "methodRight: arguments[0], split: -1});", m)
+            if m == "leadr-point":
+                continue
+            drv.execute_script(show, m)
             paths.append(screenshot(drv, out / f"viewer_{m}.png"))
         drv.execute_script("const v = window.prefilterViewer.viewer;"
                            "Object.assign(v.params, {methodLeft: 'ltc-multiscale', "
                            "methodRight: 'ltc', split: 0.5});")
-        paths.append(screenshot(drv, out / "viewer_split.png"))
+        split = screenshot(drv, out / "viewer_split.png")
+        if "leadr" in sessions:
+            open_viewer(drv, url_of("leadr"))
+        drv.execute_script(show, "leadr-point")
+        paths.append(screenshot(drv, out / "viewer_leadr-point.png"))
+        paths.append(split)
     return paths
 
 

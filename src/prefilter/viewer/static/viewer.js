@@ -2,7 +2,7 @@
 // compiles the exported GLSL snippets with shaders/viewer.frag.glsl, draws one frame.
 // No dependencies; see docs/viewer.md for the data formats.
 
-export const METHODS = ['ltc', 'ltc-multiscale', 'ltc-aniso', 'ltc-multiscale-aniso'];
+export const METHODS = ['ltc', 'ltc-multiscale', 'ltc-aniso', 'ltc-multiscale-aniso', 'leadr-point'];
 
 async function fetchOk(url, kind) {
   const r = await fetch(url);
@@ -81,15 +81,15 @@ export class Viewer {
     this.manifest = m;
     this.scene = m.scene;
     this.camera = JSON.parse(JSON.stringify(m.scene.camera));
-    const [iso, aniso, ms, vert, frag] = await Promise.all([
+    const [iso, aniso, ms, leadr, vert, frag] = await Promise.all([
       fetchOk(base + m.ltc_iso.glsl, 'text'), fetchOk(base + m.ltc_aniso.glsl, 'text'),
-      fetchOk(base + m.alpha_meso.glsl, 'text'), fetchOk('shaders/viewer.vert.glsl', 'text'),
-      fetchOk('shaders/viewer.frag.glsl', 'text')]);
+      fetchOk(base + m.alpha_meso.glsl, 'text'), fetchOk(base + m.leadr.glsl, 'text'),
+      fetchOk('shaders/viewer.vert.glsl', 'text'), fetchOk('shaders/viewer.frag.glsl', 'text')]);
     const head = '#version 300 es\nprecision highp float;\nprecision highp int;\n' +
       'precision highp sampler2D;\nprecision highp sampler3D;\nprecision highp isampler2D;\n';
     const prog = gl.createProgram();
     gl.attachShader(prog, compile(gl, gl.VERTEX_SHADER, head + vert));
-    gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, [head, iso, aniso, ms, frag].join('\n')));
+    gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, [head, iso, aniso, ms, leadr, frag].join('\n')));
     gl.linkProgram(prog);
     if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error('link: ' + gl.getProgramInfoLog(prog));
     this.prog = prog;
@@ -111,6 +111,8 @@ export class Viewer {
     this.alphaMeso = texture2D(gl, m.alpha_meso.width, m.alpha_meso.height, am, false, gl.R32F, gl.RED);
     const at = await fetchOk(base + m.atlas.f32);
     this.atlas = texture2D(gl, m.atlas.width, m.atlas.height, at, false);
+    const at16 = await fetchOk(base + m.atlas.f16);
+    this.atlas16 = texture2D(gl, m.atlas.width, m.atlas.height, at16, true);
     const lv = await fetchOk(base + m.atlas.levels);
     this.levels = texture2D(gl, m.atlas.n_levels, 1, lv, false, gl.RGBA32I, gl.RGBA_INTEGER);
     this.uniforms = {};
@@ -130,7 +132,8 @@ export class Viewer {
   _bind(width, height) {
     const gl = this.gl, P = this.params, S = this.scene, m = this.manifest;
     gl.useProgram(this.prog);
-    const units = [['uAtlas', gl.TEXTURE_2D, this.atlas], ['uLevels', gl.TEXTURE_2D, this.levels],
+    const units = [['uAtlas', gl.TEXTURE_2D, this.atlas], ['uAtlas16', gl.TEXTURE_2D, this.atlas16],
+                   ['uLevels', gl.TEXTURE_2D, this.levels],
                    ['alphaMesoNodes', gl.TEXTURE_2D, this.alphaMeso]];
     const t = this.tables[this.precision];
     for (let k = 0; k < 3; ++k) {
@@ -170,6 +173,13 @@ export class Viewer {
       return [mp.normals[0], mp.normals[1], mp.slopes[0], mp.slopes[1]];
     }));
     this._u('uMatColor', 'uniform4iv', flat(o => [...(o.material.color || [-1, 0, 0]), 0]));
+    // leadr-point: the scene's height maps, or the chosen built-in's slope moments
+    this._u('uMatHeight', 'uniform2iv', flat(o => {
+      if (P.map === 'scene') return o.material.height || [-1, 0];
+      const k = this._mapIndex(-1);
+      return k < 0 ? [-1, 0] : m.maps[k].slopes;
+    }));
+    this._u('uMapsHalf', 'uniform1i', this.precision === 'f16' ? 1 : 0);
     const quads = S.lights.map(q => this._light(q));
     this._u('uNumQuads', 'uniform1i', quads.length);
     if (quads.length) {

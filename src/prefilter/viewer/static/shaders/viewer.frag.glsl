@@ -1,15 +1,19 @@
 // The viewer's shader: the Python renderer's `ltc`, `ltc-multiscale`, `ltc-aniso` and
-// `ltc-multiscale-aniso` methods per pixel (prefilter.render.pipeline, camera, shading;
-// prefilter.multiscale.render / aniso; prefilter.ltc.aniso.render), in float32. Included after
-// ltc_iso.glsl, ltc_aniso.glsl and multiscale.glsl (the exported snippets).
+// `ltc-multiscale-aniso` and `leadr-point` methods per pixel (prefilter.render.pipeline, camera,
+// shading; prefilter.multiscale.render / aniso; prefilter.ltc.aniso.render;
+// prefilter.leadr.render), in float32. Included after ltc_iso.glsl, ltc_aniso.glsl,
+// multiscale.glsl and leadr.glsl (the exported snippets).
 #define MAX_OBJECTS 4
 #define MAX_QUADS 4
 #define METHOD_LTC 0
 #define METHOD_MULTISCALE 1
 #define METHOD_ANISO 2
 #define METHOD_MULTISCALE_ANISO 3
+#define METHOD_LEADR_POINT 4
 
 uniform highp sampler2D uAtlas;     // mip chains, RGBA32F, uAtlasWidth texels per row
+uniform highp sampler2D uAtlas16;   // the same atlas in RGBA16F (LEADR's f16 moment maps)
+uniform int uMapsHalf;              // 1: leadr-point reads its moment maps from uAtlas16
 uniform highp isampler2D uLevels;   // per mip level: (offset, height, width, stride)
 uniform int uAtlasWidth;
 uniform vec3 uCamO, uCamR, uCamU, uCamF;  // origin, right, true up, forward (unit)
@@ -24,6 +28,7 @@ uniform vec2 uMatAlpha[MAX_OBJECTS];      // alpha_x, alpha_y
 uniform vec3 uMatBase[MAX_OBJECTS], uMatF0[MAX_OBJECTS];
 uniform ivec4 uMatMap[MAX_OBJECTS];       // normal chain (first level, levels), slope chain
 uniform ivec4 uMatColor[MAX_OBJECTS];     // colour chain (first level, levels, channels)
+uniform ivec2 uMatHeight[MAX_OBJECTS];    // height map's slope-moment chain (leadr-point)
 uniform int uNumQuads;
 uniform vec3 uQuadV[4 * MAX_QUADS], uQuadN[MAX_QUADS], uQuadL[MAX_QUADS];
 uniform int uNumPoints, uNumDirs;
@@ -109,7 +114,12 @@ bool trace(vec3 o, vec3 d, vec3 ddx, vec3 ddy, out Hit h) {
 
 int imod(int a, int m) { int r = a % m; return r < 0 ? r + m : r; }
 
-vec4 atlasTexel(int k) { return texelFetch(uAtlas, ivec2(k % uAtlasWidth, k / uAtlasWidth), 0); }
+bool gHalf = false;  // read the float16 atlas (set around LEADR's moment lookups)
+
+vec4 atlasTexel(int k) {
+    ivec2 p = ivec2(k % uAtlasWidth, k / uAtlasWidth);
+    return gHalf ? texelFetch(uAtlas16, p, 0) : texelFetch(uAtlas, p, 0);
+}
 
 // wrapped bilinear lookup of level `level` (8 channels: A = 0..3, B = 4..7), weight added
 void bilinearAdd(int level, vec2 uv, float wgt, inout vec4 A, inout vec4 B) {
@@ -226,7 +236,44 @@ vec3 shadeDelta(vec3 pos, vec3 ts, vec3 bs, vec3 ns, vec3 wo, float ax, float ay
     return L;
 }
 
+// leadr-point (prefilter.leadr.render.shade_leadr_delta): the height map's slope moments at the
+// footprint's mip level, LEADR statistics with the micro roughness, geometric frame; colour and
+// normal maps are not read (as the Python method); quad lights are not shaded.
+vec3 shadeLeadr(Hit h, vec3 view) {
+    int k = h.id;
+    vec3 gn = h.n, gt = h.t, gb = h.b;
+    if (dot(view, gn) < 0.0) { gn = -gn; gb = -gb; }
+    vec4 A = vec4(0.0), B = vec4(0.0);
+    ivec2 hc = uMatHeight[k];
+    if (hc.x >= 0) {
+        gHalf = uMapsHalf == 1;
+        footprint(hc, h.uv, h.dudv, A, B);
+        gHalf = false;
+    }
+    vec2 mu;
+    vec3 cov;
+    leadrStats(A, B.x, uMatAlpha[k], mu, cov);
+    vec3 wo = normalize(vec3(dot(view, gt), dot(view, gb), dot(view, gn)));
+    vec3 L = vec3(0.0);
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumPoints) break;
+        vec3 d = uPointP[q] - h.p;
+        float d2 = max(dot(d, d), 1e-30);
+        vec3 w = d / sqrt(d2);
+        vec3 wi = normalize(vec3(dot(w, gt), dot(w, gb), dot(w, gn)));
+        L += leadrDelta(wo, wi, mu, cov, uMatBase[k], uMatF0[k]) * uPointI[q] / d2;
+    }
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumDirs) break;
+        vec3 w = -uDirD[q];
+        vec3 wi = normalize(vec3(dot(w, gt), dot(w, gb), dot(w, gn)));
+        L += leadrDelta(wo, wi, mu, cov, uMatBase[k], uMatF0[k]) * uDirE[q];
+    }
+    return L;
+}
+
 vec3 shade(Hit h, vec3 view, int method) {
+    if (method == METHOD_LEADR_POINT) return shadeLeadr(h, view);
     int k = h.id;
     ivec4 map = uMatMap[k];
     vec3 gn = h.n, gt = h.t, gb = h.b;
