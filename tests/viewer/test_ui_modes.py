@@ -62,3 +62,28 @@ def test_map_list_offers_the_builtins(page):
     names = driver.execute_script(
         "return Array.from(document.getElementById('map').options).map(o => o.value);")
     assert names == ["scene", "none", *BUILTIN_MAPS]
+
+
+def test_leadr_map_choice_none_drops_the_height_maps(browser, tmp_path):
+    """``leadr-point`` reads the height maps' moments; the map choice ``none`` gives the Python
+    image of the scene without height maps (and differs from the scene's own)."""
+    from prefilter.viewer.match import scene
+
+    sc = scene("leadr", 64, 48)
+    out = export_scene(sc, tmp_path / "site", builtin_maps=False)
+    server, url = serve(out)
+    try:
+        open_viewer(browser, url + "index.html")
+        own, covered = render_linear(browser, "leadr-point")
+        browser.execute_script("const e = document.getElementById('map'); e.value = 'none';"
+                               "e.dispatchEvent(new Event('input'));")
+        flat, _ = render_linear(browser, "leadr-point")
+    finally:
+        server.shutdown()
+        server.server_close()
+    bare = copy.deepcopy(sc)
+    for o in bare["objects"]:
+        del o["material"]["height_map"]
+    ref = render(bare, "leadr-point")
+    assert _rel(own, render(sc, "leadr-point"), covered) < 0.01
+    assert _rel(flat, ref, covered) < 0.01 and _rel(own, ref, covered) > 0.05

@@ -31,9 +31,9 @@ ERFC_COEFFS = (-1.26551223, 1.00002368, 0.37409196, 0.09678418, -0.18628806, 0.2
 
 _GLSL = """\
 // LEADR mapping under point and directional lights (Dupuy, Heitz, Iehl, Poulin, Neyret,
-// Ostromoukhov
-// 2013; supplemental 3.3 and Simplified Algorithm 3), the body of prefilter.leadr.render
-// shade_leadr_delta (prefilter `leadr/glsl.py`). Local frame: z = geometric normal.
+// Ostromoukhov 2013; supplemental 3.3 and Simplified Algorithm 3), the body of
+// prefilter.leadr.render.shade_leadr_delta (prefilter `leadr/glsl.py`). Local frame: z = the
+// geometric normal.
 const int LEADR_GRID = {n};
 const float LEADR_P[{n}] = float[{n}]({nodes});
 const float LEADR_W[{n}] = float[{n}]({weights});
