@@ -17,6 +17,7 @@ from prefilter.colormap import (
     filter_noise,
     filter_slope,
     filter_texture,
+    fit_height_params,
     gaussian_operator,
     height_distribution,
     height_moments_approx,
@@ -292,3 +293,15 @@ def test_textures_and_combinations_reject_bad_input():
     expect_error(lambda: combine_linear((1, 1, 1), c, c, c, np.nan), "v_bar")
     expect_error(lambda: combine_linear((1, 1, 1), c, np.zeros((5, 3)), c, 1.0), "c0, ch, cs")
     expect_error(lambda: combine_product(c, c, c, l_bar=np.inf), "l_bar")
+
+
+def test_height_fit_checks_its_grid_and_beats_the_paper():
+    # the refit is a least-squares optimum over the same grid: never worse than the paper's
+    params, report = fit_height_params(50.0, 60)
+    assert np.all(np.isfinite(params))
+    assert report["fit"]["mu_rms"] <= report["paper"]["mu_rms"] + 1e-12
+    assert report["fit"]["sigma_rms"] <= report["paper"]["sigma_rms"] + 1e-12
+    # were numpy / scipy errors (zero-size reduction, float n) or a NaN grid
+    expect_error(lambda: fit_height_params(-1.0), "lam_max")
+    expect_error(lambda: fit_height_params(10.0, 0), "n")
+    expect_error(lambda: fit_height_params(10.0, 2.5), "n")

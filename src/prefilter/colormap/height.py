@@ -24,6 +24,7 @@ from scipy.special import erfc, erfcx, log_ndtr
 from prefilter._validate import (
     as_directions,
     as_float_array,
+    as_positive_int,
     as_upper_directions,
     broadcast_batch,
 )
@@ -242,6 +243,15 @@ def height_moments_approx(lam, sigma_h=1.0, params: HeightParams = PAPER_PARAMS)
     return mu, sd
 
 
+def _fit_grid(lam_max, n) -> np.ndarray:
+    """``n`` values of ``L`` uniform in ``log(1 + L)`` over ``[0, lam_max]``."""
+    top = float(as_float_array(lam_max, "lam_max"))
+    if not top > 0.0:
+        raise PrefilterError(f"lam_max: expected a number > 0, got {lam_max!r}")
+    n = as_positive_int(n, "n", lo=2)
+    return np.expm1(np.linspace(0.0, np.log1p(top), n))
+
+
 def fit_height_params(lam_max: float = FIT_LAMBDA_MAX, n: int = 400):
     """Least-squares fit of eqs. 17-18 to the exact moments of eq. 16.
 
@@ -258,7 +268,7 @@ def fit_height_params(lam_max: float = FIT_LAMBDA_MAX, n: int = 400):
     """
     from scipy.optimize import least_squares
 
-    lam = np.expm1(np.linspace(0.0, np.log1p(lam_max), n))
+    lam = _fit_grid(lam_max, n)
     mu, sd = height_moments_exact(lam)
 
     def r_mu(p):
@@ -277,7 +287,7 @@ def fit_height_params(lam_max: float = FIT_LAMBDA_MAX, n: int = 400):
 def height_fit_errors(param_sets: dict, lam_max: float = FIT_LAMBDA_MAX, n: int = 400) -> dict:
     """Max / RMS absolute errors (units of ``sigma_h``) of eqs. 17-18 against the exact moments,
     over ``L`` uniform in ``log(1 + L)`` on ``[0, lam_max]``, for each named parameter set."""
-    lam = np.expm1(np.linspace(0.0, np.log1p(lam_max), n))
+    lam = _fit_grid(lam_max, n)
     mu, sd = height_moments_exact(lam)
     out = {}
     for name, p in param_sets.items():
