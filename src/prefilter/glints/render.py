@@ -120,9 +120,10 @@ def _world(w, t, b, n):
 
 
 #: Quad lights: each MIS estimate takes ``QUAD_MIS`` light samples and as many BRDF samples per
-#: shading sample; uniforms per pair: 2 (light) + 7 (hierarchical NDF sampler, B = 16).
+#: shading sample; uniforms per pair: 2 (light) + up to 9 (hierarchical NDF sampler, blocks up
+#: to 64; 7 for the default 16).
 QUAD_MIS = 4
-_U_PAIR = 9
+_U_PAIR = 11
 #: Range-query path of quad lights: the light is split into ``QUAD_SUB^2`` patches (then
 #: ``(2 QUAD_SUB)^2`` where those are too large); each patch's
 #: half-vector region must have a bounding box narrower than ``RANGE_MAX`` in ``s`` (the BRDF's
@@ -235,7 +236,6 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     -------
     (N, 3) the unbiased estimate of ``int_quad f cos L dwi``.
     """
-    from prefilter.glints.brdf import glint_brdf_cos
     from prefilter.glints.sample import pdf_wi, sample_wi
     from prefilter.render.lights import quad_light_pdf, quad_light_sample
 

@@ -273,8 +273,12 @@ def sample_wi(gm, center, sigma_p, wo, rng=0, *, u=None):
         if np.any(~small):
             if surf.gm is None:
                 raise PrefilterError("gm: footprints at or above sigma0 need a compressed map")
+            k = n_uniforms(surf.gm)
+            if uf is not None and uf.shape[-1] < k:
+                raise PrefilterError(f"u: expected at least {k} uniforms per sample for this map, "
+                                     f"got {uf.shape[-1]}")
             s[~small], ps[~small] = sample_s(surf.gm, c[~small], sp[~small], gen,
-                                             u=None if uf is None else uf[~small])
+                                             u=None if uf is None else uf[~small][:, :k])
     else:
         s, ps = sample_s(gm, c, sp, rng, u=u)
     wo = np.broadcast_to(wo, shape + (3,))
