@@ -5,8 +5,9 @@ from __future__ import annotations
 import re
 
 import numpy as np
+import pytest
 
-from prefilter.render.demo import DemoSettings, _section, run_demo
+from prefilter.render.demo import DemoSettings, _section, _viewer_section, run_demo
 from prefilter.render.report import Report
 
 SECTIONS = (
@@ -17,6 +18,7 @@ SECTIONS = (
     "LEADR: point light on height-mapped surfaces",
     "Colour-map filtering: cases a-d",
     "Glints (part 1): NDF images of footprints",
+    "Real-time viewer: WebGL2 against Python",
     "Summary",
 )
 
@@ -26,7 +28,7 @@ TINY = DemoSettings(width=48, height=30, reference_spp=4, flicker_frames=2, tabl
                     leadr_size=32, leadr_blocks=(8,), leadr_shifts=1, leadr_rays=8,
                     glints_map=32, glints_ndf_res=16, glints_rank=4,
                     methods=("ltc", "ltc-multiscale", "leadr-point"), multiscale_maps=("flakes",),
-                    colormap_configs=(("plane", 70.0, 1500.0, "far"),))
+                    colormap_configs=(("plane", 70.0, 1500.0, "far"),), viewer=False)
 
 
 def test_quick_demo_writes_every_section_with_existing_images(tmp_path):
@@ -67,3 +69,33 @@ def test_a_failing_section_leaves_a_note_and_the_rest_continues(tmp_path):
     assert "Not available" in page and "no such kernel" in page
     assert status[0][1].startswith("failed: RuntimeError") and status[1][1] == "ok"
     assert page.index("no such kernel") < page.index(">Fine</h2>")
+
+
+def test_viewer_section_without_chromium_leaves_a_note(monkeypatch, tmp_path):
+    import prefilter.viewer.browser as browser
+
+    monkeypatch.setattr(browser, "CHROMIUM", str(tmp_path / "no-chromium"))
+    report = Report("t")
+    report.add_section("viewer")
+    _viewer_section(report, DemoSettings.quick(), 0, log=lambda s: None)
+    page = report.write(tmp_path / "out").read_text(encoding="utf-8")
+    assert "Headless Chromium is missing" in page and "no-chromium" in page
+    assert "<img" not in page
+
+
+@pytest.mark.slow
+def test_viewer_section_screenshots_and_pixel_match(tmp_path):
+    """With Chromium: a screenshot per mode and the pixel-match rows, each under the 1 % bound
+    (the browser tests in tests/viewer check the same at other sizes)."""
+    from prefilter.viewer import METHODS
+
+    report = Report("t")
+    report.add_section("viewer")
+    settings = DemoSettings(viewer_size=(96, 72), viewer_match_size=(48, 36))
+    _viewer_section(report, settings, 0, log=lambda s: None)
+    page = report.write(tmp_path / "out").read_text(encoding="utf-8")
+    assert len(re.findall(r"<img src=", page)) == len(METHODS) + 1
+    rel = [float(x) for x in re.findall(r"<td[^>]*>(\d\.\d\de-\d\d)</td>\s*<td[^>]*>"
+                                        r"\d\.\d\de-\d\d</td>\s*<td[^>]*>\d\.\d\de-\d\d</td>",
+                                        page)]
+    assert len(rel) == 2 * len(METHODS) and max(rel) <= 0.01, rel

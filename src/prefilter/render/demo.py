@@ -10,8 +10,11 @@ Then one section per method package, each with its own scenes and numbers, built
 package (never re-implementing it): anisotropic LTC (brushed plane and sphere), multi-scale LTC
 (brushed and flakes normal maps, near and far), LEADR (point light; per-footprint errors against
 the displaced-geometry reference), colour-map filtering (cases a-d, near and far) and glints part
-1 (NDF images of footprints, direct against compressed). A section that fails leaves a note in
-the report instead of stopping the demo. ``docs/demo.md`` lists what each number means.
+1 (NDF images of footprints, direct against compressed), and the WebGL2 viewer (a screenshot of
+each mode from :func:`prefilter.viewer.screenshots` and the browser-vs-Python pixel match measured
+on the fly in headless Chromium; a note instead when Chromium is missing). A section that fails
+leaves a note in the report instead of stopping the demo. ``docs/demo.md`` lists what each number
+means.
 
 The camera and the light scale together with the distance, so the lighting configuration (and the
 solid angle of the light) is the same at every distance; only the number of texels under a pixel
@@ -47,9 +50,11 @@ class DemoSettings:
     method sections; ``colormap_*``: image side and reference grid (``n x n`` per pixel) of the
     colour-map scenes; ``leadr_*``: height-field size, footprint sizes (texels), shifts and rays
     per texel side of the per-footprint LEADR table; ``glints_*``: normal-map side, NDF image
-    resolution and CP rank of the glints bake. ``methods`` (showcase; ``None``: every registered
-    method), ``multiscale_maps`` and ``colormap_configs`` restrict the scenes (for tests: each
-    HDR-FLIP evaluation costs most of a second whatever the image size).
+    resolution and CP rank of the glints bake; ``viewer_*``: screenshot size, pixel-match image
+    size, and whether the viewer section runs the browser at all. ``methods`` (showcase;
+    ``None``: every registered method), ``multiscale_maps`` and ``colormap_configs`` restrict
+    the scenes (for tests: each HDR-FLIP evaluation costs most of a second whatever the image
+    size).
     """
 
     width: int = 256
@@ -71,6 +76,9 @@ class DemoSettings:
     glints_map: int = 64
     glints_ndf_res: int = 32
     glints_rank: int = 16
+    viewer: bool = True
+    viewer_size: tuple[int, int] = (384, 288)
+    viewer_match_size: tuple[int, int] = (96, 72)
     methods: tuple[str, ...] | None = None
     multiscale_maps: tuple[str, ...] = ("brushed", "flakes")
     colormap_configs: tuple = COLORMAP_CONFIGS
@@ -80,7 +88,8 @@ class DemoSettings:
         return cls(width=128, height=80, reference_spp=16, flicker_frames=4, table_configs=100,
                    table_samples=10_000, section_width=96, section_height=60, section_spp=16,
                    colormap_size=32, colormap_nref=12, leadr_size=64, leadr_blocks=(16,),
-                   leadr_shifts=2, leadr_rays=16, glints_rank=8)
+                   leadr_shifts=2, leadr_rays=16, glints_rank=8, viewer_size=(256, 192),
+                   viewer_match_size=(64, 48))
 
 
 #: Texels of the normal map per world unit, and the distance (world units) at which one pixel
@@ -480,6 +489,59 @@ def _glints_section(report, settings: DemoSettings, seed: int, log) -> None:
                      "interpolation and compression. Images share the direct image's maximum.")
 
 
+def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
+    import os
+
+    from prefilter.viewer import METHODS, pixel_match, screenshots
+    from prefilter.viewer.browser import CHROMEDRIVER, CHROMIUM, chromium
+
+    if not settings.viewer:
+        report.add_text("Skipped (demo settings: `viewer=False`).")
+        return
+    missing = [p for p in (CHROMIUM, CHROMEDRIVER) if not os.access(p, os.X_OK)]
+    if missing:
+        report.add_text(f"Headless Chromium is missing ({', '.join(missing)}): no screenshots or "
+                        "pixel match here. Install Debian's `chromium` and `chromium-driver` and "
+                        "run `prefilter view` / `python -m prefilter.viewer.match`.")
+        log(f"viewer section: {', '.join(missing)} missing, skipped")
+        return
+    w, h = settings.viewer_size
+    mw, mh = settings.viewer_match_size
+    ltc = tuple(m for m in METHODS if m != "leadr-point")
+    with tempfile.TemporaryDirectory(prefix="prefilter-demo-viewer-") as tmp:
+        driver = chromium(Path(tmp) / "profile")
+        try:
+            t0 = time.perf_counter()
+            shots = screenshots(Path(tmp) / "shots", width=w, height=h, driver=driver)
+            t_shots = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            rows = (pixel_match(scenes=("bumps-sphere",), methods=ltc, width=mw, height=mh,
+                                driver=driver)
+                    + pixel_match(scenes=("leadr",), methods=("leadr-point",), width=mw,
+                                  height=mh, driver=driver))
+            t_match = time.perf_counter() - t0
+        finally:
+            driver.quit()
+        names = [p.stem.removeprefix("viewer_") for p in shots]
+        half = (len(shots) + 1) // 2
+        report.add_image_row("viewer modes", list(zip(names[:half], map(str, shots[:half]))))
+        report.add_image_row("viewer modes 2", list(zip(names[half:], map(str, shots[half:]))))
+    report.add_text(
+        f"Canvas screenshots ({w} x {h}, sRGB, exposure 1/2) of the default scene (Gaussian-bump "
+        "plane, anisotropic sphere, one quad light) per method, `split` = ltc-multiscale | ltc; "
+        "`leadr-point` on the pixel-match `leadr` scene (height-mapped plane and sphere, two "
+        f"point lights and a directional light). Taken in {t_shots:.1f} s.")
+    report.add_table(
+        ["scene", "method", "tables / maps", "relative RMSE", "max abs error",
+         "max error / max radiance"],
+        [[r["scene"], r["method"], r["precision"], f"{r['rel_rmse']:.2e}", f"{r['max_abs']:.2e}",
+          f"{r['max_rel']:.2e}"] for r in rows],
+        caption="WebGL2 (headless Chromium, SwiftShader) against `prefilter.render.render`, "
+                f"{mw} x {mh} pixels, linear float read-back; relative RMSE = |browser - python|_2"
+                " / |python|_2 over covered pixels (the tests require <= 1 %). f16: float16 LTC "
+                f"tables, or for leadr-point float16 moment maps. Measured in {t_match:.1f} s.")
+
+
 # ---------------------------------------------------------------------------------- driver
 
 
@@ -549,6 +611,12 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "Position-normal NDFs of Gaussian pixel footprints on a small built-in normal map: the "
         "direct evaluation against the compressed pyramid's constant-time query.",
         lambda r: _glints_section(r, settings, seed, log), log)
+    _section(
+        report, status, "Real-time viewer: WebGL2 against Python",
+        "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "
+        "Chromium: a screenshot per mode and the pixel match against the Python renderer, "
+        "measured now (`docs/viewer.md`).",
+        lambda r: _viewer_section(r, settings, seed, log), log)
     total = time.perf_counter() - t_start
     report.add_section("Summary")
     report.add_table(["section", "status", "time (s)"], status,
