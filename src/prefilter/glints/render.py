@@ -169,8 +169,6 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     horizon, every patch's box narrower than ``RANGE_MAX`` and filled >= ``FILL_MIN``, footprint
     at or above the finest level); ``value`` is 0 elsewhere (use :func:`quad_mis` there).
     """
-    from prefilter.glints.query import range_mean
-
     N = corners.shape[0]
     f0 = np.atleast_1d(np.asarray(f0, dtype=np.float64))
     g = (np.arange(n_sub + 1) / n_sub)
@@ -203,7 +201,7 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     lo_v, hi_v = lo[valid].reshape(-1, 2), hi[valid].reshape(-1, 2) + eps
     cen = np.repeat(np.asarray(center)[valid], m, 0)
     spv = np.repeat(np.asarray(sigma_p)[valid], m, 0)
-    mean = range_mean(surf.gm, cen, spv, lo_v, hi_v).reshape(nv, m)
+    mean = _range_mean(surf.gm, cen, spv, lo_v, hi_v).reshape(nv, m)
     # smooth factor at each patch centre direction
     ac = ((np.arange(n_sub) + 0.5) / n_sub)
     Ac, Bc = np.meshgrid(ac, ac, indexing="ij")
@@ -219,6 +217,23 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     val = k * (jac * area[valid].reshape(nv, m) * mean)[..., None]
     out[valid] = val.sum(axis=1) * np.asarray(radiance, dtype=np.float64)
     return out, valid
+
+
+def _range_mean(gm, c, sp, lo, hi):
+    """:func:`prefilter.glints.query.range_mean` on flat arrays by the serial twin of its kernel
+    below :data:`prefilter.glints.brdf.RENDER_SERIAL_BELOW` items (render-sized batches)."""
+    from prefilter.glints._qkernels import range_kernel
+    from prefilter.glints.brdf import RENDER_SERIAL_BELOW
+    from prefilter.glints.query import _args, _prepare
+    from prefilter._numba import serial
+
+    _, idx, w, (lo_, hi_) = _prepare(gm, c, sp, (lo, "s_min"), (hi, "s_max"))
+    arrs, lo0, h = _args(gm)
+    out = np.empty(idx.shape[0])
+    kern = serial(range_kernel, 0) if idx.shape[0] < RENDER_SERIAL_BELOW else range_kernel
+    cc = np.ascontiguousarray
+    kern(*arrs, idx, w, cc(lo_[:, 0]), cc(lo_[:, 1]), cc(hi_[:, 0]), cc(hi_[:, 1]), lo0, h, out)
+    return out
 
 
 def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u):

@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter._numba import njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_float_array, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.glints.pyramid import interp_weights
@@ -163,7 +163,7 @@ def block_masses(gm: GlintsMap, center, sigma_p) -> np.ndarray:
     shape, arrs, idx, w = _prep(gm, center, sigma_p)
     nb = gm.block_index.shape[1]
     out = np.empty((idx.shape[0], nb, nb))
-    _block_masses(*arrs, idx, w, out)
+    serial(_block_masses, len(out))(*arrs, idx, w, out)
     return out.reshape(shape + (nb, nb))
 
 
@@ -214,7 +214,7 @@ def sample_s(gm: GlintsMap, center, sigma_p, rng=0, *, u=None):
     h = 2.0 * gm.support / gm.resolution
     s = np.empty((idx.shape[0], 2))
     pdf = np.empty(idx.shape[0])
-    _sample_kernel(*arrs, idx, w, uu, -gm.support, h, s, pdf)
+    serial(_sample_kernel, len(pdf))(*arrs, idx, w, uu, -gm.support, h, s, pdf)
     return s.reshape(shape + (2,)), pdf.reshape(shape)
 
 
@@ -416,7 +416,8 @@ def sample_s_direct(surf, center, sigma_p, rng=0, *, u=None):
         u = np.ascontiguousarray(u)
     s = np.empty((cf.shape[0], 2))
     s_el, J = surf.elements_
-    _direct_kernel(s_el, J, np.ascontiguousarray(cf[:, 0]), np.ascontiguousarray(cf[:, 1]), spf,
-                   surf.intrinsic_roughness, SIGMA_H, TRUNCATION, u, s)
+    cc = np.ascontiguousarray
+    serial(_direct_kernel, len(s))(s_el, J, cc(cf[:, 0]), cc(cf[:, 1]), spf,
+                                   surf.intrinsic_roughness, SIGMA_H, TRUNCATION, u, s)
     pdf = pndf(surf.normal_map, cf, spf, s, surf.intrinsic_roughness, elements_=surf.elements_)
     return s.reshape(shape + (2,)), pdf.reshape(shape)
