@@ -216,10 +216,12 @@ def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> l
 def frame_time(width: int = 512, height: int = 512, method: str = "ltc", frames: int = 10, *,
                driver=None) -> float:
     """Mean frame time in ms of the default scene at ``width x height`` drawn by ``method``
-    (synchronised by a one-pixel read-back per frame)."""
+    (synchronised by a one-pixel read-back per frame); ``leadr-point`` draws the ``leadr`` scene
+    (the default one has no point or directional light)."""
     from prefilter.viewer.browser import open_viewer
 
-    with _session({"timing": default_scene(width, height)}, driver) as (drv, url_of):
+    sc = scene("leadr", width, height) if method == "leadr-point" else default_scene(width, height)
+    with _session({"timing": sc}, driver) as (drv, url_of):
         open_viewer(drv, url_of("timing"))
         drv.execute_script("const v = window.prefilterViewer.viewer;"
                            "Object.assign(v.params, {methodLeft: arguments[0], "
