@@ -154,3 +154,34 @@ def test_footprint_bias_follows_the_method_defaults():
     assert ms_glsl.footprint_bias(lambda scene, settings: None) == (0.0, -1.0)
     bias, start = ms_glsl.footprint_bias(render_multiscale)
     assert f"MS_LOD_BIAS = {bias!r}, MS_LOD_START = {start!r}" in ms_glsl.glsl_source()
+
+
+def test_export_height_chains_for_leadr(tmp_path):
+    """An object with a normal map and a height map keeps both (LTC modes read the normal map,
+    leadr-point the height map's slope moments); the float16 atlas is the float32 one rounded."""
+    from prefilter.viewer.match import scene
+
+    d = scene("leadr", 32, 24)
+    d["objects"][1]["material"]["normal_map"] = {"procedural": "flakes", "size": 32, "seed": 1}
+    out = export_scene(d, tmp_path / "v", builtin_maps=False)
+    assert (out / "data/leadr.glsl").read_text().count("leadrDelta") >= 1
+    m = json.loads((out / "data/viewer.json").read_text())
+    assert m["leadr"]["glsl"] == "leadr.glsl" and m["atlas"]["f16"] == "atlas_f16.bin"
+    mats = [o["material"] for o in m["scene"]["objects"]]
+    assert mats[1]["map"] >= 0 and m["maps"][mats[1]["map"]]["normals"][0] >= 0
+    levels = np.fromfile(out / "data/levels_i32.bin", "<i4").reshape(-1, 4)
+    atlas = np.fromfile(out / "data/atlas_f32.bin", "<f4").reshape(-1, 4)
+    half = np.fromfile(out / "data/atlas_f16.bin", "<f2").reshape(-1, 4)
+    np.testing.assert_allclose(half, atlas, rtol=1e-3, atol=1e-7)
+    sc = load_scene(d)
+    for o, mat in zip(sc.objects, mats):
+        # level 0 of the height chain: the slopes' moments, E[s_x s_y] = s_x s_y per texel
+        first, n = mat["height"]
+        assert n == o.material.height_map.mip().n_levels
+        off, h, w, stride = levels[first]
+        slopes = o.material.height_map.load().slopes
+        assert (h, w, stride) == (*slopes.shape[:2], 2)
+        lv = atlas[off:off + h * w * 2].reshape(h, w, 8)
+        np.testing.assert_allclose(lv[..., :2], slopes, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(lv[..., 4], slopes[..., 0] * slopes[..., 1], rtol=1e-5,
+                                   atol=1e-6)
