@@ -272,6 +272,22 @@ def _serial_below(kernel, n):
     return serial(kernel, 0) if n < RENDER_SERIAL_BELOW else kernel
 
 
+def _range_mean(gm, c, sp, lo, hi):
+    """:func:`prefilter.glints.query.range_mean` on flat arrays by the serial twin of its kernel
+    below :data:`RENDER_SERIAL_BELOW` items (render-sized batches)."""
+    from prefilter.glints._qkernels import range_kernel
+    from prefilter.glints.query import _args, _prepare
+
+    _, idx, w, (lo_, hi_) = _prepare(gm, c, sp, (lo, "s_min"), (hi, "s_max"))
+    arrs, lo0, h = _args(gm)
+    out = np.empty(idx.shape[0])
+    kern = serial(range_kernel, 0) if idx.shape[0] < RENDER_SERIAL_BELOW else range_kernel
+    cc = np.ascontiguousarray
+    kern(*arrs, idx, w, cc(lo_[:, 0]), cc(lo_[:, 1]), cc(hi_[:, 0]), cc(hi_[:, 1]), lo0, h, out)
+    return out
+
+
+
 def vcavity_g1(w, m) -> np.ndarray:
     """V-cavity masking ``min(1, 2 m_z w_z / (w.m))`` for ``w.m > 0`` (Cook and Torrance 1982),
     else 0; ``w``, ``m`` ``(..., 3)`` unit vectors in the tangent frame."""

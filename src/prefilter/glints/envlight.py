@@ -26,8 +26,7 @@ import numpy as np
 
 from prefilter._validate import as_float_array, as_rng
 from prefilter.errors import PrefilterError
-from prefilter.glints.brdf import _as_surface, glint_ndf, schlick, vcavity_g2
-from prefilter.glints.query import range_mean
+from prefilter.glints.brdf import _as_surface, _range_mean, glint_ndf, schlick, vcavity_g2
 
 
 def _lobes(mu, lam, p):
@@ -52,7 +51,10 @@ def _dots(w, p):
 
 def sg_eval(w, mu, lam, p) -> np.ndarray:
     """Radiance ``(..., 3)`` of the SG environment at directions ``w (..., 3)``."""
-    mu, lam, p = _lobes(mu, lam, p)
+    return _sg_eval(w, *_lobes(mu, lam, p))
+
+
+def _sg_eval(w, mu, lam, p):
     e = np.exp(lam * (_dots(w, p) - 1.0))  # (..., K)
     return e @ mu
 
@@ -80,7 +82,10 @@ def _frame(p):
 def sample_sg(mu, lam, p, u) -> tuple[np.ndarray, np.ndarray]:
     """Directions ``(N, 3)`` from the lobe mixture (lobe chosen by luminance energy) and their
     mixture pdf ``(N,)``; ``u (N, 3)`` uniforms."""
-    mu, lam, p = _lobes(mu, lam, p)
+    return _sample_sg(*_lobes(mu, lam, p), u)
+
+
+def _sample_sg(mu, lam, p, u):
     u = np.asarray(u, dtype=np.float64)
     wgt = mu.mean(axis=1) * sg_energy(lam)
     P = wgt / wgt.sum()
@@ -94,12 +99,15 @@ def sample_sg(mu, lam, p, u) -> tuple[np.ndarray, np.ndarray]:
     pk = p[k] if p.ndim == 2 else p[np.arange(len(k)), k]
     t, b = _frame(pk)
     w = (sin * np.cos(phi))[:, None] * t + (sin * np.sin(phi))[:, None] * b + cos[:, None] * pk
-    return w, sg_pdf(w, mu, lam, p)
+    return w, _sg_pdf(w, mu, lam, p)
 
 
 def sg_pdf(w, mu, lam, p) -> np.ndarray:
     """Mixture pdf of :func:`sample_sg` at ``w (..., 3)``."""
-    mu, lam, p = _lobes(mu, lam, p)
+    return _sg_pdf(w, *_lobes(mu, lam, p))
+
+
+def _sg_pdf(w, mu, lam, p):
     wgt = mu.mean(axis=1) * sg_energy(lam)
     P = wgt / wgt.sum()
     dens = np.exp(lam * (_dots(w, p) - 1.0)) / sg_energy(lam)
@@ -141,7 +149,7 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
     small = (sp < surf.sigma0) if surf.normal_map is not None else np.zeros(N, bool)
     for j in range(n_samples):
         u = uu[:, 3 * j:3 * j + 3]
-        wi, pdf = sample_sg(mu, lam, p, u)
+        wi, pdf = _sample_sg(mu, lam, p, u)
         k = np.minimum(np.searchsorted(cum, u[:, 0], side="right"), len(cum) - 1)
         h = wo + wi
         h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
@@ -149,15 +157,15 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
         if prefilter:
             r = np.maximum(half_eps[k], 1e-6)[:, None]
             D = np.empty(N)
-            D[~small] = range_mean(surf.gm, c[~small], sp[~small], h[~small, :2] - r[~small],
-                                   h[~small, :2] + r[~small])
+            D[~small] = _range_mean(surf.gm, c[~small], sp[~small], h[~small, :2] - r[~small],
+                                    h[~small, :2] + r[~small])
             if np.any(small):
                 D[small] = glint_ndf(surf, c[small], sp[small], h[small, :2])
         else:
             D = glint_ndf(surf, c, sp, h[:, :2])
         G = vcavity_g2(wo, wi, h)
         val = np.where(ok, D * G / (4.0 * np.where(ok, wo[:, 2] * pdf, 1.0)), 0.0)
-        L = sg_eval(wi, mu, lam, p)
+        L = _sg_eval(wi, mu, lam, p)
         out += val[:, None] * schlick(f0, np.sum(wi * h, -1)) * L
         if base_color is not None:
             lam_ok = (wi[:, 2] > 0) & (pdf > 0)

@@ -44,7 +44,8 @@ import numpy as np
 from tqdm import tqdm
 
 from prefilter.errors import PrefilterError
-from prefilter.glints.brdf import FALLBACK_TRUNCATION, GlintSurface, glint_brdf_cos, surface
+from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, _range_mean,
+                                   glint_brdf_cos, surface)
 from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
 
 PIXEL_SIGMA = 0.5
@@ -217,23 +218,6 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     val = k * (jac * area[valid].reshape(nv, m) * mean)[..., None]
     out[valid] = val.sum(axis=1) * np.asarray(radiance, dtype=np.float64)
     return out, valid
-
-
-def _range_mean(gm, c, sp, lo, hi):
-    """:func:`prefilter.glints.query.range_mean` on flat arrays by the serial twin of its kernel
-    below :data:`prefilter.glints.brdf.RENDER_SERIAL_BELOW` items (render-sized batches)."""
-    from prefilter.glints._qkernels import range_kernel
-    from prefilter.glints.brdf import RENDER_SERIAL_BELOW
-    from prefilter.glints.query import _args, _prepare
-    from prefilter._numba import serial
-
-    _, idx, w, (lo_, hi_) = _prepare(gm, c, sp, (lo, "s_min"), (hi, "s_max"))
-    arrs, lo0, h = _args(gm)
-    out = np.empty(idx.shape[0])
-    kern = serial(range_kernel, 0) if idx.shape[0] < RENDER_SERIAL_BELOW else range_kernel
-    cc = np.ascontiguousarray
-    kern(*arrs, idx, w, cc(lo_[:, 0]), cc(lo_[:, 1]), cc(hi_[:, 0]), cc(hi_[:, 1]), lo0, h, out)
-    return out
 
 
 def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u):
