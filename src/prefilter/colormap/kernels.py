@@ -236,17 +236,6 @@ def _lambda(wx, wy, wz, cxx, cxy, cyy):  # pragma: no cover - compiled
 
 
 @njit_serial
-def _ncdf_fast(z):  # pragma: no cover - compiled
-    """``(Phi(z), phi(z))`` sharing one exp: Abramowitz & Stegun 7.1.26 (|error| < 7.5e-8)."""
-    x = abs(z) * 0.7071067811865476
-    t = 1.0 / (1.0 + 0.3275911 * x)
-    e = math.exp(-x * x)
-    q = 0.5 * t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027
-                                                                           + t * 1.061405429)))) * e
-    return (1.0 - q if z > 0 else q), _INV_SQRT_2PI * e
-
-
-@njit_serial
 def _log_cdf(z):  # pragma: no cover - compiled
     if z > -30.0:
         return math.log(0.5 * math.erfc(-z / math.sqrt(2.0)))
@@ -260,22 +249,96 @@ def _mills(z):  # pragma: no cover - compiled
     return -z - 1.0 / z
 
 
+# log2 of the mantissa on 1024 intervals: a float's exponent bits plus one lerp give log2 to
+# 2e-7, enough to place L on the probit grid (spacing 0.17 in log2) without a libm log, which
+# cost as much as the rest of the skew-normal terms
+_LOG2_M = np.log2(1.0 + np.arange(1025) / 1024.0)
+
+
 @njit_serial
-def _probit(lam, grid, kappa, dd):  # pragma: no cover - compiled
-    """Probit ``(kappa_L, d_L)`` of ``P_h^L`` (height.py), linear in ``log L`` on ``grid``."""
+def _log2_fast(x, tab):  # pragma: no cover - compiled
+    """``log2(x)`` for normal ``x > 0`` (|error| < 2e-7)."""
+    b = np.float64(x).view(np.int64)
+    e = (b >> 52) - 1023
+    i = (b >> 42) & 1023  # the top 10 mantissa bits select the interval
+    f = (b & ((1 << 42) - 1)) * (1.0 / (1 << 42))
+    return e + tab[i] + f * (tab[i + 1] - tab[i])
+
+
+@njit_serial
+def _probit(lam, t0, inv_dt, kappa, dd, tab):  # pragma: no cover - compiled
+    """Probit ``(kappa_L, d_L)`` of ``P_h^L`` (height.py), linear in ``log L`` on its grid
+    (``x = log2(L) inv_dt - t0`` in grid steps)."""
     if lam < 1e-4:  # == exp(grid[0]): no tilt below the table
         return 0.0, 40.0
-    n = grid.shape[0]
-    x = (math.log(lam) - grid[0]) / (grid[1] - grid[0])
+    n = kappa.shape[0]
+    x = _log2_fast(lam, tab) * inv_dt - t0
     i = min(max(int(x), 0), n - 2)
     f = min(max(x - i, 0.0), 1.0)
-    return kappa[i] * (1 - f) + kappa[i + 1] * f, dd[i] * (1 - f) + dd[i + 1] * f
+    return kappa[i] + f * (kappa[i + 1] - kappa[i]), dd[i] + f * (dd[i + 1] - dd[i])
+
+
+# Phi and the Mills ratio M = phi / Phi on [-3, 8] as cubic Hermite pieces (Phi' = phi,
+# M' = -M (z + M)): one 64-byte row of Horner coefficients per interval, error < 1e-8
+_Z_LO, _Z_HI, _Z_STEP = -3.0, 8.0, 1.0 / 32
+
+
+def _hermite_rows():
+    """Horner coefficients ``(n, 8)`` in ``t = (z - z_i) / step`` of the cubic Hermite
+    interpolants of ``Phi`` (columns 0-3) and ``M`` (4-7) on each interval."""
+    from scipy.special import log_ndtr, ndtr
+    z = np.arange(_Z_LO, _Z_HI + 0.5 * _Z_STEP, _Z_STEP)
+    phi = np.exp(-0.5 * z * z) * _INV_SQRT_2PI
+    big = ndtr(z)
+    mills = np.exp(-0.5 * z * z - log_ndtr(z)) * _INV_SQRT_2PI
+    dmills = -mills * (z + mills)
+    rows = np.empty((z.size - 1, 8))
+    for col, (y, dy) in enumerate(((big, phi), (mills, dmills))):
+        y0, y1 = y[:-1], y[1:]
+        m0, m1 = dy[:-1] * _Z_STEP, dy[1:] * _Z_STEP
+        d = y1 - y0
+        rows[:, 4 * col] = y0
+        rows[:, 4 * col + 1] = m0
+        rows[:, 4 * col + 2] = 3 * d - 2 * m0 - m1
+        rows[:, 4 * col + 3] = m0 + m1 - 2 * d
+    return rows
+
+
+_HERMITE = _hermite_rows()
+
+
+@njit_serial
+def _phi_mills(z, rows):  # pragma: no cover - compiled
+    """``(Phi(z), phi(z) / Phi(z))`` for ``z >= -3``."""
+    t = (z - _Z_LO) * (1.0 / _Z_STEP)
+    if t >= rows.shape[0]:
+        return 1.0, 0.0
+    i = int(t)
+    t -= i
+    return (rows[i, 0] + t * (rows[i, 1] + t * (rows[i, 2] + t * rows[i, 3])),
+            rows[i, 4] + t * (rows[i, 5] + t * (rows[i, 6] + t * rows[i, 7])))
+
+
+@njit_serial
+def _phi_cdf(z, rows):  # pragma: no cover - compiled
+    t = (z - _Z_LO) * (1.0 / _Z_STEP)
+    if t >= rows.shape[0]:
+        return 1.0
+    i = int(t)
+    t -= i
+    return rows[i, 0] + t * (rows[i, 1] + t * (rows[i, 2] + t * rows[i, 3]))
 
 
 @njit_parallel
-def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kappa, dd, table,
-                   lo, hi, smax, edge, filtered, max_aniso, scratch, out):  # pragma: no cover
+def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kappa, dd, l2tab,
+                   rows, table, lo, hi, smax, edge, filtered, max_aniso, scratch,
+                   out):  # pragma: no cover - compiled
     cxx, cxy, cyy = cov[0, 0], cov[0, 1], cov[1, 1]
+    inv_sh = 1.0 / sigma_h
+    inv_sh2 = inv_sh * inv_sh
+    # position on the probit grid (step dt in log L) from log2: x = log2(L) inv_dt - t0
+    inv_dt = math.log(2.0) / (grid[1] - grid[0])
+    t0 = grid[0] / (grid[1] - grid[0])
     for p in prange(uv.shape[0]):
         lam_o = _lambda(wo[p, 0], wo[p, 1], wo[p, 2], cxx, cxy, cyy)
         lam_i = _lambda(wi[p, 0], wi[p, 1], wi[p, 2], cxx, cxy, cyy)
@@ -293,22 +356,22 @@ def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kap
         var = m[1] - m[0] * m[0]
         if lod < 1.0:
             var -= (1.0 - max(lod, 0.0)) * iv[0]
-        x = m[0] / sigma_h
-        v = max(var, 0.0) / (sigma_h * sigma_h)
-        k1, d1 = _probit(lam_o + lam_i, grid, kappa, dd)
-        r1 = math.sqrt(1.0 + k1 * k1 * v)
-        z1 = (k1 * x + d1) / r1
-        k0, d0 = _probit(lam_o, grid, kappa, dd)
+        x = m[0] * inv_sh
+        v = max(var, 0.0) * inv_sh2
+        k1, d1 = _probit(lam_o + lam_i, t0, inv_dt, kappa, dd, l2tab)
+        ir1 = 1.0 / math.sqrt(1.0 + k1 * k1 * v)
+        z1 = (k1 * x + d1) * ir1
+        k0, d0 = _probit(lam_o, t0, inv_dt, kappa, dd, l2tab)
         z0 = (k0 * x + d0) / math.sqrt(1.0 + k0 * k0 * v)
-        if z1 > -3.0 and z0 > -3.0:  # the usual case: a shader-style Phi, one exp each
-            cdf1, pdf1 = _ncdf_fast(z1)
-            lz = pdf1 / cdf1
-            vb = cdf1 / _ncdf_fast(z0)[0]
+        if z1 > -3.0 and z0 > -3.0:  # the usual case: tabulated Phi and Mills ratio
+            cdf1, lz = _phi_mills(z1, rows)
+            vb = cdf1 / _phi_cdf(z0, rows)
         else:  # deep shadow: log-space tails
             lz = _mills(z1)
             vb = math.exp(_log_cdf(z1) - _log_cdf(z0))
-        mean = x + k1 * v * lz / r1
-        vv = max(v - (k1 * v / r1) ** 2 * lz * (z1 + lz), 0.0)
+        a = k1 * v * ir1
+        mean = x + a * lz
+        vv = max(v - a * a * lz * (z1 + lz), 0.0)
         _table(table, lo, hi, smax, edge, mean * sigma_h, math.sqrt(vv) * sigma_h, out[p])
         for k in range(out.shape[1]):
             out[p, k] *= vb
@@ -376,6 +439,6 @@ def shade_height(table, chain: PackedChain, uv, dudv, wo, wi, slope_cov, sigma_h
     out = np.zeros((uvf.shape[0], table.table.shape[2]))
     _height_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf, wo, wi,
                    np.ascontiguousarray(cov), float(sigma_h), _PROBIT_T, np.asarray(kappa),
-                   np.asarray(dd), *_table_args(table), bool(filtered),
+                   np.asarray(dd), _LOG2_M, _HERMITE, *_table_args(table), bool(filtered),
                    as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))
