@@ -102,11 +102,14 @@ def test_quad_mis_matches_monte_carlo(surf, sp, size):
 
 
 def test_equirect_convention():
-    """Row 0 is the zenith (+y); u = 0.25 looks along +z, u = 0.5 along -x."""
+    """docs/scenes.md: row 0 is the zenith (+y); u = 0 looks towards +z, u = 1/4 towards -x,
+    u = 1/2 (the centre) towards -z, u = 3/4 towards +x."""
     d = equirect_directions(64, 128)
-    assert d[0, 0, 1] > 0.99
-    np.testing.assert_allclose(d[32, 32], [0, 0, 1], atol=0.05)
-    np.testing.assert_allclose(d[32, 64], [-1, 0, 0], atol=0.05)
+    assert d[0, 0, 1] > 0.99 and d[-1, 0, 1] < -0.99
+    np.testing.assert_allclose(d[32, 0], [0, 0, 1], atol=0.05)
+    np.testing.assert_allclose(d[32, 32], [-1, 0, 0], atol=0.05)
+    np.testing.assert_allclose(d[32, 64], [0, 0, -1], atol=0.05)
+    np.testing.assert_allclose(d[32, 96], [1, 0, 0], atol=0.05)
     np.testing.assert_allclose(np.linalg.norm(d, axis=-1), 1.0, rtol=1e-12)
 
 

@@ -16,8 +16,8 @@ variance at equal samples (Fig. 11 of the paper); ``eps`` is relative to ``|mu|`
 Axes ``p`` may also be per shading sample, ``(N, K, 3)`` (each sample's tangent frame).
 :func:`fit_sg` fits an equirectangular environment image by a fixed set of lobes (Fibonacci axes,
 one sharpness, non-negative least squares amplitudes); :func:`equirect_directions` gives the
-image's orientation convention (that of the renderer's sphere ``uv``: ``phi = 2 pi u`` from
-``+x`` towards ``+z``, ``theta = pi v`` from ``+y``, the top row).
+image's orientation convention (``docs/scenes.md``: row 0 is ``+y``, ``u = 0`` looks towards
+``+z``, ``u = 1/4`` towards ``-x``).
 """
 
 from __future__ import annotations
@@ -175,14 +175,15 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
 
 
 def equirect_directions(height: int, width: int) -> np.ndarray:
-    """Unit world directions ``(H, W, 3)`` of the pixel centres of an equirectangular image:
-    ``u = (col + 0.5) / W``, ``v = (row + 0.5) / H``, ``phi = 2 pi u``, ``theta = pi v``,
-    ``w = (sin theta cos phi, cos theta, sin theta sin phi)`` (y up; row 0 is the zenith; the
-    renderer's sphere ``uv`` convention with pole ``+y`` and ``axis_x = +x``)."""
-    v = (np.arange(height) + 0.5) / height
-    u = (np.arange(width) + 0.5) / width
-    th, ph = np.meshgrid(np.pi * v, 2.0 * np.pi * u, indexing="ij")
-    return np.stack([np.sin(th) * np.cos(ph), np.cos(th), np.sin(th) * np.sin(ph)], -1)
+    """Unit world directions ``(H, W, 3)`` of the pixel centres of a scene environment image,
+    the convention of ``docs/scenes.md``: ``u = (col + 0.5) / W``, ``v = (row + 0.5) / H``,
+    ``d = (-sin(pi v) sin(2 pi u), cos(pi v), sin(pi v) cos(2 pi u))`` (row 0 is the zenith
+    ``+y``, ``u = 0`` looks towards ``+z``, ``u = 1/4`` towards ``-x``, the centre towards
+    ``-z``), via :data:`prefilter.leadr.envmap.ENV_FROM_WORLD`."""
+    from prefilter.leadr.envmap import ENV_FROM_WORLD, texel_directions
+
+    d, _ = texel_directions(int(height), int(width))
+    return d @ ENV_FROM_WORLD
 
 
 def fibonacci_axes(n: int) -> np.ndarray:

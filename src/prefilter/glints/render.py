@@ -11,8 +11,8 @@ range queries over the light's half-vector footprint where it is small and well 
 importance sampling of light and NDF samples, :func:`quad_mis`; diffuse by Lambert's polygon
 formula); environment maps (fitted by spherical Gaussians, :func:`environment_sgs`, sampled lobe
 by lobe; ``glints`` blurs the NDF over each lobe's compact epsilon-support by a range query,
-sec. 5.4). Equirectangular convention: :func:`prefilter.glints.envlight.equirect_directions`
-(row 0 = ``+y``, ``u = 0.25`` looks along ``+z``). Textured quads are rejected.
+sec. 5.4). Equirectangular convention: that of ``docs/scenes.md``
+(:func:`prefilter.glints.envlight.equirect_directions`). Textured quads are rejected.
 
 Footprints: the pixel is a Gaussian of std ``PIXEL_SIGMA`` pixels; through the texel-space
 Jacobian ``J = diag(W, H) dudv`` it becomes an ellipse, approximated by the isotropic Gaussian of
@@ -468,11 +468,11 @@ def render_glints_reference(scene, settings) -> np.ndarray:
 def measurement_environment() -> Path:
     """An equirectangular ``.npy`` environment (64 x 128, written once to the cache directory):
     a dim sky (0.3), a dark ground (0.05) and a bright window (20) of +-12 degrees around the
-    direction that the measurement scenes' plane mirrors towards the camera (``theta`` 59 degrees
-    from ``+y``, ``phi`` 270 degrees, i.e. towards ``-z``)."""
+    direction that the measurement scenes' plane mirrors towards the camera (59 degrees from
+    ``+y``, towards ``-z``: near the image centre in the convention of ``docs/scenes.md``)."""
     from prefilter.glints.envlight import equirect_directions
 
-    path = cache_dir() / "measurement-environment-v1.npy"
+    path = cache_dir() / "measurement-environment-v2.npy"
     if not path.exists():
         d = equirect_directions(64, 128)
         img = np.where(d[..., 1:2] > 0, 0.3, 0.05) * np.ones(3)
