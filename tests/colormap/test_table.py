@@ -6,6 +6,7 @@ from scipy.integrate import quad
 from scipy.stats import norm
 
 from prefilter.colormap import gaussian_operator, lookup, prefilter_table
+from prefilter.colormap.table import prefilter_rows
 from prefilter.errors import PrefilterError
 
 
@@ -62,6 +63,49 @@ def test_table_equals_numerical_convolution(edge):
             ref = quad(lambda x: f(m + x, 1) * norm.pdf(x, 0, s), -9 * s, 9 * s,
                        points=kinks, limit=1000, epsabs=1e-13)[0]
             assert abs(t.table[j, i, 1] - ref) < 1e-10, (j, i, t.table[j, i, 1], ref)
+
+
+@pytest.mark.parametrize("edge", ["clamp", "mirror", "periodic"])
+def test_fft_rows_equal_the_dense_operator(edge):
+    # sigmas from a fraction of a texel to 2.5 ranges (kernel reach far beyond the map: folded
+    # several times onto the period, clamp tails carrying most of the weight)
+    rng = np.random.default_rng(8)
+    for n in (2, 7, 40):
+        c = rng.random((n, 3))
+        sig = np.array([0.0, 0.2 / n, 1.0 / n, 0.13, 0.6, 2.5])
+        rows = prefilter_rows(c, sig, edge)
+        for r, s in zip(rows, sig):
+            np.testing.assert_allclose(r, gaussian_operator(n, s, edge) @ c, rtol=0, atol=1e-14)
+
+
+def test_fft_rows_do_not_depend_on_the_batch():
+    c = np.random.default_rng(9).random((64, 3))
+    sig = np.linspace(0.0, 0.4, 40)
+    full = prefilter_rows(c, sig, "mirror")
+    np.testing.assert_array_equal(prefilter_rows(c, sig[7:19], "mirror"), full[7:19])
+
+
+def _gauss_legendre_convolution(f, m, s, kinks):
+    """``int f(m + x) N(x; 0, s^2) dx`` over ``|x| < 9 s``: 12-node Gauss-Legendre on pieces that
+    split at the kinks of ``f`` and are at most ``s / 4`` long (f linear on each piece)."""
+    edges = np.unique(np.concatenate([np.linspace(-9 * s, 9 * s, 73),
+                                      kinks[np.abs(kinks) < 9 * s]]))
+    x, w = np.polynomial.legendre.leggauss(12)
+    a, b = edges[:-1, None], edges[1:, None]
+    xs = 0.5 * (a + b) + 0.5 * (b - a) * x
+    return float(np.sum(0.5 * (b - a) * w * f(m + xs) * norm.pdf(xs, 0, s)))
+
+
+def test_large_table_against_numerical_convolution():
+    # a 1024-texel clamp map (the size that took minutes with the dense operators)
+    rng = np.random.default_rng(10)
+    c = np.cumsum(rng.normal(size=(1024, 1)), 0) / 30
+    lo, hi = 0.0, 4.0
+    t = prefilter_table(c, (lo, hi), 0.5, size=1024, n_sigma=64)
+    f, centres = _reference_map(c, lo, hi, "clamp")
+    for j, i in ((1, 0), (1, 700), (20, 511), (63, 1023), (63, 3)):
+        ref = _gauss_legendre_convolution(f, t.means[i], t.sigmas[j], centres - t.means[i])
+        assert abs(t.table[j, i, 0] - ref) < 1e-12, (j, i, t.table[j, i, 0], ref)
 
 
 def test_lookup_between_texels_matches_convolution():

@@ -34,7 +34,7 @@ from prefilter._validate import as_float_array, as_positive_int, broadcast_batch
 from prefilter.errors import PrefilterError, TableFileError
 
 __all__ = ["EDGES", "ColormapTable", "as_colormap", "gaussian_operator", "lookup",
-           "prefilter_table"]
+           "prefilter_rows", "prefilter_table"]
 
 EDGES = ("clamp", "mirror", "periodic")
 #: Format name and version of the JSON sidecar of a baked table (:meth:`ColormapTable.save`).
@@ -410,9 +410,74 @@ def prefilter_table(colormap, value_range=(0.0, 1.0), sigma_max: float = 0.25, s
         c = gaussian_operator(n, 0.0, edge, n_out=size) @ c
         n = size
     sig = np.linspace(0.0, smax, n_sigma) / (hi - lo)
-    table = np.stack([gaussian_operator(n, s, edge) @ c for s in sig])
+    table = prefilter_rows(c, sig, edge)
     table[0] = c  # the sigma = 0 row is the colour map itself, bit for bit
     return ColormapTable(table, (lo, hi), smax, edge)
+
+
+def prefilter_rows(c, sigmas, edge: str = "clamp") -> np.ndarray:
+    """Rows of the table: colour-map samples ``c (n, C)`` convolved with Gaussians of std
+    ``sigmas`` (fractions of the value range), at the ``n`` texel centres (Heitz et al. 2013,
+    eq. 10).
+
+    The same sums as ``gaussian_operator(n, s, edge) @ c`` (equal to ~1e-15), by FFT: the
+    smoothed-hat kernel of each row (closed form, :func:`_hat_kernel`) is folded onto the period
+    ``2n`` of mirror maps / ``n`` of periodic ones and applied as a circular convolution; a clamp
+    map convolves its ``n`` samples linearly (zero padding to ``2n``) and adds the kernel's tail
+    masses beyond each end times the end colours. Cost ``O(n log n + 8 sigma n)`` a row instead of
+    the operator's ``O(n^2)``. Each row is computed on its own, so any subset of ``sigmas`` gives
+    the same rows bit for bit (resumable bakes can compute them in chunks).
+
+    Parameters
+    ----------
+    c : array_like, shape (n, C)
+    sigmas : array_like, shape (k,)
+        Standard deviations, fractions of the value range, ``>= 0``.
+    edge : {"clamp", "mirror", "periodic"}
+
+    Returns
+    -------
+    numpy.ndarray, shape (k, n, C)
+    """
+    c = as_float_array(c, "c", ndim_min=2)
+    if c.ndim != 2 or c.shape[0] < 2:
+        raise PrefilterError(f"c: expected colour-map samples of shape (n, C), n >= 2, got "
+                             f"{c.shape}")
+    sig = as_float_array(sigmas, "sigmas", ndim_min=1)
+    if sig.ndim != 1 or np.any(sig < 0.0):
+        raise PrefilterError(f"sigmas: expected a 1D array of stds >= 0, got shape {sig.shape}")
+    edge = _edge(edge)
+    n = c.shape[0]
+    if edge == "clamp":
+        period, ext = 2 * n, np.concatenate([c, np.zeros_like(c)])
+    elif edge == "mirror":
+        period, ext = 2 * n, np.concatenate([c, c[::-1]])
+    else:
+        period, ext = n, c
+    spectrum = np.fft.rfft(ext, axis=0)
+    out = np.empty((sig.size, n, c.shape[1]))
+    for r, s in enumerate(sig * n):
+        reach = int(np.ceil(_REACH * s)) + 1
+        k = _hat_kernel(s, reach)
+        d = np.arange(-reach, reach + 1)
+        if edge == "clamp":
+            # samples 0..n-1 only meet offsets |d| < n; the rest is the clamped ends' share
+            inner = np.abs(d) < n
+            kp = np.zeros(period)
+            kp[np.mod(d[inner], period)] = k[inner]
+        else:
+            kp = np.bincount(np.mod(d, period), weights=k, minlength=period)
+        row = np.fft.irfft(np.fft.rfft(kp)[:, None] * spectrum, n=period, axis=0)[:n]
+        if edge == "clamp":
+            # tail[m] = sum_{d >= m} k(d), summed from the small far end: the left end colour
+            # weighs tail[i + 1] at column i, the right one tail[n - i]
+            tail = np.concatenate([np.cumsum(k[:reach:-1])[::-1], [0.0]])  # d = 1 .. reach
+            i = np.arange(n)
+            wl = np.where(i + 1 <= reach, tail[np.minimum(i, reach)], 0.0)
+            wr = np.where(n - i <= reach, tail[np.minimum(n - i - 1, reach)], 0.0)
+            row += wl[:, None] * c[0] + wr[:, None] * c[-1]
+        out[r] = row
+    return out
 
 
 def as_table(table, cls=None, name: str = "table"):
