@@ -222,3 +222,12 @@ def test_integer_normal_maps_are_not_taken_for_normals(dtype):
     rgb[..., 2] = np.iinfo(dtype).max
     expect_error(lambda: slopes_from_normals(rgb), "decode_normals")
     expect_error(lambda: moments(rgb), "decode_normals")
+
+
+@pytest.mark.parametrize("backend", ["numba", "numpy"])
+def test_empty_batches(white_env, backend):
+    # an empty batch of views gives an empty result (the NumPy path returned None.reshape)
+    e3 = np.zeros((0, 3))
+    assert env_specular(white_env, e3, (0, 0), GOOD_COV, backend=backend).shape == (0, 3)
+    assert diffuse_sh(np.zeros((9, 3)), e3, (0, 0), GOOD_COV).shape == (0, 3)
+    assert point_light(e3, e3, (0, 0), GOOD_COV).shape == (0,)

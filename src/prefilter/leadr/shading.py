@@ -241,7 +241,7 @@ def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
     k = n * n
     step = max(1, CHUNK // k)
     out = None
-    for s in range(0, wo.shape[0], step):
+    for s in range(0, max(wo.shape[0], 1), step):  # once even for an empty batch (channels)
         sl = slice(s, s + step)
         o, tw = wo[sl], None if to_world is None else to_world[sl]
         m, w, cell = grid_normals(mu[sl], cov[sl], n, spacing)
