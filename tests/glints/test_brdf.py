@@ -218,13 +218,3 @@ def test_render_reference_converges_to_direct(small_bakes):
     d = render(smooth, "glints-direct")
     ref = render(smooth, "glints-reference", spp=128)
     assert ref.mean() == pytest.approx(d.mean(), rel=0.05)
-
-
-def test_render_rejects_area_lights(small_bakes):
-    from prefilter.render.pipeline import render
-
-    sc = glint_scene(3.0)
-    sc["lights"] = [{"type": "quad", "vertices": [[-1, 2, -1], [1, 2, -1], [1, 2, 1], [-1, 2, 1]],
-                     "radiance": 1.0}]
-    with pytest.raises(PrefilterError, match="point and directional"):
-        render(sc, "glints")

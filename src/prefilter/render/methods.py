@@ -87,9 +87,12 @@ _DESCRIPTIONS: dict[str, str] = {
     "leadr-irradiance": "LEADR diffuse layer: SH irradiance of environment and directional lights",
     "leadr-irradiance-naive": "naive counterpart of leadr-irradiance",
     "ltc-aniso": "area lights by the anisotropic GGX LTC table (alpha_x, alpha_y, tangent frame)",
-    "glints": "glints: compressed footprint P-NDF (point query), point/directional lights",
-    "glints-direct": "glints: direct P-NDF of every footprint (Yan et al. 2016)",
-    "glints-reference": "glints ground truth: footprint supersampling, point P-NDF of the map",
+    "glints": "glints: compressed footprint P-NDF (point query); quad lights by range queries "
+              "where valid, else MIS; environment maps by SG prefiltering",
+    "glints-direct": "glints: direct P-NDF of every footprint (Yan et al. 2016); quad and "
+                     "environment lights by Monte Carlo (MIS, SG sampling)",
+    "glints-reference": "glints ground truth: footprint supersampling, point P-NDF of the map; "
+                        "quad and environment lights by Monte Carlo",
 }
 
 
