@@ -1,0 +1,239 @@
+"""Colour-map filtering as render methods: ``colormap-filtered`` and ``colormap-naive``.
+
+A scene carries its colour-map driver under ``extras.colormap`` (a scene field the scene format
+adds for optional features; see ``docs/colormap.md``), or the functions take it as an argument.
+The image is the colour term of Heitz et al. 2013 at each sample (unlit, like the acceptance
+images): ``C0_bar`` (eq. 7) for a tabulated texture or procedural noise, ``Ch_bar`` (eq. 14, with
+the Smith visibility towards a directional light) for microsurface heights; the naive method
+shades ``C(mean)`` (times eq. 13's ``V_bar`` for heights). Both use the compiled kernels of
+:mod:`prefilter.colormap.kernels` on every object of the scene, at ``settings.spp`` sub-pixel
+samples per pixel (pixel centres for 1), with the pixel's footprint.
+
+The driver (a dict, as in a scene file)::
+
+    {"driver": "texture" | "noise" | "height",
+     "texture": {"procedural": "noise", "size": 256, "seed": 0, "corr_length": 3.0}
+                | {"procedural": "gaussian", "size": 256, "rms_slope": 0.5, ...} (height)
+                | "file.exr" (texture, height: first channel),
+     "colors": [[r, g, b], ...] | "map.png",     # the colour map, left to right
+     "range": [lo, hi],         # default: the driving values' mean -+ 4 std
+     "sigma_max": 1.5,          # default: 1.5 std of the driving values
+     "edge": "clamp",           # clamp | mirror | periodic
+     "size": 256,               # table columns and rows
+     "light": [x, y, z]}        # height: direction towards the light; default: the scene's first
+                                # directional light, else the surface normal (V_bar = 1)
+
+Heights are normalised to zero mean and unit std before the colour map reads them (``range`` is
+in units of the height std); their slopes give the Smith ``Lambda`` (eq. 3).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from prefilter._validate import as_float_array
+from prefilter.colormap.kernels import PackedChain, shade_height, shade_noise, shade_texture
+from prefilter.colormap.table import EDGES, ColormapTable, prefilter_table
+from prefilter.colormap.texture import NoiseStd
+from prefilter.errors import PrefilterError
+
+__all__ = ["DRIVERS", "ColormapDriver", "colormap_driver", "render_colormap_filtered",
+           "render_colormap_naive"]
+
+DRIVERS = ("texture", "noise", "height")
+_KEYS = ("driver", "texture", "colors", "range", "sigma_max", "edge", "size", "light")
+
+
+@dataclass(frozen=True)
+class ColormapDriver:
+    """A colour map and what drives it, ready for the kernels.
+
+    ``mean_chain``: one-channel mean mip (naive method, noise); ``moments_chain``: ``E[f],
+    E[f^2]`` mip (filtered texture and height); ``light``: world direction towards the light
+    (height) or ``None``."""
+
+    driver: str
+    table: ColormapTable
+    mean_chain: PackedChain
+    moments_chain: PackedChain | None = None
+    noise_std: NoiseStd | None = None
+    slope_cov: np.ndarray | None = None
+    light: np.ndarray | None = None
+
+
+def _err(key, what, got):
+    return PrefilterError(f"extras.colormap.{key}: expected {what}, got {got!r}")
+
+
+def _driving_texture(spec, driver, base: Path):
+    """``(values (H, W), slopes (H, W, 2) or None, noise params or None)``."""
+    from prefilter.texture import height_map, noise, read_image
+    from prefilter.texture.procedural import PARAMS
+
+    if isinstance(spec, str):
+        if driver == "noise":
+            raise _err("texture", "a procedural noise spec for the noise driver (its std per "
+                       "LOD comes from the generator)", spec)
+        img = read_image((base / spec).resolve())[..., 0]
+        if driver != "height":
+            return img, None, None
+        sx = (np.roll(img, -1, 1) - np.roll(img, 1, 1)) / 2.0  # periodic central differences
+        sy = (np.roll(img, -1, 0) - np.roll(img, 1, 0)) / 2.0
+        return img, np.stack([sx, sy], -1), None
+    if not isinstance(spec, dict) or "procedural" not in spec:
+        raise _err("texture", "a file path or a {\"procedural\": ...} spec", spec)
+    p = dict(spec)
+    kind = p.pop("procedural")
+    kinds = ("gaussian", "anisotropic") if driver == "height" else ("noise",)
+    if kind not in kinds:
+        raise _err("texture.procedural", f"one of {', '.join(kinds)} for the {driver} driver",
+                   kind)
+    unknown = set(p) - {"size", "seed"} - set(PARAMS[kind])
+    if unknown:
+        raise _err("texture", f"parameters among size, seed, {', '.join(PARAMS[kind])}",
+                   sorted(unknown))
+    size, seed = p.pop("size", 256), p.pop("seed", 0)
+    if driver == "height":
+        hm = height_map(kind, size, seed, **p)
+        return hm.height, hm.slopes, None
+    return noise(size, seed, **p), None, (size, p.get("corr_length", 4.0), p.get("sigma", 1.0))
+
+
+def _colors(spec, base: Path) -> np.ndarray:
+    if isinstance(spec, str):
+        from prefilter.colormap.commands import load_colormap_image
+
+        return load_colormap_image((base / spec).resolve())
+    c = as_float_array(spec, "extras.colormap.colors")
+    if c.ndim != 2 or c.shape[0] < 2:
+        raise _err("colors", "a list of at least 2 colours [r, g, b] or an image path",
+                   np.shape(spec))
+    return c
+
+
+@functools.lru_cache(maxsize=8)
+def _build(key: str, base: str) -> ColormapDriver:
+    from prefilter.colormap.texture import moments_mip
+    from prefilter.texture.mip import MipChain
+
+    spec, base_dir = json.loads(key), Path(base)
+    if not isinstance(spec, dict):
+        raise PrefilterError(f"extras.colormap: expected an object, got {spec!r}")
+    unknown = [k for k in spec if k not in _KEYS]
+    if unknown:
+        raise _err(unknown[0], f"one of the fields {', '.join(_KEYS)}", "an unknown field")
+    driver = spec.get("driver")
+    if driver not in DRIVERS:
+        raise _err("driver", f"one of {', '.join(DRIVERS)}", driver)
+    if "texture" not in spec or "colors" not in spec:
+        raise _err("texture" if "texture" not in spec else "colors", "a value", None)
+    f, slopes, noise_params = _driving_texture(spec["texture"], driver, base_dir)
+    cov = None
+    if driver == "height":
+        f = (f - f.mean()) / max(float(f.std()), 1e-12)
+        cov = np.cov(slopes.reshape(-1, 2).T, bias=True)
+    mean, std = float(f.mean()), float(f.std())
+    lo, hi = spec.get("range", (mean - 4 * std, mean + 4 * std))
+    edge = spec.get("edge", "clamp")
+    if edge not in EDGES:
+        raise _err("edge", f"one of {', '.join(EDGES)}", edge)
+    table = prefilter_table(_colors(spec["colors"], base_dir), (lo, hi),
+                            spec.get("sigma_max", 1.5 * max(std, 1e-6)),
+                            size=spec.get("size", 256), edge=edge)
+    light = spec.get("light")
+    if light is not None:
+        light = as_float_array(light, "extras.colormap.light", last_dim=3)
+        if light.shape != (3,) or not np.linalg.norm(light) > 0:
+            raise _err("light", "a non-zero direction [x, y, z]", spec["light"])
+        light = light / np.linalg.norm(light)
+    return ColormapDriver(
+        driver, table, PackedChain(MipChain(f)),
+        moments_chain=None if driver == "noise" else PackedChain(moments_mip(f)),
+        noise_std=NoiseStd.from_procedural(*noise_params) if driver == "noise" else None,
+        slope_cov=cov, light=light)
+
+
+def colormap_driver(spec: dict, *, base_dir=".") -> ColormapDriver:
+    """Build (and cache) the driver described by ``spec`` (module docstring); file paths are
+    relative to ``base_dir``."""
+    try:
+        key = json.dumps(spec, sort_keys=True)
+    except (TypeError, ValueError):
+        raise PrefilterError(f"extras.colormap: expected JSON data, got {spec!r}") from None
+    return _build(key, str(Path(base_dir).resolve()))
+
+
+def _scene_driver(scene, driver) -> ColormapDriver:
+    if isinstance(driver, ColormapDriver):
+        return driver
+    if driver is None:
+        extras = getattr(scene, "extras", None) or {}
+        driver = extras.get("colormap") if isinstance(extras, dict) else None
+        if driver is None:
+            raise PrefilterError("extras.colormap: the colour-map methods need a driver (scene "
+                                 "field extras.colormap, or the driver argument)")
+    return colormap_driver(driver, base_dir=getattr(scene, "base_dir", "."))
+
+
+def _light(scene, d: ColormapDriver):
+    if d.light is not None:
+        return d.light
+    for light in scene.lights:
+        if light.type == "directional":
+            return -np.asarray(light.direction, dtype=np.float64)  # stored: direction of travel
+    return None
+
+
+def _shade(scene, settings, driver, filtered: bool) -> np.ndarray:
+    from prefilter.render.pipeline import render_samples
+
+    d = _scene_driver(scene, driver)
+    light = _light(scene, d)
+
+    def shade(g, _u):
+        if d.driver == "texture":
+            chain = d.moments_chain if filtered else d.mean_chain
+            return shade_texture(d.table, chain, g.uv, g.dudv, filtered=filtered)
+        if d.driver == "noise":
+            return shade_noise(d.table, d.mean_chain, d.noise_std, g.uv, g.dudv,
+                               filtered=filtered)
+        # two-sided surfaces: seen from behind, the frame flips (n, b -> -n, -b)
+        s = np.where(np.sum(g.view * g.normal, -1) < 0, -1.0, 1.0)[..., None]
+        t, b, n = g.tangent, g.bitangent * s, g.normal * s
+
+        def local(w):
+            w = np.stack([np.sum(w * t, -1), np.sum(w * b, -1), np.sum(w * n, -1)], -1)
+            # grazing and back-facing directions: just above the horizon (V_bar -> 0, Lambda
+            # finite), as the acceptance scenes do
+            w[..., 2] = np.maximum(w[..., 2], 1e-3)
+            return w / np.linalg.norm(w, axis=-1, keepdims=True)
+
+        wo = local(g.view)
+        if light is None:  # no light given: lit everywhere (Lambda_i = 0, V_bar = 1)
+            wi = np.broadcast_to([0.0, 0.0, 1.0], wo.shape)
+        else:
+            wi = local(np.broadcast_to(light, g.view.shape))
+        chain = d.moments_chain if filtered else d.mean_chain
+        return shade_height(d.table, chain, g.uv, g.dudv, wo, wi, d.slope_cov,
+                            filtered=filtered)
+
+    return render_samples(scene, settings, shade, stratified=False,
+                          desc="colormap-filtered" if filtered else "colormap-naive")
+
+
+def render_colormap_filtered(scene, settings, driver=None) -> np.ndarray:
+    """Filtered colour-mapped texture / noise / heights (Heitz et al. 2013, eqs. 7, 10, 14),
+    ``(H, W, 3)``. ``driver``: a :class:`ColormapDriver` or its dict; default the scene's
+    ``extras.colormap``."""
+    return _shade(scene, settings, driver, True)
+
+
+def render_colormap_naive(scene, settings, driver=None) -> np.ndarray:
+    """The naive counterpart: ``C(mean)`` (times eq. 13's ``V_bar`` for heights),
+    ``(H, W, 3)``."""
+    return _shade(scene, settings, driver, False)
