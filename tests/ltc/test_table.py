@@ -95,7 +95,7 @@ def test_lookup_validates_inputs(table):
     with pytest.raises(PrefilterError, match="alpha"):
         table.lookup([0.0, 0.0, 1.0], 1.5)
     with pytest.raises(PrefilterError, match="alpha"):
-        table.lookup([0.0, 0.0, 1.0], 0.001)
+        table.lookup([0.0, 0.0, 1.0], -0.001)
     with pytest.raises(PrefilterError, match="alpha"):
         table.lookup([0.0, 0.0, 1.0], np.nan)
 
@@ -217,3 +217,31 @@ def test_loader_rejects_missing_and_truncated(table, tmp_path):
     (tmp_path / "trunc.npz").write_bytes(good[: len(good) // 2])
     with pytest.raises(TableFileError, match="unreadable"):
         GGXTable.load(tmp_path / "trunc.npz")
+
+
+def test_lookup_clamps_roughness_below_the_first_column():
+    table = GGXTable.load()
+    wo = np.array([0.6, 0.0, 0.8])
+    lo = table.lookup(wo, table.alpha_min)
+    for alpha in (1e-3, 0.0):
+        got = table.lookup(wo, alpha)
+        for a, b in zip(got, lo):
+            np.testing.assert_array_equal(a, b)
+    with pytest.raises(PrefilterError, match="alpha"):
+        table.lookup(wo, -1e-3)
+
+
+def test_lookup_names_arguments_whose_batches_do_not_broadcast():
+    table = GGXTable.load()
+    with pytest.raises(PrefilterError, match=r"wo, alpha: batch shapes"):
+        table.lookup(np.tile([0.0, 0.0, 1.0], (3, 1)), np.full(4, 0.3))
+    with pytest.raises(PrefilterError, match="wo_z"):
+        table.lookup_canonical(1.5, 0.3)
+
+
+def test_schlick_scale_validates_f0():
+    assert schlick_scale(0.9, 0.1, 1.0) == pytest.approx(0.9)
+    assert schlick_scale(0.9, 0.1, 0.0) == pytest.approx(0.1)
+    for f0 in (np.nan, 2.0, -0.1):
+        with pytest.raises(PrefilterError, match="f0"):
+            schlick_scale(0.9, 0.1, f0)

@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from prefilter._io import META_KEY, expect_array, read_npz, verify_npz
-from prefilter._validate import as_float_array, as_roughness, as_upper_directions
-from prefilter.errors import TableFileError
+from prefilter._validate import (as_float_array, as_roughness, as_unit_interval,
+                                 as_upper_directions, broadcast_batch)
+from prefilter.errors import PrefilterError, TableFileError
 from prefilter.ltc.fit_iso import TABLE_VERSION, default_table_path
 
 
@@ -25,7 +26,11 @@ def schlick_scale(magnitude, fresnel, f0) -> np.ndarray:
 
     Heitz et al. 2016 (``equations.md`` 2): ``F0 (n - f5) + f5``; broadcasts (e.g. RGB ``f0``).
     """
-    return np.asarray(f0) * (np.asarray(magnitude) - np.asarray(fresnel)) + np.asarray(fresnel)
+    f0 = as_unit_interval(f0, "f0")
+    magnitude = as_float_array(magnitude, "magnitude")
+    fresnel = as_float_array(fresnel, "fresnel")
+    broadcast_batch(f0=f0.shape, magnitude=magnitude.shape, fresnel=fresnel.shape)
+    return f0 * (magnitude - fresnel) + fresnel
 
 
 class GGXTable:
@@ -121,10 +126,12 @@ class GGXTable:
         return cls(t, r, data["M"], data["magnitude"], data["fresnel"], settings,
                    data.get("fit_error"))
 
-    def _coords(self, wo, alpha):
-        wo = as_upper_directions(wo, "wo")
-        alpha = as_roughness(alpha, "alpha", lo=self.alpha_min * (1 - 1e-12), hi=1.0)
-        shape = np.broadcast_shapes(wo.shape[:-1], alpha.shape)
+    def _coords(self, wo, alpha, wo_name: str = "wo"):
+        wo = as_upper_directions(wo, wo_name)
+        # Below the first row the lobe is sharper than any fitted entry; like Heitz et al.'s
+        # shaders we clamp to it (a near-mirror lobe's polygon integral barely changes).
+        alpha = np.maximum(as_roughness(alpha, "alpha", lo=0.0, hi=1.0), self.alpha_min)
+        shape = broadcast_batch(**{wo_name: wo.shape[:-1], "alpha": alpha.shape})
         wo = np.broadcast_to(wo, shape + (3,))
         t = np.sqrt(np.maximum(0.0, 1.0 - wo[..., 2]))
         ft = np.interp(t, self.axis_t, np.arange(len(self.axis_t), dtype=np.float64))
@@ -146,8 +153,11 @@ class GGXTable:
     def lookup_canonical(self, wo_z, alpha):
         """Bilinear ``(M, magnitude, fresnel)`` in the view's azimuthal frame (view in xz)."""
         wo_z = as_float_array(wo_z, "wo_z")
+        if np.any((wo_z < 0.0) | (wo_z > 1.0)):
+            raise PrefilterError(f"wo_z: expected cosines in [0, 1], got range "
+                                 f"[{wo_z.min():.4g}, {wo_z.max():.4g}]")
         wo = np.stack([np.sqrt(np.maximum(0.0, 1 - wo_z**2)), np.zeros_like(wo_z), wo_z], -1)
-        _, ft, fr = self._coords(wo, alpha)
+        _, ft, fr = self._coords(wo, alpha, "wo_z")
         return (self._bilinear(self.M, ft, fr), self._bilinear(self.magnitude, ft, fr),
                 self._bilinear(self.fresnel, ft, fr))
 
@@ -155,7 +165,7 @@ class GGXTable:
         """LTC of the GGX lobe for views ``wo (..., 3)`` (local frame), roughness ``alpha (...)``.
 
         Bilinear interpolation in ``(sqrt(1 - cos theta), sqrt(alpha))``; views beyond the last
-        row's angle use that row. ``M`` is returned in the local frame: ``Rz(phi) M Rz(phi)^T``
+        row's angle use that row, roughness below :attr:`alpha_min` uses the first column. ``M`` is returned in the local frame: ``Rz(phi) M Rz(phi)^T``
         with ``phi`` the view's azimuth.
 
         Returns
