@@ -52,7 +52,7 @@ class DemoSettings:
     per texel side of the per-footprint LEADR table; ``glints_*``: normal-map side, NDF image
     resolution and CP rank of the glints bake; ``viewer_*``: screenshot size, pixel-match image
     size, and whether the viewer section runs the browser at all. ``methods`` (showcase;
-    ``None``: every registered method), ``multiscale_maps`` and ``colormap_configs`` restrict
+    ``None``: every registered method but :data:`SHOWCASE_EXCLUDE`), ``multiscale_maps`` and ``colormap_configs`` restrict
     the scenes (for tests: each HDR-FLIP evaluation costs most of a second whatever the image
     size).
     """
@@ -154,10 +154,16 @@ MULTISCALE_MAPS = {
 MULTISCALE_METHODS = ("ltc", "ltc-multiscale", "ltc-multiscale-paper")
 
 
+#: Registered methods the showcase leaves out: ground-truth evaluators, whose cost grows with the
+#: footprint (``glints-direct`` ran for more than 10 minutes at distance x4 of the quick
+#: showcase; the glints section compares them with ``glints``).
+SHOWCASE_EXCLUDE = ("reference", "glints-direct", "glints-reference")
+
+
 def _available_methods() -> list[str]:
     from prefilter.render.methods import available
 
-    return [m for m in available() if m != "reference"]
+    return [m for m in available() if m not in SHOWCASE_EXCLUDE]
 
 
 def _note_failure(report, what: str, exc: BaseException, log) -> str:
