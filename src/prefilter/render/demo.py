@@ -52,9 +52,9 @@ class DemoSettings:
     per texel side of the per-footprint LEADR table; ``glints_*``: normal-map side, NDF image
     resolution and CP rank of the glints bake; ``viewer_*``: screenshot size, pixel-match image
     size, and whether the viewer section runs the browser at all. ``methods`` (showcase;
-    ``None``: every registered method but :data:`SHOWCASE_EXCLUDE`), ``multiscale_maps`` and ``colormap_configs`` restrict
-    the scenes (for tests: each HDR-FLIP evaluation costs most of a second whatever the image
-    size).
+    ``None``: every registered method but :data:`SHOWCASE_EXCLUDE`), ``multiscale_maps`` and
+    ``colormap_configs`` restrict the scenes (for tests: each HDR-FLIP evaluation costs most of
+    a second whatever the image size).
     """
 
     width: int = 256
