@@ -33,7 +33,11 @@ def as_float_array(x, name: str, *, ndim_min: int = 0, last_dim: int | None = No
             isinstance(v, (int, float, np.integer, np.floating)) for v in raw.flat)):
         what = type(x).__name__ if kind == "O" or raw.ndim == 0 else f"dtype {raw.dtype}"
         raise PrefilterError(f"{name}: expected a numeric array, got {what}")
-    a = raw.astype(np.float64, copy=False)
+    try:
+        a = raw.astype(np.float64, copy=False)
+    except OverflowError:  # Python integers beyond the float range
+        raise PrefilterError(f"{name}: expected finite values, got an integer too large for a "
+                             "float") from None
     if a.ndim < ndim_min:
         raise PrefilterError(f"{name}: expected at least {ndim_min} dimensions, got shape {a.shape}")
     if last_dim is not None and (a.ndim == 0 or a.shape[-1] != last_dim):
@@ -50,7 +54,13 @@ def as_directions(w, name: str, *, tol: float = 1e-3, normalize: bool = True) ->
     un-normalised vectors); those within ``tol`` are renormalised exactly when ``normalize``.
     """
     a = as_float_array(w, name, ndim_min=1, last_dim=3)
-    n = np.linalg.norm(a, axis=-1)
+    with np.errstate(over="ignore", under="ignore"):
+        n = np.linalg.norm(a, axis=-1)
+    if not np.all(np.isfinite(n)):  # |w|^2 overflowed: the scaled norm names the true length
+        big = np.max(np.abs(a), axis=-1)
+        with np.errstate(over="ignore"):
+            n = np.where(np.isfinite(n), n, big * np.linalg.norm(
+                a / np.where(big > 0, big, 1.0)[..., None], axis=-1))
     bad = np.abs(n - 1.0) > tol
     if np.any(bad):
         raise PrefilterError(

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from prefilter._numba import njit_parallel, prange, serial
-from prefilter._validate import as_float_array
+from prefilter._validate import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, _as_roughness, as_normal_map,
                                    elements, pndf)
@@ -229,7 +229,7 @@ def glint_ndf(surf, center, sigma_p, s, *, fallback_truncation: float | None = N
     q = as_float_array(s, "s", ndim_min=1, last_dim=2)
     if np.any(sp < 0):
         raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, q.shape[:-1])
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
@@ -324,7 +324,8 @@ def glint_brdf_cos(surf, center, sigma_p, wo, wi, f0=1.0, *,
     ----------
     surf : GlintSurface (or GlintsMap).
     center : (..., 2) footprint centres (texels); sigma_p : (...) footprint stds (texels).
-    wo, wi : (..., 3) unit view / light directions in the geometric tangent frame.
+    wo, wi : (..., 3) unit view / light directions in the geometric tangent frame (lengths within
+        1e-3 of 1 are renormalised, others rejected).
     f0 : (..., C) or scalar Schlick reflectance at normal incidence.
 
     Returns
@@ -332,12 +333,16 @@ def glint_brdf_cos(surf, center, sigma_p, wo, wi, f0=1.0, *,
     (..., C) ``F(wi.h) G(wo, wi, h) D_P(h_xy) / (4 wo_z)`` (``C = 1`` for a scalar ``f0``); zero
     when ``wo`` or ``wi`` is below the horizon. ``fallback_truncation``: see :func:`glint_ndf`.
     """
-    wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
-    wi = as_float_array(wi, "wi", ndim_min=1, last_dim=3)
+    wo = as_directions(wo, "wo")
+    wi = as_directions(wi, "wi")
     f0 = np.atleast_1d(as_float_array(f0, "f0"))
     if np.any((f0 < 0) | (f0 > 1)):
         raise PrefilterError(f"f0: expected reflectances in [0, 1], got min {f0.min()} max "
                              f"{f0.max()}")
+    # named here: glint_ndf only sees the half vectors (its `s`)
+    broadcast_batch(center=as_float_array(center, "center", ndim_min=1, last_dim=2).shape[:-1],
+                    sigma_p=as_float_array(sigma_p, "sigma_p").shape, wo=wo.shape[:-1],
+                    wi=wi.shape[:-1], f0=f0.shape[:-1])
     h = _half(wo, wi)
     D = glint_ndf(surf, center, sigma_p, h[..., :2], fallback_truncation=fallback_truncation)
     G = vcavity_g2(wo, wi, h)

@@ -28,7 +28,7 @@ import math
 import numpy as np
 
 from prefilter._numba import njit_parallel, njit_serial, prange, serial
-from prefilter._validate import as_float_array, as_rng
+from prefilter._validate import as_directions, as_float_array, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.query import point
@@ -149,7 +149,7 @@ def _prep(gm, center, sigma_p):
     sp = as_float_array(sigma_p, "sigma_p")
     if np.any(sp < 0):
         raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = np.broadcast_shapes(c.shape[:-1], sp.shape)
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     idx, w = interp_weights(gm.pyramid, c, sp)
@@ -247,10 +247,12 @@ def sample_wi(gm, center, sigma_p, wo, rng=0, *, u=None):
     """
     from prefilter.glints.brdf import GlintSurface
 
-    wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
+    wo = as_directions(wo, "wo")
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = as_float_array(sigma_p, "sigma_p")
-    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, wo.shape[:-1])
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, wo=wo.shape[:-1])
     c = np.broadcast_to(c, shape + (2,))
     sp = np.broadcast_to(sp, shape)
     if isinstance(gm, GlintSurface):
@@ -300,11 +302,14 @@ def pdf_wi(surf, center, sigma_p, wo, wi) -> np.ndarray:
     from prefilter.glints.pndf import TRUNCATION
 
     surf = surf if isinstance(surf, GlintSurface) else _as_surface(surf)
-    wo = as_float_array(wo, "wo", ndim_min=1, last_dim=3)
-    wi = as_float_array(wi, "wi", ndim_min=1, last_dim=3)
+    wo = as_directions(wo, "wo")
+    wi = as_directions(wi, "wi")
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = as_float_array(sigma_p, "sigma_p")
-    shape = np.broadcast_shapes(c.shape[:-1], sp.shape, wo.shape[:-1], wi.shape[:-1])
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, wo=wo.shape[:-1],
+                            wi=wi.shape[:-1])
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     wo = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
@@ -403,7 +408,7 @@ def sample_s_direct(surf, center, sigma_p, rng=0, *, u=None):
     sp = as_float_array(sigma_p, "sigma_p")
     if np.any(sp < 0):
         raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = np.broadcast_shapes(c.shape[:-1], sp.shape)
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
     cf = np.ascontiguousarray(np.broadcast_to(c, shape + (2,)).reshape(-1, 2))
     spf = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1), dtype=np.float64)
     if u is None:

@@ -17,7 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter._validate import (as_directions, as_float_array, as_positive_int,
+                                 broadcast_batch)
 from prefilter.errors import PrefilterError
 
 
@@ -138,10 +139,19 @@ class EnvMap:
                 + (tex[y1, x0] * (1 - fx) + tex[y1, x1] * fx) * fy)
 
     def lookup(self, w, lod=0.0) -> np.ndarray:
-        """Trilinear radiance ``(..., C)`` in directions ``w (..., 3)`` at mip level ``lod``."""
+        """Trilinear radiance ``(..., C)`` in unit directions ``w (..., 3)`` at mip level ``lod``
+        ``(...)`` (broadcast with ``w``; clamped to the chain, ``+-inf`` included)."""
+        w = as_directions(w, "w")
+        try:
+            lod = np.asarray(lod, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise PrefilterError(f"lod: expected numbers (mip levels), got {lod!r}") from None
+        if np.any(np.isnan(lod)):
+            raise PrefilterError("lod: expected mip levels (numbers or +-inf), got NaN")
         uv = direction_to_uv(w)
-        lod = np.clip(np.broadcast_to(np.asarray(lod, np.float64), uv.shape[:-1]), 0.0,
-                      len(self.levels) - 1.0)
+        shape = broadcast_batch(w=uv.shape[:-1], lod=lod.shape)
+        uv = np.broadcast_to(uv, shape + (2,))
+        lod = np.clip(np.broadcast_to(lod, shape), 0.0, len(self.levels) - 1.0)
         l0 = np.floor(lod).astype(np.int64)
         t = (lod - l0)[..., None]
         out = np.zeros(uv.shape[:-1] + (self.levels[0].shape[2],))
@@ -197,8 +207,14 @@ def sh9_irradiance(coeffs, n) -> np.ndarray:
     """Irradiance ``E(n) = integral L(w) max(0, n.w) dw`` ``(..., C)`` from SH ``coeffs (9, C)``.
 
     Ramamoorthi & Hanrahan 2001 eq. 7 (order-2 truncation; exact for radiance of order <= 2).
+    ``coeffs (9,)`` is one channel (``C = 1``); ``n (..., 3)`` unit normals.
     """
-    c = np.asarray(coeffs, dtype=np.float64)
+    c = as_float_array(coeffs, "coeffs", ndim_min=1)
+    if c.shape[0] != 9 or c.ndim > 2:
+        raise PrefilterError(f"coeffs: expected SH coefficients of shape (9, C) or (9,), got "
+                             f"shape {c.shape}")
+    c = c.reshape(9, -1)
+    n = as_directions(n, "n")
     a = np.array([_A[0], _A[1], _A[1], _A[1], _A[2], _A[2], _A[2], _A[2], _A[2]])
     return sh9_basis(n) @ (a[:, None] * c)
 

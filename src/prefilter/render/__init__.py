@@ -1,7 +1,8 @@
 """Rendering: scenes as data, the pinhole camera and G-buffer, lights, shading methods, metrics.
 
 ``load_scene`` reads a JSON scene (``docs/scenes.md``); ``gbuffer`` traces primary rays and returns
-per-pixel (or per-sub-sample) positions, frames, UVs and UV footprints; methods shade them.
+per-pixel (or per-sub-sample) positions, frames, UVs and UV footprints; methods shade them;
+``render(scene, method)`` is the scene -> image entry point (:mod:`prefilter.render.pipeline`).
 """
 
 from prefilter.render.camera import (
@@ -15,6 +16,7 @@ from prefilter.render.camera import (
     pixel_positions,
     rays_at,
 )
+from prefilter.render.pipeline import render
 from prefilter.render.scene import Material, Plane, Scene, Sphere, TextureRef, load_scene
 
 __all__ = [
@@ -33,4 +35,5 @@ __all__ = [
     "load_scene",
     "pixel_positions",
     "rays_at",
+    "render",
 ]

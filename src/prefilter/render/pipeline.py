@@ -75,10 +75,12 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
 
 
 def supported_lights(scene: Scene, method: str):
-    """The scene's :class:`~prefilter.render.lights.LightSet`; environment maps and textured quad
-    lights are rejected with a message naming the light (for methods without light textures;
-    ``ltc`` and the ``ltc-multiscale`` methods use
-    :func:`prefilter.render.lighttex.split_lights`)."""
+    """The scene's :class:`~prefilter.render.lights.LightSet` for a method that shades only
+    untextured quad, point and directional lights: environment maps and textured quad lights are
+    rejected with a message naming the light. Methods that support more do not call it: ``ltc``
+    and the ``ltc-multiscale`` methods take textured quads
+    (:func:`prefilter.render.lighttex.split_lights`), the ``leadr-env*`` / ``leadr-irradiance*``
+    and ``glints*`` methods take environment lights."""
     for i, light in enumerate(scene.lights):
         if light.type == "environment" or getattr(light, "texture", None) is not None:
             what = "environment" if light.type == "environment" else "textured quad"
