@@ -110,3 +110,16 @@ def test_bad_driver_raises(bad, match):
 def test_missing_driver_raises():
     with pytest.raises(PrefilterError, match="extras.colormap"):
         render_colormap_naive(_scene(40.0, size=4), RenderSettings())
+
+
+def test_driver_from_scene_extras():
+    # the scene format's extras.colormap (a stand-in object until Scene carries extras)
+    from types import SimpleNamespace
+
+    scene = _scene(40.0, size=6)
+    spec = {"driver": "texture", "texture": TEX, "colors": COLORS, "range": [-4, 4],
+            "sigma_max": 1.5}
+    holder = SimpleNamespace(camera=scene.camera, objects=scene.objects, lights=scene.lights,
+                             extras={"colormap": spec})
+    np.testing.assert_array_equal(render_colormap_filtered(holder, RenderSettings()),
+                                  render_colormap_filtered(scene, RenderSettings(), spec))
