@@ -11,7 +11,7 @@ from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints import pndf_image
 from prefilter.glints.bake import bake
 from prefilter.glints.query import block_means, point, range_mean
-from prefilter.glints.store import ARRAYS, load, save
+from prefilter.glints.store import ARRAYS, decode, encode, load, save
 
 R, S, BLK = 32, 0.4, 8
 
@@ -107,9 +107,12 @@ def test_loader_rejects_bad_files(baked, tmp_path):
     header = json.loads(str(arrays["header"]))
     for mutate, match in [
         (lambda a, h: h.update(version=99), "version"),
-        (lambda a, h: a.pop("C"), "missing"),
-        (lambda a, h: a.update(C=-a["C"] - 1), "negative"),
+        (lambda a, h: a.pop("c"), "missing"),
+        (lambda a, h: a.update(c=-a["c"] - 1), "negative"),
+        (lambda a, h: a.update(c=a["c"].astype(np.float32)), "float16"),
+        (lambda a, h: a.update(group_rows=a["group_rows"][::-1].copy()), "group_rows"),
         (lambda a, h: a.update(block_index=a["block_index"][:-1]), "block_index"),
+        (lambda a, h: h.update(version=1), "missing"),  # a version-2 layout labelled 1
     ]:
         a = dict(arrays)
         h = dict(header)
@@ -124,11 +127,37 @@ def test_loader_rejects_bad_files(baked, tmp_path):
 
 
 def test_save_roundtrip_is_deterministic(baked, tmp_path):
+    """A version-1 file (float32 prefix sums, written without the encoded arrays) loads to the
+    same arrays as the version-2 file it came from."""
     _, out, _, gm = baked
     save(tmp_path / "again.npz", gm)
     g2 = load(tmp_path / "again.npz")
+    assert g2.header["version"] == 1 and gm.header["version"] == 2
     for k in ARRAYS:
         np.testing.assert_array_equal(getattr(g2, k), getattr(gm, k))
+    # what is counted is what is on disk: the float16 factors, not the float32 prefix sums
+    assert gm.compressed_bytes < 0.6 * g2.compressed_bytes
+
+
+def test_float16_encoding_error_is_rounding():
+    """decode(encode(.)) == the float64 factors to float16 rounding (2^-11 relative), including
+    block sums far above float16's range (per-group scales) and empty groups."""
+    rng = np.random.default_rng(3)
+    G, Rk, Bs = 5, 4, 8
+    a = rng.random((G, Rk, Bs))
+    a /= a.sum(axis=-1, keepdims=True)
+    b = rng.random((G, Rk, Bs))
+    b /= b.sum(axis=-1, keepdims=True)
+    rows = np.array([0, 3, 3, 10, 11, 11])
+    c = rng.random((11, Rk)) * 10.0 ** rng.integers(-3, 7, (11, 1))
+    A, Bp, C = decode(**encode(a, b, c, rows))
+    np.testing.assert_allclose(np.diff(A, axis=-1), a, rtol=2e-3, atol=1e-7)
+    np.testing.assert_allclose(np.diff(Bp, axis=-1), b, rtol=2e-3, atol=1e-7)
+    np.testing.assert_allclose(A[..., -1], 1.0, rtol=1e-6)
+    gmax = np.array([c[r0:r1].max(axis=0) if r1 > r0 else np.zeros(Rk)
+                     for r0, r1 in zip(rows[:-1], rows[1:])])
+    per_row = np.repeat(gmax, np.diff(rows), axis=0)
+    assert np.all(np.abs(C - c) <= 1e-3 * per_row)
 
 
 def test_bake_resumes_from_parts(tmp_path):

@@ -32,7 +32,7 @@ from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, _as_roughness, _as_support,
                                    as_normal_map, elements, pndf_image)
 from prefilter.glints.pyramid import level_difference, next_level, plan
-from prefilter.glints.store import GlintsMap, save
+from prefilter.glints.store import GlintsMap, decode, encode, save
 
 LEVEL0_CHUNK = 0
 LEVEL_CHUNK = 10_000
@@ -54,7 +54,7 @@ def _memmap(path, shape):
 
 def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16,
          support: float = 0.5, intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int = 4,
-         sigma0: float | None = None, cell: int = 64, converge: float = 0.01,
+         sigma0: float | None = None, cell: int = 32, converge: float = 0.01,
          max_levels: int | None = None, blank_tol: float = 1e-4, n_iter_max: int = 50,
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
          levels_dir=None) -> dict:
@@ -85,7 +85,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     settings = dict(rank=rank, ndf_res=R, block=B, support=S, intrinsic_roughness=sr,
                     stride0=pyr.stride0, sigma0=pyr.sigma0, cell=cell, converge=converge,
                     max_levels=max_levels, blank_tol=blank_tol, n_iter_max=n_iter_max, tol=tol,
-                    seed=seed)
+                    seed=seed, layout=2)
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
@@ -126,19 +126,31 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     pyr = pyr.with_levels(len(levels))
     offsets = pyr.offsets
 
-    # 3. compression per cell
-    ncy, ncx = H // cell, W // cell
-    members = [[] for _ in range(ncy * ncx)]  # (level, iy, ix) per cell
+    # 3. compression per cell: a cell is a square of k x k footprint centres of ONE level
+    # (k = cell / stride0, i.e. cell * 2^l texels at level l), so every group holds blocks of
+    # footprints of the same size and about the same number of them at every level; a level's fit
+    # is not dominated by the sharper, higher-energy blocks of the levels below it.
+    k_side = cell // pyr.stride0
+    members = []  # (level, iy, ix) per cell
     for lv in range(pyr.n_levels):
-        cen = pyr.centers(lv)
-        cy = (cen[..., 1] // cell).astype(int)
-        cx = (cen[..., 0] // cell).astype(int)
-        for (iy, ix), cid in np.ndenumerate(cy * ncx + cx):
-            members[cid].append((lv, iy, ix))
+        ny, nx = pyr.shape(lv)
+        ncy, ncx = max(1, ny // k_side), max(1, nx // k_side)
+        iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
+        cid = np.minimum(iy // k_side, ncy - 1) * ncx + np.minimum(ix // k_side, ncx - 1)
+        order = np.argsort(cid.ravel(), kind="stable")
+        bounds = np.searchsorted(cid.ravel()[order], np.arange(ncy * ncx + 1))
+        for c0 in range(ncy * ncx):
+            sel = order[bounds[c0]:bounds[c0 + 1]]
+            members.append([(lv, int(y), int(x)) for y, x in zip(iy.ravel()[sel], ix.ravel()[sel])])
+    n_cells = len(members)
 
     def compress_cell(cid):
         mem = members[cid]
-        imgs = np.stack([levels[lv][iy, ix] for lv, iy, ix in mem]).astype(np.float64)
+        lv = mem[0][0]
+        iy = np.array([m[1] for m in mem])
+        ix = np.array([m[2] for m in mem])
+        imgs = np.asarray(levels[lv][iy.min():iy.max() + 1, ix.min():ix.max() + 1],
+                          dtype=np.float64)[iy - iy.min(), ix - ix.min()]
         blocks = cpmod.cut_blocks(imgs, B)  # (n, nb, nb, B, B)
         blank = cpmod.blank_mask(blocks, imgs.max(axis=(1, 2)), blank_tol)
         tensors, where = [], []
@@ -150,72 +162,76 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
         res = dict(zip(live, cpmod.nn_cp_batch([tensors[g] for g in live], rank,
                                                n_iter_max=n_iter_max, tol=tol, seed=seed + cid)))
-        A = np.zeros((nb * nb, rank, B + 1), np.float32)
-        Bp = np.zeros_like(A)
-        Cs, local = [], np.full(blank.shape, -1, np.int32)
-        n_lv = pyr.n_levels
-        err2 = np.zeros(n_lv)
-        norm2 = np.zeros(n_lv)
-        lv_of = np.array([m[0] for m in mem])
-        np.add.at(norm2, lv_of, np.einsum("nij,nij->n", imgs, imgs))
-        blank_e = np.einsum("nabij,nabij->nab", blocks, blocks) * blank
-        np.add.at(err2, lv_of, blank_e.sum(axis=(1, 2)))
-        k0 = 0
+        a = np.zeros((nb * nb, rank, B))
+        b = np.zeros_like(a)
+        cs, local = [], np.full(blank.shape, -1, np.int32)
+        rows = np.zeros(nb * nb + 1, np.int64)
+        for g in range(nb * nb):
+            if g in res:
+                ag, bg, cg, _ = res[g]
+                bi, bj = divmod(g, nb)
+                a[g], b[g] = ag.T, bg.T
+                local[where[g], bi, bj] = rows[g] + np.arange(len(where[g]), dtype=np.int32)
+                cs.append(cg)
+            rows[g + 1] = rows[g] + (len(where[g]) if g in res else 0)
+        c = np.concatenate(cs) if cs else np.zeros((0, rank))
+        enc = encode(a, b, c, rows)
+        # the error of what is stored: the float16 factors decoded as the loader does
+        A_, B_, C_ = decode(**enc)
+        a_s, b_s = np.diff(A_.astype(np.float64), axis=2), np.diff(B_.astype(np.float64), axis=2)
+        err2 = np.einsum("nabij,nabij->", blocks, blocks * blank[..., None, None])
         for g in live:
-            a, b, c, _ = res[g]
             bi, bj = divmod(g, nb)
-            A[g], Bp[g] = cpmod.prefix_sums(a), cpmod.prefix_sums(b)
-            c32 = c.astype(np.float32)
-            # the error of what is stored: float32 factors read back through the prefix sums
-            a_s = np.diff(A[g].astype(np.float64), axis=1).T
-            b_s = np.diff(Bp[g].astype(np.float64), axis=1).T
-            rec = cpmod.reconstruct(a_s, b_s, c32.astype(np.float64))
+            rec = cpmod.reconstruct(a_s[g].T, b_s[g].T, C_[rows[g]:rows[g + 1]].astype(np.float64))
             d = rec - tensors[g]
-            np.add.at(err2, lv_of[where[g]], np.einsum("ijk,ijk->k", d, d))
-            local[where[g], bi, bj] = k0 + np.arange(len(where[g]), dtype=np.int32)
-            k0 += len(where[g])
-            Cs.append(c32)
-        C = np.concatenate(Cs) if Cs else np.zeros((0, rank), np.float32)
+            err2 += np.einsum("ijk,ijk->", d, d)
         mass = imgs.sum(axis=(1, 2)) * (2 * S / R) ** 2
-        ck.save(CELL_CHUNK + cid, A=A, Bp=Bp, C=C, local=local, err2=err2, norm2=norm2,
-                kept=np.array((~blank).sum()), mass=mass)
+        ck.save(CELL_CHUNK + cid, **enc, local=local, err2=np.array(err2),
+                norm2=np.array(np.einsum("nij,nij->", imgs, imgs)), kept=np.array((~blank).sum()),
+                mass=mass)
         return cid
 
-    pending = [cid for cid in range(ncy * ncx) if not ck.done(CELL_CHUNK + cid)]
+    pending = [cid for cid in range(n_cells) if not ck.done(CELL_CHUNK + cid)]
     workers = max(1, min(os.cpu_count() or 1, len(pending)))
     with cpmod.single_threaded_blas(), ThreadPoolExecutor(workers) as pool, \
-            tqdm(total=ncy * ncx, initial=ncy * ncx - len(pending), desc="CP compression",
+            tqdm(total=n_cells, initial=n_cells - len(pending), desc="CP compression",
                  disable=not progress) as bar:
         for _ in pool.map(compress_cell, pending):
             bar.update(1)
 
     # 4. assemble
-    A_all, B_all, C_all = [], [], []
+    parts = {k: [] for k in ("a", "b", "c", "c_scale")}
     block_index = np.full((pyr.n_images, nb, nb), -1, np.int32)
     image_cell = np.zeros(pyr.n_images, np.int32)
+    group_rows = [np.zeros(1, np.int64)]
     err2 = np.zeros(pyr.n_levels)
     norm2 = np.zeros(pyr.n_levels)
     kept, masses, k0 = 0, [], 0
-    for cid in range(ncy * ncx):
+    for cid in range(n_cells):
         part = ck.load(CELL_CHUNK + cid)
-        flat = np.array([offsets[lv] + iy * pyr.shape(lv)[1] + ix for lv, iy, ix in members[cid]],
+        lv = members[cid][0][0]
+        flat = np.array([offsets[lv] + iy * pyr.shape(lv)[1] + ix for _, iy, ix in members[cid]],
                         dtype=np.int64)
         loc = part["local"]
         block_index[flat] = np.where(loc >= 0, loc + k0, -1)
         image_cell[flat] = cid
-        k0 += part["C"].shape[0]
-        A_all.append(part["A"])
-        B_all.append(part["Bp"])
-        C_all.append(part["C"])
-        err2 += part["err2"][: pyr.n_levels]
-        norm2 += part["norm2"][: pyr.n_levels]
+        group_rows.append(part["group_rows"][1:] + k0)
+        k0 += part["c"].shape[0]
+        for k in parts:
+            parts[k].append(part[k])
+        err2[lv] += float(part["err2"])
+        norm2[lv] += float(part["norm2"])
         kept += int(part["kept"])
         masses.append(part["mass"])
     raw_bytes = pyr.n_images * R * R * 4
     elapsed = time.perf_counter() - t_start
     per_level = np.sqrt(err2 / np.maximum(norm2, 1e-300))
-    gm = GlintsMap(header={}, A=np.concatenate(A_all), Bp=np.concatenate(B_all),
-                   C=np.concatenate(C_all), block_index=block_index, image_cell=image_cell)
+    enc = {k: np.concatenate(v) for k, v in parts.items()}
+    enc["group_rows"] = np.concatenate(group_rows)
+    A, Bp, C = decode(**enc)
+    gm = GlintsMap(header={}, A=A, Bp=Bp, C=C, block_index=block_index, image_cell=image_cell,
+                   stored_bytes=sum(v.nbytes for v in enc.values()) + block_index.nbytes
+                   + image_cell.nbytes)
     summary = dict(
         raw_bytes=int(raw_bytes), compressed_bytes=gm.compressed_bytes,
         ratio=gm.compressed_bytes / raw_bytes, rel_l2_error=float(np.sqrt(err2.sum() / norm2.sum())),
@@ -229,7 +245,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                                                      intrinsic_roughness=sr, sigma_h=SIGMA_H),
                      settings=settings, map_sha1=digest,
                      summary={k: v for k, v in summary.items() if k != "seconds"})
-    save(out, gm)
+    save(out, gm, enc)
     if not keep_parts:
         ck.clear()
     return summary

@@ -1,14 +1,22 @@
 """On-disk format of a baked glints map: one ``.npz`` with a JSON header, versioned.
 
-Arrays (``G`` groups, ``R`` rank, ``B`` block size, ``nb = ndf_res / B``, ``N`` images):
+In memory (:class:`GlintsMap`; ``G`` groups, ``R`` rank, ``B`` block size, ``nb = ndf_res / B``,
+``N`` images):
 
-* ``header``: JSON text (format, version, pyramid, NDF image geometry, settings, bake summary).
 * ``A``, ``Bp`` ``(G, R, B + 1)`` float32: 1D prefix sums of the row / column factors ``a_r``, ``b_r``
   of each group (columns sum to 1, so each prefix sum runs from 0 to 1).
-* ``C`` ``(K, R)`` float32: the third factors with the CP weights folded in, one row per kept block.
+* ``C`` ``(K, R)`` float32: the third factors with the CP weights folded in, one row per kept block;
+  the rows of a group are contiguous.
 * ``block_index`` ``(N, nb, nb)`` int32: row of ``C`` of block ``[bi, bj]`` of each image, -1 = blank.
-* ``image_cell`` ``(N,)`` int32: spatial cell of each image; the group of block ``[bi, bj]`` of an
-  image is ``image_cell * nb^2 + bi * nb + bj``.
+* ``image_cell`` ``(N,)`` int32: cell of each image (a group of images of one pyramid level); the
+  group of block ``[bi, bj]`` of an image is ``image_cell * nb^2 + bi * nb + bj``.
+
+On disk, version 2 (what :func:`save` writes) stores the factors, not the prefix sums, in float16:
+``a``, ``b`` ``(G, R, B)`` float16 (columns renormalised to sum 1 at load), ``c`` ``(K, R)``
+float16 scaled per group and rank by ``c_scale (G, R)`` float32 (float16 alone overflows: block sums
+of a sharp NDF reach 1e6), ``group_rows (G + 1,)`` int64 (first row of ``c`` of each group), plus
+``block_index`` and ``image_cell``; :func:`decode` rebuilds the float32 arrays (the bake measures its
+error on exactly these). Version 1 files (float32 prefix sums ``A``, ``Bp``, ``C``) still load.
 
 All factor values are non-negative, so every reconstructed NDF value and range mean is >= 0.
 """
@@ -26,8 +34,9 @@ from prefilter.errors import TableFileError
 from prefilter.glints.pyramid import Pyramid
 
 FORMAT = "prefilter-glints"
-VERSION = 1
-ARRAYS = ("A", "Bp", "C", "block_index", "image_cell")
+VERSION = 2
+ARRAYS = ("A", "Bp", "C", "block_index", "image_cell")  # in memory, and on disk in version 1
+ARRAYS_V2 = ("a", "b", "c", "c_scale", "group_rows", "block_index", "image_cell")
 
 
 @dataclass
@@ -40,6 +49,8 @@ class GlintsMap:
     C: np.ndarray
     block_index: np.ndarray
     image_cell: np.ndarray
+    #: bytes of the arrays as stored on disk (set by :func:`encode` / :func:`load`)
+    stored_bytes: int | None = None
 
     @property
     def pyramid(self) -> Pyramid:
@@ -65,6 +76,9 @@ class GlintsMap:
 
     @property
     def compressed_bytes(self) -> int:
+        """Bytes stored on disk (the in-memory float32 prefix sums when not known)."""
+        if self.stored_bytes is not None:
+            return int(self.stored_bytes)
         return int(sum(getattr(self, k).nbytes for k in ARRAYS))
 
     def point(self, center, sigma_p, s):
@@ -78,13 +92,47 @@ class GlintsMap:
         return range_mean(self, center, sigma_p, s_min, s_max)
 
 
-def save(path: str | os.PathLike, gm: GlintsMap) -> None:
+def encode(a: np.ndarray, b: np.ndarray, c: np.ndarray, group_rows: np.ndarray) -> dict:
+    """Version-2 arrays of float64 factors ``a``, ``b`` ``(G, R, B)`` (columns summing to 1 or
+    zero) and ``c (K, R)`` whose rows ``group_rows[g]:group_rows[g + 1]`` belong to group ``g``."""
+    G, R = a.shape[:2]
+    rows = np.asarray(group_rows, dtype=np.int64)
+    gmax = np.zeros((G, R))
+    np.maximum.at(gmax, np.repeat(np.arange(G), np.diff(rows)), c)
+    scale = np.where(gmax > 0, gmax, 1.0).astype(np.float32)
+    per_row = np.repeat(scale, np.diff(rows), axis=0).astype(np.float64)
+    c16 = np.divide(c, per_row, out=np.zeros_like(c, dtype=np.float64), where=per_row > 0)
+    return dict(a=a.astype(np.float16), b=b.astype(np.float16), c=c16.astype(np.float16),
+                c_scale=scale, group_rows=rows)
+
+
+def decode(a, b, c, c_scale, group_rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Float32 prefix sums ``A``, ``Bp`` ``(G, R, B + 1)`` and ``C (K, R)`` of version-2 arrays."""
+    def prefix(f):
+        f = f.astype(np.float64)
+        s = f.sum(axis=-1, keepdims=True)
+        f = np.divide(f, s, out=np.zeros_like(f), where=s > 0)  # float16 rounding: sums back to 1
+        out = np.zeros(f.shape[:-1] + (f.shape[-1] + 1,), np.float32)
+        out[..., 1:] = np.cumsum(f, axis=-1)
+        return out
+
+    per_row = np.repeat(c_scale.astype(np.float32), np.diff(group_rows), axis=0)
+    return prefix(a), prefix(b), (c.astype(np.float32) * per_row)
+
+
+def save(path: str | os.PathLike, gm: GlintsMap, encoded: dict | None = None) -> None:
     """Write ``gm`` atomically (uncompressed ``np.savez``: deterministic bytes, mmap-able) with
-    the ``__meta__`` checksum entry of :func:`prefilter._io.save_npz_atomic`."""
-    header = dict(gm.header, format=FORMAT, version=VERSION)
-    save_npz_atomic(path, format_name=FORMAT, format_version=VERSION,
-                    header=np.array(json.dumps(header, sort_keys=True)),
-                    **{k: getattr(gm, k) for k in ARRAYS})
+    the ``__meta__`` checksum entry of :func:`prefilter._io.save_npz_atomic`.
+
+    ``encoded``: the version-2 arrays of :func:`encode`; without them the file is written in the
+    version-1 layout (float32 prefix sums), which :func:`load` also reads.
+    """
+    version = 1 if encoded is None else VERSION
+    header = dict(gm.header, format=FORMAT, version=version)
+    arrays = ({k: getattr(gm, k) for k in ARRAYS} if encoded is None else
+              dict(encoded, block_index=gm.block_index, image_cell=gm.image_cell))
+    save_npz_atomic(path, format_name=FORMAT, format_version=version,
+                    header=np.array(json.dumps(header, sort_keys=True)), **arrays)
 
 
 def _fail(path, msg):
@@ -97,12 +145,8 @@ def load(path: str | os.PathLike) -> GlintsMap:
     # the layout is checked before the checksum so a malformed file gets the precise message
     raw_data = read_npz(path, "glints map")
     data = {k: v for k, v in raw_data.items() if k != META_KEY}
-    missing = [k for k in ("header",) + ARRAYS if k not in data]
-    if missing:
-        _fail(path, f"missing arrays {missing}; expected {('header',) + ARRAYS}")
-    unknown = [k for k in data if k not in ("header",) + ARRAYS]
-    if unknown:
-        _fail(path, f"unknown arrays {unknown}; expected {('header',) + ARRAYS}")
+    if "header" not in data:
+        _fail(path, "missing array 'header'")
     raw = data["header"]
     try:
         if raw.dtype.kind != "U" or raw.shape != ():
@@ -112,13 +156,26 @@ def load(path: str | os.PathLike) -> GlintsMap:
             raise ValueError
     except ValueError:
         _fail(path, f"header: expected a JSON object string, got {raw.dtype} {raw.shape}")
-    arrays = {k: data[k] for k in ARRAYS}
     if header.get("format") != FORMAT:
         _fail(path, f"header.format: expected {FORMAT!r}, got {header.get('format')!r}")
-    if header.get("version") != VERSION:
-        _fail(path, f"header.version: expected {VERSION}, got {header.get('version')!r}")
+    version = header.get("version")
+    if version not in (1, VERSION):
+        _fail(path, f"header.version: expected 1 or {VERSION}, got {version!r}")
+    names = ARRAYS if version == 1 else ARRAYS_V2
+    missing = [k for k in names if k not in data]
+    if missing:
+        _fail(path, f"missing arrays {missing}; expected {('header',) + names} (version {version})")
+    unknown = [k for k in data if k not in ("header",) + names]
+    if unknown:
+        _fail(path, f"unknown arrays {unknown}; expected {('header',) + names} (version {version})")
+    if version == 1:
+        arrays = {k: data[k] for k in ARRAYS}
+        stored = None
+    else:
+        arrays = _decode_checked(path, data)
+        stored = int(sum(data[k].nbytes for k in ARRAYS_V2))
     try:
-        gm = GlintsMap(header=header, **arrays)
+        gm = GlintsMap(header=header, **arrays, stored_bytes=stored)
         pyr, R, B, rank = gm.pyramid, gm.resolution, gm.block, gm.rank
         n_images = pyr.n_images
     except (KeyError, TypeError, ValueError, AttributeError, OverflowError) as exc:
@@ -150,5 +207,28 @@ def load(path: str | os.PathLike) -> GlintsMap:
             _fail(path, f"{name}: expected finite, non-negative values")
     if np.any(np.diff(gm.A, axis=-1) < -1e-6) or np.any(np.diff(gm.Bp, axis=-1) < -1e-6):
         _fail(path, "A, Bp: expected non-decreasing prefix sums")
-    verify_npz(path, "glints map", raw_data, format_name=FORMAT, format_version=VERSION)
+    verify_npz(path, "glints map", raw_data, format_name=FORMAT, format_version=version)
     return gm
+
+
+def _decode_checked(path, data) -> dict:
+    """Validate the version-2 factor arrays (dtypes, shapes, values) and decode them."""
+    a, b, c, sc, rows = (data[k] for k in ("a", "b", "c", "c_scale", "group_rows"))
+    for name, arr, dtype, ndim in (("a", a, np.float16, 3), ("b", b, np.float16, 3),
+                                   ("c", c, np.float16, 2), ("c_scale", sc, np.float32, 2),
+                                   ("group_rows", rows, np.int64, 1)):
+        if arr.dtype != dtype or arr.ndim != ndim:
+            _fail(path, f"{name}: expected a {ndim}-D {np.dtype(dtype)} array, got {arr.dtype} "
+                        f"of shape {arr.shape}")
+    G, R, _ = a.shape
+    if b.shape != a.shape or sc.shape != (G, R) or c.shape[1:] != (R,) or rows.shape != (G + 1,):
+        _fail(path, f"a, b, c, c_scale, group_rows: expected shapes (G, R, B) twice, (K, R), "
+                    f"(G, R), (G + 1,), got {a.shape}, {b.shape}, {c.shape}, {sc.shape}, "
+                    f"{rows.shape}")
+    if rows[0] != 0 or rows[-1] != c.shape[0] or np.any(np.diff(rows) < 0):
+        _fail(path, f"group_rows: expected non-decreasing offsets from 0 to {c.shape[0]}")
+    for name, arr in (("a", a), ("b", b), ("c", c), ("c_scale", sc)):
+        if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            _fail(path, f"{name}: expected finite, non-negative values")
+    A, Bp, C = decode(a, b, c, sc, rows)
+    return dict(A=A, Bp=Bp, C=C, block_index=data["block_index"], image_cell=data["image_cell"])
