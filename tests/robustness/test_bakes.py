@@ -63,8 +63,8 @@ BAKES = {
                                  "--block", "8", "--rank", "4", "--cell", "16", "--iters", "20",
                                  "-o", str(o)], "glints.npz", True, (0.0, 0.8)),
     "colormap": Bake(lambda i, o: ["colormap", str(_colormap_input(i)), "--sigma-max", "0.2",
-                                   "--size", "256", "-o", str(o)], "table.exr", True,
-                     (0.0, 1.0)),
+                                   "--size", "1024", "-o", str(o)], "table.exr", True,
+                     (0.0, 0.4)),
     "leadr": Bake(lambda i, o: ["leadr", str(_height_input(i)), "-o", str(o),
                                 "--base-roughness", "0.05"], "leadr", False, (0.5, 3.0)),
 }

@@ -34,12 +34,12 @@ def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigm
                out, chunk: int = 32):
     """:func:`~prefilter.colormap.table.prefilter_table`, computed ``chunk`` sigma rows at a time
     with each chunk checkpointed in ``<out>.parts/`` (a large table takes minutes; a killed bake
-    resumes). The rows are the same computation as ``prefilter_table`` (same calls, same order),
-    so the table is bit-identical to it."""
+    resumes). The rows are the same computation as ``prefilter_table`` (``prefilter_rows``
+    computes each row on its own), so the table is bit-identical to it."""
     import numpy as np
 
     from prefilter._io import Checkpoints, array_digest
-    from prefilter.colormap.table import ColormapTable, gaussian_operator, prefilter_table
+    from prefilter.colormap.table import ColormapTable, prefilter_rows, prefilter_table
 
     # two rows validate the arguments and resample the map exactly as the full table does
     head = prefilter_table(colormap, value_range, sigma_max, size=size, edge=edge, n_sigma=2)
@@ -53,8 +53,7 @@ def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigm
     rows = []
     for k, start in enumerate(range(0, n_sigma, chunk)):
         if not ck.done(k):
-            ck.save(k, rows=np.stack([gaussian_operator(size, s, head.edge) @ c
-                                      for s in sig[start:start + chunk]]))
+            ck.save(k, rows=prefilter_rows(c, sig[start:start + chunk], head.edge))
         rows.append(ck.load(k)["rows"])
     table = np.concatenate(rows)
     table[0] = c  # the sigma = 0 row is the colour map itself, bit for bit (as prefilter_table)
