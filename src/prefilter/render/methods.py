@@ -66,6 +66,8 @@ _REGISTRY: dict[str, Method | str] = {
     "leadr-irradiance": "prefilter.leadr.render:render_leadr_irradiance",
     "leadr-irradiance-naive": "prefilter.leadr.render:render_leadr_irradiance_naive",
     "ltc-aniso": "prefilter.ltc.aniso.render:render_ltc_aniso",
+    "colormap-filtered": "prefilter.colormap.render:render_colormap_filtered",
+    "colormap-naive": "prefilter.colormap.render:render_colormap_naive",
     "glints": "prefilter.glints.render:render_glints",
     "glints-direct": "prefilter.glints.render:render_glints_direct",
     "glints-reference": "prefilter.glints.render:render_glints_reference",
@@ -87,6 +89,9 @@ _DESCRIPTIONS: dict[str, str] = {
     "leadr-irradiance": "LEADR diffuse layer: SH irradiance of environment and directional lights",
     "leadr-irradiance-naive": "naive counterpart of leadr-irradiance",
     "ltc-aniso": "area lights by the anisotropic GGX LTC table (alpha_x, alpha_y, tangent frame)",
+    "colormap-filtered": "colour-map filtering (Heitz et al. 2013): the filtered colour term of a "
+                         "texture / noise / height colour map (scene extras.colormap), unlit",
+    "colormap-naive": "naive counterpart of colormap-filtered: C(mean), times V_bar for heights",
     "glints": "glints: compressed footprint P-NDF (point query); quad lights by range queries "
               "where valid, else MIS; environment maps by SG prefiltering",
     "glints-direct": "glints: direct P-NDF of every footprint (Yan et al. 2016); quad and "
