@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from prefilter._numba import njit_parallel, prange
 from prefilter._validate import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 
@@ -96,12 +97,35 @@ def plan(height: int, width: int, stride0: int = 4, sigma0: float | None = None,
     return Pyramid(H, W, st, s0, n)
 
 
+@njit_parallel
+def _decimate_axis1(src, w, taps, out):
+    """``out[y, xo] = sum_t w[t] src[y, (2 xo + taps[t]) mod nx]`` over images ``(..., R, R)``,
+    accumulated in float64 (each output image from one iteration: no parallel reduction)."""
+    ny, nx = src.shape[0], src.shape[1]
+    nxo = out.shape[1]
+    R0, R1 = src.shape[2], src.shape[3]
+    for n in prange(ny * nxo):
+        y = n // nxo
+        xo = n - y * nxo
+        acc = np.zeros((R0, R1))
+        for t in range(taps.shape[0]):
+            x = (2 * xo + taps[t]) % nx
+            wt = w[t]
+            for i in range(R0):
+                for j in range(R1):
+                    acc[i, j] += wt * src[y, x, i, j]
+        for i in range(R0):
+            for j in range(R1):
+                out[y, xo, i, j] = acc[i, j]
+
+
 def next_level(images: np.ndarray, sigma_over_stride: float, out: np.ndarray | None = None,
                chunk: int = 8) -> np.ndarray:
     """Level ``l + 1`` images ``(ny/2, nx/2, R, R)`` from level ``l`` images ``(ny, nx, R, R)``.
 
     Periodic separable Gaussian filter of std ``sqrt(3) sigma_l`` (in strides:
     ``sqrt(3) * sigma_over_stride``) sampled at the even centres; weights normalised to sum 1.
+    ``images`` may be a float32 memory map; ``chunk`` is unused (kept for callers).
     """
     ny, nx = images.shape[:2]
     if ny % 2 or nx % 2:
@@ -110,22 +134,17 @@ def next_level(images: np.ndarray, sigma_over_stride: float, out: np.ndarray | N
     taps = np.arange(-math.ceil(4 * std), math.ceil(4 * std) + 1)
     w = np.exp(-0.5 * (taps / std) ** 2)
     w /= w.sum()
-    tmp = np.zeros((ny, nx // 2) + images.shape[2:], dtype=np.float32)
-    cols = np.arange(nx // 2) * 2
-    for y0 in range(0, ny, chunk):
-        block = np.asarray(images[y0:y0 + chunk], dtype=np.float64)
-        acc = np.zeros((block.shape[0], nx // 2) + images.shape[2:])
-        for t, wt in zip(taps, w):
-            acc += wt * block[:, (cols + t) % nx]
-        tmp[y0:y0 + chunk] = acc
+    src = np.asarray(images)
+    if src.dtype != np.float32:
+        src = src.astype(np.float32)
+    tmp = np.empty((ny, nx // 2) + images.shape[2:], dtype=np.float32)
+    _decimate_axis1(src, w, taps, tmp)
     if out is None:
         out = np.zeros((ny // 2, nx // 2) + images.shape[2:], dtype=np.float32)
-    rows = np.arange(ny // 2) * 2
-    for x0 in range(0, nx // 2, chunk):
-        acc = np.zeros((ny // 2, min(chunk, nx // 2 - x0)) + images.shape[2:])
-        for t, wt in zip(taps, w):
-            acc += wt * tmp[(rows + t) % ny, x0:x0 + chunk]
-        out[:, x0:x0 + chunk] = acc
+    res = np.empty((nx // 2, ny // 2) + images.shape[2:], dtype=np.float32)
+    # the second pass filters along y through a transposed view (no copy of the images)
+    _decimate_axis1(tmp.transpose(1, 0, 2, 3), w, taps, res)
+    out[...] = res.transpose(1, 0, 2, 3)
     return out
 
 
