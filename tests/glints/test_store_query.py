@@ -52,8 +52,11 @@ def test_summary_error_is_the_measured_error(baked):
         cen = pyr.centers(lv).reshape(-1, 2)
         ref = pndf_image(nm, cen, pyr.sigma(lv), R, S)
         got = point(gm, cen[:, None, None, :], pyr.sigma(lv), s[None])
-        num += np.sum((got - ref) ** 2)
-        den += np.sum(ref**2)
+        e2, n2 = np.sum((got - ref) ** 2), np.sum(ref**2)
+        assert np.sqrt(e2 / n2) == pytest.approx(summary["rel_l2_error_per_level"][lv],
+                                                  rel=0.02, abs=1e-3)
+        num += e2
+        den += n2
     assert np.sqrt(num / den) == pytest.approx(summary["rel_l2_error"], rel=0.02, abs=1e-3)
 
 

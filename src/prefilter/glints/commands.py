@@ -52,7 +52,8 @@ def load_normal_map(spec: str) -> np.ndarray:
 @click.option("--roughness", default=0.005, show_default=True, help="Intrinsic roughness sigma_r.")
 @click.option("--stride0", default=4, show_default=True, help="Level-0 footprint stride (texels).")
 @click.option("--sigma0", default=None, type=float, help="Level-0 footprint std [default: stride0].")
-@click.option("--cell", default=64, show_default=True, help="Spatial cell of a group (texels).")
+@click.option("--cell", default=32, show_default=True,
+              help="Spatial cell of a group at level 0 (texels; doubles with each level).")
 @click.option("--converge", default=0.01, show_default=True,
               help="Stop adding levels when one differs from the previous by less (rel. L2).")
 @click.option("--iters", default=50, show_default=True, help="Max CP iterations per group.")
