@@ -24,10 +24,10 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from multiprocessing import get_context
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 from scipy.optimize import minimize
@@ -496,7 +496,7 @@ def probe_quads(wo, alpha, settings: ProbeSettings) -> np.ndarray:
     if settings.seed == 0:
         raise PrefilterError("seed: expected a seed other than 0 (the acceptance seed)")
     rng = np.random.default_rng([settings.seed, 1])
-    ns = int(round(0.2 * settings.probes_random))
+    ns = int(round(0.2 * settings.probes_random))  # noqa: RUF046  (numpy ints too)
     quads = [random_quads(ns, rng, straddle=True),
              random_quads(settings.probes_random - ns, rng)]
     if settings.probes_lobe:
@@ -627,8 +627,11 @@ def probe_refit_study(n_configs: int = 200, settings: ProbeSettings | None = Non
     """
     from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
     from prefilter.ltc.table import GGXTable
-    from prefilter.ltc.validate import (error_statistics, random_configurations,
-                                        reference_quad_integral)
+    from prefilter.ltc.validate import (
+        error_statistics,
+        random_configurations,
+        reference_quad_integral,
+    )
 
     settings = settings or ProbeSettings()
     table = table or GGXTable.load()
