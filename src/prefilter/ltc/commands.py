@@ -27,7 +27,7 @@ import click
               type=click.Choice(["density", "quads"]),
               help="density: fit |p - q|^power; quads: then refit each row on quad-light "
                    "integrals (the acceptance test's relative error, docs/ltc.md).")
-@click.option("--power", default=0.5, show_default=True, type=click.FloatRange(0.1, 4.0),
+@click.option("--power", default=1.0, show_default=True, type=click.FloatRange(0.1, 4.0),
               help="Exponent k of the density objective integral |p - q|^k.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def bake_ltc_iso(res, seed, n_fit, processes, out, objective, power, quiet):
