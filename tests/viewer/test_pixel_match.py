@@ -11,15 +11,18 @@ from prefilter.viewer import METHODS, pixel_match
 from prefilter.viewer.match import scene
 
 TOL = 0.01
-CASES = [(s, m) for s in ("delta", "textured") for m in METHODS if m != "leadr-point"] + [
-    ("leadr", "leadr-point")]
+CASES = [(s, m) for s in ("delta", "textured") for m in METHODS
+         if m != "leadr-point" and not m.startswith("colormap-")] + [
+    ("leadr", "leadr-point"), ("colormap", "colormap-filtered"), ("colormap", "colormap-naive")]
 
 
 @pytest.fixture(scope="module")
 def rows(browser):
     return (pixel_match(scenes=("delta", "textured"), driver=browser, width=96, height=72)
             + pixel_match(scenes=("leadr",), methods=("leadr-point",), driver=browser, width=96,
-                          height=72))
+                          height=72)
+            + pixel_match(scenes=("colormap",), methods=("colormap-filtered", "colormap-naive"),
+                          driver=browser, width=96, height=72))
 
 
 @pytest.mark.parametrize("precision", ["f32", "f16"])
@@ -61,3 +64,8 @@ def test_leadr_differs_from_naive_by_more_than_the_tolerance():
 def test_other_scenes_all_methods(browser):
     for r in pixel_match(scenes=("flat", "brushed", "bumps-sphere", "horizon"), driver=browser):
         assert r["rel_rmse"] <= TOL, r
+
+
+def test_colormap_filtered_differs_from_naive_by_more_than_the_tolerance():
+    sc = scene("colormap", 96, 72)
+    assert _rel(render(sc, "colormap-naive"), render(sc, "colormap-filtered")) > 10 * TOL

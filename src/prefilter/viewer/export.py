@@ -13,6 +13,7 @@ moment chains, also in float16), and LEADR's shading from :func:`prefilter.leadr
 
 from __future__ import annotations
 
+import re
 import shutil
 from pathlib import Path
 
@@ -25,7 +26,8 @@ __all__ = ["BUILTIN_MAPS", "MAX_OBJECTS", "MAX_QUADS", "METHODS", "default_scene
            "export_scene", "viewer_scene"]
 
 #: Render methods the page implements (GLSL names in ``static/shaders/viewer.frag.glsl``).
-METHODS = ("ltc", "ltc-multiscale", "ltc-aniso", "ltc-multiscale-aniso", "leadr-point")
+METHODS = ("ltc", "ltc-multiscale", "ltc-aniso", "ltc-multiscale-aniso", "leadr-point",
+           "colormap-filtered", "colormap-naive")
 MAX_OBJECTS = 4
 MAX_QUADS = 4
 #: Texels per row of the texture atlas.
@@ -147,6 +149,45 @@ class _Atlas:
         return out
 
 
+class _Levels:
+    """The levels of a :class:`prefilter.colormap.kernels.PackedChain` as ``_Atlas.add`` reads a
+    mip chain."""
+
+    def __init__(self, packed):
+        c = packed.channels
+        self.levels = [packed.data[o:o + h * w].reshape(h, w, c) for o, h, w in
+                       zip(packed.offsets, packed.heights, packed.widths)]
+        self.shape = self.levels[0].shape
+
+
+def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
+    """The scene's colour-map driver (``extras.colormap``, texture driver) for the
+    ``colormap-*`` modes: the exported snippet and table, and the moments chain in the atlas."""
+    from prefilter.colormap.glsl import GLSL_WRAP, glsl_snippet
+    from prefilter.colormap.render import colormap_driver
+    from prefilter.colormap.table import ColormapTable
+
+    spec = (getattr(scene, "extras", None) or {}).get("colormap")
+    driver = None
+    if spec is not None and spec.get("driver") == "texture":
+        driver = colormap_driver(spec, base_dir=getattr(scene, "base_dir", "."))
+        table, chain = driver.table, atlas.add(_Levels(driver.moments_chain))
+    else:  # no texture-driven colour map: a placeholder table, the modes draw black
+        table = ColormapTable(np.zeros((2, 2, 3)), (0.0, 1.0), 1.0)
+        chain = [-1, 0]
+    img = np.concatenate([table.table, np.ones(table.table.shape[:2] + (1,))], -1)
+    _write(data / "colormap_f32.bin", img.astype("<f4").tobytes())
+    # glsl_snippet writes an integer-valued sigma_max as an int literal ("= 2;"), which GLSL ES
+    # does not convert to float: add the ".0" (reported to the colormap package)
+    src = re.sub(r"(const float kSigmaMax\s*=\s*)(-?\d+);", r"\1\2.0;",
+                 glsl_snippet(table.metadata()))
+    with atomic_path(data / "colormap.glsl", suffix=".glsl") as tmp:
+        tmp.write_text(src)
+    return {"glsl": "colormap.glsl", "f32": "colormap_f32.bin", "width": table.n_mean,
+            "height": table.n_sigma, "wrap_s": GLSL_WRAP[table.edge].removeprefix("GL_"),
+            "chain": chain, "driver": None if driver is None else driver.driver}
+
+
 def _write(path: Path, data: bytes) -> None:
     with atomic_path(path, suffix=path.suffix) as tmp:
         tmp.write_bytes(data)
@@ -224,6 +265,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
     if builtin_maps:
         for name, spec in BUILTIN_MAPS.items():
             add_map(name, TextureRef("normal_map", spec, f"builtin {name}"))
+    colormap = _colormap(scene, atlas, data)
     packed = atlas.data()
     _write(data / "atlas_f32.bin", packed.astype("<f4").tobytes())
     # LEADR's moment maps as a real-time renderer would store them (the page's f16 option)
@@ -244,6 +286,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
                        "width": ms_glsl.ALPHA_MESO_WIDTH,
                        "height": int(ms_glsl.alpha_meso_nodes().shape[0])},
         "leadr": {"glsl": "leadr.glsl"},
+        "colormap": colormap,
         "atlas": {"f32": "atlas_f32.bin", "f16": "atlas_f16.bin", "width": ATLAS_WIDTH,
                   "height": max(1, -(-atlas.size // ATLAS_WIDTH)),
                   "levels": "levels_i32.bin", "n_levels": max(1, len(atlas.levels))},

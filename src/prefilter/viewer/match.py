@@ -39,12 +39,16 @@ def _camera(width, height):
 #: crosses the plane seen by a close sphere (horizon clipping everywhere), the default scene with
 #: a point and a directional light added, a height-mapped plane and a sphere with colour maps,
 #: and height-mapped objects under point and directional lights only (``leadr-point``).
-SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr")
+SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr",
+          "colormap")
 
 
 def applies(sc, method: str) -> bool:
     """Whether the Python renderer draws scene ``sc`` (dict or :class:`Scene`) with ``method``:
     ``leadr-point`` takes point and directional lights only (quad lights raise)."""
+    if method.startswith("colormap-"):
+        extras = sc.get("extras", {}) if isinstance(sc, dict) else sc.extras
+        return (extras or {}).get("colormap", {}).get("driver") == "texture"
     if method != "leadr-point":
         return True
     lights = sc["lights"] if isinstance(sc, dict) else [{"type": x.type} for x in sc.lights]
@@ -105,6 +109,18 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
                                           "f0": 0.04, "height_map": dict(
                                               hmap, size=64, seed=5, rms_slope=0.4,
                                               corr_length=2)}}]}
+    if name == "colormap":
+        # a colour-mapped noise texture on a plane and a sphere (prefilter.colormap.render)
+        colors = [[0.05, 0.1, 0.4], [0.9, 0.9, 0.85], [0.1, 0.45, 0.15], [0.95, 0.55, 0.1],
+                  [0.5, 0.05, 0.05]] * 3
+        return {"camera": _camera(width, height), "lights": [_quad()],
+                "objects": [_plane({"alpha": 0.2, "base_color": 0.2, "f0": 0.04}, uv=4.0),
+                            {"type": "sphere", "center": [1.0, 0.5, -1.2], "radius": 0.5,
+                             "uv_scale": [2, 1], "material": {"alpha": 0.2}}],
+                "extras": {"colormap": {"driver": "texture", "colors": colors,
+                                        "texture": {"procedural": "noise", "size": 64,
+                                                    "seed": 3, "corr_length": 1.5},
+                                        "range": [-4, 4], "sigma_max": 1.5}}}
     raise PrefilterError(f"scene: expected one of {', '.join(SCENES)}, got {name!r}")
 
 
@@ -178,7 +194,8 @@ def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> l
     ``out_dir`` (``viewer_<method>.png``, ``viewer_split.png``); returns the paths.
     ``scene`` defaults to :func:`default_scene` at ``width x height``; ``leadr-point`` (point and
     directional lights only) is shot on the ``leadr`` scene of :func:`scene` at the same size
-    when ``scene`` has no point or directional light."""
+    when ``scene`` has no point or directional light (or has quad lights), the ``colormap-*``
+    modes on the ``colormap`` scene when ``scene`` has no texture-driven ``extras.colormap``."""
     from prefilter.render.scene import Scene, load_scene
     from prefilter.viewer.browser import open_viewer, screenshot
     from prefilter.viewer.match import scene as named_scene  # shadowed by the argument
@@ -186,30 +203,34 @@ def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> l
     out = Path(out_dir)
     sc = scene if scene is not None else default_scene(width, height)
     loaded = sc if isinstance(sc, Scene) else load_scene(sc)
+    c = loaded.camera
     sessions = {"shots": sc}
-    if not any(x.type in ("point", "directional") for x in loaded.lights):
-        c = loaded.camera
-        sessions["leadr"] = named_scene("leadr", c.width, c.height)
+    # modes the scene cannot show are shot on the pixel-match scene made for them
+    where = {m: "shots" for m in METHODS}
+    for m, name in (("leadr-point", "leadr"), ("colormap-filtered", "colormap"),
+                    ("colormap-naive", "colormap")):
+        if not applies(loaded, m) or (m == "leadr-point" and not any(
+                x.type in ("point", "directional") for x in loaded.lights)):
+            sessions[name] = named_scene(name, c.width, c.height)
+            where[m] = name
     paths = []
     show = ("const v = window.prefilterViewer.viewer;"
             "Object.assign(v.params, {methodLeft: arguments[0], methodRight: arguments[0], "
             "split: -1});")
     with _session(sessions, driver) as (drv, url_of):
-        open_viewer(drv, url_of("shots"))
+        current = None
         for m in METHODS:
-            if m == "leadr-point":
-                continue
+            if where[m] != current:
+                current = where[m]
+                open_viewer(drv, url_of(current))
             drv.execute_script(show, m)
             paths.append(screenshot(drv, out / f"viewer_{m}.png"))
+        if current != "shots":
+            open_viewer(drv, url_of("shots"))
         drv.execute_script("const v = window.prefilterViewer.viewer;"
                            "Object.assign(v.params, {methodLeft: 'ltc-multiscale', "
                            "methodRight: 'ltc', split: 0.5});")
-        split = screenshot(drv, out / "viewer_split.png")
-        if "leadr" in sessions:
-            open_viewer(drv, url_of("leadr"))
-        drv.execute_script(show, "leadr-point")
-        paths.append(screenshot(drv, out / "viewer_leadr-point.png"))
-        paths.append(split)
+        paths.append(screenshot(drv, out / "viewer_split.png"))
     return paths
 
 

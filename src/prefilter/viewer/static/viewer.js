@@ -2,7 +2,8 @@
 // compiles the exported GLSL snippets with shaders/viewer.frag.glsl, draws one frame.
 // No dependencies; see docs/viewer.md for the data formats.
 
-export const METHODS = ['ltc', 'ltc-multiscale', 'ltc-aniso', 'ltc-multiscale-aniso', 'leadr-point'];
+export const METHODS = ['ltc', 'ltc-multiscale', 'ltc-aniso', 'ltc-multiscale-aniso', 'leadr-point',
+  'colormap-filtered', 'colormap-naive'];
 
 async function fetchOk(url, kind) {
   const r = await fetch(url);
@@ -81,15 +82,16 @@ export class Viewer {
     this.manifest = m;
     this.scene = m.scene;
     this.camera = JSON.parse(JSON.stringify(m.scene.camera));
-    const [iso, aniso, ms, leadr, vert, frag] = await Promise.all([
+    const [iso, aniso, ms, leadr, cmap, vert, frag] = await Promise.all([
       fetchOk(base + m.ltc_iso.glsl, 'text'), fetchOk(base + m.ltc_aniso.glsl, 'text'),
       fetchOk(base + m.alpha_meso.glsl, 'text'), fetchOk(base + m.leadr.glsl, 'text'),
+      fetchOk(base + m.colormap.glsl, 'text'),
       fetchOk('shaders/viewer.vert.glsl', 'text'), fetchOk('shaders/viewer.frag.glsl', 'text')]);
     const head = '#version 300 es\nprecision highp float;\nprecision highp int;\n' +
       'precision highp sampler2D;\nprecision highp sampler3D;\nprecision highp isampler2D;\n';
     const prog = gl.createProgram();
     gl.attachShader(prog, compile(gl, gl.VERTEX_SHADER, head + vert));
-    gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, [head, iso, aniso, ms, leadr, frag].join('\n')));
+    gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, [head, iso, aniso, ms, leadr, cmap, frag].join('\n')));
     gl.linkProgram(prog);
     if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error('link: ' + gl.getProgramInfoLog(prog));
     this.prog = prog;
@@ -113,6 +115,12 @@ export class Viewer {
     this.atlas = texture2D(gl, m.atlas.width, m.atlas.height, at, false);
     const at16 = await fetchOk(base + m.atlas.f16);
     this.atlas16 = texture2D(gl, m.atlas.width, m.atlas.height, at16, true);
+    // the colour-map table as the exported snippet expects it: LINEAR, its wrap mode along S
+    const ct = await fetchOk(base + m.colormap.f32);
+    this.colormapTable = texture2D(gl, m.colormap.width, m.colormap.height, ct, false);
+    for (const [k, v] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
+                          [gl.TEXTURE_WRAP_S, gl[m.colormap.wrap_s]]])
+      gl.texParameteri(gl.TEXTURE_2D, k, v);
     const lv = await fetchOk(base + m.atlas.levels);
     this.levels = texture2D(gl, m.atlas.n_levels, 1, lv, false, gl.RGBA32I, gl.RGBA_INTEGER);
     this.uniforms = {};
@@ -134,6 +142,7 @@ export class Viewer {
     gl.useProgram(this.prog);
     const units = [['uAtlas', gl.TEXTURE_2D, this.atlas], ['uAtlas16', gl.TEXTURE_2D, this.atlas16],
                    ['uLevels', gl.TEXTURE_2D, this.levels],
+                   ['uColormapTable', gl.TEXTURE_2D, this.colormapTable],
                    ['alphaMesoNodes', gl.TEXTURE_2D, this.alphaMeso]];
     const t = this.tables[this.precision];
     for (let k = 0; k < 3; ++k) {
@@ -180,6 +189,7 @@ export class Viewer {
       return k < 0 ? [-1, 0] : m.maps[k].slopes;
     }));
     this._u('uMapsHalf', 'uniform1i', this.precision === 'f16' ? 1 : 0);
+    this._u('uColormapChain', 'uniform2iv', m.colormap.chain);
     const quads = S.lights.map(q => this._light(q));
     this._u('uNumQuads', 'uniform1i', quads.length);
     if (quads.length) {

@@ -10,6 +10,8 @@
 #define METHOD_ANISO 2
 #define METHOD_MULTISCALE_ANISO 3
 #define METHOD_LEADR_POINT 4
+#define METHOD_COLORMAP_FILTERED 5
+#define METHOD_COLORMAP_NAIVE 6
 
 uniform highp sampler2D uAtlas;     // mip chains, RGBA32F, uAtlasWidth texels per row
 uniform highp sampler2D uAtlas16;   // the same atlas in RGBA16F (LEADR's f16 moment maps)
@@ -29,6 +31,7 @@ uniform vec3 uMatBase[MAX_OBJECTS], uMatF0[MAX_OBJECTS];
 uniform ivec4 uMatMap[MAX_OBJECTS];       // normal chain (first level, levels), slope chain
 uniform ivec4 uMatColor[MAX_OBJECTS];     // colour chain (first level, levels, channels)
 uniform ivec2 uMatHeight[MAX_OBJECTS];    // height map's slope-moment chain (leadr-point)
+uniform ivec2 uColormapChain;             // colour-map driver's (E[f], E[f^2]) chain, or -1
 uniform int uNumQuads;
 uniform vec3 uQuadV[4 * MAX_QUADS], uQuadN[MAX_QUADS], uQuadL[MAX_QUADS];
 uniform int uNumPoints, uNumDirs;
@@ -272,8 +275,65 @@ vec3 shadeLeadr(Hit h, vec3 view) {
     return L;
 }
 
+// colormap-filtered / -naive (prefilter.colormap.render, texture driver; kernels._fetch and
+// _texture_kernel): the driver's moments over the anisotropic footprint (up to 8 trilinear taps
+// along the major axis), the level-0 interpolation variance removed under magnification, then
+// the exported snippet's table lookup. Unlit: the colour term itself.
+vec3 shadeColormap(Hit h, bool filtered) {
+    ivec2 ch = uColormapChain;
+    if (ch.x < 0) return vec3(0.0);
+    ivec4 L0 = texelFetch(uLevels, ivec2(ch.x, 0), 0);
+    float w = float(L0.z), hh = float(L0.y);
+    float a00 = h.dudv.x * w, a01 = h.dudv.y * w, a10 = h.dudv.z * hh, a11 = h.dudv.w * hh;
+    float p = a00 * a00 + a01 * a01, r = a10 * a10 + a11 * a11, q = a00 * a10 + a01 * a11;
+    float disc = sqrt(max(0.25 * (p - r) * (p - r) + q * q, 0.0));
+    float l1 = 0.5 * (p + r) + disc, l2 = max(0.5 * (p + r) - disc, 0.0);
+    vec2 v1 = vec2(q, l1 - p), v2 = vec2(l1 - r, q);
+    vec2 dir = dot(v1, v1) >= dot(v2, v2) ? v1 : v2;
+    float nd = length(dir);
+    dir = nd > 0.0 ? dir / nd : vec2(1.0, 0.0);
+    float major = sqrt(l1), minor = sqrt(l2);
+    int taps = minor > 0.0 ? int(min(max(ceil(major / minor), 1.0), 8.0)) : 8;
+    float lod = log2(max(max(minor, major / 8.0), 1.0));
+    vec2 axis = dir * major / vec2(w, hh);
+    int n = ch.y;
+    bool want = filtered && lod < 1.0;
+    float t = n > 1 ? max(lod, 0.0) : 0.0, iv = 0.0;
+    float tl = clamp(lod, 0.0, float(n - 1));
+    int l0 = n > 1 ? min(int(floor(tl)), n - 2) : 0;
+    float tt = n > 1 ? tl - float(l0) : 0.0;
+    vec4 M = vec4(0.0), B = vec4(0.0);
+    for (int i = 0; i < 8; ++i) {
+        if (i >= taps) break;
+        vec2 uv = h.uv + ((float(i) + 0.5) / float(taps) - 0.5) * axis;
+        float wt = 1.0 / float(taps);
+        if (!want) {
+            if (n == 1) bilinearAdd(ch.x, uv, wt, M, B);
+            else {
+                if (tt < 1.0) bilinearAdd(ch.x + l0, uv, wt * (1.0 - tt), M, B);
+                if (tt > 0.0) bilinearAdd(ch.x + l0 + 1, uv, wt * tt, M, B);
+            }
+            continue;
+        }
+        vec4 m0 = vec4(0.0);
+        bilinearAdd(ch.x, uv, 1.0, m0, B);
+        M += (1.0 - t) * wt * m0;
+        if (t > 0.0) bilinearAdd(ch.x + 1, uv, t * wt, M, B);
+        iv += (m0.y - m0.x * m0.x) * wt;
+    }
+    float sigma = 0.0;
+    if (filtered) {
+        float var = M.y - M.x * M.x;
+        if (lod < 1.0) var -= (1.0 - max(lod, 0.0)) * iv;
+        sigma = sqrt(max(var, 0.0));
+    }
+    return colormapFiltered(M.x, sigma);
+}
+
 vec3 shade(Hit h, vec3 view, int method) {
     if (method == METHOD_LEADR_POINT) return shadeLeadr(h, view);
+    if (method == METHOD_COLORMAP_FILTERED || method == METHOD_COLORMAP_NAIVE)
+        return shadeColormap(h, method == METHOD_COLORMAP_FILTERED);
     int k = h.id;
     ivec4 map = uMatMap[k];
     vec3 gn = h.n, gt = h.t, gb = h.b;
