@@ -98,4 +98,5 @@ def test_viewer_section_screenshots_and_pixel_match(tmp_path):
     rel = [float(x) for x in re.findall(r"<td[^>]*>(\d\.\d\de-\d\d)</td>\s*<td[^>]*>"
                                         r"\d\.\d\de-\d\d</td>\s*<td[^>]*>\d\.\d\de-\d\d</td>",
                                         page)]
-    assert len(rel) == 2 * len(METHODS) and max(rel) <= 0.01, rel
+    # f32 and f16 rows per mode, the colour-map modes f32 only
+    assert len(rel) == 2 * len(METHODS) - 2 and max(rel) <= 0.01, rel

@@ -513,7 +513,8 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         return
     w, h = settings.viewer_size
     mw, mh = settings.viewer_match_size
-    ltc = tuple(m for m in METHODS if m != "leadr-point")
+    ltc = tuple(m for m in METHODS if m.startswith("ltc"))
+    cmap = tuple(m for m in METHODS if m.startswith("colormap-"))
     with tempfile.TemporaryDirectory(prefix="prefilter-demo-viewer-") as tmp:
         driver = chromium(Path(tmp) / "profile")
         try:
@@ -524,7 +525,9 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
             rows = (pixel_match(scenes=("bumps-sphere",), methods=ltc, width=mw, height=mh,
                                 driver=driver)
                     + pixel_match(scenes=("leadr",), methods=("leadr-point",), width=mw,
-                                  height=mh, driver=driver))
+                                  height=mh, driver=driver)
+                    + pixel_match(scenes=("colormap",), methods=cmap, precisions=("f32",),
+                                  width=mw, height=mh, driver=driver))
             t_match = time.perf_counter() - t0
         finally:
             driver.quit()
@@ -536,7 +539,8 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         f"Canvas screenshots ({w} x {h}, sRGB, exposure 1/2) of the default scene (Gaussian-bump "
         "plane, anisotropic sphere, one quad light) per method, `split` = ltc-multiscale | ltc; "
         "`leadr-point` on the pixel-match `leadr` scene (height-mapped plane and sphere, two "
-        f"point lights and a directional light). Taken in {t_shots:.1f} s.")
+        "point lights and a directional light), the unlit `colormap-*` modes on its `colormap` "
+        f"scene (a colour-mapped noise texture). Taken in {t_shots:.1f} s.")
     report.add_table(
         ["scene", "method", "tables / maps", "relative RMSE", "max abs error",
          "max error / max radiance"],
@@ -545,7 +549,8 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         caption="WebGL2 (headless Chromium, SwiftShader) against `prefilter.render.render`, "
                 f"{mw} x {mh} pixels, linear float read-back; relative RMSE = |browser - python|_2"
                 " / |python|_2 over covered pixels (the tests require <= 1 %). f16: float16 LTC "
-                f"tables, or for leadr-point float16 moment maps. Measured in {t_match:.1f} s.")
+                "tables, or for leadr-point float16 moment maps (the colour-map table is "
+                f"float32 only). Measured in {t_match:.1f} s.")
 
 
 # ---------------------------------------------------------------------------------- driver
