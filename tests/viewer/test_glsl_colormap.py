@@ -2,9 +2,10 @@
 its baked table (RGBA32F, ``GL_LINEAR``, the snippet's wrap modes) against
 :meth:`prefilter.colormap.table.ColormapTable.lookup`, for every edge rule.
 
-No render method of the Python renderer shades with colour-map filtering (``prefilter.colormap`` is
-used by its own acceptance scenes, not by ``prefilter.render``), so the viewer has no colour-map
-mode to pixel-match: the snippet is tested alone (``docs/viewer.md``)."""
+The page's ``colormap-*`` modes (texture driver) are pixel-matched against
+``prefilter.colormap.render`` in ``test_pixel_match.py``; this checks the snippet's other entry
+points (``colormapTexture``, ``colormapHeight``) and every edge rule, which the modes do not
+all reach."""
 
 import numpy as np
 import pytest
