@@ -207,14 +207,15 @@ def sh9_irradiance(coeffs, n) -> np.ndarray:
     """Irradiance ``E(n) = integral L(w) max(0, n.w) dw`` ``(..., C)`` from SH ``coeffs (9, C)``.
 
     Ramamoorthi & Hanrahan 2001 eq. 7 (order-2 truncation; exact for radiance of order <= 2).
-    ``coeffs (9,)`` is one channel (``C = 1``); ``n (..., 3)`` unit normals.
+    ``coeffs (9,)`` is one channel (``C = 1``); ``n (..., 3)`` normals (unit for eq. 7).
     """
     c = as_float_array(coeffs, "coeffs", ndim_min=1)
     if c.shape[0] != 9 or c.ndim > 2:
         raise PrefilterError(f"coeffs: expected SH coefficients of shape (9, C) or (9,), got "
                              f"shape {c.shape}")
     c = c.reshape(9, -1)
-    n = as_directions(n, "n")
+    # not renormalised: the naive methods pass mip-averaged (shorter) normals on purpose
+    n = as_float_array(n, "n", ndim_min=1, last_dim=3)
     a = np.array([_A[0], _A[1], _A[1], _A[1], _A[2], _A[2], _A[2], _A[2], _A[2]])
     return sh9_basis(n) @ (a[:, None] * c)
 

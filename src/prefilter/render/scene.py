@@ -181,7 +181,17 @@ def _load_texture(role, key, path, mtime, convention, srgb, scale):
         sx = (np.roll(h, -1, 1) - np.roll(h, 1, 1)) / 2.0  # periodic central differences
         sy = (np.roll(h, -1, 0) - np.roll(h, 1, 0)) / 2.0
         return tx.HeightMap(h, np.stack([sx, sy], -1))
-    return img
+    return _radiometric(img, role)
+
+
+def _radiometric(a, role: str):
+    """``a`` if it holds finite values >= 0: colours and radiance multiply light, so a negative
+    texel of a file would make negative pixels (and NaN spreads through the mip chain)."""
+    finite = np.isfinite(a)
+    if not finite.all() or np.any(a < 0):
+        got = "NaN or inf" if not finite.all() else f"min {float(a.min()):.4g}"
+        raise PrefilterError(f"{role.replace('_', ' ')}: expected finite values >= 0, got {got}")
+    return a
 
 
 @functools.lru_cache(maxsize=64)
@@ -313,12 +323,21 @@ class EnvironmentLight:
     type: str = "environment"
 
 
+#: Optional features under the scene field ``extras`` and the modules that validate their content.
+EXTRAS = ("colormap",)  # prefilter.colormap.render: the colour-map methods' driver
+
+
 @dataclass(frozen=True)
 class Scene:
+    """A loaded scene. ``extras``: optional feature data (keys of :data:`EXTRAS`, validated by
+    the methods that read them); ``base_dir``: the directory relative paths are resolved in."""
+
     camera: Camera
     objects: tuple
     lights: tuple
     source: Any = None
+    extras: dict = field(default_factory=dict)
+    base_dir: str = "."
 
     def light_set(self):
         """The quad, point and directional lights as a :class:`prefilter.render.lights.LightSet`
@@ -408,7 +427,8 @@ def _light(v, path, base):
         vs = np.stack([vo.vector(str(i), 3) for i in range(4)])
         tex = o.raw("texture", None)
         spec = QuadLightSpec(vs, o.vector("radiance", 3, lo=0.0, scalar_ok=True),
-                             _texture(tex, o.at("texture"), "light_texture", base) if tex else None)
+                             None if tex is None else
+                             _texture(tex, o.at("texture"), "light_texture", base))
         try:  # planarity / convexity checks live with the shading light type
             from prefilter.render.lights import QuadLight
 
@@ -459,13 +479,19 @@ def _read_scene_file(p: Path):
 
 
 def _parse(data, base: Path) -> Scene:
-    o = _Obj(data, "", ("camera", "objects", "lights"))
+    o = _Obj(data, "", ("camera", "objects", "lights", "extras"))
     camera = _camera(o.raw("camera"), "camera")
     objects = tuple(_object(v, f"objects[{i}]", base)
                     for i, v in enumerate(_list(o.raw("objects"), "objects")))
     lights = tuple(_light(v, f"lights[{i}]", base)
                    for i, v in enumerate(_list(o.raw("lights", []), "lights")))
-    return Scene(camera, objects, lights, source=data)
+    extras = _Obj(o.raw("extras", {}), "extras", EXTRAS).d
+    try:  # the content is the reading method's to check, but it must be JSON data
+        extras = json.loads(json.dumps(extras, allow_nan=False))
+    except (TypeError, ValueError):
+        raise PrefilterError(f"extras: expected JSON data (no NaN or infinity), got "
+                             f"{_got(extras)}") from None
+    return Scene(camera, objects, lights, source=data, extras=extras, base_dir=str(base))
 
 
 def load_scene(path_or_dict, *, base_dir: str | os.PathLike | None = None) -> Scene:
