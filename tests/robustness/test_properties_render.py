@@ -109,7 +109,8 @@ def test_sh9_irradiance_rejects_bad_coefficients():
     expect_error(lambda: sh9_irradiance(np.full((9, 3), np.nan), n), "coeffs", "NaN")
     expect_error(lambda: sh9_irradiance(np.zeros((8, 3)), n), "coeffs", "(8, 3)")
     expect_error(lambda: sh9_irradiance(np.zeros((9, 3, 1)), n), "coeffs")
-    expect_error(lambda: sh9_irradiance(np.zeros((9, 3)), [0.0, 0.0, 2.0]), "n", "unit")
+    expect_error(lambda: sh9_irradiance(np.zeros((9, 3)), [0.0, np.nan, 1.0]), "n", "NaN")
+    expect_error(lambda: sh9_irradiance(np.zeros((9, 3)), [0.0, 1.0]), "n", "(..., 3)")
 
 
 @settings(max_examples=N)

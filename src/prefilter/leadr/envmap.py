@@ -17,10 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import (as_directions, as_float_array, as_positive_int,
-                                 broadcast_batch)
+from prefilter._validate import as_directions, as_float_array, as_positive_int, broadcast_batch
 from prefilter.errors import PrefilterError
-
 
 #: World (y up) -> lat-long map coordinates of scene environment lights (rows: map x, y, z).
 ENV_FROM_WORLD = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -63,7 +61,7 @@ def latlong_resample(image, rows: int) -> np.ndarray:
     return top * (1 - fy) + bot * fy
 
 
-def env_from_image(image, scale: float = 1.0) -> "EnvMap":
+def env_from_image(image, scale: float = 1.0) -> EnvMap:
     """:class:`EnvMap` of an equirectangular image ``(H, W[, C])`` of any size, times ``scale``.
 
     Grey images give three equal channels, alpha is dropped; sizes that are not ``(2^k, 2^(k+1))``
