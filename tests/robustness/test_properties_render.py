@@ -190,3 +190,27 @@ def test_quad_light_sample_pdf_finite_and_consistent(size, height, tilt, seed):
     # the pdf of a sampled direction is the sampler's density (points hit the quad's front)
     good = ok & (pdf < 1e12)
     assert np.allclose(p2[good], pdf[good], rtol=1e-6)
+
+
+RENDER_SCENE = {
+    "camera": {"origin": [0, 1.2, 3], "target": [0, 0.3, 0], "fov": 40, "width": 4, "height": 3},
+    "objects": [{"type": "plane", "size": 4.0}],
+    "lights": [{"type": "quad", "vertices": [[1, 2, -1], [1, 2, 1], [-1, 2, 1], [-1, 2, -1]],
+                "radiance": 1.0}]}
+
+
+@pytest.mark.parametrize("kwargs, name", [
+    ({"spp": 0}, "spp"), ({"spp": 2.0}, "spp"), ({"seed": -1}, "seed"), ({"seed": 1.5}, "seed"),
+    ({"jitter": (np.nan, 0.0)}, "jitter"), ({"jitter": 1.0}, "jitter"),
+    ({"chunk_samples": 0}, "chunk_samples"), ({"method": None}, "method"),
+    ({"method": "LTC"}, "method"),
+    # a table of the wrong type reached the shader: AttributeError 'str' has no 'lookup'
+    ({"table": "ggx.npz"}, "table"), ({"table": 3}, "table"),
+])
+def test_render_arguments_are_validated(kwargs, name):
+    from prefilter.render import render
+
+    kw = dict(kwargs)
+    method = kw.pop("method", "ltc")
+    for m in ([method] if "method" in kwargs else ["ltc", "ltc-multiscale"]):
+        expect_error(lambda m=m: render(RENDER_SCENE, m, **kw), name)

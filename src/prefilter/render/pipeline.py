@@ -52,7 +52,8 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
     progress : bool
         tqdm progress bar for renders longer than a second.
     table : GGXTable or None
-        LTC table for LTC-based methods (default: the shipped one).
+        LTC table for LTC-based methods (default: the shipped one); any object with a
+        ``lookup`` method (a table-like object) is passed through.
 
     Returns
     -------
@@ -66,6 +67,9 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
         raise PrefilterError(f"jitter: expected (dx, dy), got shape {j.shape}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise PrefilterError(f"seed: expected an integer >= 0, got {seed!r}")
+    if table is not None and not callable(getattr(table, "lookup", None)):
+        raise PrefilterError("table: expected an LTC table (prefilter.ltc.table.GGXTable, "
+                             f"AnisoGGXTable) or None, got {type(table).__name__}")
     settings = RenderSettings(spp=as_positive_int(spp, "spp"), seed=int(seed),
                               jitter=(float(j[0]), float(j[1])), progress=bool(progress),
                               chunk_samples=as_positive_int(chunk_samples, "chunk_samples"),
