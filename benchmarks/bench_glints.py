@@ -86,7 +86,7 @@ def bench_bake_scaling(sizes, tmp):
     for n in sizes:
         nm = normal_map("gaussian", n, seed=0)
         t = time.perf_counter()
-        s = bake(nm, Path(tmp) / f"g{n}.npz", progress=False, cell=min(64, n))
+        s = bake(nm, Path(tmp) / f"g{n}.npz", progress=False, cell=min(32, n))
         print(f"  {n:4d}^2: {time.perf_counter() - t:7.1f} s, ratio {100 * s['ratio']:.2f} %, "
               f"rel L2 {100 * s['rel_l2_error']:.1f} %, images {s['n_images']}")
 
@@ -102,7 +102,7 @@ def bench_ranks(size, tmp, ranks=(8, 16, 32, 64),
         for rank in ranks:
             t = time.perf_counter()
             s = bake(nm, Path(tmp) / f"{kind}_{rank}.npz", rank=rank, progress=False,
-                     cell=min(64, size), levels_dir=lv)
+                     cell=min(32, size), levels_dir=lv)
             e = s["rel_l2_error_per_level"]
             print(f"{kind:>10} {rank:5d} {100 * s['ratio']:8.2f} {100 * s['rel_l2_error']:9.2f} "
                   f"{100 * e[0]:9.2f} {100 * e[-1]:6.2f} {time.perf_counter() - t:6.1f}",
@@ -166,7 +166,7 @@ def main():
             nm = normal_map("gaussian", p.height, seed=0)
         else:
             nm = normal_map("gaussian", a.size, seed=0)
-            bake(nm, Path(tmp) / "q.npz", progress=False, cell=min(64, a.size))
+            bake(nm, Path(tmp) / "q.npz", progress=False, cell=min(32, a.size))
             gm = load(Path(tmp) / "q.npz")
         bench_queries(gm, nm)
         bench_queries(gm, nm, coherent=True)

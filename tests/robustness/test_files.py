@@ -381,11 +381,11 @@ FORMATS = {
     "glints_map": Fmt(_make_glints, _load_glints, {
         "dtype": _rewrite_npz(_set("block_index", lambda b: b.astype(np.int64))),
         "dtype_text": _rewrite_npz(_set("header", lambda h: np.array([1, 2]))),
-        "shape": _rewrite_npz(_set("C", lambda c: c[:, :1].copy())),
+        "shape": _rewrite_npz(_set("c", lambda c: c[:, :1].copy())),
         "layout": _rewrite_npz(_set("block_index", lambda b: b + 1000)),
-        "missing": _rewrite_npz(_drop("A")),
+        "missing": _rewrite_npz(_drop("a")),
         "missing_field": _rewrite_npz(lambda a: _glints_header(ndf=None)(a)),
-        "version": _rewrite_npz(_glints_header(version=2), version=2),
+        "version": _rewrite_npz(_glints_header(version=99), version=99),
     }),
     "colormap_png": Fmt(_make_colormap(".png", "img"), _load_colormap(".png"), {
         "dtype": _rewrite_image(bits=8),

@@ -84,7 +84,7 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
         return hit[1]
     nm = as_normal_map(normal_map)
     H, W = nm.shape[:2]
-    st.setdefault("cell", min(64, H, W))
+    st.setdefault("cell", min(32, H, W))
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     key = hashlib.sha1(json.dumps(st, sort_keys=True).encode()).hexdigest()[:12]
     mem = (digest, "direct" if direct else key)
