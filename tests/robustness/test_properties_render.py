@@ -126,6 +126,21 @@ def test_sh9_irradiance_of_constant_radiance_is_pi_l(n):
     assert e1.shape == (1,) and np.allclose(e1, 2.0 * np.pi, rtol=2e-3)
 
 
+@settings(max_examples=N)
+@given(unit, unit)
+@example(np.array([0.0, 0.0, 1.0]), direction(122.2, 0.0))  # the truncation's minimum (-0.040)
+@example(direction(30.0, 1.0), direction(30.0, 1.0))  # towards the light: 17/16
+def test_sh9_irradiance_of_a_directional_light_is_non_negative(d, n):
+    from prefilter.leadr.envmap import sh9_directional
+
+    c = sh9_directional(d[None], [[1.0]])
+    e = sh9_irradiance(c, n)
+    assert e.shape == (1,) and np.isfinite(e[0]) and e[0] >= 0.0
+    if np.dot(n, d) > 1 - 1e-15:
+        # sum_l A_l (2l + 1) / (4 pi) = (pi + 2 pi + 5 pi / 4) / (4 pi) towards the light
+        assert e[0] == pytest.approx(17.0 / 16.0, rel=1e-5)
+
+
 # -- _validate ---------------------------------------------------------------------------------
 
 
