@@ -37,7 +37,7 @@ def test_gl_wrap_modes_follow_the_specification():
 def test_snippet_carries_the_table_layout():
     t = prefilter_table(np.zeros((8, 3)), (-2.0, 5.0), 0.75, size=8, edge="mirror")
     code = glsl_snippet(t.metadata())
-    assert "GL_MIRRORED_REPEAT" in code and "vec2(-2, 5)" in code and "0.75" in code
+    assert "GL_MIRRORED_REPEAT" in code and "vec2(-2.0, 5.0)" in code and "0.75" in code
     assert code.count("{") == code.count("}")
 
 
@@ -79,3 +79,17 @@ def test_bake_command_rejects_bad_input(tmp_path):
     res = CliRunner().invoke(cli, ["bake", "colormap", str(src), "--sigma-max", "-1",
                                    "-o", str(tmp_path / "t.exr")])
     assert res.exit_code != 0 and "sigma_max" in str(res.exception) + res.output
+
+
+def test_glsl_snippet_writes_float_literals_for_whole_numbers():
+    # GLSL ES 3.00 has no implicit int -> float conversion: `const float x = 2;` does not compile
+    import re
+
+    from prefilter.colormap.glsl import glsl_snippet
+
+    src = glsl_snippet({"value_range": [0, 4], "edge": "mirror", "sigma_max": 2, "n_sigma": 64})
+    for line in src.splitlines():
+        if line.startswith("const float") or line.startswith("const vec"):
+            for number in re.findall(r"(?<![\w.])-?\d+(?:\.\d*)?(?:e-?\d+)?(?![\w.])",
+                                     line.split("=", 1)[1]):
+                assert "." in number or "e" in number, (line, number)

@@ -23,8 +23,8 @@ _SNIPPET = """\
 // `prefilter bake colormap`. Upload the table with row 0 of the file at t = 0, GL_LINEAR
 // min/mag filters without mipmaps, wrap S = {wrap_s}, wrap T = GL_CLAMP_TO_EDGE.
 uniform sampler2D uColormapTable; // rows: sigma = sigma_max * j / (n_sigma - 1); columns: mean
-const vec2  kValueRange = vec2({lo:.9g}, {hi:.9g});
-const float kSigmaMax   = {sigma_max:.9g};
+const vec2  kValueRange = vec2({lo}, {hi});
+const float kSigmaMax   = {sigma_max};
 const float kNSigma     = {n_sigma:.1f};
 
 // <C, N(mean, sigma^2)> (eq. 10): one bilinear fetch.
@@ -48,7 +48,7 @@ vec3 colormapNoise(float filteredNoise, sampler2D noiseStd, float lod, float nLe
 
 // Height-correlated colour (section 5.1, eqs. 13, 17, 18); lambdaO / lambdaI from eq. 3.
 // Returns V_bar * <C_h, D_h> as eq. 14.
-const vec4 kHeightFit = vec4({a_mu:.6g}, {b_mu:.6g}, {a_s:.6g}, {b_s:.6g}); // alpha/beta mu, sigma
+const vec4 kHeightFit = vec4({a_mu}, {b_mu}, {a_s}, {b_s}); // alpha/beta mu, sigma
 vec3 colormapHeight(float sigmaH, float lambdaO, float lambdaI) {{
     float L = lambdaO + lambdaI;
     float mu = kHeightFit.x * sigmaH * log(kHeightFit.y * L + 1.0);
@@ -56,6 +56,12 @@ vec3 colormapHeight(float sigmaH, float lambdaO, float lambdaI) {{
     return (1.0 + lambdaO) / (1.0 + L) * colormapFiltered(mu, sd);
 }}
 """
+
+
+def _float_literal(x, digits: int = 9) -> str:
+    """A GLSL float literal (GLSL ES has no implicit int -> float: ``2`` must be ``2.0``)."""
+    text = f"{float(x):.{digits}g}"
+    return text if any(c in text for c in ".eEn") else text + ".0"
 
 
 def glsl_snippet(metadata: dict, height_params=None) -> str:
@@ -66,9 +72,11 @@ def glsl_snippet(metadata: dict, height_params=None) -> str:
     try:
         lo, hi = metadata["value_range"]
         p = OWN_PARAMS if height_params is None else height_params
-        return _SNIPPET.format(wrap_s=GLSL_WRAP[metadata["edge"]], lo=lo, hi=hi,
-                               sigma_max=metadata["sigma_max"], n_sigma=metadata["n_sigma"],
-                               a_mu=p[0], b_mu=p[1], a_s=p[2], b_s=p[3])
+        f = _float_literal
+        return _SNIPPET.format(wrap_s=GLSL_WRAP[metadata["edge"]], lo=f(lo), hi=f(hi),
+                               sigma_max=f(metadata["sigma_max"]), n_sigma=metadata["n_sigma"],
+                               a_mu=f(p[0], 6), b_mu=f(p[1], 6), a_s=f(p[2], 6),
+                               b_s=f(p[3], 6))
     except (KeyError, TypeError, ValueError) as exc:
         raise PrefilterError(f"metadata: expected a colour-map table description, got {exc}") \
             from None
