@@ -263,7 +263,7 @@ def test_fuzzed_scenes_render_finite_or_raise_prefilter_error(assets, scene, spp
 
 
 @pytest.mark.slow
-@settings(max_examples=N * 5)
+@settings(max_examples=N * 3)
 @given(scene=scenes(), spp_seed=SPP_SEED)
 def test_fuzzed_scenes_many(assets, scene, spp_seed):
     render_all(scene, assets, *spp_seed)
