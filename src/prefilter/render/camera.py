@@ -233,7 +233,9 @@ def _sphere_geometry(obj, p):
     theta = np.arccos(y)
     phi = np.mod(np.arctan2(z, x), 2.0 * np.pi)
     st = np.maximum(np.sqrt(x * x + z * z), 1e-12)  # sin(theta), kept off the poles
-    cp, sp = x / st, z / st
+    # at the exact pole phi is undefined: take phi = 0 so the frame stays orthonormal
+    pole = np.sqrt(x * x + z * z) < 1e-12
+    cp, sp = np.where(pole, 1.0, x / st), np.where(pole, 0.0, z / st)
     n = q / np.linalg.norm(q, axis=-1, keepdims=True)
     tangent = -sp[..., None] * ex + cp[..., None] * ez
     bitangent = (y * cp)[..., None] * ex - st[..., None] * ey + (y * sp)[..., None] * ez

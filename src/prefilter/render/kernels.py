@@ -150,7 +150,10 @@ def _trace(k, ox, oy, oz, dx, dy, dz, xx, xy_, xz, yx, yy, yz, types, params,
         if phi < 0.0:
             phi += _TWO_PI
         st = max(math.sqrt(x * x + z * z), 1e-12)  # sin(theta), kept off the poles
-        cp, sp = x / st, z / st
+        if x * x + z * z < 1e-24:  # the exact pole: phi = 0 keeps the frame orthonormal
+            cp, sp = 1.0, 0.0
+        else:
+            cp, sp = x / st, z / st
         inv = 1.0 / math.sqrt(qx * qx + qy * qy + qz * qz)
         nx, ny, nz = qx * inv, qy * inv, qz * inv
         tx, ty, tz = -sp * ex0 + cp * ez0, -sp * ex1 + cp * ez1, -sp * ex2 + cp * ez2
