@@ -454,15 +454,11 @@ def _colormap_scene(assets, **change):
     return load_scene(scene, base_dir=assets)
 
 
-@pytest.mark.xfail(strict=True, raises=TypeError, reason="open defect (reported, colormap/render.py"
-                   "): a scalar extras.colormap.range gives a bare TypeError")
 def test_colormap_scalar_range(assets):
     with pytest.raises(PrefilterError, match="range"):
         render(_colormap_scene(assets, range=5), "colormap-filtered")
 
 
-@pytest.mark.xfail(strict=True, reason="open defect (reported, colormap/render.py): negative "
-                   "extras.colormap.colors are accepted and give negative pixels")
 def test_colormap_negative_colours(assets):
     try:
         img = render(_colormap_scene(assets, colors=[[0, 0, 0], [1, 1, -1]]), "colormap-filtered")

@@ -113,6 +113,8 @@ def _colors(spec, base: Path) -> np.ndarray:
     if c.ndim != 2 or c.shape[0] < 2:
         raise _err("colors", "a list of at least 2 colours [r, g, b] or an image path",
                    np.shape(spec))
+    if np.any(c < 0):
+        raise _err("colors", "non-negative (linear) colours", float(c.min()))
     return c
 
 
@@ -138,7 +140,12 @@ def _build(key: str, base: str) -> ColormapDriver:
         f = (f - f.mean()) / max(float(f.std()), 1e-12)
         cov = np.cov(slopes.reshape(-1, 2).T, bias=True)
     mean, std = float(f.mean()), float(f.std())
-    lo, hi = spec.get("range", (mean - 4 * std, mean + 4 * std))
+    value_range = spec.get("range", (mean - 4 * std, mean + 4 * std))
+    if (not isinstance(value_range, (list, tuple)) or len(value_range) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                       for v in value_range)):
+        raise _err("range", "two numbers [lo, hi]", value_range)
+    lo, hi = value_range
     edge = spec.get("edge", "clamp")
     if edge not in EDGES:
         raise _err("edge", f"one of {', '.join(EDGES)}", edge)
