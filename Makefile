@@ -39,7 +39,7 @@ bench: $(STAMP)
 	$(PY) benchmarks/run_all.py
 
 lint: $(STAMP)
-	$(PY) -m pip install -q ruff && $(VENV)/bin/ruff check src tests benchmarks
+	$(PY) -m pip install -q ruff && $(VENV)/bin/ruff check src tests benchmarks tools
 
 # Numba's on-disk cache keys a kernel by its own file: after editing a helper in another module,
 # drop the cache so kernels recompile.

@@ -76,7 +76,7 @@ def convergence(p: int = 1000) -> None:
     }
     grids = [("3", 3, None), ("5", 5, None), ("paper5", 5, 0.9), ("9", 9, None),
              ("17", 17, None), ("33", 33, None)]
-    print(f"| case | ref N=128 mean | " + " | ".join(f"N={g[0]} err / us" for g in grids) + " |")
+    print("| case | ref N=128 mean | " + " | ".join(f"N={g[0]} err / us" for g in grids) + " |")
     print("|---|---|" + "---|" * len(grids))
     for name, (kind, cov) in cases.items():
         def run(n, spacing, reps=1):

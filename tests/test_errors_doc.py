@@ -8,7 +8,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def test_errors_doc_is_current():
-    spec = importlib.util.spec_from_file_location("gen_errors_md", REPO / "tools" / "gen_errors_md.py")
+    spec = importlib.util.spec_from_file_location("gen_errors_md",
+                                                  REPO / "tools" / "gen_errors_md.py")
     gen = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(gen)
     current = (REPO / "docs" / "errors.md").read_text()

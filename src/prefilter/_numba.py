@@ -1,6 +1,7 @@
 """Numba configuration shared by the hot kernels.
 
-Kernels are compiled with ``parallel=True, fastmath=True, cache=True`` as the developers' brief asks.
+Kernels are compiled with ``parallel=True, fastmath=True, cache=True`` as the developers' brief
+asks.
 Thread count follows ``NUMBA_NUM_THREADS``; results do not depend on it because every kernel writes
 each output element from exactly one iteration (no parallel reductions).
 """

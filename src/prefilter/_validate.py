@@ -39,7 +39,8 @@ def as_float_array(x, name: str, *, ndim_min: int = 0, last_dim: int | None = No
         raise PrefilterError(f"{name}: expected finite values, got an integer too large for a "
                              "float") from None
     if a.ndim < ndim_min:
-        raise PrefilterError(f"{name}: expected at least {ndim_min} dimensions, got shape {a.shape}")
+        raise PrefilterError(f"{name}: expected at least {ndim_min} dimensions, "
+                             f"got shape {a.shape}")
     if last_dim is not None and (a.ndim == 0 or a.shape[-1] != last_dim):
         raise PrefilterError(f"{name}: expected shape (..., {last_dim}), got shape {a.shape}")
     if not np.all(np.isfinite(a)):

@@ -84,7 +84,8 @@ def test_fractional_range_and_vectorisation(baked):
     n = 200
     for q in range(2):
         t = (np.arange(n) + 0.5) / n
-        X, Y = np.meshgrid(lo[q, 0] + t * (hi[q, 0] - lo[q, 0]), lo[q, 1] + t * (hi[q, 1] - lo[q, 1]))
+        X, Y = np.meshgrid(lo[q, 0] + t * (hi[q, 0] - lo[q, 0]),
+                           lo[q, 1] + t * (hi[q, 1] - lo[q, 1]))
         dense = point(gm, c[q], 7.0, np.stack([X, Y], -1)).mean()
         assert got[q] == pytest.approx(dense, rel=1e-2, abs=1e-6)
 

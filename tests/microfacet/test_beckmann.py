@@ -52,7 +52,8 @@ def test_d_matches_gaussian_slopes_via_finite_difference_jacobian():
 @pytest.mark.parametrize("name", MODELS)
 def test_ndf_normalised(name):
     b, width, (npol, naz) = MODELS[name]
-    val = hemisphere_integral(lambda m: b.D(m) * m[..., 2], width=width, n_polar=npol, n_azimuth=naz)
+    val = hemisphere_integral(lambda m: b.D(m) * m[..., 2], width=width, n_polar=npol,
+                              n_azimuth=naz)
     assert val == pytest.approx(1.0, abs=1e-6)
 
 

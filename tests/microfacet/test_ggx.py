@@ -1,4 +1,5 @@
-"""Anisotropic GGX: quadrature identities, closed forms, Smith integrals and VNDF chi-square tests."""
+"""Anisotropic GGX: quadrature identities, closed forms, Smith integrals and VNDF chi-square
+tests."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,5 @@
-"""Exact lobe sampling (VNDF + rejection, anisotropic-LTC paper Algorithm 1) for GGX and Beckmann."""
+"""Exact lobe sampling (VNDF + rejection, anisotropic-LTC paper Algorithm 1) for GGX and
+Beckmann."""
 
 import numpy as np
 import pytest
@@ -17,7 +18,8 @@ LOBE_FAST = [
     (Beckmann.anisotropic(0.02, 0.4, (0.3, -0.2)), 10),
 ]
 LOBE_SLOW = (
-    [(GGX(a, a * r), t) for a in (0.02, 0.2, 1.0) for r in (1.0, 0.3, 0.05) for t in (0, 5, 80, 85, 89)]
+    [(GGX(a, a * r), t) for a in (0.02, 0.2, 1.0) for r in (1.0, 0.3, 0.05)
+     for t in (0, 5, 80, 85, 89)]
     + [(Beckmann.anisotropic(a, a * r, mu), t) for a in (0.02, 0.3, 1.0) for r in (1.0, 0.05)
        for mu in ((0, 0), (0.2, 0.3)) for t in (0, 5, 80, 89)]
 )

@@ -28,7 +28,8 @@ def test_rays_centre_corner_and_differentials():
         1 + t * t + (t * 4 / 3) ** 2))
     h = 1e-4
     xy = np.array([[7.3, 11.2]])
-    fd = (rays_at(s.camera, xy + [h, 0]).direction - rays_at(s.camera, xy - [h, 0]).direction) / (2 * h)
+    fd = (rays_at(s.camera, xy + [h, 0]).direction
+          - rays_at(s.camera, xy - [h, 0]).direction) / (2 * h)
     assert np.allclose(rays_at(s.camera, xy).ddx, fd, atol=1e-8)
     assert generate_rays(s.camera).direction.shape == (30, 40, 3)
 

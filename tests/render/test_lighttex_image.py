@@ -4,7 +4,8 @@ Reference: per pixel, a Monte Carlo estimate of the integral the shader approxim
 textured light (the light texture's texels as piecewise-constant radiance; diffuse by uniform area
 sampling, specular by sampling the lobe):
 ``int_P (base / pi max(w_z, 0) + s D_M(w) [w_z >= 0]) T(uv(w)) L dw`` with the method's own
-shading point, frame, roughness and table lobe ``D_M`` (``s`` the Fresnel-weighted magnitude). It isolates the textured-light approximation (one prefiltered lookup per lobe,
+shading point, frame, roughness and table lobe ``D_M`` (``s`` the Fresnel-weighted magnitude).
+It isolates the textured-light approximation (one prefiltered lookup per lobe,
 Heitz et al. 2016, section 5.3) from the LTC fit and the normal-map filtering.
 """
 

@@ -104,11 +104,13 @@ def test_light_pdf_integrates_to_one_and_matches_sampler():
     pdf = quad_light_pdf(light, np.zeros((n, 3)), w)
     est = pdf * 4 * np.pi
     assert abs(est.mean() - 1.0) < 5 * est.std() / np.sqrt(n)
-    wi, p_s = quad_light_sample(light, np.zeros((1000, 3)), np.random.default_rng(3).random((1000, 2)))
+    wi, p_s = quad_light_sample(light, np.zeros((1000, 3)),
+                                np.random.default_rng(3).random((1000, 2)))
     assert np.allclose(quad_light_pdf(light, np.zeros((1000, 3)), wi), p_s, rtol=1e-9)
     # Behind the light (above it) nothing is emitted towards the point.
     above = np.tile([0.5, 0.0, 3.0], (1000, 1))
-    assert np.all(quad_light_sample(light, above, np.random.default_rng(4).random((1000, 2)))[1] == 0)
+    assert np.all(
+        quad_light_sample(light, above, np.random.default_rng(4).random((1000, 2)))[1] == 0)
     assert np.all(quad_light_pdf(light, above, -wi) == 0)
 
 
@@ -208,7 +210,8 @@ def test_mis_error_falls_as_inverse_square_root():
         trials = 400
         t, b, nn = _frame(n * trials)
         u = rng.random((n * trials, 5))
-        est = estimate_quad(light, np.zeros((n * trials, 3)), t, b, nn, np.tile(wo, (n * trials, 1)),
+        est = estimate_quad(light, np.zeros((n * trials, 3)), t, b, nn,
+                            np.tile(wo, (n * trials, 1)),
                             np.full(n * trials, 0.3), np.full(n * trials, 0.3),
                             np.tile(base, (n * trials, 1)), np.tile(f0, (n * trials, 1)), u)[:, 0]
         errs.append(np.sqrt(np.mean((est.reshape(trials, n).mean(1) - ref) ** 2)))

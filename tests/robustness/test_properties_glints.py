@@ -7,7 +7,8 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from prefilter.errors import PrefilterError
-from prefilter.glints import block_means, elements, hemisphere_ndf, pndf, pndf_image, point, range_mean
+from prefilter.glints import (block_means, elements, hemisphere_ndf, pndf, pndf_image, point,
+                              range_mean)
 from prefilter.glints.bake import bake
 from prefilter.glints.store import load
 
@@ -60,7 +61,8 @@ def wide_limit(s, sr):
 
 
 @settings(max_examples=N)
-@given(centre, centre, st.sampled_from([64.0, 1e4, 1e6]), st.floats(-0.3, 0.3), st.floats(-0.3, 0.3))
+@given(centre, centre, st.sampled_from([64.0, 1e4, 1e6]), st.floats(-0.3, 0.3),
+       st.floats(-0.3, 0.3))
 @example(0.0, 0.0, 1e6, 0.0, 0.19)  # hung: 6e13 texel copies under the footprint
 def test_pndf_of_footprints_larger_than_the_map(cx, cy, sp, sx, sy):
     d = pndf(NM, [cx, cy], sp, [sx, sy], 0.02, elements_=ELEM)

@@ -80,7 +80,8 @@ def test_point_light_energy_at_most_one():
     T, P = np.meshgrid(th, ph, indexing="ij")
     d = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1)
     jac = np.sin(T) * (np.pi / 4) * np.pi * np.outer(w, w)
-    for t, mu, cov in [(0.0, (0.0, 0.0), np.eye(2) * 0.5), (80.0, (0.3, -0.2), np.diag([0.3, 0.01])),
+    for t, mu, cov in [(0.0, (0.0, 0.0), np.eye(2) * 0.5),
+                       (80.0, (0.3, -0.2), np.diag([0.3, 0.01])),
                        (89.9, (0.0, 0.0), np.eye(2) * 2.0)]:
         e = np.sum(point_light(direction(t, 0.3), d, mu, cov) * jac)
         assert 0.0 <= e <= 1.0 + 1e-3
@@ -158,7 +159,8 @@ def test_gaussian_grid_moments():
     # closed form from the docstring: sum w p^2 + h^2 / 12 = 1, weights sum to 1
     for n in (3, 5, 9):
         p, w, h = gaussian_grid(n)
-        assert w.sum() == pytest.approx(1.0) and np.sum(w * p * p) + h * h / 12 == pytest.approx(1.0)
+        assert (w.sum() == pytest.approx(1.0)
+                and np.sum(w * p * p) + h * h / 12 == pytest.approx(1.0))
 
 
 # -- invalid input -------------------------------------------------------------------------------
@@ -166,7 +168,8 @@ def test_gaussian_grid_moments():
 GOOD_COV = np.diag([0.1, 0.2])
 
 
-@pytest.mark.parametrize("cov", [np.diag([0.0, 0.1]), np.diag([-0.1, 0.1]), [[0.1, 0.2], [0.2, 0.1]],
+@pytest.mark.parametrize("cov", [np.diag([0.0, 0.1]), np.diag([-0.1, 0.1]),
+                                 [[0.1, 0.2], [0.2, 0.1]],
                                  np.full((2, 2), np.nan), np.eye(3), [[0.1, 0.05], [0.0, 0.1]]])
 def test_bad_covariances_rejected(cov):
     wo = [0.0, 0.0, 1.0]

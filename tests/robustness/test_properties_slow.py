@@ -20,7 +20,8 @@ def test_property_suite_with_ten_times_the_examples():
     files = sorted(str(p) for p in HERE.glob("test_properties_*.py") if p.name != me)
     env = dict(os.environ, PREFILTER_FUZZ="slow")
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-                           "-p", "no:xdist", "-m", "not slow", *files], env=env, cwd=HERE.parents[1],
+                           "-p", "no:xdist", "-m", "not slow", *files],
+                          env=env, cwd=HERE.parents[1],
                           capture_output=True, text=True, timeout=1800)
     tail = "\n".join(proc.stdout.splitlines()[-30:])
     assert proc.returncode == 0, tail + proc.stderr[-2000:]

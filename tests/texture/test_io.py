@@ -148,7 +148,8 @@ def test_normal_map_conventions_round_trip(tmp_path):
         back = decode_normals(read_image(write_image(tmp_path / f"{conv}.png", c, bits=16)), conv)
         assert np.abs(back - n).max() < 1e-4
     # the two conventions differ exactly by the green channel
-    assert np.allclose(encode_normals(n, "opengl")[..., 1], 1 - encode_normals(n, "directx")[..., 1])
+    assert np.allclose(encode_normals(n, "opengl")[..., 1],
+                       1 - encode_normals(n, "directx")[..., 1])
 
 
 def test_opengl_green_points_up_the_image():

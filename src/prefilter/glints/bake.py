@@ -236,7 +236,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                    + image_cell.nbytes)
     summary = dict(
         raw_bytes=int(raw_bytes), compressed_bytes=gm.compressed_bytes,
-        ratio=gm.compressed_bytes / raw_bytes, rel_l2_error=float(np.sqrt(err2.sum() / norm2.sum())),
+        ratio=gm.compressed_bytes / raw_bytes,
+        rel_l2_error=float(np.sqrt(err2.sum() / norm2.sum())),
         rel_l2_error_per_level=[float(x) for x in per_level], level_differences=diffs,
         blocks_kept=kept, blocks_total=int(pyr.n_images * nb * nb),
         mean_mass_in_support=float(np.concatenate(masses).mean()), n_images=pyr.n_images,

@@ -22,7 +22,8 @@ def load_normal_map(spec: str) -> np.ndarray:
             size = int(parts[1]) if len(parts) > 1 else 512
             seed = int(parts[2]) if len(parts) > 2 else 0
         except ValueError as exc:
-            raise PrefilterError(f"NORMAL_MAP: expected procedural:KIND[:SIZE[:SEED]], got {spec!r}") from exc
+            raise PrefilterError(
+                f"NORMAL_MAP: expected procedural:KIND[:SIZE[:SEED]], got {spec!r}") from exc
         return normal_map(parts[0], size=size, seed=seed)
     path = Path(spec)
     if not path.is_file():
@@ -51,7 +52,8 @@ def load_normal_map(spec: str) -> np.ndarray:
               help="Half-width of the NDF images in projected normals s.")
 @click.option("--roughness", default=0.005, show_default=True, help="Intrinsic roughness sigma_r.")
 @click.option("--stride0", default=4, show_default=True, help="Level-0 footprint stride (texels).")
-@click.option("--sigma0", default=None, type=float, help="Level-0 footprint std [default: stride0].")
+@click.option("--sigma0", default=None, type=float,
+              help="Level-0 footprint std [default: stride0].")
 @click.option("--cell", default=32, show_default=True,
               help="Spatial cell of a group at level 0 (texels; doubles with each level).")
 @click.option("--converge", default=0.01, show_default=True,

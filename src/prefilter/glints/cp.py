@@ -5,9 +5,9 @@ all below ``blank_tol`` times their image's maximum are dropped ("blank"). A gro
 stacked into a tensor ``T (B, B, K)`` and factorised as ``T[i, j, k] ~ sum_r a_r[i] b_r[j] c_r[k]``
 with non-negative factors (sampling in part 2 needs non-negative values, so no clamp is needed).
 
-We normalise ``sum_i a_r[i] = sum_j b_r[j] = 1`` (the weight ``lambda_r`` is folded into ``c_r``), so
-the mean of block ``k`` is ``sum_r c_r[k] / B^2`` and the 1D prefix sums of ``a_r`` and ``b_r`` run
-from 0 to 1 (paper, sec. 4.4: range means from 1D summed-area tables).
+We normalise ``sum_i a_r[i] = sum_j b_r[j] = 1`` (the weight ``lambda_r`` is folded into
+``c_r``), so the mean of block ``k`` is ``sum_r c_r[k] / B^2`` and the 1D prefix sums of
+``a_r`` and ``b_r`` run from 0 to 1 (paper, sec. 4.4: range means from 1D summed-area tables).
 
 Solvers: ``"hals"`` is hierarchical alternating least squares (Cichocki & Phan 2009) written for
 this tensor shape (one BLAS matrix product per MTTKRP), about 10-50x faster than tensorly's generic
@@ -175,7 +175,8 @@ def _hals(T, R, n_iter_max, tol, seed):
 
 
 def nn_cp_batch(tensors: list[np.ndarray], rank: int, *, n_iter_max: int = 100,
-                tol: float = 1e-5, seed: int = 0) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+                tol: float = 1e-5, seed: int = 0
+                ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
     """:func:`nn_cp` (method ``"hals"``) of many small ``(I, J, K_g)`` tensors at once.
 
     The tensors are zero-padded to a common ``K`` and updated together with batched matrix

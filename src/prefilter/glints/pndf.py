@@ -16,11 +16,13 @@ Conventions (used by the whole ``prefilter.glints`` package):
 Each texel ``i`` is a 4D element ``g_i(u) N(s; n_i + J_i (u - u_i), sigma_r^2)`` with
 ``g_i(u) = exp(-|u - u_i|^2 / (2 sigma_h^2))``, ``sigma_h`` a FWHM of one texel, ``J_i`` the central
 finite-difference Jacobian ``ds/du``. Against the footprint ``G_p(u) = exp(-|u - u_p|^2 / (2
-sigma_p^2))`` the ``u`` integral is closed form: element ``i`` contributes a 2D Gaussian in ``s`` with
+sigma_p^2))`` the ``u`` integral is closed form: element ``i`` contributes a 2D Gaussian in
+``s`` with
 
     weight  w_i = exp(-|u_p - u_i|^2 / (2 (sigma_p^2 + sigma_h^2)))
     mean    n_i + J_i mu_i,   mu_i = (u_p - u_i) sigma_h^2 / (sigma_p^2 + sigma_h^2)
-    cov     sigma_r^2 I + sigma^2 J_i J_i^T,   sigma^2 = sigma_p^2 sigma_h^2 / (sigma_p^2 + sigma_h^2)
+    cov     sigma_r^2 I + sigma^2 J_i J_i^T,
+            sigma^2 = sigma_p^2 sigma_h^2 / (sigma_p^2 + sigma_h^2)
 
 and ``D_p(s) = sum_i w_i N_i(s) / sum_i w_i`` (normalised exactly). Elements with ``|u_p - u_i|``
 beyond ``TRUNCATION`` standard deviations (per axis) are skipped: the texel grid is the spatial
@@ -118,7 +120,8 @@ def elements(normal_map) -> tuple[np.ndarray, np.ndarray]:
 
 
 def pixel_edges(resolution: int, support: float) -> np.ndarray:
-    """Edges ``(resolution + 1,)`` of the NDF-image pixels along one axis of ``[-support, support]``."""
+    """Edges ``(resolution + 1,)`` of the NDF-image pixels along one axis of
+    ``[-support, support]``."""
     return np.linspace(-support, support, resolution + 1)
 
 

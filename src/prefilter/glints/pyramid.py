@@ -86,7 +86,8 @@ def plan(height: int, width: int, stride0: int = 4, sigma0: float | None = None,
     st = as_positive_int(stride0, "stride0")
     s0 = float(st if sigma0 is None else sigma0)
     if not (0.5 * st <= s0 <= 4.0 * st):
-        raise PrefilterError(f"sigma0: expected a footprint std in [stride0/2, 4 stride0], got {s0}")
+        raise PrefilterError(
+            f"sigma0: expected a footprint std in [stride0/2, 4 stride0], got {s0}")
     if H % st or W % st:
         raise PrefilterError(f"stride0: expected a divisor of the map size {H}x{W}, got {st}")
     n = 1

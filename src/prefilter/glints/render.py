@@ -394,7 +394,6 @@ def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
 def random_dims(scene) -> int:
     """Uniforms per shading sample the glints methods need (quad MIS, environment samples)."""
     lights = scene.light_set()
-    env = any(lt.type == "environment" for lt in scene.lights)
     n_env = sum(lt.type == "environment" for lt in scene.lights)
     return len(lights.quads) * QUAD_MIS * _U_PAIR + n_env * ENV_SAMPLES * 3
 

@@ -3,11 +3,12 @@
 In memory (:class:`GlintsMap`; ``G`` groups, ``R`` rank, ``B`` block size, ``nb = ndf_res / B``,
 ``N`` images):
 
-* ``A``, ``Bp`` ``(G, R, B + 1)`` float32: 1D prefix sums of the row / column factors ``a_r``, ``b_r``
-  of each group (columns sum to 1, so each prefix sum runs from 0 to 1).
+* ``A``, ``Bp`` ``(G, R, B + 1)`` float32: 1D prefix sums of the row / column factors ``a_r``,
+  ``b_r`` of each group (columns sum to 1, so each prefix sum runs from 0 to 1).
 * ``C`` ``(K, R)`` float32: the third factors with the CP weights folded in, one row per kept block;
   the rows of a group are contiguous.
-* ``block_index`` ``(N, nb, nb)`` int32: row of ``C`` of block ``[bi, bj]`` of each image, -1 = blank.
+* ``block_index`` ``(N, nb, nb)`` int32: row of ``C`` of block ``[bi, bj]`` of each image,
+  -1 = blank.
 * ``image_cell`` ``(N,)`` int32: cell of each image (a group of images of one pyramid level); the
   group of block ``[bi, bj]`` of an image is ``image_cell * nb^2 + bi * nb + bj``.
 
@@ -15,8 +16,8 @@ On disk, version 2 (what :func:`save` writes) stores the factors, not the prefix
 ``a``, ``b`` ``(G, R, B)`` float16 (columns renormalised to sum 1 at load), ``c`` ``(K, R)``
 float16 scaled per group and rank by ``c_scale (G, R)`` float32 (float16 alone overflows: block sums
 of a sharp NDF reach 1e6), ``group_rows (G + 1,)`` int64 (first row of ``c`` of each group), plus
-``block_index`` and ``image_cell``; :func:`decode` rebuilds the float32 arrays (the bake measures its
-error on exactly these). Version 1 files (float32 prefix sums ``A``, ``Bp``, ``C``) still load.
+``block_index`` and ``image_cell``; :func:`decode` rebuilds the float32 arrays (the bake measures
+its error on exactly these). Version 1 files (float32 prefix sums ``A``, ``Bp``, ``C``) still load.
 
 All factor values are non-negative, so every reconstructed NDF value and range mean is >= 0.
 """

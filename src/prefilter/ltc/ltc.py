@@ -21,7 +21,8 @@ def as_ltc_matrix(M, name: str = "M", *, max_cond: float = 1e8) -> np.ndarray:
     cond = np.linalg.cond(M.reshape(-1, 3, 3)) if M.size else np.zeros(0)
     if np.any(~np.isfinite(cond) | (cond > max_cond)):
         worst = float(np.nanmax(np.where(np.isfinite(cond), cond, np.inf)))
-        raise PrefilterError(f"{name}: expected invertible matrices, got condition number {worst:.3g}")
+        raise PrefilterError(
+            f"{name}: expected invertible matrices, got condition number {worst:.3g}")
     return M
 
 

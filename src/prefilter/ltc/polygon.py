@@ -342,7 +342,8 @@ def _integrate(mats, name, V, *, invert: bool, two_sided) -> np.ndarray:
     v_mode, v_idx = _batch_index(v_shape, batch)
     mf = np.ascontiguousarray(mats.reshape(-1, 3, 3))
     vf = np.ascontiguousarray(V.reshape(-1, V.shape[-2], 3))
-    serial(_polygon_kernel, nb)(mf, m_mode, m_idx, vf, v_mode, v_idx, invert, bool(two_sided), out, status)
+    serial(_polygon_kernel, nb)(mf, m_mode, m_idx, vf, v_mode, v_idx, invert, bool(two_sided),
+                                out, status)
     if status.any():
         k = int(np.flatnonzero(status)[0])
         mi = k if m_mode == 0 else (0 if m_mode == 1 else int(m_idx[k]))

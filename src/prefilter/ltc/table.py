@@ -165,7 +165,8 @@ class GGXTable:
         """LTC of the GGX lobe for views ``wo (..., 3)`` (local frame), roughness ``alpha (...)``.
 
         Bilinear interpolation in ``(sqrt(1 - cos theta), sqrt(alpha))``; views beyond the last
-        row's angle use that row, roughness below :attr:`alpha_min` uses the first column. ``M`` is returned in the local frame: ``Rz(phi) M Rz(phi)^T``
+        row's angle use that row, roughness below :attr:`alpha_min` uses the first column. ``M`` is
+        returned in the local frame: ``Rz(phi) M Rz(phi)^T``
         with ``phi`` the view's azimuth.
 
         Returns

@@ -197,7 +197,8 @@ class Beckmann(MicrofacetModel):
         return cls(mean_slope, cov)
 
     def __repr__(self) -> str:
-        return f"Beckmann(mean_slope={self.mean_slope.tolist()}, slope_cov={self.slope_cov.tolist()})"
+        return (f"Beckmann(mean_slope={self.mean_slope.tolist()}, "
+                f"slope_cov={self.slope_cov.tolist()})")
 
     def _scalar_params(self) -> bool:
         return self.mean_slope.ndim == 1 and self.slope_cov.ndim == 2
@@ -231,7 +232,8 @@ class Beckmann(MicrofacetModel):
         return d, np.sqrt(np.maximum(var, 0.0))
 
     def _a(self, w):
-        """``a = (cot(theta) - mu_phi) / (sqrt(2) sigma_phi)`` (equations.md 1), +-inf if sigma = 0."""
+        """``a = (cot(theta) - mu_phi) / (sqrt(2) sigma_phi)`` (equations.md 1), +-inf if
+        sigma = 0."""
         d, sigma = self._slope_stats(w)
         pos = sigma > 0.0
         a = d / (_SQRT2 * np.where(pos, sigma, 1.0))
@@ -264,12 +266,14 @@ class Beckmann(MicrofacetModel):
         phi = np.exp(-0.5 * t * t - _LOG_SQRT_2PI)
         above = d * special.ndtr(t) + sigma * phi
         tn = np.abs(t)
-        below = sigma * phi * np.maximum(0.0, 1.0 - tn * np.sqrt(np.pi / 2) * special.erfcx(tn / _SQRT2))
+        below = sigma * phi * np.maximum(
+            0.0, 1.0 - tn * np.sqrt(np.pi / 2) * special.erfcx(tn / _SQRT2))
         area = np.where(t >= 0.0, above, below)
         return np.where(pos, area, np.maximum(d, 0.0))
 
     def sample_vndf(self, wo, u) -> np.ndarray:
-        """Exact visible normals ``m (..., 3)`` for views ``wo (..., 3)`` and uniforms ``u (..., 2)``.
+        """Exact visible normals ``m (..., 3)`` for views ``wo (..., 3)`` and uniforms
+        ``u (..., 2)``.
 
         In slope space the visible density is ``max(0, wo_z - s.wo_xy) P22(s)``. With
         ``s = mu + L z`` (``Sigma = L L^T``) the ramp depends only on ``x = e.z``,
@@ -329,7 +333,8 @@ class Beckmann(MicrofacetModel):
         xg, wg = np.polynomial.legendre.leggauss(k)
         # u = (1 - cos(pi t)) / 2 packs nodes towards the ends of the CDF ranges, where narrow
         # lobes cut off a small tail (reflection below the horizon or the mean surface).
-        tg, wg = (1.0 - np.cos(np.pi * (xg + 1) / 2)) / 2, wg * np.pi / 4 * np.sin(np.pi * (xg + 1) / 2)
+        tg, wg = ((1.0 - np.cos(np.pi * (xg + 1) / 2)) / 2,
+                  wg * np.pi / 4 * np.sin(np.pi * (xg + 1) / 2))
         seen = wo[..., 2] > 0.0
         wo = np.where(seen[..., None], wo, np.array([0.0, 0.0, 1.0]))
         lam_o = self.smith_lambda(wo)
@@ -407,7 +412,8 @@ class Beckmann(MicrofacetModel):
             u2 = g_lo[..., None] + mass_y[..., None] * tg
             y = special.ndtri(np.clip(u2, 2.0**-60, 1.0 - 2.0**-53))
             y = np.clip(y, lo_y[..., None], hi_y[..., None])
-            m = model._normal_from_whitened(x[..., None], y, ex[..., None, None], ey[..., None, None])
+            m = model._normal_from_whitened(x[..., None], y, ex[..., None, None],
+                                            ey[..., None, None])
             wi = 2.0 * np.sum(wo_b * m, axis=-1, keepdims=True) * m - wo_b
             wi = wi / np.linalg.norm(wi, axis=-1, keepdims=True)
             lam_i = model.smith_lambda(wi)

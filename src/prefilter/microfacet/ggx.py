@@ -142,7 +142,8 @@ class GGX(MicrofacetModel):
         th = th_lo[..., None] + dth[..., None] * tg
         y = c[..., None] * np.tan(th)
         xb = x[..., None]
-        zx, zy = xb * ex[..., None, None] - y * ey[..., None, None], xb * ey[..., None, None] + y * ex[..., None, None]
+        zx, zy = (xb * ex[..., None, None] - y * ey[..., None, None],
+                  xb * ey[..., None, None] + y * ex[..., None, None])
         axb, ayb = self.alpha_x[..., None, None], self.alpha_y[..., None, None]
         m = np.stack(np.broadcast_arrays(-axb * zx, -ayb * zy, np.ones_like(zx)), -1)
         m = m / np.linalg.norm(m, axis=-1, keepdims=True)
@@ -151,7 +152,9 @@ class GGX(MicrofacetModel):
         model = GGX(axb, ayb)
         lam_o = self.smith_lambda(wo)
         lam_i = model.smith_lambda(wi)
-        ratio = np.where(wi[..., 2] > 0.0, (1.0 + lam_o[..., None, None]) / (1.0 + lam_o[..., None, None] + lam_i), 0.0)
+        ratio = np.where(wi[..., 2] > 0.0,
+                         (1.0 + lam_o[..., None, None]) / (1.0 + lam_o[..., None, None] + lam_i),
+                         0.0)
         ramp = (wz[..., None] * np.cos(psi) - sigma[..., None] * np.sin(psi))
         inner = np.sum(ratio * np.cos(th) ** 2 * wg, axis=-1) * dth
         total = np.sum(inner * ramp * wg, axis=-1) * dpsi / np.pi

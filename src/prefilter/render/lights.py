@@ -39,7 +39,8 @@ class QuadLight:
         r = _rgb(self.radiance, "quad light radiance")
         normal, area = quad_normal_area(v)
         if area <= 1e-12:
-            raise PrefilterError(f"quad light vertices: expected a convex quad with area > 0, got {v.tolist()}")
+            raise PrefilterError(f"quad light vertices: expected a convex quad with area > 0, "
+                                 f"got {v.tolist()}")
         # Coplanarity: every corner within a small distance of the plane through the centroid.
         off = np.abs((v - v.mean(0)) @ normal)
         if np.max(off) > 1e-6 * max(1.0, np.sqrt(area)):

@@ -25,7 +25,7 @@ __all__ = ["DirectionalLightSpec", "EnvironmentLight", "Material", "Plane", "Poi
            "QuadLightSpec", "Scene", "Sphere", "TextureRef", "load_scene"]
 
 
-# -- field validation -------------------------------------------------------------------------------
+# -- field validation ------------------------------------------------------------------------------
 
 
 def _got(v: Any) -> str:
@@ -71,7 +71,8 @@ class _Obj:
     def integer(self, key, default=..., lo=1, hi=1 << 16) -> int:
         v = self.raw(key, default)
         if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-            raise PrefilterError(f"{self.at(key)}: expected an integer in [{lo}, {hi}], got {_got(v)}")
+            raise PrefilterError(
+                f"{self.at(key)}: expected an integer in [{lo}, {hi}], got {_got(v)}")
         return v
 
     def vector(self, key, n, default=..., lo=-np.inf, scalar_ok=False) -> np.ndarray:
@@ -92,7 +93,8 @@ class _Obj:
         v = self.vector(key, 3, default)
         n = np.linalg.norm(v)
         if n < 1e-12:
-            raise PrefilterError(f"{self.at(key)}: expected a non-zero vector, got {_got(v.tolist())}")
+            raise PrefilterError(
+                f"{self.at(key)}: expected a non-zero vector, got {_got(v.tolist())}")
         return v / n
 
     def choice(self, key, options, default=...) -> str:
@@ -238,7 +240,7 @@ def _texture(value, path: str, role: str, base: Path) -> TextureRef:
     return TextureRef(role, value, path, full, conv, srgb, scale)
 
 
-# -- materials, objects, lights ----------------------------------------------------------------------
+# -- materials, objects, lights --------------------------------------------------------------------
 
 
 @dataclass(frozen=True)
@@ -357,7 +359,7 @@ class Scene:
         return json.loads(json.dumps(self.source))
 
 
-# -- parsing ----------------------------------------------------------------------------------------
+# -- parsing ---------------------------------------------------------------------------------------
 
 
 def _camera(v, path) -> Camera:
@@ -388,7 +390,8 @@ def _material(v, path, base) -> Material:
 
 
 def _object(v, path, base):
-    kind = _Obj(v, path, tuple(v) if isinstance(v, dict) else ()).choice("type", ("plane", "sphere"))
+    kind = _Obj(v, path, tuple(v) if isinstance(v, dict) else ()).choice(
+        "type", ("plane", "sphere"))
     if kind == "plane":
         o = _Obj(v, path, ("type", "center", "normal", "tangent", "size", "uv_scale", "material"))
         n = o.unit("normal", [0.0, 1.0, 0.0])
@@ -398,7 +401,8 @@ def _object(v, path, base):
             raise PrefilterError(f"{o.at('tangent')}: expected a vector not parallel to the normal")
         size = o.vector("size", 2, [1.0, 1.0], scalar_ok=True)
         if np.any(size <= 0):
-            raise PrefilterError(f"{o.at('size')}: expected positive sizes, got {_got(size.tolist())}")
+            raise PrefilterError(
+                f"{o.at('size')}: expected positive sizes, got {_got(size.tolist())}")
         return Plane(o.vector("center", 3, [0.0] * 3), n, t / np.linalg.norm(t), size,
                      o.vector("uv_scale", 2, [1.0, 1.0], scalar_ok=True),
                      _material(o.raw("material", {}), o.at("material"), base))

@@ -76,7 +76,8 @@ def decode_normals(rgb, convention: str = "opengl") -> np.ndarray:
         first = np.argwhere(bad)[0]
         raise PrefilterError(
             f"normal map: expected tangent-space normals with z >= 0 (blue >= 0.5), got "
-            f"{int(bad.sum())} zero or downward vectors (first at index {tuple(int(i) for i in first)}:"
+            f"{int(bad.sum())} zero or downward vectors "
+            f"(first at index {tuple(int(i) for i in first)}:"
             f" colour {np.array2string(c[tuple(first)][:3], precision=4)}); is this a normal map?")
     return n / length
 

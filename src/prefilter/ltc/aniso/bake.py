@@ -2,8 +2,9 @@
 
 Per entry: SW fit from the identity (:func:`.fit.fit_sw`), an optional point-wise L1
 polish kept only where it lowers the L1 distance (:func:`.fit.fit_pointwise`), alignment
-(:func:`.align.align`, eq. 12), normalisation by the third column (section 7); then over the whole grid the symmetry
-post-processing (:func:`.symmetry.enforce`, eq. 16) and the magnitude / Fresnel quadrature.
+(:func:`.align.align`, eq. 12), normalisation by the third column (section 7); then over the
+whole grid the symmetry post-processing (:func:`.symmetry.enforce`, eq. 16) and the magnitude /
+Fresnel quadrature.
 Entries are fitted in chunks, each one tensor program; every finished chunk is checkpointed so a
 killed bake resumes from the last finished chunk, and the table is written atomically.
 """
@@ -110,7 +111,6 @@ def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool
     """
     settings = settings or BakeSettings()
     out = Path(out) if out is not None else default_table_path()
-    axes = settings.axes()
     entries = grid_entries(settings)
     E = len(entries["wo"])
     chunk = as_positive_int(settings.chunk, "chunk")
