@@ -85,10 +85,17 @@ def sample_sg(mu, lam, p, u) -> tuple[np.ndarray, np.ndarray]:
     return _sample_sg(*_lobes(mu, lam, p), u)
 
 
+def _lobe_probabilities(wgt) -> np.ndarray:
+    """Lobe selection probabilities proportional to ``wgt (K,)``; uniform for a black
+    environment (every lobe contributes zero, any choice is exact)."""
+    total = wgt.sum()
+    return wgt / total if total > 0 else np.full(wgt.shape, 1.0 / wgt.size)
+
+
 def _sample_sg(mu, lam, p, u):
     u = np.asarray(u, dtype=np.float64)
     wgt = mu.mean(axis=1) * sg_energy(lam)
-    P = wgt / wgt.sum()
+    P = _lobe_probabilities(wgt)
     k = np.minimum(np.searchsorted(np.cumsum(P), u[:, 0] * 1.0, side="right"), len(P) - 1)
     lk = lam[k]
     # exact inversion of the SG's cosine marginal
@@ -109,7 +116,7 @@ def sg_pdf(w, mu, lam, p) -> np.ndarray:
 
 def _sg_pdf(w, mu, lam, p):
     wgt = mu.mean(axis=1) * sg_energy(lam)
-    P = wgt / wgt.sum()
+    P = _lobe_probabilities(wgt)
     dens = np.exp(lam * (_dots(w, p) - 1.0)) / sg_energy(lam)
     return dens @ P
 
@@ -145,7 +152,7 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
     out = np.zeros((N, 3))
     half_eps = 0.5 * eps_support(mu, lam, eps)
     wgt = mu.mean(axis=1) * sg_energy(lam)
-    cum = np.cumsum(wgt / wgt.sum())
+    cum = np.cumsum(_lobe_probabilities(wgt))
     small = (sp < surf.sigma0) if surf.normal_map is not None else np.zeros(N, bool)
     for j in range(n_samples):
         u = uu[:, 3 * j:3 * j + 3]
