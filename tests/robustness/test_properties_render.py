@@ -229,3 +229,17 @@ def test_render_arguments_are_validated(kwargs, name):
     method = kw.pop("method", "ltc")
     for m in ([method] if "method" in kwargs else ["ltc", "ltc-multiscale"]):
         expect_error(lambda m=m: render(RENDER_SCENE, m, **kw), name)
+
+
+@pytest.mark.parametrize("scale", [1e-6, 1e-3, 1.0, 1e4])
+def test_quad_light_validity_does_not_depend_on_scene_units(scale):
+    # was: an absolute area threshold of 1e-12 rejected a valid 1e-6 x 1e-6 quad
+    from prefilter.render.lights import QuadLight
+
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    light = QuadLight(square * scale + [0, 0, 2], 1.0)
+    np.testing.assert_allclose(light.normal, [0, 0, 1], atol=1e-12)
+    with pytest.raises(PrefilterError, match="area > 0"):
+        QuadLight(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0.0]]) * scale, 1.0)
+    with pytest.raises(PrefilterError, match="coplanar"):
+        QuadLight((square + np.array([[0, 0, 0]] * 3 + [[0, 0, 1e-3]])) * scale, 1.0)

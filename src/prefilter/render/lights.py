@@ -38,12 +38,14 @@ class QuadLight:
             raise PrefilterError(f"quad light vertices: expected shape (4, 3), got {v.shape}")
         r = _rgb(self.radiance, "quad light radiance")
         normal, area = quad_normal_area(v)
-        if area <= 1e-12:
+        # relative to the quad's own size, so that scenes in any unit behave alike
+        size = float(np.max(np.linalg.norm(np.roll(v, -1, axis=0) - v, axis=-1)))
+        if not area > 1e-12 * size * size:
             raise PrefilterError(f"quad light vertices: expected a convex quad with area > 0, "
                                  f"got {v.tolist()}")
         # Coplanarity: every corner within a small distance of the plane through the centroid.
         off = np.abs((v - v.mean(0)) @ normal)
-        if np.max(off) > 1e-6 * max(1.0, np.sqrt(area)):
+        if np.max(off) > 1e-6 * size:
             raise PrefilterError(
                 f"quad light vertices: expected 4 coplanar corners, got one {np.max(off):.3g} "
                 "off the plane"
