@@ -27,10 +27,9 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange, serial
+from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_float_array
 from prefilter.errors import PrefilterError
 
@@ -124,7 +123,7 @@ def _edge(ax, ay, az, bx, by, bz):
     return _atan2_pos(s, d) * (cz / s)
 
 
-@numba.njit(fastmath=True, cache=True, inline="always")  # inlined: a call costs ~15 % in the shader
+@njit_inline
 def _clipped_edge_sum(t00, t01, t02, t10, t11, t12, t20, t21, t22, verts, n):
     """Edge sum of the polygon ``T verts[:n]`` clipped to ``z >= 0`` (Heitz et al. 2016, eq. 11
     before the ``-1/2pi`` factor), for ``T`` rows ``(t00, t01, t02), ...`` scaled to a largest

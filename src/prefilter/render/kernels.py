@@ -15,7 +15,8 @@ import weakref
 
 import numpy as np
 
-from prefilter._numba import SERIAL_BELOW, njit_parallel, njit_serial, prange, serial  # noqa: F401
+from prefilter._numba import (  # noqa: F401
+    SERIAL_BELOW, njit_inline, njit_parallel, njit_serial, prange, serial)
 from prefilter.ltc.polygon import _DET_RTOL2, _INV_2PI, _clipped_edge_sum
 
 _EPS = 1e-9  # smallest ray parameter of a hit (as camera._EPS)
@@ -184,6 +185,34 @@ def _trace(k, ox, oy, oz, dx, dy, dz, xx, xy_, xz, yx, yy, yz, types, params,
     dudv[k, 1, 1] = gv * (bx * bx2 + by * by2 + bz * bz2)
 
 
+@njit_inline
+def _camera_trace(k, cam, x, y, types, params, hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx,
+                  dpdy, dist, view, dirn):  # pragma: no cover - compiled
+    """The primary ray through pixel position ``(x, y)`` (``cam`` as in
+    :func:`gbuffer_camera_kernel`) with its differentials, traced into G-buffer slot ``k``."""
+    rx, ry, rz = cam[3], cam[4], cam[5]
+    ux, uy, uz = cam[6], cam[7], cam[8]
+    sy = cam[12]
+    px = (x - cam[13] / 2.0) * sy
+    py = (cam[14] / 2.0 - y) * sy
+    d0 = cam[9] + px * rx + py * ux
+    d1 = cam[10] + px * ry + py * uy
+    d2 = cam[11] + px * rz + py * uz
+    inv = 1.0 / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    d0 *= inv
+    d1 *= inv
+    d2 *= inv
+    # derivative of d / |d|: (I - dn dn^T) (dd/dx) / |d|, dd/dx = sy r, dd/dy = -sy u
+    ex0, ex1, ex2 = sy * rx, sy * ry, sy * rz
+    ey0, ey1, ey2 = -sy * ux, -sy * uy, -sy * uz
+    a = d0 * ex0 + d1 * ex1 + d2 * ex2
+    b = d0 * ey0 + d1 * ey1 + d2 * ey2
+    _trace(k, cam[0], cam[1], cam[2], d0, d1, d2,
+           (ex0 - a * d0) * inv, (ex1 - a * d1) * inv, (ex2 - a * d2) * inv,
+           (ey0 - b * d0) * inv, (ey1 - b * d1) * inv, (ey2 - b * d2) * inv,
+           types, params, hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx, dpdy, dist, view, dirn)
+
+
 @njit_parallel
 def gbuffer_camera_kernel(cam, xy, types, params, hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx,
                           dpdy, dist, view, dirn):
@@ -192,32 +221,9 @@ def gbuffer_camera_kernel(cam, xy, types, params, hit, oid, pos, nrm, tan, bit, 
     ``cam (16,)``: origin, right, up, forward (unit), ``sy`` (image-plane units per pixel),
     width, height, unused.
     """
-    ox, oy, oz = cam[0], cam[1], cam[2]
-    rx, ry, rz = cam[3], cam[4], cam[5]
-    ux, uy, uz = cam[6], cam[7], cam[8]
-    fx, fy, fz = cam[9], cam[10], cam[11]
-    sy = cam[12]
-    hw, hh = cam[13] / 2.0, cam[14] / 2.0
     for k in prange(xy.shape[0]):
-        px = (xy[k, 0] - hw) * sy
-        py = (hh - xy[k, 1]) * sy
-        d0 = fx + px * rx + py * ux
-        d1 = fy + px * ry + py * uy
-        d2 = fz + px * rz + py * uz
-        inv = 1.0 / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-        d0 *= inv
-        d1 *= inv
-        d2 *= inv
-        # derivative of d / |d|: (I - dn dn^T) (dd/dx) / |d|, dd/dx = sy r, dd/dy = -sy u
-        ex0, ex1, ex2 = sy * rx, sy * ry, sy * rz
-        ey0, ey1, ey2 = -sy * ux, -sy * uy, -sy * uz
-        a = d0 * ex0 + d1 * ex1 + d2 * ex2
-        b = d0 * ey0 + d1 * ey1 + d2 * ey2
-        _trace(k, ox, oy, oz, d0, d1, d2,
-               (ex0 - a * d0) * inv, (ex1 - a * d1) * inv, (ex2 - a * d2) * inv,
-               (ey0 - b * d0) * inv, (ey1 - b * d1) * inv, (ey2 - b * d2) * inv,
-               types, params, hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx, dpdy, dist, view,
-               dirn)
+        _camera_trace(k, cam, xy[k, 0], xy[k, 1], types, params, hit, oid, pos, nrm, tan, bit,
+                      uv, dudv, dpdx, dpdy, dist, view, dirn)
 
 
 @njit_parallel
@@ -679,12 +685,6 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, ro
     ``rough (K, RGH_WIDTH)``: per-material roughness rows (:func:`plain_roughness` for ``ltc``;
     the ``ltc-multiscale`` methods take ``alpha_total`` of the averaged normal's length,
     :func:`_multiscale_alpha`, with ``meso_tab``)."""
-    ox, oy, oz = cam[0], cam[1], cam[2]
-    rx, ry, rz = cam[3], cam[4], cam[5]
-    ux, uy, uz = cam[6], cam[7], cam[8]
-    fx, fy, fz = cam[9], cam[10], cam[11]
-    sy = cam[12]
-    hw, hh = cam[13] / 2.0, cam[14] / 2.0
     n_pts = xy.shape[0]
     n_blocks = (n_pts + _BLOCK - 1) // _BLOCK
     for blk in prange(n_blocks):
@@ -692,24 +692,8 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, ro
         hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx, dpdy, dist, view, dirn = _gscratch()
         tx = np.empty((1, 4))
         for k in range(blk * _BLOCK, min(n_pts, (blk + 1) * _BLOCK)):
-            px = (xy[k, 0] - hw) * sy
-            py = (hh - xy[k, 1]) * sy
-            d0 = fx + px * rx + py * ux
-            d1 = fy + px * ry + py * uy
-            d2 = fz + px * rz + py * uz
-            inv = 1.0 / math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            d0 *= inv
-            d1 *= inv
-            d2 *= inv
-            ex0, ex1, ex2 = sy * rx, sy * ry, sy * rz
-            ey0, ey1, ey2 = -sy * ux, -sy * uy, -sy * uz
-            a = d0 * ex0 + d1 * ex1 + d2 * ex2
-            b = d0 * ey0 + d1 * ey1 + d2 * ey2
-            _trace(0, ox, oy, oz, d0, d1, d2,
-                   (ex0 - a * d0) * inv, (ex1 - a * d1) * inv, (ex2 - a * d2) * inv,
-                   (ey0 - b * d0) * inv, (ey1 - b * d1) * inv, (ey2 - b * d2) * inv,
-                   types, params, hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx, dpdy, dist, view,
-                   dirn)
+            _camera_trace(0, cam, xy[k, 0], xy[k, 1], types, params, hit, oid, pos, nrm, tan,
+                          bit, uv, dudv, dpdx, dpdy, dist, view, dirn)
             rad[k, 0] = 0.0
             rad[k, 1] = 0.0
             rad[k, 2] = 0.0
