@@ -183,6 +183,29 @@ def expect_array(data: Mapping[str, np.ndarray], key: str, where: str, *, kind: 
     return a
 
 
+def expect_table_header(data: Mapping[str, np.ndarray], need, where: str, version: int) -> None:
+    """The arrays ``need`` are all present and ``data["version"]`` is the integer ``version``;
+    else a TableFileError at ``where`` (the shared head of the table loaders)."""
+    missing = [k for k in need if k not in data]
+    if missing:
+        raise TableFileError(f"{where}: missing arrays {missing}; expected {list(need)}")
+    v = expect_array(data, "version", where, kind="i", shape=())
+    if int(v) != version:
+        raise TableFileError(f"{where}: version: expected {version}, got {int(v)}")
+
+
+def expect_json_object(data: Mapping[str, np.ndarray], key: str, where: str) -> dict:
+    """``data[key]``, a text scalar holding a JSON object, decoded; else a TableFileError."""
+    expect_array(data, key, where, kind="U", shape=())
+    try:
+        obj = json.loads(str(data[key]))
+    except ValueError:
+        obj = None
+    if not isinstance(obj, dict):
+        raise TableFileError(f"{where}: {key}: expected a JSON object string")
+    return obj
+
+
 def save_json_atomic(path: str | os.PathLike, obj) -> None:
     with atomic_path(path, suffix=".json") as tmp:
         tmp.write_text(json.dumps(obj, indent=2, sort_keys=True) + "\n")

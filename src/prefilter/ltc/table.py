@@ -8,13 +8,13 @@ Heitz, Dupuy, Hill, Neubelt 2016, section 4: one LTC matrix, a magnitude and a F
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import META_KEY, expect_array, read_npz, verify_npz
+from prefilter._io import (META_KEY, expect_array, expect_json_object, expect_table_header,
+                           read_npz, verify_npz)
 from prefilter._validate import (as_float_array, as_roughness, as_unit_interval,
                                  as_upper_directions, broadcast_batch)
 from prefilter.errors import PrefilterError, TableFileError
@@ -90,12 +90,7 @@ class GGXTable:
         raw_data = read_npz(path, "LTC table")
         data = {k: v for k, v in raw_data.items() if k != META_KEY}
         need = ("version", "axis_t", "axis_r", "M", "magnitude", "fresnel", "settings")
-        missing = [k for k in need if k not in data]
-        if missing:
-            raise TableFileError(f"{where}: missing arrays {missing}; expected {list(need)}")
-        v = expect_array(data, "version", where, kind="i", shape=())
-        if int(v) != TABLE_VERSION:
-            raise TableFileError(f"{where}: version: expected {TABLE_VERSION}, got {int(v)}")
+        expect_table_header(data, need, where, TABLE_VERSION)
         t = expect_array(data, "axis_t", where, ndim=1)
         r = expect_array(data, "axis_r", where, ndim=1)
         if len(t) < 2 or len(r) < 2:
@@ -115,13 +110,7 @@ class GGXTable:
             raise TableFileError(f"{where}: M: expected invertible matrices")
         if np.any(data["magnitude"] < 0):
             raise TableFileError(f"{where}: magnitude: expected values >= 0")
-        expect_array(data, "settings", where, kind="U", shape=())
-        try:
-            settings = json.loads(str(data["settings"]))
-            if not isinstance(settings, dict):
-                raise ValueError
-        except ValueError:
-            raise TableFileError(f"{where}: settings: expected a JSON object string") from None
+        settings = expect_json_object(data, "settings", where)
         verify_npz(path, "LTC table", raw_data, format_version=TABLE_VERSION)
         return cls(t, r, data["M"], data["magnitude"], data["fresnel"], settings,
                    data.get("fit_error"))

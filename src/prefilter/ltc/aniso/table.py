@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import META_KEY, expect_array, read_npz, save_npz_atomic, verify_npz
+from prefilter._io import (META_KEY, expect_array, expect_json_object, expect_table_header,
+                           read_npz, save_npz_atomic, verify_npz)
 from prefilter._validate import as_roughness, as_upper_directions
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.ltc.aniso import symmetry
@@ -110,12 +111,7 @@ class AnisoGGXTable:
         raw_data = read_npz(path, "anisotropic LTC table")
         data = {k: v for k, v in raw_data.items() if k != META_KEY}
         need = ("version", *AXES, "M", "magnitude", "fresnel", "settings")
-        missing = [k for k in need if k not in data]
-        if missing:
-            raise TableFileError(f"{where}: missing arrays {missing}; expected {list(need)}")
-        v = expect_array(data, "version", where, kind="i", shape=())
-        if int(v) != TABLE_VERSION:
-            raise TableFileError(f"{where}: version: expected {TABLE_VERSION}, got {int(v)}")
+        expect_table_header(data, need, where, TABLE_VERSION)
         axes = [expect_array(data, n, where, ndim=1) for n in AXES]
         if any(len(a) < 2 or not np.all(np.diff(a) > 0) for a in axes):
             raise TableFileError(f"{where}: axes: expected increasing 1-D arrays of length >= 2, "
@@ -133,13 +129,7 @@ class AnisoGGXTable:
             raise TableFileError(f"{where}: M: expected positive determinants")
         if np.any(data["magnitude"] < 0):
             raise TableFileError(f"{where}: magnitude: expected values >= 0")
-        expect_array(data, "settings", where, kind="U", shape=())
-        try:
-            settings = json.loads(str(data["settings"]))
-            if not isinstance(settings, dict):
-                raise ValueError
-        except ValueError:
-            raise TableFileError(f"{where}: settings: expected a JSON object string") from None
+        settings = expect_json_object(data, "settings", where)
         unknown = [k for k in data if k not in need and not k.startswith("diag_")]
         if unknown:
             raise TableFileError(f"{where}: unknown arrays {unknown}; expected {list(need)} "
