@@ -35,7 +35,7 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange
 from prefilter._validate import (
     as_float_array,
     as_positive_int,
@@ -177,6 +177,18 @@ def _footprint(cx, cy, sp, sh2, trunc, H, W, lim2):
     return x0, x1, y0, y1, sh2 / tot2, sp2 * sh2 / tot2, tot2, False
 
 
+@njit_inline
+def _element(s_el, J, r, c, dx, dy, f, var):  # pragma: no cover - compiled
+    """Mean slope ``(mx, my)`` and positional covariance ``(a, b, d)`` (without the intrinsic
+    roughness) of texel ``(r, c)``'s element seen from a footprint offset ``(dx, dy)``: the
+    4D Gaussian's slope marginal conditioned on the footprint (Yan et al. 2016)."""
+    j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
+    mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
+    my = s_el[r, c, 1] + f * (j10 * dx + j11 * dy)
+    return (mx, my, var * (j00 * j00 + j01 * j01), var * (j00 * j10 + j01 * j11),
+            var * (j10 * j10 + j11 * j11))
+
+
 @njit_parallel
 def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
     H, W = s_el.shape[0], s_el.shape[1]
@@ -194,12 +206,9 @@ def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
                 c = x % W
                 w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
                 wsum += w
-                j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
-                mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
-                my = s_el[r, c, 1] + f * (j10 * dx + j11 * dy)
-                a = sr * sr + var * (j00 * j00 + j01 * j01)
-                b = var * (j00 * j10 + j01 * j11)
-                d = sr * sr + var * (j10 * j10 + j11 * j11)
+                mx, my, a, b, d = _element(s_el, J, r, c, dx, dy, f, var)
+                a += sr * sr
+                d += sr * sr
                 det = a * d - b * b
                 ex = qx[q] - mx
                 ey = qy[q] - my
@@ -265,12 +274,7 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
                 c = x % W
                 w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
                 wsum += w
-                j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
-                mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
-                my = s_el[r, c, 1] + f * (j10 * dx + j11 * dy)
-                a = var * (j00 * j00 + j01 * j01)
-                b = var * (j00 * j10 + j01 * j11)
-                d = var * (j10 * j10 + j11 * j11)
+                mx, my, a, b, d = _element(s_el, J, r, c, dx, dy, f, var)
                 half = 0.5 * (a + d)
                 dif = math.sqrt(0.25 * (a - d) * (a - d) + b * b)
                 nu1 = half + dif

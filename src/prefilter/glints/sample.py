@@ -30,6 +30,7 @@ import numpy as np
 from prefilter._numba import njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_directions, as_float_array, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
+from prefilter.glints.pndf import _element
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.query import point
 from prefilter.glints.store import GlintsMap
@@ -375,12 +376,9 @@ def _direct_kernel(s_el, J, cx, cy, sp, sr, sh, trunc, u, out):
         dx = cx[q] - (bx + 0.5)
         dy = cy[q] - (by + 0.5)
         r, c = by % H, bx % W
-        j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
-        mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
-        my = s_el[r, c, 1] + f * (j10 * dx + j11 * dy)
-        a = sr * sr + var * (j00 * j00 + j01 * j01)
-        b = var * (j00 * j10 + j01 * j11)
-        d = sr * sr + var * (j10 * j10 + j11 * j11)
+        mx, my, a, b, d = _element(s_el, J, r, c, dx, dy, f, var)
+        a += sr * sr
+        d += sr * sr
         # Cholesky of [[a, b], [b, d]] applied to a Box-Muller pair
         l11 = math.sqrt(a)
         l21 = b / l11
