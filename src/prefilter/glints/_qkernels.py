@@ -9,10 +9,24 @@ from prefilter._numba import njit_parallel, njit_serial, prange
 
 
 @njit_serial
-def _block_value(A, Bp, C, g, k, i, j):
+def _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q, bi, bj, i0, i1, j0, j1):
+    """Sum of the blended image's pixel values over rows ``[i0, i1)``, columns ``[j0, j1)`` of
+    block ``(bi, bj)`` (block-local pixel indices)."""
+    nb = block_index.shape[1]
     acc = 0.0
-    for r in range(C.shape[1]):
-        acc += C[k, r] * (A[g, r, i + 1] - A[g, r, i]) * (Bp[g, r, j + 1] - Bp[g, r, j])
+    for c in range(idx.shape[1]):
+        w = wts[q, c]
+        if w == 0.0:
+            continue
+        img = idx[q, c]
+        k = block_index[img, bi, bj]
+        if k < 0:
+            continue
+        g = image_cell[img] * nb * nb + bi * nb + bj
+        s = 0.0
+        for r in range(C.shape[1]):
+            s += C[k, r] * ((A[g, r, i1] - A[g, r, i0]) * (Bp[g, r, j1] - Bp[g, r, j0]))
+        acc += w * s
     return acc
 
 
@@ -20,7 +34,6 @@ def _block_value(A, Bp, C, g, k, i, j):
 def point_kernel(A, Bp, C, block_index, image_cell, idx, wts, sx, sy, lo, h, out):
     R = block_index.shape[1] * (A.shape[2] - 1)
     B = A.shape[2] - 1
-    nb = block_index.shape[1]
     for q in prange(out.shape[0]):
         fx = (sx[q] - lo) / h
         fy = (sy[q] - lo) / h
@@ -29,16 +42,9 @@ def point_kernel(A, Bp, C, block_index, image_cell, idx, wts, sx, sy, lo, h, out
             j = int(fx)
             i = int(fy)
             bi, bj = i // B, j // B
-            for c in range(idx.shape[1]):
-                w = wts[q, c]
-                if w == 0.0:
-                    continue
-                img = idx[q, c]
-                k = block_index[img, bi, bj]
-                if k < 0:
-                    continue
-                g = image_cell[img] * nb * nb + bi * nb + bj
-                acc += w * _block_value(A, Bp, C, g, k, i - bi * B, j - bj * B)
+            i0, j0 = i - bi * B, j - bj * B
+            acc = _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q, bi, bj, i0, i0 + 1,
+                             j0, j0 + 1)
         out[q] = acc
 
 

@@ -30,32 +30,11 @@ import numpy as np
 from prefilter._numba import njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_directions, as_float_array, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
+from prefilter.glints._qkernels import _rect_mass
 from prefilter.glints.pndf import _element
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.query import point
 from prefilter.glints.store import GlintsMap
-
-
-@njit_serial
-def _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q, bi, bj, i0, i1, j0, j1):
-    """Sum of the blended image's pixel values over rows ``[i0, i1)``, columns ``[j0, j1)`` of
-    block ``(bi, bj)`` (block-local pixel indices)."""
-    nb = block_index.shape[1]
-    acc = 0.0
-    for c in range(idx.shape[1]):
-        w = wts[q, c]
-        if w == 0.0:
-            continue
-        img = idx[q, c]
-        k = block_index[img, bi, bj]
-        if k < 0:
-            continue
-        g = image_cell[img] * nb * nb + bi * nb + bj
-        s = 0.0
-        for r in range(C.shape[1]):
-            s += C[k, r] * ((A[g, r, i1] - A[g, r, i0]) * (Bp[g, r, j1] - Bp[g, r, j0]))
-        acc += w * s
-    return acc
 
 
 @njit_parallel
