@@ -7,6 +7,14 @@ with the balance heuristic (Veach 1997, eq. 9.4 / 9.13), using the true GGX BRDF
 Fresnel (:func:`prefilter.render.shading.brdf_cos`): no LTC. The estimator is unbiased, so images
 converge to the exact one at ``O(spp^-1/2)``; ``docs/reference.md`` has the measured rates.
 
+Textured quad lights (:class:`prefilter.render.lighttex.TexturedQuad`) are sampled the same way;
+each sample's radiance is multiplied by the light texture at the sample's point on the light,
+read at level 0 (bilinear, texel centres at ``(i + 0.5) / size``) with the texture coordinates of
+:func:`prefilter.render.lighttex.texture_uv` (``p = v0 + u (v1 - v0) + v (v3 - v0)``, ``u`` along
+columns): the same convention as the ``ltc`` method's prefiltered lookups. The densities do not
+depend on the texture, so the estimator stays unbiased (only its variance grows with the
+texture's contrast).
+
 Random numbers come from one ``numpy.random.Generator`` per image row, spawned from
 ``SeedSequence(seed)``; rows are shaded in chunks for memory, so the image does not depend on the
 chunk size or thread count.
@@ -21,7 +29,13 @@ import numpy as np
 from prefilter._numba import njit_parallel, njit_serial, prange
 
 from prefilter.microfacet import GGX, reflect
-from prefilter.render.lights import LightSet, QuadLight, quad_light_pdf, quad_light_sample
+from prefilter.render.lights import (
+    LightSet,
+    QuadLight,
+    quad_light_pdf,
+    quad_light_sample,
+    sample_quad_area,
+)
 from prefilter.render.shading import (
     brdf_cos,
     local_view,
@@ -65,35 +79,67 @@ def pdf_brdf(wo, wi, alpha_x, alpha_y, p_spec) -> np.ndarray:
     return p_spec * p_s + (1.0 - p_spec) * p_d
 
 
-def estimate_quad(light: QuadLight, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0,
+def light_emission(light, points) -> np.ndarray:
+    """Texture factor ``(N, 3)`` of a quad light at ``points (N, 3)`` on it: the level-0 bilinear
+    texel of a :class:`~prefilter.render.lighttex.TexturedQuad` at its
+    :func:`~prefilter.render.lighttex.texture_uv` (clamped to the light), ones for an untextured
+    :class:`QuadLight`. A one-channel texture scales all three channels."""
+    n = len(points)
+    tex = getattr(light, "texture", None)
+    if tex is None:
+        return np.ones((n, 3))
+    from prefilter.render.lighttex import texture_uv
+
+    t = tex.lookup(texture_uv(light.vertices, points), 0.0)  # sigma 0: level 0, bilinear
+    return t if t.shape[1] == 3 else np.repeat(t[:, :1], 3, axis=1)
+
+
+def _geometry(light) -> QuadLight:
+    """The untextured quad of ``light`` (its sampling densities ignore the texture)."""
+    return light if isinstance(light, QuadLight) else QuadLight(light.vertices, light.radiance)
+
+
+def estimate_quad(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0,
                   u) -> np.ndarray:
     """One-sample MIS estimate ``(N, 3)`` of the radiance reflected from one quad light.
 
-    ``u (N, 5)``: 2 uniforms for the light sample, 3 for the BRDF sample. Balance heuristic with
-    one sample per strategy: ``sum_k f(w_k) L / (p_light(w_k) + p_brdf(w_k))``.
+    ``light``: a :class:`QuadLight` or a textured quad (its radiance times
+    :func:`light_emission` at each sample's point on the light). ``u (N, 5)``: 2 uniforms for the
+    light sample, 3 for the BRDF sample. Balance heuristic with one sample per strategy (Veach
+    1997, eq. 9.13): ``sum_k f(w_k) L(y_k) / (p_light(w_k) + p_brdf(w_k))``.
     """
+    textured = getattr(light, "texture", None) is not None
+    geo = _geometry(light)
     p_spec = specular_probability(wo, base_color, f0)
     # Light sample.
-    wl, pl = quad_light_sample(light, position, u[:, 0:2])
+    wl, pl = quad_light_sample(geo, position, u[:, 0:2])
     wl_loc = to_local(wl, ts, bs, ns)
     wl_loc /= np.linalg.norm(wl_loc, axis=-1, keepdims=True)
     f = brdf_cos(wo, wl_loc, alpha_x, alpha_y, base_color, f0)
     den = pl + pdf_brdf(wo, wl_loc, alpha_x, alpha_y, p_spec)
     ok = (pl > 0.0) & (den > 0.0)
     est = np.where(ok[:, None], f / np.where(ok, den, 1.0)[:, None], 0.0)
+    if textured:
+        # the point quad_light_sample drew (same uniforms, same warp)
+        est *= light_emission(light, sample_quad_area(geo.vertices, u[:, 0:2]))
     # BRDF sample.
     wb_loc = sample_brdf(wo, u[:, 2:5], alpha_x, alpha_y, p_spec)
     wb = to_world(wb_loc, ts, bs, ns)
-    plb = quad_light_pdf(light, position, wb)
+    plb = quad_light_pdf(geo, position, wb)
     f = brdf_cos(wo, wb_loc, alpha_x, alpha_y, base_color, f0)
     den = plb + pdf_brdf(wo, wb_loc, alpha_x, alpha_y, p_spec)
     ok = (plb > 0.0) & (den > 0.0)
-    est += np.where(ok[:, None], f / np.where(ok, den, 1.0)[:, None], 0.0)
-    return est * light.radiance
+    eb = np.where(ok[:, None], f / np.where(ok, den, 1.0)[:, None], 0.0)
+    if textured:
+        n = geo.normal
+        cos_l = wb @ n
+        t = ((geo.vertices[0] - position) @ n) / np.where(ok, cos_l, 1.0)
+        eb *= light_emission(light, position + np.where(ok, t, 0.0)[:, None] * wb)
+    return (est + eb) * light.radiance
 
 
 def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y, base_color, f0,
-                    lights: LightSet, u, *, kernel: bool = True) -> np.ndarray:
+                    lights: LightSet, u, *, textured=(), kernel: bool = True) -> np.ndarray:
     """Monte Carlo radiance ``(N, 3)`` at shading points, one MIS sample pair per quad light.
 
     Parameters
@@ -104,8 +150,10 @@ def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
         GGX roughness along ``frame_t`` and ``frame_b``.
     base_color, f0 : (N, 3)
     lights : LightSet
-    u : (N, Q, 5)
-        Uniform random numbers, ``Q = len(lights.quads)``.
+    u : (N, Q + T, 5)
+        Uniform random numbers, ``Q = len(lights.quads)`` then ``T = len(textured)``.
+    textured : sequence of TexturedQuad
+        Textured quad lights (:func:`prefilter.render.lighttex.split_lights`).
     kernel : bool
         Use the Numba kernel (default) or the NumPy implementation (same numbers to rounding).
 
@@ -120,9 +168,8 @@ def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
     wo = local_view(view, ts, bs, ns)
     out = shade_delta_lights(position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, lights)
     est = estimate_quad_fast if kernel else estimate_quad
-    for q, ql in enumerate(lights.quads):
-        out += est(ql, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0,
-                             u[:, q, :])
+    for q, ql in enumerate(tuple(lights.quads) + tuple(textured)):
+        out += est(ql, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, u[:, q, :])
     return out
 
 
@@ -146,19 +193,22 @@ def render_reference(scene, settings) -> np.ndarray:
     """The ``reference`` method: ground truth for ``scene`` at ``settings.spp`` samples per pixel.
 
     Stratified sub-pixel positions (whole pixel footprint), level-0 bilinear textures, and per
-    sample one MIS light/BRDF sample pair per quad light (:func:`shade_reference`). Returns
-    ``(H, W, 3)`` linear radiance; deterministic for a given ``settings.seed``.
+    sample one MIS light/BRDF sample pair per quad light, textured or not
+    (:func:`shade_reference`). Returns ``(H, W, 3)`` linear radiance; deterministic for a given
+    ``settings.seed``.
     """
-    from prefilter.render.pipeline import render_samples, supported_lights, surface_attributes
+    from prefilter.render.lighttex import split_lights
+    from prefilter.render.pipeline import render_samples, surface_attributes
 
-    lights = supported_lights(scene, "reference")
-    q = len(lights.quads)
+    lights, textured = split_lights(scene, "reference")
+    q = len(lights.quads) + len(textured)
 
     def shade(g, u):
         a = surface_attributes(scene, g, filtered=False)
         uq = u.reshape(len(u), q, DIMS_PER_QUAD) if q else np.zeros((len(g.hit), 0, 5))
         return shade_reference(g.position, a["t"], a["b"], a["n"], g.view, a["alpha_x"],
-                               a["alpha_y"], a["base_color"], a["f0"], lights, uq)
+                               a["alpha_y"], a["base_color"], a["f0"], lights, uq,
+                               textured=textured)
 
     return render_samples(scene, settings, shade, random_dims=q * DIMS_PER_QUAD,
                           stratified=True, desc="reference")
@@ -211,7 +261,9 @@ def _brdf_pdf(wox, woy, woz, wix, wiy, wiz, ax, ay, base, f0, p_spec, f_out):
 
 
 @njit_parallel
-def _estimate_quad_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, u, out):
+def _estimate_quad_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, u, out, hit):
+    """``out[i, 0]`` / ``out[i, 1]``: the light- and BRDF-sample terms (rgb, untextured);
+    ``hit[i, 0]`` / ``hit[i, 1]``: their points on the light (for the light texture)."""
     n = pos.shape[0]
     tri1 = 0.5 * math.sqrt(
         ((verts[1, 1] - verts[0, 1]) * (verts[2, 2] - verts[0, 2])
@@ -253,6 +305,7 @@ def _estimate_quad_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, 
         dx = verts[0, 0] + b1 * (verts[c_i, 0] - verts[0, 0]) + b2 * (verts[b_i, 0] - verts[0, 0])
         dy = verts[0, 1] + b1 * (verts[c_i, 1] - verts[0, 1]) + b2 * (verts[b_i, 1] - verts[0, 1])
         dz = verts[0, 2] + b1 * (verts[c_i, 2] - verts[0, 2]) + b2 * (verts[b_i, 2] - verts[0, 2])
+        hit[i, 0, 0], hit[i, 0, 1], hit[i, 0, 2] = dx, dy, dz
         dx -= pos[i, 0]
         dy -= pos[i, 1]
         dz -= pos[i, 2]
@@ -274,6 +327,13 @@ def _estimate_quad_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, 
                     acc0 += f[0] / den
                     acc1 += f[1] / den
                     acc2 += f[2] / den
+        out[i, 0, 0] = acc0
+        out[i, 0, 1] = acc1
+        out[i, 0, 2] = acc2
+        acc0 = 0.0
+        acc1 = 0.0
+        acc2 = 0.0
+        hit[i, 1, 0], hit[i, 1, 1], hit[i, 1, 2] = pos[i, 0], pos[i, 1], pos[i, 2]
         # -- BRDF sample: GGX visible normal (Heitz 2018) reflected, or cosine --
         if u[i, 4] < p_spec:
             vx, vy, vz = axi * wox, ayi * woy, woz
@@ -340,6 +400,7 @@ def _estimate_quad_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, 
                     if cr < 0.0:
                         inside = False
                 if inside:
+                    hit[i, 1, 0], hit[i, 1, 1], hit[i, 1, 2] = hx, hy, hz
                     plb = t * t / (area * cos_l)
                     pb = _brdf_pdf(wox, woy, woz, bx, by, bz, axi, ayi, base[i], f0[i], p_spec,
                                    f)
@@ -348,22 +409,30 @@ def _estimate_quad_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, 
                         acc0 += f[0] / den
                         acc1 += f[1] / den
                         acc2 += f[2] / den
-        out[i, 0] = acc0
-        out[i, 1] = acc1
-        out[i, 2] = acc2
+        out[i, 1, 0] = acc0
+        out[i, 1, 1] = acc1
+        out[i, 1, 2] = acc2
 
 
-def estimate_quad_fast(light: QuadLight, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color,
-                       f0, u) -> np.ndarray:
-    """:func:`estimate_quad` as a Numba kernel (same random numbers, same estimate to rounding)."""
+def estimate_quad_fast(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0,
+                       u) -> np.ndarray:
+    """:func:`estimate_quad` as a Numba kernel (same random numbers, same estimate to rounding);
+    the light texture, if any, is read afterwards at the two samples' points on the light."""
     n = len(position)
+    geo = _geometry(light)
 
     def c(a, shape):
         return np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=np.float64), shape))
 
-    out = np.empty((n, 3))
+    out = np.empty((n, 2, 3))
+    hit = np.empty((n, 2, 3))
     _estimate_quad_kernel(c(position, (n, 3)), c(ts, (n, 3)), c(bs, (n, 3)), c(ns, (n, 3)),
                           c(wo, (n, 3)), c(alpha_x, (n,)), c(alpha_y, (n,)),
-                          c(base_color, (n, 3)), c(f0, (n, 3)), light.vertices, light.normal,
-                          float(light.area), c(u, (n, 5)), out)
-    return out * light.radiance
+                          c(base_color, (n, 3)), c(f0, (n, 3)), geo.vertices, geo.normal,
+                          float(geo.area), c(u, (n, 5)), out, hit)
+    if getattr(light, "texture", None) is None:
+        est = out[:, 0] + out[:, 1]
+    else:
+        est = (out[:, 0] * light_emission(light, hit[:, 0])
+               + out[:, 1] * light_emission(light, hit[:, 1]))
+    return est * light.radiance
