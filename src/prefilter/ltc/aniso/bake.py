@@ -101,6 +101,33 @@ def _fill(settings, entries, values):
     return out
 
 
+def fit_entries(wo, alpha_x, alpha_y, settings: BakeSettings, chunk: int = 0, *,
+                progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+    """The bake's per-entry fit (before alignment): SW fit, then the L1 polish where it helps.
+
+    ``wo (B, 3)``, ``alpha_x``, ``alpha_y (B,)``; ``chunk`` seeds the fit as chunk ``chunk`` of a
+    bake (same bytes as the bake for the same entries). Returns ``M (B, 3, 3)`` (unit third
+    column), ``loss (B,)`` (SW) and ``polished (B,)`` (bool: the polish was kept).
+    """
+    sw = replace(settings.sw, seed=settings.sw.seed * 100_003 + chunk)
+    res = fit_sw(wo, alpha_x, alpha_y, sw, progress=progress)
+    M, polished = res["M"], np.zeros(len(wo), bool)
+    if settings.polish_steps:
+        pol = fit_pointwise(wo, alpha_x, alpha_y, steps=settings.polish_steps,
+                            n_samples=settings.polish_samples, lr=settings.polish_lr,
+                            lr_final=settings.polish_lr / 30, power=1.0, seed=sw.seed,
+                            M0=M, double=False)["M"]
+        bad = ~np.all(np.isfinite(pol), axis=(1, 2))
+        bad |= np.linalg.cond(np.where(bad[:, None, None], np.eye(3), pol)) > 1e7
+        pol[bad] = M[bad]  # a diverged polish keeps the SW fit
+        rng = np.random.default_rng(sw.seed + 7)
+        d_sw = l1_distance(M, wo, alpha_x, alpha_y, settings.polish_check, rng)
+        d_pol = l1_distance(pol, wo, alpha_x, alpha_y, settings.polish_check, rng)
+        polished = d_pol < d_sw
+        M = np.where(polished[:, None, None], pol, M)
+    return {"M": M, "loss": res["loss"], "polished": polished}
+
+
 def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool = True,
                on_chunk: Callable[[int], None] | None = None) -> Path:
     """Fit, align, post-process and write the table; returns the output path.
@@ -126,7 +153,6 @@ def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool
     try:
         for c in todo:
             sl = slice(c * chunk, min(E, (c + 1) * chunk))
-            sw = replace(settings.sw, seed=settings.sw.seed * 100_003 + c)
             done = [0]
 
             def tick(step, done=done):
@@ -135,21 +161,8 @@ def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool
                 done[0] = step
 
             wo, ax, ay = entries["wo"][sl], entries["alpha_x"][sl], entries["alpha_y"][sl]
-            res = fit_sw(wo, ax, ay, sw, progress=tick)
-            M, polished = res["M"], np.zeros(len(wo), bool)
-            if settings.polish_steps:
-                pol = fit_pointwise(wo, ax, ay, steps=settings.polish_steps,
-                                    n_samples=settings.polish_samples, lr=settings.polish_lr,
-                                    lr_final=settings.polish_lr / 30, power=1.0, seed=sw.seed,
-                                    M0=M, double=False)["M"]
-                bad = ~np.all(np.isfinite(pol), axis=(1, 2))
-                bad |= np.linalg.cond(np.where(bad[:, None, None], np.eye(3), pol)) > 1e7
-                pol[bad] = M[bad]  # a diverged polish keeps the SW fit
-                rng = np.random.default_rng(sw.seed + 7)
-                d_sw = l1_distance(M, wo, ax, ay, settings.polish_check, rng)
-                d_pol = l1_distance(pol, wo, ax, ay, settings.polish_check, rng)
-                polished = d_pol < d_sw
-                M = np.where(polished[:, None, None], pol, M)
+            res = fit_entries(wo, ax, ay, settings, c, progress=tick)
+            M, polished = res["M"], res["polished"]
             ck.save(c, M=M, loss=res["loss"], polished=polished)
             if on_chunk is not None:
                 on_chunk(c)
