@@ -105,9 +105,8 @@ HEIGHT_MAPS = [
     {"procedural": "gaussian", "size": 4, "seed": 0, "scale": 0.0},
     {"path": "height_1x1.exr", "scale": 5.0},
 ]
-#: procedural noise colour maps are left out: zero-mean noise makes negative colours (see
-#: test_procedural_noise_colour_map_gives_negative_pixels)
-COLOR_MAPS = [None, "color_1x1.png", "color_ramp.exr"]
+COLOR_MAPS = [None, "color_1x1.png", "color_ramp.exr",
+              {"procedural": "noise", "size": 4, "seed": 0}]
 
 ALPHAS = [{"alpha": 1e-3}, {"alpha": 1.0}, {"alpha": 0.3}, {"alpha_x": 1e-3, "alpha_y": 1.0},
           {"alpha_x": 1.0, "alpha_y": 1e-3}, {"alpha_x": 0.05, "alpha_y": 0.6}]
@@ -421,15 +420,31 @@ def test_negative_or_nan_colour_files_are_rejected(assets, tmp_path):
         render(s, "leadr-env")
 
 
-@pytest.mark.xfail(strict=True, reason="open defect (reported): a procedural 'noise' colour map "
-                   "is zero-mean, so base_color * noise is negative and so are the pixels")
-def test_procedural_noise_colour_map_gives_negative_pixels(assets):
+def _noise_scene(**spec):
     scene = copy.deepcopy(VALID)
     scene["lights"] = [{"type": "point", "position": [1, 2, 1], "intensity": 2.0}]
-    scene["objects"][0]["material"]["color_map"] = {"procedural": "noise", "size": 4, "seed": 0}
+    scene["objects"][0]["material"]["color_map"] = {"procedural": "noise", **spec}
     scene["objects"][0]["material"]["base_color"] = 1.0
-    img = render(load_scene(scene, base_dir=assets), "ltc")
-    assert img.min() >= 0.0, img.min()
+    return scene
+
+
+def test_procedural_noise_colour_map_is_in_unit_range(assets):
+    # a zero-mean noise colour map made negative pixels; scenes map it to clip(0.5 + 0.5 n, 0, 1)
+    img = render(load_scene(_noise_scene(size=4, seed=0), base_dir=assets), "ltc")
+    assert img.min() >= 0.0 and img.max() > 0.0, (img.min(), img.max())
+
+    def texture(sigma):
+        s = load_scene(_noise_scene(size=128, seed=1, sigma=sigma), base_dir=assets)
+        return s.objects[0].material.color_map.load()
+
+    # sigma = 1: clipped at both ends, P(|n| > 1) = 32 % of texels
+    tex = texture(1.0)
+    assert tex.shape == (128, 128, 1) and tex.min() == 0.0 and tex.max() == 1.0
+    assert 0.15 < np.mean((tex == 0) | (tex == 1)) < 0.5
+    # sigma = 0.2: nothing clips (5 standard deviations); mean 1/2, standard deviation sigma / 2
+    soft = texture(0.2)
+    assert 0.0 < soft.min() and soft.max() < 1.0
+    assert abs(soft.mean() - 0.5) < 0.02 and 0.08 < soft.std() < 0.12, (soft.mean(), soft.std())
 
 
 def test_scene_extras_reach_the_colour_map_methods(assets):

@@ -163,6 +163,7 @@ class TextureRef:
 @functools.lru_cache(maxsize=64)
 def _load_texture(role, key, path, mtime, convention, srgb, scale):
     from prefilter import texture as tx
+    from prefilter.texture.procedural import noise_texture
 
     if path is None:
         spec = dict(json.loads(key))
@@ -174,7 +175,8 @@ def _load_texture(role, key, path, mtime, convention, srgb, scale):
         if role == "height_map":
             h = tx.height_map(kind, size, seed, **spec)
             return tx.HeightMap(h.height * scale, h.slopes * scale)
-        return tx.noise(size, seed, **spec)[..., None]
+        # colours and radiance multiply light: the noise mapped to [0, 1] (noise_texture)
+        return noise_texture(size, seed, **spec)[..., None]
     img = tx.read_image(path, srgb=srgb)
     if role == "normal_map":
         return tx.decode_normals(img, convention)

@@ -35,6 +35,7 @@ __all__ = [
     "normal_map",
     "noise",
     "noise_level_variance",
+    "noise_texture",
     "slopes_to_normals",
 ]
 
@@ -339,6 +340,19 @@ def noise(size: int = 512, seed=0, corr_length: float = 4.0, sigma: float = 1.0)
     # fft of unit white noise has E|W|^2 = N; with p summing to 1, ifft gives unit variance.
     amp = np.sqrt(_noise_power(n, l) * n * n)
     return s * np.fft.ifft2(np.fft.fft2(rng.standard_normal((n, n))) * amp).real
+
+
+def noise_texture(size: int = 512, seed=0, corr_length: float = 4.0,
+                  sigma: float = 1.0) -> np.ndarray:
+    """:func:`noise` as a colour or radiance texture ``(size, size)`` in ``[0, 1]``:
+    ``clip(0.5 + 0.5 * noise, 0, 1)``.
+
+    Mean 0.5 and standard deviation ``sigma / 2`` where nothing is clipped (``sigma <= 1/3``
+    clips 0.3 % of texels; the default ``sigma = 1`` clips 32 %, at 0 and 1). Used for procedural
+    ``color_map``, ``light_texture`` and ``environment`` textures of scenes, which multiply
+    light and must not be negative (the zero-mean :func:`noise` would give negative pixels).
+    """
+    return np.clip(0.5 + 0.5 * noise(size, seed, corr_length, sigma), 0.0, 1.0)
 
 
 def noise_level_variance(size: int = 512, corr_length: float = 4.0, sigma: float = 1.0):
