@@ -63,6 +63,23 @@ def test_diffuse_directional_converges_to_visible_normal_monte_carlo(mu, cov, wo
     assert abs(grid - est) < 4 * err + 2e-3 * est, (grid, est, err)
 
 
+@pytest.mark.parametrize("mu,cov,wo", VIEWS)
+def test_shadowed_diffuse_directional_is_visible_normal_mc_times_smith_g2_over_g1(mu, cov, wo):
+    # Algorithm 3 with Algorithm 2's shadowed irradiance for one light: the Lambertian
+    # microsurface radiance E_vndf[<m, wl>] / pi * G2 / G1, with Lambda from the microfacet
+    # module's own implementation (uncorrelated Smith G2).
+    wo, wl = _unit(wo), _unit([-0.8, 0.4, 0.3])  # low light: shadowing is large
+    grid = diffuse_directional(wo, wl, mu, cov, 33, shadowing=True)
+    model = Beckmann(mu, cov)
+    m = model.sample_vndf(wo, np.random.default_rng(3).random((400_000, 2)))
+    lo, li = model.smith_lambda(wo), model.smith_lambda(wl)
+    g = (1 + lo) / (1 + lo + li)
+    vals = np.maximum(m @ wl, 0) / np.pi * g
+    est, err = vals.mean(), vals.std() / np.sqrt(len(vals))
+    assert abs(grid - est) < 4 * err + 2e-3 * est, (grid, est, err)
+    assert g < 0.98 or cov[0][0] < 0.05  # visible shadowing on the rougher surface
+
+
 def _irradiance_quadrature(radiance_fn, n, size=256):
     d, om = texel_directions(size, 2 * size)
     L = radiance_fn(d)

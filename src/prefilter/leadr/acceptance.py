@@ -136,7 +136,7 @@ def _shadowing(mean, cov, wo, wi):
     lo = float(model.smith_lambda(wo))
     li = model.smith_lambda(wi)
     with np.errstate(invalid="ignore"):
-        g = (1.0 + lo) / (1.0 + lo + li)
+        g = 1.0 / (1.0 + li / (1.0 + lo))  # 1 if the mesosurface faces away from wo
     return np.where(np.isfinite(li) & (wi[..., 2] > 0.0), g, 0.0)
 
 
@@ -342,8 +342,9 @@ def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48
               height: int = 32, sub: int = 8, spp: int = 16, sigma_b: float = 0.1,
               tex_size: int = 128, shadowing: bool = True, seed: int = 0,
               log=print) -> list[dict]:
-    """Image-level comparison on a plane: the renderer's ``leadr-env`` / ``leadr-env-shadowed``
-    / ``leadr-env-naive`` (specular, f0 = 1) and ``leadr-irradiance`` / ``-naive`` (diffuse)
+    """Image-level comparison on a plane: the renderer's ``leadr-env`` (self-shadowing) /
+    ``leadr-env-simplified`` / ``leadr-env-naive`` (specular, f0 = 1) and ``leadr-irradiance``
+    / its simplified variant / ``-naive`` (diffuse)
     against the displaced plane rendered by :func:`prefilter.leadr.displaced.displaced_env_points`.
 
     The camera looks obliquely at a plane textured with a Gaussian height map (slope std
@@ -395,10 +396,13 @@ def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48
                 "lights": [{"type": "environment", "image": "sky.npy"}]}, base_dir=tmp)
             settings = RenderSettings()
             if specular:
-                methods = {"leadr": lr.render_leadr_env, "leadr shadowed":
-                           lr.render_leadr_env_shadowed, "naive": lr.render_leadr_env_naive}
+                methods = {"leadr": lr.render_leadr_env,
+                           "leadr simplified": lr.render_leadr_env_simplified,
+                           "naive": lr.render_leadr_env_naive}
             else:
                 methods = {"leadr": lr.render_leadr_irradiance,
+                           "leadr simplified": lambda sc, st: lr._render_irradiance(
+                               sc, st, True, "leadr-irradiance-simplified", shadowing=False),
                            "naive": lr.render_leadr_irradiance_naive}
             imgs = {m: np.asarray(f(scene, settings), np.float64) for m, f in methods.items()}
             # reference: sub x sub rays per pixel through the displaced plane
@@ -439,3 +443,248 @@ def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48
             rows.append(row)
             log(row)
     return rows
+
+
+# -- images under a point light: planes and spheres ------------------------------------------------
+
+#: Height fields of :func:`image_point` (scene procedural specs; slope std per axis). ``aniso u``
+#: is rougher along the tangent (the plane's x; on the sphere d p / d phi, along the circles of
+#: latitude), ``aniso v`` along the bitangent (the sphere's meridians).
+POINT_SURFACES = {
+    "iso 0.1": dict(procedural="gaussian", rms_slope=0.1 * np.sqrt(2)),
+    "iso 0.25": dict(procedural="gaussian", rms_slope=0.25 * np.sqrt(2)),
+    "iso 0.5": dict(procedural="gaussian", rms_slope=0.5 * np.sqrt(2)),
+    "aniso u (0.45, 0.15)": dict(procedural="anisotropic", cov=((0.2025, 0.0), (0.0, 0.0225))),
+    "aniso v (0.15, 0.45)": dict(procedural="anisotropic", cov=((0.0225, 0.0), (0.0, 0.2025))),
+}
+
+#: Camera and point light per shape of :func:`image_point` (world +y up).
+POINT_SHAPES = {
+    "plane": dict(camera=dict(origin=[0.0, 2.0, 3.0], target=[0.0, 0.0, 0.0], fov=30.0),
+                  obj=dict(type="plane", size=40.0),
+                  light=dict(type="point", position=[0.4, 2.4, -3.2], intensity=12.0)),
+    # close enough that the sphere fills the frame: the macro normal turns by ~0.03 rad per
+    # pixel, which no texture filter sees (geometric aliasing, the same for every method)
+    "sphere": dict(camera=dict(origin=[0.0, 0.4, 2.6], target=[0.0, 0.0, 0.0], fov=30.0),
+                   obj=dict(type="sphere", center=[0.0, 0.0, 0.0], radius=1.0, pole=[0, 1, 0],
+                            axis_x=[0, 0, -1]),
+                   light=dict(type="point", position=[2.5, 2.5, 3.5], intensity=25.0)),
+}
+
+
+def _r2(k: int) -> np.ndarray:
+    """Sub-pixel jitter ``(k, 2)`` in ``[-0.5, 0.5)^2``: the R2 sequence, first offset 0."""
+    a = np.array([0.7548776662466927, 0.5698402909980532])
+    return np.mod(0.5 + np.arange(k)[:, None] * a, 1.0) - 0.5
+
+
+class _Fixed:
+    """Per-sample moments ``(N, 5)`` standing in for a mip chain (``lookup_footprint``)."""
+
+    def __init__(self, moments):
+        self.moments = moments
+
+    def lookup_footprint(self, uv, dudv, **_):
+        return self.moments
+
+
+def _point_scene(shape, width, height, scale, material, tmp=None):
+    from prefilter.render import load_scene
+
+    spec = POINT_SHAPES[shape]
+    uv = [float(scale), float(scale)] if shape == "plane" else [2.0 * scale, float(scale)]
+    return load_scene({"camera": dict(spec["camera"], width=width, height=height),
+                       "objects": [dict(spec["obj"], uv_scale=uv, material=material)],
+                       "lights": [spec["light"]]})
+
+
+def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0, 16.0),
+                width: int = 40, height: int = 30, sub: int | None = None, jitters: int = 8,
+                sigma_b: float = 0.1, tex_size: int = 256, min_cos: float = 0.15,
+                seed: int = 0, log=print) -> list[dict]:
+    """Image rows under one point light: LEADR (the renderer's shading code) vs the displaced
+    height field, the normal-mapped reference and naive mip-mapped normal mapping.
+
+    Per surface (:data:`POINT_SURFACES`, correlation length 4 texels, ``tex_size^2``), shape
+    (:data:`POINT_SHAPES`: an oblique plane; a sphere with lat-long uv, ``uv_scale = (2 s, s)``
+    so texels are square at the equator, the seam at the back) and footprint (``uv_scale`` set
+    so the median pixel covers ``texels_per_pixel`` texels per side):
+
+    * reference: ``sub x sub`` stratified camera rays per pixel (default ``max(8, tpp)``), each
+      hitting the macro surface, then traced into the bilinear height field in that hit's
+      tangent frame (texel units; :func:`prefilter.leadr.displaced.trace_points`) with a shadow
+      ray towards the light; micro BRDF Beckmann ``sigma_b`` (specular, F = 1) or Lambert;
+    * normal-mapped: the same rays shading the height field's normal at the macro hit;
+    * ``leadr``: :func:`prefilter.leadr.render.shade_leadr_delta` (specular, closed form with
+      G2) / :func:`~prefilter.leadr.render.shade_leadr_irradiance` (diffuse, Algorithm 3 with
+      ``G2 / G1``), ``leadr simplified`` the diffuse without shadowing, at pixel centres, fed
+      the exact moments of the traced bilinear surface (:func:`cell_moments`);
+    * ``naive``: the same code with ``meso=False`` (mip-averaged normal, micro roughness).
+
+    The largest footprint is rendered at ``jitters`` sub-pixel offsets (a camera shake; the
+    reference follows): ``flicker`` = per-pixel std over the jitters of ``method - reference``,
+    averaged over pixels, relative to the mean reference. Pixels count when every reference ray
+    hits with ``wo_z >= min_cos``. Rows: relative RMSE (``rmse``) and HDR-FLIP (``flip``) per
+    method (means over the jitters), ``flicker`` per method, ``ref noise`` (RMSE between two
+    sub-ray patterns / 2, relative).
+    """
+    from prefilter.leadr import render as lr
+    from prefilter.leadr.displaced import _gradient, _micro, _normals, trace_points
+    from prefilter.render.camera import gbuffer_at
+    from prefilter.render.metrics import flip
+    from prefilter.texture import MipChain
+
+    rows = []
+    far = max(texels_per_pixel)
+    for name, spec in (surfaces or POINT_SURFACES).items():
+        params = dict(spec)
+        kind = params.pop("procedural")
+        hmap = height_map(kind, size=tex_size, seed=seed, corr_length=4.0, **params).height
+        mips = {0: MipChain(cell_moments(hmap))}
+        mats = {"specular": {"alpha": np.sqrt(2.0) * sigma_b, "f0": 1.0, "base_color": 0.0},
+                "diffuse": {"alpha": 0.001, "f0": 0.0, "base_color": 1.0}}
+        for shape in shapes:
+            probe = _point_scene(shape, width, height, 1.0, mats["diffuse"])
+            pix = np.stack(np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5), -1)
+            gp = gbuffer_at(probe, pix)
+            fp1 = np.median(np.sqrt(np.abs(np.linalg.det(gp.dudv[gp.hit])))) * tex_size
+            for tpp in texels_per_pixel:
+                scenes = {s: _point_scene(shape, width, height, tpp / fp1, m)
+                          for s, m in mats.items()}
+                sc = scenes["diffuse"]
+                light = sc.light_set().points[0]
+                ns = sub or max(8, int(np.ceil(tpp)))
+                offs = _r2(jitters if tpp == far else 1)
+                acc = {s: {} for s in mats}
+                for k, o in enumerate(offs):
+                    centre = pix + o
+                    # reference rays: sub x sub strata per pixel (and a shifted pattern once)
+                    pats = [0.0] + ([0.5] if k == 0 else [])
+                    refs = {s: [] for s in mats}
+                    box = None
+                    for shift in pats:
+                        s1 = (np.arange(ns) + 0.5 + shift) / ns - 0.5
+                        sy, sx = np.meshgrid(s1, s1, indexing="ij")
+                        xy = centre[:, :, None, :] + np.stack([sx.ravel(), sy.ravel()], -1)
+                        g = gbuffer_at(sc, xy)
+                        ok = g.hit.copy()
+                        gh = g.select(ok)
+                        t, b, n, wo = lr._frame(gh)
+                        good = wo[:, 2] >= min_cos
+                        d = light.position - gh.position
+                        d2 = np.sum(d * d, -1)
+                        wi = lr._local(d / np.sqrt(d2)[:, None], t, b, n)
+                        x = gh.uv[:, 0] * tex_size
+                        y = gh.uv[:, 1] * tex_size
+                        hit, nm, lit = trace_points(hmap, x[good], y[good], wo[good], wi[good])
+                        e = light.intensity[0] / d2[good]
+                        nmap = _normals(_gradient(hmap, x[good], y[good]))
+                        flat_ok = np.flatnonzero(ok.ravel())[good]
+                        if box is None:
+                            # the pixel's own moments: the box average over its rays' cells
+                            cm = mips[0].levels[0]
+                            cnt = ok.sum(axis=2)
+                            mom = np.zeros(ok.shape + (5,))
+                            mom[ok] = cm[np.floor(y).astype(np.int64) % tex_size,
+                                         np.floor(x).astype(np.int64) % tex_size]
+                            box = mom.sum(axis=2) / np.maximum(cnt, 1)[..., None]
+                        mask = np.zeros(ok.size, bool)
+                        mask[flat_ok] = True
+                        pmask = mask.reshape(ok.shape).all(axis=2)
+                        for s in mats:
+                            spec_ = s == "specular"
+                            v = np.zeros(len(nm))
+                            v[hit] = _micro(wo[good][hit], wi[good][hit], nm[hit], sigma_b, 1.0,
+                                            spec_) * lit[hit]
+                            nmv = _micro(wo[good], wi[good], nmap, sigma_b, 1.0, spec_)
+                            img = np.zeros(ok.size)
+                            img[flat_ok] = v * e
+                            nmi = np.zeros(ok.size)
+                            nmi[flat_ok] = nmv * e
+                            refs[s].append((img.reshape(ok.shape).mean(axis=2),
+                                            nmi.reshape(ok.shape).mean(axis=2), pmask))
+                    # the methods at the (jittered) pixel centres
+                    gc = gbuffer_at(sc, centre)
+                    gs = gc.select(gc.hit)
+                    ls = sc.light_set()
+                    meth = {}
+                    fixed = {0: _Fixed(box[gc.hit])}
+                    for s, scene in scenes.items():
+                        if s == "specular":
+                            vals = {"leadr": lr.shade_leadr_delta(scene, gs, ls, mips=mips),
+                                    "leadr box": lr.shade_leadr_delta(scene, gs, ls, mips=fixed),
+                                    "naive": lr.shade_leadr_delta(scene, gs, ls, meso=False,
+                                                                  mips=mips)}
+                        else:
+                            z = np.zeros((9, 3))
+                            vals = {"leadr": lr.shade_leadr_irradiance(
+                                        scene, gs, z, ls, mips=mips),
+                                    "leadr simplified": lr.shade_leadr_irradiance(
+                                        scene, gs, z, ls, mips=mips, shadowing=False),
+                                    "leadr box": lr.shade_leadr_irradiance(
+                                        scene, gs, z, ls, mips=fixed),
+                                    "naive": lr.shade_leadr_irradiance(
+                                        scene, gs, z, ls, meso=False, mips=mips)}
+                        meth[s] = {}
+                        for m, v in vals.items():
+                            im = np.zeros(gc.hit.shape)
+                            im[gc.hit] = v[:, 0]
+                            meth[s][m] = im
+                    for s in mats:
+                        ref, nmi, pmask = refs[s][0]
+                        pmask = pmask & gc.hit
+                        a = acc[s]
+                        a.setdefault("mask", np.ones_like(pmask))
+                        a["mask"] &= pmask
+                        a.setdefault("ref", []).append(ref)
+                        if len(refs[s]) > 1:
+                            a["ref2"] = refs[s][1][0]
+                            a["mask"] &= refs[s][1][2]
+                        for m, im in dict(meth[s], **{"normal-mapped": nmi}).items():
+                            a.setdefault(m, []).append(im)
+                for s in mats:
+                    a = acc[s]
+                    mask = a["mask"]
+                    refs_k = np.asarray(a["ref"])
+                    mref = float(refs_k[:, mask].mean())
+                    row = {"surface": name, "shape": shape, "shading": s,
+                           "texels/pixel": float(tpp), "pixels": int(mask.sum()),
+                           "ref noise": float(np.sqrt(np.mean((a["ref2"] - refs_k[0])[mask] ** 2)
+                                                      / 2) / mref)}
+                    for m in [q for q in a if q not in ("mask", "ref", "ref2")]:
+                        ims = np.asarray(a[m])
+                        dif = (ims - refs_k)[:, mask]
+                        row[f"rmse {m}"] = float(np.sqrt(np.mean(dif ** 2)) / mref)
+                        row[f"flip {m}"] = float(np.mean([flip(
+                            np.repeat(np.where(mask, im, 0.0)[..., None], 3, -1),
+                            np.repeat(np.where(mask, rf, 0.0)[..., None], 3, -1)).mean
+                            for im, rf in zip(ims, refs_k)]))
+                        if len(ims) > 1:
+                            row[f"flicker {m}"] = float(np.mean(np.std(dif, axis=0)) / mref)
+                    rows.append(row)
+                    log(row)
+    return rows
+
+
+def point_table(rows) -> str:
+    """Markdown table of :func:`image_point`'s rows: RMSE / FLIP per method, the LEADR / naive
+    RMSE ratio and the flickers (where measured)."""
+    out = ["| surface | shape | shading | texels/pixel | LEADR | LEADR box | LEADR simplified | "
+           "normal-mapped | naive | LEADR / naive | flicker LEADR / box / naive | "
+           "flicker ratio | ref noise |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    cell = lambda r, m: (f"{100 * r[f'rmse {m}']:.1f}% / {r[f'flip {m}']:.3f}"  # noqa: E731
+                         if f"rmse {m}" in r else "-")
+    for r in rows:
+        fl = "flicker leadr" in r
+        out.append(
+            f"| {r['surface']} | {r['shape']} | {r['shading']} | {r['texels/pixel']:.0f} | "
+            f"{cell(r, 'leadr')} | {cell(r, 'leadr box')} | {cell(r, 'leadr simplified')} | "
+            f"{cell(r, 'normal-mapped')} | {cell(r, 'naive')} | "
+            f"{r['rmse leadr'] / max(r['rmse naive'], 1e-12):.2f} | "
+            + (f"{100 * r['flicker leadr']:.1f}% / {100 * r['flicker leadr box']:.1f}% / "
+               f"{100 * r['flicker naive']:.1f}% | "
+               f"{r['flicker leadr'] / max(r['flicker naive'], 1e-12):.2f} | " if fl
+               else "- | - | ")
+            + f"{100 * r['ref noise']:.2f}% |")
+    return "\n".join(out)

@@ -413,3 +413,84 @@ def naive_env_radiance(height, block: int, i0: int, j0: int, wo, env, *, k: int 
     est = _env_estimates(env, EnvSampler(env), as_directions(wo, "wo"), nbar[None], samples,
                          np.random.default_rng(seed), sigma_b, albedo, specular)
     return est[0]
+
+
+# -- point and directional lights, per ray ---------------------------------------------------------
+
+
+def trace_points(height, x, y, wo, wi=None, *, shadowing: bool = True, step: float = 0.1):
+    """First hits of the view rays that cross the mean plane at texel coordinates ``x, y (P,)``
+    towards ``wo (P, 3)`` (local frame, z = mean-plane normal), and their shadow rays towards
+    ``wi (P, 3)`` (a point light seen from each hit, or a directional light).
+
+    Returns ``hit (P,)`` bool, unit micro-surface normals ``n (P, 3)`` at the hits (zero where
+    nothing is hit) and ``lit (P,)`` (``True`` where the shadow ray leaves the height field, or
+    everywhere if ``wi`` is ``None`` or ``shadowing`` is off). Directions below the mean plane are
+    never lit (a shadow ray going down always meets the periodic height field).
+    """
+    h = np.ascontiguousarray(as_float_array(height, "height", ndim_min=2))
+    x = np.asarray(x, np.float64).ravel()
+    y = np.asarray(y, np.float64).ravel()
+    wo = np.ascontiguousarray(np.broadcast_to(as_directions(wo, "wo"), (x.size, 3)))
+    if np.any(wo[:, 2] <= 0.05):
+        raise PrefilterError("wo: expected views above the mean plane (z > 0.05), got "
+                             f"min z = {wo[:, 2].min():.3g}")
+    hmax, hmin = float(h.max()), float(h.min())
+    t_up = (hmax + 1e-6) / wo[:, 2]
+    ox, oy, oz = x + t_up * wo[:, 0], y + t_up * wo[:, 1], np.full(x.shape, hmax + 1e-6)
+    d = np.ascontiguousarray(-wo)
+    dn = step / float(np.min(np.maximum(np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])))) \
+        if x.size else step
+    max_steps = int(4 * (h.shape[0] + h.shape[1]) / step) + 16
+    t = _march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
+               np.ascontiguousarray(d[:, 2]), hmin, hmax + 1e-3, dn, max_steps)
+    hit = np.isfinite(t)
+    n = np.zeros((x.size, 3))
+    px, py = ox[hit] + t[hit] * d[hit, 0], oy[hit] + t[hit] * d[hit, 1]
+    pz = oz[hit] + t[hit] * d[hit, 2]
+    n[hit] = _normals(_gradient(h, px, py))
+    lit = np.ones(x.size, bool)
+    if wi is not None and shadowing:
+        wi = np.broadcast_to(as_directions(wi, "wi"), (x.size, 3))[hit]
+        up = wi[:, 2] > 0.0
+        lit_h = np.zeros(len(wi), bool)
+        if np.any(up):
+            w = np.ascontiguousarray(wi[up])
+            eps = 1e-4
+            dn_i = step / np.maximum(np.hypot(w[:, 0], w[:, 1]), np.abs(w[:, 2]))
+            ts = _march(h, px[up] + eps * w[:, 0], py[up] + eps * w[:, 1], pz[up] + eps * w[:, 2],
+                        np.ascontiguousarray(w[:, 0]), np.ascontiguousarray(w[:, 1]),
+                        np.ascontiguousarray(w[:, 2]), hmin - 1.0, hmax, float(dn_i.min()),
+                        max_steps)
+            lit_h[up] = ~np.isfinite(ts)
+        lit[hit] = lit_h
+    return hit, n, lit
+
+
+def displaced_point_radiance(height, x, y, wo, wi, *, sigma_b: float = 0.1, albedo: float = 1.0,
+                             specular: bool = True, shadowing: bool = True,
+                             step: float = 0.1) -> np.ndarray:
+    """Cosine-weighted micro BRDF ``f(wo, wi) <n, wi> V(wi)`` at the first hit of each view ray
+    (:func:`trace_points`), ``(P,)``: the radiance of the displaced surface per unit irradiance
+    (at normal incidence) of a point or directional light from ``wi (P, 3)``; 0 where the ray
+    misses. Masking by the first hit, shadowing by a shadow ray (``shadowing``)."""
+    hit, n, lit = trace_points(height, x, y, wo, wi, shadowing=shadowing, step=step)
+    wo = np.broadcast_to(as_directions(wo, "wo"), n.shape)
+    wi = np.broadcast_to(as_directions(wi, "wi"), n.shape)
+    out = np.zeros(len(n))
+    if np.any(hit):
+        out[hit] = _micro(wo[hit], wi[hit], n[hit], sigma_b, albedo, specular) * lit[hit]
+    return out
+
+
+def normal_mapped_point_radiance(height, x, y, wo, wi, *, sigma_b: float = 0.1,
+                                 albedo: float = 1.0, specular: bool = True) -> np.ndarray:
+    """The height field's normal at ``x, y (P,)`` on the flat mean plane (no parallax, masking or
+    shadowing by the geometry) with the micro BRDF: ``f(wo, wi) <n, wi>``, ``(P,)``."""
+    h = as_float_array(height, "height", ndim_min=2)
+    x = np.asarray(x, np.float64).ravel()
+    y = np.asarray(y, np.float64).ravel()
+    n = _normals(_gradient(h, x, y))
+    wo = np.broadcast_to(as_directions(wo, "wo"), n.shape)
+    wi = np.broadcast_to(as_directions(wi, "wi"), n.shape)
+    return _micro(wo, wi, n, sigma_b, albedo, specular)

@@ -1,8 +1,11 @@
-"""Compiled Simplified Algorithm 1 (environment specular), one shading point per iteration.
+"""Compiled Algorithm 1 (environment specular), one shading point per iteration.
 
 Same arithmetic as :func:`prefilter.leadr.shading.env_specular` (tested equal to the NumPy path):
 grid micronormals, the artificial micronormal of supplemental 3.7, the per-sample LOD from the
-Jacobian, trilinear lat-long lookups (wrap in phi, clamp in theta) and Schlick Fresnel.
+Jacobian, trilinear lat-long lookups (wrap in phi, clamp in theta) and Schlick Fresnel; with
+``shadowing`` each sample is weighted by ``G2 / G1`` (the paper's Algorithm 1, tested equal to
+:func:`prefilter.leadr.render.env_specular_shadowed`). :func:`diffuse_shadow_kernel`: the
+shadowing correction of the diffuse irradiance (Algorithm 2 minus Simplified Algorithm 2).
 """
 
 from __future__ import annotations
@@ -51,9 +54,37 @@ def _lookup(flat, offsets, shapes, wx, wy, wz, lod, out):  # pragma: no cover - 
         _bilinear(flat, offsets[l0 + 1], shapes[l0 + 1, 0], shapes[l0 + 1, 1], u, v, out, t)
 
 
+@njit(fastmath=True, cache=True)
+def _lambda_a(wx, wy, wz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
+    """Smith ``a = (w_z - mu.w_xy) / sqrt(2 w_xy^T Sigma w_xy)`` (supplemental 3.2), and
+    ``Lambda(a)`` (``-1.0`` standing for +inf when ``a <= 0``: fastmath has no infinities)."""
+    d = wz - mx * wx - my * wy
+    s2 = sxx * wx * wx + 2.0 * sxy * wx * wy + syy * wy * wy
+    if d <= 0.0:
+        return -1.0
+    if s2 <= 0.0:
+        return 0.0
+    a = d / math.sqrt(2.0 * s2)
+    if a > 26.0:
+        return 0.0
+    lam = 0.5 * (math.exp(-a * a) / (a * 1.7724538509055159) - math.erfc(a))
+    return max(lam, 0.0)
+
+
+@njit(fastmath=True, cache=True)
+def _g2_over_g1(lam_o, lam_i, wiz):  # pragma: no cover - compiled
+    """``1 / (1 + Lambda_i / (1 + Lambda_o))``; 0 below the geometric plane or the mesosurface,
+    1 for a mesosurface facing away from the view (``Lambda_o`` infinite)."""
+    if wiz <= 0.0 or lam_i < 0.0:
+        return 0.0
+    if lam_o < 0.0:
+        return 1.0
+    return 1.0 / (1.0 + lam_i / (1.0 + lam_o))
+
+
 @njit_parallel
 def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h, f0, use_f0,
-                        lod_bias, eps, w_art, out):  # pragma: no cover - compiled
+                        lod_bias, eps, w_art, shadowing, out):  # pragma: no cover - compiled
     """``out (P, C)`` for views ``wo (P, 3)``, mean slopes ``(P, 2)``, covariances ``(P, 2, 2)``,
     local-to-world ``rot (P, 3, 3)``, 1D grid ``p, w`` of spacing ``h``, Schlick ``f0 (P,)``."""
     npts = wo.shape[0]
@@ -69,6 +100,7 @@ def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h,
         num = np.zeros(nc)
         rad = np.empty(nc)
         den = 0.0
+        lam_o = _lambda_a(ox, oy, oz, mu[q, 0], mu[q, 1], sxx, syy, sxy) if shadowing else 0.0
         for k in range(n * n + 1):
             if k < n * n:
                 j, i = k // n, k % n
@@ -102,6 +134,11 @@ def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h,
                 fr = f0[q] + (1.0 - f0[q]) * (1.0 - c) ** 5
             ws = wt * proj
             den += ws
+            if shadowing and k < n * n:
+                # (the artificial micronormal stays unshadowed: it only exists so that a
+                # footprint that sees nothing is not black)
+                fr *= _g2_over_g1(lam_o, _lambda_a(rx, ry, rz, mu[q, 0], mu[q, 1], sxx, syy, sxy),
+                                  rz)
             for c in range(nc):
                 num[c] += ws * fr * rad[c]
         for c in range(nc):
@@ -109,4 +146,56 @@ def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h,
                 out[q, c] = num[c] / den
             else:
                 out[q, c] = rad[c] * fr
+    return out
+
+
+@njit_parallel
+def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no cover - compiled
+    """``out (P, C)`` = ``-(1 / pi) sum W S E_lost(m) / sum W S`` with
+    ``E_lost(m) = sum_d lw_d <m, d>+ (1 - G2 / G1(wo, d))``: the irradiance that self-shadowing
+    removes, by quadrature over directions ``dirs (D, 3)`` (map coordinates) with weights
+    ``lw (D, C)`` = radiance x solid angle; ``rot (P, 3, 3)`` local -> map."""
+    npts = wo.shape[0]
+    nc = lw.shape[1]
+    n = p.size
+    nd = dirs.shape[0]
+    for q in prange(npts):
+        ox, oy, oz = wo[q, 0], wo[q, 1], wo[q, 2]
+        sxx, syy, sxy = cov[q, 0, 0], cov[q, 1, 1], cov[q, 0, 1]
+        sx, sy = math.sqrt(sxx), math.sqrt(syy)
+        r = sxy / (sx * sy)
+        r_ = math.sqrt(max(1.0 - r * r, 0.0))
+        lam_o = _lambda_a(ox, oy, oz, mu[q, 0], mu[q, 1], sxx, syy, sxy)
+        # local light directions and their lost fraction 1 - G2 / G1
+        loc = np.empty((nd, 3))
+        lost = np.empty(nd)
+        for k in range(nd):
+            dx = rot[q, 0, 0] * dirs[k, 0] + rot[q, 1, 0] * dirs[k, 1] + rot[q, 2, 0] * dirs[k, 2]
+            dy = rot[q, 0, 1] * dirs[k, 0] + rot[q, 1, 1] * dirs[k, 1] + rot[q, 2, 1] * dirs[k, 2]
+            dz = rot[q, 0, 2] * dirs[k, 0] + rot[q, 1, 2] * dirs[k, 1] + rot[q, 2, 2] * dirs[k, 2]
+            loc[k, 0], loc[k, 1], loc[k, 2] = dx, dy, dz
+            lam_i = _lambda_a(dx, dy, dz, mu[q, 0], mu[q, 1], sxx, syy, sxy)
+            lost[k] = 1.0 - _g2_over_g1(lam_o, lam_i, dz)
+        num = np.zeros(nc)
+        den = 0.0
+        for j in range(n):
+            for i in range(n):
+                x = mu[q, 0] + p[j] * sx
+                y = mu[q, 1] + (p[j] * r + p[i] * r_) * sy
+                inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
+                mx, my, mz = -x * inv, -y * inv, inv
+                ws = w[j] * w[i] * max(mx * ox + my * oy + mz * oz, 0.0) / mz
+                if ws <= 0.0:
+                    continue
+                den += ws
+                for k in range(nd):
+                    if lost[k] <= 0.0:
+                        continue
+                    c_ = mx * loc[k, 0] + my * loc[k, 1] + mz * loc[k, 2]
+                    if c_ > 0.0:
+                        f = ws * c_ * lost[k]
+                        for c in range(nc):
+                            num[c] += f * lw[k, c]
+        for c in range(nc):
+            out[q, c] = -num[c] / (den * math.pi) if den > 1e-300 else 0.0
     return out

@@ -31,27 +31,62 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 from prefilter.leadr.envmap import (ENV_FROM_WORLD, env_from_image, latlong_resample,
-                                    sh9_directional, sh9_project)
+                                    sh9_project)
 from prefilter.leadr.maps import shading_stats
-from prefilter.leadr.shading import (diffuse_directional, diffuse_sh, env_specular,
-                                     grid_normals, point_light, schlick)
+from prefilter.leadr.shading import (diffuse_directional, diffuse_sh, diffuse_shadowing,
+                                     env_specular, grid_normals, point_light, schlick)
 from prefilter.microfacet import beckmann_lambda
 
 DIFFUSE_GRID = 5
 #: Specular grid of ``leadr-env``: 9 x 9 is within ~3% of the N = 128 grid for isotropic lobes
 #: (docs/leadr.md convergence table), 5 x 5 within 7-14%.
 ENV_GRID = 9
+#: Moment lookups box-filter the pixel footprint: up to ``FOOTPRINT_TAPS^2`` trilinear taps
+#: spread over the footprint parallelogram (one per ~2 x 2 texels), each at the LOD of its share.
+#: Moments are linear, so this is a box filter over the pixel's own texels; a single trilinear
+#: tap blends a square of the major axis' size aligned to the mip grid, whose statistics flicker
+#: as the camera moves (docs/leadr.md, point-light image rows: flicker 0.67x -> 0.48x naive for
+#: diffuse at 16 texels per pixel). 1: one isotropic trilinear tap.
+FOOTPRINT_TAPS = 8
+
+
+def footprint_moments(chain, uv, dudv, max_taps: int | None = None) -> np.ndarray:
+    """Box-filtered moments ``(N, C)`` of a mip chain over pixel footprints ``uv (N, 2)``,
+    ``dudv (N, 2, 2)``: ``T x T`` taps, ``T = clip(ceil(major / 2), 1, max_taps)`` with
+    ``major`` the footprint's major axis in texels (:data:`FOOTPRINT_TAPS`); objects without
+    ``lookup`` (precomputed moments) answer ``lookup_footprint`` themselves."""
+    from prefilter.texture.mip import footprint_axes
+
+    max_taps = FOOTPRINT_TAPS if max_taps is None else int(max_taps)
+    if max_taps <= 1 or not hasattr(chain, "lookup"):
+        return chain.lookup_footprint(uv, dudv)
+    h, w = chain.shape[:2]
+    major = footprint_axes(dudv, (h, w))[0]
+    taps = np.clip(np.ceil(major / 2.0), 1, max_taps).astype(np.int64)
+    out = np.empty((len(uv), chain.shape[2]))
+    for t in np.unique(taps):
+        m = taps == t
+        lod = np.log2(np.maximum(major[m] / t, 1.0))
+        o = (np.arange(t) + 0.5) / t - 0.5
+        ox, oy = np.meshgrid(o, o)
+        off = np.einsum("nab,kb->nka", dudv[m], np.stack([ox.ravel(), oy.ravel()], -1))
+        out[m] = chain.lookup(uv[m][:, None, :] + off,
+                              np.broadcast_to(lod[:, None], off.shape[:2])).mean(axis=1)
+    return out
 
 
 def _local(w, t, b, n):
     return np.stack([np.sum(w * t, -1), np.sum(w * b, -1), np.sum(w * n, -1)], -1)
 
 
-def leadr_stats(scene, g, *, meso: bool = True):
+def leadr_stats(scene, g, *, meso: bool = True, mips=None):
     """Mean slope ``(N, 2)`` and covariance ``(N, 2, 2)`` per hit sample, plus materials.
 
     ``meso=False`` keeps the mean slope and drops the footprint's slope covariance (naive
-    mip-mapped normal mapping: the micro roughness only)."""
+    mip-mapped normal mapping: the micro roughness only). ``mips``: optional
+    ``{object index: MipChain of the 5 moments}`` (or any object with the same
+    ``lookup_footprint``) replacing the materials' height-map chains (the acceptance feeds the
+    exact moments of the bilinear surface it ray traces)."""
     n = g.hit.size
     mean = np.zeros((n, 2))
     cov = np.zeros((n, 2, 2))
@@ -60,8 +95,10 @@ def leadr_stats(scene, g, *, meso: bool = True):
     for k in np.unique(g.object_id):
         m = g.object_id == k
         mat = scene.objects[int(k)].material
-        if mat.height_map is not None:
-            mom = mat.height_map.mip().lookup_footprint(g.uv[m], g.dudv[m])
+        if mips is not None and int(k) in mips:
+            mom = footprint_moments(mips[int(k)], g.uv[m], g.dudv[m])
+        elif mat.height_map is not None:
+            mom = footprint_moments(mat.height_map.mip(), g.uv[m], g.dudv[m])
         else:
             mom = np.zeros((int(m.sum()), 5))
         mu, c = shading_stats(mom, 0.0)
@@ -84,10 +121,13 @@ def _frame(g):
     return t, b, n, wo
 
 
-def shade_leadr_delta(scene, g, lights, *, meso: bool = True) -> np.ndarray:
-    """Radiance ``(N, 3)`` of the hit samples ``g`` under point and directional lights."""
+def shade_leadr_delta(scene, g, lights, *, meso: bool = True, shadowing: bool = True,
+                      mips=None) -> np.ndarray:
+    """Radiance ``(N, 3)`` of the hit samples ``g`` under point and directional lights:
+    closed-form specular (supplemental 3.3, with G2) + the diffuse grid (Algorithm 3 for one
+    light; ``shadowing`` multiplies it by ``G2 / G1``, :func:`shading.shadowing_ratio`)."""
     t, b, n, wo = _frame(g)
-    mean, cov, base, f0 = leadr_stats(scene, g, meso=meso)
+    mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips)
     incoming = []
     for pl in lights.points:
         d = pl.position - g.position
@@ -102,7 +142,8 @@ def shade_leadr_delta(scene, g, lights, *, meso: bool = True) -> np.ndarray:
         h = wo + wi
         h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-12)
         spec = point_light(wo, wi, mean, cov)[:, None] * schlick(f0, np.sum(h * wi, -1)[:, None])
-        diff = base * diffuse_directional(wo, wi, mean, cov, DIFFUSE_GRID)[:, None]
+        diff = base * diffuse_directional(wo, wi, mean, cov, DIFFUSE_GRID,
+                                          shadowing=shadowing)[:, None]
         out += (spec + diff) * e
     return out
 
@@ -128,49 +169,63 @@ def _env_rotation(t, b, n) -> np.ndarray:
 
 
 def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int = ENV_GRID,
-                    diffuse_grid: int = DIFFUSE_GRID, shadowed: bool = False) -> np.ndarray:
-    """Radiance ``(N, 3)`` of hits ``g``: environment specular (Simplified Algorithm 1, or
-    Algorithm 1 with self-shadowing if ``shadowed``) + SH diffuse (Simplified Algorithm 3) +
-    point/directional lights."""
+                    diffuse_grid: int = DIFFUSE_GRID, shadowing: bool = True,
+                    mips=None) -> np.ndarray:
+    """Radiance ``(N, 3)`` of hits ``g``: environment specular (Algorithm 1 with self-shadowing,
+    compiled; ``shadowing=False``: Simplified Algorithm 1) + diffuse (Simplified Algorithm 3 on
+    SH irradiance, plus :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``) +
+    point/directional lights (:func:`shade_leadr_delta`)."""
     t, b, n, wo = _frame(g)
-    mean, cov, base, f0 = leadr_stats(scene, g, meso=meso)
+    mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips)
     rot = _env_rotation(t, b, n)
     out = np.zeros((len(wo), 3))
     if env is not None:
-        if shadowed:
-            out += env_specular_shadowed(env, wo, mean, cov, n_grid, f0=f0, to_world=rot)
-        elif np.all(f0 == f0[:, :1]):
-            out += env_specular(env, wo, mean, cov, n_grid, f0=f0[:, 0], to_world=rot)
+        spec = lambda f: env_specular(env, wo, mean, cov, n_grid, f0=f, to_world=rot,  # noqa
+                                      shadowing=shadowing)
+        if np.all(f0 == f0[:, :1]):
+            out += spec(f0[:, 0])
         elif np.any(f0 != 0.0):
             # Schlick is linear in f0: F = f0 * 1 + (1 - f0) * (1 - c)^5.
-            one = env_specular(env, wo, mean, cov, n_grid, f0=1.0, to_world=rot)
-            out += f0 * one
+            out += f0 * spec(1.0)
             if np.any(f0 != 1.0):
-                zero = env_specular(env, wo, mean, cov, n_grid, f0=0.0, to_world=rot)
-                out += (1.0 - f0) * zero
-        else:
-            out += env_specular(env, wo, mean, cov, n_grid, f0=0.0, to_world=rot)
+                out += (1.0 - f0) * spec(0.0)
         if np.any(base != 0.0):
-            out += base * diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=rot)
+            diff = diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=rot)
+            if shadowing:
+                diff = np.maximum(diff + diffuse_shadowing(env, wo, mean, cov, diffuse_grid,
+                                                           to_world=rot), 0.0)
+            out += base * diff
     if lights.points or lights.directionals:
-        out += shade_leadr_delta(scene, g, lights, meso=meso)
+        out += shade_leadr_delta(scene, g, lights, meso=meso, shadowing=shadowing, mips=mips)
     return out
 
 
 def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
-                           diffuse_grid: int = DIFFUSE_GRID) -> np.ndarray:
-    """Diffuse radiance ``(N, 3)`` of hits ``g``: SH irradiance ``sh (9, 3)`` (environment and
-    directional lights, map coordinates) by Simplified Algorithm 3, point lights directly."""
+                           diffuse_grid: int = DIFFUSE_GRID, shadowing: bool = True,
+                           env=None, mips=None) -> np.ndarray:
+    """Diffuse radiance ``(N, 3)`` of hits ``g``: SH irradiance ``sh (9, 3)`` (environment, map
+    coordinates) by Simplified Algorithm 3 (plus the environment ``env``'s
+    :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``); point and directional
+    lights one by one (Algorithm 3 for one light, times ``G2 / G1`` if ``shadowing``)."""
     t, b, n, wo = _frame(g)
-    mean, cov, base, _ = leadr_stats(scene, g, meso=meso)
-    out = diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=_env_rotation(t, b, n))
+    mean, cov, base, _ = leadr_stats(scene, g, meso=meso, mips=mips)
+    rot = _env_rotation(t, b, n)
+    out = diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=rot)
+    if shadowing and env is not None:
+        out = np.maximum(out + diffuse_shadowing(env, wo, mean, cov, diffuse_grid, to_world=rot),
+                         0.0)
+    incoming = []
     for pl in lights.points:
         d = pl.position - g.position
         d2 = np.maximum(np.sum(d * d, -1), 1e-300)
-        wl = _local(d / np.sqrt(d2)[:, None], t, b, n)
+        incoming.append((d / np.sqrt(d2)[:, None], pl.intensity / d2[:, None]))
+    for dl in lights.directionals:
+        incoming.append((np.broadcast_to(-dl.direction, g.position.shape), dl.irradiance))
+    for w, e in incoming:
+        wl = _local(w, t, b, n)
         wl /= np.linalg.norm(wl, axis=-1, keepdims=True)
-        e = diffuse_directional(wo, wl, mean, cov, diffuse_grid)
-        out += e[:, None] * pl.intensity / d2[:, None]
+        out += diffuse_directional(wo, wl, mean, cov, diffuse_grid,
+                                   shadowing=shadowing)[:, None] * e
     return base * out
 
 
@@ -219,12 +274,13 @@ def env_specular_shadowed(env, wo, mean, cov, n: int = ENV_GRID, *, f0=None, to_
         rad = env.lookup(look, lod)
         lam_o = _gauss_lambda(o[:, None, :], mu, c)[:, 0]
         lam_i = _gauss_lambda(wi, mu, c)
-        with np.errstate(invalid="ignore"):
-            g = (1.0 + lam_o[:, None]) / (1.0 + lam_o[:, None] + lam_i)
+        # G2 / G1 as 1 / (1 + Lambda_i / (1 + Lambda_o)): 1 when the mesosurface faces away
+        # from the view (Lambda_o infinite; the result is then the simplified one, never black).
         # Light from below the geometric plane is blocked by the height field itself (a shadow
         # ray going down always hits it), as in the microfacet module's G2.
-        g = np.where(np.isfinite(lam_i) & np.isfinite(lam_o[:, None]) & (wi[..., 2] > 0.0), g,
-                     0.0)
+        with np.errstate(invalid="ignore"):
+            g = 1.0 / (1.0 + lam_i / (1.0 + lam_o[:, None]))
+        g = np.where(np.isfinite(lam_i) & (wi[..., 2] > 0.0), g, 0.0)
         wgt = area * g
         if f0 is not None:
             f = np.asarray(f0, np.float64).reshape(-1, nc)[sl]
@@ -248,7 +304,7 @@ def _lights_without_quads(scene, method):
     return scene.light_set()
 
 
-def _render_env(scene, settings, meso: bool, name: str, shadowed: bool = False) -> np.ndarray:
+def _render_env(scene, settings, meso: bool, name: str, shadowing: bool = True) -> np.ndarray:
     from prefilter.render.pipeline import render_samples
 
     lights = _lights_without_quads(scene, name)
@@ -256,33 +312,39 @@ def _render_env(scene, settings, meso: bool, name: str, shadowed: bool = False) 
     sh = sh9_project(env) if env is not None else np.zeros((9, 3))
     return render_samples(scene, settings,
                           lambda g, _u: shade_leadr_env(scene, g, env, sh, lights, meso=meso,
-                                                        shadowed=shadowed),
+                                                        shadowing=shadowing),
                           stratified=settings.spp > 1, desc=name)
 
 
-def _render_irradiance(scene, settings, meso: bool, name: str) -> np.ndarray:
+def _render_irradiance(scene, settings, meso: bool, name: str,
+                       shadowing: bool = True) -> np.ndarray:
     from prefilter.render.pipeline import render_samples
 
     lights = _lights_without_quads(scene, name)
     env = scene_environment(scene)
     sh = sh9_project(env) if env is not None else np.zeros((9, 3))
-    if lights.directionals:
-        dirs = np.stack([-dl.direction for dl in lights.directionals]) @ ENV_FROM_WORLD.T
-        sh = sh + sh9_directional(dirs, np.stack([dl.irradiance for dl in lights.directionals]))
     return render_samples(scene, settings,
-                          lambda g, _u: shade_leadr_irradiance(scene, g, sh, lights, meso=meso),
+                          lambda g, _u: shade_leadr_irradiance(scene, g, sh, lights, meso=meso,
+                                                               env=env, shadowing=shadowing),
                           stratified=settings.spp > 1, desc=name)
 
 
 def render_leadr_env(scene, settings) -> np.ndarray:
-    """The ``leadr-env`` method (environment, point and directional lights)."""
+    """The ``leadr-env`` method (environment, point and directional lights; self-shadowing in
+    every layer: Algorithms 1-3 of the paper)."""
     return _render_env(scene, settings, True, "leadr-env")
 
 
 def render_leadr_env_shadowed(scene, settings) -> np.ndarray:
-    """``leadr-env-shadowed``: ``leadr-env`` with self-shadowing in the environment specular
-    (the paper's Algorithm 1, NumPy path; diffuse and delta lights as ``leadr-env``)."""
-    return _render_env(scene, settings, True, "leadr-env-shadowed", shadowed=True)
+    """``leadr-env-shadowed``: the same as ``leadr-env`` since self-shadowing became the default
+    (kept so that existing scripts and scenes keep working)."""
+    return _render_env(scene, settings, True, "leadr-env-shadowed")
+
+
+def render_leadr_env_simplified(scene, settings) -> np.ndarray:
+    """``leadr-env-simplified``: the supplemental's Simplified Algorithms 1-3 (masking only, no
+    self-shadowing) for every layer and light."""
+    return _render_env(scene, settings, True, "leadr-env-simplified", shadowing=False)
 
 
 def render_leadr_env_naive(scene, settings) -> np.ndarray:
@@ -291,7 +353,8 @@ def render_leadr_env_naive(scene, settings) -> np.ndarray:
 
 
 def render_leadr_irradiance(scene, settings) -> np.ndarray:
-    """The ``leadr-irradiance`` method (diffuse layer; environment, point, directional lights)."""
+    """The ``leadr-irradiance`` method (diffuse layer; environment, point, directional lights;
+    with self-shadowing)."""
     return _render_irradiance(scene, settings, True, "leadr-irradiance")
 
 

@@ -271,13 +271,16 @@ def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
 
 
 def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0=None,
-                 lod_bias: float = 0.0, to_world=None, backend: str = "numba") -> np.ndarray:
-    """Rough specular microfacets under an environment map: Simplified Algorithm 1.
+                 lod_bias: float = 0.0, to_world=None, backend: str = "numba",
+                 shadowing: bool = False) -> np.ndarray:
+    """Rough specular microfacets under an environment map: Simplified Algorithm 1, or with
+    ``shadowing`` the paper's Algorithm 1 (each sample weighted by ``G2 / G1``, 0 below the
+    geometric plane; :func:`prefilter.leadr.render.env_specular_shadowed` is the NumPy path).
 
     Each grid micronormal reflects ``wo``; the radiance is read at the mip level whose texel solid
     angle matches the sample's: ``Omega = J * cell``, ``J = 4 |m.wo| |m.z|^3`` (supplemental eqs.
     1 and 3: slope area to solid angle), ``cell = h^2 sqrt(det Sigma)``,
-    ``LOD = log2(Omega / Omega_texel) / 2 + lod_bias``. Without self-shadowing.
+    ``LOD = log2(Omega / Omega_texel) / 2 + lod_bias``.
 
     Parameters
     ----------
@@ -303,7 +306,10 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
         raise PrefilterError(f"backend: expected 'numba' or 'numpy', got {backend!r}")
     if backend == "numba":
         return _env_specular_compiled(env, wo, mean_slope, slope_cov, n, spacing, f0, lod_bias,
-                                      to_world)
+                                      to_world, bool(shadowing))
+    if shadowing:
+        raise PrefilterError("backend: the NumPy path of env_specular has no shadowing; use "
+                             "backend='numba' or prefilter.leadr.render.env_specular_shadowed")
 
     def radiance(m, wi, jac, cell, tw):
         with np.errstate(divide="ignore"):
@@ -313,7 +319,8 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, f0, to_world)
 
 
-def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_world):
+def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_world,
+                           shadowing=False):
     from prefilter.leadr.envmap import packed_levels
     from prefilter.leadr.kernels import env_specular_kernel
 
@@ -335,7 +342,7 @@ def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_worl
     out = np.empty(flat_shape + (flat.shape[1],))
     env_specular_kernel(flat, offsets, shapes, env.texel_solid_angle, b(wo, (3,)), b(mu, (2,)),
                         b(np.asarray(cov, np.float64), (2, 2)), rot, p, w, h, f0a, f0 is not None,
-                        float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, out)
+                        float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, shadowing, out)
     return out.reshape(shape + (flat.shape[1],))
 
 
@@ -359,9 +366,73 @@ def diffuse_sh(sh_coeffs, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None
     return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, None, to_world)
 
 
-def diffuse_directional(wo, wl, mean_slope, slope_cov, n: int = 5, *, spacing=None) -> np.ndarray:
+def shadowing_ratio(wo, wi, mean_slope, slope_cov) -> np.ndarray:
+    """``G2 / G1 = (1 + Lambda(wo)) / (1 + Lambda(wo) + Lambda(wi))`` of non-centred Gaussian
+    slopes (LEADR supplemental eq. 9 and 3.3: the shadowing the simplified algorithms drop),
+    written ``1 / (1 + Lambda(wi) / (1 + Lambda(wo)))`` so a mesosurface facing away from ``wo``
+    (``Lambda(wo) = inf``) gives 1, not NaN; 0 when ``wi`` is below the mesosurface or the
+    geometric plane. ``(...)``."""
+    wo = as_directions(wo, "wo")
+    wi = as_directions(wi, "wi")
+    mu, sxx, syy, sxy = _stats(mean_slope, slope_cov)
+    lo = _lambda(wo, mu, sxx, syy, sxy, "exact")
+    li = _lambda(wi, mu, sxx, syy, sxy, "exact")
+    with np.errstate(invalid="ignore"):
+        g = 1.0 / (1.0 + li / (1.0 + lo))
+    return np.where(np.isfinite(li) & (wi[..., 2] > 0.0) & np.isfinite(g), g, 0.0)
+
+
+#: Rows of the environment level that :func:`diffuse_shadowing` integrates over.
+SHADOW_ROWS = 16
+
+
+def diffuse_shadowing(env, wo, mean_slope, slope_cov, n: int = 5, *, to_world=None,
+                      rows: int = SHADOW_ROWS) -> np.ndarray:
+    """What self-shadowing removes from the diffuse layer under ``env``, ``(..., C)`` (<= 0):
+    the paper's Algorithm 2 irradiance ``int L <m, wi> / (1 + Lambda_o + Lambda_i)`` minus
+    Simplified Algorithm 2's ``int L <m, wi>``, through Algorithm 3's grid (the projected-area
+    sum turns ``1 / (1 + Lambda_o + Lambda_i)`` into ``G2 / G1``):
+    ``-(1 / pi) sum W S int L <m, wi>+ (1 - G2 / G1) / sum W S``. Quadrature over the texels of
+    the environment's mip level with ``rows`` rows (``1 - G2 / G1`` is smooth: it lives near the
+    horizon); add it to :func:`diffuse_sh` (order-2 SH keeps the unshadowed part cheap).
+    Compiled (:func:`prefilter.leadr.kernels.diffuse_shadow_kernel`)."""
+    from prefilter.leadr.envmap import EnvMap, texel_directions
+    from prefilter.leadr.kernels import diffuse_shadow_kernel
+
+    if not isinstance(env, EnvMap):
+        raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
+    n = as_positive_int(n, "n")
+    rows = as_positive_int(rows, "rows")
+    wo = as_directions(wo, "wo")
+    mu, sxx, _, _ = _stats(mean_slope, slope_cov)
+    to_world = _as_rotation(to_world)
+    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
+                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}))
+    lev = next((a for a in env.levels if a.shape[0] <= rows), env.levels[-1])
+    d, omega = texel_directions(*lev.shape[:2])
+    lw = np.ascontiguousarray((lev * omega[..., None]).reshape(-1, lev.shape[2]))
+    flat = (int(np.prod(shape, dtype=np.int64)),)
+    b = lambda a, tail: np.ascontiguousarray(  # noqa: E731
+        np.broadcast_to(a, shape + tail).reshape(flat + tail), dtype=np.float64)
+    p, w, _ = gaussian_grid(n)
+    out = np.empty(flat + (lw.shape[1],))
+    diffuse_shadow_kernel(np.ascontiguousarray(d.reshape(-1, 3)), lw, b(wo, (3,)), b(mu, (2,)),
+                          b(np.asarray(slope_cov, np.float64), (2, 2)),
+                          b(np.eye(3) if to_world is None else to_world, (3, 3)), p, w, out)
+    return out.reshape(shape + (lw.shape[1],))
+
+
+def diffuse_directional(wo, wl, mean_slope, slope_cov, n: int = 5, *, spacing=None,
+                        shadowing: bool = False) -> np.ndarray:
     """Rough diffuse microfacets (albedo 1) lit by one directional light of unit radiance from
-    ``wl``: Simplified Algorithm 3 with ``E(m) = <m, wl>`` (supplemental 3.6); ``(...)``."""
+    ``wl``: Simplified Algorithm 3 with ``E(m) = <m, wl>`` (supplemental 3.6); ``(...)``.
+
+    ``shadowing=True``: the paper's Algorithm 3 with Algorithm 2's shadowed irradiance, which for
+    one light is ``E(m) = <m, wl> / (1 + Lambda_o + Lambda_l)``; with the projected-area sum
+    (supplemental eq. 10) this multiplies the simplified result by :func:`shadowing_ratio`."""
+    if shadowing:
+        return diffuse_directional(wo, wl, mean_slope, slope_cov, n, spacing=spacing) \
+            * shadowing_ratio(wo, wl, mean_slope, slope_cov)
     n = as_positive_int(n, "n")
     wl = as_directions(wl, "wl")
 
