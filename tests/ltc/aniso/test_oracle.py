@@ -70,3 +70,35 @@ def test_fit_quad_ltc_rejects_bad_input():
         fit_quad_ltc(quads, np.ones(4), 1.0, -np.eye(3))
     with pytest.raises(PrefilterError, match="reference"):
         fit_quad_ltc(quads, np.zeros(4), 1.0, np.eye(3))
+
+
+@pytest.mark.slow
+def test_quad_polish_improves_a_sub_table_on_held_out_quads(table):
+    """``bake.quad_polish`` on 2^4 nodes of the shipped table (view 0 / 61 deg, azimuth 0 / 90
+    deg, alpha 0.46 / 1, ratio 0.46 / 1): after the refit, the validation check, re-alignment
+    and eq. 16, the entries beat the originals on quads used neither for fitting nor checking."""
+    from prefilter.ltc import AnisoGGXTable
+    from prefilter.ltc.aniso.bake import QuadPolishSettings, quad_polish
+
+    sub = ([0, 5], [0, -1], [4, -1], [4, -1])
+    c = np.ix_(*sub)
+    settings = {**table.settings, "res_theta": 2, "res_phi": 2, "res_alpha": 2, "res_ratio": 2}
+    small = AnisoGGXTable([a[i] for a, i in zip(table.axes, sub)], table.M[c], table.magnitude[c],
+                          table.fresnel[c], settings)
+    polished = quad_polish(small, QuadPolishSettings(n_quads=16, lobe_samples=1024,
+                                                     light_samples=256), progress=False)
+    assert np.all(np.linalg.det(polished.M) > 0)
+    assert polished.settings["quad_polish"]["loss"] == "l1"
+    test = acceptance_quads(64, np.random.default_rng(21))
+    before, after = [], []
+    for i in np.ndindex(2, 2, 2, 2):
+        if i[0] == 0 and i[1] == 1:  # the normal view is the same entry for every azimuth
+            continue
+        th, ph, al, ra = (a[j] for a, j in zip(small.axes, i))
+        wo = np.array([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)])
+        ref = quad_references(wo, al, al * ra, test, 4096, 1024, np.random.default_rng(i))
+        before.append(np.mean(relative_errors(small.M[i], small.magnitude[i], test, ref)))
+        after.append(np.mean(relative_errors(polished.M[i], polished.magnitude[i], test, ref)))
+    # measured: mean 0.097 -> 0.083, no entry worse by more than 0.001
+    assert np.mean(after) < 0.9 * np.mean(before), (before, after)
+    assert np.all(np.array(after) < np.array(before) + 0.01), (before, after)

@@ -192,18 +192,20 @@ def _quad_estimates(x, clipped, magnitude):
     from prefilter.ltc.polygon import polygon_integral
 
     M = np.append(x[:8], 1.0).reshape(3, 3)
-    return magnitude * np.exp(x[8]) * polygon_integral(M, clipped)
+    scale = np.exp(x[8]) if len(x) > 8 else 1.0
+    return magnitude * scale * polygon_integral(M, clipped)
 
 
 def fit_quad_ltc(quads, reference, magnitude: float, M0, *, loss: str = "l2",
-                 threshold: float = 1e-3, max_nfev: int = 400) -> dict:
+                 threshold: float = 1e-3, max_nfev: int = 400, fit_scale: bool = True) -> dict:
     """The LTC (and magnitude scale) that best fits quad-light integrals of one lobe.
 
     Minimises the acceptance metric itself, the relative error
     ``magnitude * s * polygon_integral(M, clip_to_horizon(P_k)) / r_k - 1`` over training quads
     ``P_k`` with references ``r_k >= threshold`` (:data:`QUAD_LOSSES`), by
     ``scipy.optimize.least_squares`` (trust region, finite differences) over the 8 free entries
-    of ``M`` (``M_22 = 1``) and ``log s``, started from ``M0``.
+    of ``M`` (``M_22 = 1``) and ``log s`` (``s = 1`` fixed unless ``fit_scale``), started from
+    ``M0``.
 
     Parameters
     ----------
@@ -238,7 +240,9 @@ def fit_quad_ltc(quads, reference, magnitude: float, M0, *, loss: str = "l2",
         except PrefilterError:  # a singular trial matrix: steer the trust region away
             return np.full(len(rk), 1e3)
 
-    x0 = np.append((M0 / M0[2, 2]).reshape(-1)[:8], 0.0)
+    x0 = (M0 / M0[2, 2]).reshape(-1)[:8]
+    if fit_scale:
+        x0 = np.append(x0, 0.0)
     kind, f_scale = QUAD_LOSSES[loss]
     res = least_squares(residual, x0, loss=kind, f_scale=f_scale, method="trf",
                         x_scale="jac", diff_step=1e-6, max_nfev=max_nfev)
@@ -253,5 +257,5 @@ def fit_quad_ltc(quads, reference, magnitude: float, M0, *, loss: str = "l2",
         e[keep] = np.abs(residual(xx))
         return e
 
-    return {"M": M, "scale": float(np.exp(x[8])), "train_error": errors(x),
+    return {"M": M, "scale": float(np.exp(x[8])) if fit_scale else 1.0, "train_error": errors(x),
             "start_error": errors(x0)}

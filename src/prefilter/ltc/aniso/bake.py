@@ -29,6 +29,7 @@ from prefilter.ltc.aniso.fit import (
     lobe_moments,
 )
 from prefilter.ltc.aniso.symmetry import enforce
+from prefilter.ltc.polygon import clip_to_horizon
 from prefilter.ltc.aniso.table import TABLE_VERSION, AnisoGGXTable, default_table_path
 
 
@@ -207,3 +208,122 @@ def finish_table(settings: BakeSettings, entries, M_raw, loss=None, *,
     shape = M.shape[:4]
     return AnisoGGXTable(axes, M, mom["magnitude"].reshape(shape), mom["fresnel"].reshape(shape),
                          settings.to_dict(), diagnostics)
+
+
+# --------------------------------------------------------------------------------------------
+# Quad-light polish (beyond the paper; docs/ltc-aniso.md, "What limits the p90")
+# --------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class QuadPolishSettings:
+    """Settings of :func:`quad_polish` (stored in the table's settings when applied)."""
+
+    #: Training quads, drawn like the acceptance's and shared by every entry; with their
+    #: mirror images in x, y and both (the symmetries of eq. 16), so ``4 n_quads`` in all.
+    n_quads: int = 24
+    #: Validation quads (as many, another seed): a refit is kept only if it lowers the
+    #: objective on them (sharp lobes light few quads and overfit).
+    lobe_samples: int = 2048
+    light_samples: int = 512
+    #: Objective of :func:`~prefilter.ltc.aniso.accept.fit_quad_ltc` ("l1" or "l2").
+    loss: str = "l1"
+    #: Seed of the quads and references (never 0, the acceptance's seed).
+    seed: int = 1
+    processes: int = 1
+
+
+def _mirrored(quads):
+    """``quads (K, 4, 3)`` and their images under x -> -x, y -> -y and both ``(4K, 4, 3)``;
+    vertex order reversed for the single mirrors so that they stay front-facing."""
+    out = [quads]
+    for s, rev in (((-1, 1, 1), True), ((1, -1, 1), True), ((-1, -1, 1), False)):
+        q = quads * np.array(s, float)
+        out.append(q[:, ::-1] if rev else q)
+    return np.concatenate(out)
+
+
+def _objective(err, loss):
+    return np.mean(err**2) if loss == "l2" else np.mean(err)
+
+
+def _polish_job(args):
+    from prefilter.ltc.aniso.accept import fit_quad_ltc, quad_references
+    from prefilter.ltc.polygon import polygon_integral
+
+    wo, ax, ay, mag, M0, quads, valid, idx, qs = args
+    out = np.array(M0, copy=True)
+    kept = np.zeros(len(wo), bool)
+    clipped = clip_to_horizon(valid)
+    for j in range(len(wo)):
+        refs = [quad_references(wo[j], ax[j], ay[j], q, qs.lobe_samples, qs.light_samples,
+                                np.random.default_rng([qs.seed, k, int(idx[j])]))
+                for k, q in enumerate((quads, valid))]
+        if min(np.count_nonzero(r >= 1e-3) for r in refs) < 8:
+            continue  # too few lit quads to fit or to judge: keep the density fit
+        M = fit_quad_ltc(quads, refs[0], mag[j], M0[j], loss=qs.loss, fit_scale=False)["M"]
+        lit = refs[1] >= 1e-3
+
+        def err(m):
+            return np.abs(mag[j] * polygon_integral(m, clipped[lit]) / refs[1][lit] - 1.0)
+
+        if _objective(err(M), qs.loss) < _objective(err(M0[j]), qs.loss):
+            out[j], kept[j] = M, True
+    return out, kept
+
+
+def quad_polish(table: AnisoGGXTable, qs: QuadPolishSettings = QuadPolishSettings(), *,
+                progress: bool = True) -> AnisoGGXTable:
+    """Refit every entry of ``table`` on the acceptance metric, then re-align and apply eq. 16.
+
+    Per entry, :func:`~prefilter.ltc.aniso.accept.fit_quad_ltc` (magnitude fixed) started from
+    the stored matrix, on quads shared by all entries (``qs.n_quads`` and their mirror images)
+    with MC references (:func:`~prefilter.ltc.aniso.accept.quad_references`); the refit is kept
+    only where it is better on as many validation quads. Magnitude and Fresnel are unchanged;
+    ``diagnostics["quad_polished"]`` marks the refitted entries.
+    """
+    from prefilter.ltc.aniso.accept import QUAD_LOSSES, acceptance_quads
+
+    if qs.loss not in QUAD_LOSSES or qs.seed == 0:
+        raise PrefilterError(f"quad polish: expected loss in {sorted(QUAD_LOSSES)} and a seed "
+                             f"other than 0 (the acceptance's), got {qs.loss!r}, {qs.seed}")
+    settings = BakeSettings(**{k: v for k, v in table.settings.items()
+                               if k in BakeSettings.__dataclass_fields__ and k != "sw"})
+    th, ph, al, ra = table.axes
+    entries = grid_entries(settings)
+    i = entries["index"]
+    wo = np.stack([np.sin(th[i[:, 0]]) * np.cos(ph[i[:, 1]]),
+                   np.sin(th[i[:, 0]]) * np.sin(ph[i[:, 1]]), np.cos(th[i[:, 0]])], -1)
+    ax, ay = al[i[:, 2]], al[i[:, 2]] * ra[i[:, 3]]
+    M0 = table.M[i[:, 0], i[:, 1], i[:, 2], i[:, 3]]
+    mag = table.magnitude[i[:, 0], i[:, 1], i[:, 2], i[:, 3]]
+    quads = _mirrored(acceptance_quads(qs.n_quads, np.random.default_rng([qs.seed, 0])))
+    valid = _mirrored(acceptance_quads(qs.n_quads, np.random.default_rng([qs.seed, 1])))
+    jobs = [(wo[s:s + 32], ax[s:s + 32], ay[s:s + 32], mag[s:s + 32], M0[s:s + 32], quads,
+             valid, np.arange(s, min(s + 32, len(wo))), qs) for s in range(0, len(wo), 32)]
+    if qs.processes > 1:
+        import multiprocessing
+
+        pool = multiprocessing.get_context("fork").Pool(qs.processes)
+        results = pool.imap(_polish_job, jobs)
+    else:
+        pool, results = None, map(_polish_job, jobs)
+    if progress:
+        from tqdm import tqdm
+
+        results = tqdm(results, total=len(jobs), desc="ltc-aniso quad polish", unit="chunk")
+    try:
+        parts = list(results)
+    finally:
+        if pool is not None:
+            pool.close()
+    M = np.concatenate([p[0] for p in parts])
+    kept = np.concatenate([p[1] for p in parts])
+    aligned = align(M)["M"]
+    aligned /= np.linalg.norm(aligned[..., :, 2], axis=-1)[..., None, None]
+    M_new = enforce(_fill(settings, entries, aligned), th, ph, ra)
+    diagnostics = dict(table.diagnostics)
+    diagnostics["quad_polished"] = _fill(settings, entries, kept)
+    diagnostics["quad_polish_change"] = np.abs(M_new - table.M).max(axis=(-2, -1))
+    return AnisoGGXTable(table.axes, M_new, table.magnitude, table.fresnel,
+                         {**table.settings, "quad_polish": asdict(qs)}, diagnostics)
