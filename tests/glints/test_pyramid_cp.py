@@ -87,3 +87,42 @@ def test_prefix_sums_and_blocks():
     img = np.arange(16.0).reshape(4, 4)
     blk = cut_blocks(img, 2)
     np.testing.assert_array_equal(blk[1, 0], [[8, 9], [12, 13]])
+
+
+def test_allocate_ranks_is_optimal_for_the_bytes_it_uses():
+    """Brute force over all allocations of a small problem: none within the same bytes has a
+    smaller predicted error, and the budget is respected."""
+    import itertools
+
+    from prefilter.glints.cp import allocate_ranks
+
+    rng = np.random.default_rng(0)
+    base, cand, p = 4, [4, 6, 8, 12], 2.0
+    for _ in range(5):
+        e = rng.random(5) ** 3 * 10
+        u = rng.integers(5, 60, 5).astype(float)
+        budget = rng.uniform(4.5, 11) * u.sum()
+        r = allocate_ranks(e, u, base, cand, budget, p)
+        used = float(u @ r)
+        assert used <= budget + 1e-9
+        pred = float(np.sum(e * (r / base) ** -p))
+        best = min(np.sum(e * (np.array(c) / base) ** -p)
+                   for c in itertools.product(cand, repeat=5) if u @ np.array(c) <= used + 1e-9)
+        assert pred <= best * (1 + 1e-12)
+    # a budget below the base rank keeps everything at the base; a huge one takes the maximum
+    np.testing.assert_array_equal(allocate_ranks(e, u, base, cand, 0.0, p), base)
+    np.testing.assert_array_equal(allocate_ranks(e, u, base, cand, 1e9, p), 12)
+
+
+def test_nn_cp_batch_warm_start():
+    """Started from the exact factors of a rank-4 tensor, HALS stays there; bad shapes fail."""
+    rng = np.random.default_rng(1)
+    a, b, c = (rng.random((n, 4)) for n in (8, 8, 30))
+    T = reconstruct(a, b, c)
+    cold = nn_cp_batch([T], 4, n_iter_max=3, tol=0)[0][3]
+    warm = nn_cp_batch([T], 4, n_iter_max=3, tol=0, init=[(a, b, c)])[0][3]
+    assert warm < 1e-6 < cold
+    # extra components start small: the fit stays close to the exact one
+    assert nn_cp_batch([T], 6, n_iter_max=3, tol=0, init=[(a, b, c)])[0][3] < 0.05
+    with pytest.raises(PrefilterError, match="init"):
+        nn_cp_batch([T], 3, init=[(a, b, c)])

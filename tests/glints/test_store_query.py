@@ -11,7 +11,8 @@ from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints import pndf_image
 from prefilter.glints.bake import bake
 from prefilter.glints.query import block_means, point, range_mean
-from prefilter.glints.store import ARRAYS, decode, encode, load, save
+from prefilter.glints.store import (ARRAYS, Q, block_index_from_mask, decode, decode_v2,
+                                    encode, encode_v2, load, pack_mask, save)
 
 R, S, BLK = 32, 0.4, 8
 
@@ -112,14 +113,17 @@ def test_loader_rejects_bad_files(baked, tmp_path):
     for mutate, match in [
         (lambda a, h: h.update(version=99), "version"),
         (lambda a, h: a.pop("c"), "missing"),
-        (lambda a, h: a.update(c=-a["c"] - 1), "negative"),
-        (lambda a, h: a.update(c=a["c"].astype(np.float32)), "float16"),
-        (lambda a, h: a.update(group_rows=a["group_rows"][::-1].copy()), "group_rows"),
-        (lambda a, h: a.update(block_index=a["block_index"][:-1]), "block_index"),
-        (lambda a, h: h.update(version=1), "missing"),  # a version-2 layout labelled 1
+        (lambda a, h: a.update(c_scale=-a["c_scale"] - 1), "c_scale"),
+        (lambda a, h: a.update(c=a["c"].astype(np.float16)), "uint8"),
+        (lambda a, h: a.update(c=a["c"][:-1]), "kept blocks"),
+        (lambda a, h: a.update(ranks=a["ranks"] + 1), "sum of ranks"),
+        (lambda a, h: a.update(block_mask=a["block_mask"][:-1]), "block_mask"),
+        (lambda a, h: a.update(image_cell=a["image_cell"] + 10**6), "image_cell"),
+        (lambda a, h: h["ndf"].update(rank=1), "ranks"),
+        (lambda a, h: h.update(version=1), "missing"),  # a version-3 layout labelled 1
     ]:
         a = dict(arrays)
-        h = dict(header)
+        h = json.loads(json.dumps(header))
         mutate(a, h)
         a["header"] = np.array(json.dumps(h))
         np.savez(bad, **a)
@@ -132,20 +136,36 @@ def test_loader_rejects_bad_files(baked, tmp_path):
 
 def test_save_roundtrip_is_deterministic(baked, tmp_path):
     """A version-1 file (float32 prefix sums, written without the encoded arrays) loads to the
-    same arrays as the version-2 file it came from."""
+    same arrays as the version-3 file it came from."""
     _, out, _, gm = baked
     save(tmp_path / "again.npz", gm)
     g2 = load(tmp_path / "again.npz")
-    assert g2.header["version"] == 1 and gm.header["version"] == 2
+    assert g2.header["version"] == 1 and gm.header["version"] == 3
     for k in ARRAYS:
         np.testing.assert_array_equal(getattr(g2, k), getattr(gm, k))
-    # what is counted is what is on disk: the float16 factors, not the float32 prefix sums
-    assert gm.compressed_bytes < 0.6 * g2.compressed_bytes
+    # what is counted is what is on disk: the 8-bit factors, not the float32 prefix sums
+    assert gm.compressed_bytes < 0.35 * g2.compressed_bytes
+
+
+def test_version2_files_still_load(baked, tmp_path):
+    """A version-2 file (float16 factors of one rank) of the same factors loads to the same
+    in-memory arrays up to float16 rounding."""
+    _, _, _, gm = baked
+    nb = gm.block_index.shape[1]
+    G = gm.A.shape[0]
+    _, rows = block_index_from_mask(pack_mask(gm.block_index >= 0), gm.image_cell, nb, G)
+    a, b = np.diff(gm.A.astype(np.float64), axis=2), np.diff(gm.Bp.astype(np.float64), axis=2)
+    save(tmp_path / "v2.npz", gm, encode_v2(a, b, gm.C.astype(np.float64), rows))
+    g2 = load(tmp_path / "v2.npz")
+    assert g2.header["version"] == 2 and g2.ranks is None
+    np.testing.assert_array_equal(g2.block_index, gm.block_index)
+    np.testing.assert_allclose(g2.A, gm.A, atol=2e-3)
+    np.testing.assert_allclose(g2.C, gm.C, rtol=2e-3, atol=1e-3 * gm.C.max())
 
 
 def test_float16_encoding_error_is_rounding():
-    """decode(encode(.)) == the float64 factors to float16 rounding (2^-11 relative), including
-    block sums far above float16's range (per-group scales) and empty groups."""
+    """decode_v2(encode_v2(.)) == the float64 factors to float16 rounding (2^-11 relative),
+    including block sums far above float16's range (per-group scales) and empty groups."""
     rng = np.random.default_rng(3)
     G, Rk, Bs = 5, 4, 8
     a = rng.random((G, Rk, Bs))
@@ -154,7 +174,7 @@ def test_float16_encoding_error_is_rounding():
     b /= b.sum(axis=-1, keepdims=True)
     rows = np.array([0, 3, 3, 10, 11, 11])
     c = rng.random((11, Rk)) * 10.0 ** rng.integers(-3, 7, (11, 1))
-    A, Bp, C = decode(**encode(a, b, c, rows))
+    A, Bp, C = decode_v2(**encode_v2(a, b, c, rows))
     np.testing.assert_allclose(np.diff(A, axis=-1), a, rtol=2e-3, atol=1e-7)
     np.testing.assert_allclose(np.diff(Bp, axis=-1), b, rtol=2e-3, atol=1e-7)
     np.testing.assert_allclose(A[..., -1], 1.0, rtol=1e-6)
@@ -162,6 +182,56 @@ def test_float16_encoding_error_is_rounding():
                      for r0, r1 in zip(rows[:-1], rows[1:])])
     per_row = np.repeat(gmax, np.diff(rows), axis=0)
     assert np.all(np.abs(C - c) <= 1e-3 * per_row)
+
+
+def test_8bit_encoding_error_is_rounding():
+    """decode(encode(.)) of groups of different ranks (one empty) == the factors up to the
+    rounding bounds of 255 steps: ``|c' - c| <= m_c / 510``; for ``a`` (renormalised after
+    rounding, ``q_i = 255 a_i / m + d_i``, ``|d_i| <= 1/2``):
+    ``|a' - a| <= (m / 255) (1/2 + a B / 2) / (1 - B m / 510)``."""
+    rng = np.random.default_rng(4)
+    Bs, ranks, ks = 8, [3, 0, 5, 1], [4, 2, 7, 3]
+    groups = []
+    for r, k in zip(ranks, ks):
+        a = rng.random((r, Bs)) ** 4
+        a /= a.sum(axis=1, keepdims=True)
+        b = rng.random((r, Bs))
+        b /= b.sum(axis=1, keepdims=True)
+        groups.append((a, b, rng.random((k, r)) * 10.0 ** rng.integers(-3, 7, (1, r))))
+    enc = encode(groups)
+    assert enc["a"].dtype == np.uint8 and enc["c"].dtype == np.uint8
+    rows = np.concatenate([[0], np.cumsum(ks)])
+    A, Bp, C = decode(**enc, group_rows=rows, width=6)
+    assert A.shape == (4, 6, Bs + 1) and C.shape == (rows[-1], 6)
+    for g, (a, b, c) in enumerate(groups):
+        r = ranks[g]
+        for f, P in ((a, A), (b, Bp)):
+            m = f.max(axis=1, keepdims=True)
+            bound = m / 255 * (0.5 + 0.5 * Bs * f) / (1 - Bs * m / 510)
+            assert np.all(np.abs(np.diff(P[g, :r].astype(np.float64), axis=1) - f)
+                          <= bound + 1e-6)
+            assert np.all(P[g, r:] == 0)
+        Cg = C[rows[g]:rows[g + 1]].astype(np.float64)
+        assert np.all(np.abs(Cg[:, :r] - c) <= c.max(axis=0) / (2 * Q) * (1 + 1e-5))
+        assert np.all(Cg[:, r:] == 0)
+
+
+def test_block_index_from_mask_numbers_rows_by_group_then_image():
+    rng = np.random.default_rng(5)
+    N, nb = 12, 2
+    kept = rng.random((N, nb, nb)) < 0.6
+    cell = np.sort(rng.integers(0, 3, N)).astype(np.int32)
+    index, rows = block_index_from_mask(pack_mask(kept), cell, nb, 3 * nb * nb)
+    expect = np.full((N, nb, nb), -1)
+    k = 0
+    for g in range(3 * nb * nb):  # brute force: groups in order, images in order
+        c, blk = divmod(g, nb * nb)
+        for n in range(N):
+            if cell[n] == c and kept[n].ravel()[blk]:
+                expect[n].ravel()[blk] = k
+                k += 1
+        assert rows[g + 1] == k
+    np.testing.assert_array_equal(index, expect)
 
 
 def test_bake_resumes_from_parts(tmp_path):
@@ -173,8 +243,8 @@ def test_bake_resumes_from_parts(tmp_path):
     first = load(out)
     parts = tmp_path / "a.npz.parts"
     # forget one level-0 chunk and one compressed cell, as if the bake had died there
-    (parts / "000000.npz").unlink()
-    (parts / "100001.npz").unlink()
+    for chunk in ("000000", "100001", "099999", "500002"):
+        (parts / f"{chunk}.npz").unlink()
     out.unlink()
     s2 = bake(nm, out, **kw)
     again = load(out)
@@ -202,4 +272,6 @@ def test_cli_bake(tmp_path):
                                            "--rank", "4", "--ndf-res", "16", "--block", "8",
                                            "--cell", "8", "--iters", "10", "--quiet"])
     assert res.exit_code == 0, res.output
-    assert "ratio" in res.output and load(tmp_path / "o.npz").rank == 4
+    gm = load(tmp_path / "o.npz")
+    assert "ratio" in res.output and gm.header["settings"]["rank"] == 4
+    assert gm.rank == gm.ranks.max() <= 12  # --max-rank defaults to 3 x --rank

@@ -8,8 +8,12 @@ Stages, each resumable through :class:`prefilter._io.Checkpoints` (``<out>.parts
    differs from the one below by less than ``converge`` (relative L2) or the top is reached;
 3. per cell (``k x k`` footprint centres of ONE level, ``k = cell / stride0``: ``cell * 2^l``
    texels at level ``l``): blocks, blank blocks dropped, one ``(B, B, K)`` tensor per angular
-   block position ``(bi, bj)``, non-negative CP of all of the cell's tensors in one batch, factors
-   encoded in float16 (``store.encode``) and the error measured on what the loader decodes;
+   block position ``(bi, bj)`` (a group); (a) non-negative CP of every group at rank
+   ``rank // 2``, all of a cell's groups in one batch; (b) ranks per group under the storage
+   budget of ``rank`` on average (``cp.allocate_ranks``: largest predicted error drop per byte
+   first, up to ``max_rank``); (c) the promoted groups refitted at their rank, warm-started from
+   (a), the factors encoded in 8 bits (``store.encode``) and the error measured on what the
+   loader decodes;
 4. the final ``.npz`` written atomically, then the parts removed.
 
 Grouping deviates from the paper (which mixes all levels' blocks of a spatial cell in one tensor):
@@ -34,11 +38,15 @@ from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, _as_roughness, _as_support,
                                    as_normal_map, elements, pndf_image)
 from prefilter.glints.pyramid import level_difference, next_level, plan
-from prefilter.glints.store import GlintsMap, decode, encode, save
+from prefilter.glints.store import GlintsMap, decode, encode, pack_mask, save
 
 LEVEL0_CHUNK = 0
 LEVEL_CHUNK = 10_000
+ALLOC_CHUNK = 99_999
 CELL_CHUNK = 100_000
+FINAL_CHUNK = 500_000
+#: relative steps of the candidate ranks above the pass-1 rank ``base = rank // 2``
+RANK_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
 
 
 def _memmap(path, shape):
@@ -59,13 +67,19 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          sigma0: float | None = None, cell: int = 32, converge: float = 0.01,
          max_levels: int | None = None, blank_tol: float = 1e-4, n_iter_max: int = 50,
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
-         levels_dir=None) -> dict:
+         levels_dir=None, max_rank: int | None = None) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
     ``s`` (default 0.5: 128 pixels at the pitch of a 256-pixel image of the whole disk).
     ``levels_dir``: keep the uncompressed pyramid there (keyed by the NDF settings only) so bakes
     at several ranks share it; it is not removed at the end.
+
+    ``rank`` is the storage budget: the mean rank per group weighted by the group's bytes per
+    rank (``K_g + 2 B + 4``: one byte per kept block for ``c``, ``2 B`` for ``a``, ``b``, four
+    for the scale), i.e. the bytes a uniform rank ``rank`` would take. Groups get ranks between
+    ``rank // 2`` and ``max_rank`` (default ``3 rank``; it is the width of the in-memory factors,
+    so it sets the query cost). The summary reports the resulting mean and histogram.
     """
     from tqdm import tqdm
 
@@ -84,10 +98,19 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     if cell % pyr.stride0 or H % cell or W % cell:
         raise PrefilterError(f"cell: expected a multiple of stride0 dividing {H}x{W}, got {cell}")
     nb = R // B
+    max_rank = 3 * rank if max_rank is None else as_positive_int(max_rank, "max_rank")
+    if max_rank < rank:
+        raise PrefilterError(f"max_rank: expected at least rank = {rank}, got {max_rank}")
+    # pass 1 fits every group at rank // 2; the budget (rank per group on average, weighted by
+    # bytes) is then spent where the predicted error drop per byte is largest
+    base = max(1, rank // 2)
+    candidates = sorted({min(max_rank, max(base, round(base * f))) for f in RANK_STEPS}
+                        | {max_rank})
+    unit_bytes_group = 2 * B + 4  # per rank: a, b (uint8), c_scale (float32); + 1 per block (c)
     settings = dict(rank=rank, ndf_res=R, block=B, support=S, intrinsic_roughness=sr,
                     stride0=pyr.stride0, sigma0=pyr.sigma0, cell=cell, converge=converge,
                     max_levels=max_levels, blank_tol=blank_tol, n_iter_max=n_iter_max, tol=tol,
-                    seed=seed, layout=2)
+                    seed=seed, layout=3, max_rank=max_rank)
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
@@ -146,7 +169,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
             members.append([(lv, int(y), int(x)) for y, x in zip(iy.ravel()[sel], ix.ravel()[sel])])
     n_cells = len(members)
 
-    def compress_cell(cid):
+    def cell_tensors(cid):
         mem = members[cid]
         lv = mem[0][0]
         iy = np.array([m[1] for m in mem])
@@ -161,79 +184,130 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                 keep = np.flatnonzero(~blank[:, bi, bj])
                 where.append(keep)
                 tensors.append(np.ascontiguousarray(blocks[keep, bi, bj].transpose(1, 2, 0)))
+        return imgs, blocks, blank, tensors, where
+
+    def fit_cell(cid):
+        """Pass 1: every group of the cell at rank ``base``; its error drives the allocation."""
+        imgs, blocks, blank, tensors, where = cell_tensors(cid)
         live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
-        res = dict(zip(live, cpmod.nn_cp_batch([tensors[g] for g in live], rank,
+        res = dict(zip(live, cpmod.nn_cp_batch([tensors[g] for g in live], base,
                                                n_iter_max=n_iter_max, tol=tol, seed=seed + cid)))
-        a = np.zeros((nb * nb, rank, B))
+        rows = np.concatenate([[0], np.cumsum([len(w) for w in where])]).astype(np.int64)
+        local = np.full(blank.shape, -1, np.int32)
+        a = np.zeros((nb * nb, base, B), np.float32)
         b = np.zeros_like(a)
-        cs, local = [], np.full(blank.shape, -1, np.int32)
-        rows = np.zeros(nb * nb + 1, np.int64)
-        for g in range(nb * nb):
-            if g in res:
-                ag, bg, cg, _ = res[g]
-                bi, bj = divmod(g, nb)
-                a[g], b[g] = ag.T, bg.T
-                local[where[g], bi, bj] = rows[g] + np.arange(len(where[g]), dtype=np.int32)
-                cs.append(cg)
-            rows[g + 1] = rows[g] + (len(where[g]) if g in res else 0)
-        c = np.concatenate(cs) if cs else np.zeros((0, rank))
-        enc = encode(a, b, c, rows)
-        # the error of what is stored: the float16 factors decoded as the loader does
-        A_, B_, C_ = decode(**enc)
-        a_s, b_s = np.diff(A_.astype(np.float64), axis=2), np.diff(B_.astype(np.float64), axis=2)
-        err2 = np.einsum("nabij,nabij->", blocks, blocks * blank[..., None, None])
-        for g in live:
+        c = np.zeros((rows[-1], base), np.float32)
+        err2_g = np.zeros(nb * nb)
+        for g, (ag, bg, cg, e) in res.items():
             bi, bj = divmod(g, nb)
-            rec = cpmod.reconstruct(a_s[g].T, b_s[g].T, C_[rows[g]:rows[g + 1]].astype(np.float64))
-            d = rec - tensors[g]
-            err2 += np.einsum("ijk,ijk->", d, d)
+            local[where[g], bi, bj] = rows[g] + np.arange(len(where[g]), dtype=np.int32)
+            a[g], b[g], c[rows[g]:rows[g + 1]] = ag.T, bg.T, cg
+            err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g])
         mass = imgs.sum(axis=(1, 2)) * (2 * S / R) ** 2
-        ck.save(CELL_CHUNK + cid, **enc, local=local, err2=np.array(err2),
+        ck.save(CELL_CHUNK + cid, a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g,
+                blank2=np.array(np.einsum("nabij,nabij->", blocks,
+                                          blocks * blank[..., None, None])),
                 norm2=np.array(np.einsum("nij,nij->", imgs, imgs)), kept=np.array((~blank).sum()),
                 mass=mass)
         return cid
 
-    pending = [cid for cid in range(n_cells) if not ck.done(CELL_CHUNK + cid)]
-    workers = max(1, min(os.cpu_count() or 1, len(pending)))
-    with cpmod.single_threaded_blas(), ThreadPoolExecutor(workers) as pool, \
-            tqdm(total=n_cells, initial=n_cells - len(pending), desc="CP compression",
-                 disable=not progress) as bar:
-        for _ in pool.map(compress_cell, pending):
-            bar.update(1)
+    def refit_cell(cid):
+        """Pass 2: the groups given a larger rank, warm-started from pass 1; 8-bit encoding; the
+        error measured on what the loader decodes."""
+        _, _, _, tensors, _ = cell_tensors(cid)
+        p1 = ck.load(CELL_CHUNK + cid)
+        rows, r_cell = p1["rows"], alloc[cid * nb * nb:(cid + 1) * nb * nb]
+        first = {g: (p1["a"][g].T.astype(np.float64), p1["b"][g].T.astype(np.float64),
+                     p1["c"][rows[g]:rows[g + 1]].astype(np.float64)) for g in range(nb * nb)}
+        fits = dict(first)
+        for r in sorted(set(r_cell.tolist()) - {0, base}):
+            gs = [g for g in range(nb * nb) if r_cell[g] == r]
+            out = cpmod.nn_cp_batch([tensors[g] for g in gs], int(r), n_iter_max=n_iter_max,
+                                    tol=tol, seed=seed + cid, init=[first[g] for g in gs])
+            fits.update({g: o[:3] for g, o in zip(gs, out)})
+        groups = [(fits[g][0].T, fits[g][1].T, fits[g][2]) if r_cell[g] else
+                  (np.zeros((0, B)), np.zeros((0, B)), np.zeros((rows[g + 1] - rows[g], 0)))
+                  for g in range(nb * nb)]
+        enc = encode(groups)
+        A_, B_, C_ = decode(**enc, group_rows=rows)
+        a_s, b_s = np.diff(A_.astype(np.float64), axis=2), np.diff(B_.astype(np.float64), axis=2)
+        err2_g = np.zeros(nb * nb)
+        for g in range(nb * nb):
+            if rows[g + 1] > rows[g]:
+                d = cpmod.reconstruct(a_s[g].T, b_s[g].T,
+                                      C_[rows[g]:rows[g + 1]].astype(np.float64)) - tensors[g]
+                err2_g[g] = np.einsum("ijk,ijk->", d, d)
+        ck.save(FINAL_CHUNK + cid, **enc, err2_g=err2_g)
+        return cid
+
+    def run(fn, cids, desc):
+        pending = [c for c in cids if not ck.done((CELL_CHUNK if fn is fit_cell else FINAL_CHUNK)
+                                                  + c)]
+        workers = max(1, min(os.cpu_count() or 1, len(pending)))
+        with cpmod.single_threaded_blas(), ThreadPoolExecutor(workers) as pool, \
+                tqdm(total=len(cids), initial=len(cids) - len(pending), desc=desc,
+                     disable=not progress) as bar:
+            for _ in pool.map(fn, pending):
+                bar.update(1)
+
+    t_cp = time.perf_counter()
+    run(fit_cell, range(n_cells), f"CP rank {base}")
+    t_cp1 = time.perf_counter()
+    # allocation: predicted error drop per byte over all groups of the map (cp.allocate_ranks)
+    if not ck.done(ALLOC_CHUNK):
+        err2_all, counts = [], []
+        for cid in range(n_cells):
+            p1 = ck.load(CELL_CHUNK + cid)
+            err2_all.append(p1["err2_g"])
+            counts.append(np.diff(p1["rows"]))
+        counts = np.concatenate(counts)
+        unit = np.where(counts > 0, counts + unit_bytes_group, 0.0)
+        ranks_ = cpmod.allocate_ranks(np.concatenate(err2_all), unit, base, candidates,
+                                      budget=rank * unit.sum())
+        ck.save(ALLOC_CHUNK, ranks=np.where(counts > 0, ranks_, 0).astype(np.int64))
+    alloc = ck.load(ALLOC_CHUNK)["ranks"]
+    run(refit_cell, range(n_cells), "CP refit")
+    t_cp2 = time.perf_counter()
 
     # 4. assemble
-    parts = {k: [] for k in ("a", "b", "c", "c_scale")}
+    parts = {k: [] for k in ("ranks", "a", "b", "c", "c_scale")}
     block_index = np.full((pyr.n_images, nb, nb), -1, np.int32)
     image_cell = np.zeros(pyr.n_images, np.int32)
     group_rows = [np.zeros(1, np.int64)]
     err2 = np.zeros(pyr.n_levels)
     norm2 = np.zeros(pyr.n_levels)
-    kept, masses, k0 = 0, [], 0
+    kept, masses, k0, err2_groups = 0, [], 0, []
     for cid in range(n_cells):
-        part = ck.load(CELL_CHUNK + cid)
+        p1, part = ck.load(CELL_CHUNK + cid), ck.load(FINAL_CHUNK + cid)
         lv = members[cid][0][0]
         flat = np.array([offsets[lv] + iy * pyr.shape(lv)[1] + ix for _, iy, ix in members[cid]],
                         dtype=np.int64)
-        loc = part["local"]
+        loc = p1["local"]
         block_index[flat] = np.where(loc >= 0, loc + k0, -1)
         image_cell[flat] = cid
-        group_rows.append(part["group_rows"][1:] + k0)
-        k0 += part["c"].shape[0]
+        group_rows.append(p1["rows"][1:] + k0)
+        k0 += int(p1["rows"][-1])
         for k in parts:
             parts[k].append(part[k])
-        err2[lv] += float(part["err2"])
-        norm2[lv] += float(part["norm2"])
-        kept += int(part["kept"])
-        masses.append(part["mass"])
+        err2[lv] += float(part["err2_g"].sum() + p1["blank2"])
+        err2_groups.append(part["err2_g"])
+        norm2[lv] += float(p1["norm2"])
+        kept += int(p1["kept"])
+        masses.append(p1["mass"])
     raw_bytes = pyr.n_images * R * R * 4
     elapsed = time.perf_counter() - t_start
     per_level = np.sqrt(err2 / np.maximum(norm2, 1e-300))
     enc = {k: np.concatenate(v) for k, v in parts.items()}
-    enc["group_rows"] = np.concatenate(group_rows)
-    A, Bp, C = decode(**enc)
+    width = int(enc["ranks"].max(initial=0))
+    A, Bp, C = decode(**enc, group_rows=np.concatenate(group_rows), width=width)
+    on_disk = dict(enc, block_mask=pack_mask(block_index >= 0), image_cell=image_cell)
     gm = GlintsMap(header={}, A=A, Bp=Bp, C=C, block_index=block_index, image_cell=image_cell,
-                   stored_bytes=sum(v.nbytes for v in enc.values()) + block_index.nbytes
-                   + image_cell.nbytes)
+                   stored_bytes=sum(v.nbytes for v in on_disk.values()),
+                   ranks=enc["ranks"].astype(np.int32))
+    live = enc["ranks"] > 0
+    unit = np.diff(np.concatenate(group_rows)) + unit_bytes_group
+    e2g = np.concatenate(err2_groups)
+    top = np.sort(e2g)[::-1]
     summary = dict(
         raw_bytes=int(raw_bytes), compressed_bytes=gm.compressed_bytes,
         ratio=gm.compressed_bytes / raw_bytes,
@@ -241,13 +315,22 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         rel_l2_error_per_level=[float(x) for x in per_level], level_differences=diffs,
         blocks_kept=kept, blocks_total=int(pyr.n_images * nb * nb),
         mean_mass_in_support=float(np.concatenate(masses).mean()), n_images=pyr.n_images,
-        seconds=elapsed,
+        mean_rank=float(enc["ranks"][live].mean()) if live.any() else 0.0,
+        mean_rank_per_byte=float(unit[live] @ enc["ranks"][live] / max(unit[live].sum(), 1)),
+        max_rank=width,
+        rank_histogram={int(r): int(n) for r, n in zip(*np.unique(enc["ranks"][live],
+                                                                 return_counts=True))},
+        bytes={k: int(v.nbytes) for k, v in on_disk.items()},
+        err2_share_top10pct_groups=float(top[:max(1, live.sum() // 10)].sum()
+                                         / max(top.sum(), 1e-300)),
+        seconds=elapsed, seconds_cp=[t_cp1 - t_cp, t_cp2 - t_cp1],  # pass 1, pass 2
     )
     # the wall time stays out of the file: the same bake must give the same bytes
-    gm.header = dict(pyramid=pyr.to_dict(), ndf=dict(resolution=R, support=S, block=B, rank=rank,
+    gm.header = dict(pyramid=pyr.to_dict(), ndf=dict(resolution=R, support=S, block=B, rank=width,
                                                      intrinsic_roughness=sr, sigma_h=SIGMA_H),
                      settings=settings, map_sha1=digest,
-                     summary={k: v for k, v in summary.items() if k != "seconds"})
+                     summary={k: v for k, v in summary.items()
+                              if not k.startswith("seconds")})
     save(out, gm, enc)
     if not keep_parts:
         ck.clear()

@@ -45,7 +45,12 @@ def load_normal_map(spec: str) -> np.ndarray:
 @click.argument("normal_map")
 @click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
               help="Output .npz (written atomically; parts in OUT.parts/ make it resumable).")
-@click.option("--rank", default=16, show_default=True, help="CP rank (paper: 16, 32 for flakes).")
+@click.option("--rank", default=16, show_default=True,
+              help="Mean CP rank per group: the storage budget, spent where the error drops most "
+                   "per byte (paper: a fixed rank 16, 32 for flakes).")
+@click.option("--max-rank", default=None, type=int,
+              help="Largest rank of a group (the width of the in-memory factors, which sets the "
+                   "query cost) [default: 3 x rank].")
 @click.option("--ndf-res", default=128, show_default=True, help="NDF image resolution.")
 @click.option("--block", default=16, show_default=True, help="Block size B of the NDF images.")
 @click.option("--support", default=0.5, show_default=True,
@@ -61,8 +66,8 @@ def load_normal_map(spec: str) -> np.ndarray:
 @click.option("--iters", default=50, show_default=True, help="Max CP iterations per group.")
 @click.option("--seed", default=0, show_default=True)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def bake_glints(normal_map, out, rank, ndf_res, block, support, roughness, stride0, sigma0, cell,
-                converge, iters, seed, quiet):
+def bake_glints(normal_map, out, rank, max_rank, ndf_res, block, support, roughness, stride0,
+                sigma0, cell, converge, iters, seed, quiet):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
@@ -73,11 +78,16 @@ def bake_glints(normal_map, out, rank, ndf_res, block, support, roughness, strid
     nm = load_normal_map(normal_map)
     summary = bake(nm, out, rank=rank, ndf_res=ndf_res, block=block, support=support,
                    intrinsic_roughness=roughness, stride0=stride0, sigma0=sigma0, cell=cell,
-                   converge=converge, n_iter_max=iters, seed=seed, progress=not quiet)
+                   converge=converge, n_iter_max=iters, seed=seed, progress=not quiet,
+                   max_rank=max_rank)
     s = summary
     click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
     click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "
                f"{s['compressed_bytes'] / 2**20:.2f} MiB, ratio {100 * s['ratio']:.2f} %")
+    click.echo(f"ranks: mean {s['mean_rank']:.1f} per group, {s['mean_rank_per_byte']:.1f} per "
+               f"byte, max {s['max_rank']}; " + ", ".join(f"{v} x {k}" for k, v in
+                                                        s["rank_histogram"].items()))
+    click.echo("bytes: " + ", ".join(f"{k} {v / 2**20:.2f} MiB" for k, v in s["bytes"].items()))
     click.echo(f"relative L2 error {100 * s['rel_l2_error']:.2f} % (per level: "
                + ", ".join(f"{100 * e:.1f}" for e in s["rel_l2_error_per_level"]) + ")")
     click.echo(f"time {s['seconds']:.1f} s -> {out}")

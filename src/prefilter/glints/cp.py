@@ -22,8 +22,10 @@ import ctypes
 import glob
 import os
 
+import numba
 import numpy as np
 
+from prefilter._numba import FASTMATH
 from prefilter._validate import as_positive_int
 from prefilter.errors import PrefilterError
 
@@ -174,14 +176,44 @@ def _hals(T, R, n_iter_max, tol, seed):
     return a, b, c
 
 
+@numba.njit(fastmath=FASTMATH, cache=True, nogil=True)
+def _hals_columns(F, M, G, eps, pad, tiny):
+    """One HALS sweep over the columns of every ``F[g] (rows, R)`` in place, for
+    ``min |X_g - F_g W_g^T|`` with ``M = X W`` and ``G = W^T W``, floored at ``eps[g]``; rows with
+    ``pad[g, k]`` stay zero. Compiled (without the GIL: the bake runs cells in threads) because
+    the column loop is sequential: as NumPy it was ~R small operations per mode and iteration."""
+    n, rows, R = F.shape
+    for g in range(n):
+        for r in range(R):
+            d = max(G[g, r, r], tiny)
+            for k in range(rows):
+                if pad[g, k]:
+                    F[g, k, r] = 0.0
+                    continue
+                acc = M[g, k, r]
+                for q in range(R):
+                    acc -= F[g, k, q] * G[g, q, r]
+                v = F[g, k, r] + acc / d
+                F[g, k, r] = v if v > eps[g] else eps[g]
+
+
 def nn_cp_batch(tensors: list[np.ndarray], rank: int, *, n_iter_max: int = 100,
-                tol: float = 1e-5, seed: int = 0
-                ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
+                tol: float = 1e-5, seed: int = 0, init: list | None = None,
+                dtype=np.float32) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, float]]:
     """:func:`nn_cp` (method ``"hals"``) of many small ``(I, J, K_g)`` tensors at once.
 
     The tensors are zero-padded to a common ``K`` and updated together with batched matrix
     products, so the Python overhead per iteration is paid once per batch instead of once per
     group (a bake has thousands of groups). Padding rows of ``c`` only fit zeros and are dropped.
+
+    ``init``: optional ``(a (I, r0), b (J, r0), c (K_g, r0))`` per tensor, ``r0 <= rank`` (a
+    lower-rank fit): its terms start the first ``r0`` components (warm start), the others start
+    random at a tenth of the usual scale, so the fit starts near the lower-rank optimum.
+
+    ``dtype``: of the iterations. float32 halves the time of the batched products (they are the
+    cost) and changed the error of a rank-24 fit of a level-0 cell of the 512^2 gaussian map from
+    5.237 % to 5.255 %; the returned factors and errors are float64 (computed against the
+    float64 tensors).
     """
     if not tensors:
         return []
@@ -190,19 +222,38 @@ def nn_cp_batch(tensors: list[np.ndarray], rank: int, *, n_iter_max: int = 100,
     Ks = [t.shape[2] for t in tensors]
     Km = max(Ks)
     n = len(tensors)
-    T = np.zeros((n, I, J, Km))
+    T = np.zeros((n, I, J, Km), dtype)
     for g, t in enumerate(tensors):
         T[g, :, :, : t.shape[2]] = t
     rng = np.random.default_rng(seed)
     norms = np.sqrt(np.einsum("gijk,gijk->g", T, T))
     normT2 = np.maximum(norms**2, 1e-300)
     scale = (np.maximum(norms, 1e-300) / np.sqrt(I * J * np.array(Ks))) ** (1.0 / 3.0)
-    a = rng.random((n, I, R)) * scale[:, None, None]
-    b = rng.random((n, J, R)) * scale[:, None, None]
-    c = rng.random((n, Km, R)) * scale[:, None, None]
+    a = (rng.random((n, I, R)) * scale[:, None, None]).astype(dtype)
+    b = (rng.random((n, J, R)) * scale[:, None, None]).astype(dtype)
+    c = (rng.random((n, Km, R)) * scale[:, None, None]).astype(dtype)
     pad = np.arange(Km)[None, :] >= np.array(Ks)[:, None]
+    if init is not None:
+        if len(init) != n:
+            raise PrefilterError(f"init: expected {n} factor triples, got {len(init)}")
+        a *= 0.1
+        b *= 0.1
+        c *= 0.1
+        for g, (ag, bg, cg) in enumerate(init):
+            r0 = ag.shape[1]
+            if r0 > R or bg.shape != (J, r0) or ag.shape != (I, r0) or cg.shape != (Ks[g], r0):
+                raise PrefilterError(f"init: expected factors (I, r0), (J, r0), (K, r0) with "
+                                     f"r0 <= {R} for tensor {g}")
+            # a, b sum to 1 per column: spread the weight over the three modes like the init
+            w = np.cbrt(np.maximum(cg.max(axis=0), 0.0) * ag.max(axis=0) * bg.max(axis=0))
+            sa = np.where(ag.max(axis=0) > 0, w / np.maximum(ag.max(axis=0), 1e-300), 0.0)
+            sb = np.where(bg.max(axis=0) > 0, w / np.maximum(bg.max(axis=0), 1e-300), 0.0)
+            a[g, :, :r0] = ag * sa
+            b[g, :, :r0] = bg * sb
+            c[g, : Ks[g], :r0] = cg / np.maximum(sa * sb, 1e-300) * (sa * sb > 0)
     c[pad] = 0.0
     eps = (1e-9 * scale)[:, None]
+    tiny = np.finfo(dtype).tiny
     X12 = T.reshape(n, I * J, Km)  # Y = X12 @ c serves the MTTKRPs of modes a and b
 
     def kr(x, y):
@@ -211,16 +262,11 @@ def nn_cp_batch(tensors: list[np.ndarray], rank: int, *, n_iter_max: int = 100,
     def gram(x):
         return np.matmul(x.transpose(0, 2, 1), x)
 
+    no_pad = np.zeros((n, max(I, J)), bool)
+
     def update(F, M, G, mask=None):
-        Ft = np.ascontiguousarray(F.transpose(2, 0, 1))  # (R, n, rows): contiguous columns
-        Mt = M.transpose(2, 0, 1)
-        Gt = np.ascontiguousarray(G.transpose(1, 0, 2))  # (R, n, R)
-        for r in range(R):
-            num = Mt[r] - np.einsum("sgk,gs->gk", Ft, Gt[r], optimize=False)
-            Ft[r] = np.maximum(Ft[r] + num / np.maximum(Gt[r][:, r], 1e-300)[:, None], eps)
-            if mask is not None:
-                Ft[r][mask] = 0.0
-        F[...] = Ft.transpose(1, 2, 0)
+        _hals_columns(F, np.ascontiguousarray(M, dtype=dtype), np.ascontiguousarray(G, dtype=dtype),
+                      eps[:, 0].astype(dtype), no_pad if mask is None else mask, tiny)
 
     prev = np.full(n, np.inf)
     err = np.ones(n)
@@ -244,7 +290,7 @@ def nn_cp_batch(tensors: list[np.ndarray], rank: int, *, n_iter_max: int = 100,
             f *= np.where(ok, g / np.where(nf > 0, nf, 1.0), 1.0)[:, None, :]
     out = []
     for g, t in enumerate(tensors):
-        ag, bg, cg = a[g], b[g], c[g, : Ks[g]]
+        ag, bg, cg = (np.asarray(f, np.float64) for f in (a[g], b[g], c[g, : Ks[g]]))
         out.append(_normalised(ag, bg, cg, t))
     return out
 
@@ -262,7 +308,7 @@ def _normalised(a, b, c, T):
 
 def reconstruct(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """``T_hat (I, J, K) = sum_r a_r (x) b_r (x) c_r``."""
-    return np.einsum("ir,jr,kr->ijk", a, b, c, optimize=True)
+    return (_khatri_rao(a, b) @ c.T).reshape(a.shape[0], b.shape[0], c.shape[0])
 
 
 def prefix_sums(f: np.ndarray) -> np.ndarray:
@@ -270,3 +316,54 @@ def prefix_sums(f: np.ndarray) -> np.ndarray:
     out = np.zeros((f.shape[1], f.shape[0] + 1))
     np.cumsum(f.T, axis=1, out=out[:, 1:])
     return out
+
+
+def allocate_ranks(err2: np.ndarray, unit_bytes: np.ndarray, base: int, candidates,
+                   budget: float, p: float = 2.0) -> np.ndarray:
+    """Ranks per group that minimise the predicted total squared error under a storage budget.
+
+    Group ``g`` was fitted at rank ``base`` with squared error ``err2[g]``; at rank ``r`` its
+    error is predicted as ``err2[g] (r / base)^-p`` (``p = 2`` is the median slope measured on
+    NDF blocks of the 512^2 gaussian map, ranks 8-32) and it costs ``r unit_bytes[g]`` bytes.
+    Each group takes the candidate rank minimising ``error + lambda bytes``, with the smallest
+    ``lambda`` (bisection) whose total is within ``budget``: the Lagrangian relaxation of the
+    knapsack, optimal among allocations of at most the bytes it uses (the greedy "largest error
+    drop per byte first" with convex curves).
+
+    Parameters
+    ----------
+    err2 : (G,) squared errors at rank ``base``.
+    unit_bytes : (G,) bytes per rank of each group.
+    base : rank of the fit that measured ``err2``; candidates below it are ignored.
+    candidates : ranks a group may take (``base`` is always one).
+    budget : total bytes; at least ``base * unit_bytes.sum()`` is used whatever it is.
+
+    Returns
+    -------
+    (G,) int ranks.
+    """
+    e = np.asarray(err2, dtype=np.float64)
+    u = np.asarray(unit_bytes, dtype=np.float64)
+    cand = np.unique(np.array([base] + [int(r) for r in candidates if int(r) >= base]))
+    pred = e[:, None] * (cand[None, :] / base) ** (-float(p))  # (G, n)
+    cost = u[:, None] * cand[None, :]
+
+    def choose(lam):
+        return np.argmin(pred + lam * cost, axis=1)
+
+    def used(j):
+        return cost[np.arange(len(e)), j].sum()
+
+    j = choose(0.0)
+    if used(j) <= budget:
+        return cand[j]
+    lo, hi = 0.0, max(float(e.max()) / max(float(u[u > 0].min(initial=1.0)), 1e-300), 1e-300)
+    while used(choose(hi)) > budget and hi < 1e300:
+        hi *= 4.0
+    for _ in range(100):  # bisection in lambda: bytes used are non-increasing in it
+        mid = 0.5 * (lo + hi)
+        if used(choose(mid)) > budget:
+            lo = mid
+        else:
+            hi = mid
+    return cand[choose(hi)]

@@ -12,12 +12,25 @@ In memory (:class:`GlintsMap`; ``G`` groups, ``R`` rank, ``B`` block size, ``nb 
 * ``image_cell`` ``(N,)`` int32: cell of each image (a group of images of one pyramid level); the
   group of block ``[bi, bj]`` of an image is ``image_cell * nb^2 + bi * nb + bj``.
 
-On disk, version 2 (what :func:`save` writes) stores the factors, not the prefix sums, in float16:
-``a``, ``b`` ``(G, R, B)`` float16 (columns renormalised to sum 1 at load), ``c`` ``(K, R)``
-float16 scaled per group and rank by ``c_scale (G, R)`` float32 (float16 alone overflows: block sums
-of a sharp NDF reach 1e6), ``group_rows (G + 1,)`` int64 (first row of ``c`` of each group), plus
-``block_index`` and ``image_cell``; :func:`decode` rebuilds the float32 arrays (the bake measures
-its error on exactly these). Version 1 files (float32 prefix sums ``A``, ``Bp``, ``C``) still load.
+On disk, version 3 (what :func:`save` writes with :func:`encode`'s arrays) stores per-group ranks
+and 8-bit factors (decoded at load into the arrays above, zero-padded to the largest rank):
+
+* ``ranks (G,)`` uint16: rank of each group (the bake allocates them under a storage budget; 0 for
+  a group without kept blocks).
+* ``a``, ``b`` ``(sum(ranks), B)`` uint8: each component's factor rounded to 255 steps of its
+  maximum (columns renormalised to sum 1 at load, so no scale is stored); groups in order.
+* ``c (sum_k ranks[group(k)],)`` uint8: the rows of ``C`` in row order, each with its group's rank
+  of entries, in 255 steps of ``c_scale (sum(ranks),)`` float32 (the component's maximum over the
+  group's rows).
+* ``block_mask (N, ceil(nb^2 / 8))`` uint8: packed bits, set for kept blocks (row-major
+  ``[bi, bj]``). The rows of ``C`` are ordered by group, then by image, so ``block_index`` and the
+  group offsets follow from the mask and ``image_cell`` (:func:`block_index_from_mask`).
+* ``image_cell (N,)`` int32.
+
+The 8-bit rounding adds 0.01 points of relative L2 error to a 5.2 % fit (512^2 gaussian map,
+rank 24; float16 added nothing measurable): see docs/glints.md. Version 2 (float16 factors of one
+rank, ``c_scale`` per group and rank, ``group_rows``, an int32 ``block_index``) and version 1
+(float32 prefix sums ``A``, ``Bp``, ``C``) still load.
 
 All factor values are non-negative, so every reconstructed NDF value and range mean is >= 0.
 """
@@ -35,9 +48,11 @@ from prefilter.errors import TableFileError
 from prefilter.glints.pyramid import Pyramid
 
 FORMAT = "prefilter-glints"
-VERSION = 2
+VERSION = 3
+Q = 255  # levels of the 8-bit factors
 ARRAYS = ("A", "Bp", "C", "block_index", "image_cell")  # in memory, and on disk in version 1
 ARRAYS_V2 = ("a", "b", "c", "c_scale", "group_rows", "block_index", "image_cell")
+ARRAYS_V3 = ("ranks", "a", "b", "c", "c_scale", "block_mask", "image_cell")
 
 
 @dataclass
@@ -52,6 +67,9 @@ class GlintsMap:
     image_cell: np.ndarray
     #: bytes of the arrays as stored on disk (set by :func:`encode` / :func:`load`)
     stored_bytes: int | None = None
+    #: ``(G,)`` rank of each group (version 3; its components come first in ``A``, ``Bp``, ``C``,
+    #: zeros after them up to ``rank``); None: every group uses all ``rank`` components
+    ranks: np.ndarray | None = None
 
     @property
     def pyramid(self) -> Pyramid:
@@ -93,7 +111,7 @@ class GlintsMap:
         return range_mean(self, center, sigma_p, s_min, s_max)
 
 
-def encode(a: np.ndarray, b: np.ndarray, c: np.ndarray, group_rows: np.ndarray) -> dict:
+def encode_v2(a: np.ndarray, b: np.ndarray, c: np.ndarray, group_rows: np.ndarray) -> dict:
     """Version-2 arrays of float64 factors ``a``, ``b`` ``(G, R, B)`` (columns summing to 1 or
     zero) and ``c (K, R)`` whose rows ``group_rows[g]:group_rows[g + 1]`` belong to group ``g``."""
     G, R = a.shape[:2]
@@ -107,16 +125,92 @@ def encode(a: np.ndarray, b: np.ndarray, c: np.ndarray, group_rows: np.ndarray) 
                 c_scale=scale, group_rows=rows)
 
 
-def decode(a, b, c, c_scale, group_rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Float32 prefix sums ``A``, ``Bp`` ``(G, R, B + 1)`` and ``C (K, R)`` of version-2 arrays."""
-    def prefix(f):
-        f = f.astype(np.float64)
-        s = f.sum(axis=-1, keepdims=True)
-        f = np.divide(f, s, out=np.zeros_like(f), where=s > 0)  # float16 rounding: sums back to 1
-        out = np.zeros(f.shape[:-1] + (f.shape[-1] + 1,), np.float32)
-        out[..., 1:] = np.cumsum(f, axis=-1)
-        return out
+def encode(groups: list) -> dict:
+    """Version-3 factor arrays (``ranks``, ``a``, ``b``, ``c``, ``c_scale``) of groups given as
+    ``(a (r_g, B), b (r_g, B), c (K_g, r_g))`` non-negative float factors (``a``, ``b`` rows
+    summing to 1 or zero); concatenating the arrays of consecutive runs of groups gives those of
+    the whole run."""
+    ranks, qa, qb, qc, sc = [], [], [], [], []
+    for a, b, c in groups:
+        ranks.append(a.shape[0])
+        for f, out in ((a, qa), (b, qb)):
+            m = f.max(axis=1, keepdims=True) if f.size else np.zeros((f.shape[0], 1))
+            out.append(np.rint(np.divide(Q * f, m, out=np.zeros(f.shape), where=m > 0)))
+        m = c.max(axis=0) if c.shape[0] else np.zeros(c.shape[1])
+        qc.append(np.rint(np.divide(Q * c, m, out=np.zeros(c.shape), where=m > 0)).ravel())
+        sc.append(m)
+    B = groups[0][0].shape[1] if groups else 0
+    cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape))
+    return dict(ranks=np.array(ranks, np.uint16), a=cat(qa, (0, B)).astype(np.uint8),
+                b=cat(qb, (0, B)).astype(np.uint8), c=cat(qc, (0,)).astype(np.uint8),
+                c_scale=cat(sc, (0,)).astype(np.float32))
 
+
+def decode(ranks, a, b, c, c_scale, group_rows, width: int | None = None
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Float32 prefix sums ``A``, ``Bp`` ``(G, width, B + 1)`` and ``C (K, width)`` of version-3
+    arrays, each group's components first and zeros after them (``width`` defaults to the
+    largest rank); ``group_rows (G + 1,)``: first row of ``C`` of each group."""
+    ranks = np.asarray(ranks, np.int64)
+    G = ranks.shape[0]
+    W = int(ranks.max(initial=0)) if width is None else int(width)
+    B = a.shape[1]
+    off = np.concatenate([[0], np.cumsum(ranks)])
+    comp_g = np.repeat(np.arange(G), ranks)
+    comp_r = np.arange(off[-1]) - off[comp_g]
+    A = np.zeros((G, W, B + 1), np.float32)
+    Bp = np.zeros_like(A)
+    A[comp_g, comp_r] = _prefix(a)
+    Bp[comp_g, comp_r] = _prefix(b)
+    rows = np.asarray(group_rows, np.int64)
+    K = int(rows[-1])
+    row_g = np.repeat(np.arange(G), np.diff(rows))
+    row_rank = ranks[row_g]
+    row_off = np.concatenate([[0], np.cumsum(row_rank)])
+    e_row = np.repeat(np.arange(K), row_rank)
+    e_col = np.arange(row_off[-1]) - row_off[e_row]
+    C = np.zeros((K, W), np.float32)
+    C[e_row, e_col] = (c.astype(np.float32) * np.float32(1.0 / Q)
+                       * c_scale[off[row_g[e_row]] + e_col])
+    return A, Bp, C
+
+
+def pack_mask(kept: np.ndarray) -> np.ndarray:
+    """``block_mask (N, ceil(nb^2 / 8))`` uint8 of the kept-block flags ``(N, nb, nb)``."""
+    return np.packbits(np.asarray(kept, bool).reshape(kept.shape[0], -1), axis=1)
+
+
+def block_index_from_mask(block_mask: np.ndarray, image_cell: np.ndarray, nb: int,
+                          n_groups: int) -> tuple[np.ndarray, np.ndarray]:
+    """``block_index (N, nb, nb)`` int32 and ``group_rows (n_groups + 1,)`` int64 of a packed
+    mask: rows are numbered by group (``image_cell * nb^2 + bi * nb + bj``), then by image."""
+    N = block_mask.shape[0]
+    kept = np.unpackbits(block_mask, axis=1, count=nb * nb).astype(bool)
+    img, blk = np.nonzero(kept)
+    gid = image_cell[img].astype(np.int64) * (nb * nb) + blk
+    order = np.lexsort((img, gid))
+    rows = np.empty(img.shape[0], np.int64)
+    rows[order] = np.arange(img.shape[0])
+    index = np.full((N, nb * nb), -1, np.int32)
+    index[img, blk] = rows
+    counts = np.bincount(gid, minlength=n_groups)
+    return index.reshape(N, nb, nb), np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+
+
+def _prefix(f):
+    """Float32 prefix sums ``(..., n + 1)`` of factors ``(..., n)`` renormalised to sum 1 (undoes
+    the rounding of the stored values; zero factors stay zero)."""
+    f = f.astype(np.float64)
+    s = f.sum(axis=-1, keepdims=True)
+    f = np.divide(f, s, out=np.zeros_like(f), where=s > 0)
+    out = np.zeros(f.shape[:-1] + (f.shape[-1] + 1,), np.float32)
+    out[..., 1:] = np.cumsum(f, axis=-1)
+    return out
+
+
+def decode_v2(a, b, c, c_scale, group_rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Float32 prefix sums ``A``, ``Bp`` ``(G, R, B + 1)`` and ``C (K, R)`` of version-2 arrays."""
+    prefix = _prefix
     per_row = np.repeat(c_scale.astype(np.float32), np.diff(group_rows), axis=0)
     return prefix(a), prefix(b), (c.astype(np.float32) * per_row)
 
@@ -125,13 +219,20 @@ def save(path: str | os.PathLike, gm: GlintsMap, encoded: dict | None = None) ->
     """Write ``gm`` atomically (uncompressed ``np.savez``: deterministic bytes, mmap-able) with
     the ``__meta__`` checksum entry of :func:`prefilter._io.save_npz_atomic`.
 
-    ``encoded``: the version-2 arrays of :func:`encode`; without them the file is written in the
-    version-1 layout (float32 prefix sums), which :func:`load` also reads.
+    ``encoded``: the version-3 arrays of :func:`encode` (the block mask is taken from
+    ``gm.block_index``), or the version-2 arrays of :func:`encode_v2`; without them the file is
+    written in the version-1 layout (float32 prefix sums). :func:`load` reads all three.
     """
-    version = 1 if encoded is None else VERSION
+    if encoded is None:
+        version, arrays = 1, {k: getattr(gm, k) for k in ARRAYS}
+    elif "ranks" in encoded:
+        version = 3
+        arrays = dict(encoded, block_mask=pack_mask(gm.block_index >= 0),
+                      image_cell=gm.image_cell)
+    else:
+        version = 2
+        arrays = dict(encoded, block_index=gm.block_index, image_cell=gm.image_cell)
     header = dict(gm.header, format=FORMAT, version=version)
-    arrays = ({k: getattr(gm, k) for k in ARRAYS} if encoded is None else
-              dict(encoded, block_index=gm.block_index, image_cell=gm.image_cell))
     save_npz_atomic(path, format_name=FORMAT, format_version=version,
                     header=np.array(json.dumps(header, sort_keys=True)), **arrays)
 
@@ -160,9 +261,9 @@ def load(path: str | os.PathLike) -> GlintsMap:
     if header.get("format") != FORMAT:
         _fail(path, f"header.format: expected {FORMAT!r}, got {header.get('format')!r}")
     version = header.get("version")
-    if version not in (1, VERSION):
-        _fail(path, f"header.version: expected 1 or {VERSION}, got {version!r}")
-    names = ARRAYS if version == 1 else ARRAYS_V2
+    if version not in (1, 2, VERSION):
+        _fail(path, f"header.version: expected 1, 2 or {VERSION}, got {version!r}")
+    names = {1: ARRAYS, 2: ARRAYS_V2, 3: ARRAYS_V3}[version]
     missing = [k for k in names if k not in data]
     if missing:
         _fail(path, f"missing arrays {missing}; expected {('header',) + names} (version {version})")
@@ -172,9 +273,12 @@ def load(path: str | os.PathLike) -> GlintsMap:
     if version == 1:
         arrays = {k: data[k] for k in ARRAYS}
         stored = None
-    else:
+    elif version == 2:
         arrays = _decode_checked(path, data)
         stored = int(sum(data[k].nbytes for k in ARRAYS_V2))
+    else:
+        arrays = _decode_checked_v3(path, data, header)
+        stored = int(sum(data[k].nbytes for k in ARRAYS_V3))
     try:
         gm = GlintsMap(header=header, **arrays, stored_bytes=stored)
         pyr, R, B, rank = gm.pyramid, gm.resolution, gm.block, gm.rank
@@ -231,5 +335,45 @@ def _decode_checked(path, data) -> dict:
     for name, arr in (("a", a), ("b", b), ("c", c), ("c_scale", sc)):
         if not np.all(np.isfinite(arr)) or np.any(arr < 0):
             _fail(path, f"{name}: expected finite, non-negative values")
-    A, Bp, C = decode(a, b, c, sc, rows)
+    A, Bp, C = decode_v2(a, b, c, sc, rows)
     return dict(A=A, Bp=Bp, C=C, block_index=data["block_index"], image_cell=data["image_cell"])
+
+
+def _decode_checked_v3(path, data, header) -> dict:
+    """Validate the version-3 arrays (dtypes, shapes, counts, values) and decode them."""
+    arrs = {k: data[k] for k in ARRAYS_V3}
+    for name, dtype, ndim in (("ranks", np.uint16, 1), ("a", np.uint8, 2), ("b", np.uint8, 2),
+                              ("c", np.uint8, 1), ("c_scale", np.float32, 1),
+                              ("block_mask", np.uint8, 2), ("image_cell", np.int32, 1)):
+        arr = arrs[name]
+        if arr.dtype != dtype or arr.ndim != ndim:
+            _fail(path, f"{name}: expected a {ndim}-D {np.dtype(dtype)} array, got {arr.dtype} "
+                        f"of shape {arr.shape}")
+    try:
+        R, B, width = (int(header["ndf"][k]) for k in ("resolution", "block", "rank"))
+        nb = R // B
+    except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
+        raise TableFileError(f"glints map {path}: header field missing or invalid "
+                             f"({type(exc).__name__}: {exc})") from None
+    ranks, cell, mask = arrs["ranks"], arrs["image_cell"], arrs["block_mask"]
+    G, M, N = ranks.shape[0], int(ranks.sum(dtype=np.int64)), cell.shape[0]
+    if arrs["a"].shape != (M, B) or arrs["b"].shape != (M, B) or arrs["c_scale"].shape != (M,):
+        _fail(path, f"a, b, c_scale: expected shapes ({M}, {B}) twice and ({M},) (sum of ranks, "
+                    f"block), got {arrs['a'].shape}, {arrs['b'].shape}, {arrs['c_scale'].shape}")
+    if mask.shape != (N, -(-nb * nb // 8)):
+        _fail(path, f"block_mask: expected shape ({N}, {-(-nb * nb // 8)}), got {mask.shape}")
+    if G % (nb * nb) or (N and (cell.min() < 0 or (int(cell.max()) + 1) * nb * nb > G)):
+        _fail(path, f"image_cell: expected cells of the {G} groups ({nb * nb} per cell)")
+    if G and int(ranks.max()) > width:
+        _fail(path, f"ranks: expected at most header.ndf.rank = {width}, got {int(ranks.max())}")
+    index, rows = block_index_from_mask(mask, cell, nb, G)
+    need = int(np.sum(np.diff(rows) * ranks.astype(np.int64)))
+    if arrs["c"].shape != (need,):
+        _fail(path, f"c: expected {need} values (kept blocks x their group's rank), got "
+                    f"{arrs['c'].shape[0]}")
+    sc = arrs["c_scale"]
+    if not np.all(np.isfinite(sc)) or np.any(sc < 0):
+        _fail(path, "c_scale: expected finite, non-negative values")
+    A, Bp, C = decode(ranks, arrs["a"], arrs["b"], arrs["c"], sc, rows, width)
+    return dict(A=A, Bp=Bp, C=C, block_index=index, image_cell=cell,
+                ranks=ranks.astype(np.int32))
