@@ -17,7 +17,12 @@ and naive mip-mapped normal mapping vs the displaced height field, 16 to 64 texe
 ``--acceptance-env`` the same under the procedural environment (add ``--no-shadowing`` for a
 reference without self-shadowing, the model of the simplified algorithms).
 
-Render methods (``--render``): wall time of ``leadr-env``, ``leadr-env-shadowed``,
+Point-light images (``--image-point``, ~30-50 min): :func:`prefilter.leadr.acceptance.image_point`,
+planes and spheres, iso / anisotropic height fields, specular and diffuse, 4 and 16 texels per
+pixel, RMSE / FLIP / flicker of LEADR, the normal-mapped reference and naive normal mapping vs the
+ray-traced displaced surface (``--quick``: one surface, the plane only).
+
+Render methods (``--render``): wall time of ``leadr-env``, ``leadr-env-simplified``,
 ``leadr-irradiance`` and the naive methods on a 160 x 90 plane + sphere scene with a Gaussian
 height map under ``procedural_env(128)``.
 
@@ -32,8 +37,8 @@ import time
 
 import numpy as np
 
-from prefilter.leadr import (EnvMap, diffuse_directional, diffuse_sh, env_specular, point_light,
-                             procedural_env, sh9_project)
+from prefilter.leadr import (EnvMap, diffuse_directional, diffuse_sh, diffuse_shadowing,
+                             env_specular, point_light, procedural_env, sh9_project)
 
 LUM = np.array([0.2126, 0.7152, 0.0722])
 
@@ -106,6 +111,10 @@ def throughput(p: int = 1 << 16) -> None:
     runs = {"point light (closed form)": lambda: point_light(wo, wl, mu, cov, f0=0.04)}
     for n in (3, 5, 9, 17):
         runs[f"env specular {n}x{n}"] = lambda n=n: env_specular(env, wo, mu, cov, n, f0=0.04)
+    runs["env specular 9x9 + shadowing"] = lambda: env_specular(env, wo, mu, cov, 9, f0=0.04,
+                                                               shadowing=True)
+    runs["diffuse shadowing 5x5 (16 x 32 directions)"] = lambda: diffuse_shadowing(
+        env, wo, mu, cov, 5)
     for n in (5, 9):
         runs[f"diffuse SH {n}x{n}"] = lambda n=n: diffuse_sh(sh, wo, mu, cov, n)
         runs[f"diffuse directional {n}x{n}"] = lambda n=n: diffuse_directional(wo, wl, mu, cov, n)
@@ -115,7 +124,7 @@ def throughput(p: int = 1 << 16) -> None:
         print(f"| {name} | {p / t:,.0f} |", flush=True)
 
 
-METHODS = ("leadr-env", "leadr-env-shadowed", "leadr-env-naive", "leadr-irradiance",
+METHODS = ("leadr-env", "leadr-env-simplified", "leadr-env-naive", "leadr-irradiance",
            "leadr-irradiance-naive")
 
 
@@ -158,9 +167,18 @@ if __name__ == "__main__":
     ap.add_argument("--convergence", action="store_true",
                     help="N x N vs N = 128 (prefilter.leadr.acceptance.convergence)")
     ap.add_argument("--render", action="store_true", help="render-method frame times")
+    ap.add_argument("--image-point", action="store_true",
+                    help="point-light image rows, planes and spheres (acceptance.image_point)")
+    ap.add_argument("--quick", action="store_true", help="with --image-point: iso 0.25, plane")
     ap.add_argument("--points", type=int, default=None)
     a = ap.parse_args()
-    if a.render:
+    if a.image_point:
+        from prefilter.leadr.acceptance import POINT_SURFACES, image_point, point_table
+
+        kw = dict(surfaces={"iso 0.25": POINT_SURFACES["iso 0.25"]},
+                  shapes=("plane",)) if a.quick else {}
+        print(point_table(image_point(log=lambda row: None, **kw)))
+    elif a.render:
         render_times()
     elif a.acceptance_env:
         from prefilter.leadr.acceptance import env_table, run_env

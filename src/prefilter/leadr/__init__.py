@@ -17,16 +17,18 @@ from prefilter.leadr.shading import (
     artificial_micronormal,
     diffuse_directional,
     diffuse_sh,
+    diffuse_shadowing,
     env_specular,
     gaussian_grid,
     grid_normals,
     point_light,
     schlick,
+    shadowing_ratio,
 )
 
 __all__ = [
     "CHANNELS", "EnvMap", "LeadrMaps", "artificial_micronormal", "diffuse_directional",
-    "diffuse_sh", "env_specular", "gaussian_grid", "grid_normals", "moments", "point_light",
-    "procedural_env", "schlick", "sh9_irradiance", "sh9_project", "shading_stats",
-    "slopes_from_height", "slopes_from_normals", "stats_to_moments",
+    "diffuse_sh", "diffuse_shadowing", "env_specular", "gaussian_grid", "grid_normals", "moments",
+    "point_light", "procedural_env", "schlick", "sh9_irradiance", "sh9_project", "shading_stats",
+    "shadowing_ratio", "slopes_from_height", "slopes_from_normals", "stats_to_moments",
 ]

@@ -11,7 +11,10 @@ std of ``method - reference`` over shifts, the part of the variation that is an 
 :func:`run_env` does the same under the procedural environment (specular: Simplified Algorithm 1;
 diffuse: SH irradiance + Simplified Algorithm 3) against
 :func:`prefilter.leadr.displaced.displaced_env_radiance`. :func:`convergence` measures the N x N
-grid against the paper's N = 128 grid (error and time per N).
+grid against the paper's N = 128 grid (error and time per N). :func:`image_point` renders
+images of planes and spheres under a point light (LEADR, normal-mapped reference, naive) against
+the ray-traced displaced surface, with flicker over sub-pixel jitters; :func:`image_env` images of
+a plane under the environment.
 """
 
 from __future__ import annotations

@@ -1,24 +1,24 @@
 """LEADR render methods: ``leadr-point`` (point and directional lights), ``leadr-env``
 (environment + point/directional lights), ``leadr-irradiance`` (diffuse microfacets, SH
-irradiance), and the naive counterparts ``leadr-env-naive`` / ``leadr-irradiance-naive``.
+irradiance), ``leadr-env-simplified`` (the supplemental's simplified algorithms, no
+self-shadowing), and the naive counterparts ``leadr-env-naive`` / ``leadr-irradiance-naive``.
 
-Per G-buffer sample: the slope moments of the material's height map at the footprint's mip level
-(the renderer's moments chain of the slopes, trilinear) give the mean slope and covariance
-(:func:`prefilter.leadr.maps.shading_stats`); the micro roughness adds the Beckmann slope variance
-``alpha^2 / 2`` per axis (GGX alpha taken as the Beckmann alpha). Shading is in the *geometric*
-frame: the mesonormal is carried by the mean slope. Specular: the closed form of supplemental 3.3
-with Schlick Fresnel; diffuse: the grid of Simplified Algorithm 3 with ``E(m) = <m, wi>``
-(5 x 5). Quad and environment lights are rejected by ``leadr-point``.
+Per G-buffer sample: the slope moments of the material's height map over the pixel footprint
+(:func:`footprint_moments`: a box filter of the renderer's moment mip chain) give the mean slope
+and covariance (:func:`prefilter.leadr.maps.shading_stats`); the micro roughness adds the
+Beckmann slope variance ``alpha^2 / 2`` per axis (GGX alpha taken as the Beckmann alpha).
+Shading is in the *geometric* frame: the mesonormal is carried by the mean slope.
 
-``leadr-env``: specular by Simplified Algorithm 1 (``ENV_GRID`` x ``ENV_GRID`` Gaussian grid,
-mip LOD per sample from the Jacobian, :func:`prefilter.leadr.shading.env_specular`) over the sum
-of the scene's environment lights, plus the diffuse layer by Simplified Algorithms 2/3 (order-2 SH
-of the environment, ``DIFFUSE_GRID`` grid), plus point/directional lights as in ``leadr-point``.
-Schlick Fresnel per grid sample is linear in ``f0``, so rgb ``f0`` costs two scalar passes
-(``f0 = 1`` and ``f0 = 0``) blended per channel. ``leadr-irradiance``: the diffuse layer only
-(``base_color``; the specular layer is not rendered): environment and directional lights go into
-one SH irradiance (Simplified Algorithm 2), point lights use ``E(m) = I / d^2 <m, wl>``.
-The environment orientation is :data:`prefilter.leadr.envmap.ENV_FROM_WORLD` (``docs/leadr.md``).
+Self-shadowing is on by default (the displaced reference has it and it lowers the error,
+docs/leadr.md): specular under point/directional lights by the closed form of supplemental 3.3
+with ``G2``; under the environment by Algorithm 1 with ``G2 / G1`` per grid sample (compiled,
+:func:`prefilter.leadr.shading.env_specular` with ``shadowing``); diffuse by Algorithm 3 with
+``E(m) = <m, wl> G2 / G1`` per delta light and, for the environment, order-2 SH irradiance
+(Simplified Algorithm 2) plus :func:`prefilter.leadr.shading.diffuse_shadowing`. Schlick Fresnel
+per grid sample is linear in ``f0``, so rgb ``f0`` costs two scalar passes (``f0 = 1`` and
+``f0 = 0``) blended per channel. ``leadr-irradiance`` renders the diffuse layer only
+(``base_color``). The environment orientation is
+:data:`prefilter.leadr.envmap.ENV_FROM_WORLD` (``docs/leadr.md``).
 
 The ``-naive`` variants are naive mip-mapped normal mapping under the same integrators: the mean
 slope of the footprint (the mip-averaged height-map normal) with the micro roughness only, i.e.
