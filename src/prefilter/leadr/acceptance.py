@@ -522,6 +522,8 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
       G2) / :func:`~prefilter.leadr.render.shade_leadr_irradiance` (diffuse, Algorithm 3 with
       ``G2 / G1``), ``leadr simplified`` the diffuse without shadowing, at pixel centres, fed
       the exact moments of the traced bilinear surface (:func:`cell_moments`);
+    * ``leadr-point``: what that method renders (one isotropic trilinear moment tap, diffuse
+      without shadowing; the WebGL viewer's shading);
     * ``naive``: the same code with ``meso=False`` (mip-averaged normal, micro roughness).
 
     The largest footprint is rendered at ``jitters`` sub-pixel offsets (a camera shake; the
@@ -615,6 +617,9 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                     for s, scene in scenes.items():
                         if s == "specular":
                             vals = {"leadr": lr.shade_leadr_delta(scene, gs, ls, mips=mips),
+                                    "leadr-point": lr.shade_leadr_delta(
+                                        scene, gs, ls, mips=mips, shadowing=False,
+                                        taps=lr.POINT_FOOTPRINT_TAPS),
                                     "leadr box": lr.shade_leadr_delta(scene, gs, ls, mips=fixed),
                                     "naive": lr.shade_leadr_delta(scene, gs, ls, meso=False,
                                                                   mips=mips)}
@@ -624,6 +629,9 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                                         scene, gs, z, ls, mips=mips),
                                     "leadr simplified": lr.shade_leadr_irradiance(
                                         scene, gs, z, ls, mips=mips, shadowing=False),
+                                    "leadr-point": lr.shade_leadr_irradiance(
+                                        scene, gs, z, ls, mips=mips, shadowing=False,
+                                        taps=lr.POINT_FOOTPRINT_TAPS),
                                     "leadr box": lr.shade_leadr_irradiance(
                                         scene, gs, z, ls, mips=fixed),
                                     "naive": lr.shade_leadr_irradiance(
@@ -673,9 +681,9 @@ def point_table(rows) -> str:
     """Markdown table of :func:`image_point`'s rows: RMSE / FLIP per method, the LEADR / naive
     RMSE ratio and the flickers (where measured)."""
     out = ["| surface | shape | shading | texels/pixel | LEADR | LEADR box | LEADR simplified | "
-           "normal-mapped | naive | LEADR / naive | flicker LEADR / box / naive | "
-           "flicker ratio | ref noise |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "leadr-point | normal-mapped | naive | LEADR / naive | leadr-point / naive | "
+           "flicker LEADR / leadr-point / naive | flicker ratio | ref noise |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     cell = lambda r, m: (f"{100 * r[f'rmse {m}']:.1f}% / {r[f'flip {m}']:.3f}"  # noqa: E731
                          if f"rmse {m}" in r else "-")
     for r in rows:
@@ -683,9 +691,10 @@ def point_table(rows) -> str:
         out.append(
             f"| {r['surface']} | {r['shape']} | {r['shading']} | {r['texels/pixel']:.0f} | "
             f"{cell(r, 'leadr')} | {cell(r, 'leadr box')} | {cell(r, 'leadr simplified')} | "
-            f"{cell(r, 'normal-mapped')} | {cell(r, 'naive')} | "
+            f"{cell(r, 'leadr-point')} | {cell(r, 'normal-mapped')} | {cell(r, 'naive')} | "
             f"{r['rmse leadr'] / max(r['rmse naive'], 1e-12):.2f} | "
-            + (f"{100 * r['flicker leadr']:.1f}% / {100 * r['flicker leadr box']:.1f}% / "
+            f"{r['rmse leadr-point'] / max(r['rmse naive'], 1e-12):.2f} | "
+            + (f"{100 * r['flicker leadr']:.1f}% / {100 * r['flicker leadr-point']:.1f}% / "
                f"{100 * r['flicker naive']:.1f}% | "
                f"{r['flicker leadr'] / max(r['flicker naive'], 1e-12):.2f} | " if fl
                else "- | - | ")

@@ -48,6 +48,11 @@ ENV_GRID = 9
 #: as the camera moves (docs/leadr.md, point-light image rows: flicker 0.67x -> 0.48x naive for
 #: diffuse at 16 texels per pixel). 1: one isotropic trilinear tap.
 FOOTPRINT_TAPS = 8
+#: ``leadr-point`` keeps one isotropic trilinear tap and the unshadowed diffuse (Simplified
+#: Algorithm 3): it is the method the WebGL viewer reproduces pixel for pixel
+#: (``prefilter.viewer``'s ``footprint()`` and the exported ``leadr.glsl``). The other ``leadr-*``
+#: methods shade point and directional lights with the box filter and ``G2 / G1`` diffuse.
+POINT_FOOTPRINT_TAPS = 1
 
 
 def footprint_moments(chain, uv, dudv, max_taps: int | None = None) -> np.ndarray:
@@ -79,14 +84,15 @@ def _local(w, t, b, n):
     return np.stack([np.sum(w * t, -1), np.sum(w * b, -1), np.sum(w * n, -1)], -1)
 
 
-def leadr_stats(scene, g, *, meso: bool = True, mips=None):
+def leadr_stats(scene, g, *, meso: bool = True, mips=None, taps: int | None = None):
     """Mean slope ``(N, 2)`` and covariance ``(N, 2, 2)`` per hit sample, plus materials.
 
     ``meso=False`` keeps the mean slope and drops the footprint's slope covariance (naive
     mip-mapped normal mapping: the micro roughness only). ``mips``: optional
     ``{object index: MipChain of the 5 moments}`` (or any object with the same
     ``lookup_footprint``) replacing the materials' height-map chains (the acceptance feeds the
-    exact moments of the bilinear surface it ray traces)."""
+    exact moments of the bilinear surface it ray traces). ``taps``: :func:`footprint_moments`'
+    ``max_taps`` (``None``: :data:`FOOTPRINT_TAPS`)."""
     n = g.hit.size
     mean = np.zeros((n, 2))
     cov = np.zeros((n, 2, 2))
@@ -96,9 +102,9 @@ def leadr_stats(scene, g, *, meso: bool = True, mips=None):
         m = g.object_id == k
         mat = scene.objects[int(k)].material
         if mips is not None and int(k) in mips:
-            mom = footprint_moments(mips[int(k)], g.uv[m], g.dudv[m])
+            mom = footprint_moments(mips[int(k)], g.uv[m], g.dudv[m], taps)
         elif mat.height_map is not None:
-            mom = footprint_moments(mat.height_map.mip(), g.uv[m], g.dudv[m])
+            mom = footprint_moments(mat.height_map.mip(), g.uv[m], g.dudv[m], taps)
         else:
             mom = np.zeros((int(m.sum()), 5))
         mu, c = shading_stats(mom, 0.0)
@@ -122,12 +128,12 @@ def _frame(g):
 
 
 def shade_leadr_delta(scene, g, lights, *, meso: bool = True, shadowing: bool = True,
-                      mips=None) -> np.ndarray:
+                      mips=None, taps: int | None = None) -> np.ndarray:
     """Radiance ``(N, 3)`` of the hit samples ``g`` under point and directional lights:
     closed-form specular (supplemental 3.3, with G2) + the diffuse grid (Algorithm 3 for one
     light; ``shadowing`` multiplies it by ``G2 / G1``, :func:`shading.shadowing_ratio`)."""
     t, b, n, wo = _frame(g)
-    mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips)
+    mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips, taps=taps)
     incoming = []
     for pl in lights.points:
         d = pl.position - g.position
@@ -202,13 +208,13 @@ def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int
 
 def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
                            diffuse_grid: int = DIFFUSE_GRID, shadowing: bool = True,
-                           env=None, mips=None) -> np.ndarray:
+                           env=None, mips=None, taps: int | None = None) -> np.ndarray:
     """Diffuse radiance ``(N, 3)`` of hits ``g``: SH irradiance ``sh (9, 3)`` (environment, map
     coordinates) by Simplified Algorithm 3 (plus the environment ``env``'s
     :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``); point and directional
     lights one by one (Algorithm 3 for one light, times ``G2 / G1`` if ``shadowing``)."""
     t, b, n, wo = _frame(g)
-    mean, cov, base, _ = leadr_stats(scene, g, meso=meso, mips=mips)
+    mean, cov, base, _ = leadr_stats(scene, g, meso=meso, mips=mips, taps=taps)
     rot = _env_rotation(t, b, n)
     out = diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=rot)
     if shadowing and env is not None:
@@ -364,11 +370,15 @@ def render_leadr_irradiance_naive(scene, settings) -> np.ndarray:
 
 
 def render_leadr_point(scene, settings) -> np.ndarray:
-    """The ``leadr-point`` method (point and directional lights only)."""
+    """The ``leadr-point`` method (point and directional lights only): closed-form specular with
+    ``G2``, Simplified Algorithm 3 diffuse, one trilinear moment tap (:data:`POINT_FOOTPRINT_TAPS`,
+    the WebGL viewer's shading)."""
     from prefilter.render.pipeline import render_samples
 
     if any(light.type in ("quad", "environment") for light in scene.lights):
         raise PrefilterError("method 'leadr-point': expected only point and directional lights")
     lights = scene.light_set()
-    return render_samples(scene, settings, lambda g, _u: shade_leadr_delta(scene, g, lights),
+    return render_samples(scene, settings,
+                          lambda g, _u: shade_leadr_delta(scene, g, lights, shadowing=False,
+                                                          taps=POINT_FOOTPRINT_TAPS),
                           stratified=settings.spp > 1, desc="leadr-point")
