@@ -23,6 +23,7 @@ from prefilter.texture.procedural import (
     height_map,
     noise,
     noise_level_variance,
+    noise_texture,
     normal_map,
     slopes_to_normals,
 )
@@ -43,6 +44,7 @@ __all__ = [
     "height_map",
     "noise",
     "noise_level_variance",
+    "noise_texture",
     "normal_map",
     "slopes_to_normals",
 ]
