@@ -134,3 +134,36 @@ def test_far_distance_error_at_most_half_of_ltc():
         return np.sqrt(max(e * e - noise * noise, 0.0))
 
     assert err("ltc-multiscale") <= 0.5 * err("ltc")
+
+
+def test_study_supersampled_ltc_is_the_full_resolution_shader(tmp_path):
+    # benchmarks/study_multiscale_decomp.py's "ss" image (the fused kernel with the normal-map
+    # footprint scaled to nothing) must be the NumPy stages with level-0 normals
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+    from study_multiscale_decomp import render_ss
+
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.pipeline import render_samples
+    from prefilter.render.shading import shade_ltc
+
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(32, 32, 3)) * [0.3, 0.3, 0.0] + [0.0, 0.0, 1.0]
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    sc = load_scene(_scene(n, tmp_path, uv_scale=8.0, alpha=0.2), base_dir=tmp_path)
+    table = GGXTable.load()
+    lights = sc.light_set()
+
+    def shade(g, _u):
+        a = surface_attributes(sc, g, filtered=False)
+        return shade_ltc(g.position, a["t"], a["b"], a["n"], g.view, np.sqrt(a["alpha_x"]
+                         * a["alpha_y"]), a["base_color"], a["f0"], lights, table)
+
+    want = render_samples(sc, RenderSettings(spp=4, table=table), shade, stratified=True)
+    got = render_ss(sc, table, 4)
+    assert np.abs(want).max() > 0.1
+    np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
+    # and it differs from the mip-filtered ltc method (the footprint spans 8 texels)
+    assert np.abs(render(sc, "ltc", table=table, spp=4) - got).max() > 1e-3
