@@ -12,6 +12,8 @@ from scipy.special import erf
 from prefilter.errors import PrefilterError
 from prefilter.glints import bake, load, pndf, pndf_image
 from prefilter.glints.brdf import glint_brdf_cos, glint_ndf, surface, vcavity_g1, vcavity_g2
+from prefilter.glints.pyramid import resample_min_sigma
+from prefilter.glints.query import point
 from prefilter.microfacet import GGX
 
 R, S = 64, 0.5
@@ -75,8 +77,16 @@ def schlick_ref(f0, c):
     return f0 + (1 - f0) * (1 - c) ** 5
 
 
-def test_flat_map_closed_form(flat):
-    """Flat map: D_P is the intrinsic Gaussian N(s; 0, sr^2); compressed = its pixel average."""
+@pytest.mark.parametrize("interp", ["trilinear", "resample"])
+@pytest.mark.parametrize("bilinear", [False, True])
+def test_flat_map_closed_form(flat, interp, bilinear):
+    """Flat map: D_P is the intrinsic Gaussian N(s; 0, sr^2); compressed = its pixel average.
+    Tolerance: float16 factors of the rank-4 fit leave -0.9 to +0.4 % per level-0 image (checked
+    at a level-0 centre); resampling blends ~25 level-0 images, the trilinear blend at
+    ``sigma_p = 6`` 4 images of each of levels 0 and 1, whose errors partly cancel."""
+    from dataclasses import replace
+
+    flat = replace(flat, interp=interp, bilinear=bilinear)
     sr = 0.05
     rng = np.random.default_rng(2)
     n = 400
@@ -95,12 +105,23 @@ def test_flat_map_closed_form(flat):
     Gv = np.minimum(1, np.minimum(2 * h[:, 2] * wo[:, 2] / np.sum(wo * h, -1),
                                   2 * h[:, 2] * wi[:, 2] / np.sum(wi * h, -1)))
     # compressed: pixel average of the Gaussian (separable erf masses over the pixel)
-    e0 = np.floor((h[:, :2] + S) / H) * H - S
     cdf = lambda x: 0.5 * (1 + erf(x / (math.sqrt(2) * sr)))  # noqa: E731
-    mass = np.prod(cdf(e0 + H) - cdf(e0), axis=-1) / H**2
+    if bilinear:
+        # bilinear between the pixel centres of the exact pixel averages (separable)
+        g = (h[:, :2] + S) / H - 0.5
+        j0 = np.floor(g)
+        t = g - j0
+        mass = 1.0
+        for ax in range(2):
+            e = j0[:, ax] * H - S
+            mass = mass * ((1 - t[:, ax]) * (cdf(e + H) - cdf(e))
+                           + t[:, ax] * (cdf(e + 2 * H) - cdf(e + H))) / H
+    else:
+        e0 = np.floor((h[:, :2] + S) / H) * H - S
+        mass = np.prod(cdf(e0 + H) - cdf(e0), axis=-1) / H**2
     got = glint_brdf_cos(flat, c, 6.0, wo, wi, f0)
     ref = (mass * Gv / (4 * wo[:, 2]))[:, None] * F
-    np.testing.assert_allclose(got, ref, rtol=2e-3, atol=1e-4 * ref.max())
+    np.testing.assert_allclose(got, ref, rtol=1e-2, atol=1e-4 * ref.max())
     # direct (footprint below sigma0): the Gaussian itself, but the flat bake used sr = 0.05
     d = np.exp(-0.5 * np.sum(h[:, :2] ** 2, -1) / sr**2) / (2 * math.pi * sr**2)
     got = glint_brdf_cos(flat, c, 1.0, wo, wi, f0)
@@ -119,14 +140,26 @@ def test_fallback_and_clamp(surf):
     np.testing.assert_allclose(glint_ndf(surf, c, 10 * top, s), glint_ndf(surf, c, top, s),
                                rtol=1e-12)
     # a GlintsMap alone (no normal map) clamps small footprints to level 0
-    np.testing.assert_allclose(glint_ndf(surf.gm, c, 2.0, s), glint_ndf(surf, c, 4.0, s),
+    np.testing.assert_allclose(glint_ndf(surf.gm, c, 2.0, s),
+                               point(surf.gm, c, 4.0, s, bilinear=True), rtol=1e-12)
+    # resampling starts where level 0 resolves the resampling kernel; the direct P-NDF below
+    sm = resample_min_sigma(surf.gm.pyramid)
+    assert 4.0 < sm < 5.5
+    np.testing.assert_allclose(glint_ndf(surf, c, 0.99 * sm, s), pndf(NM, c, 0.99 * sm, s),
                                rtol=1e-12)
 
 
-@pytest.mark.parametrize("sp", [4.0, 8.0, 11.3])
-def test_compressed_matches_direct_images(surf, sp):
+@pytest.mark.parametrize("interp, sp, bound", [
+    ("trilinear", 4.0, 0.08), ("trilinear", 8.0, 0.25), ("trilinear", 11.3, 0.25),
+    ("resample", 5.5, 0.08), ("resample", 8.0, 0.08), ("resample", 11.3, 0.08)])
+def test_compressed_matches_direct_images(surf, interp, sp, bound):
     """Point queries at the pixel centres vs direct NDF images: the compression and the spatial
-    (bilinear) interpolation error only, for footprints on and between the pyramid samples."""
+    interpolation error only, for footprints on and between the pyramid samples. Trilinear
+    blends move glints between the samples (up to ~20 %); Gaussian resampling is the exact
+    footprint up to aliasing and compression."""
+    from dataclasses import replace
+
+    surf = replace(surf, interp=interp)
     rng = np.random.default_rng(4)
     c = rng.uniform(0, 64, (4, 2))
     x = (np.arange(R) + 0.5) * H - S
@@ -137,7 +170,8 @@ def test_compressed_matches_direct_images(surf, sp):
         ref = pndf_image(NM, cc, sp, R, S)
         got = glint_ndf(surf, cc, sp, grid)
         err = np.linalg.norm(got - ref) / np.linalg.norm(ref)
-        assert err < (0.08 if sp == 4.0 else 0.25), err
+        print(interp, sp, err)
+        assert err < bound, err
 
 
 def test_reciprocity(surf):

@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from prefilter._numba import njit_parallel, njit_serial, prange
 
 
@@ -103,3 +105,192 @@ def range_kernel(A, Bp, C, block_index, image_cell, idx, wts, x0, y0, x1, y1, lo
                             s += C[k, r] * ia * ib
                         acc += w * s
         out[q] = acc / area
+
+
+@njit_serial
+def _axis_taps(f, R, B):
+    """Bilinear taps along one axis at pixel coordinate ``f`` (pixel centres at ``k + 0.5``):
+    pixels ``p0, p0 + 1`` with weights ``1 - t, t``; pixels outside ``[0, R)`` get weight 0."""
+    g = f - 0.5
+    p0 = int(math.floor(g))
+    t = g - p0
+    w0 = 1.0 - t if 0 <= p0 < R else 0.0
+    w1 = t if 0 <= p0 + 1 < R else 0.0
+    return p0, w0, w1
+
+
+@njit_parallel
+def bilinear_kernel(A, Bp, C, block_index, image_cell, idx, wts, sx, sy, lo, h, out):
+    """Point values of the blended images reconstructed bilinearly between pixel centres.
+
+    The CP image of a block is ``sum_r c_r a_r (x) b_r``, so a bilinear combination of pixels of
+    one block is ``sum_r c_r (sum_i u_i a_r[i]) (sum_j v_j b_r[j])``: two factor lookups per axis
+    instead of four pixel values; neighbours in another block are taken from that block."""
+    B = A.shape[2] - 1
+    nb = block_index.shape[1]
+    R = nb * B
+    for q in prange(out.shape[0]):
+        i0, u0, u1 = _axis_taps((sy[q] - lo) / h, R, B)
+        j0, v0, v1 = _axis_taps((sx[q] - lo) / h, R, B)
+        acc = 0.0
+        for di in range(2):
+            wi = u0 if di == 0 else u1
+            i = i0 + di
+            if wi == 0.0:
+                continue
+            bi = i // B
+            # both rows in one block: handled together at di == 0
+            if di == 1 and u0 != 0.0 and (i0 // B) == bi:
+                continue
+            ia = i - bi * B
+            wa0 = wi
+            wa1 = 0.0
+            if di == 0 and u1 != 0.0 and (i0 + 1) // B == bi:
+                wa1 = u1
+            for dj in range(2):
+                wj = v0 if dj == 0 else v1
+                j = j0 + dj
+                if wj == 0.0:
+                    continue
+                bj = j // B
+                if dj == 1 and v0 != 0.0 and (j0 // B) == bj:
+                    continue
+                ja = j - bj * B
+                wb0 = wj
+                wb1 = 0.0
+                if dj == 0 and v1 != 0.0 and (j0 + 1) // B == bj:
+                    wb1 = v1
+                for c in range(idx.shape[1]):
+                    w = wts[q, c]
+                    if w == 0.0:
+                        continue
+                    img = idx[q, c]
+                    k = block_index[img, bi, bj]
+                    if k < 0:
+                        continue
+                    g = image_cell[img] * nb * nb + bi * nb + bj
+                    s = 0.0
+                    for r in range(C.shape[1]):
+                        fa = wa0 * (A[g, r, ia + 1] - A[g, r, ia])
+                        if wa1 != 0.0:
+                            fa += wa1 * (A[g, r, ia + 2] - A[g, r, ia + 1])
+                        fb = wb0 * (Bp[g, r, ja + 1] - Bp[g, r, ja])
+                        if wb1 != 0.0:
+                            fb += wb1 * (Bp[g, r, ja + 2] - Bp[g, r, ja + 1])
+                        s += C[k, r] * fa * fb
+                    acc += w * s
+        out[q] = acc
+
+
+@njit_serial
+def _axis_taps2(f, R, bilinear):
+    """As :func:`_axis_taps`, or the pixel containing ``f`` with weight 1 (``bilinear`` False)."""
+    if not bilinear:
+        p = int(math.floor(f))
+        return p, (1.0 if 0 <= p < R else 0.0), 0.0
+    g = f - 0.5
+    p0 = int(math.floor(g))
+    t = g - p0
+    return p0, (1.0 - t if 0 <= p0 < R else 0.0), (t if 0 <= p0 + 1 < R else 0.0)
+
+
+@njit_parallel
+def resample_point_kernel(A, Bp, C, block_index, image_cell, offs, ny_l, nx_l, sig_l, st_l,
+                          cx, cy, sp, sx, sy, lo, h, trunc, q_min, bilinear, out, done):
+    """Point values of Gaussian-resampled footprints (:func:`prefilter.glints.pyramid.
+    resample_weights`, the same level choice and taps) without materialising the tap lists:
+    taps of one CP group share its factor values at ``s``, which are read once per group.
+    ``done[q] = False`` where no level qualifies (the caller uses another path)."""
+    B = A.shape[2] - 1
+    nb = block_index.shape[1]
+    R = nb * B
+    L = sig_l.shape[0]
+    rank = C.shape[1]
+    for q in prange(out.shape[0]):
+        s = sp[q]
+        m = -1
+        if s < sig_l[L - 1]:
+            for lv in range(L - 1, -1, -1):
+                if sig_l[lv] < s:
+                    qq = math.sqrt(1.0 - (sig_l[lv] / s) ** 2) * sig_l[lv] / st_l[lv]
+                    if qq >= q_min:
+                        m = lv
+                        break
+        if m < 0:
+            done[q] = False
+            out[q] = 0.0
+            continue
+        done[q] = True
+        r = math.sqrt(s * s - sig_l[m] * sig_l[m])
+        st = st_l[m]
+        half = trunc * r / st
+        gx = (cx[q] - 0.5) / st
+        gy = (cy[q] - 0.5) / st
+        kx0 = int(math.ceil(gx - half))
+        kx1 = int(math.floor(gx + half))
+        ky0 = int(math.ceil(gy - half))
+        ky1 = int(math.floor(gy + half))
+        nx = nx_l[m]
+        ny = ny_l[m]
+        wx = np.empty(kx1 - kx0 + 1)
+        wy = np.empty(ky1 - ky0 + 1)
+        sxw = 0.0
+        for i in range(kx1 - kx0 + 1):
+            d = ((kx0 + i) * st + 0.5 - cx[q]) / r
+            wx[i] = math.exp(-0.5 * d * d)
+            sxw += wx[i]
+        syw = 0.0
+        for i in range(ky1 - ky0 + 1):
+            d = ((ky0 + i) * st + 0.5 - cy[q]) / r
+            wy[i] = math.exp(-0.5 * d * d)
+            syw += wy[i]
+        i0, u0, u1 = _axis_taps2((sy[q] - lo) / h, R, bilinear)
+        j0, v0, v1 = _axis_taps2((sx[q] - lo) / h, R, bilinear)
+        fa = np.empty(rank)
+        fb = np.empty(rank)
+        acc = 0.0
+        for di in range(2):
+            wi = u0 if di == 0 else u1
+            if wi == 0.0:
+                continue
+            i = i0 + di
+            bi = i // B
+            if di == 1 and u0 != 0.0 and (i0 // B) == bi:
+                continue
+            ia = i - bi * B
+            wa1 = u1 if (di == 0 and u1 != 0.0 and (i0 + 1) // B == bi) else 0.0
+            for dj in range(2):
+                wj = v0 if dj == 0 else v1
+                if wj == 0.0:
+                    continue
+                j = j0 + dj
+                bj = j // B
+                if dj == 1 and v0 != 0.0 and (j0 // B) == bj:
+                    continue
+                ja = j - bj * B
+                wb1 = v1 if (dj == 0 and v1 != 0.0 and (j0 + 1) // B == bj) else 0.0
+                last = -1
+                for ty in range(ky1 - ky0 + 1):
+                    row = offs[m] + ((ky0 + ty) % ny) * nx
+                    for tx in range(kx1 - kx0 + 1):
+                        img = row + (kx0 + tx) % nx
+                        k = block_index[img, bi, bj]
+                        if k < 0:
+                            continue
+                        g = image_cell[img] * nb * nb + bi * nb + bj
+                        if g != last:
+                            last = g
+                            for rr in range(rank):
+                                a = wi * (A[g, rr, ia + 1] - A[g, rr, ia])
+                                if wa1 != 0.0:
+                                    a += wa1 * (A[g, rr, ia + 2] - A[g, rr, ia + 1])
+                                b = wj * (Bp[g, rr, ja + 1] - Bp[g, rr, ja])
+                                if wb1 != 0.0:
+                                    b += wb1 * (Bp[g, rr, ja + 2] - Bp[g, rr, ja + 1])
+                                fa[rr] = a
+                                fb[rr] = b
+                        v = 0.0
+                        for rr in range(rank):
+                            v += C[k, rr] * fa[rr] * fb[rr]
+                        acc += wy[ty] * wx[tx] * v
+        out[q] = acc / (sxw * syw)

@@ -4,11 +4,15 @@
 (``x`` along texture ``+u`` = normal-map columns, ``y`` along ``+v`` = rows, ``z`` the macro
 normal), where the NDF ``D_P`` is the P-NDF of the pixel footprint:
 
-* ``sigma_p >= sigma0`` (the finest pyramid level): the compressed point query, trilinear over the
-  pyramid (:func:`prefilter.glints.point`); footprints larger than the top level are clamped to it
-  (the top has converged to a smooth NDF, sec. 5.1);
-* ``sigma_p < sigma0``: the direct P-NDF of Yan et al. 2016 (:func:`prefilter.glints.pndf`), cheap
-  for such footprints; without the normal map the footprint is clamped to level 0 instead.
+* ``sigma_p >= sigma_min`` (:attr:`GlintSurface.sigma_min`): the compressed point query; by
+  default Gaussian resampling of a finer pyramid level (the footprint's own P-NDF up to aliasing,
+  :func:`prefilter.glints.pyramid.resample_weights`) with the NDF interpolated bilinearly between
+  the stored pixel averages; ``interp="trilinear"`` gives the paper's 8-image blend (which moves
+  sparse glints between the pyramid samples). Footprints larger than the top level are clamped
+  to it (the top has converged to a smooth NDF, sec. 5.1);
+* ``sigma_p < sigma_min`` (``sigma0``, or ``~1.12 sigma0`` where resampling starts): the direct
+  P-NDF of Yan et al. 2016 (:func:`prefilter.glints.pndf`), cheap for such footprints; without
+  the normal map the footprint is clamped to level 0 instead.
 
 ``D(m) = D_p(m_xy)`` on the hemisphere (see ``pndf``): a density w.r.t. projected normals that
 weights macro area, so ``integral D(m) m_z dm`` is the mass of ``D_p`` (1, or the mass inside the
@@ -35,6 +39,7 @@ from prefilter._validate import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, _as_roughness, as_normal_map,
                                    elements, pndf)
+from prefilter.glints.query import point_flat
 from prefilter.glints.store import GlintsMap
 
 
@@ -50,10 +55,24 @@ class GlintSurface:
     normal_map: np.ndarray | None
     elements_: tuple | None
     intrinsic_roughness: float
+    interp: str = "resample"
+    bilinear: bool = True
 
     @property
     def sigma0(self) -> float:
         return self.gm.pyramid.sigma0 if self.gm is not None else np.inf
+
+    @property
+    def sigma_min(self) -> float:
+        """Footprint std below which :func:`glint_ndf` uses the direct P-NDF (when the normal
+        map is known): ``sigma0``, or the smallest resampled std for ``interp="resample"``."""
+        if self.gm is None:
+            return np.inf
+        if self.interp == "resample":
+            from prefilter.glints.pyramid import resample_min_sigma
+
+            return resample_min_sigma(self.gm.pyramid)
+        return self.gm.pyramid.sigma0
 
     @property
     def shape(self) -> tuple[int, int]:
@@ -64,14 +83,22 @@ class GlintSurface:
 
 
 def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
-            intrinsic_roughness: float | None = None) -> GlintSurface:
+            intrinsic_roughness: float | None = None, interp: str = "resample",
+            bilinear: bool = True) -> GlintSurface:
     """Bundle a baked map and its normal map (the direct P-NDF for tiny footprints).
 
     ``gm=None`` gives a direct-only surface (every query by :func:`prefilter.glints.pndf`, the
     ``glints-direct`` method). ``check`` verifies that ``normal_map`` is the one ``gm`` was baked
     from (SHA-1 of the float64 normals recorded by the bake). ``intrinsic_roughness``: that of
-    the direct P-NDF (default: the bake's, else Yan et al.'s 0.005).
+    the direct P-NDF (default: the bake's, else Yan et al.'s 0.005). ``interp``: how
+    :func:`glint_ndf` evaluates compressed footprints (:func:`prefilter.glints.query.weights`):
+    ``"resample"`` (default; Gaussian resampling, the footprint's exact P-NDF up to compression)
+    or ``"trilinear"`` (the paper's 8-image blend); ``bilinear``: NDF values interpolated between
+    the stored pixel averages (default) instead of the pixel's value.
     """
+    from prefilter.glints.query import _check_interp
+
+    _check_interp(interp)
     if gm is None and normal_map is None:
         raise PrefilterError("surface: expected a GlintsMap, a normal map, or both; got neither")
     if gm is not None and not isinstance(gm, GlintsMap):
@@ -94,7 +121,7 @@ def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
         sr = DEFAULT_ROUGHNESS
     if intrinsic_roughness is not None:
         sr = _as_roughness(intrinsic_roughness)
-    return GlintSurface(gm, nm, el, sr)
+    return GlintSurface(gm, nm, el, sr, interp, bool(bilinear))
 
 
 def _as_surface(surf) -> GlintSurface:
@@ -218,8 +245,9 @@ def glint_ndf(surf, center, sigma_p, s, *, fallback_truncation: float | None = N
 
     Returns
     -------
-    (...) compressed point query (trilinear) for ``sigma_p >= sigma0``, direct P-NDF below when
-    the normal map is known; top-level clamp above the pyramid. ``fallback_truncation``: evaluate
+    (...) compressed point query (``surf.interp``, ``surf.bilinear``) for
+    ``sigma_p >= surf.sigma_min``, direct P-NDF below when the normal map is known; top-level
+    clamp above the pyramid. ``fallback_truncation``: evaluate
     that direct P-NDF by :func:`direct_ndf` truncated at this many stds (faster, approximate;
     ``None``: :func:`prefilter.glints.pndf` exactly).
     """
@@ -234,7 +262,7 @@ def glint_ndf(surf, center, sigma_p, s, *, fallback_truncation: float | None = N
     q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     out = np.zeros(c.shape[0])
-    direct = sp < surf.sigma0 if surf.normal_map is not None else np.zeros(sp.shape, bool)
+    direct = sp < surf.sigma_min if surf.normal_map is not None else np.zeros(sp.shape, bool)
     if np.any(direct) and fallback_truncation is not None:
         out[direct] = direct_ndf(surf, c[direct], sp[direct], q[direct],
                                  truncation=fallback_truncation)
@@ -243,23 +271,9 @@ def glint_ndf(surf, center, sigma_p, s, *, fallback_truncation: float | None = N
                            surf.intrinsic_roughness, elements_=surf.elements_)
     if surf.gm is not None and not np.all(direct):
         k = ~direct
-        out[k] = _point(surf.gm, c[k], sp[k], q[k])
+        out[k] = point_flat(surf.gm, c[k], sp[k], q[k], interp=surf.interp,
+                            bilinear=surf.bilinear)
     return out.reshape(shape)
-
-
-def _point(gm, c, sp, q):
-    """:func:`prefilter.glints.point` on flat arrays, by the serial twin of its kernel for
-    batches below :data:`RENDER_SERIAL_BELOW` (a near frame has a few hundred such queries;
-    waking the thread pool cost ~20 ms)."""
-    from prefilter.glints._qkernels import point_kernel
-    from prefilter.glints.query import _args, _prepare
-
-    _, idx, w, (q,) = _prepare(gm, c, sp, (q, "s"))
-    arrs, lo, h = _args(gm)
-    out = np.empty(idx.shape[0])
-    _serial_below(point_kernel, idx.shape[0])(*arrs, idx, w, np.ascontiguousarray(q[:, 0]),
-                                              np.ascontiguousarray(q[:, 1]), lo, h, out)
-    return out
 
 
 #: The render methods' kernels run serially below this many items. Their work per item is a few
@@ -271,20 +285,6 @@ RENDER_SERIAL_BELOW = 1 << 15
 def _serial_below(kernel, n):
     return serial(kernel, 0) if n < RENDER_SERIAL_BELOW else kernel
 
-
-def _range_mean(gm, c, sp, lo, hi):
-    """:func:`prefilter.glints.query.range_mean` on flat arrays by the serial twin of its kernel
-    below :data:`RENDER_SERIAL_BELOW` items (render-sized batches)."""
-    from prefilter.glints._qkernels import range_kernel
-    from prefilter.glints.query import _args, _prepare
-
-    _, idx, w, (lo_, hi_) = _prepare(gm, c, sp, (lo, "s_min"), (hi, "s_max"))
-    arrs, lo0, h = _args(gm)
-    out = np.empty(idx.shape[0])
-    kern = serial(range_kernel, 0) if idx.shape[0] < RENDER_SERIAL_BELOW else range_kernel
-    cc = np.ascontiguousarray
-    kern(*arrs, idx, w, cc(lo_[:, 0]), cc(lo_[:, 1]), cc(hi_[:, 0]), cc(hi_[:, 1]), lo0, h, out)
-    return out
 
 
 

@@ -26,7 +26,8 @@ import numpy as np
 
 from prefilter._validate import as_float_array, as_rng
 from prefilter.errors import PrefilterError
-from prefilter.glints.brdf import _as_surface, _range_mean, glint_ndf, schlick, vcavity_g2
+from prefilter.glints.brdf import _as_surface, glint_ndf, schlick, vcavity_g2
+from prefilter.glints.query import range_weighted, weights
 
 
 def _lobes(mu, lam, p):
@@ -153,7 +154,10 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
     half_eps = 0.5 * eps_support(mu, lam, eps)
     wgt = mu.mean(axis=1) * sg_energy(lam)
     cum = np.cumsum(_lobe_probabilities(wgt))
-    small = (sp < surf.sigma0) if surf.normal_map is not None else np.zeros(N, bool)
+    small = (sp < surf.sigma_min) if surf.normal_map is not None else np.zeros(N, bool)
+    if prefilter:
+        # the footprints are the same for every sample: their pyramid weights once
+        idx, w, _ = weights(surf.gm, c[~small], sp[~small], interp=surf.interp)
     for j in range(n_samples):
         u = uu[:, 3 * j:3 * j + 3]
         wi, pdf = _sample_sg(mu, lam, p, u)
@@ -164,8 +168,8 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
         if prefilter:
             r = np.maximum(half_eps[k], 1e-6)[:, None]
             D = np.empty(N)
-            D[~small] = _range_mean(surf.gm, c[~small], sp[~small], h[~small, :2] - r[~small],
-                                    h[~small, :2] + r[~small])
+            D[~small] = range_weighted(surf.gm, idx, w, h[~small, :2] - r[~small],
+                                       h[~small, :2] + r[~small])
             if np.any(small):
                 D[small] = glint_ndf(surf, c[small], sp[small], h[small, :2])
         else:

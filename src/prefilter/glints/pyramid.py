@@ -202,3 +202,90 @@ def interp_weights(pyr: Pyramid, center, sigma_p) -> tuple[np.ndarray, np.ndarra
                 wts[..., k] = wl * (fx if dx else 1 - fx) * (fy if dy else 1 - fy)
                 k += 1
     return idx, wts
+
+
+#: Gaussian resampling (:func:`resample_weights`): taps within ``RESAMPLE_TRUNCATION`` stds of the
+#: resampling kernel per axis, and the smallest allowed std of the product of that kernel with a
+#: tap's footprint, in strides of its level (``exp(-2 pi^2 q^2)`` aliasing: 8e-4 at 0.6).
+RESAMPLE_TRUNCATION = 3.0
+RESAMPLE_Q_MIN = 0.45
+
+
+def resample_weights(pyr: Pyramid, center, sigma_p, *, truncation: float = RESAMPLE_TRUNCATION,
+                     q_min: float = RESAMPLE_Q_MIN):
+    """Gaussian-resampling weights: flat image indices ``(N, K)``, weights ``(N, K)`` (padded with
+    zero weights) and ``ok (N,)``.
+
+    The P-NDF is linear in the footprint and ``G_sigma = G_r * G_{sigma_m}`` with
+    ``r^2 = sigma^2 - sigma_m^2``, so the footprint ``(c, sigma)`` is the sum over the centres
+    ``c_k`` of a finer level ``m`` of ``G_r(c_k - c)``-weighted level-``m`` footprints (the
+    construction of the upper levels themselves, :func:`next_level`, at any centre and std). The
+    Riemann sum over the centre grid aliases like ``exp(-2 pi^2 q^2)``, ``q`` the std of the
+    product ``G_r(c_k - c) G_{sigma_m}(u - c_k)`` in strides, ``q = r sigma_m / (sigma stride_m)``:
+    the coarsest level with ``q >= q_min`` is used (fewest taps), with taps within
+    ``truncation r`` per axis, weights normalised to sum 1. Trilinear interpolation
+    (:func:`interp_weights`) instead blends 8 footprints of the wrong sizes and places, which
+    moves sparse glints.
+
+    ``ok`` is False where no level qualifies (``sigma_p`` within ``~1.25 sigma0`` of the finest
+    level or below it: the caller uses the direct P-NDF there) and at or above the top level
+    (converged: the clamped trilinear weights are used); rows with ``ok`` False hold the
+    trilinear weights.
+
+    Parameters
+    ----------
+    center : (N, 2) footprint centres in texels; sigma_p : (N,) footprint stds in texels.
+    """
+    c = as_float_array(center, "center", ndim_min=2, last_dim=2).reshape(-1, 2)
+    sp = np.broadcast_to(as_float_array(sigma_p, "sigma_p"), c.shape[:1]).astype(np.float64)
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    L = pyr.n_levels
+    sig = np.array([pyr.sigma(lv) for lv in range(L)])
+    st = np.array([pyr.stride(lv) for lv in range(L)], dtype=np.float64)
+    m = np.full(sp.shape, -1, np.int64)
+    top = sig[-1]
+    for lv in range(L):
+        with np.errstate(invalid="ignore", divide="ignore"):
+            q = np.sqrt(np.maximum(1.0 - (sig[lv] / sp) ** 2, 0.0)) * sig[lv] / st[lv]
+        m = np.where((sig[lv] < sp) & (q >= q_min) & (sp < top), lv, m)
+    ok = m >= 0
+    tidx, tw = interp_weights(pyr, c, sp)
+    if not np.any(ok):
+        return tidx, tw, ok
+    mo = m[ok]
+    co = c[ok]
+    r = np.sqrt(sp[ok] ** 2 - sig[mo] ** 2)
+    stm = st[mo]
+    shapes = np.array([pyr.shape(lv) for lv in range(L)])
+    ny, nx = shapes[mo, 0], shapes[mo, 1]
+    half = truncation * r / stm
+    g = (co - 0.5) / stm[:, None]
+    k0 = np.ceil(g - half[:, None]).astype(np.int64)
+    n = np.floor(g + half[:, None]).astype(np.int64) - k0 + 1  # (n_ok, 2) taps per axis
+    kx, ky = int(n[:, 0].max()), int(n[:, 1].max())
+    jx, jy = np.arange(kx), np.arange(ky)
+    cx = (k0[:, :1] + jx) * stm[:, None] + 0.5
+    cy = (k0[:, 1:] + jy) * stm[:, None] + 0.5
+    wx = np.where(jx < n[:, :1], np.exp(-0.5 * ((cx - co[:, :1]) / r[:, None]) ** 2), 0.0)
+    wy = np.where(jy < n[:, 1:], np.exp(-0.5 * ((cy - co[:, 1:]) / r[:, None]) ** 2), 0.0)
+    w = (wy[:, :, None] * wx[:, None, :]).reshape(len(mo), -1)
+    w /= w.sum(axis=1, keepdims=True)
+    ix = (k0[:, :1] + jx) % nx[:, None]
+    iy = (k0[:, 1:] + jy) % ny[:, None]
+    offs = pyr.offsets
+    idx_ok = (offs[mo][:, None, None] + iy[:, :, None] * nx[:, None, None]
+              + ix[:, None, :]).reshape(len(mo), -1)
+    K = max(8, idx_ok.shape[1])
+    idx = np.zeros((len(sp), K), np.int64)
+    wts = np.zeros((len(sp), K))
+    idx[~ok, :8], wts[~ok, :8] = tidx[~ok], tw[~ok]
+    idx[ok, :idx_ok.shape[1]], wts[ok, :idx_ok.shape[1]] = idx_ok, w
+    return idx, wts, ok
+
+
+def resample_min_sigma(pyr: Pyramid, q_min: float = RESAMPLE_Q_MIN) -> float:
+    """Smallest footprint std that :func:`resample_weights` resamples (from level 0):
+    ``sigma0 / sqrt(1 - (q_min stride0 / sigma0)^2)``; ``inf`` when level 0 never qualifies."""
+    a = q_min * pyr.stride0 / pyr.sigma0
+    return pyr.sigma0 / math.sqrt(1.0 - a * a) if a < 1.0 else math.inf

@@ -44,8 +44,7 @@ import numpy as np
 from tqdm import tqdm
 
 from prefilter.errors import PrefilterError
-from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, _range_mean,
-                                   glint_brdf_cos, surface)
+from prefilter.glints.brdf import FALLBACK_TRUNCATION, GlintSurface, glint_brdf_cos, surface
 from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
 
 PIXEL_SIGMA = 0.5
@@ -192,7 +191,7 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     valid = (front & np.all(d[..., 2] > _HORIZON, axis=1) & np.all(h[..., 2] > 0, axis=1)
              & (wo[:, 2] > 0) & np.all(hi - lo < RANGE_MAX, axis=(1, 2, 3))
              & np.all(area >= FILL_MIN * box, axis=(1, 2))
-             & (np.asarray(sigma_p) >= surf.sigma0) & (surf.gm is not None))
+             & (np.asarray(sigma_p) >= surf.sigma_min) & (surf.gm is not None))
     out = np.zeros((N, len(np.broadcast_to(f0, (3,)))))
     if not np.any(valid):
         return out, valid
@@ -202,7 +201,10 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     lo_v, hi_v = lo[valid].reshape(-1, 2), hi[valid].reshape(-1, 2) + eps
     cen = np.repeat(np.asarray(center)[valid], m, 0)
     spv = np.repeat(np.asarray(sigma_p)[valid], m, 0)
-    mean = _range_mean(surf.gm, cen, spv, lo_v, hi_v).reshape(nv, m)
+    from prefilter.glints.query import range_weighted, weights
+
+    idx, w, _ = weights(surf.gm, cen, spv, interp=surf.interp)
+    mean = range_weighted(surf.gm, idx, w, lo_v, hi_v).reshape(nv, m)
     # smooth factor at each patch centre direction
     ac = ((np.arange(n_sub) + 0.5) / n_sub)
     Ac, Bc = np.meshgrid(ac, ac, indexing="ij")
@@ -324,7 +326,7 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
             if use_range and surf.gm is not None:
                 val, done = quad_range(surf, c, sp, wo[m], corners, ql.radiance, f0)
                 # lights too large for 2x2 patches: 4x4 (16 range queries) before MIS
-                r = np.flatnonzero(~done & (sp >= surf.sigma0))
+                r = np.flatnonzero(~done & (sp >= surf.sigma_min))
                 if r.size:
                     v4, d4 = quad_range(surf, c[r], sp[r], wo[m][r], corners[r], ql.radiance,
                                         f0, n_sub=2 * QUAD_SUB)
