@@ -77,6 +77,11 @@ METHODS = {
     # ltc-multiscale with the paper's footprint (one isotropic mip level, no LOD bias)
     "ms0": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, lod_bias=0.0,
                                                      lod_bias_start=None),
+    # the anisotropic (multi-tap) footprint over the unnormalised mips, paper's LOD otherwise
+    "ms+ewa": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, anisotropic_footprint=True,
+                                                        lod_bias=0.0, lod_bias_start=None),
+    # a supersampled footprint: 8 x 8 normalised level-0 normals over the pixel (box_taps)
+    "ms-box8": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, box_taps=8),
     "ms": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc-multiscale", table=t, jitter=j),
     "paper": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc-multiscale-paper", table=t, jitter=j),
 }

@@ -167,3 +167,37 @@ def test_study_supersampled_ltc_is_the_full_resolution_shader(tmp_path):
     np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
     # and it differs from the mip-filtered ltc method (the footprint spans 8 texels)
     assert np.abs(render(sc, "ltc", table=table, spp=4) - got).max() > 1e-3
+
+
+def test_box_footprint_has_no_interpolation_shortening(tmp_path):
+    # magnified checkerboard (a pixel covers < 0.1 texel): the bilinear mip lookup blends +-theta
+    # texels into normals as short as cos(theta) near texel corners, although the surface the
+    # reference shades (normalised bilinear normals) barely turns within such a footprint;
+    # the box footprint of normalised taps sees that
+    theta = 0.4
+    sc = load_scene(_scene(_checker(theta), tmp_path, uv_scale=0.05), base_dir=tmp_path)
+    g = gbuffer(sc).reshape(-1)
+    g = g.select(g.hit)
+    texels = np.abs(g.dudv).max() * 64
+    assert texels < 0.1
+    mip = multiscale_attributes(sc, g)["r"]
+    box = multiscale_attributes(sc, g, box_taps=4)
+    assert mip.min() < 1.0 - 0.5 * (1.0 - np.cos(theta))
+    assert box["r"].min() > 1.0 - 0.1 * (1.0 - np.cos(theta))
+    np.testing.assert_allclose(box["alpha"], alpha_total(0.1, alpha_meso_exact(box["r"])),
+                               atol=1e-6)
+
+
+def test_box_footprint_of_a_constant_map_renders_like_ltc(tmp_path):
+    n = np.broadcast_to(np.array([np.sin(0.2), 0.0, np.cos(0.2)]), (16, 16, 3)).copy()
+    sc = load_scene(_scene(n, tmp_path, uv_scale=50.0), base_dir=tmp_path)
+    table = _toy_table()
+    from prefilter.multiscale.render import render_multiscale
+    from prefilter.render.methods import RenderSettings
+
+    ms = render_multiscale(sc, RenderSettings(table=table), box_taps=3)
+    naive = render(sc, "ltc", table=table)
+    assert naive.max() > 0.01
+    np.testing.assert_allclose(ms, naive, rtol=1e-6, atol=1e-6)
+    with pytest.raises(ValueError, match="box_taps"):
+        render_multiscale(sc, RenderSettings(table=table), box_taps=-1)

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from prefilter._validate import as_positive_int
 from prefilter.multiscale.convolution import _alpha_total
 from prefilter.multiscale.meso import _alpha_from_r, _mrl, _paper_eq5, R_COSINE
 
@@ -113,9 +114,25 @@ def _lookup(chain, uv, dudv, anisotropic: bool, max_aniso: int) -> np.ndarray:
     return footprint_lookup(chain, uv, dudv)
 
 
+def _box_lookup(chain, uv, dudv, taps: int) -> np.ndarray:
+    """Mean ``(N, 3)`` of ``taps^2`` *normalised* level-0 bilinear normals on a regular grid over
+    the pixel footprint (the parallelogram spanned by ``dudv[:, :, 0]`` and ``dudv[:, :, 1]``):
+    the normals the reference shades with, so its length is the footprint's mean resultant
+    length without the shortening that interpolating between texels adds."""
+    acc = np.zeros((len(uv), 3))
+    grid = (np.arange(taps) + 0.5) / taps - 0.5
+    for a in grid:
+        for b in grid:
+            n = chain.lookup(uv + a * dudv[:, :, 0] + b * dudv[:, :, 1], 0.0)[:, :3]
+            ln = np.linalg.norm(n, axis=-1, keepdims=True)
+            acc += n / np.where(ln > 0.0, ln, 1.0)
+    return acc / (taps * taps)
+
+
 def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
                           anisotropic_footprint: bool = False, max_aniso: int = 8,
-                          lod_bias: float = 0.0, lod_bias_start=None) -> dict:
+                          lod_bias: float = 0.0, lod_bias_start=None,
+                          box_taps: int = 0) -> dict:
     """Shading frame, material and multi-scale roughness per hit sample of a flat G-buffer.
 
     As :func:`prefilter.render.pipeline.surface_attributes` with ``filtered=True``, plus ``r``
@@ -131,7 +148,12 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
     ``clip(lod - s, 0, lod_bias)`` with ``lod = log2`` of its major axis in texels, so footprints
     below ``2^s`` texels are read unbiased (distance-dependent stabilisation, see
     ``docs/multiscale.md``).
+    ``box_taps``: ``0`` (default, the mip lookup above) or ``k``: the normal map is read as the
+    mean of ``k^2`` normalised full-resolution normals over the pixel footprint (a supersampled
+    footprint, not a real-time one; it isolates the footprint's error in the study of
+    ``docs/multiscale.md``; ``lod_bias`` and the anisotropic footprint do not apply).
     """
+    box_taps = as_positive_int(box_taps, "box_taps", lo=0)
     from prefilter.render.shading import shading_frame
     from prefilter.texture.procedural import slopes_to_normals
 
@@ -149,8 +171,13 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
         nts = None
         if mat.normal_map is not None:
             chain = mat.normal_map.mip()
-            scale = _bias_scale(g.dudv[m], chain.levels[0].shape[:2], lod_bias, lod_bias_start)
-            nts = _lookup(chain, g.uv[m], g.dudv[m] * scale, anisotropic_footprint, max_aniso)
+            if box_taps:
+                nts = _box_lookup(chain, g.uv[m], g.dudv[m], box_taps)
+            else:
+                scale = _bias_scale(g.dudv[m], chain.levels[0].shape[:2], lod_bias,
+                                    lod_bias_start)
+                nts = _lookup(chain, g.uv[m], g.dudv[m] * scale, anisotropic_footprint,
+                              max_aniso)
             r[m] = np.minimum(np.sqrt(np.einsum("ij,ij->i", nts, nts)), 1.0)
         elif mat.height_map is not None:
             nts = slopes_to_normals(mat.height_map.mip().lookup_footprint(g.uv[m],
@@ -177,7 +204,7 @@ def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> n
     lights, textured = split_lights(scene, name)
     table = settings.table if settings.table is not None else GGXTable.load()
     if not (lights.points or lights.directionals or textured
-            or footprint.get("anisotropic_footprint")):
+            or footprint.get("anisotropic_footprint") or footprint.get("box_taps")):
         # quad lights only: the ``ltc`` method's fused kernel with this roughness
         rough = multiscale_roughness(scene.objects, meso, total, footprint.get("lod_bias", 0.0),
                                      footprint.get("lod_bias_start"))
@@ -203,16 +230,16 @@ LOD_BIAS, LOD_BIAS_START = 2.0, 2.0
 
 def render_multiscale(scene, settings, *, anisotropic_footprint: bool = False,
                       max_aniso: int = 8, lod_bias: float = LOD_BIAS,
-                      lod_bias_start=LOD_BIAS_START) -> np.ndarray:
+                      lod_bias_start=LOD_BIAS_START, box_taps: int = 0) -> np.ndarray:
     """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7.
 
-    ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias`` / ``lod_bias_start``: see
-    :func:`multiscale_attributes`; the default footprint is :data:`LOD_BIAS` levels coarser at
-    most, ramping in from :data:`LOD_BIAS_START` (``lod_bias=0`` is the paper's isotropic mip
-    level; all measured in ``docs/multiscale.md``)."""
+    ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias`` / ``lod_bias_start`` /
+    ``box_taps``: see :func:`multiscale_attributes`; the default footprint is :data:`LOD_BIAS`
+    levels coarser at most, ramping in from :data:`LOD_BIAS_START` (``lod_bias=0`` is the
+    paper's isotropic mip level; all measured in ``docs/multiscale.md``)."""
     return _render(scene, settings, "exact", "fit", "ltc-multiscale",
                    anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
-                   lod_bias=lod_bias, lod_bias_start=lod_bias_start)
+                   lod_bias=lod_bias, lod_bias_start=lod_bias_start, box_taps=box_taps)
 
 
 def render_multiscale_paper(scene, settings) -> np.ndarray:
