@@ -215,6 +215,11 @@ def finish_table(settings: BakeSettings, entries, M_raw, loss=None, *,
 # --------------------------------------------------------------------------------------------
 
 
+#: Conditioning bound of stored matrices, ``cond(M) <= COND_BOUND / alpha_min`` (docs/ltc-aniso.md,
+#: "Conditioning"; the SW + L1 bake stays below 8.2).
+COND_BOUND = 10.0
+
+
 @dataclass(frozen=True)
 class QuadPolishSettings:
     """Settings of :func:`quad_polish` (stored in the table's settings when applied)."""
@@ -262,6 +267,8 @@ def _polish_job(args):
         if min(np.count_nonzero(r >= 1e-3) for r in refs) < 8:
             continue  # too few lit quads to fit or to judge: keep the density fit
         M = fit_quad_ltc(quads, refs[0], mag[j], M0[j], loss=qs.loss, fit_scale=False)["M"]
+        if np.linalg.cond(M) > COND_BOUND / min(ax[j], ay[j]):
+            continue  # degenerate refit (the quads only constrain part of the lobe)
         lit = refs[1] >= 1e-3
 
         def err(m):
@@ -322,8 +329,47 @@ def quad_polish(table: AnisoGGXTable, qs: QuadPolishSettings = QuadPolishSetting
     aligned = align(M)["M"]
     aligned /= np.linalg.norm(aligned[..., :, 2], axis=-1)[..., None, None]
     M_new = enforce(_fill(settings, entries, aligned), th, ph, ra)
+    # eq. 16 averages and zeroes entries; where that leaves a bad matrix keep the table's
+    amin = (al[:, None] * ra[None, :])[None, None]
+    bad = (np.linalg.det(M_new) <= 0) | (np.linalg.cond(M_new) > COND_BOUND / amin)
+    M_new[bad] = table.M[bad]
     diagnostics = dict(table.diagnostics)
-    diagnostics["quad_polished"] = _fill(settings, entries, kept)
+    diagnostics["quad_polished"] = _fill(settings, entries, kept) * ~bad
     diagnostics["quad_polish_change"] = np.abs(M_new - table.M).max(axis=(-2, -1))
     return AnisoGGXTable(table.axes, M_new, table.magnitude, table.fresnel,
                          {**table.settings, "quad_polish": asdict(qs)}, diagnostics)
+
+
+def repolish(table: AnisoGGXTable, power: float, *, seed: int = 0) -> AnisoGGXTable:
+    """The bake's point-wise polish rerun with exponent ``power`` on a table's stored fits.
+
+    Starts every entry from ``diagnostics["M_unaligned"]`` (the bake's fits before alignment),
+    runs :func:`~prefilter.ltc.aniso.fit.fit_pointwise` with the table's polish settings and
+    ``|p - q|^power``, keeps each result unless it diverged, then aligns and applies eq. 16;
+    magnitude and Fresnel are unchanged (docs/ltc-aniso.md, "What limits the p90").
+    """
+    if "M_unaligned" not in table.diagnostics:
+        raise PrefilterError("table: expected the diagnostic array M_unaligned (a baked table)")
+    settings = BakeSettings(**{k: v for k, v in table.settings.items()
+                               if k in BakeSettings.__dataclass_fields__ and k != "sw"})
+    entries = grid_entries(settings)
+    i = entries["index"]
+    M0 = table.diagnostics["M_unaligned"][i[:, 0], i[:, 1], i[:, 2], i[:, 3]]
+    out = np.empty_like(M0)
+    for c in range(0, len(M0), settings.chunk):
+        sl = slice(c, c + settings.chunk)
+        pol = fit_pointwise(entries["wo"][sl], entries["alpha_x"][sl], entries["alpha_y"][sl],
+                            steps=settings.polish_steps, n_samples=settings.polish_samples,
+                            lr=settings.polish_lr, lr_final=settings.polish_lr / 30,
+                            power=power, seed=seed * 100_003 + c // settings.chunk, M0=M0[sl],
+                            double=False)["M"]
+        bad = ~np.all(np.isfinite(pol), axis=(1, 2))
+        bad |= np.linalg.cond(np.where(bad[:, None, None], np.eye(3), pol)) > 1e7
+        pol[bad] = M0[sl][bad]  # a diverged polish keeps the stored fit
+        out[sl] = pol
+    aligned = align(out)["M"]
+    aligned /= np.linalg.norm(aligned[..., :, 2], axis=-1)[..., None, None]
+    M = enforce(_fill(settings, entries, aligned), *table.axes[:2], table.axis_ratio)
+    return AnisoGGXTable(table.axes, M, table.magnitude, table.fresnel,
+                         {**table.settings, "repolish_power": power},
+                         {"M_unaligned": _fill(settings, entries, out)})
