@@ -254,6 +254,13 @@ def test_bake_resumes_from_parts(tmp_path):
     assert not parts.exists()
 
 
+def test_bake_rank_errors(tmp_path):
+    nm = sinusoid(16, px=16, py=8)
+    with pytest.raises(PrefilterError, match="max_rank"):
+        bake(nm, tmp_path / "x.npz", rank=8, max_rank=4, ndf_res=16, block=8, cell=8,
+             progress=False)
+
+
 def test_query_input_errors(baked):
     _, _, _, gm = baked
     with pytest.raises(PrefilterError, match="s_max"):
