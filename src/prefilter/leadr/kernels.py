@@ -199,3 +199,55 @@ def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no 
         for c in range(nc):
             out[q, c] = -num[c] / (den * math.pi) if den > 1e-300 else 0.0
     return out
+
+
+@njit(fastmath=True, cache=True)
+def _bilinear_wrap(flat, offset, hh, ww, u, v, out, scale):  # pragma: no cover - compiled
+    """``out += scale * bilinear(level, u, v)``, periodic in both axes (``MipChain._bilinear``)."""
+    x = u * ww - 0.5
+    y = v * hh - 0.5
+    x0 = math.floor(x)
+    y0 = math.floor(y)
+    fx = x - x0
+    fy = y - y0
+    j0 = int(x0) % ww
+    i0 = int(y0) % hh
+    j1 = (j0 + 1) % ww
+    i1 = (i0 + 1) % hh
+    for c in range(flat.shape[1]):
+        a = flat[offset + i0 * ww + j0, c] * (1 - fx) + flat[offset + i0 * ww + j1, c] * fx
+        b = flat[offset + i1 * ww + j0, c] * (1 - fx) + flat[offset + i1 * ww + j1, c] * fx
+        out[c] += scale * (a * (1 - fy) + b * fy)
+
+
+@njit_parallel
+def box_moments_kernel(flat, offsets, shapes, uv, dudv, major, max_taps,
+                       out):  # pragma: no cover - compiled
+    """``out (N, C)``: mean of ``T x T`` trilinear taps over each footprint parallelogram
+    ``uv + dudv @ o``, ``T = clip(ceil(major / 2), 1, max_taps)``, each at
+    ``lod = log2(max(major / T, 1))`` (:func:`prefilter.leadr.render.footprint_moments`)."""
+    npts = uv.shape[0]
+    nc = flat.shape[1]
+    nl = offsets.size
+    for q in prange(npts):
+        t = int(math.ceil(major[q] / 2.0))
+        t = min(max(t, 1), max_taps)
+        lod = math.log2(max(major[q] / t, 1.0))
+        lod = min(max(lod, 0.0), nl - 1.0)
+        l0 = min(int(math.floor(lod)), max(nl - 2, 0))
+        f = lod - l0 if nl > 1 else 0.0
+        acc = np.zeros(nc)
+        for i in range(t):
+            oy = (i + 0.5) / t - 0.5
+            for j in range(t):
+                ox = (j + 0.5) / t - 0.5
+                u = uv[q, 0] + dudv[q, 0, 0] * ox + dudv[q, 0, 1] * oy
+                v = uv[q, 1] + dudv[q, 1, 0] * ox + dudv[q, 1, 1] * oy
+                _bilinear_wrap(flat, offsets[l0], shapes[l0, 0], shapes[l0, 1], u, v, acc,
+                               1.0 - f)
+                if nl > 1:
+                    _bilinear_wrap(flat, offsets[l0 + 1], shapes[l0 + 1, 0], shapes[l0 + 1, 1],
+                                   u, v, acc, f)
+        for c in range(nc):
+            out[q, c] = acc[c] / (t * t)
+    return out

@@ -27,6 +27,8 @@ without the meso-scale slope covariance.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from prefilter.errors import PrefilterError
@@ -55,16 +57,36 @@ FOOTPRINT_TAPS = 8
 POINT_FOOTPRINT_TAPS = 1
 
 
+_PACKED = weakref.WeakKeyDictionary()
+
+
 def footprint_moments(chain, uv, dudv, max_taps: int | None = None) -> np.ndarray:
     """Box-filtered moments ``(N, C)`` of a mip chain over pixel footprints ``uv (N, 2)``,
     ``dudv (N, 2, 2)``: ``T x T`` taps, ``T = clip(ceil(major / 2), 1, max_taps)`` with
-    ``major`` the footprint's major axis in texels (:data:`FOOTPRINT_TAPS`); objects without
-    ``lookup`` (precomputed moments) answer ``lookup_footprint`` themselves."""
+    ``major`` the footprint's major axis in texels (:data:`FOOTPRINT_TAPS`), compiled
+    (:func:`prefilter.leadr.kernels.box_moments_kernel`); objects without ``levels``
+    (precomputed moments) answer ``lookup_footprint`` themselves."""
+    from prefilter.leadr.envmap import packed_levels
+    from prefilter.leadr.kernels import box_moments_kernel
     from prefilter.texture.mip import footprint_axes
 
     max_taps = FOOTPRINT_TAPS if max_taps is None else int(max_taps)
-    if max_taps <= 1 or not hasattr(chain, "lookup"):
+    if max_taps <= 1 or not hasattr(chain, "levels"):
         return chain.lookup_footprint(uv, dudv)
+    if chain not in _PACKED:
+        _PACKED[chain] = packed_levels(chain)
+    flat, offsets, shapes = _PACKED[chain]
+    uv = np.ascontiguousarray(uv, dtype=np.float64)
+    dudv = np.ascontiguousarray(dudv, dtype=np.float64)
+    major = np.ascontiguousarray(footprint_axes(dudv, chain.shape[:2])[0], dtype=np.float64)
+    out = np.empty((len(uv), flat.shape[1]))
+    return box_moments_kernel(flat, offsets, shapes, uv, dudv, major, max_taps, out)
+
+
+def _footprint_moments_numpy(chain, uv, dudv, max_taps: int = FOOTPRINT_TAPS) -> np.ndarray:
+    """NumPy version of :func:`footprint_moments` (the compiled kernel is tested against it)."""
+    from prefilter.texture.mip import footprint_axes
+
     h, w = chain.shape[:2]
     major = footprint_axes(dudv, (h, w))[0]
     taps = np.clip(np.ceil(major / 2.0), 1, max_taps).astype(np.int64)
