@@ -62,6 +62,7 @@ _REGISTRY: dict[str, Method | str] = {
     "leadr-point": "prefilter.leadr.render:render_leadr_point",
     "leadr-env": "prefilter.leadr.render:render_leadr_env",
     "leadr-env-shadowed": "prefilter.leadr.render:render_leadr_env_shadowed",
+    "leadr-env-simplified": "prefilter.leadr.render:render_leadr_env_simplified",
     "leadr-env-naive": "prefilter.leadr.render:render_leadr_env_naive",
     "leadr-irradiance": "prefilter.leadr.render:render_leadr_irradiance",
     "leadr-irradiance-naive": "prefilter.leadr.render:render_leadr_irradiance_naive",
@@ -82,9 +83,11 @@ _DESCRIPTIONS: dict[str, str] = {
     "ltc-multiscale-paper": "multi-scale LTC with the paper's fitted eqs. 5 and 7",
     "ltc-multiscale-mrl": "multi-scale LTC with the closed-form product of mean resultant lengths",
     "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2)",
-    "leadr-env": "LEADR under environment (+ point/directional) light: Simplified Algorithm 1 "
-                 "specular grid, SH irradiance diffuse",
-    "leadr-env-shadowed": "leadr-env with self-shadowing (G2/G1 per grid sample; NumPy path)",
+    "leadr-env": "LEADR under environment (+ point/directional) light: Algorithm 1 specular "
+                 "grid with self-shadowing (G2/G1), SH irradiance diffuse with shadowing",
+    "leadr-env-shadowed": "alias of leadr-env (self-shadowing is now its default)",
+    "leadr-env-simplified": "LEADR with the supplemental's simplified algorithms (masking only, "
+                            "no self-shadowing)",
     "leadr-env-naive": "naive counterpart of leadr-env: mip-averaged normal, micro roughness only",
     "leadr-irradiance": "LEADR diffuse layer: SH irradiance of environment and directional lights",
     "leadr-irradiance-naive": "naive counterpart of leadr-irradiance",
