@@ -5,6 +5,9 @@
     python benchmarks/bench_glints.py --size 256      # map size of the query benchmark
     python benchmarks/bench_glints.py --frames        # only: glints frame time at 3 distances
     python benchmarks/bench_glints.py --frames --direct   # also glints-direct, speed-up, FLIP
+    python benchmarks/bench_glints.py --frames --runs 3 --interp trilinear --nearest \
+        --bake-rank 16  # the evaluation and bake of the previous version
+    python benchmarks/bench_glints.py --frames --stride0 2 --sigma0 2  # finer level 0 (bakes)
 
 The machine is shared, so every ratio is computed from timings of the same run; the absolute
 numbers are only indicative. Footprint "width" is 2 sigma_p (texels).
@@ -109,11 +112,24 @@ def bench_ranks(size, tmp, ranks=(8, 16, 32, 64),
                   flush=True)
 
 
-def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=False, lights="point"):
+def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=False, lights="point",
+                 interp=None, bilinear=None, bake_settings=None, clock=time.perf_counter):
     """Whole-frame time of ``glints`` at several distances in one run (the measurement scene of
     :mod:`prefilter.glints.render`: 64 x 48 pixels, 128^2 map, footprint ~ distance). Rounds are
-    interleaved over the distances so that load changes hit all of them; best of ``repeat``."""
+    interleaved over the distances so that load changes hit all of them; best of ``repeat``.
+    ``interp``, ``bilinear``, ``bake_settings``: override the render module's evaluation
+    (``INTERP``, ``BILINEAR``) and bake settings (e.g. ``stride0``/``sigma0``). ``clock``:
+    ``time.process_time`` counts this process's CPU time (all threads), which a loaded machine
+    disturbs far less than the wall time (the render kernels are serial at this size)."""
+    from prefilter.glints import render as grender
     from prefilter.glints.render import measurement_scene
+
+    if interp is not None:
+        grender.INTERP = interp
+    if bilinear is not None:
+        grender.BILINEAR = bilinear
+    if bake_settings:
+        grender.BAKE_SETTINGS.update(bake_settings)
     from prefilter.render.metrics import flip
     from prefilter.render.pipeline import render
     from prefilter.render.scene import load_scene
@@ -124,11 +140,14 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
     best = [np.inf] * len(scenes)
     for _ in range(repeat):
         for i, sc in enumerate(scenes):
-            t = time.perf_counter()
+            t = clock()
             render(sc, "glints")
-            best[i] = min(best[i], time.perf_counter() - t)
+            best[i] = min(best[i], clock() - t)
     print(f"glints frame time ({lights} light, {kind} 128^2 map, 64x48 pixels, best of {repeat}, "
-          f"NUMBA threads {os.environ.get('NUMBA_NUM_THREADS', 'all')})")
+          f"NUMBA threads {os.environ.get('NUMBA_NUM_THREADS', 'all')}, interp "
+          f"{grender.INTERP}, bilinear {grender.BILINEAR}, stride0 "
+          f"{grender.BAKE_SETTINGS['stride0']}, sigma0 {grender.BAKE_SETTINGS.get('sigma0')}, "
+          f"clock {clock.__name__})")
     for d, t in zip(distances, best):
         line = f"  distance {d:4g}: glints {t * 1e3:8.1f} ms"
         if direct:
@@ -155,9 +174,25 @@ def main():
     ap.add_argument("--frames", action="store_true", help="only the frame-time benchmark")
     ap.add_argument("--direct", action="store_true", help="--frames: also glints-direct + FLIP")
     ap.add_argument("--lights", default="point", help="--frames: point, quad or environment")
+    ap.add_argument("--runs", type=int, default=1, help="--frames: repeat the measurement")
+    ap.add_argument("--interp", default=None, help="--frames: resample (default) or trilinear")
+    ap.add_argument("--nearest", action="store_true", help="--frames: NDF pixel value lookup")
+    ap.add_argument("--stride0", type=int, default=None, help="--frames: bake with this stride0")
+    ap.add_argument("--sigma0", type=float, default=None, help="--frames: and this sigma0")
+    ap.add_argument("--cpu", action="store_true", help="--frames: process CPU time, not wall")
+    ap.add_argument("--bake-rank", type=int, default=None, help="--frames: bake rank budget")
     a = ap.parse_args()
     if a.frames:
-        bench_frames(direct=a.direct, lights=a.lights)
+        bs = {k: v for k, v in (("stride0", a.stride0), ("sigma0", a.sigma0),
+                                ("rank", a.bake_rank)) if v is not None}
+        ratios = []
+        for _ in range(a.runs):
+            best = bench_frames(direct=a.direct, lights=a.lights, interp=a.interp,
+                                bilinear=False if a.nearest else None, bake_settings=bs,
+                                clock=time.process_time if a.cpu else time.perf_counter)
+            ratios.append(max(best) / min(best))
+        if a.runs > 1:
+            print("max/min per run: " + ", ".join(f"{r:.2f}" for r in ratios))
         return
     with tempfile.TemporaryDirectory() as tmp:
         if a.map:

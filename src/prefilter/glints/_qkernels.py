@@ -11,9 +11,10 @@ from prefilter._numba import njit_parallel, njit_serial, prange
 
 
 @njit_serial
-def _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q, bi, bj, i0, i1, j0, j1):
+def _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bi, bj, i0, i1, j0, j1):
     """Sum of the blended image's pixel values over rows ``[i0, i1)``, columns ``[j0, j1)`` of
-    block ``(bi, bj)`` (block-local pixel indices)."""
+    block ``(bi, bj)`` (block-local pixel indices). ``granks``: the rank of each CP group (its
+    components come first; adaptive-rank maps pad the others with zeros, skipped here)."""
     nb = block_index.shape[1]
     acc = 0.0
     for c in range(idx.shape[1]):
@@ -26,14 +27,14 @@ def _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q, bi, bj, i0, i1, j
             continue
         g = image_cell[img] * nb * nb + bi * nb + bj
         s = 0.0
-        for r in range(C.shape[1]):
+        for r in range(granks[g]):
             s += C[k, r] * ((A[g, r, i1] - A[g, r, i0]) * (Bp[g, r, j1] - Bp[g, r, j0]))
         acc += w * s
     return acc
 
 
 @njit_parallel
-def point_kernel(A, Bp, C, block_index, image_cell, idx, wts, sx, sy, lo, h, out):
+def point_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy, lo, h, out):
     R = block_index.shape[1] * (A.shape[2] - 1)
     B = A.shape[2] - 1
     for q in prange(out.shape[0]):
@@ -45,8 +46,8 @@ def point_kernel(A, Bp, C, block_index, image_cell, idx, wts, sx, sy, lo, h, out
             i = int(fy)
             bi, bj = i // B, j // B
             i0, j0 = i - bi * B, j - bj * B
-            acc = _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q, bi, bj, i0, i0 + 1,
-                             j0, j0 + 1)
+            acc = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bi, bj, i0,
+                             i0 + 1, j0, j0 + 1)
         out[q] = acc
 
 
@@ -63,7 +64,7 @@ def _prefix_at(P, g, r, u):
 
 
 @njit_parallel
-def range_kernel(A, Bp, C, block_index, image_cell, idx, wts, x0, y0, x1, y1, lo, h, out):
+def range_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, x0, y0, x1, y1, lo, h, out):
     """Mean of the piecewise-constant NDF image over ``[x0, x1] x [y0, y1]`` (zero outside the
     support); the rectangle is split at block boundaries (paper, sec. 4.4)."""
     B = A.shape[2] - 1
@@ -99,7 +100,7 @@ def range_kernel(A, Bp, C, block_index, image_cell, idx, wts, x0, y0, x1, y1, lo
                         u1 = cx1 - bj * B
                         g = image_cell[img] * nb * nb + bi * nb + bj
                         s = 0.0
-                        for r in range(C.shape[1]):
+                        for r in range(granks[g]):
                             ia = _prefix_at(A, g, r, v1) - _prefix_at(A, g, r, v0)
                             ib = _prefix_at(Bp, g, r, u1) - _prefix_at(Bp, g, r, u0)
                             s += C[k, r] * ia * ib
@@ -120,7 +121,7 @@ def _axis_taps(f, R, B):
 
 
 @njit_parallel
-def bilinear_kernel(A, Bp, C, block_index, image_cell, idx, wts, sx, sy, lo, h, out):
+def bilinear_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy, lo, h, out):
     """Point values of the blended images reconstructed bilinearly between pixel centres.
 
     The CP image of a block is ``sum_r c_r a_r (x) b_r``, so a bilinear combination of pixels of
@@ -170,7 +171,7 @@ def bilinear_kernel(A, Bp, C, block_index, image_cell, idx, wts, sx, sy, lo, h, 
                         continue
                     g = image_cell[img] * nb * nb + bi * nb + bj
                     s = 0.0
-                    for r in range(C.shape[1]):
+                    for r in range(granks[g]):
                         fa = wa0 * (A[g, r, ia + 1] - A[g, r, ia])
                         if wa1 != 0.0:
                             fa += wa1 * (A[g, r, ia + 2] - A[g, r, ia + 1])
@@ -195,12 +196,14 @@ def _axis_taps2(f, R, bilinear):
 
 
 @njit_parallel
-def resample_point_kernel(A, Bp, C, block_index, image_cell, offs, ny_l, nx_l, sig_l, st_l,
-                          cx, cy, sp, sx, sy, lo, h, trunc, q_min, bilinear, out, done):
+def resample_point_kernel(A, Bp, C, block_index, image_cell, granks, offs, ny_l, nx_l, sig_l,
+                          st_l, cx, cy, sp, sx, sy, lo, h, trunc, q_min, bilinear, out, done):
     """Point values of Gaussian-resampled footprints (:func:`prefilter.glints.pyramid.
     resample_weights`, the same level choice and taps) without materialising the tap lists:
     taps of one CP group share its factor values at ``s``, which are read once per group.
-    ``done[q] = False`` where no level qualifies (the caller uses another path)."""
+    ``granks``: the rank of each group (its components come first; adaptive-rank maps pad the
+    rest with zeros). ``done[q] = False`` where no level qualifies (the caller uses another
+    path)."""
     B = A.shape[2] - 1
     nb = block_index.shape[1]
     R = nb * B
@@ -278,9 +281,10 @@ def resample_point_kernel(A, Bp, C, block_index, image_cell, offs, ny_l, nx_l, s
                         if k < 0:
                             continue
                         g = image_cell[img] * nb * nb + bi * nb + bj
+                        nr = granks[g]
                         if g != last:
                             last = g
-                            for rr in range(rank):
+                            for rr in range(nr):
                                 a = wi * (A[g, rr, ia + 1] - A[g, rr, ia])
                                 if wa1 != 0.0:
                                     a += wa1 * (A[g, rr, ia + 2] - A[g, rr, ia + 1])
@@ -290,7 +294,7 @@ def resample_point_kernel(A, Bp, C, block_index, image_cell, offs, ny_l, nx_l, s
                                 fa[rr] = a
                                 fb[rr] = b
                         v = 0.0
-                        for rr in range(rank):
+                        for rr in range(nr):
                             v += C[k, rr] * fa[rr] * fb[rr]
                         acc += wy[ty] * wx[tx] * v
         out[q] = acc / (sxw * syw)

@@ -124,6 +124,18 @@ def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
     return GlintSurface(gm, nm, el, sr, interp, bool(bilinear))
 
 
+def bilinear_bake_roughness(intrinsic_roughness: float, support: float, ndf_res: int) -> float:
+    """Intrinsic roughness to bake with so that the bilinear lookup reproduces ``sigma_r``.
+
+    A bilinear interpolation of pixel averages (pitch ``h = 2 support / ndf_res``) blurs the NDF
+    by the pixel box (variance ``h^2 / 12``) and the tent (``h^2 / 6``), i.e. adds ``(h / 2)^2``
+    to the variance of every element's Gaussian: baking with ``sqrt(sigma_r^2 - (h/2)^2)`` puts it
+    back (not below ``sigma_r / 2`` when the pixels are too coarse for that)."""
+    sr = _as_roughness(intrinsic_roughness)
+    hh = float(support) / int(ndf_res)
+    return max(math.sqrt(max(sr * sr - hh * hh, 0.0)), 0.5 * sr)
+
+
 def _as_surface(surf) -> GlintSurface:
     if isinstance(surf, GlintSurface):
         return surf

@@ -156,7 +156,14 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points, interp="trilinear"):
 
 def _args(gm):
     h = 2.0 * gm.support / gm.resolution
-    return (gm.A, gm.Bp, gm.C, gm.block_index, gm.image_cell), -gm.support, h
+    return (gm.A, gm.Bp, gm.C, gm.block_index, gm.image_cell, _group_ranks(gm)), -gm.support, h
+
+
+def _group_ranks(gm):
+    """Rank of each CP group ``(G,)`` int64 (all of ``C``'s columns for single-rank maps)."""
+    if gm.ranks is None:
+        return np.full(gm.A.shape[0], gm.C.shape[1], np.int64)
+    return np.ascontiguousarray(gm.ranks, dtype=np.int64)
 
 
 def point(gm: GlintsMap, center, sigma_p, s, *, interp: str = "trilinear",

@@ -38,14 +38,14 @@ from prefilter.glints.store import GlintsMap
 
 
 @njit_parallel
-def _block_masses(A, Bp, C, block_index, image_cell, idx, wts, out):
+def _block_masses(A, Bp, C, block_index, image_cell, granks, idx, wts, out):
     """Masses ``out (N, nb, nb)`` (sums of pixel values) of every block of the blended images."""
     B = A.shape[2] - 1
     nb = block_index.shape[1]
     for q in prange(out.shape[0]):
         for bi in range(nb):
             for bj in range(nb):
-                out[q, bi, bj] = _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q,
+                out[q, bi, bj] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q,
                                             bi, bj, 0, B, 0, B)
 
 
@@ -70,15 +70,15 @@ def _choose(masses, n, u):
 
 
 @njit_parallel
-def _sample_kernel(A, Bp, C, block_index, image_cell, idx, wts, u, lo, h, out_s, out_pdf):
+def _sample_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, u, lo, h, out_s, out_pdf):
     B = A.shape[2] - 1
     nb = block_index.shape[1]
     for q in prange(out_pdf.shape[0]):
         bm = np.empty(nb * nb)
         for bi in range(nb):
             for bj in range(nb):
-                bm[bi * nb + bj] = _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q,
-                                              bi, bj, 0, B, 0, B)
+                bm[bi * nb + bj] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx,
+                                              wts, q, bi, bj, 0, B, 0, B)
         kb, p = _choose(bm, nb * nb, u[q, 0])
         if kb < 0:
             out_s[q, 0] = 0.0
@@ -104,7 +104,7 @@ def _sample_kernel(A, Bp, C, block_index, image_cell, idx, wts, u, lo, h, out_s,
                     if b1 <= b0:
                         continue
                     ci0[n], ci1[n], cj0[n], cj1[n] = a0, a1, b0, b1
-                    cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, idx, wts, q,
+                    cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q,
                                        bi, bj, a0, a1, b0, b1)
                     n += 1
             k, pk = _choose(cm, n, u[q, lev])
@@ -133,7 +133,9 @@ def _prep(gm, center, sigma_p):
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     idx, w = interp_weights(gm.pyramid, c, sp)
-    arrs = (gm.A, gm.Bp, gm.C, gm.block_index, gm.image_cell)
+    from prefilter.glints.query import _args
+
+    arrs = _args(gm)[0]
     return shape, arrs, np.ascontiguousarray(idx), np.ascontiguousarray(w)
 
 
