@@ -65,10 +65,19 @@ def best_of(fn, repeats: int = 5) -> float:
 
 
 def bench_cost(table, width: int = 384, height: int = 240) -> None:
+    from prefilter.multiscale.render import render_multiscale
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.scene import load_scene
+
     sc = scene(4.0, width, height, 0.03, "gaussian")
-    names = ("ltc", "ltc-multiscale", "ltc-multiscale-paper", "ltc-multiscale-aniso")
+    loaded = load_scene(sc)
+    runs = {m: (lambda m=m: render(loaded, m, table=table))
+            for m in ("ltc", "ltc-multiscale", "ltc-multiscale-paper", "ltc-multiscale-aniso")}
+    # the compiled anisotropic taps (option taps=4: footprints below 4 texels, axis ratio > 1.5)
+    runs["ms+taps"] = lambda: render_multiscale(loaded, RenderSettings(table=table), taps=4)
+    names = tuple(runs)
     for m in names:
-        render(sc, m, table=table)  # warm-up: textures, mips, Numba
+        runs[m]()  # warm-up: textures, mips, Numba
     # interleave so load changes on the shared machine hit all alike; the process CPU time (all
     # threads) is reported too: it is less sensitive to other jobs than the wall time
     t = {m: [] for m in names}
@@ -76,7 +85,7 @@ def bench_cost(table, width: int = 384, height: int = 240) -> None:
     for _ in range(9):
         for m in names:
             c0, t0 = time.process_time(), time.perf_counter()
-            render(sc, m, table=table)
+            runs[m]()
             t[m].append(time.perf_counter() - t0)
             c[m].append(time.process_time() - c0)
     best = {m: min(v) for m, v in t.items()}
@@ -152,6 +161,8 @@ STUDY = {
     # the bias ramps in above 4 texels per pixel: clip(lod - 2, 0, 1 or 2) levels
     "ms+ramp1": _variant("ltc-multiscale", lod_bias=1.0, lod_bias_start=2.0),
     "ms+ramp2": _variant("ltc-multiscale", lod_bias=2.0, lod_bias_start=2.0),
+    # the registered footprint plus compiled anisotropic taps below 4 texels
+    "ms+taps": _variant("ltc-multiscale", taps=4),
 }
 
 

@@ -83,6 +83,13 @@ METHODS = {
     # a supersampled footprint: 8 x 8 normalised level-0 normals over the pixel (box_taps)
     "ms-box8": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, box_taps=8),
     "ms": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc-multiscale", table=t, jitter=j),
+    # the registered footprint plus compiled anisotropic taps (2-4 along the major axis at the
+    # minor axis' LOD) for footprints below 4 texels (where the LOD ramp is off) / everywhere
+    "ms+taps": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4),
+    "ms+taps8": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=8),
+    "ms+taps-all": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4,
+                                                             taps_below=np.inf),
+    "ms+taps-r2": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4, taps_ratio=2.0),
     "paper": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc-multiscale-paper", table=t, jitter=j),
 }
 

@@ -3,7 +3,7 @@
 References: the exact inverse of eq. 4 (bisection, ``alpha_meso_exact``), the NumPy functions
 ``alpha_meso`` / ``alpha_total`` of every variant, and the NumPy render path
 (``multiscale_attributes`` + ``shade_ltc`` through the generic row driver), which stays the
-general path of the methods.
+general path of the methods; for the anisotropic taps also closed-form footprint means.
 """
 
 from __future__ import annotations
@@ -14,16 +14,19 @@ import numpy as np
 import pytest
 
 import prefilter.multiscale  # noqa: F401  (registers the methods)
+from prefilter.errors import PrefilterError
 from prefilter.ltc.table import GGXTable
 from prefilter.multiscale import (alpha_meso, alpha_meso_exact, alpha_total,
                                   mean_resultant_length)
 from prefilter.multiscale.render import (LOD_BIAS, LOD_BIAS_START, meso_table,
                                          multiscale_attributes, multiscale_roughness)
-from prefilter.render import load_scene
+from prefilter.multiscale.render import render_multiscale, taps_lookup
+from prefilter.render import gbuffer, load_scene
 from prefilter.render.kernels import _interp_uniform, _multiscale_alpha
 from prefilter.render.methods import RenderSettings
 from prefilter.render.pipeline import render, render_samples
 from prefilter.render.shading import shade_ltc
+from prefilter.texture.mip import MipChain, footprint_axes
 
 VARIANTS = {"ltc-multiscale": ("exact", "fit"), "ltc-multiscale-paper": ("paper", "paper"),
             "ltc-multiscale-mrl": ("exact", "mrl")}
@@ -192,3 +195,108 @@ def test_ramped_lod_bias_leaves_small_footprints_alone():
     assert small.sum() > 20 and large.sum() > 20
     np.testing.assert_array_equal(ramped[small], plain[small])
     np.testing.assert_allclose(ramped[large], const[large], rtol=1e-6, atol=1e-7)
+
+
+# -- anisotropic taps (``taps=``): compiled in the fused shader, ``taps_lookup`` its NumPy twin --
+# References: closed-form footprint means of a striped normal map (a footprint one texel wide
+# along the stripes sees one stripe: length 1; the isotropic level of its major axis averages
+# four stripes: ``cos theta``), the NumPy twin, and the untapped kernel on the footprints the
+# option must leave alone (bit for bit).
+
+def _stripes(theta: float, size: int = 16, along_u: bool = True) -> np.ndarray:
+    # rows (constant v) alternate between two unit normals tilted by +-theta
+    s, c = np.sin(theta), np.cos(theta)
+    sign = np.where(np.arange(size) % 2 == 0, 1.0, -1.0)
+    n = np.zeros((size, size, 3))
+    n[..., 0] = s * sign[:, None]
+    n[..., 2] = c
+    return n if along_u else n.transpose(1, 0, 2)
+
+
+@pytest.mark.parametrize("along_u", [True, False])
+def test_taps_along_the_stripes_see_one_stripe(along_u):
+    theta, size = 0.6, 16
+    chain = MipChain(_stripes(theta, size, along_u))
+    # texel centres, footprint 3.5 texels along the stripes and 1 across them
+    i = np.arange(8)
+    uv = np.stack([(i + 0.5) / size, (2 * i + 0.5) / size], -1)
+    d = np.zeros((8, 2, 2))
+    major, minor = 3.5 / size, 1.0 / size
+    if along_u:
+        d[:, 0, 0], d[:, 1, 1] = major, minor
+    else:
+        uv = uv[:, ::-1]
+        d[:, 1, 0], d[:, 0, 1] = major, minor
+    got = taps_lookup(chain, uv, d, taps=4)
+    # the footprint covers one stripe: its mean normal is that stripe's unit normal
+    want = _stripes(theta, size, along_u)[(uv[:, 1] * size).astype(int),
+                                          (uv[:, 0] * size).astype(int)]
+    np.testing.assert_allclose(got, want, atol=1e-12)
+    # without taps: the major axis' level (log2 3.5) mixes the stripes, r -> cos theta
+    iso = taps_lookup(chain, uv, d, taps=0)
+    r = np.linalg.norm(iso, axis=-1)
+    assert np.all(r < 1.0 - 0.5 * (1.0 - np.cos(theta)))
+    # footprints at or above `below` texels are read as without taps
+    big = d * (4.0 / 3.5)
+    np.testing.assert_array_equal(taps_lookup(chain, uv, big, taps=4),
+                                  taps_lookup(chain, uv, big, taps=0))
+
+
+def _numpy_path_kw(sc, settings, **kw):
+    lights = sc.light_set()
+
+    def shade(g, _u):
+        a = multiscale_attributes(sc, g, **kw)
+        return shade_ltc(g.position, a["t"], a["b"], a["n"], g.view, a["alpha"],
+                         a["base_color"], a["f0"], lights, settings.table)
+
+    return render_samples(sc, settings, shade, stratified=settings.spp > 1)
+
+
+@pytest.mark.parametrize("bias", [(2.0, 2.0), (0.0, None), (1.0, None)])
+def test_fused_taps_match_the_numpy_twin(bias, monkeypatch):
+    import prefilter.render.pipeline as pl
+
+    table = _table()
+    sc = load_scene(_scene())
+    st = RenderSettings(table=table, spp=2, jitter=(0.3, -0.2), seed=2)
+    kw = {"lod_bias": bias[0], "lod_bias_start": bias[1], "taps": 4, "taps_below": 6.0}
+    with monkeypatch.context() as m:
+        m.setattr(pl, "render_samples", lambda *_a, **_k: (_ for _ in ()).throw(
+            AssertionError("the generic row driver ran: the fused path was not taken")))
+        got = render_multiscale(sc, st, **kw)
+    want = _numpy_path_kw(sc, st, **kw)
+    rel = np.abs(got - want) / np.maximum(np.abs(want), 1e-3 * want.max())
+    assert rel.max() < 1e-4, rel.max()
+    # the taps change the image where they apply
+    plain = render_multiscale(sc, st, lod_bias=bias[0], lod_bias_start=bias[1])
+    assert np.abs(plain - got).max() > 1e-2 * got.max()
+
+
+def test_taps_leave_large_and_round_footprints_bit_identical():
+    table = _table()
+    sc = load_scene(_scene())
+    st = RenderSettings(table=table)
+    plain = render_multiscale(sc, st)
+    tapped = render_multiscale(sc, st, taps=4, taps_below=4.0, taps_ratio=1.5)
+    gb = gbuffer(sc)
+    # the normal-mapped planes' footprints (both maps 64^2); the sphere has a height map
+    major, minor, _ = footprint_axes(gb.dudv, (64, 64))
+    mapped = gb.hit & (gb.object_id != 1)
+    untouched = gb.hit & ~(mapped & (major < 4.0) & (major > 1.5 * minor))
+    touched = gb.hit & ~untouched
+    assert untouched.sum() > 50 and touched.sum() > 50
+    np.testing.assert_array_equal(tapped[untouched], plain[untouched])
+    assert np.abs(tapped[touched] - plain[touched]).max() > 0.0
+    # taps_below = 0 or one tap at most: the untapped image, bit for bit
+    np.testing.assert_array_equal(render_multiscale(sc, st, taps=4, taps_below=0.0), plain)
+    np.testing.assert_array_equal(render_multiscale(sc, st, taps=1), plain)
+
+
+@pytest.mark.parametrize("kw", [{"taps": -1}, {"taps": 2.5}, {"taps": 4, "taps_ratio": 0.5},
+                                {"taps": 4, "taps_below": float("nan")},
+                                {"taps": 4, "taps_below": "x"}])
+def test_bad_tap_options_are_rejected(kw):
+    sc = load_scene(_scene())
+    with pytest.raises(PrefilterError):
+        render_multiscale(sc, RenderSettings(table=_table()), **kw)

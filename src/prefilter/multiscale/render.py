@@ -23,6 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter._validate import as_positive_int
+from prefilter.errors import PrefilterError
 from prefilter.multiscale.convolution import _alpha_total
 from prefilter.multiscale.meso import _alpha_from_r, _mrl, _paper_eq5, R_COSINE
 
@@ -53,11 +54,13 @@ def meso_table() -> np.ndarray:
 
 
 def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
-                         lod_bias: float = 0.0, lod_bias_start=None):
+                         lod_bias: float = 0.0, lod_bias_start=None, taps: int = 0,
+                         taps_below: float = 4.0, taps_ratio: float = 1.5):
     """Per-material roughness rows for the fused shader
     (:func:`prefilter.render.kernels.ltc_samples_kernel`): ``(rows (K, RGH_WIDTH), meso_tab)``,
     or ``None`` for a combination it does not implement (mean-resultant-length matching needs
-    the exact inverse). ``lod_bias`` / ``lod_bias_start``: see :func:`multiscale_attributes`."""
+    the exact inverse). ``lod_bias`` / ``lod_bias_start`` / ``taps`` / ``taps_below`` /
+    ``taps_ratio``: see :func:`multiscale_attributes`."""
     from prefilter.multiscale.convolution import FIT_COEFFS, PAPER_EQ7
     from prefilter.multiscale.meso import PAPER_EQ5
     from prefilter.render import kernels as kn
@@ -84,7 +87,25 @@ def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
         row[kn.RGH_BIAS] = lod_bias
         row[kn.RGH_RAMP] = ramp
         row[kn.RGH_START] = float(lod_bias_start) if ramp else 0.0
+        row[kn.RGH_TAPS] = taps
+        row[kn.RGH_TAPS_BELOW] = taps_below
+        row[kn.RGH_TAPS_RATIO] = taps_ratio
     return rows, meso_table()
+
+
+def _taps_args(taps, below, ratio) -> tuple[int, float, float]:
+    """Validated ``(taps, taps_below, taps_ratio)`` of the anisotropic-taps option."""
+    taps = as_positive_int(taps, "taps", lo=0)
+    try:
+        below, ratio = float(below), float(ratio)
+    except (TypeError, ValueError):
+        raise PrefilterError(f"taps_below, taps_ratio: expected numbers, got {below!r}, "
+                             f"{ratio!r}") from None
+    if not below >= 0.0:  # inf (every footprint) is allowed, NaN is not
+        raise PrefilterError(f"taps_below: expected a number >= 0 (texels), got {below!r}")
+    if not ratio >= 1.0:
+        raise PrefilterError(f"taps_ratio: expected a number >= 1 (axis ratio), got {ratio!r}")
+    return taps, below, ratio
 
 
 def _bias_scale(dudv, shape, lod_bias: float, lod_bias_start) -> np.ndarray:
@@ -114,6 +135,49 @@ def _lookup(chain, uv, dudv, anisotropic: bool, max_aniso: int) -> np.ndarray:
     return footprint_lookup(chain, uv, dudv)
 
 
+def taps_lookup(chain, uv, dudv, taps: int, below: float = 4.0, ratio: float = 1.5,
+                lod_bias: float = 0.0, lod_bias_start=None) -> np.ndarray:
+    """The normal-map read of the fused shader with anisotropic taps (NumPy twin of
+    ``kernels.ltc_samples_kernel``'s lookup). Footprints whose major axis is below ``below``
+    texels and longer than ``ratio`` times the minor one: the mean of
+    ``n = clip(ceil(major / minor), 2, taps)`` unnormalised trilinear taps spread over the major
+    axis, at the LOD of ``max(minor, major / n)`` (anisotropic filtering as GPUs do it);
+    elsewhere the single isotropic tap at the major axis' LOD. ``lod_bias`` / ``lod_bias_start``
+    as :func:`multiscale_attributes` (the ramped bias is added to both LODs).
+
+    Parameters
+    ----------
+    chain : MipChain (level 0 ``(H, W, C)``)
+    uv : numpy.ndarray, shape (N, 2)
+    dudv : numpy.ndarray, shape (N, 2, 2)
+
+    Returns
+    -------
+    numpy.ndarray, shape (N, C)
+    """
+    from prefilter.texture.mip import footprint_axes
+
+    h, w = chain.levels[0].shape[:2]
+    major, minor, direction = footprint_axes(dudv, (h, w))
+    ramp = lod_bias_start is not None
+    ns = 1.0 if ramp else 2.0 ** lod_bias
+    lod = np.log2(np.maximum(ns * major, 1.0))
+    bias = np.clip(lod - lod_bias_start, 0.0, lod_bias) if ramp else np.zeros_like(lod)
+    out = chain.lookup(uv, lod + bias)
+    use = (taps >= 2) & (major < below) & (major > ratio * minor)
+    with np.errstate(divide="ignore"):
+        n = np.clip(np.ceil(major / np.maximum(minor, 1e-300)), 2, max(taps, 2)).astype(np.int64)
+    lod_t = np.log2(np.maximum(ns * np.maximum(minor, major / n), 1.0)) + bias
+    axis_uv = direction * (major[:, None] / np.array([w, h], float))
+    for k in np.unique(n[use]):
+        m = use & (n == k)
+        acc = 0.0
+        for i in range(k):
+            acc = acc + chain.lookup(uv[m] + ((i + 0.5) / k - 0.5) * axis_uv[m], lod_t[m]) / k
+        out[m] = acc
+    return out
+
+
 def _box_lookup(chain, uv, dudv, taps: int) -> np.ndarray:
     """Mean ``(N, 3)`` of ``taps^2`` *normalised* level-0 bilinear normals on a regular grid over
     the pixel footprint (the parallelogram spanned by ``dudv[:, :, 0]`` and ``dudv[:, :, 1]``):
@@ -132,7 +196,8 @@ def _box_lookup(chain, uv, dudv, taps: int) -> np.ndarray:
 def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
                           anisotropic_footprint: bool = False, max_aniso: int = 8,
                           lod_bias: float = 0.0, lod_bias_start=None,
-                          box_taps: int = 0) -> dict:
+                          box_taps: int = 0, taps: int = 0, taps_below: float = 4.0,
+                          taps_ratio: float = 1.5) -> dict:
     """Shading frame, material and multi-scale roughness per hit sample of a flat G-buffer.
 
     As :func:`prefilter.render.pipeline.surface_attributes` with ``filtered=True``, plus ``r``
@@ -152,8 +217,13 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
     mean of ``k^2`` normalised full-resolution normals over the pixel footprint (a supersampled
     footprint, not a real-time one; it isolates the footprint's error in the study of
     ``docs/multiscale.md``; ``lod_bias`` and the anisotropic footprint do not apply).
+    ``taps``: ``0`` (off) or the largest number of anisotropic taps for footprints whose major
+    axis is below ``taps_below`` texels and more than ``taps_ratio`` (>= 1) times the minor axis
+    (:func:`taps_lookup`, the fused shader's compiled lookup); larger or rounder footprints are
+    read as without it.
     """
     box_taps = as_positive_int(box_taps, "box_taps", lo=0)
+    taps, taps_below, taps_ratio = _taps_args(taps, taps_below, taps_ratio)
     from prefilter.render.shading import shading_frame
     from prefilter.texture.procedural import slopes_to_normals
 
@@ -173,6 +243,9 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
             chain = mat.normal_map.mip()
             if box_taps:
                 nts = _box_lookup(chain, g.uv[m], g.dudv[m], box_taps)
+            elif taps and not anisotropic_footprint:
+                nts = taps_lookup(chain, g.uv[m], g.dudv[m], taps, taps_below, taps_ratio,
+                                  lod_bias, lod_bias_start)
             else:
                 scale = _bias_scale(g.dudv[m], chain.levels[0].shape[:2], lod_bias,
                                     lod_bias_start)
@@ -207,7 +280,10 @@ def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> n
             or footprint.get("anisotropic_footprint") or footprint.get("box_taps")):
         # quad lights only: the ``ltc`` method's fused kernel with this roughness
         rough = multiscale_roughness(scene.objects, meso, total, footprint.get("lod_bias", 0.0),
-                                     footprint.get("lod_bias_start"))
+                                     footprint.get("lod_bias_start"),
+                                     *_taps_args(footprint.get("taps", 0),
+                                                 footprint.get("taps_below", 4.0),
+                                                 footprint.get("taps_ratio", 1.5)))
         if rough is not None:
             image = _render_ltc_fused(scene, settings, lights, table, rough, desc=name)
             if image is not None:
@@ -230,16 +306,20 @@ LOD_BIAS, LOD_BIAS_START = 2.0, 2.0
 
 def render_multiscale(scene, settings, *, anisotropic_footprint: bool = False,
                       max_aniso: int = 8, lod_bias: float = LOD_BIAS,
-                      lod_bias_start=LOD_BIAS_START, box_taps: int = 0) -> np.ndarray:
+                      lod_bias_start=LOD_BIAS_START, box_taps: int = 0,
+                      taps: int = 0, taps_below: float = 4.0,
+                      taps_ratio: float = 1.5) -> np.ndarray:
     """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7.
 
     ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias`` / ``lod_bias_start`` /
-    ``box_taps``: see :func:`multiscale_attributes`; the default footprint is :data:`LOD_BIAS`
+    ``box_taps`` / ``taps`` / ``taps_below`` / ``taps_ratio``: see
+    :func:`multiscale_attributes`; the default footprint is :data:`LOD_BIAS`
     levels coarser at most, ramping in from :data:`LOD_BIAS_START` (``lod_bias=0`` is the
     paper's isotropic mip level; all measured in ``docs/multiscale.md``)."""
     return _render(scene, settings, "exact", "fit", "ltc-multiscale",
                    anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
-                   lod_bias=lod_bias, lod_bias_start=lod_bias_start, box_taps=box_taps)
+                   lod_bias=lod_bias, lod_bias_start=lod_bias_start, box_taps=box_taps,
+                   taps=taps, taps_below=taps_below, taps_ratio=taps_ratio)
 
 
 def render_multiscale_paper(scene, settings) -> np.ndarray:

@@ -302,6 +302,52 @@ def _major_texels(h0, w0, d00, d01, d10, d11):
 
 
 @njit_serial
+def _footprint_axes(h0, w0, d00, d01, d10, d11):
+    """``(major, minor, dir_x, dir_y)`` of the footprint ellipse in texels of an ``h0 x w0``
+    level 0, the major direction a unit vector in texel space (``texture.footprint_axes``)."""
+    j00 = d00 * w0
+    j01 = d01 * w0
+    j10 = d10 * h0
+    j11 = d11 * h0
+    p = j00 * j00 + j01 * j01
+    r = j10 * j10 + j11 * j11
+    q = j00 * j10 + j01 * j11
+    disc = math.sqrt(max(0.25 * (p - r) ** 2 + q * q, 0.0))
+    l1 = 0.5 * (p + r) + disc
+    l2 = max(0.5 * (p + r) - disc, 0.0)
+    # eigenvector of l1: (q, l1 - p) or (l1 - r, q), whichever is longer (stable)
+    ax, ay = q, l1 - p
+    bx, by = l1 - r, q
+    if ax * ax + ay * ay < bx * bx + by * by:
+        ax, ay = bx, by
+    nv = math.sqrt(ax * ax + ay * ay)
+    if nv > 0.0:
+        ax /= nv
+        ay /= nv
+    else:
+        ax, ay = 1.0, 0.0
+    return math.sqrt(l1), math.sqrt(l2), ax, ay
+
+
+@njit_serial
+def _taps_into(data, info, first, n_levels, stride, c, u, v, h0, w0, major, dir_x, dir_y, n,
+               lod, out, k):
+    """Mean of ``n`` trilinear taps at ``lod`` spread over the major axis (``major`` texels
+    along the unit texel-space direction ``dir``), as ``MipChain.lookup_footprint``'s
+    anisotropic branch: channels ``:c`` into ``out[k, :c]``, ``out[k + 1]`` is scratch."""
+    au = dir_x * major / w0
+    av = dir_y * major / h0
+    for ch in range(c):
+        out[k, ch] = 0.0
+    for i in range(n):
+        s = (i + 0.5) / n - 0.5
+        _trilinear_into(data, info, first, n_levels, stride, c, u + s * au, v + s * av, lod,
+                        out, k + 1)
+        for ch in range(c):
+            out[k, ch] += out[k + 1, ch] / n
+
+
+@njit_serial
 def _footprint_into(data, info, first, n_levels, stride, c, u, v, d00, d01, d10, d11, out, k):
     """``MipChain.lookup_footprint`` (isotropic) of the chain whose levels are
     ``info[first:first + n_levels]`` (``stride`` channels per texel) at ``uv = (u, v)``,
@@ -572,7 +618,12 @@ MAT_WIDTH = 8  # alpha_x, alpha_y, base colour (3), f0 (3)
 # ``start`` (a flag, not a NaN sentinel: fastmath folds isnan away).
 RGH_MODE, RGH_MESO, RGH_ALPHA, RGH_COEF, RGH_MRL, RGH_EQ5, RGH_NSCALE = 0, 1, 2, 3, 7, 8, 17
 RGH_BIAS, RGH_START, RGH_RAMP = 18, 19, 20
-RGH_WIDTH = 21
+# Anisotropic taps of the normal map (``RGH_TAPS`` > 0, the largest tap count): footprints whose
+# major axis is below ``RGH_TAPS_BELOW`` texels and longer than ``RGH_TAPS_RATIO`` times the
+# minor axis are read as the mean of ``clip(ceil(major / minor), 2, RGH_TAPS)`` unnormalised
+# trilinear taps along the major axis at the minor axis' LOD; all other footprints as before.
+RGH_TAPS, RGH_TAPS_BELOW, RGH_TAPS_RATIO = 21, 22, 23
+RGH_WIDTH = 24
 #: ``RGH_MODE`` values: ``sqrt(alpha_x alpha_y)`` (the ``ltc`` method); our form of eq. 7
 #: (``multiscale.convolution``, "fit"); eq. 7's polynomial ("paper"); mean-resultant-length
 #: matching ("mrl").
@@ -690,7 +741,7 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, ro
     for blk in prange(n_blocks):
         geo, mat, P, C, ident, tm, mm, res = _scratch()
         hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx, dpdy, dist, view, dirn = _gscratch()
-        tx = np.empty((1, 4))
+        tx = np.empty((2, 4))
         for k in range(blk * _BLOCK, min(n_pts, (blk + 1) * _BLOCK)):
             _camera_trace(0, cam, xy[k, 0], xy[k, 1], types, params, hit, oid, pos, nrm, tan,
                           bit, uv, dudv, dpdx, dpdy, dist, view, dirn)
@@ -716,13 +767,29 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, ro
                 first = tex[t_n, 0]
                 # the footprint scaled by 2^lod_bias (1 for ``ltc``), as MipChain.lookup_footprint
                 ns = rough[o, RGH_NSCALE]
-                lod = math.log2(max(ns * _major_texels(info[first, 1], info[first, 2], du00,
-                                                       du01, du10, du11), 1.0))
+                h0, w0 = info[first, 1], info[first, 2]
+                major = _major_texels(h0, w0, du00, du01, du10, du11)
+                lod = math.log2(max(ns * major, 1.0))
+                bias = 0.0
                 if rough[o, RGH_RAMP] != 0.0:
                     # a bias that ramps in with the footprint (start >= 0, so the scaled
                     # footprint is > 1 texel wherever the bias is > 0: plain addition in LOD)
-                    lod += min(max(lod - rough[o, RGH_START], 0.0), rough[o, RGH_BIAS])
-                _trilinear_into(data, info, first, tex[t_n, 1], tex[t_n, 2], 3, u, v, lod, tx, 0)
+                    bias = min(max(lod - rough[o, RGH_START], 0.0), rough[o, RGH_BIAS])
+                    lod += bias
+                n_taps = 1
+                if rough[o, RGH_TAPS] > 0.0 and major < rough[o, RGH_TAPS_BELOW]:
+                    major, minor, dxx, dyy = _footprint_axes(h0, w0, du00, du01, du10, du11)
+                    if major > rough[o, RGH_TAPS_RATIO] * minor:
+                        # elongated: the minor axis' LOD, taps along the major axis, and the
+                        # unnormalised mean keeps r the footprint's mean resultant length
+                        n_taps = np.int64(min(max(math.ceil(major / max(minor, 1e-300)), 2.0),
+                                              rough[o, RGH_TAPS]))
+                        lod_t = math.log2(max(ns * max(minor, major / n_taps), 1.0)) + bias
+                        _taps_into(data, info, first, tex[t_n, 1], tex[t_n, 2], 3, u, v, h0,
+                                   w0, major, dxx, dyy, n_taps, lod_t, tx, 0)
+                if n_taps == 1:
+                    _trilinear_into(data, info, first, tex[t_n, 1], tex[t_n, 2], 3, u, v, lod,
+                                    tx, 0)
                 m0, m1, m2 = tx[0, 0], tx[0, 1], tx[0, 2]
                 has_map = True
             elif t_h >= 0:
