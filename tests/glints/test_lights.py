@@ -65,7 +65,13 @@ def test_quad_range_matches_monte_carlo(surf, sp, size, tilt, n_sub):
     c = np.array([[17.3, 40.1]])
     wo = _wo(tilt)
     light = facing_quad(wo, size, 3.0)
-    mc, err = mc_quad(surf, c, sp, wo[None], light, 20000, rng)
+    # the NDF the range queries integrate: render.RANGE_INTERP weights, piecewise-constant pixels
+    from dataclasses import replace
+
+    from prefilter.glints.render import RANGE_INTERP
+
+    mc, err = mc_quad(replace(surf, interp=RANGE_INTERP, bilinear=False), c, sp, wo[None],
+                      light, 20000, rng)
     val, valid = quad_range(surf, c, np.array([sp]), wo[None], light.vertices[None],
                             light.radiance, 1.0, n_sub=n_sub)
     assert valid[0]

@@ -157,7 +157,9 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
     small = (sp < surf.sigma_min) if surf.normal_map is not None else np.zeros(N, bool)
     if prefilter:
         # the footprints are the same for every sample: their pyramid weights once
-        idx, w, _ = weights(surf.gm, c[~small], sp[~small], interp=surf.interp)
+        from prefilter.glints.render import RANGE_INTERP
+
+        idx, w, _ = weights(surf.gm, c[~small], sp[~small], interp=RANGE_INTERP)
     for j in range(n_samples):
         u = uu[:, 3 * j:3 * j + 3]
         wi, pdf = _sample_sg(mu, lam, p, u)
