@@ -28,9 +28,9 @@ and 8-bit factors (decoded at load into the arrays above, zero-padded to the lar
 * ``image_cell (N,)`` int32.
 
 The 8-bit rounding adds 0.01 points of relative L2 error to a 5.47 % fit (sampled cells of the
-512^2 gaussian map, rank 24; float16 added nothing measurable): see docs/glints.md. Version 2 (float16 factors of one
-rank, ``c_scale`` per group and rank, ``group_rows``, an int32 ``block_index``) and version 1
-(float32 prefix sums ``A``, ``Bp``, ``C``) still load.
+512^2 gaussian map, rank 24; float16 added nothing measurable): see docs/glints.md. Version 2
+(float16 factors of one rank, ``c_scale`` per group and rank, ``group_rows``, an int32
+``block_index``) and version 1 (float32 prefix sums ``A``, ``Bp``, ``C``) still load.
 
 All factor values are non-negative, so every reconstructed NDF value and range mean is >= 0.
 """
