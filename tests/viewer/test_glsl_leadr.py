@@ -1,8 +1,8 @@
 """The exported LEADR snippet (``prefilter.leadr.glsl``) alone in WebGL2 against the Python it
 mirrors: ``leadrStats`` + ``leadrSpecular`` + ``leadrDiffuse`` + ``leadrDelta`` against
 :func:`prefilter.leadr.maps.shading_stats`, :func:`prefilter.leadr.shading.point_light`
-(closed form, exact Smith Lambda), ``schlick`` and ``diffuse_directional`` (5 x 5 grid) on random
-moments, roughnesses and directions (lights below the surface included)."""
+(closed form, exact Smith Lambda), ``schlick`` and ``diffuse_directional`` (5 x 5 grid; in
+``leadrDelta`` with ``shadowing=True``, Smith ``G2 / G1``) on random moments, roughnesses and directions (lights below the surface included)."""
 
 import numpy as np
 from scipy import special
@@ -68,9 +68,13 @@ def test_leadr_snippet_in_webgl_matches_python(run_glsl):
     cov[:, 1, 1] += 0.5 * d[:, 3, 2] ** 2
     spec = point_light(wo, wi, mu, cov)
     diff = diffuse_directional(wo, wi, mu, cov, 5)
+    # leadrDelta's diffuse is Algorithm 3 for one light: with G2 / G1 (leadr-point's shading)
+    diff_sh = diffuse_directional(wo, wi, mu, cov, 5, shadowing=True)
+    # the shadowing must matter on these inputs, or the check below could not see it missing
+    assert np.mean(np.abs(diff_sh - diff)) > 0.01 * np.mean(diff)
     h = wo + wi
     h /= np.linalg.norm(h, axis=-1, keepdims=True)
-    L = spec[:, None] * schlick(f0, np.sum(h * wi, -1)[:, None]) + base * diff[:, None]
+    L = spec[:, None] * schlick(f0, np.sum(h * wi, -1)[:, None]) + base * diff_sh[:, None]
     lit = spec > 1e-3
     assert lit.sum() > n // 4 and (wi[:, 2] < 0).sum() > n // 10
     print(f"max rel error spec {np.max(np.abs(out[lit, 0] / spec[lit] - 1)):.2e}, "
@@ -79,3 +83,34 @@ def test_leadr_snippet_in_webgl_matches_python(run_glsl):
     np.testing.assert_allclose(out[:, 0], spec, rtol=2e-4, atol=1e-6)
     np.testing.assert_allclose(out[:, 1], diff, rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(out[:, 2:], L[:, [0, 2]], rtol=2e-4, atol=1e-6)
+
+
+def test_page_renders_leadr_point_with_box_filter_and_shadowing(browser):
+    """The page's ``leadr-point`` (``footprintBox`` + ``leadrDelta``) against
+    ``prefilter.render`` on the ``leadr`` scene and on ``leadr-grazing`` (low lights, mostly
+    diffuse): relative RMSE <= 1 % for float32 and float16 moment maps, while the old one-tap
+    shading and the unshadowed diffuse each differ from the Python image by > 5x that (so a page
+    missing either would fail)."""
+    from prefilter.leadr import render as lr
+    from prefilter.render.pipeline import render
+    from prefilter.viewer import pixel_match
+    from prefilter.viewer.match import scene
+
+    rows = pixel_match(scenes=("leadr", "leadr-grazing"), methods=("leadr-point",),
+                       driver=browser, width=96, height=72)
+    assert len(rows) == 4
+    for r in rows:
+        assert r["covered"] > 0.3 * 96 * 72
+        assert r["rel_rmse"] <= 0.01, r
+    sc = scene("leadr-grazing", 96, 72)
+    ref = render(sc, "leadr-point")
+    rel = lambda a: np.sqrt(np.mean((a - ref) ** 2)) / np.sqrt(np.mean(ref**2))  # noqa: E731
+    saved = lr.POINT_FOOTPRINT_TAPS, lr.POINT_SHADOWING
+    try:
+        lr.POINT_FOOTPRINT_TAPS = 1
+        one_tap = render(sc, "leadr-point")
+        lr.POINT_FOOTPRINT_TAPS, lr.POINT_SHADOWING = saved[0], False
+        unshadowed = render(sc, "leadr-point")
+    finally:
+        lr.POINT_FOOTPRINT_TAPS, lr.POINT_SHADOWING = saved
+    assert rel(one_tap) > 0.05 and rel(unshadowed) > 0.05

@@ -618,7 +618,7 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                         if s == "specular":
                             vals = {"leadr": lr.shade_leadr_delta(scene, gs, ls, mips=mips),
                                     "leadr-point": lr.shade_leadr_delta(
-                                        scene, gs, ls, mips=mips, shadowing=False,
+                                        scene, gs, ls, mips=mips, shadowing=lr.POINT_SHADOWING,
                                         taps=lr.POINT_FOOTPRINT_TAPS),
                                     "leadr box": lr.shade_leadr_delta(scene, gs, ls, mips=fixed),
                                     "naive": lr.shade_leadr_delta(scene, gs, ls, meso=False,
@@ -630,8 +630,11 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                                     "leadr simplified": lr.shade_leadr_irradiance(
                                         scene, gs, z, ls, mips=mips, shadowing=False),
                                     "leadr-point": lr.shade_leadr_irradiance(
-                                        scene, gs, z, ls, mips=mips, shadowing=False,
+                                        scene, gs, z, ls, mips=mips,
+                                        shadowing=lr.POINT_SHADOWING,
                                         taps=lr.POINT_FOOTPRINT_TAPS),
+                                    "leadr one tap": lr.shade_leadr_irradiance(
+                                        scene, gs, z, ls, mips=mips, shadowing=False, taps=1),
                                     "leadr box": lr.shade_leadr_irradiance(
                                         scene, gs, z, ls, mips=fixed),
                                     "naive": lr.shade_leadr_irradiance(
@@ -672,6 +675,13 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                             for im, rf in zip(ims, refs_k)]))
                         if len(ims) > 1:
                             row[f"flicker {m}"] = float(np.mean(np.std(dif, axis=0)) / mref)
+                            # the image's own change under the shake, without the reference
+                            row[f"own flicker {m}"] = float(
+                                np.mean(np.std(ims[:, mask], axis=0)) / mref)
+                    if len(refs_k) > 1:
+                        # the flicker score of a perfectly steady image (the jitter-mean of the
+                        # reference): what no filter can go below on this row
+                        row["flicker ref"] = float(np.mean(np.std(refs_k[:, mask], axis=0)) / mref)
                     rows.append(row)
                     log(row)
     return rows

@@ -6,8 +6,11 @@ chain, filtered over the footprint by the caller) -> mean slope and covariance
 (:func:`prefilter.leadr.maps.shading_stats` plus the micro roughness ``alpha^2 / 2`` per axis),
 then per light the closed-form rough specular of supplemental 3.3
 (:func:`prefilter.leadr.shading.point_light`, exact Smith ``Lambda`` of Gaussian slopes) times
-Schlick's Fresnel, plus ``base_color`` times the Gaussian-grid diffuse of Simplified Algorithm 3
-with ``E(m) = <m, wl>`` (:func:`prefilter.leadr.shading.diffuse_directional`). The grid nodes
+Schlick's Fresnel, plus ``base_color`` times the Gaussian-grid diffuse of Algorithm 3 for one
+light: Simplified Algorithm 3 with ``E(m) = <m, wl>`` times ``G2 / G1``
+(:func:`prefilter.leadr.shading.diffuse_directional` with ``shadowing=True``). ``LEADR_TAPS``
+is :data:`prefilter.leadr.render.POINT_FOOTPRINT_TAPS` for the caller's box filter of the
+moments (the viewer's ``footprintBox``). The grid nodes
 and weights are written into the snippet from :func:`prefilter.leadr.shading.gaussian_grid`, so
 the GPU integrates on the same grid as Python.
 
@@ -40,6 +43,9 @@ const float LEADR_W[{n}] = float[{n}]({weights});
 const float LEADR_BASE_R2 = {base_r2:.9g};  // leadr.maps.MIN_BASE_ROUGHNESS^2
 const float LEADR_ART_EPS = {eps:.9g}, LEADR_ART_W = {art_w:.9g};  // supplemental 3.7
 const float LEADR_PI = 3.14159265358979;
+// the caller's box filter of the moments: up to LEADR_TAPS^2 trilinear taps over the pixel
+// footprint (leadr.render.FOOTPRINT_TAPS, footprint_moments)
+const int LEADR_TAPS = {taps};
 
 // Slope moments (A = E[sx], E[sy], E[sx^2], E[sy^2]; exy = E[sx sy]) and GGX alphas taken as
 // Beckmann alphas -> mean slope and covariance (xx, yy, xy) (leadr.maps.shading_stats, eq. 8).
@@ -114,12 +120,24 @@ float leadrDiffuse(vec3 wo, vec3 wl, vec2 mu, vec3 cov) {{
     return (den > 0.0 ? num / den : ra) / LEADR_PI;
 }}
 
+// Self-shadowing of the diffuse light from wi (leadr.shading.shadowing_ratio; supplemental 3.3,
+// Algorithm 2): G2 / G1 = 1 / (1 + Lambda(wi) / (1 + Lambda(wo))); 1 when the mesosurface faces
+// away from wo (Lambda(wo) infinite: never black), 0 for wi below it or below the geometric plane.
+float leadrShadowing(vec3 wo, vec3 wi, vec2 mu, vec3 cov) {{
+    float lo, li;
+    if (!(wi.z > 0.0) || !leadrLambda(wi, mu, cov, li)) return 0.0;
+    if (!leadrLambda(wo, mu, cov, lo)) return 1.0;
+    return 1.0 / (1.0 + li / (1.0 + lo));
+}}
+
 // Radiance towards wo per unit irradiance from wi (point light: I / d^2; directional: E):
-// specular times Schlick's Fresnel at the half vector, plus base * diffuse.
+// specular times Schlick's Fresnel at the half vector, plus base * the shadowed diffuse
+// (Algorithm 3 for one light).
 vec3 leadrDelta(vec3 wo, vec3 wi, vec2 mu, vec3 cov, vec3 base, vec3 f0) {{
     float c = clamp(dot(normalize(wo + wi), wi), 0.0, 1.0);
     vec3 F = f0 + (1.0 - f0) * pow(1.0 - c, 5.0);
-    return leadrSpecular(wo, wi, mu, cov) * F + base * leadrDiffuse(wo, wi, mu, cov);
+    return leadrSpecular(wo, wi, mu, cov) * F
+        + base * (leadrDiffuse(wo, wi, mu, cov) * leadrShadowing(wo, wi, mu, cov));
 }}
 """
 
@@ -138,7 +156,7 @@ def glsl_source(n: int | None = None) -> str:
     :func:`prefilter.leadr.shading.gaussian_grid` (default: ``render.DIFFUSE_GRID``, as
     ``leadr-point``)."""
     from prefilter.leadr.maps import MIN_BASE_ROUGHNESS
-    from prefilter.leadr.render import DIFFUSE_GRID
+    from prefilter.leadr.render import DIFFUSE_GRID, POINT_FOOTPRINT_TAPS
     from prefilter.leadr.shading import ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, gaussian_grid
 
     p, w, _ = gaussian_grid(DIFFUSE_GRID if n is None else n)
@@ -147,7 +165,7 @@ def glsl_source(n: int | None = None) -> str:
     for k in c[-2:0:-1]:
         poly = f"{k:.9g} + t * ({poly})"
     poly = f"{c[0]:.9g} + t * ({poly})"
-    return _GLSL.format(n=len(p), nodes=_floats(p), weights=_floats(w),
+    return _GLSL.format(n=len(p), nodes=_floats(p), weights=_floats(w), taps=POINT_FOOTPRINT_TAPS,
                         base_r2=MIN_BASE_ROUGHNESS**2, eps=ARTIFICIAL_EPS,
                         art_w=ARTIFICIAL_WEIGHT, poly=poly)
 

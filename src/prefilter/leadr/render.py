@@ -50,11 +50,12 @@ ENV_GRID = 9
 #: as the camera moves (docs/leadr.md, point-light image rows: flicker 0.67x -> 0.48x naive for
 #: diffuse at 16 texels per pixel). 1: one isotropic trilinear tap.
 FOOTPRINT_TAPS = 8
-#: ``leadr-point`` keeps one isotropic trilinear tap and the unshadowed diffuse (Simplified
-#: Algorithm 3): it is the method the WebGL viewer reproduces pixel for pixel
-#: (``prefilter.viewer``'s ``footprint()`` and the exported ``leadr.glsl``). The other ``leadr-*``
-#: methods shade point and directional lights with the box filter and ``G2 / G1`` diffuse.
-POINT_FOOTPRINT_TAPS = 1
+#: ``leadr-point`` shades like the other ``leadr-*`` methods: box-filtered moments
+#: (:data:`FOOTPRINT_TAPS`) and ``G2 / G1`` diffuse; the WebGL viewer reproduces it
+#: (``prefilter.viewer``'s ``footprintBox()`` and the exported ``leadr.glsl``).
+POINT_FOOTPRINT_TAPS = FOOTPRINT_TAPS
+#: ``leadr-point``'s diffuse is Algorithm 3 for one light with ``G2 / G1`` (self-shadowing).
+POINT_SHADOWING = True
 
 
 _PACKED = weakref.WeakKeyDictionary()
@@ -393,14 +394,16 @@ def render_leadr_irradiance_naive(scene, settings) -> np.ndarray:
 
 def render_leadr_point(scene, settings) -> np.ndarray:
     """The ``leadr-point`` method (point and directional lights only): closed-form specular with
-    ``G2``, Simplified Algorithm 3 diffuse, one trilinear moment tap (:data:`POINT_FOOTPRINT_TAPS`,
-    the WebGL viewer's shading)."""
+    ``G2`` (supplemental 3.3), Algorithm 3 diffuse with ``G2 / G1`` per light, moments
+    box-filtered over the pixel footprint (:data:`POINT_FOOTPRINT_TAPS`); the WebGL viewer
+    renders the same (``leadr.glsl``)."""
     from prefilter.render.pipeline import render_samples
 
     if any(light.type in ("quad", "environment") for light in scene.lights):
         raise PrefilterError("method 'leadr-point': expected only point and directional lights")
     lights = scene.light_set()
     return render_samples(scene, settings,
-                          lambda g, _u: shade_leadr_delta(scene, g, lights, shadowing=False,
+                          lambda g, _u: shade_leadr_delta(scene, g, lights,
+                                                          shadowing=POINT_SHADOWING,
                                                           taps=POINT_FOOTPRINT_TAPS),
                           stratified=settings.spp > 1, desc="leadr-point")

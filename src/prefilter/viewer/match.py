@@ -38,9 +38,10 @@ def _camera(width, height):
 #: an anisotropic sphere), a brushed plane (anisotropic normal distribution) and a light that
 #: crosses the plane seen by a close sphere (horizon clipping everywhere), the default scene with
 #: a point and a directional light added, a height-mapped plane and a sphere with colour maps,
-#: and height-mapped objects under point and directional lights only (``leadr-point``).
+#: and height-mapped objects under point and directional lights only (``leadr-point``; in
+#: ``leadr-grazing`` low lights on a mostly diffuse material, where self-shadowing shows).
 SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr",
-          "colormap")
+          "leadr-grazing", "colormap")
 
 
 def applies(sc, method: str) -> bool:
@@ -99,8 +100,9 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
                 "lights": [{"type": "point", "position": [-1.0, 1.2, 0.5], "intensity": 2.0},
                            {"type": "point", "position": [1.0, 0.9, -2.2],
                             "intensity": [1.5, 1.2, 0.8]},
-                           {"type": "directional", "direction": [0.3, -1.0, -0.4],
-                            "irradiance": [0.5, 0.4, 0.3]}],
+                           # low sun: the footprint's self-shadowing (G2 / G1) shows
+                           {"type": "directional", "direction": [0.8, -0.25, -0.4],
+                            "irradiance": [1.0, 0.8, 0.6]}],
                 "objects": [_plane({"alpha_x": 0.15, "alpha_y": 0.06, "base_color": 0.2,
                                     "f0": [0.9, 0.7, 0.5], "height_map": hmap}),
                             {"type": "sphere", "center": [1.0, 0.5, -1.2], "radius": 0.5,
@@ -109,6 +111,16 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
                                           "f0": 0.04, "height_map": dict(
                                               hmap, size=64, seed=5, rms_slope=0.4,
                                               corr_length=2)}}]}
+    if name == "leadr-grazing":
+        # the leadr scene, mostly diffuse, under low lights: the footprint's self-shadowing
+        # (G2 / G1) changes the image by far more than the pixel-match tolerance
+        sc = scene("leadr", width, height)
+        sc["lights"] = [{"type": "point", "position": [-2.5, 0.3, -0.5], "intensity": 6.0},
+                        {"type": "directional", "direction": [0.9, -0.12, -0.4],
+                         "irradiance": [1.0, 0.8, 0.6]}]
+        for o in sc["objects"]:
+            o["material"].update(f0=0.02, base_color=0.5)
+        return sc
     if name == "colormap":
         # a colour-mapped noise texture on a plane and a sphere (prefilter.colormap.render)
         colors = [[0.05, 0.1, 0.4], [0.9, 0.9, 0.85], [0.1, 0.45, 0.15], [0.95, 0.55, 0.1],

@@ -171,6 +171,31 @@ void footprint(ivec2 chain, vec2 uv, vec4 dudv, out vec4 A, out vec4 B) {
     }
 }
 
+// LEADR's box filter of the moments over the pixel footprint (leadr.render.footprint_moments,
+// leadr.kernels.box_moments_kernel): T x T trilinear taps at uv + dudv (ox, oy), ox, oy the
+// cell centres of [-1/2, 1/2], T = clamp(ceil(major / 2), 1, LEADR_TAPS), each at
+// lod = log2(max(major / T, 1)); moments are linear, so this averages the pixel's own texels.
+void footprintBox(ivec2 chain, vec2 uv, vec4 dudv, out vec4 A, out vec4 B) {
+    A = vec4(0.0); B = vec4(0.0);
+    float major = footprintMajor(chain, dudv);
+    int T = int(clamp(ceil(major / 2.0), 1.0, float(LEADR_TAPS)));
+    float lod = clamp(log2(max(major / float(T), 1.0)), 0.0, float(chain.y - 1));
+    int l0 = min(int(floor(lod)), max(chain.y - 2, 0));
+    float f = chain.y > 1 ? lod - float(l0) : 0.0;
+    float w = 1.0 / float(T * T);
+    for (int i = 0; i < LEADR_TAPS; ++i) {
+        if (i >= T) break;
+        float oy = (float(i) + 0.5) / float(T) - 0.5;
+        for (int j = 0; j < LEADR_TAPS; ++j) {
+            if (j >= T) break;
+            float ox = (float(j) + 0.5) / float(T) - 0.5;
+            vec2 p = uv + vec2(dudv.x * ox + dudv.y * oy, dudv.z * ox + dudv.w * oy);
+            bilinearAdd(chain.x + l0, p, w * (1.0 - f), A, B);
+            if (chain.y > 1) bilinearAdd(chain.x + l0 + 1, p, w * f, A, B);
+        }
+    }
+}
+
 // -- shading (prefilter.render.shading) -----------------------------------------------------------
 
 // shading_frame: the normal m (tangent space, need not be unit), tangent re-orthogonalised
@@ -239,8 +264,9 @@ vec3 shadeDelta(vec3 pos, vec3 ts, vec3 bs, vec3 ns, vec3 wo, float ax, float ay
     return L;
 }
 
-// leadr-point (prefilter.leadr.render.shade_leadr_delta): the height map's slope moments at the
-// footprint's mip level, LEADR statistics with the micro roughness, geometric frame; colour and
+// leadr-point (prefilter.leadr.render.shade_leadr_delta): the height map's slope moments
+// box-filtered over the footprint, LEADR statistics with the micro roughness, geometric frame,
+// diffuse with self-shadowing (G2 / G1, in leadrDelta); colour and
 // normal maps are not read (as the Python method); quad lights are not shaded.
 vec3 shadeLeadr(Hit h, vec3 view) {
     int k = h.id;
@@ -250,7 +276,7 @@ vec3 shadeLeadr(Hit h, vec3 view) {
     ivec2 hc = uMatHeight[k];
     if (hc.x >= 0) {
         gHalf = uMapsHalf == 1;
-        footprint(hc, h.uv, h.dudv, A, B);
+        footprintBox(hc, h.uv, h.dudv, A, B);
         gHalf = false;
     }
     vec2 mu;
