@@ -379,10 +379,10 @@ FORMATS = {
         "version": _rewrite_npz(_set("version", lambda v: np.int64(2)), version=2),
     }),
     "glints_map": Fmt(_make_glints, _load_glints, {
-        "dtype": _rewrite_npz(_set("block_index", lambda b: b.astype(np.int64))),
+        "dtype": _rewrite_npz(_set("block_mask", lambda b: b.astype(np.int64))),
         "dtype_text": _rewrite_npz(_set("header", lambda h: np.array([1, 2]))),
-        "shape": _rewrite_npz(_set("c", lambda c: c[:, :1].copy())),
-        "layout": _rewrite_npz(_set("block_index", lambda b: b + 1000)),
+        "shape": _rewrite_npz(_set("c", lambda c: c[..., :-1].copy())),
+        "layout": _rewrite_npz(_set("block_mask", lambda b: np.zeros_like(b))),
         "missing": _rewrite_npz(_drop("a")),
         "missing_field": _rewrite_npz(lambda a: _glints_header(ndf=None)(a)),
         "version": _rewrite_npz(_glints_header(version=99), version=99),
