@@ -194,6 +194,30 @@ def _axis_taps2(f, R, bilinear):
     t = g - p0
     return p0, (1.0 - t if 0 <= p0 < R else 0.0), (t if 0 <= p0 + 1 < R else 0.0)
 
+#: CP groups whose weighted C rows :func:`resample_point_kernel` accumulates at once (taps of a
+#: level-0 footprint span up to 3 x 3 cells; more are flushed and restarted, still exact)
+_SLOTS = 16
+
+
+@njit_serial
+def _flush_slots(A, Bp, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja):
+    """``sum_slots sum_r cw[slot, r] fa_r fb_r`` with each slot's group factors at the bilinear
+    NDF taps (rows ``ia, ia + 1`` weighted ``wi, wa1``; columns ``ja, ja + 1``: ``wj, wb1``)."""
+    acc = 0.0
+    for t in range(ns):
+        g = gs[t]
+        s = 0.0
+        for rr in range(granks[g]):
+            a = wi * (A[g, rr, ia + 1] - A[g, rr, ia])
+            if wa1 != 0.0:
+                a += wa1 * (A[g, rr, ia + 2] - A[g, rr, ia + 1])
+            b = wj * (Bp[g, rr, ja + 1] - Bp[g, rr, ja])
+            if wb1 != 0.0:
+                b += wb1 * (Bp[g, rr, ja + 2] - Bp[g, rr, ja + 1])
+            s += cw[t, rr] * a * b
+        acc += s
+    return acc
+
 
 @njit_parallel
 def resample_point_kernel(A, Bp, C, block_index, image_cell, granks, offs, ny_l, nx_l, sig_l,
@@ -249,8 +273,11 @@ def resample_point_kernel(A, Bp, C, block_index, image_cell, granks, offs, ny_l,
             syw += wy[i]
         i0, u0, u1 = _axis_taps2((sy[q] - lo) / h, R, bilinear)
         j0, v0, v1 = _axis_taps2((sx[q] - lo) / h, R, bilinear)
-        fa = np.empty(rank)
-        fb = np.empty(rank)
+        # per CP group, the weighted sum of its taps' C rows first (nr multiply-adds per tap),
+        # then one product with the group's factor values: taps spanning several cells no
+        # longer recompute the factors at every change of group (the mid frame's level-0 taps)
+        cw = np.empty((_SLOTS, rank))
+        gs = np.empty(_SLOTS, np.int64)
         acc = 0.0
         for di in range(2):
             wi = u0 if di == 0 else u1
@@ -272,7 +299,9 @@ def resample_point_kernel(A, Bp, C, block_index, image_cell, granks, offs, ny_l,
                     continue
                 ja = j - bj * B
                 wb1 = v1 if (dj == 0 and v1 != 0.0 and (j0 + 1) // B == bj) else 0.0
+                ns = 0
                 last = -1
+                slot = 0
                 for ty in range(ky1 - ky0 + 1):
                     row = offs[m] + ((ky0 + ty) % ny) * nx
                     for tx in range(kx1 - kx0 + 1):
@@ -283,18 +312,24 @@ def resample_point_kernel(A, Bp, C, block_index, image_cell, granks, offs, ny_l,
                         g = image_cell[img] * nb * nb + bi * nb + bj
                         nr = granks[g]
                         if g != last:
+                            slot = -1
+                            for t in range(ns):
+                                if gs[t] == g:
+                                    slot = t
+                                    break
+                            if slot < 0:
+                                if ns == _SLOTS:
+                                    acc += _flush_slots(A, Bp, granks, gs, cw, ns, wi, wa1, wj,
+                                                        wb1, ia, ja)
+                                    ns = 0
+                                slot = ns
+                                gs[slot] = g
+                                for rr in range(nr):
+                                    cw[slot, rr] = 0.0
+                                ns += 1
                             last = g
-                            for rr in range(nr):
-                                a = wi * (A[g, rr, ia + 1] - A[g, rr, ia])
-                                if wa1 != 0.0:
-                                    a += wa1 * (A[g, rr, ia + 2] - A[g, rr, ia + 1])
-                                b = wj * (Bp[g, rr, ja + 1] - Bp[g, rr, ja])
-                                if wb1 != 0.0:
-                                    b += wb1 * (Bp[g, rr, ja + 2] - Bp[g, rr, ja + 1])
-                                fa[rr] = a
-                                fb[rr] = b
-                        v = 0.0
+                        wt = wy[ty] * wx[tx]
                         for rr in range(nr):
-                            v += C[k, rr] * fa[rr] * fb[rr]
-                        acc += wy[ty] * wx[tx] * v
+                            cw[slot, rr] += wt * C[k, rr]
+                acc += _flush_slots(A, Bp, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
         out[q] = acc / (sxw * syw)
