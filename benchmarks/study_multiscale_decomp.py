@@ -90,6 +90,17 @@ METHODS = {
     "ms+taps-all": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4,
                                                              taps_below=np.inf),
     "ms+taps-r2": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4, taps_ratio=2.0),
+    # ... with each tap's level-0 read renormalised (no bilinear shortening)
+    "ms+taps-n": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4,
+                                                           taps_normalize=True),
+    "ms+taps-all-n": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4,
+                                                               taps_below=np.inf,
+                                                               taps_normalize=True),
+    "ms+taps16": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4, taps_below=16.0),
+    "ms+taps16-n": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4, taps_below=16.0,
+                                                             taps_normalize=True),
+    "ms+taps-all8": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=8,
+                                                              taps_below=np.inf),
     "paper": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc-multiscale-paper", table=t, jitter=j),
 }
 
@@ -100,13 +111,34 @@ def _debiased(e: float, noise: float) -> float:
 
 def study_scene(table, nm: str, alpha: float, dist: str, *, width: int = 96, height: int = 60,
                 spp: int = 1024, ss_spp: int = 256, ref_flicker_spp: int = 0, methods=None,
-                extra=None, seed: int = 0) -> dict:
+                extra=None, seed: int = 0, cache=None) -> dict:
     k = 160.0 / height
     sc = scene(DISTANCES[dist] / k, width, height, alpha, nm)
-    flat = scene(DISTANCES[dist] / k, width, height, alpha, nm)
-    del flat["objects"][0]["material"]["normal_map"]
     jit = jitter_offsets(8)
     t0 = time.perf_counter()
+    key = None
+    if cache:  # the method-independent part (reference, ss, flat plane) from an earlier run
+        key = Path(cache) / (f"{nm}_{alpha}_{dist}_{width}x{height}_{spp}_{ss_spp}_"
+                             f"{ref_flicker_spp}_{seed}")
+        if key.with_suffix(".npz").exists():
+            with np.load(key.with_suffix(".npz")) as z:
+                ref, ss = z["ref"], z["ss"]
+            row = json.loads(key.with_suffix(".json").read_text())
+            return _methods_into(row, sc, table, ref, ss, row["noise"], jit, methods, extra, t0)
+    row, ref, ss = _base_row(table, sc, nm, alpha, dist, width, height, spp, ss_spp,
+                             ref_flicker_spp, seed, jit)
+    if key is not None:
+        key.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(key.with_suffix(".npz"), ref=ref, ss=ss)
+        key.with_suffix(".json").write_text(json.dumps(row))
+    return _methods_into(row, sc, table, ref, ss, row["noise"], jit, methods, extra, t0)
+
+
+def _base_row(table, sc, nm, alpha, dist, width, height, spp, ss_spp, ref_flicker_spp, seed,
+              jit):
+    k = 160.0 / height
+    flat = scene(DISTANCES[dist] / k, width, height, alpha, nm)
+    del flat["objects"][0]["material"]["normal_map"]
     r1 = render(sc, "reference", spp=spp // 2, seed=seed)
     r2 = render(sc, "reference", spp=spp // 2, seed=seed + 1)
     ref, noise = 0.5 * (r1 + r2), rmse(r1, r2) / 2.0
@@ -130,6 +162,10 @@ def study_scene(table, nm: str, alpha: float, dist: str, *, width: int = 96, hei
                            for j in jit])
         row["flicker_ref"] = flicker(frames)
         row["ref_flicker_spp"] = ref_flicker_spp
+    return row, ref, ss
+
+
+def _methods_into(row, sc, table, ref, ss, noise, jit, methods, extra, t0) -> dict:
     runs = {m: METHODS[m] for m in (methods or ("ltc", "ms"))}
     runs.update(extra or {})
     for m, fn in runs.items():
@@ -235,6 +271,8 @@ def main() -> None:
     ap.add_argument("--ref-flicker-spp", type=int, default=0)
     ap.add_argument("--table", default=None)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--cache", default=None,
+                    help="directory keeping each scene's reference / ss / flat-plane results")
     ap.add_argument("--scan", action="store_true",
                     help="alpha_meso scale scan and single-lobe flat planes instead")
     args = ap.parse_args()
@@ -251,7 +289,8 @@ def main() -> None:
                     print(json.dumps(row), flush=True)
                     continue
                 row = study_scene(table, nm, alpha, dist, spp=args.spp, ss_spp=args.ss_spp,
-                                  ref_flicker_spp=args.ref_flicker_spp, methods=methods)
+                                  ref_flicker_spp=args.ref_flicker_spp, methods=methods,
+                                  cache=args.cache)
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     if args.scan:

@@ -242,6 +242,20 @@ def test_taps_along_the_stripes_see_one_stripe(along_u):
                                   taps_lookup(chain, uv, big, taps=0))
 
 
+def test_normalised_taps_between_two_stripes_are_unit():
+    theta, size = 0.6, 16
+    chain = MipChain(_stripes(theta, size))
+    # on the boundary between two stripes: bilinear blends of +-theta average to cos theta,
+    # the surface there is the blend's direction, a unit normal (0, 0, 1)
+    uv = np.stack([(np.arange(6) + 0.5) / size, (np.arange(6) * 2 + 1.0) / size], -1)
+    d = np.zeros((6, 2, 2))
+    d[:, 0, 0], d[:, 1, 1] = 3.0 / size, 0.5 / size
+    got = taps_lookup(chain, uv, d, taps=4, normalize=True)
+    np.testing.assert_allclose(got, np.tile([0.0, 0.0, 1.0], (6, 1)), atol=1e-12)
+    plain = taps_lookup(chain, uv, d, taps=4)
+    np.testing.assert_allclose(plain, np.tile([0.0, 0.0, np.cos(theta)], (6, 1)), atol=1e-12)
+
+
 def _numpy_path_kw(sc, settings, **kw):
     lights = sc.light_set()
 
@@ -253,14 +267,16 @@ def _numpy_path_kw(sc, settings, **kw):
     return render_samples(sc, settings, shade, stratified=settings.spp > 1)
 
 
-@pytest.mark.parametrize("bias", [(2.0, 2.0), (0.0, None), (1.0, None)])
-def test_fused_taps_match_the_numpy_twin(bias, monkeypatch):
+@pytest.mark.parametrize("bias,normalize", [((2.0, 2.0), False), ((0.0, None), False),
+                                            ((1.0, None), False), ((2.0, 2.0), True)])
+def test_fused_taps_match_the_numpy_twin(bias, normalize, monkeypatch):
     import prefilter.render.pipeline as pl
 
     table = _table()
     sc = load_scene(_scene())
     st = RenderSettings(table=table, spp=2, jitter=(0.3, -0.2), seed=2)
-    kw = {"lod_bias": bias[0], "lod_bias_start": bias[1], "taps": 4, "taps_below": 6.0}
+    kw = {"lod_bias": bias[0], "lod_bias_start": bias[1], "taps": 4, "taps_below": 6.0,
+          "taps_normalize": normalize}
     with monkeypatch.context() as m:
         m.setattr(pl, "render_samples", lambda *_a, **_k: (_ for _ in ()).throw(
             AssertionError("the generic row driver ran: the fused path was not taken")))

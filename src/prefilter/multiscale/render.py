@@ -55,12 +55,13 @@ def meso_table() -> np.ndarray:
 
 def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
                          lod_bias: float = 0.0, lod_bias_start=None, taps: int = 0,
-                         taps_below: float = 4.0, taps_ratio: float = 1.5):
+                         taps_below: float = 4.0, taps_ratio: float = 1.5,
+                         taps_normalize: bool = False):
     """Per-material roughness rows for the fused shader
     (:func:`prefilter.render.kernels.ltc_samples_kernel`): ``(rows (K, RGH_WIDTH), meso_tab)``,
     or ``None`` for a combination it does not implement (mean-resultant-length matching needs
     the exact inverse). ``lod_bias`` / ``lod_bias_start`` / ``taps`` / ``taps_below`` /
-    ``taps_ratio``: see :func:`multiscale_attributes`."""
+    ``taps_ratio`` / ``taps_normalize``: see :func:`multiscale_attributes`."""
     from prefilter.multiscale.convolution import FIT_COEFFS, PAPER_EQ7
     from prefilter.multiscale.meso import PAPER_EQ5
     from prefilter.render import kernels as kn
@@ -90,6 +91,7 @@ def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
         row[kn.RGH_TAPS] = taps
         row[kn.RGH_TAPS_BELOW] = taps_below
         row[kn.RGH_TAPS_RATIO] = taps_ratio
+        row[kn.RGH_TAPS_NORM] = bool(taps_normalize)
     return rows, meso_table()
 
 
@@ -136,14 +138,18 @@ def _lookup(chain, uv, dudv, anisotropic: bool, max_aniso: int) -> np.ndarray:
 
 
 def taps_lookup(chain, uv, dudv, taps: int, below: float = 4.0, ratio: float = 1.5,
-                lod_bias: float = 0.0, lod_bias_start=None) -> np.ndarray:
+                lod_bias: float = 0.0, lod_bias_start=None,
+                normalize: bool = False) -> np.ndarray:
     """The normal-map read of the fused shader with anisotropic taps (NumPy twin of
     ``kernels.ltc_samples_kernel``'s lookup). Footprints whose major axis is below ``below``
     texels and longer than ``ratio`` times the minor one: the mean of
     ``n = clip(ceil(major / minor), 2, taps)`` unnormalised trilinear taps spread over the major
     axis, at the LOD of ``max(minor, major / n)`` (anisotropic filtering as GPUs do it);
     elsewhere the single isotropic tap at the major axis' LOD. ``lod_bias`` / ``lod_bias_start``
-    as :func:`multiscale_attributes` (the ramped bias is added to both LODs).
+    as :func:`multiscale_attributes` (the ramped bias is added to both LODs). ``normalize``:
+    below LOD 1 each tap's level-0 bilinear read is renormalised (first three channels) before
+    the blend with level 1 (bilinear blends of unit texels are shorter than the surface's
+    spread of normals).
 
     Parameters
     ----------
@@ -172,8 +178,17 @@ def taps_lookup(chain, uv, dudv, taps: int, below: float = 4.0, ratio: float = 1
     for k in np.unique(n[use]):
         m = use & (n == k)
         acc = 0.0
+        lm = np.clip(lod_t[m], 0.0, chain.n_levels - 1)[:, None]
         for i in range(k):
-            acc = acc + chain.lookup(uv[m] + ((i + 0.5) / k - 0.5) * axis_uv[m], lod_t[m]) / k
+            p = uv[m] + ((i + 0.5) / k - 0.5) * axis_uv[m]
+            tap = chain.lookup(p, lod_t[m])
+            if normalize and chain.n_levels > 1:
+                low = (lm < 1.0)[:, 0]
+                n0 = chain.lookup(p[low], 0.0)
+                ln = np.linalg.norm(n0[:, :3], axis=-1, keepdims=True)
+                n0 = n0 / np.where(ln > 0.0, ln, 1.0)
+                tap[low] = n0 * (1.0 - lm[low]) + chain.lookup(p[low], 1.0) * lm[low]
+            acc = acc + tap / k
         out[m] = acc
     return out
 
@@ -197,7 +212,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
                           anisotropic_footprint: bool = False, max_aniso: int = 8,
                           lod_bias: float = 0.0, lod_bias_start=None,
                           box_taps: int = 0, taps: int = 0, taps_below: float = 4.0,
-                          taps_ratio: float = 1.5) -> dict:
+                          taps_ratio: float = 1.5, taps_normalize: bool = False) -> dict:
     """Shading frame, material and multi-scale roughness per hit sample of a flat G-buffer.
 
     As :func:`prefilter.render.pipeline.surface_attributes` with ``filtered=True``, plus ``r``
@@ -220,7 +235,8 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
     ``taps``: ``0`` (off) or the largest number of anisotropic taps for footprints whose major
     axis is below ``taps_below`` texels and more than ``taps_ratio`` (>= 1) times the minor axis
     (:func:`taps_lookup`, the fused shader's compiled lookup); larger or rounder footprints are
-    read as without it.
+    read as without it. ``taps_normalize``: the taps' level-0 reads are renormalised
+    (:func:`taps_lookup`'s ``normalize``).
     """
     box_taps = as_positive_int(box_taps, "box_taps", lo=0)
     taps, taps_below, taps_ratio = _taps_args(taps, taps_below, taps_ratio)
@@ -245,7 +261,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
                 nts = _box_lookup(chain, g.uv[m], g.dudv[m], box_taps)
             elif taps and not anisotropic_footprint:
                 nts = taps_lookup(chain, g.uv[m], g.dudv[m], taps, taps_below, taps_ratio,
-                                  lod_bias, lod_bias_start)
+                                  lod_bias, lod_bias_start, taps_normalize)
             else:
                 scale = _bias_scale(g.dudv[m], chain.levels[0].shape[:2], lod_bias,
                                     lod_bias_start)
@@ -283,7 +299,8 @@ def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> n
                                      footprint.get("lod_bias_start"),
                                      *_taps_args(footprint.get("taps", 0),
                                                  footprint.get("taps_below", 4.0),
-                                                 footprint.get("taps_ratio", 1.5)))
+                                                 footprint.get("taps_ratio", 1.5)),
+                                     footprint.get("taps_normalize", False))
         if rough is not None:
             image = _render_ltc_fused(scene, settings, lights, table, rough, desc=name)
             if image is not None:
@@ -308,18 +325,19 @@ def render_multiscale(scene, settings, *, anisotropic_footprint: bool = False,
                       max_aniso: int = 8, lod_bias: float = LOD_BIAS,
                       lod_bias_start=LOD_BIAS_START, box_taps: int = 0,
                       taps: int = 0, taps_below: float = 4.0,
-                      taps_ratio: float = 1.5) -> np.ndarray:
+                      taps_ratio: float = 1.5, taps_normalize: bool = False) -> np.ndarray:
     """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7.
 
     ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias`` / ``lod_bias_start`` /
-    ``box_taps`` / ``taps`` / ``taps_below`` / ``taps_ratio``: see
+    ``box_taps`` / ``taps`` / ``taps_below`` / ``taps_ratio`` / ``taps_normalize``: see
     :func:`multiscale_attributes`; the default footprint is :data:`LOD_BIAS`
     levels coarser at most, ramping in from :data:`LOD_BIAS_START` (``lod_bias=0`` is the
     paper's isotropic mip level; all measured in ``docs/multiscale.md``)."""
     return _render(scene, settings, "exact", "fit", "ltc-multiscale",
                    anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
                    lod_bias=lod_bias, lod_bias_start=lod_bias_start, box_taps=box_taps,
-                   taps=taps, taps_below=taps_below, taps_ratio=taps_ratio)
+                   taps=taps, taps_below=taps_below, taps_ratio=taps_ratio,
+                   taps_normalize=taps_normalize)
 
 
 def render_multiscale_paper(scene, settings) -> np.ndarray:

@@ -331,18 +331,32 @@ def _footprint_axes(h0, w0, d00, d01, d10, d11):
 
 @njit_serial
 def _taps_into(data, info, first, n_levels, stride, c, u, v, h0, w0, major, dir_x, dir_y, n,
-               lod, out, k):
+               lod, norm0, out, k):
     """Mean of ``n`` trilinear taps at ``lod`` spread over the major axis (``major`` texels
     along the unit texel-space direction ``dir``), as ``MipChain.lookup_footprint``'s
-    anisotropic branch: channels ``:c`` into ``out[k, :c]``, ``out[k + 1]`` is scratch."""
+    anisotropic branch: channels ``:c`` into ``out[k, :c]``, ``out[k + 1]`` is scratch.
+    ``norm0``: below LOD 1 the level-0 bilinear read is renormalised (channels ``:3``) before
+    it is blended with level 1."""
+    lodc = min(max(lod, 0.0), n_levels - 1.0)
     au = dir_x * major / w0
     av = dir_y * major / h0
     for ch in range(c):
         out[k, ch] = 0.0
     for i in range(n):
         s = (i + 0.5) / n - 0.5
-        _trilinear_into(data, info, first, n_levels, stride, c, u + s * au, v + s * av, lod,
-                        out, k + 1)
+        if norm0 and lodc < 1.0 and n_levels > 1:
+            for ch in range(c):
+                out[k + 1, ch] = 0.0
+            _bilinear_add(data, info, first, stride, c, u + s * au, v + s * av, 1.0, out, k + 1)
+            ln = math.sqrt(out[k + 1, 0] ** 2 + out[k + 1, 1] ** 2 + out[k + 1, 2] ** 2)
+            sc = (1.0 - lodc) / ln if ln > 0.0 else 1.0 - lodc
+            for ch in range(c):
+                out[k + 1, ch] *= sc
+            _bilinear_add(data, info, first + 1, stride, c, u + s * au, v + s * av, lodc, out,
+                          k + 1)
+        else:
+            _trilinear_into(data, info, first, n_levels, stride, c, u + s * au, v + s * av,
+                            lod, out, k + 1)
         for ch in range(c):
             out[k, ch] += out[k + 1, ch] / n
 
@@ -622,8 +636,10 @@ RGH_BIAS, RGH_START, RGH_RAMP = 18, 19, 20
 # major axis is below ``RGH_TAPS_BELOW`` texels and longer than ``RGH_TAPS_RATIO`` times the
 # minor axis are read as the mean of ``clip(ceil(major / minor), 2, RGH_TAPS)`` unnormalised
 # trilinear taps along the major axis at the minor axis' LOD; all other footprints as before.
-RGH_TAPS, RGH_TAPS_BELOW, RGH_TAPS_RATIO = 21, 22, 23
-RGH_WIDTH = 24
+# ``RGH_TAPS_NORM`` = 1: each tap's level-0 bilinear read is renormalised before the blend with
+# level 1 (interpolating between unit texels shortens them although the surface barely turns).
+RGH_TAPS, RGH_TAPS_BELOW, RGH_TAPS_RATIO, RGH_TAPS_NORM = 21, 22, 23, 24
+RGH_WIDTH = 25
 #: ``RGH_MODE`` values: ``sqrt(alpha_x alpha_y)`` (the ``ltc`` method); our form of eq. 7
 #: (``multiscale.convolution``, "fit"); eq. 7's polynomial ("paper"); mean-resultant-length
 #: matching ("mrl").
@@ -786,7 +802,8 @@ def ltc_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, ro
                                               rough[o, RGH_TAPS]))
                         lod_t = math.log2(max(ns * max(minor, major / n_taps), 1.0)) + bias
                         _taps_into(data, info, first, tex[t_n, 1], tex[t_n, 2], 3, u, v, h0,
-                                   w0, major, dxx, dyy, n_taps, lod_t, tx, 0)
+                                   w0, major, dxx, dyy, n_taps, lod_t,
+                                   rough[o, RGH_TAPS_NORM] != 0.0, tx, 0)
                 if n_taps == 1:
                     _trilinear_into(data, info, first, tex[t_n, 1], tex[t_n, 2], 3, u, v, lod,
                                     tx, 0)
