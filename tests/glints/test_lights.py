@@ -227,3 +227,11 @@ def test_direct_ndf_truncation(surf):
                                rtol=1e-6, atol=1e-7 * ref.max())
     with pytest.raises(PrefilterError, match="truncation"):
         direct_ndf(surf, c, sp, s, truncation=0.1)
+    # footprints wider than the 64^2 map (rows wrap more than once: the per-texel kernel) mixed
+    # with ones whose rows wrap at the map edge (contiguous slices of the doubled planes)
+    c2 = np.concatenate([rng.uniform(-2, 2, (20, 2)) % 64, rng.uniform(0, 64, (20, 2))])
+    sp2 = np.concatenate([rng.uniform(2.0, 7.0, 20), rng.uniform(8.5, 12.0, 20)])
+    s2 = rng.uniform(-0.3, 0.3, (40, 2))
+    ref2 = pndf(NM, c2, sp2, s2, 0.01)
+    np.testing.assert_allclose(direct_ndf(surf, c2, sp2, s2, truncation=4.0), ref2,
+                               rtol=1e-6, atol=1e-7 * ref2.max())

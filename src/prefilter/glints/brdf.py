@@ -216,7 +216,88 @@ def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
         out[q] = acc / (sx * sy)
 
 
+@njit_parallel
+def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, out):
+    """:func:`_direct_points` over planes of the elements doubled along ``x`` (``(H, 2 W)``: a
+    footprint row of at most ``W`` texels is one contiguous slice, no index wrap). Each row's
+    quadratic forms are computed for all its texels in a branch-free loop (SIMD), the
+    exponentials only where ``quad < 36``: the bound-then-branch of :func:`_direct_points`
+    rejected 2/3 of the near frame's texels but paid a mispredicted branch and three scattered
+    loads for each (10.8 -> 4.6 ms on the near measurement frame, same values to 1e-15)."""
+    H = SX.shape[0]
+    W = SX.shape[1] // 2
+    sh2 = sh * sh
+    sr2 = sr * sr
+    for q in prange(out.shape[0]):
+        sp2 = sp[q] * sp[q]
+        tot2 = sp2 + sh2
+        f = sh2 / tot2
+        var = sp2 * sh2 / tot2
+        rad = trunc * math.sqrt(tot2)
+        x0 = int(math.ceil(cx[q] - rad - 0.5))
+        x1 = int(math.floor(cx[q] + rad - 0.5))
+        y0 = int(math.ceil(cy[q] - rad - 0.5))
+        y1 = int(math.floor(cy[q] + rad - 0.5))
+        nx = x1 - x0 + 1
+        xs = x0 % W
+        wx = np.empty(nx)
+        fdx = np.empty(nx)
+        quad = np.empty(nx)
+        det = np.empty(nx)
+        inv = 1.0 / (2.0 * tot2)
+        sx = 0.0
+        for i in range(nx):
+            dx = cx[q] - (x0 + i + 0.5)
+            fdx[i] = f * dx
+            wx[i] = math.exp(-dx * dx * inv)
+            sx += wx[i]
+        qxq = qx[q]
+        qyq = qy[q]
+        acc = 0.0
+        sy = 0.0
+        for y in range(y0, y1 + 1):
+            dy = cy[q] - (y + 0.5)
+            wy = math.exp(-dy * dy * inv)
+            sy += wy
+            r = y % H
+            fdy = f * dy
+            sxr = SX[r, xs:xs + nx]
+            syr = SY[r, xs:xs + nx]
+            a0 = J00[r, xs:xs + nx]
+            a1 = J01[r, xs:xs + nx]
+            b0 = J10[r, xs:xs + nx]
+            b1 = J11[r, xs:xs + nx]
+            for i in range(nx):
+                j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
+                ex = qxq - sxr[i] - (j00 * fdx[i] + j01 * fdy)
+                ey = qyq - syr[i] - (j10 * fdx[i] + j11 * fdy)
+                a = sr2 + var * (j00 * j00 + j01 * j01)
+                d = sr2 + var * (j10 * j10 + j11 * j11)
+                b = var * (j00 * j10 + j01 * j11)
+                det[i] = a * d - b * b  # >= sr^4 > 0 (Cauchy-Schwarz)
+                quad[i] = d * ex * ex - 2.0 * b * ex * ey + a * ey * ey
+            racc = 0.0
+            for i in range(nx):
+                if quad[i] < 36.0 * det[i]:
+                    racc += wx[i] * math.exp(-0.5 * quad[i] / det[i]) / math.sqrt(det[i])
+            acc += wy * racc
+        out[q] = acc / (2.0 * math.pi * sx * sy)
+
+
 _JNORM: dict = {}
+_PLANES: dict = {}
+
+
+def _element_planes(s_el, J):
+    """``(SX, SY, J00, J01, J10, J11)``, each ``(H, 2 W)`` contiguous: the elements' ``s`` and
+    Jacobian entries, the map repeated once along ``x`` (cached per element arrays)."""
+    hit = _PLANES.get(id(J))
+    if hit is None or hit[0] is not J or hit[1] is not s_el:
+        planes = tuple(np.ascontiguousarray(np.concatenate([p, p], axis=1), dtype=np.float64)
+                       for p in (s_el[..., 0], s_el[..., 1], J[..., 0, 0], J[..., 0, 1],
+                                 J[..., 1, 0], J[..., 1, 1]))
+        hit = _PLANES[id(J)] = (J, s_el, planes)
+    return hit[2]
 
 
 def _jacobian_norms(J):
@@ -240,9 +321,26 @@ def direct_ndf(surf, center, sigma_p, s, *, truncation: float = FALLBACK_TRUNCAT
     q = np.ascontiguousarray(s, dtype=np.float64)
     out = np.empty(c.shape[0])
     cc = np.ascontiguousarray
-    _serial_below(_direct_points, c.shape[0])(
-        s_el, J, _jacobian_norms(J), cc(c[:, 0]), cc(c[:, 1]), cc(sigma_p, dtype=np.float64),
-        cc(q[:, 0]), cc(q[:, 1]), surf.intrinsic_roughness, SIGMA_H, float(truncation), out)
+    sp = cc(np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), c.shape[:1]))
+    # rows of at most W texels are contiguous slices of the doubled planes; wider footprints
+    # (larger than the map) wrap more than once: the per-texel kernel
+    W = s_el.shape[1]
+    rad = float(truncation) * np.sqrt(sp * sp + SIGMA_H * SIGMA_H)
+    wide = 2.0 * rad + 2.0 > W
+    args = (surf.intrinsic_roughness, SIGMA_H, float(truncation))
+    if not np.all(wide):
+        k = ~wide
+        o = np.empty(int(k.sum()))
+        _serial_below(_direct_rows, o.size)(
+            *_element_planes(s_el, J), cc(c[k, 0]), cc(c[k, 1]), sp[k], cc(q[k, 0]),
+            cc(q[k, 1]), *args, o)
+        out[k] = o
+    if np.any(wide):
+        o = np.empty(int(wide.sum()))
+        _serial_below(_direct_points, o.size)(
+            s_el, J, _jacobian_norms(J), cc(c[wide, 0]), cc(c[wide, 1]), sp[wide],
+            cc(q[wide, 0]), cc(q[wide, 1]), *args, o)
+        out[wide] = o
     return out
 
 
