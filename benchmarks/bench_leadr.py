@@ -20,7 +20,9 @@ reference without self-shadowing, the model of the simplified algorithms).
 Point-light images (``--image-point``, ~30-50 min): :func:`prefilter.leadr.acceptance.image_point`,
 planes and spheres, iso / anisotropic height fields, specular and diffuse, 4 and 16 texels per
 pixel, RMSE / FLIP / flicker of LEADR, the normal-mapped reference and naive normal mapping vs the
-ray-traced displaced surface (``--quick``: one surface, the plane only).
+ray-traced displaced surface (``--quick``: one surface, the plane only). ``--flicker-floor``
+(~15 min): the far rows' flickers with the reference's own sampling-error floor
+(:func:`prefilter.leadr.acceptance.flicker_table`).
 
 Render methods (``--render``): wall time of ``leadr-env``, ``leadr-env-simplified``,
 ``leadr-irradiance`` and the naive methods on a 160 x 90 plane + sphere scene with a Gaussian
@@ -170,9 +172,17 @@ if __name__ == "__main__":
     ap.add_argument("--image-point", action="store_true",
                     help="point-light image rows, planes and spheres (acceptance.image_point)")
     ap.add_argument("--quick", action="store_true", help="with --image-point: iso 0.25, plane")
+    ap.add_argument("--flicker-floor", action="store_true",
+                    help="far (16 texels/pixel) flicker rows with the reference's own flicker "
+                         "floor (acceptance.image_point(noise_floor=True)), ~15 min")
     ap.add_argument("--points", type=int, default=None)
     a = ap.parse_args()
-    if a.image_point:
+    if a.flicker_floor:
+        from prefilter.leadr.acceptance import flicker_table, image_point
+
+        print(flicker_table(image_point(texels_per_pixel=(16.0,), noise_floor=True,
+                                        log=lambda row: None)))
+    elif a.image_point:
         from prefilter.leadr.acceptance import POINT_SURFACES, image_point, point_table
 
         kw = dict(surfaces={"iso 0.25": POINT_SURFACES["iso 0.25"]},

@@ -2,7 +2,9 @@
 mirrors: ``leadrStats`` + ``leadrSpecular`` + ``leadrDiffuse`` + ``leadrDelta`` against
 :func:`prefilter.leadr.maps.shading_stats`, :func:`prefilter.leadr.shading.point_light`
 (closed form, exact Smith Lambda), ``schlick`` and ``diffuse_directional`` (5 x 5 grid; in
-``leadrDelta`` with ``shadowing=True``, Smith ``G2 / G1``) on random moments, roughnesses and directions (lights below the surface included)."""
+``leadrDelta`` with ``shadowing=True``, Smith ``G2 / G1``) on random moments, roughnesses and
+directions (lights below the surface included); the page's ``leadr-point`` against
+``prefilter.render``."""
 
 import numpy as np
 from scipy import special

@@ -180,12 +180,18 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
     shadow rays each), the normal-mapped reference, naive mip-mapped normal mapping and LEADR
     (``n_grid^2`` grid; diffuse: order-2 SH irradiance), plus ``leadr shadowed`` (the paper's
     non-simplified Algorithms 1 / 2+3 with ``G2 / G1`` per sample; diffuse with the exact
-    irradiance), and for diffuse ``leadr exact E`` (Simplified Algorithm 3 with the exact
+    irradiance), ``leadr-env`` (what the render method computes since session 3: compiled
+    Algorithm 1 with ``G2 / G1``; diffuse: SH on the 5 x 5 grid plus
+    :func:`~prefilter.leadr.shading.diffuse_shadowing`), and for diffuse ``leadr exact E``
+    (Simplified Algorithm 3 with the exact
     irradiance instead of SH) and ``naive SH`` (SH irradiance at the naive normal, what
     ``leadr-irradiance-naive`` renders). ``err``: relative RMSE of the luminance over views and
     shifts; ``bias``: mean signed error, relative; ``flicker``: std over the shifts of
     ``method - reference``, relative, averaged over views (includes the reference's MC noise).
     """
+    from prefilter.leadr import render as lr
+    from prefilter.leadr.shading import diffuse_shadowing
+
     env = EnvMap(procedural_env(env_rows))
     sh = sh9_project(env)
     rows = []
@@ -196,7 +202,8 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
         cells = cell_moments(h)
         for specular in [sh == "specular" for sh in shadings]:
             for block in blocks:
-                sq = {"leadr": 0.0, "leadr shadowed": 0.0, "normal-mapped": 0.0, "naive": 0.0}
+                sq = {"leadr": 0.0, "leadr shadowed": 0.0, "leadr-env": 0.0,
+                      "normal-mapped": 0.0, "naive": 0.0}
                 if not specular:
                     sq.update({"leadr exact E": 0.0, "naive SH": 0.0})
                 dev = {m: [] for m in sq}
@@ -218,12 +225,20 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
                                              @ LUM)
                         if specular:
                             lv = env_specular(env, wo, mu, cov, n_grid)
+                            vals["leadr-env"].append(float(env_specular(
+                                env, wo, mu, cov, n_grid, shadowing=True) @ LUM))
                             vals["leadr shadowed"].append(
                                 float(env_specular_shadowed(env, wo, mu, cov, n_grid) @ LUM))
                         else:
                             vals["leadr shadowed"].append(float(
                                 diffuse_exact(env, wo, mu, cov, n_grid, shadowing=True) @ LUM))
                             lv = diffuse_sh(sh, wo, mu, cov, n_grid)
+                            # the render method's diffuse: SH on its 5 x 5 grid + the compiled
+                            # shadowing correction
+                            dg = lr.DIFFUSE_GRID
+                            vals["leadr-env"].append(float(np.maximum(
+                                diffuse_sh(sh, wo, mu, cov, dg)
+                                + diffuse_shadowing(env, wo, mu, cov, dg), 0.0) @ LUM))
                             vals["leadr exact E"].append(
                                 float(diffuse_exact(env, wo, mu, cov, n_grid) @ LUM))
                             nb = np.array([-mu[0], -mu[1], 1.0]) / np.hypot(1.0, np.hypot(*mu))
@@ -323,21 +338,23 @@ def env_table(rows) -> str:
 
     Diffuse rows compare like with like for the ratio: LEADR and naive both with the exact
     irradiance (SH truncation is in the ``LEADR SH`` column)."""
-    out = ["| surface | shading | texels/pixel | LEADR (as rendered) | LEADR exact E | "
-           "LEADR + shadowing | normal-mapped | naive | naive SH | LEADR / naive | "
-           "shadowed / naive | LEADR flicker | naive flicker |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    out = ["| surface | shading | texels/pixel | LEADR simplified | LEADR exact E | "
+           "LEADR + shadowing | leadr-env | normal-mapped | naive | naive SH | "
+           "simplified / naive | shadowed / naive | leadr-env / naive | leadr-env flicker | "
+           "naive flicker |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     pc = lambda r, k: f"{100 * r[k]:.1f}%" if k in r else "-"  # noqa: E731
     for r in rows:
         lead = "err leadr" if r["shading"] == "specular" else "err leadr exact E"
-        flick = lead.replace("err", "flicker")
         out.append(
             f"| {r['surface']} | {r['shading']} | {r['block']} | {pc(r, 'err leadr')} | "
             f"{pc(r, 'err leadr exact E')} | {pc(r, 'err leadr shadowed')} | "
+            f"{pc(r, 'err leadr-env')} | "
             f"{pc(r, 'err normal-mapped')} | {pc(r, 'err naive')} | {pc(r, 'err naive SH')} | "
             f"{r[lead] / max(r['err naive'], 1e-12):.2f} | "
-            f"{r['err leadr shadowed'] / max(r['err naive'], 1e-12):.2f} | {100 * r[flick]:.2f}% | "
-            f"{100 * r['flicker naive']:.2f}% |")
+            f"{r['err leadr shadowed'] / max(r['err naive'], 1e-12):.2f} | "
+            f"{r['err leadr-env'] / max(r['err naive'], 1e-12):.2f} | "
+            f"{100 * r['flicker leadr-env']:.2f}% | {100 * r['flicker naive']:.2f}% |")
     return "\n".join(out)
 
 
@@ -504,7 +521,7 @@ def _point_scene(shape, width, height, scale, material, tmp=None):
 def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0, 16.0),
                 width: int = 40, height: int = 30, sub: int | None = None, jitters: int = 8,
                 sigma_b: float = 0.1, tex_size: int = 256, min_cos: float = 0.15,
-                seed: int = 0, log=print) -> list[dict]:
+                seed: int = 0, noise_floor: bool = False, log=print) -> list[dict]:
     """Image rows under one point light: LEADR (the renderer's shading code) vs the displaced
     height field, the normal-mapped reference and naive mip-mapped normal mapping.
 
@@ -531,7 +548,15 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
     averaged over pixels, relative to the mean reference. Pixels count when every reference ray
     hits with ``wo_z >= min_cos``. Rows: relative RMSE (``rmse``) and HDR-FLIP (``flip``) per
     method (means over the jitters), ``flicker`` per method, ``ref noise`` (RMSE between two
-    sub-ray patterns / 2, relative).
+    sub-ray patterns / 2, relative). Flicker rows also hold ``own flicker <method>`` (the std
+    over the jitters of the image itself) and ``flicker ref`` (that of the reference: the score
+    of a perfectly steady image).
+
+    ``noise_floor``: the shifted sub-ray pattern is traced at every jitter of the largest
+    footprint, giving ``flicker floor`` (the per-pixel std over the jitters of the two patterns'
+    difference / sqrt 2, i.e. the flicker that the reference's own sampling error adds to any
+    method's score, relative) and ``flicker2 <method>`` (flicker against the mean of the two
+    patterns, whose floor is ``flicker floor / sqrt 2``).
     """
     from prefilter.leadr import render as lr
     from prefilter.leadr.displaced import _gradient, _micro, _normals, trace_points
@@ -564,7 +589,7 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                 for k, o in enumerate(offs):
                     centre = pix + o
                     # reference rays: sub x sub strata per pixel (and a shifted pattern once)
-                    pats = [0.0] + ([0.5] if k == 0 else [])
+                    pats = [0.0] + ([0.5] if k == 0 or (noise_floor and tpp == far) else [])
                     refs = {s: [] for s in mats}
                     box = None
                     for shift in pats:
@@ -652,7 +677,7 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                         a["mask"] &= pmask
                         a.setdefault("ref", []).append(ref)
                         if len(refs[s]) > 1:
-                            a["ref2"] = refs[s][1][0]
+                            a.setdefault("ref2", []).append(refs[s][1][0])
                             a["mask"] &= refs[s][1][2]
                         for m, im in dict(meth[s], **{"normal-mapped": nmi}).items():
                             a.setdefault(m, []).append(im)
@@ -663,8 +688,13 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                     mref = float(refs_k[:, mask].mean())
                     row = {"surface": name, "shape": shape, "shading": s,
                            "texels/pixel": float(tpp), "pixels": int(mask.sum()),
-                           "ref noise": float(np.sqrt(np.mean((a["ref2"] - refs_k[0])[mask] ** 2)
-                                                      / 2) / mref)}
+                           "ref noise": float(np.sqrt(np.mean((a["ref2"][0] - refs_k[0])[mask]
+                                                              ** 2) / 2) / mref)}
+                    both = len(a["ref2"]) == len(refs_k) > 1
+                    if both:
+                        ref2 = np.asarray(a["ref2"])
+                        row["flicker floor"] = float(np.mean(np.std(
+                            (ref2 - refs_k)[:, mask], axis=0)) / np.sqrt(2.0) / mref)
                     for m in [q for q in a if q not in ("mask", "ref", "ref2")]:
                         ims = np.asarray(a[m])
                         dif = (ims - refs_k)[:, mask]
@@ -678,6 +708,9 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                             # the image's own change under the shake, without the reference
                             row[f"own flicker {m}"] = float(
                                 np.mean(np.std(ims[:, mask], axis=0)) / mref)
+                            if both:
+                                row[f"flicker2 {m}"] = float(np.mean(np.std(
+                                    (ims - 0.5 * (refs_k + ref2))[:, mask], axis=0)) / mref)
                     if len(refs_k) > 1:
                         # the flicker score of a perfectly steady image (the jitter-mean of the
                         # reference): what no filter can go below on this row
@@ -709,4 +742,30 @@ def point_table(rows) -> str:
                f"{r['flicker leadr'] / max(r['flicker naive'], 1e-12):.2f} | " if fl
                else "- | - | ")
             + f"{100 * r['ref noise']:.2f}% |")
+    return "\n".join(out)
+
+
+def flicker_table(rows) -> str:
+    """Markdown table of the far flicker rows of :func:`image_point` run with ``noise_floor``:
+    flicker of LEADR / naive / the normal-mapped reference against the displaced reference, the
+    reference's own std over the jitters (the score of a steady image), the floor that the
+    reference's sampling error puts under every method's score, and the same flickers against the
+    mean of the two sub-ray patterns (floor / sqrt 2). ``reachable`` says whether the floor is
+    below half the naive flicker (else no filter can meet flicker <= 0.5x naive on that row)."""
+    out = ["| surface | shape | shading | LEADR | naive | normal-mapped | LEADR / naive | "
+           "ref's own | floor | floor / naive | reachable | vs 2-pattern ref: LEADR / naive "
+           "(ratio), floor |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    pc = lambda v: f"{100 * v:.2f}%"  # noqa: E731
+    for r in rows:
+        if "flicker floor" not in r:
+            continue
+        fl, fn, f2l, f2n = (r["flicker floor"], r["flicker naive"], r["flicker2 leadr"],
+                            r["flicker2 naive"])
+        out.append(
+            f"| {r['surface']} | {r['shape']} | {r['shading']} | {pc(r['flicker leadr'])} | "
+            f"{pc(fn)} | {pc(r['flicker normal-mapped'])} | {r['flicker leadr'] / fn:.2f} | "
+            f"{pc(r['flicker ref'])} | {pc(fl)} | {fl / fn:.2f} | "
+            f"{'yes' if fl < 0.5 * fn else 'no'} | {pc(f2l)} / {pc(f2n)} ({f2l / f2n:.2f}), "
+            f"{pc(fl / np.sqrt(2.0))} |")
     return "\n".join(out)
