@@ -200,35 +200,40 @@ _SLOTS = 16
 
 
 @njit_serial
-def _flush_slots(A, Bp, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja):
+def _flush_slots(Pa, Pb, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja):
     """``sum_slots sum_r cw[slot, r] fa_r fb_r`` with each slot's group factors at the bilinear
-    NDF taps (rows ``ia, ia + 1`` weighted ``wi, wa1``; columns ``ja, ja + 1``: ``wj, wb1``)."""
+    NDF taps (rows ``ia, ia + 1`` weighted ``wi, wa1``; columns ``ja, ja + 1``: ``wj, wb1``).
+    ``Pa``, ``Pb`` ``(G, B, R)``: the factors' pixel values, rank-contiguous."""
     acc = 0.0
     for t in range(ns):
         g = gs[t]
         s = 0.0
         for rr in range(granks[g]):
-            a = wi * (A[g, rr, ia + 1] - A[g, rr, ia])
+            a = wi * Pa[g, ia, rr]
             if wa1 != 0.0:
-                a += wa1 * (A[g, rr, ia + 2] - A[g, rr, ia + 1])
-            b = wj * (Bp[g, rr, ja + 1] - Bp[g, rr, ja])
+                a += wa1 * Pa[g, ia + 1, rr]
+            b = wj * Pb[g, ja, rr]
             if wb1 != 0.0:
-                b += wb1 * (Bp[g, rr, ja + 2] - Bp[g, rr, ja + 1])
+                b += wb1 * Pb[g, ja + 1, rr]
             s += cw[t, rr] * a * b
         acc += s
     return acc
 
 
 @njit_parallel
-def resample_point_kernel(A, Bp, C, block_index, image_cell, granks, offs, ny_l, nx_l, sig_l,
+def resample_point_kernel(Pa, Pb, C, block_index, image_cell, granks, offs, ny_l, nx_l, sig_l,
                           st_l, cx, cy, sp, sx, sy, lo, h, trunc, q_min, bilinear, out, done):
     """Point values of Gaussian-resampled footprints (:func:`prefilter.glints.pyramid.
     resample_weights`, the same level choice and taps) without materialising the tap lists:
     taps of one CP group share its factor values at ``s``, which are read once per group.
     ``granks``: the rank of each group (its components come first; adaptive-rank maps pad the
-    rest with zeros). ``done[q] = False`` where no level qualifies (the caller uses another
+    rest with zeros). ``Pa``, ``Pb`` ``(G, B, R)``: pixel values of the row / column factors
+    (differences of ``A``, ``Bp``) with the rank innermost: a group's factors at one NDF pixel
+    are a few cache lines instead of one line per component (``A[g, :, i]`` strides 17 floats),
+    which made level-0 footprints, spread over many groups, 2x slower per tap than upper levels.
+    ``done[q] = False`` where no level qualifies (the caller uses another
     path)."""
-    B = A.shape[2] - 1
+    B = Pa.shape[1]
     nb = block_index.shape[1]
     R = nb * B
     L = sig_l.shape[0]
@@ -319,7 +324,7 @@ def resample_point_kernel(A, Bp, C, block_index, image_cell, granks, offs, ny_l,
                                     break
                             if slot < 0:
                                 if ns == _SLOTS:
-                                    acc += _flush_slots(A, Bp, granks, gs, cw, ns, wi, wa1, wj,
+                                    acc += _flush_slots(Pa, Pb, granks, gs, cw, ns, wi, wa1, wj,
                                                         wb1, ia, ja)
                                     ns = 0
                                 slot = ns
@@ -331,5 +336,5 @@ def resample_point_kernel(A, Bp, C, block_index, image_cell, granks, offs, ny_l,
                         wt = wy[ty] * wx[tx]
                         for rr in range(nr):
                             cw[slot, rr] += wt * C[k, rr]
-                acc += _flush_slots(A, Bp, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
+                acc += _flush_slots(Pa, Pb, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
         out[q] = acc / (sxw * syw)

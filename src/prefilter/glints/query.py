@@ -113,6 +113,7 @@ def point_flat(gm: GlintsMap, center, sigma_p, s, *, interp: str = "trilinear",
         levels = [int(lv) for lv in np.arange(L)]  # `range` is this module's range query
         shapes = np.array([pyr.shape(lv) for lv in levels], dtype=np.int64)
         arrs, lo, h = _args(gm)
+        arrs = _pixel_factors(gm) + arrs[2:]
         done = np.zeros(sp.shape[0], bool)
         serial(resample_point_kernel, _n(sp))(
             *arrs, pyr.offsets, shapes[:, 0].copy(), shapes[:, 1].copy(),
@@ -157,6 +158,19 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points, interp="trilinear"):
 def _args(gm):
     h = 2.0 * gm.support / gm.resolution
     return (gm.A, gm.Bp, gm.C, gm.block_index, gm.image_cell, _group_ranks(gm)), -gm.support, h
+
+
+_PIXEL_FACTORS: dict = {}
+
+
+def _pixel_factors(gm):
+    """Pixel values of the CP factors, ``(G, B, R)`` float32 each (rank innermost), from the
+    prefix sums ``A``, ``Bp`` (cached per map): the resampling kernel's layout."""
+    hit = _PIXEL_FACTORS.get(id(gm.A))
+    if hit is None or hit[0] is not gm.A or hit[1] is not gm.Bp:
+        pa, pb = (np.ascontiguousarray(np.diff(f, axis=2).transpose(0, 2, 1)) for f in (gm.A, gm.Bp))
+        hit = _PIXEL_FACTORS[id(gm.A)] = (gm.A, gm.Bp, (pa, pb))
+    return hit[2]
 
 
 def _group_ranks(gm):
