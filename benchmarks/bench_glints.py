@@ -8,6 +8,7 @@
     python benchmarks/bench_glints.py --frames --runs 3 --interp trilinear --nearest \
         --bake-rank 16  # the evaluation and bake of the previous version
     python benchmarks/bench_glints.py --frames --stride0 2 --sigma0 2  # finer level 0 (bakes)
+    python benchmarks/bench_glints.py --breakdown     # frame CPU time: queries, taps, fallback
 
 The machine is shared, so every ratio is computed from timings of the same run; the absolute
 numbers are only indicative. Footprint "width" is 2 sigma_p (texels).
@@ -152,14 +153,69 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
         line = f"  distance {d:4g}: glints {t * 1e3:8.1f} ms"
         if direct:
             sc = scenes[distances.index(d)]
-            t0 = time.perf_counter()
+            t0 = clock()  # the same clock as glints' (CPU time with --cpu: all threads)
             img_d = render(sc, "glints-direct")
-            td = time.perf_counter() - t0
+            td = clock() - t0
             fl = flip(render(sc, "glints"), img_d).mean
             line += f", glints-direct {td * 1e3:9.1f} ms, speed-up {td / t:6.1f}x, FLIP {fl:.3f}"
         print(line, flush=True)
     print(f"max/min over distances: {max(best) / min(best):.2f} (target <= 1.5)")
     return best
+
+
+def bench_breakdown(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=5):
+    """Where a ``glints`` frame's CPU time goes (point light): the compressed point queries
+    (resampling kernel: queries per pyramid level, taps per query) and the direct P-NDF fallback
+    below the finest level, each re-run alone on the frame's own inputs, vs the whole frame."""
+    from prefilter.glints import brdf
+    from prefilter.glints.pyramid import resample_weights
+    from prefilter.glints.render import measurement_scene
+    from prefilter.render.pipeline import render
+    from prefilter.render.scene import load_scene
+
+    calls = {}
+    orig = {"point_flat": brdf.point_flat, "direct_ndf": brdf.direct_ndf}
+
+    def spy(name):
+        def f(*a, **kw):
+            calls[name] = (a, kw)
+            return orig[name](*a, **kw)
+        return f
+
+    def cpu(fn):
+        best = np.inf
+        for _ in range(repeat):
+            t = time.process_time()
+            fn()
+            best = min(best, time.process_time() - t)
+        return best * 1e3
+
+    brdf.point_flat, brdf.direct_ndf = spy("point_flat"), spy("direct_ndf")
+    try:
+        print(f"glints frame CPU time breakdown ({kind} 128^2, point light, best of {repeat})")
+        for d in distances:
+            sc = load_scene(measurement_scene(d, kind))
+            calls.clear()
+            render(sc, "glints")
+            line = f"  distance {d:4g}: frame {cpu(lambda: render(sc, 'glints')):6.1f} ms"
+            if "point_flat" in calls:
+                (gm, c, sp, q), kw = calls["point_flat"]
+                t = cpu(lambda: orig["point_flat"](gm, c, sp, q, **kw))
+                idx, w, ok = resample_weights(gm.pyramid, c, sp)
+                lv = np.searchsorted(gm.pyramid.offsets, idx[:, 0], side="right") - 1
+                taps = (w > 0).sum(1)[ok]
+                hist = np.histogram(taps, [0, 20, 40, 80, 120, 200])[0]
+                line += (f" | point queries {len(sp)}: {t:5.1f} ms, per level "
+                         f"{np.bincount(lv[ok], minlength=gm.pyramid.n_levels).tolist()}, taps "
+                         f"mean {taps.mean() if taps.size else 0:.0f}, histogram "
+                         f"(<20, <40, <80, <120, <200) {hist.tolist()}")
+            if "direct_ndf" in calls:
+                (surf, c, sp, q), kw = calls["direct_ndf"]
+                t = cpu(lambda: orig["direct_ndf"](surf, c, sp, q, **kw))
+                line += f" | direct fallback {len(sp)}: {t:5.1f} ms"
+            print(line, flush=True)
+    finally:
+        brdf.point_flat, brdf.direct_ndf = orig["point_flat"], orig["direct_ndf"]
 
 
 def main():
@@ -181,7 +237,12 @@ def main():
     ap.add_argument("--sigma0", type=float, default=None, help="--frames: and this sigma0")
     ap.add_argument("--cpu", action="store_true", help="--frames: process CPU time, not wall")
     ap.add_argument("--bake-rank", type=int, default=None, help="--frames: bake rank budget")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="only: where the frame CPU time goes (queries, taps, fallback)")
     a = ap.parse_args()
+    if a.breakdown:
+        bench_breakdown()
+        return
     if a.frames:
         bs = {k: v for k, v in (("stride0", a.stride0), ("sigma0", a.sigma0),
                                 ("rank", a.bake_rank)) if v is not None}
