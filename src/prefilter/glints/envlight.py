@@ -123,7 +123,8 @@ def _sg_pdf(w, mu, lam, p):
 
 
 def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 16, rng=0,
-             prefilter: bool = True, eps: float = 0.1, u=None, base_color=None) -> np.ndarray:
+             prefilter: bool = True, eps: float = 0.1, u=None, base_color=None,
+             fallback_truncation: float | None = None) -> np.ndarray:
     """Specular radiance ``(N, 3)`` of footprints ``(center (N, 2), sigma_p (N,))`` seen from
     ``wo (N, 3)`` (tangent frame) under the SG environment; ``n_samples`` light samples each.
 
@@ -131,7 +132,9 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
     lobe (needs a compressed map; footprints below its finest level keep the point NDF, which is
     the direct P-NDF there); ``False``: the point NDF of :func:`glint_ndf` (unbiased). ``p`` is
     ``(K, 3)`` or per sample ``(N, K, 3)``. ``u``: optional ``(N, 3 n_samples)`` uniforms (else
-    drawn from ``rng``). ``base_color (3,)``: adds the Lambertian term from the same samples."""
+    drawn from ``rng``). ``base_color (3,)``: adds the Lambertian term from the same samples.
+    ``fallback_truncation``: that of :func:`glint_ndf`'s direct P-NDF (the render's ``glints``
+    passes 4 stds: the same values to 3e-8, the fast row kernel)."""
     surf = _as_surface(surf)
     mu, lam, p = _lobes(mu, lam, p)
     c = as_float_array(center, "center", ndim_min=2, last_dim=2)
@@ -173,9 +176,10 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
             D[~small] = range_weighted(surf.gm, idx, w, h[~small, :2] - r[~small],
                                        h[~small, :2] + r[~small])
             if np.any(small):
-                D[small] = glint_ndf(surf, c[small], sp[small], h[small, :2])
+                D[small] = glint_ndf(surf, c[small], sp[small], h[small, :2],
+                                     fallback_truncation=fallback_truncation)
         else:
-            D = glint_ndf(surf, c, sp, h[:, :2])
+            D = glint_ndf(surf, c, sp, h[:, :2], fallback_truncation=fallback_truncation)
         G = vcavity_g2(wo, wi, h)
         val = np.where(ok, D * G / (4.0 * np.where(ok, wo[:, 2] * pdf, 1.0)), 0.0)
         L = _sg_eval(wi, mu, lam, p)

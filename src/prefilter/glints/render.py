@@ -246,7 +246,8 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     return out, valid
 
 
-def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u):
+def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u, *,
+             fallback_truncation: float | None = None):
     """Specular radiance of ``light`` by multiple importance sampling (balance heuristic): per
     shading sample ``n`` light samples (uniform on the quad's area) and ``n`` BRDF samples
     (:func:`prefilter.glints.sample.sample_wi`: the hierarchical NDF sampler, or the direct
@@ -255,7 +256,8 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     Parameters
     ----------
     position : (N, 3) world shading points; frame : (t, b, n) each (N, 3) (world);
-    light : QuadLight; u : (N, n * 9) uniforms in ``[0, 1)``.
+    light : QuadLight; u : (N, n * 9) uniforms in ``[0, 1)``; fallback_truncation: see
+    :func:`prefilter.glints.brdf.glint_ndf` (the BRDF's direct P-NDF below the finest level).
 
     Returns
     -------
@@ -274,7 +276,8 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
         # light sample
         wl, pl = quad_light_sample(light, position, uj[:, :2])
         wl_loc = _local(wl, t, b, n)
-        fl = glint_brdf_cos(surf, center, sigma_p, wo, wl_loc, f0)
+        fl = glint_brdf_cos(surf, center, sigma_p, wo, wl_loc, f0,
+                            fallback_truncation=fallback_truncation)
         pb = pdf_wi(surf, center, sigma_p, wo, wl_loc)
         w = np.where(pl > 0, 1.0 / np.where(pl > 0, pl + pb, 1.0), 0.0)
         out += fl * w[:, None]
@@ -284,7 +287,8 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
         wb_loc = np.where(ok[:, None], wb_loc, np.array([0.0, 0.0, 1.0]))
         wb = _world(wb_loc, t, b, n)
         pl2 = quad_light_pdf(light, position, wb)
-        fb = glint_brdf_cos(surf, center, sigma_p, wo, wb_loc, f0)
+        fb = glint_brdf_cos(surf, center, sigma_p, wo, wb_loc, f0,
+                            fallback_truncation=fallback_truncation)
         w2 = np.where(ok & (pl2 > 0), 1.0 / np.where(ok, pb2 + pl2, 1.0), 0.0)
         out += fb * w2[:, None]
     return out * L / max(n_pairs, 1)
@@ -361,12 +365,13 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
                 uq = u[m][:, qi * QUAD_MIS * _U_PAIR:(qi + 1) * QUAD_MIS * _U_PAIR]
                 val[rest] = quad_mis(surf, c[rest], sp[rest], wo[m][rest],
                                      g.position[m][rest], tuple(f[rest] for f in frame), ql,
-                                     f0, uq[rest])
+                                     f0, uq[rest], fallback_truncation=trunc)
             out[m] += val
         if env:
             ue = None if u is None else u[m][:, nq * QUAD_MIS * _U_PAIR:]
             out[m] += environment_radiance(env, surf, c, sp, wo[m], frame, f0, base, ue,
-                                           prefilter=(mode == "compressed"))
+                                           prefilter=(mode == "compressed"),
+                                           fallback_truncation=trunc)
     return out
 
 
@@ -394,7 +399,7 @@ def environment_sgs(light):
 
 
 def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
-                         prefilter: bool) -> np.ndarray:
+                         prefilter: bool, fallback_truncation: float | None = None) -> np.ndarray:
     """Radiance ``(N, 3)`` (specular and Lambert) from environment lights by SG sampling
     (:func:`prefilter.glints.envlight.shade_sg`, ``ENV_SAMPLES`` per shading sample); the NDF is
     range-prefiltered over the lobe's compact epsilon-support when ``prefilter`` (sec. 5.4)."""
@@ -413,7 +418,7 @@ def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
             uj = None
         out += shade_sg(surf, center, sigma_p, wo, mu, lam, pl, f0, n_samples=ENV_SAMPLES,
                         rng=0, prefilter=prefilter and surf.gm is not None, eps=ENV_EPS, u=uj,
-                        base_color=base)
+                        base_color=base, fallback_truncation=fallback_truncation)
     return out
 
 
