@@ -90,7 +90,7 @@ def test_compiled_box_filter_equals_the_numpy_one():
 def tiny_rows():
     return image_point(surfaces={"iso 0.25": POINT_SURFACES["iso 0.25"]}, shapes=("plane",),
                        texels_per_pixel=(8.0,), width=12, height=9, sub=8, jitters=2,
-                       tex_size=64, log=lambda r: None)
+                       tex_size=64, noise_floor=True, log=lambda r: None)
 
 
 def test_tiny_image_rows_leadr_beats_naive_against_the_displaced_reference(tiny_rows):
@@ -103,3 +103,19 @@ def test_tiny_image_rows_leadr_beats_naive_against_the_displaced_reference(tiny_
     # naive misses the meso roughness: several times off for specular
     assert spec["rmse leadr"] < 0.5 * spec["rmse naive"]
     assert diff["rmse leadr"] < diff["rmse naive"]
+
+
+def test_tiny_rows_leadr_point_method_and_flicker_floor(tiny_rows):
+    """``leadr-point``'s shading (box filter + ``G2 / G1`` diffuse, what the method renders)
+    against the displaced reference: < 0.5x naive specular, < naive diffuse, and closer than the
+    old one-tap unshadowed diffuse; the reference's own sampling floor is below every method's
+    flicker score (a score is ~ sqrt(own^2 + floor^2))."""
+    spec, diff = tiny_rows
+    assert spec["rmse leadr-point"] < 0.5 * spec["rmse naive"]
+    assert diff["rmse leadr-point"] < diff["rmse naive"]
+    assert diff["rmse leadr-point"] < diff["rmse leadr one tap"]
+    for r in tiny_rows:
+        assert 0.0 < r["flicker floor"] < r["ref noise"]
+        for m in ("leadr", "leadr-point", "naive", "normal-mapped"):
+            assert r["flicker floor"] < r[f"flicker {m}"], (m, r)
+            assert np.isfinite(r[f"flicker2 {m}"])
