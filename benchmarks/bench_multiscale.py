@@ -73,8 +73,8 @@ def bench_cost(table, width: int = 384, height: int = 240) -> None:
     loaded = load_scene(sc)
     runs = {m: (lambda m=m: render(loaded, m, table=table))
             for m in ("ltc", "ltc-multiscale", "ltc-multiscale-paper", "ltc-multiscale-aniso")}
-    # the compiled anisotropic taps (option taps=4: footprints below 4 texels, axis ratio > 1.5)
-    runs["ms+taps"] = lambda: render_multiscale(loaded, RenderSettings(table=table), taps=4)
+    # ltc-multiscale without its anisotropic taps (the footprint before they became the default)
+    runs["ms-notaps"] = lambda: render_multiscale(loaded, RenderSettings(table=table), taps=0)
     names = tuple(runs)
     for m in names:
         runs[m]()  # warm-up: textures, mips, Numba
@@ -148,20 +148,21 @@ def _variant(name: str, **kw):
 
 STUDY = {
     "ltc": _variant("ltc"),
-    # the registered ltc-multiscale (its default footprint: the ramped bias "ramp2" below)
+    # the registered ltc-multiscale (its default footprint: "ms+taps" below, the ramped bias
+    # "ramp2" plus anisotropic taps below 4 texels)
     "ms-default": _variant("ltc-multiscale"),
     # the paper's footprint: one isotropic mip level, no bias
-    "ms": _variant("ltc-multiscale", lod_bias=0.0, lod_bias_start=None),
+    "ms": _variant("ltc-multiscale", lod_bias=0.0, lod_bias_start=None, taps=0),
     "ms-aniso": _variant("ltc-multiscale-aniso"),
-    "ms+ewa": _variant("ltc-multiscale", anisotropic_footprint=True, lod_bias=0.0,
+    "ms+ewa": _variant("ltc-multiscale", anisotropic_footprint=True, lod_bias=0.0, taps=0,
                        lod_bias_start=None),
     "ms-aniso+ewa": _variant("ltc-multiscale-aniso", anisotropic_footprint=True),
-    "ms+bias1": _variant("ltc-multiscale", lod_bias=1.0, lod_bias_start=None),
+    "ms+bias1": _variant("ltc-multiscale", lod_bias=1.0, lod_bias_start=None, taps=0),
     "ms-aniso+bias1": _variant("ltc-multiscale-aniso", lod_bias=1.0),
     # the bias ramps in above 4 texels per pixel: clip(lod - 2, 0, 1 or 2) levels
-    "ms+ramp1": _variant("ltc-multiscale", lod_bias=1.0, lod_bias_start=2.0),
-    "ms+ramp2": _variant("ltc-multiscale", lod_bias=2.0, lod_bias_start=2.0),
-    # the registered footprint plus compiled anisotropic taps below 4 texels
+    "ms+ramp1": _variant("ltc-multiscale", lod_bias=1.0, lod_bias_start=2.0, taps=0),
+    "ms+ramp2": _variant("ltc-multiscale", lod_bias=2.0, lod_bias_start=2.0, taps=0),
+    # the registered footprint: ramp2 plus compiled anisotropic taps below 4 texels
     "ms+taps": _variant("ltc-multiscale", taps=4),
 }
 

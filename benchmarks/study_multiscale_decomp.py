@@ -76,15 +76,17 @@ METHODS = {
     "ltc": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc", table=t, jitter=j),
     # ltc-multiscale with the paper's footprint (one isotropic mip level, no LOD bias)
     "ms0": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, lod_bias=0.0,
-                                                     lod_bias_start=None),
+                                                     lod_bias_start=None, taps=0),
+    # the registered footprint before the anisotropic taps (LOD ramp only)
+    "ms-notaps": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=0),
     # the anisotropic (multi-tap) footprint over the unnormalised mips, paper's LOD otherwise
     "ms+ewa": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, anisotropic_footprint=True,
                                                         lod_bias=0.0, lod_bias_start=None),
     # a supersampled footprint: 8 x 8 normalised level-0 normals over the pixel (box_taps)
     "ms-box8": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, box_taps=8),
     "ms": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc-multiscale", table=t, jitter=j),
-    # the registered footprint plus compiled anisotropic taps (2-4 along the major axis at the
-    # minor axis' LOD) for footprints below 4 texels (where the LOD ramp is off) / everywhere
+    # compiled anisotropic taps (2-4 along the major axis at the minor axis' LOD) for footprints
+    # below 4 texels (where the LOD ramp is off; = the registered default "ms") / 16 / everywhere
     "ms+taps": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4),
     "ms+taps8": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=8),
     "ms+taps-all": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=4,
@@ -116,21 +118,22 @@ def study_scene(table, nm: str, alpha: float, dist: str, *, width: int = 96, hei
     sc = scene(DISTANCES[dist] / k, width, height, alpha, nm)
     jit = jitter_offsets(8)
     t0 = time.perf_counter()
-    key = None
     if cache:  # the method-independent part (reference, ss, flat plane) from an earlier run
-        key = Path(cache) / (f"{nm}_{alpha}_{dist}_{width}x{height}_{spp}_{ss_spp}_"
-                             f"{ref_flicker_spp}_{seed}")
-        if key.with_suffix(".npz").exists():
-            with np.load(key.with_suffix(".npz")) as z:
+        # no dots in the stem (alpha 0.03 and 0.3 must not share a file)
+        stem = (f"{nm}_{alpha:g}_{dist}_{width}x{height}_{spp}_{ss_spp}_{ref_flicker_spp}_"
+                f"{seed}").replace(".", "p")
+        npz, meta = Path(cache) / f"{stem}.npz", Path(cache) / f"{stem}.json"
+        if npz.exists() and meta.exists():
+            with np.load(npz) as z:
                 ref, ss = z["ref"], z["ss"]
-            row = json.loads(key.with_suffix(".json").read_text())
+            row = json.loads(meta.read_text())
             return _methods_into(row, sc, table, ref, ss, row["noise"], jit, methods, extra, t0)
     row, ref, ss = _base_row(table, sc, nm, alpha, dist, width, height, spp, ss_spp,
                              ref_flicker_spp, seed, jit)
-    if key is not None:
-        key.parent.mkdir(parents=True, exist_ok=True)
-        np.savez(key.with_suffix(".npz"), ref=ref, ss=ss)
-        key.with_suffix(".json").write_text(json.dumps(row))
+    if cache:
+        npz.parent.mkdir(parents=True, exist_ok=True)
+        np.savez(npz, ref=ref, ss=ss)
+        meta.write_text(json.dumps(row))
     return _methods_into(row, sc, table, ref, ss, row["noise"], jit, methods, extra, t0)
 
 
@@ -180,13 +183,15 @@ def _methods_into(row, sc, table, ref, ss, noise, jit, methods, extra, t0) -> di
 def render_ms_scaled(sc, table, s: float) -> np.ndarray:
     """``ltc-multiscale`` (registered footprint) with ``alpha_meso`` scaled by ``s`` (its table
     times ``s``): how much meso-scale broadening the images want."""
-    from prefilter.multiscale.render import LOD_BIAS, LOD_BIAS_START, multiscale_roughness
+    from prefilter.multiscale.render import (LOD_BIAS, LOD_BIAS_START, TAPS, TAPS_BELOW,
+                                             TAPS_RATIO, multiscale_roughness)
     from prefilter.render.methods import RenderSettings
     from prefilter.render.pipeline import _render_ltc_fused
     from prefilter.render.scene import load_scene
 
     sl = load_scene(sc)
-    rows, tab = multiscale_roughness(sl.objects, "exact", "fit", LOD_BIAS, LOD_BIAS_START)
+    rows, tab = multiscale_roughness(sl.objects, "exact", "fit", LOD_BIAS, LOD_BIAS_START, TAPS,
+                                     TAPS_BELOW, TAPS_RATIO)
     img = _render_ltc_fused(sl, RenderSettings(table=table), sl.light_set(), table,
                             (rows, tab * s))
     return np.asarray(img, np.float32)

@@ -18,8 +18,9 @@ from prefilter.errors import PrefilterError
 from prefilter.ltc.table import GGXTable
 from prefilter.multiscale import (alpha_meso, alpha_meso_exact, alpha_total,
                                   mean_resultant_length)
-from prefilter.multiscale.render import (LOD_BIAS, LOD_BIAS_START, meso_table,
-                                         multiscale_attributes, multiscale_roughness)
+from prefilter.multiscale.render import (LOD_BIAS, LOD_BIAS_START, TAPS, TAPS_BELOW,
+                                         TAPS_RATIO, meso_table, multiscale_attributes,
+                                         multiscale_roughness)
 from prefilter.multiscale.render import render_multiscale, taps_lookup
 from prefilter.render import gbuffer, load_scene
 from prefilter.render.kernels import _interp_uniform, _multiscale_alpha
@@ -112,12 +113,12 @@ def _table():
         return GGXTable(t, r, M, np.ones((8, 8)), 0.1 * np.ones((8, 8)))
 
 
-def _numpy_path(sc, settings, meso, total, lod_bias=0.0, lod_bias_start=None):
+def _numpy_path(sc, settings, meso, total, lod_bias=0.0, lod_bias_start=None, taps=0):
     lights = sc.light_set()
 
     def shade(g, _u):
         a = multiscale_attributes(sc, g, meso=meso, total=total, lod_bias=lod_bias,
-                                  lod_bias_start=lod_bias_start)
+                                  lod_bias_start=lod_bias_start, taps=taps)
         return shade_ltc(g.position, a["t"], a["b"], a["n"], g.view, a["alpha"],
                          a["base_color"], a["f0"], lights, settings.table)
 
@@ -133,8 +134,9 @@ def test_fused_images_match_the_numpy_path(name, monkeypatch):
     import prefilter.render.pipeline as pl
 
     meso, total = VARIANTS[name]
-    # the registered ltc-multiscale reads the normal map with its ramped LOD bias
-    bias = (LOD_BIAS, LOD_BIAS_START) if name == "ltc-multiscale" else (0.0, None)
+    # the registered ltc-multiscale reads the normal map with its ramped LOD bias and its
+    # anisotropic taps (TAPS_BELOW and TAPS_RATIO are multiscale_attributes' defaults too)
+    bias = (LOD_BIAS, LOD_BIAS_START, TAPS) if name == "ltc-multiscale" else (0.0, None, 0)
     table = _table()
     sc = load_scene(_scene())
     for spp, jitter in ((1, (0.0, 0.0)), (2, (0.3, -0.2))):
@@ -159,8 +161,8 @@ def test_fused_lod_bias_matches_the_numpy_path(start):
     table = _table()
     sc = load_scene(_scene())
     st = RenderSettings(table=table)
-    got = render_multiscale(sc, st, lod_bias=1.0, lod_bias_start=start)
-    assert np.abs(render_multiscale(sc, st, lod_bias=0.0, lod_bias_start=None)
+    got = render_multiscale(sc, st, lod_bias=1.0, lod_bias_start=start, taps=0)
+    assert np.abs(render_multiscale(sc, st, lod_bias=0.0, lod_bias_start=None, taps=0)
                   - got).max() > 1e-3 * got.max()
     lights = sc.light_set()
 
@@ -181,9 +183,9 @@ def test_ramped_lod_bias_leaves_small_footprints_alone():
     table = _table()
     sc = load_scene(_scene())
     st = RenderSettings(table=table)
-    plain = render_multiscale(sc, st, lod_bias=0.0, lod_bias_start=None)
-    ramped = render_multiscale(sc, st, lod_bias=1.0, lod_bias_start=2.0)
-    const = render_multiscale(sc, st, lod_bias=1.0, lod_bias_start=None)
+    plain = render_multiscale(sc, st, lod_bias=0.0, lod_bias_start=None, taps=0)
+    ramped = render_multiscale(sc, st, lod_bias=1.0, lod_bias_start=2.0, taps=0)
+    const = render_multiscale(sc, st, lod_bias=1.0, lod_bias_start=None, taps=0)
     # the big plane's footprints (object 0) in texels of its 64^2 normal map
     from prefilter.render import gbuffer
 
@@ -285,7 +287,7 @@ def test_fused_taps_match_the_numpy_twin(bias, normalize, monkeypatch):
     rel = np.abs(got - want) / np.maximum(np.abs(want), 1e-3 * want.max())
     assert rel.max() < 1e-4, rel.max()
     # the taps change the image where they apply
-    plain = render_multiscale(sc, st, lod_bias=bias[0], lod_bias_start=bias[1])
+    plain = render_multiscale(sc, st, lod_bias=bias[0], lod_bias_start=bias[1], taps=0)
     assert np.abs(plain - got).max() > 1e-2 * got.max()
 
 
@@ -293,7 +295,7 @@ def test_taps_leave_large_and_round_footprints_bit_identical():
     table = _table()
     sc = load_scene(_scene())
     st = RenderSettings(table=table)
-    plain = render_multiscale(sc, st)
+    plain = render_multiscale(sc, st, taps=0)
     tapped = render_multiscale(sc, st, taps=4, taps_below=4.0, taps_ratio=1.5)
     gb = gbuffer(sc)
     # the normal-mapped planes' footprints (both maps 64^2); the sphere has a height map
@@ -316,3 +318,11 @@ def test_bad_tap_options_are_rejected(kw):
     sc = load_scene(_scene())
     with pytest.raises(PrefilterError):
         render_multiscale(sc, RenderSettings(table=_table()), **kw)
+
+
+def test_registered_taps_defaults_are_the_attribute_defaults():
+    import inspect
+
+    sig = inspect.signature(multiscale_attributes).parameters
+    assert (sig["taps_below"].default, sig["taps_ratio"].default) == (TAPS_BELOW, TAPS_RATIO)
+    assert TAPS >= 2

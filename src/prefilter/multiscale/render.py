@@ -29,7 +29,7 @@ from prefilter.multiscale.meso import _alpha_from_r, _mrl, _paper_eq5, R_COSINE
 
 __all__ = ["LOD_BIAS", "LOD_BIAS_START", "MESO_TABLE_SIZE", "meso_table", "multiscale_attributes",
            "multiscale_roughness", "render_multiscale", "render_multiscale_mrl",
-           "render_multiscale_paper"]
+           "render_multiscale_paper", "taps_lookup", "TAPS", "TAPS_BELOW", "TAPS_RATIO"]
 
 #: Nodes of the compiled shader's ``alpha_meso`` table, uniform in ``x = sqrt(3 (1 - r))``
 #: (the nodes of :func:`prefilter.multiscale.alpha_meso`'s own interpolant, so the fused path
@@ -320,19 +320,27 @@ def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> n
 #: three normal maps and two micro roughnesses, ``docs/multiscale.md``).
 LOD_BIAS, LOD_BIAS_START = 2.0, 2.0
 
+#: The ``ltc-multiscale`` method's anisotropic taps: footprints below :data:`TAPS_BELOW` texels
+#: along the major axis and more than :data:`TAPS_RATIO` times longer than wide are read as up to
+#: :data:`TAPS` unnormalised trilinear taps along the major axis at the minor axis' LOD (the
+#: near-distance defect of the single isotropic tap; far footprints, where the LOD ramp is on,
+#: are read as before, bit for bit). Measured in ``docs/multiscale.md``.
+TAPS, TAPS_BELOW, TAPS_RATIO = 4, 4.0, 1.5
+
 
 def render_multiscale(scene, settings, *, anisotropic_footprint: bool = False,
                       max_aniso: int = 8, lod_bias: float = LOD_BIAS,
                       lod_bias_start=LOD_BIAS_START, box_taps: int = 0,
-                      taps: int = 0, taps_below: float = 4.0,
-                      taps_ratio: float = 1.5, taps_normalize: bool = False) -> np.ndarray:
+                      taps: int = TAPS, taps_below: float = TAPS_BELOW,
+                      taps_ratio: float = TAPS_RATIO, taps_normalize: bool = False) -> np.ndarray:
     """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7.
 
     ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias`` / ``lod_bias_start`` /
     ``box_taps`` / ``taps`` / ``taps_below`` / ``taps_ratio`` / ``taps_normalize``: see
-    :func:`multiscale_attributes`; the default footprint is :data:`LOD_BIAS`
-    levels coarser at most, ramping in from :data:`LOD_BIAS_START` (``lod_bias=0`` is the
-    paper's isotropic mip level; all measured in ``docs/multiscale.md``)."""
+    :func:`multiscale_attributes`; the default footprint is :data:`LOD_BIAS` levels coarser at most,
+    ramping in from :data:`LOD_BIAS_START`, with :data:`TAPS` anisotropic taps below
+    :data:`TAPS_BELOW` texels (``lod_bias=0, taps=0`` is the paper's isotropic mip level; all
+    measured in ``docs/multiscale.md``)."""
     return _render(scene, settings, "exact", "fit", "ltc-multiscale",
                    anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
                    lod_bias=lod_bias, lod_bias_start=lod_bias_start, box_taps=box_taps,
