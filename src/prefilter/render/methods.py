@@ -82,7 +82,8 @@ _DESCRIPTIONS: dict[str, str] = {
                       "unnormalised mip-averaged normal, convolved with micro roughness (our fit)",
     "ltc-multiscale-paper": "multi-scale LTC with the paper's fitted eqs. 5 and 7",
     "ltc-multiscale-mrl": "multi-scale LTC with the closed-form product of mean resultant lengths",
-    "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2)",
+    "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2; "
+                   "box-filtered moments, G2/G1 diffuse)",
     "leadr-env": "LEADR under environment (+ point/directional) light: Algorithm 1 specular "
                  "grid with self-shadowing (G2/G1), SH irradiance diffuse with shadowing",
     "leadr-env-shadowed": "alias of leadr-env (self-shadowing is now its default)",
