@@ -52,22 +52,25 @@ def point_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy, lo
 
 
 @njit_serial
-def _prefix_at(P, g, r, u):
-    """Integral of factor ``r`` over ``[0, u]`` pixels (prefix sum, linear inside a pixel)."""
-    B = P.shape[2] - 1
+def _prefix_at(P, g, u):
+    """Integral over ``[0, u]`` pixels of the factors of group ``g`` (prefix sums linear inside a
+    pixel), written to ``P``'s row of the group: ``P (G, B + 1, R)`` is rank-contiguous, so the
+    group's components at one ``u`` are a few cache lines; returns the row index and weight."""
+    B = P.shape[1] - 1
     if u <= 0.0:
-        return 0.0
+        return 0, 0.0
     if u >= B:
-        return P[g, r, B]
+        return B, 0.0
     n = int(u)
-    return P[g, r, n] + (u - n) * (P[g, r, n + 1] - P[g, r, n])
+    return n, u - n
 
 
 @njit_parallel
 def range_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, x0, y0, x1, y1, lo, h, out):
     """Mean of the piecewise-constant NDF image over ``[x0, x1] x [y0, y1]`` (zero outside the
-    support); the rectangle is split at block boundaries (paper, sec. 4.4)."""
-    B = A.shape[2] - 1
+    support); the rectangle is split at block boundaries (paper, sec. 4.4). ``A``, ``Bp``: the
+    prefix sums rank-contiguous, ``(G, B + 1, R)`` (:func:`prefilter.glints.query._prefix_t`)."""
+    B = A.shape[1] - 1
     nb = block_index.shape[1]
     R = nb * B
     for q in prange(out.shape[0]):
@@ -99,11 +102,25 @@ def range_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, x0, y0, x1
                         u0 = cx0 - bj * B
                         u1 = cx1 - bj * B
                         g = image_cell[img] * nb * nb + bi * nb + bj
+                        na1, ta1 = _prefix_at(A, g, v1)
+                        na0, ta0 = _prefix_at(A, g, v0)
+                        nb1, tb1 = _prefix_at(Bp, g, u1)
+                        nb0, tb0 = _prefix_at(Bp, g, u0)
                         s = 0.0
                         for r in range(granks[g]):
-                            ia = _prefix_at(A, g, r, v1) - _prefix_at(A, g, r, v0)
-                            ib = _prefix_at(Bp, g, r, u1) - _prefix_at(Bp, g, r, u0)
-                            s += C[k, r] * ia * ib
+                            a1 = A[g, na1, r]
+                            if ta1 != 0.0:
+                                a1 += ta1 * (A[g, na1 + 1, r] - a1)
+                            a0 = A[g, na0, r]
+                            if ta0 != 0.0:
+                                a0 += ta0 * (A[g, na0 + 1, r] - a0)
+                            b1 = Bp[g, nb1, r]
+                            if tb1 != 0.0:
+                                b1 += tb1 * (Bp[g, nb1 + 1, r] - b1)
+                            b0 = Bp[g, nb0, r]
+                            if tb0 != 0.0:
+                                b0 += tb0 * (Bp[g, nb0 + 1, r] - b0)
+                            s += C[k, r] * (a1 - a0) * (b1 - b0)
                         acc += w * s
         out[q] = acc / area
 
@@ -203,18 +220,18 @@ _SLOTS = 16
 def _flush_slots(Pa, Pb, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja):
     """``sum_slots sum_r cw[slot, r] fa_r fb_r`` with each slot's group factors at the bilinear
     NDF taps (rows ``ia, ia + 1`` weighted ``wi, wa1``; columns ``ja, ja + 1``: ``wj, wb1``).
-    ``Pa``, ``Pb`` ``(G, B, R)``: the factors' pixel values, rank-contiguous."""
+    ``Pa``, ``Pb`` ``(G, B + 1, R)``: the factors' prefix sums, rank-contiguous."""
     acc = 0.0
     for t in range(ns):
         g = gs[t]
         s = 0.0
         for rr in range(granks[g]):
-            a = wi * Pa[g, ia, rr]
+            a = wi * (Pa[g, ia + 1, rr] - Pa[g, ia, rr])
             if wa1 != 0.0:
-                a += wa1 * Pa[g, ia + 1, rr]
-            b = wj * Pb[g, ja, rr]
+                a += wa1 * (Pa[g, ia + 2, rr] - Pa[g, ia + 1, rr])
+            b = wj * (Pb[g, ja + 1, rr] - Pb[g, ja, rr])
             if wb1 != 0.0:
-                b += wb1 * Pb[g, ja + 1, rr]
+                b += wb1 * (Pb[g, ja + 2, rr] - Pb[g, ja + 1, rr])
             s += cw[t, rr] * a * b
         acc += s
     return acc
@@ -227,13 +244,13 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, granks, offs, ny_l
     resample_weights`, the same level choice and taps) without materialising the tap lists:
     taps of one CP group share its factor values at ``s``, which are read once per group.
     ``granks``: the rank of each group (its components come first; adaptive-rank maps pad the
-    rest with zeros). ``Pa``, ``Pb`` ``(G, B, R)``: pixel values of the row / column factors
-    (differences of ``A``, ``Bp``) with the rank innermost: a group's factors at one NDF pixel
-    are a few cache lines instead of one line per component (``A[g, :, i]`` strides 17 floats),
+    rest with zeros). ``Pa``, ``Pb`` ``(G, B + 1, R)``: the prefix sums ``A``, ``Bp`` with the
+    rank innermost (:func:`prefilter.glints.query._prefix_t`): a group's factors at one NDF
+    pixel are a few cache lines instead of one line per component (``A[g, :, i]`` strides 17 floats),
     which made level-0 footprints, spread over many groups, 2x slower per tap than upper levels.
     ``done[q] = False`` where no level qualifies (the caller uses another
     path)."""
-    B = Pa.shape[1]
+    B = Pa.shape[1] - 1
     nb = block_index.shape[1]
     R = nb * B
     L = sig_l.shape[0]

@@ -88,6 +88,7 @@ def range_weighted(gm: GlintsMap, idx, w, s_min, s_max) -> np.ndarray:
     if np.any(hi_ <= lo_):
         raise PrefilterError("s_max: expected s_max > s_min in both coordinates")
     arrs, lo, h = _args(gm)
+    arrs = _prefix_t(gm) + arrs[2:]
     out = np.empty(idx.shape[0])
     c = np.ascontiguousarray
     serial(range_kernel, _n(idx))(*arrs, idx, w, c(lo_[:, 0]), c(lo_[:, 1]), c(hi_[:, 0]),
@@ -113,7 +114,7 @@ def point_flat(gm: GlintsMap, center, sigma_p, s, *, interp: str = "trilinear",
         levels = [int(lv) for lv in np.arange(L)]  # `range` is this module's range query
         shapes = np.array([pyr.shape(lv) for lv in levels], dtype=np.int64)
         arrs, lo, h = _args(gm)
-        arrs = _pixel_factors(gm) + arrs[2:]
+        arrs = _prefix_t(gm) + arrs[2:]
         done = np.zeros(sp.shape[0], bool)
         serial(resample_point_kernel, _n(sp))(
             *arrs, pyr.offsets, shapes[:, 0].copy(), shapes[:, 1].copy(),
@@ -160,16 +161,17 @@ def _args(gm):
     return (gm.A, gm.Bp, gm.C, gm.block_index, gm.image_cell, _group_ranks(gm)), -gm.support, h
 
 
-_PIXEL_FACTORS: dict = {}
+_PREFIX_T: dict = {}
 
 
-def _pixel_factors(gm):
-    """Pixel values of the CP factors, ``(G, B, R)`` float32 each (rank innermost), from the
-    prefix sums ``A``, ``Bp`` (cached per map): the resampling kernel's layout."""
-    hit = _PIXEL_FACTORS.get(id(gm.A))
+def _prefix_t(gm):
+    """The prefix sums ``A``, ``Bp`` as ``(G, B + 1, R)`` float32 (rank innermost; cached per
+    map): the layout of the resampling and range kernels, which read all components of a group
+    at one or two NDF pixels."""
+    hit = _PREFIX_T.get(id(gm.A))
     if hit is None or hit[0] is not gm.A or hit[1] is not gm.Bp:
-        pa, pb = (np.ascontiguousarray(np.diff(f, axis=2).transpose(0, 2, 1)) for f in (gm.A, gm.Bp))
-        hit = _PIXEL_FACTORS[id(gm.A)] = (gm.A, gm.Bp, (pa, pb))
+        at, bt = (np.ascontiguousarray(f.transpose(0, 2, 1)) for f in (gm.A, gm.Bp))
+        hit = _PREFIX_T[id(gm.A)] = (gm.A, gm.Bp, (at, bt))
     return hit[2]
 
 
