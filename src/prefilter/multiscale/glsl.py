@@ -8,7 +8,9 @@ normals) and ``alpha_total`` combines micro and meso roughness (eq. 7 form). The
 texture of ``ALPHA_MESO_WIDTH`` texels per row (:func:`alpha_meso_nodes`) and interpolates them
 the same way. ``alpha_total`` is our refit (:data:`prefilter.multiscale.FIT_COEFFS`) in closed
 form. The normal-map footprint bias of each method's default (``lod_bias``, ``lod_bias_start``)
-is read from its signature. :func:`alpha_meso_twin` is the shader's ``alphaMeso`` in NumPy.
+is read from its signature; its anisotropic taps (``taps``, below 4 texels) are not in the
+shader, which reads the single isotropic tap. :func:`alpha_meso_twin` is the shader's
+``alphaMeso`` in NumPy.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
 """Numba kernels of the renderer's hot paths: primary rays + G-buffer, trilinear footprint
 lookups and the fused LTC quad-light shader (the ``ltc`` method and, through per-material
-roughness rows, the isotropic ``ltc-multiscale`` methods: Tao et al. 2021, eqs. 4-7 per sample).
+roughness rows, the isotropic ``ltc-multiscale`` methods: Tao et al. 2021, eqs. 4-7 per sample,
+with optional anisotropic taps of the normal map for small elongated footprints).
 
 Each kernel writes every output element from exactly one loop iteration (no parallel reductions),
 so results do not depend on the thread count. The NumPy implementations they replace stay in
