@@ -1,5 +1,10 @@
 """Numba kernels of the compressed queries (kept apart from ``query.py``, whose public ``range``
-would shadow the builtin inside compiled code)."""
+would shadow the builtin inside compiled code).
+
+Every kernel takes the prefix sums ``A``, ``Bp`` rank-contiguous, ``(G, B + 1, R)``
+(:func:`prefilter.glints.query._prefix_t`, what ``query._args`` passes): the kernels read all
+components of a group at one or two NDF pixels, which the stored ``(G, R, B + 1)`` layout spreads
+over one cache line per component (17 floats apart)."""
 
 from __future__ import annotations
 
@@ -28,15 +33,15 @@ def _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bi, bj, i
         g = image_cell[img] * nb * nb + bi * nb + bj
         s = 0.0
         for r in range(granks[g]):
-            s += C[k, r] * ((A[g, r, i1] - A[g, r, i0]) * (Bp[g, r, j1] - Bp[g, r, j0]))
+            s += C[k, r] * ((A[g, i1, r] - A[g, i0, r]) * (Bp[g, j1, r] - Bp[g, j0, r]))
         acc += w * s
     return acc
 
 
 @njit_parallel
 def point_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy, lo, h, out):
-    R = block_index.shape[1] * (A.shape[2] - 1)
-    B = A.shape[2] - 1
+    R = block_index.shape[1] * (A.shape[1] - 1)
+    B = A.shape[1] - 1
     for q in prange(out.shape[0]):
         fx = (sx[q] - lo) / h
         fy = (sy[q] - lo) / h
@@ -144,7 +149,7 @@ def bilinear_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy,
     The CP image of a block is ``sum_r c_r a_r (x) b_r``, so a bilinear combination of pixels of
     one block is ``sum_r c_r (sum_i u_i a_r[i]) (sum_j v_j b_r[j])``: two factor lookups per axis
     instead of four pixel values; neighbours in another block are taken from that block."""
-    B = A.shape[2] - 1
+    B = A.shape[1] - 1
     nb = block_index.shape[1]
     R = nb * B
     for q in prange(out.shape[0]):
@@ -189,12 +194,12 @@ def bilinear_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy,
                     g = image_cell[img] * nb * nb + bi * nb + bj
                     s = 0.0
                     for r in range(granks[g]):
-                        fa = wa0 * (A[g, r, ia + 1] - A[g, r, ia])
+                        fa = wa0 * (A[g, ia + 1, r] - A[g, ia, r])
                         if wa1 != 0.0:
-                            fa += wa1 * (A[g, r, ia + 2] - A[g, r, ia + 1])
-                        fb = wb0 * (Bp[g, r, ja + 1] - Bp[g, r, ja])
+                            fa += wa1 * (A[g, ia + 2, r] - A[g, ia + 1, r])
+                        fb = wb0 * (Bp[g, ja + 1, r] - Bp[g, ja, r])
                         if wb1 != 0.0:
-                            fb += wb1 * (Bp[g, r, ja + 2] - Bp[g, r, ja + 1])
+                            fb += wb1 * (Bp[g, ja + 2, r] - Bp[g, ja + 1, r])
                         s += C[k, r] * fa * fb
                     acc += w * s
         out[q] = acc
@@ -246,7 +251,7 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, granks, offs, ny_l
     ``granks``: the rank of each group (its components come first; adaptive-rank maps pad the
     rest with zeros). ``Pa``, ``Pb`` ``(G, B + 1, R)``: the prefix sums ``A``, ``Bp`` with the
     rank innermost (:func:`prefilter.glints.query._prefix_t`): a group's factors at one NDF
-    pixel are a few cache lines instead of one line per component (``A[g, :, i]`` strides 17 floats),
+    pixel are a few cache lines instead of one per component (``A[g, :, i]``: 17 floats apart),
     which made level-0 footprints, spread over many groups, 2x slower per tap than upper levels.
     ``done[q] = False`` where no level qualifies (the caller uses another
     path)."""

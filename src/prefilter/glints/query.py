@@ -88,7 +88,6 @@ def range_weighted(gm: GlintsMap, idx, w, s_min, s_max) -> np.ndarray:
     if np.any(hi_ <= lo_):
         raise PrefilterError("s_max: expected s_max > s_min in both coordinates")
     arrs, lo, h = _args(gm)
-    arrs = _prefix_t(gm) + arrs[2:]
     out = np.empty(idx.shape[0])
     c = np.ascontiguousarray
     serial(range_kernel, _n(idx))(*arrs, idx, w, c(lo_[:, 0]), c(lo_[:, 1]), c(hi_[:, 0]),
@@ -114,7 +113,6 @@ def point_flat(gm: GlintsMap, center, sigma_p, s, *, interp: str = "trilinear",
         levels = [int(lv) for lv in np.arange(L)]  # `range` is this module's range query
         shapes = np.array([pyr.shape(lv) for lv in levels], dtype=np.int64)
         arrs, lo, h = _args(gm)
-        arrs = _prefix_t(gm) + arrs[2:]
         done = np.zeros(sp.shape[0], bool)
         serial(resample_point_kernel, _n(sp))(
             *arrs, pyr.offsets, shapes[:, 0].copy(), shapes[:, 1].copy(),
@@ -158,7 +156,8 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points, interp="trilinear"):
 
 def _args(gm):
     h = 2.0 * gm.support / gm.resolution
-    return (gm.A, gm.Bp, gm.C, gm.block_index, gm.image_cell, _group_ranks(gm)), -gm.support, h
+    return (_prefix_t(gm) + (gm.C, gm.block_index, gm.image_cell, _group_ranks(gm)),
+            -gm.support, h)
 
 
 _PREFIX_T: dict = {}

@@ -40,7 +40,7 @@ from prefilter.glints.store import GlintsMap
 @njit_parallel
 def _block_masses(A, Bp, C, block_index, image_cell, granks, idx, wts, out):
     """Masses ``out (N, nb, nb)`` (sums of pixel values) of every block of the blended images."""
-    B = A.shape[2] - 1
+    B = A.shape[1] - 1
     nb = block_index.shape[1]
     for q in prange(out.shape[0]):
         for bi in range(nb):
@@ -71,7 +71,7 @@ def _choose(masses, n, u):
 
 @njit_parallel
 def _sample_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, u, lo, h, out_s, out_pdf):
-    B = A.shape[2] - 1
+    B = A.shape[1] - 1
     nb = block_index.shape[1]
     for q in prange(out_pdf.shape[0]):
         bm = np.empty(nb * nb)
