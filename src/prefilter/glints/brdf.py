@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -290,13 +291,15 @@ _PLANES: dict = {}
 
 def _element_planes(s_el, J):
     """``(SX, SY, J00, J01, J10, J11)``, each ``(H, 2 W)`` contiguous: the elements' ``s`` and
-    Jacobian entries, the map repeated once along ``x`` (cached per element arrays)."""
-    hit = _PLANES.get(id(J))
-    if hit is None or hit[0] is not J or hit[1] is not s_el:
+    Jacobian entries, the map repeated once along ``x`` (cached while ``J`` lives)."""
+    key = id(J)
+    hit = _PLANES.get(key)
+    if hit is None or hit[0]() is not J or hit[1]() is not s_el:
         planes = tuple(np.ascontiguousarray(np.concatenate([p, p], axis=1), dtype=np.float64)
                        for p in (s_el[..., 0], s_el[..., 1], J[..., 0, 0], J[..., 0, 1],
                                  J[..., 1, 0], J[..., 1, 1]))
-        hit = _PLANES[id(J)] = (J, s_el, planes)
+        hit = _PLANES[key] = (weakref.ref(J), weakref.ref(s_el), planes)
+        weakref.finalize(J, _PLANES.pop, key, None)
     return hit[2]
 
 

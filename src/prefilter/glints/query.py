@@ -18,6 +18,8 @@ render-sized batch).
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from prefilter._numba import serial
@@ -164,13 +166,16 @@ _PREFIX_T: dict = {}
 
 
 def _prefix_t(gm):
-    """The prefix sums ``A``, ``Bp`` as ``(G, B + 1, R)`` float32 (rank innermost; cached per
-    map): the layout of the resampling and range kernels, which read all components of a group
-    at one or two NDF pixels."""
-    hit = _PREFIX_T.get(id(gm.A))
-    if hit is None or hit[0] is not gm.A or hit[1] is not gm.Bp:
+    """The prefix sums ``A``, ``Bp`` as ``(G, B + 1, R)`` float32 (rank innermost): the layout of
+    every query and sampler kernel, which read all components of a group at one or two NDF
+    pixels. Cached per map while its ``A`` lives (weak references: a process that loads many
+    maps does not keep their copies)."""
+    key = id(gm.A)
+    hit = _PREFIX_T.get(key)
+    if hit is None or hit[0]() is not gm.A or hit[1]() is not gm.Bp:
         at, bt = (np.ascontiguousarray(f.transpose(0, 2, 1)) for f in (gm.A, gm.Bp))
-        hit = _PREFIX_T[id(gm.A)] = (gm.A, gm.Bp, (at, bt))
+        hit = _PREFIX_T[key] = (weakref.ref(gm.A), weakref.ref(gm.Bp), (at, bt))
+        weakref.finalize(gm.A, _PREFIX_T.pop, key, None)
     return hit[2]
 
 
