@@ -291,15 +291,7 @@ def _bilinear_add(data, info, level, stride, c, u, v, wgt, out, k):
 def _major_texels(h0, w0, d00, d01, d10, d11):
     """Major axis (texels of an ``h0 x w0`` level 0) of the footprint ellipse of the Jacobian
     ``d..``: the largest singular value of ``diag(w0, h0) dudv`` (``texture.footprint_axes``)."""
-    j00 = d00 * w0
-    j01 = d01 * w0
-    j10 = d10 * h0
-    j11 = d11 * h0
-    p = j00 * j00 + j01 * j01
-    r = j10 * j10 + j11 * j11
-    q = j00 * j10 + j01 * j11
-    disc = math.sqrt(max(0.25 * (p - r) ** 2 + q * q, 0.0))
-    return math.sqrt(0.5 * (p + r) + disc)
+    return _footprint_axes(h0, w0, d00, d01, d10, d11)[0]
 
 
 @njit_serial
