@@ -3,6 +3,8 @@
     python benchmarks/bench_glints.py                 # queries + bake scaling (a few minutes)
     python benchmarks/bench_glints.py --ranks         # also ratio/error per map and rank 8-64
     python benchmarks/bench_glints.py --size 256      # map size of the query benchmark
+    NUMBA_NUM_THREADS=1 python benchmarks/bench_glints.py --map m.npz --scaling "" --cpu
+                                                      # queries in process CPU time (loaded box)
     python benchmarks/bench_glints.py --frames        # only: glints frame time at 3 distances
     python benchmarks/bench_glints.py --frames --direct   # also glints-direct, speed-up, FLIP
     python benchmarks/bench_glints.py --frames --runs 3 --interp trilinear --nearest \
@@ -34,18 +36,43 @@ from prefilter.texture.procedural import normal_map
 WIDTHS = [1, 4, 16, 64, 256, 512, 1024]
 
 
-def _best(fn, repeat=3):
+def _best(fn, repeat=3, clock=time.perf_counter):
     best = np.inf
     for _ in range(repeat):
-        t = time.perf_counter()
+        t = clock()
         fn()
-        best = min(best, time.perf_counter() - t)
+        best = min(best, clock() - t)
     return best
 
 
-def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False):
+def level_footprint(gm):
+    """Per pyramid level: images, groups, mean rank of the kept blocks' groups and the MB of
+    ``C`` rows and prefix sums (in-memory layout) a random-order query stream at that level
+    reads from: the cause of the per-level spread of the query time (see docs/glints.md)."""
+    from prefilter.glints.query import _group_ranks
+
+    pyr = gm.pyramid
+    nb = gm.block_index.shape[1]
+    ranks = _group_ranks(gm)
+    row_c = gm.C.shape[1] * gm.C.itemsize
+    row_g = 2 * gm.A[0].nbytes
+    print(f"{'level':>5} {'images':>7} {'groups':>7} {'mean rank':>9} {'C MB':>7} {'A+Bp MB':>8}")
+    for lv in np.arange(pyr.n_levels):
+        lv = int(lv)
+        img = np.arange(pyr.offsets[lv], pyr.offsets[lv + 1])
+        k = gm.block_index[img]
+        g = (gm.image_cell[img, None, None].astype(np.int64) * nb * nb
+             + np.arange(nb * nb).reshape(nb, nb))[k >= 0]
+        n_groups = np.unique(g).size
+        print(f"{lv:5d} {img.size:7d} {n_groups:7d} {ranks[g].mean() if g.size else 0:9.1f} "
+              f"{(k >= 0).sum() * row_c / 1e6:7.1f} {n_groups * row_g / 1e6:8.1f}")
+
+
+def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False, clock=time.perf_counter):
     """Per-query cost. ``coherent`` sorts the queries by footprint centre (rows of 8 texels), as
-    a renderer's neighbouring pixels would be; random order measures cache misses as well."""
+    a renderer's neighbouring pixels would be; random order measures cache misses as well.
+    ``clock``: ``time.process_time`` (with ``NUMBA_NUM_THREADS=1``) is not charged for the time
+    other processes of a loaded machine hold the cores."""
     rng = np.random.default_rng(seed)
     H = nm.shape[0]
     el = elements(nm)
@@ -62,16 +89,17 @@ def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False):
         hi = s + rng.uniform(1, 12, (n_queries, 2)) * h
         point(gm, c[:10], sp, s[:10])
         range_mean(gm, c[:10], sp, lo[:10], hi[:10])
-        tp = _best(lambda: point(gm, c, sp, s), 7) / n_queries
-        tr = _best(lambda: range_mean(gm, c, sp, lo, hi), 7) / n_queries
+        tp = _best(lambda: point(gm, c, sp, s), 7, clock) / n_queries
+        tr = _best(lambda: range_mean(gm, c, sp, lo, hi), 7, clock) / n_queries
         # direct P-NDF: enough queries for ~0.5 s (its cost grows with the footprint area)
         n_direct = int(max(3, min(20000, 4e6 / (8 * max(sp, 0.5)) ** 2)))
         pndf(nm, c[:2], sp, s[:2], elements_=el)
-        td = _best(lambda: pndf(nm, c[:n_direct], sp, s[:n_direct], elements_=el), 2) / n_direct
+        td = _best(lambda: pndf(nm, c[:n_direct], sp, s[:n_direct], elements_=el), 2,
+                   clock) / n_direct
         rows.append((w, tp, tr, td))
     print(f"query cost per query ({'coherent' if coherent else 'random'} order, map {H}^2, "
           f"{n_queries} queries, NUMBA threads "
-          f"{os.environ.get('NUMBA_NUM_THREADS', 'all')})")
+          f"{os.environ.get('NUMBA_NUM_THREADS', 'all')}, clock {clock.__name__})")
     print(f"{'width':>6} {'point us':>9} {'range us':>9} {'direct us':>11} {'direct/point':>13}")
     for w, tp, tr, td in rows:
         print(f"{w:6d} {tp * 1e6:9.3f} {tr * 1e6:9.3f} {td * 1e6:11.1f} {td / tp:13.1f}")
@@ -235,7 +263,8 @@ def main():
     ap.add_argument("--nearest", action="store_true", help="--frames: NDF pixel value lookup")
     ap.add_argument("--stride0", type=int, default=None, help="--frames: bake with this stride0")
     ap.add_argument("--sigma0", type=float, default=None, help="--frames: and this sigma0")
-    ap.add_argument("--cpu", action="store_true", help="--frames: process CPU time, not wall")
+    ap.add_argument("--cpu", action="store_true",
+                    help="--frames and queries: process CPU time, not wall")
     ap.add_argument("--bake-rank", type=int, default=None, help="--frames: bake rank budget")
     ap.add_argument("--breakdown", action="store_true",
                     help="only: where the frame CPU time goes (queries, taps, fallback)")
@@ -264,8 +293,10 @@ def main():
             nm = normal_map("gaussian", a.size, seed=0)
             bake(nm, Path(tmp) / "q.npz", progress=False, cell=min(32, a.size))
             gm = load(Path(tmp) / "q.npz")
-        bench_queries(gm, nm)
-        bench_queries(gm, nm, coherent=True)
+        clock = time.process_time if a.cpu else time.perf_counter
+        level_footprint(gm)
+        bench_queries(gm, nm, clock=clock)
+        bench_queries(gm, nm, coherent=True, clock=clock)
         if a.scaling:
             bench_bake_scaling([int(x) for x in a.scaling.split(",")], tmp)
         if a.ranks:
