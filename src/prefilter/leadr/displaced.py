@@ -16,9 +16,8 @@ external ray tracer is installed; a height field needs none).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
 
-from prefilter._numba import njit_parallel, prange
+from prefilter._numba import njit_parallel, njit_serial, prange
 from prefilter._validate import as_directions, as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.microfacet import Beckmann
@@ -60,7 +59,7 @@ def _march(h, ox, oy, oz, dx, dy, dz, hmin, hmax, step, max_steps):  # pragma: n
     return out
 
 
-@njit(fastmath=True, cache=True)
+@njit_serial
 def _bilerp(h, x, y, ny, nx):  # pragma: no cover - compiled
     fx = np.floor(x)
     fy = np.floor(y)

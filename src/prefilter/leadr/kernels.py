@@ -13,12 +13,11 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from numba import njit
 
-from prefilter._numba import njit_parallel, prange
+from prefilter._numba import njit_parallel, njit_serial, prange
 
 
-@njit(fastmath=True, cache=True)
+@njit_serial
 def _bilinear(flat, offset, hh, ww, u, v, out, scale):  # pragma: no cover - compiled
     x = u * ww - 0.5
     y = min(max(v * hh - 0.5, 0.0), hh - 1.0)
@@ -36,7 +35,7 @@ def _bilinear(flat, offset, hh, ww, u, v, out, scale):  # pragma: no cover - com
         out[c] += scale * (a * (1 - fy) + b * fy)
 
 
-@njit(fastmath=True, cache=True)
+@njit_serial
 def _lookup(flat, offsets, shapes, wx, wy, wz, lod, out):  # pragma: no cover - compiled
     for c in range(out.size):
         out[c] = 0.0
@@ -54,7 +53,7 @@ def _lookup(flat, offsets, shapes, wx, wy, wz, lod, out):  # pragma: no cover - 
         _bilinear(flat, offsets[l0 + 1], shapes[l0 + 1, 0], shapes[l0 + 1, 1], u, v, out, t)
 
 
-@njit(fastmath=True, cache=True)
+@njit_serial
 def _lambda_a(wx, wy, wz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
     """Smith ``a = (w_z - mu.w_xy) / sqrt(2 w_xy^T Sigma w_xy)`` (supplemental 3.2), and
     ``Lambda(a)`` (``-1.0`` standing for +inf when ``a <= 0``: fastmath has no infinities)."""
@@ -71,7 +70,7 @@ def _lambda_a(wx, wy, wz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
     return max(lam, 0.0)
 
 
-@njit(fastmath=True, cache=True)
+@njit_serial
 def _g2_over_g1(lam_o, lam_i, wiz):  # pragma: no cover - compiled
     """``1 / (1 + Lambda_i / (1 + Lambda_o))``; 0 below the geometric plane or the mesosurface,
     1 for a mesosurface facing away from the view (``Lambda_o`` infinite)."""
@@ -201,7 +200,7 @@ def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no 
     return out
 
 
-@njit(fastmath=True, cache=True)
+@njit_serial
 def _bilinear_wrap(flat, offset, hh, ww, u, v, out, scale):  # pragma: no cover - compiled
     """``out += scale * bilinear(level, u, v)``, periodic in both axes (``MipChain._bilinear``)."""
     x = u * ww - 0.5
