@@ -1,0 +1,182 @@
+"""Issue #9's acceptance matrix: FLIP of ``glints`` vs ``glints-direct`` and frame wall times.
+
+    python benchmarks/study_glints_scenes.py --lights point            # 2 shapes x 4 maps x 3 d
+    python benchmarks/study_glints_scenes.py --lights quad --out m.jsonl   # appends, resumes
+    python benchmarks/study_glints_scenes.py --lights quad,environment --floor  # + MC floor
+    python benchmarks/study_glints_scenes.py --table m.jsonl           # only print the table
+
+Scenes: the plane of :func:`prefilter.glints.render.measurement_scene` (camera and light scaled
+with the distance, so only the footprint changes), and a sphere of radius ``0.25 d`` at the same
+place under the same lights, textured at the plane's density (4 map repeats per unit length,
+``uv_scale`` rounded to whole repeats so the ``phi`` seam is continuous). Maps: the four
+procedural glint maps, 128^2 (baked once into the render cache, ~1 min each). One cell = one
+frame per method at 64x48, 1 spp; FLIP (HDR, :func:`prefilter.render.metrics.flip`) with
+``glints-direct`` as the reference, since ``glints``' only intended error is its compression.
+Wall times are single frames on a shared machine: indicative only. Quad and environment lights:
+``glints-direct`` is a 1-spp Monte Carlo estimate (MIS, SG sampling) while ``glints`` mostly uses
+noise-free range queries, so their FLIP includes the estimator's noise; ``--floor`` measures it
+(FLIP of ``glints-direct`` seed 1 vs seed 0). Rows are appended to
+``--out`` as JSON lines as they finish and cells already there are skipped.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+KINDS = ("gaussian", "brushed", "flakes", "scratches")
+DISTANCES = {"near": 0.5, "mid": 2.0, "far": 8.0}
+TARGET = 0.05
+#: map repeats per unit length of the measurement plane (``uv_scale / size = 160 d / 40 d``)
+DENSITY = 4.0
+
+
+def scene(shape: str, distance: float, kind: str, lights: str) -> dict:
+    """The measurement plane, or a sphere at its place with the same camera and lights."""
+    from prefilter.glints.render import measurement_scene
+
+    sc = measurement_scene(distance, kind, lights=lights)
+    if shape == "sphere":
+        plane = sc["objects"][0]
+        r = 0.25 * distance
+        uv = [max(1.0, round(2 * np.pi * r * DENSITY)), max(1.0, round(np.pi * r * DENSITY))]
+        sc["objects"] = [{"type": "sphere", "center": [0.0, 0.0, 0.0], "radius": r,
+                          "uv_scale": uv, "material": plane["material"]}]
+    return sc
+
+
+def coverage(sc, size: int = 128):
+    """Median footprint std (texels) over the hit pixels (the render's own footprint) and the
+    ``(H, W)`` mask of pixels whose centre hits the object."""
+    from prefilter.glints.render import footprints
+    from prefilter.render.camera import gbuffer_at
+
+    xy = np.stack(np.meshgrid(np.arange(sc.camera.width) + 0.5,
+                              np.arange(sc.camera.height) + 0.5), -1)
+    g = gbuffer_at(sc, xy).reshape(-1)
+    _, sp = footprints(g.select(g.hit), (size, size))
+    return float(np.median(sp)), g.hit.reshape(sc.camera.height, sc.camera.width)
+
+
+def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False) -> dict:
+    """One matrix cell. ``floor``: also ``glints-direct`` with another seed, and FLIP between
+    its two images: the Monte Carlo noise floor of a comparison against a 1-spp MIS / SG-sampled
+    ``glints-direct`` (quad and environment lights; 0 for point lights)."""
+    from prefilter.render.metrics import flip
+    from prefilter.render.pipeline import render
+    from prefilter.render.scene import load_scene
+
+    sc = load_scene(scene(shape, DISTANCES[dist_name], kind, lights))
+    render(sc, "glints")  # bake (disk cache) and compile outside the timing
+    img, t = {}, {}
+    for m in ("glints", "glints-direct"):
+        t0 = time.perf_counter()
+        img[m] = render(sc, m)
+        t[m] = time.perf_counter() - t0
+    mean_d = float(img["glints-direct"].mean())
+    sp, hit = coverage(sc)
+    extra = {}
+    if floor:
+        fl2 = flip(render(sc, "glints-direct", seed=1), img["glints-direct"])
+        extra = dict(floor=float(fl2.mean), floor_object=float(fl2.error_map[hit].mean()))
+    fl = flip(img["glints"], img["glints-direct"])
+    # the sphere leaves black background pixels (zero error): also the mean over the object
+    return dict(lights=lights, shape=shape, distance=dist_name, map=kind, sigma_p_median=sp,
+                flip=float(fl.mean), flip_object=float(fl.error_map[hit].mean()),
+                object_pixels=float(hit.mean()),
+                t_glints=t["glints"], t_direct=t["glints-direct"],
+                mean_ratio=float(img["glints"].mean()) / mean_d if mean_d > 0 else float("nan"),
+                **extra)
+
+
+def worst(r: dict) -> float:
+    """The FLIP a cell is judged by: over the frame and over the object's pixels."""
+    return max(r["flip"], r.get("flip_object", r["flip"]))
+
+
+def _flip_cell(r: dict) -> str:
+    txt = f"{r['flip']:.3f}"
+    if r.get("object_pixels", 1.0) < 0.999:
+        txt += f" ({r['flip_object']:.3f})"
+    return f"**{txt}**" if worst(r) > TARGET else txt
+
+
+def _floor(rs) -> str:
+    def one(r):
+        if r is None or "floor" not in r:
+            return "-"
+        if r.get("object_pixels", 1.0) < 0.999:
+            return f"{r['floor']:.3f} ({r['floor_object']:.3f})"
+        return f"{r['floor']:.3f}"
+
+    return " / ".join(one(r) for r in rs)
+
+
+def table(rows: list[dict]) -> str:
+    """Markdown: one row per (lights, shape, map), FLIP near / mid / far (frame, and in brackets
+    over the object's pixels where the background shows; bold over the target), wall times and
+    the Monte Carlo floor (``--floor``)."""
+    out = ["| lights | shape | map | FLIP near | mid | far | glints s (n/m/f) | "
+           "glints-direct s (n/m/f) | mean glints/direct (n/m/f) | MC floor (n/m/f) |",
+           "|---|---|---|---|---|---|---|---|---|---|"]
+    by = {(r["lights"], r["shape"], r["map"], r["distance"]): r for r in rows}
+    for lights in ("point", "quad", "environment"):
+        for shape in ("plane", "sphere"):
+            for kind in KINDS:
+                rs = [by.get((lights, shape, kind, d)) for d in DISTANCES]
+                if not any(rs):
+                    continue
+
+                def f(key, fmt, rs=rs):
+                    return " / ".join("-" if r is None else format(r[key], fmt) for r in rs)
+
+                fl = ["-" if r is None else _flip_cell(r) for r in rs]
+                out.append(f"| {lights} | {shape} | {kind} | {' | '.join(fl)} | "
+                           f"{f('t_glints', '.2f')} | {f('t_direct', '.2f')} | "
+                           f"{f('mean_ratio', '.3f')} | {_floor(rs)} |")
+    return "\n".join(out)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--lights", default="point", help="comma list: point, quad, environment")
+    ap.add_argument("--shapes", default="plane,sphere")
+    ap.add_argument("--kinds", default=",".join(KINDS))
+    ap.add_argument("--distances", default="near,mid,far")
+    ap.add_argument("--out", default="glints_scenes.jsonl")
+    ap.add_argument("--floor", action="store_true",
+                    help="also FLIP of glints-direct seed 1 vs seed 0 (MC noise floor)")
+    ap.add_argument("--table", default=None, help="only print the table of this .jsonl")
+    a = ap.parse_args()
+    if a.table:
+        print(table([json.loads(x) for x in Path(a.table).read_text().splitlines() if x]))
+        return
+    out = Path(a.out)
+    done = set()
+    if out.exists():
+        for x in out.read_text().splitlines():
+            if x:
+                r = json.loads(x)
+                done.add((r["lights"], r["shape"], r["map"], r["distance"]))
+    for lights in a.lights.split(","):
+        for kind in a.kinds.split(","):  # map-major: one bake, then all its cells
+            for shape in a.shapes.split(","):
+                for dn in a.distances.split(","):
+                    if (lights, shape, kind, dn) in done:
+                        continue
+                    r = cell(shape, dn, kind, lights, a.floor)
+                    print(json.dumps(r), flush=True)
+                    with out.open("a") as fh:
+                        fh.write(json.dumps(r) + "\n")
+    rows = [json.loads(x) for x in out.read_text().splitlines() if x]
+    print(table(rows))
+    bad = [r for r in rows if worst(r) > TARGET]
+    print(f"cells over FLIP {TARGET}: {len(bad)} of {len(rows)}")
+
+
+if __name__ == "__main__":
+    main()
