@@ -62,10 +62,13 @@ def coverage(sc, size: int = 128):
     return float(np.median(sp)), g.hit.reshape(sc.camera.height, sc.camera.width)
 
 
-def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False) -> dict:
+def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False,
+         converged: int = 0) -> dict:
     """One matrix cell. ``floor``: also ``glints-direct`` with another seed, and FLIP between
     its two images: the Monte Carlo noise floor of a comparison against a 1-spp MIS / SG-sampled
-    ``glints-direct`` (quad and environment lights; 0 for point lights)."""
+    ``glints-direct`` (quad and environment lights; 0 for point lights). ``converged``: also
+    FLIP between the means of ``converged`` seeds of each method (the Monte Carlo noise of both
+    averaged down, the compression error stays)."""
     from prefilter.render.metrics import flip
     from prefilter.render.pipeline import render
     from prefilter.render.scene import load_scene
@@ -83,6 +86,12 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
     if floor:
         fl2 = flip(render(sc, "glints-direct", seed=1), img["glints-direct"])
         extra = dict(floor=float(fl2.mean), floor_object=float(fl2.error_map[hit].mean()))
+    if converged > 1:
+        avg = {m: np.mean([img[m]] + [render(sc, m, seed=k) for k in range(1, converged)], 0)
+               for m in img}
+        fl3 = flip(avg["glints"], avg["glints-direct"])
+        extra.update(converged=converged, flip_converged=float(fl3.mean),
+                     flip_converged_object=float(fl3.error_map[hit].mean()))
     fl = flip(img["glints"], img["glints-direct"])
     # the sphere leaves black background pixels (zero error): also the mean over the object
     return dict(lights=lights, shape=shape, distance=dist_name, map=kind, sigma_p_median=sp,
@@ -150,6 +159,8 @@ def main():
     ap.add_argument("--out", default="glints_scenes.jsonl")
     ap.add_argument("--floor", action="store_true",
                     help="also FLIP of glints-direct seed 1 vs seed 0 (MC noise floor)")
+    ap.add_argument("--converged", type=int, default=0,
+                    help="also FLIP between the means of this many seeds of each method")
     ap.add_argument("--table", default=None, help="only print the table of this .jsonl")
     a = ap.parse_args()
     if a.table:
@@ -168,7 +179,7 @@ def main():
                 for dn in a.distances.split(","):
                     if (lights, shape, kind, dn) in done:
                         continue
-                    r = cell(shape, dn, kind, lights, a.floor)
+                    r = cell(shape, dn, kind, lights, a.floor, a.converged)
                     print(json.dumps(r), flush=True)
                     with out.open("a") as fh:
                         fh.write(json.dumps(r) + "\n")
