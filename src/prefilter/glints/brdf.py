@@ -38,8 +38,8 @@ import numpy as np
 from prefilter._numba import njit_parallel, prange, serial
 from prefilter._validate import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, _as_roughness, as_normal_map,
-                                   elements, pndf)
+from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, _as_roughness, _window,
+                                   as_normal_map, elements, pndf)
 from prefilter.glints.query import point_flat
 from prefilter.glints.store import GlintsMap
 
@@ -171,10 +171,8 @@ def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
         var = sp2 * sh2 / tot2
         sv = math.sqrt(var)
         rad = trunc * math.sqrt(tot2)
-        x0 = int(math.ceil(cx[q] - rad - 0.5))
-        x1 = int(math.floor(cx[q] + rad - 0.5))
-        y0 = int(math.ceil(cy[q] - rad - 0.5))
-        y1 = int(math.floor(cy[q] + rad - 0.5))
+        x0, x1 = _window(cx[q], rad)
+        y0, y1 = _window(cy[q], rad)
         nx = x1 - x0 + 1
         wx = np.empty(nx)
         col = np.empty(nx, np.int64)
@@ -235,10 +233,8 @@ def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, 
         f = sh2 / tot2
         var = sp2 * sh2 / tot2
         rad = trunc * math.sqrt(tot2)
-        x0 = int(math.ceil(cx[q] - rad - 0.5))
-        x1 = int(math.floor(cx[q] + rad - 0.5))
-        y0 = int(math.ceil(cy[q] - rad - 0.5))
-        y1 = int(math.floor(cy[q] + rad - 0.5))
+        x0, x1 = _window(cx[q], rad)
+        y0, y1 = _window(cy[q], rad)
         nx = x1 - x0 + 1
         xs = x0 % W
         wx = np.empty(nx)

@@ -31,7 +31,7 @@ from prefilter._numba import njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_directions, as_float_array, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _rect_mass
-from prefilter.glints.pndf import _element
+from prefilter.glints.pndf import _element, _window
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.query import point
 from prefilter.glints.store import GlintsMap
@@ -329,10 +329,8 @@ def _direct_kernel(s_el, J, cx, cy, sp, sr, sh, trunc, u, out):
         f = sh2 / tot2
         var = sp2 * sh2 / tot2
         rad = trunc * math.sqrt(tot2)
-        x0 = int(math.ceil(cx[q] - rad - 0.5))
-        x1 = int(math.floor(cx[q] + rad - 0.5))
-        y0 = int(math.ceil(cy[q] - rad - 0.5))
-        y1 = int(math.floor(cy[q] + rad - 0.5))
+        x0, x1 = _window(cx[q], rad)
+        y0, y1 = _window(cy[q], rad)
         wsum = 0.0
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
