@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange
 
 
 @njit_serial
@@ -130,16 +130,21 @@ def range_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, x0, y0, x1
         out[q] = acc / area
 
 
-@njit_serial
-def _axis_taps(f, R, B):
-    """Bilinear taps along one axis at pixel coordinate ``f`` (pixel centres at ``k + 0.5``):
-    pixels ``p0, p0 + 1`` with weights ``1 - t, t``; pixels outside ``[0, R)`` get weight 0."""
-    g = f - 0.5
-    p0 = int(math.floor(g))
-    t = g - p0
-    w0 = 1.0 - t if 0 <= p0 < R else 0.0
-    w1 = t if 0 <= p0 + 1 < R else 0.0
-    return p0, w0, w1
+@njit_inline
+def _block_tap(p0, w0, w1, d, B):
+    """Tap ``d`` (0, 1) of an axis's bilinear pair ``p0, p0 + 1`` (weights ``w0, w1``) split at
+    the B-pixel block boundaries: ``(block, offset in block, weight, weight of pixel + 1)``,
+    where the second weight is nonzero when both taps lie in one block (handled together at
+    ``d == 0``); block ``-1``: nothing to add for this tap."""
+    w = w0 if d == 0 else w1
+    if w == 0.0:
+        return -1, 0, 0.0, 0.0
+    p = p0 + d
+    blk = p // B
+    if d == 1 and w0 != 0.0 and (p0 // B) == blk:
+        return -1, 0, 0.0, 0.0
+    wn = w1 if (d == 0 and w1 != 0.0 and (p0 + 1) // B == blk) else 0.0
+    return blk, p - blk * B, w, wn
 
 
 @njit_parallel
@@ -153,36 +158,17 @@ def bilinear_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy,
     nb = block_index.shape[1]
     R = nb * B
     for q in prange(out.shape[0]):
-        i0, u0, u1 = _axis_taps((sy[q] - lo) / h, R, B)
-        j0, v0, v1 = _axis_taps((sx[q] - lo) / h, R, B)
+        i0, u0, u1 = _axis_taps2((sy[q] - lo) / h, R, True)
+        j0, v0, v1 = _axis_taps2((sx[q] - lo) / h, R, True)
         acc = 0.0
         for di in range(2):
-            wi = u0 if di == 0 else u1
-            i = i0 + di
-            if wi == 0.0:
+            bi, ia, wa0, wa1 = _block_tap(i0, u0, u1, di, B)
+            if bi < 0:
                 continue
-            bi = i // B
-            # both rows in one block: handled together at di == 0
-            if di == 1 and u0 != 0.0 and (i0 // B) == bi:
-                continue
-            ia = i - bi * B
-            wa0 = wi
-            wa1 = 0.0
-            if di == 0 and u1 != 0.0 and (i0 + 1) // B == bi:
-                wa1 = u1
             for dj in range(2):
-                wj = v0 if dj == 0 else v1
-                j = j0 + dj
-                if wj == 0.0:
+                bj, ja, wb0, wb1 = _block_tap(j0, v0, v1, dj, B)
+                if bj < 0:
                     continue
-                bj = j // B
-                if dj == 1 and v0 != 0.0 and (j0 // B) == bj:
-                    continue
-                ja = j - bj * B
-                wb0 = wj
-                wb1 = 0.0
-                if dj == 0 and v1 != 0.0 and (j0 + 1) // B == bj:
-                    wb1 = v1
                 for c in range(idx.shape[1]):
                     w = wts[q, c]
                     if w == 0.0:
@@ -207,7 +193,9 @@ def bilinear_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy,
 
 @njit_serial
 def _axis_taps2(f, R, bilinear):
-    """As :func:`_axis_taps`, or the pixel containing ``f`` with weight 1 (``bilinear`` False)."""
+    """Bilinear taps along one axis at pixel coordinate ``f`` (pixel centres at ``k + 0.5``):
+    pixels ``p0, p0 + 1`` with weights ``1 - t, t``, pixels outside ``[0, R)`` weight 0; or the
+    pixel containing ``f`` with weight 1 (``bilinear`` False)."""
     if not bilinear:
         p = int(math.floor(f))
         return p, (1.0 if 0 <= p < R else 0.0), 0.0
@@ -307,25 +295,13 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, granks, offs, ny_l
         gs = np.empty(_SLOTS, np.int64)
         acc = 0.0
         for di in range(2):
-            wi = u0 if di == 0 else u1
-            if wi == 0.0:
+            bi, ia, wi, wa1 = _block_tap(i0, u0, u1, di, B)
+            if bi < 0:
                 continue
-            i = i0 + di
-            bi = i // B
-            if di == 1 and u0 != 0.0 and (i0 // B) == bi:
-                continue
-            ia = i - bi * B
-            wa1 = u1 if (di == 0 and u1 != 0.0 and (i0 + 1) // B == bi) else 0.0
             for dj in range(2):
-                wj = v0 if dj == 0 else v1
-                if wj == 0.0:
+                bj, ja, wj, wb1 = _block_tap(j0, v0, v1, dj, B)
+                if bj < 0:
                     continue
-                j = j0 + dj
-                bj = j // B
-                if dj == 1 and v0 != 0.0 and (j0 // B) == bj:
-                    continue
-                ja = j - bj * B
-                wb1 = v1 if (dj == 0 and v1 != 0.0 and (j0 + 1) // B == bj) else 0.0
                 ns = 0
                 last = -1
                 slot = 0
