@@ -197,6 +197,44 @@ def test_kill_restart_fast(kind, references, tmp_path):
     _check(kind, 0, references, tmp_path)
 
 
+def test_concurrent_bakes_of_one_output(references, tmp_path):
+    """Two processes baking the same glints output at once (pytest workers sharing the render
+    cache did this) both succeed, one after the other, and leave the uninterrupted bake's bytes,
+    no parts directory and no lock file."""
+    references.start("glints")
+    inputs, work = tmp_path / "in", tmp_path / "work"
+    inputs.mkdir()
+    work.mkdir()
+    cmd = _cmd(BAKES["glints"], inputs, work)
+    procs = [subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    for p in procs:
+        _, err = p.communicate(timeout=TIMEOUT)
+        assert p.returncode == 0, err[-2000:]
+    assert _outputs(work) == references.get("glints")
+
+
+def test_bake_if_missing_waits_for_a_running_bake(tmp_path):
+    """``bake_if_missing`` called while another process holds the bake's lock returns only once
+    that bake has finished, and then does not bake again."""
+    from prefilter.glints.bake import bake_if_missing
+
+    out = tmp_path / "g.npz"
+    holder = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys, time; from pathlib import Path; from prefilter._io import exclusive_lock\n"
+         "with exclusive_lock(sys.argv[1] + '.lock'):\n"
+         "    print('locked', flush=True); time.sleep(1.0); Path(sys.argv[1]).write_bytes(b'x')",
+         str(out)], stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline().strip() == "locked"
+    nm = np.zeros((16, 16, 3))
+    nm[..., 2] = 1.0
+    baked = bake_if_missing(nm, out, ndf_res=16, block=8, rank=2, cell=16, progress=False)
+    holder.wait(timeout=TIMEOUT)
+    assert not baked and out.read_bytes() == b"x"
+    assert not Path(str(out) + ".lock").exists()
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("seed", [1, 2, 3])
 @pytest.mark.parametrize("kind", list(BAKES))

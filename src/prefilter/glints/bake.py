@@ -16,6 +16,10 @@ Stages, each resumable through :class:`prefilter._io.Checkpoints` (``<out>.parts
    loader decodes;
 4. the final ``.npz`` written atomically, then the parts removed.
 
+A bake holds an exclusive lock on ``<out>.lock`` (and on a shared ``levels_dir``) while it runs:
+a second process baking the same output waits, then bakes again (``bake``) or finds the output
+and returns (``bake_if_missing``, what the renderer's cache uses).
+
 Grouping deviates from the paper (which mixes all levels' blocks of a spatial cell in one tensor):
 blocks at the same ``(bi, bj)`` of overlapping footprints are alike, and a group of one level is
 not fit at the expense of the others (with all levels in one group, the sharp, high-energy level-0
@@ -24,14 +28,17 @@ blocks dominated and the upper levels had ~10 % error). Measurements in docs/gli
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import ExitStack, contextmanager
+from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import Checkpoints
+from prefilter._io import Checkpoints, exclusive_lock
 from prefilter._validate import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
@@ -62,6 +69,40 @@ def _memmap(path, shape):
     return np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=shape)
 
 
+@contextmanager
+def _locked(out, levels_dir):
+    """Exclusive locks on ``<out>.lock`` and on the shared ``levels_dir``: two processes baking
+    the same output wait for each other instead of sharing (and deleting) checkpoint parts."""
+    with ExitStack() as locks:
+        locks.enter_context(exclusive_lock(str(out) + ".lock"))
+        if levels_dir is not None:
+            locks.enter_context(exclusive_lock(str(levels_dir).removesuffix(".parts") + ".lock"))
+        yield
+
+
+def _serialised(fn):
+    """Run a bake under :func:`_locked` (``fn.__wrapped__`` is the unlocked bake)."""
+    @functools.wraps(fn)
+    def locked(normal_map, out, **kwargs):
+        with _locked(out, kwargs.get("levels_dir")):
+            return fn(normal_map, out, **kwargs)
+    return locked
+
+
+def bake_if_missing(normal_map, out, **kwargs) -> bool:
+    """:func:`bake` into ``out`` unless it exists, also when another process is baking it right
+    now (the check is made under the bake's lock). Returns whether this call baked."""
+    out = Path(out)
+    if out.exists():
+        return False
+    with _locked(out, kwargs.get("levels_dir")):
+        if out.exists():  # baked by the process that held the lock
+            return False
+        bake.__wrapped__(normal_map, out, **kwargs)
+    return True
+
+
+@_serialised
 def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16,
          support: float = 0.5, intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int = 4,
          sigma0: float | None = None, cell: int = 32, converge: float = 0.01,
