@@ -1,14 +1,20 @@
 """Wang tiles (glints paper sec. 5.5): edge-colour consistency of the implicit tiling, seamless
 tile edges, implicit == explicit (stored index map) P-NDFs (the paper's Fig. 14), constant
-storage."""
+storage; per-tile pyramids against the direct P-NDF across tiles, tile shares of the footprint
+mass, sampling (pdf == eval, chi-square)."""
+
+import math
 
 import numpy as np
 import pytest
-from maps import sinusoid
+from maps import gaussian_heightfield, sinusoid
+from scipy.stats import chi2
 
 from prefilter.errors import PrefilterError
-from prefilter.glints.wang import (assemble, index_map, pndf_explicit, pndf_implicit, synthesize,
-                                   tile_index)
+from prefilter.glints.pndf import SIGMA_H, TRUNCATION
+from prefilter.glints.wang import (TiledNDF, assemble, bake_tiles, contributions, index_map,
+                                   ndf, ndf_image, ndf_pdf, pndf_explicit, pndf_image_implicit,
+                                   pndf_implicit, sample, synthesize, tile_index)
 
 T = 16
 
@@ -72,3 +78,169 @@ def test_validation():
         synthesize(nm, tile=15)
     with pytest.raises(PrefilterError, match="band"):
         synthesize(nm, tile=16, band=20)
+
+
+# ---------------------------------------------------------------------------------------------
+# per-tile pyramids
+
+R, SUPPORT, SR = 32, 0.5, 0.01
+
+
+@pytest.fixture(scope="module")
+def wn(wt):
+    return bake_tiles(wt, ndf_res=R, support=SUPPORT, intrinsic_roughness=SR)
+
+
+def _rel(a, b):
+    return float(np.linalg.norm(a - b) / np.linalg.norm(b))
+
+
+@pytest.mark.parametrize("c, sp", [
+    ((8.3, 7.9), 3.0),     # inside one tile
+    ((15.7, 40.2), 3.0),   # straddling a vertical edge
+    ((16.2, 31.9), 3.0),   # on a corner (four tiles, the dependent texels of each)
+    ((47.6, 33.1), 4.6),   # between levels 1 and 2
+    ((40.3, 45.2), 7.9),   # just below the switch: ~40 tiles' contributions
+    ((-100.4, 70.7), 2.6),  # negative coordinates, near level 0
+])
+def test_tiled_matches_direct(wn, wt, c, sp):
+    """Sum of per-tile contributions == the direct P-NDF of the assembled texels."""
+    ij, imgs = contributions(wn, c, sp)
+    assert len(ij) > 0  # the per-tile path, not a fallback
+    b = pndf_image_implicit(wt, c, sp, R, SUPPORT, SR)
+    assert _rel(imgs.sum(axis=0), b) < 1.5e-3  # float32 storage, resampling aliasing
+
+
+def test_direct_fallback_below_min_sigma(wn, wt):
+    c = (21.3, 9.8)
+    assert wn.min_sigma > wn.sigma0
+    for sp in (0.0, 1.0, 0.99 * wn.min_sigma):
+        ij, imgs = contributions(wn, c, sp)
+        assert len(ij) == 0
+        np.testing.assert_allclose(imgs[0], pndf_image_implicit(wt, c, sp, R, SUPPORT, SR),
+                                   rtol=1e-12, atol=1e-12)
+
+
+def test_tile_shares_of_the_footprint_mass(wn):
+    """Each tile's contribution carries its share of the Gaussian footprint weights (closed form:
+    separable sums over the texels of the tile in the truncation window)."""
+    c, sp = np.array([16.4, 31.7]), 3.7
+    ij, imgs = contributions(wn, c, sp)
+    h2 = (2 * SUPPORT / R) ** 2
+    tot2 = sp * sp + SIGMA_H**2
+    rad = TRUNCATION * math.sqrt(tot2)
+    axes = []
+    for a in (0, 1):
+        x = np.arange(math.ceil(c[a] - rad - 0.5), math.floor(c[a] + rad - 0.5) + 1)
+        axes.append((x // 16, np.exp(-(c[a] - x - 0.5) ** 2 / (2 * tot2))))
+    total = axes[0][1].sum() * axes[1][1].sum()
+    big = 0
+    for (i, j), img in zip(ij, imgs):
+        share = (axes[0][1][axes[0][0] == i].sum() * axes[1][1][axes[1][0] == j].sum() / total)
+        assert img.sum() * h2 == pytest.approx(share, abs=2e-4)
+        big += share > 0.1
+    assert big == 4
+
+
+def test_implicit_equals_explicit_tiled(wn, wt):
+    """The paper's Fig. 14 on the precomputed path: a stored index map gives the same NDFs."""
+    idx = index_map(wt, 8, 8)
+    for c, sp in (((37.3, 52.1), 3.0), ((48.0, 40.0), 6.0), ((60.2, 71.4), 1.5),
+                  ((17.0, 81.0), 9.0)):
+        a = ndf_image(wn, c, sp)
+        b = ndf_image(wn, c, sp, index=idx)
+        assert a.max() > 1.0
+        np.testing.assert_array_equal(a, b)
+
+
+def test_point_values_match_direct_image(wn, wt):
+    c, sp = (31.6, 16.3), 5.0
+    direct = pndf_image_implicit(wt, c, sp, R, SUPPORT, SR)
+    g = np.linspace(-SUPPORT, SUPPORT, R, endpoint=False) + SUPPORT / R  # pixel centres
+    s = np.stack(np.meshgrid(g, g), -1)
+    v = ndf(wn, c, sp, s)
+    np.testing.assert_allclose(v, direct, rtol=0, atol=1.5e-3 * direct.max())
+    assert ndf(wn, c, sp, [0.6, 0.0]) == 0.0  # outside the support
+
+
+def test_wide_footprints_use_the_expected_tiling(wn, wt):
+    """Above the switch the NDF is the position average over the tiled plane, which is the same
+    at every footprint size (Monte Carlo over random centres of the direct P-NDF at half the
+    switch size: agreement within 3 standard errors + the dependent texels' expected-Jacobian
+    bias)."""
+    sp = wn.wide_sigma
+    rng = np.random.default_rng(5)
+    cs = rng.uniform(-1e4, 1e4, (24, 2))
+    direct = np.array([pndf_image_implicit(wt, c, 0.5 * sp, R, SUPPORT, SR) for c in cs])
+    avg = direct.mean(axis=0)
+    se = np.sqrt(direct.var(axis=0, ddof=1).sum() / len(cs))
+    img = ndf_image(wn, (3.0, 4.0), sp)
+    np.testing.assert_array_equal(img, wn.mean)
+    assert np.linalg.norm(img - avg) < 3 * se + 0.02 * np.linalg.norm(avg)
+    assert img.sum() * (2 * SUPPORT / R) ** 2 == pytest.approx(1.0, abs=1e-3)
+
+
+def test_sampling_pdf_equals_eval_and_chi2(wn):
+    c, sp, n = (16.2, 31.9), 3.3, 40000
+    s, pdf = sample(wn, c, sp, n, rng=11)
+    np.testing.assert_allclose(pdf, ndf_pdf(wn, c, sp, s), rtol=1e-12)
+    img = ndf_image(wn, c, sp)
+    h = 2 * SUPPORT / R
+    expected = n * img.ravel() / img.sum()
+    ix = np.floor((s[:, 0] + SUPPORT) / h).astype(int)
+    iy = np.floor((s[:, 1] + SUPPORT) / h).astype(int)
+    observed = np.bincount(iy * R + ix, minlength=R * R)
+    assert observed[expected == 0].sum() == 0
+    big = expected >= 5
+    obs = np.append(observed[big], observed[~big].sum())
+    exp = np.append(expected[big], expected[~big].sum())
+    stat = ((obs - exp) ** 2 / exp).sum()
+    assert chi2.sf(stat, len(obs) - 1) > 1e-3
+    s2, pdf2 = sample(wn, c, sp, n, rng=11)
+    assert s2.tobytes() == s.tobytes() and pdf2.tobytes() == pdf.tobytes()
+
+
+def test_tiled_constant_storage(wn):
+    before = wn.nbytes
+    T = wn.wang.size
+    per_tile = sum(a[0].nbytes for a in wn.images)
+    assert before == wn.wang.nbytes + 16 * per_tile + wn.mean.nbytes
+    for c in ((10.0, 10.0), (1e6 + 0.3, -3e5), (-7e7, 2e7)):
+        img = ndf_image(wn, c, 3.0)
+        assert np.all(np.isfinite(img))
+        assert img.sum() * (2 * SUPPORT / R) ** 2 == pytest.approx(1.0, abs=2e-3)
+    assert wn.nbytes == before
+    assert isinstance(wn, TiledNDF) and T == 16
+
+
+def test_tiled_validation(wn, wt):
+    with pytest.raises(PrefilterError, match="index"):
+        ndf_image(wn, (1.0, 2.0), 3.0, index=np.full((2, 2), 16))
+    with pytest.raises(PrefilterError, match="sigma_p"):
+        ndf_image(wn, (1.0, 2.0), [3.0, 4.0])
+    with pytest.raises(PrefilterError, match="center"):
+        ndf(wn, (1.0, 2.0, 3.0), 3.0, [0.0, 0.0])
+    with pytest.raises(PrefilterError, match="wn"):
+        sample(wt, (1.0, 2.0), 3.0, 10)
+    with pytest.raises(PrefilterError, match="wide_tiles"):
+        bake_tiles(wt, wide_tiles=0.0)
+    with pytest.raises(PrefilterError, match="stride0"):
+        bake_tiles(wt, stride0=4, wide_tiles=2.0)
+
+
+@pytest.mark.slow
+def test_tiled_matches_direct_heightfield_32():
+    """Tile 32, NDF 64^2, a Gaussian random heightfield: errors of the per-tile path and of the
+    tile-independent switch vs the direct P-NDF (numbers in docs/glints-wang.md)."""
+    nm, _ = gaussian_heightfield(128, corr=3.0, slope_std=0.15, seed=2)
+    wt = synthesize(nm, tile=32, band=4.0, rng=1)
+    wn = bake_tiles(wt, ndf_res=64, support=0.5, intrinsic_roughness=0.01, wide_tiles=0.5)
+    rng = np.random.default_rng(0)
+    errs = []
+    for sp in (5.5, 9.0, 14.0):
+        for c in rng.uniform(-500, 500, (4, 2)):
+            errs.append(_rel(ndf_image(wn, c, sp), pndf_image_implicit(wt, c, sp, 64, 0.5, 0.01)))
+    assert max(errs) < 2e-3
+    wide = [_rel(wn.mean, pndf_image_implicit(wt, c, 32.0, 64, 0.5, 0.01))
+            for c in rng.uniform(-500, 500, (4, 2))]
+    assert max(wide) < 0.15

@@ -18,11 +18,24 @@ to two bits, the colours of the edge to its right (horizontal) and below it (ver
 ``e = below(i + 1, j)``, index ``n + 2 s + 4 w + 8 e``. Only the 16 tiles and a seed are stored,
 whatever the synthesised area.
 
-**P-NDFs across tiles.** A footprint's NDF is the direct P-NDF of the texels under it: the tiles
-under its truncation window (plus a 2-texel margin for the Jacobians) are looked up implicitly and
-assembled locally, so storage stays constant; the explicit variant uses a stored index map of a
-finite area and its assembled normal map (the paper's Fig. 14 comparison). Not done: per-tile
-compressed pyramids and sampling across tiles.
+**Direct P-NDFs across tiles.** :func:`pndf_implicit` / :func:`pndf_image_implicit`: the direct
+P-NDF of the texels under the footprint, the tiles under its truncation window (plus a 2-texel
+margin for the Jacobians) looked up by hashing and assembled locally; :func:`pndf_explicit` uses a
+stored index map of a finite area (the paper's Fig. 14 comparison).
+
+**Per-tile pyramids** (:func:`bake_tiles`, design and measurements in docs/glints-wang.md). The
+P-NDF is linear in the texel weights: ``D_p = sum_tiles sum_{i in tile} w_i N_i / sum_all w_i``,
+so a footprint's NDF is the sum over the tiles it touches of that tile's *contribution*, an image
+carrying the tile's share of the footprint mass. For each of the 16 tiles the contribution is
+precomputed for footprint centres on and around the tile (a margin of ``TRUNCATION`` footprint
+stds: footprints centred on neighbouring tiles reaching in), on the footprint pyramid of
+``pyramid.py`` (level 0 by ``pndf_image`` with the other texels' elements moved out of the NDF
+square, so they count in the normalisation only; upper levels by exact Gaussian filtering).
+Queries between centres/levels use Gaussian resampling (``pyramid.resample_weights``' scheme) per
+tile, summed over the tiles under the truncation window; smaller footprints use the direct P-NDF;
+footprints with ``sigma_p >= wide_tiles * T`` use the tile-independent NDF of the expected tiling
+(every tile equally likely), which is the position average of the footprint NDF at any size.
+Storage: 16 tiles' pyramids, independent of the synthesised area.
 """
 
 from __future__ import annotations
@@ -32,9 +45,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from prefilter._numba import njit_serial
 from prefilter._validate import as_float_array, as_positive_int, as_rng
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_normal_map, pndf
+from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, _as_roughness,
+                                   _as_sigma_p, _as_support, _splat, as_normal_map, pixel_edges,
+                                   pndf, pndf_image)
+from prefilter.glints.pyramid import next_level
 
 
 @dataclass(frozen=True)
@@ -156,3 +173,520 @@ def pndf_explicit(wt: WangTiles, index: np.ndarray, center, sigma_p, s,
     """Direct P-NDF on the normal map assembled from a stored index map (tiles ``(0, 0)`` at
     the origin; footprints must stay inside it, the assembled map is periodic)."""
     return pndf(assemble(wt, index), center, sigma_p, s, intrinsic_roughness)
+
+
+def pndf_image_implicit(wt: WangTiles, center, sigma_p, resolution: int = 64,
+                        support: float = 0.5,
+                        intrinsic_roughness: float = DEFAULT_ROUGHNESS) -> np.ndarray:
+    """Direct NDF image ``(R, R)`` (``pndf.pndf_image``) of one footprint ``center (2,)``,
+    ``sigma_p`` over the implicitly tiled plane (tiles assembled locally, as
+    :func:`pndf_implicit`)."""
+    c = _as_center(center)
+    sp = float(_as_sigma_p(sigma_p))
+    i0, j0, nx, ny = _window(wt, c, sp)
+    local = assemble(wt, index_map(wt, ny, nx, i0, j0))
+    T = wt.size
+    return pndf_image(local, c - np.array([i0 * T, j0 * T]), sp, resolution, support,
+                      intrinsic_roughness)
+
+
+def _as_center(center) -> np.ndarray:
+    c = as_float_array(center, "center")
+    if c.shape != (2,):
+        raise PrefilterError(f"center: expected one footprint centre (x, y), got shape {c.shape}")
+    return c
+
+
+# ---------------------------------------------------------------------------------------------
+# per-tile pyramids
+
+
+def _colours(idx):
+    idx = np.asarray(idx)
+    return idx & 1, (idx >> 1) & 1, (idx >> 2) & 1, (idx >> 3) & 1  # n, s, w, e
+
+
+def tile_elements(wt: WangTiles) -> tuple[np.ndarray, np.ndarray]:
+    """Per-tile elements ``s (16, T, T, 2)``, ``J (16, T, T, 2, 2)`` (as ``pndf.elements``).
+
+    The central differences at a tile's border need the neighbour's texels, which depend on the
+    edge colour only away from the corner squares (module docstring). Each side is padded with
+    the mean of the adjacent rows of the 8 tiles that can sit there (the expected neighbour, so
+    the Jacobian is its expectation over tilings); exact except in the corner squares.
+    """
+    T = wt.size
+    S = wt.tiles[..., :2]
+    n, s, w, e = _colours(np.arange(16))
+    pad = np.zeros((16, T + 2, T + 2, 2))
+    pad[:, 1:-1, 1:-1] = S
+    for t in range(16):
+        pad[t, 0, 1:-1] = S[s == n[t], T - 1].mean(axis=0)  # bottom rows of the tiles above
+        pad[t, -1, 1:-1] = S[n == s[t], 0].mean(axis=0)
+        pad[t, 1:-1, 0] = S[e == w[t], :, T - 1].mean(axis=0)
+        pad[t, 1:-1, -1] = S[w == e[t], :, 0].mean(axis=0)
+    J = np.empty((16, T, T, 2, 2))
+    J[..., :, 0] = 0.5 * (pad[:, 1:-1, 2:] - pad[:, 1:-1, :-2])
+    J[..., :, 1] = 0.5 * (pad[:, 2:, 1:-1] - pad[:, :-2, 1:-1])
+    return np.ascontiguousarray(S), J
+
+
+def dependent_texels(wt: WangTiles) -> np.ndarray:
+    """``(T, T)`` mask of the border texels whose Jacobian depends on which neighbour tile sits
+    across the edge (not only on the edge colour): the ends of the edges, where the neighbour's
+    corner square is. The per-tile pyramids leave them out; queries add them exactly."""
+    T = wt.size
+    S = wt.tiles[..., :2]
+    n, s, w, e = _colours(np.arange(16))
+
+    def varies(rows):  # (8, T, 2) candidate neighbour rows -> (T,) differ anywhere
+        return np.any(np.abs(rows - rows[:1]) > 1e-12, axis=(0, 2))
+
+    dep = np.zeros((T, T), bool)
+    for c in (0, 1):
+        dep[0] |= varies(S[s == c, T - 1])
+        dep[-1] |= varies(S[n == c, 0])
+        dep[:, 0] |= varies(S[e == c, :, T - 1])
+        dep[:, -1] |= varies(S[w == c, :, 0])
+    return dep
+
+
+#: Elements moved here contribute nothing to an NDF image (``support <= 1``) but keep their
+#: footprint weight in its normalisation.
+_AWAY = 9.0
+
+
+@dataclass(frozen=True)
+class TiledNDF:
+    """Per-tile footprint pyramids of a :class:`WangTiles` set (:func:`bake_tiles`).
+
+    ``images[l]`` is ``(16, n_l, n_l, R, R)`` float32: tile ``t``'s contribution for footprints
+    of std ``sigma0 2^l`` centred at ``((k0[l] + a) stride_l + 0.5, (k0[l] + b) stride_l + 0.5)``
+    relative to the tile's corner (index ``[t, b, a]``); contributions of centres outside are 0.
+    ``mean (R, R)``: the tile-independent NDF image (expected tiling).
+    """
+
+    wang: WangTiles
+    images: tuple
+    k0: tuple
+    mean: np.ndarray
+    stride0: int
+    sigma0: float
+    resolution: int
+    support: float
+    intrinsic_roughness: float
+    wide_sigma: float
+    dependent: np.ndarray  # (n_dep, 2) (row, col) of dependent_texels(wang)
+
+    @property
+    def n_levels(self) -> int:
+        return len(self.images)
+
+    def stride(self, level: int) -> int:
+        return self.stride0 << level
+
+    def sigma(self, level: int) -> float:
+        return self.sigma0 * 2.0**level
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes stored: tiles, per-tile pyramids and the mean image (no per-area data)."""
+        return int(self.wang.nbytes + sum(a.nbytes for a in self.images) + self.mean.nbytes)
+
+    @property
+    def min_sigma(self) -> float:
+        """Footprints below this std use the direct P-NDF (no pyramid level resamples them)."""
+        a = _Q_MIN * self.stride0 / self.sigma0
+        return self.sigma0 / math.sqrt(1.0 - a * a) if a < 1.0 else math.inf
+
+
+def _margin(sigma: float) -> float:
+    # texel centres within TRUNCATION total stds of a footprint centre carry weight
+    return TRUNCATION * math.sqrt(sigma * sigma + SIGMA_H**2) + 1.0
+
+
+def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
+               intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int | None = None,
+               wide_tiles: float = 0.5) -> TiledNDF:
+    """Per-tile footprint pyramids, uncompressed float32 (glints paper sec. 5.5, Fig. 12).
+
+    Parameters
+    ----------
+    wt : the 16 tiles (:func:`synthesize`).
+    ndf_res, support, intrinsic_roughness : NDF images ``R x R`` over ``[-support, support]^2``.
+    stride0 : level-0 centre stride in texels (``sigma0 = stride0``); default ``T // 8``.
+    wide_tiles : footprints with ``sigma_p >= wide_tiles * T`` use the tile-independent NDF; the
+        pyramid has levels up to the first ``sigma_l >= wide_tiles * T``.
+    """
+    T = wt.size
+    R = as_positive_int(ndf_res, "ndf_res")
+    S = _as_support(support)
+    sr = _as_roughness(intrinsic_roughness)
+    st0 = max(1, T // 8) if stride0 is None else as_positive_int(stride0, "stride0")
+    wide = float(wide_tiles)
+    if not (0.0 < wide <= 4.0):
+        raise PrefilterError(f"wide_tiles: expected a footprint std in tiles in (0, 4], got "
+                             f"{wide_tiles!r}")
+    L = 1
+    while st0 * 2.0 ** (L - 1) < wide * T:
+        L += 1
+    st_top = st0 << (L - 1)
+    if T % st_top:
+        raise PrefilterError(f"stride0: expected stride0 * 2^(levels - 1) = {st_top} to divide the "
+                             f"tile size {T} (stride0 = {st0}, wide_tiles = {wide}): lower "
+                             "stride0 or wide_tiles")
+    sig = [float(st0 << lv) for lv in range(L)]
+    k0 = [math.floor((-_margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
+    k1 = [math.ceil((T + _margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
+    # periodic canvas: the tile once, far enough from its copies that no cropped centre sees them
+    m_top = _margin(sig[-1]) + st_top
+    P = st_top * math.ceil((T + 2.0 * m_top + 2 * st_top) / st_top)
+    o = st_top * math.ceil(0.5 * (P - T) / st_top)  # tile corner in the canvas, on every grid
+    s_el, J_el = tile_elements(wt)
+    dep = dependent_texels(wt)
+    images = [np.empty((16, k1[lv] - k0[lv] + 1, k1[lv] - k0[lv] + 1, R, R), np.float32)
+              for lv in range(L)]
+    mean = np.zeros((R, R))
+    for t in range(16):
+        cs = np.full((P, P, 2), _AWAY)
+        cj = np.zeros((P, P, 2, 2))
+        cs[o:o + T, o:o + T] = np.where(dep[..., None], _AWAY, s_el[t])
+        cj[o:o + T, o:o + T] = J_el[t]
+        ks = np.arange(k0[0], k1[0] + 1)
+        g = (ks + o // st0) * st0 + 0.5
+        cen = np.stack(np.meshgrid(g, g), axis=-1)
+        grid = np.zeros((P // st0, P // st0, R, R), np.float32)
+        a0, a1 = k0[0] + o // st0, k1[0] + o // st0 + 1
+        grid[a0:a1, a0:a1] = pndf_image(None, cen, sig[0], R, S, sr, elements_=(cs, cj))
+        for lv in range(L):
+            if lv:
+                grid = next_level(grid, sig[0] / st0)
+            off = o // (st0 << lv)
+            images[lv][t] = grid[k0[lv] + off:k1[lv] + off + 1, k0[lv] + off:k1[lv] + off + 1]
+        # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
+        mean += pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
+                           elements_=(s_el[t], J_el[t])) / 16.0
+    return TiledNDF(wt, tuple(images), tuple(k0), mean, st0, float(st0), R, S, sr, wide * T,
+                    np.argwhere(dep))
+
+
+# ---------------------------------------------------------------------------------------------
+# queries
+
+
+def _lookup(wn: TiledNDF, index, i, j):
+    if index is None:
+        return tile_index(wn.wang, i, j)
+    ny, nx = index.shape
+    return index[np.asarray(j) % ny, np.asarray(i) % nx]
+
+
+def _as_index(index):
+    if index is None:
+        return None
+    a = np.asarray(index)
+    if a.ndim != 2 or not np.issubdtype(a.dtype, np.integer) or a.size == 0 \
+            or a.min() < 0 or a.max() > 15:
+        raise PrefilterError(f"index: expected a 2D integer tile index map in [0, 15], got "
+                             f"{a.dtype} {a.shape}")
+    return a
+
+
+#: Resampling taps within this many stds of the resampling kernel (``pyramid.resample_weights``
+#: uses 3: cutting it there narrows the footprint by ~1 %, which moves the tile shares of a
+#: footprint on a tile corner by ~3e-3).
+_TAP_TRUNCATION = 4.0
+#: Smallest std of a resampling tap's product Gaussian in strides (``pyramid.RESAMPLE_Q_MIN`` is
+#: 0.45): the Riemann sum over centres aliases like ``exp(-2 pi^2 q^2)``, 2 % at 0.45 for the sharp
+#: per-tile contributions, 8e-4 at 0.6; below it the direct P-NDF is used.
+_Q_MIN = 0.6
+
+
+def _regime(wn: TiledNDF, sp: float) -> str:
+    if sp < wn.min_sigma:
+        return "direct"
+    return "wide" if sp >= wn.wide_sigma else "tiles"
+
+
+def _level(wn: TiledNDF, sp: float) -> int:
+    """Coarsest level whose footprints resample ``sp`` (``pyramid.resample_weights``' rule)."""
+    m = 0
+    for lv in range(wn.n_levels):
+        sg = wn.sigma(lv)
+        if sg < sp and math.sqrt(1.0 - (sg / sp) ** 2) * sg / wn.stride(lv) >= _Q_MIN:
+            m = lv
+    return m
+
+
+def _axis_taps(wn: TiledNDF, m: int, c: float, r: float, n_tiles_lo: int, n_tiles_hi: int):
+    """Per tile column ``i`` in ``[n_tiles_lo, n_tiles_hi]``: crop indices and weights of the
+    Gaussian resampling taps along one axis, the weights normalised over all taps."""
+    st = wn.stride(m)
+    T = wn.wang.size
+    g = (c - 0.5) / st
+    half = _TAP_TRUNCATION * r / st
+    k = np.arange(math.ceil(g - half), math.floor(g + half) + 1)
+    w = np.exp(-0.5 * ((k * st + 0.5 - c) / r) ** 2)
+    w /= w.sum()
+    n = wn.images[m].shape[1]
+    out = []
+    for i in range(n_tiles_lo, n_tiles_hi + 1):
+        a = k - i * (T // st) - wn.k0[m]  # tile-relative centre index, then crop index
+        keep = (a >= 0) & (a < n)
+        out.append((i, a[keep], w[keep]))
+    return out
+
+
+def _tiles_window(wn: TiledNDF, c, reach, sigma):
+    T = wn.wang.size
+    rad = reach + _margin(sigma)
+    return (math.floor((c[0] - rad) / T), math.floor((c[0] + rad) / T),
+            math.floor((c[1] - rad) / T), math.floor((c[1] + rad) / T))
+
+
+def _tile_terms(wn: TiledNDF, c, sp, index):
+    """Level and ``(i, j, t, ay, wy, ax, wx)`` per tile under the footprint's window (taps in
+    the tile's crop, possibly none)."""
+    m = _level(wn, sp)
+    r = math.sqrt(sp * sp - wn.sigma(m) ** 2)
+    # every tile a tap's footprint reaches (the resampled footprint's tails beyond the direct
+    # truncation carry ~1e-3 of the mass at small r)
+    i0, i1, j0, j1 = _tiles_window(wn, c, _TAP_TRUNCATION * r, wn.sigma(m))
+    xs = _axis_taps(wn, m, float(c[0]), r, i0, i1)
+    ys = _axis_taps(wn, m, float(c[1]), r, j0, j1)
+    terms = [(i, j, ay, wy, ax, wx) for j, ay, wy in ys for i, ax, wx in xs]
+    t = _lookup(wn, index, np.array([x[0] for x in terms]), np.array([x[1] for x in terms]))
+    return m, [(i, j, int(tt), ay, wy, ax, wx) for (i, j, ay, wy, ax, wx), tt in zip(terms, t)]
+
+
+@njit_serial
+def _splat_elements(mx, my, a, b, d, w, which, sr, lo, h, trunc, imgs):
+    """Add ``w_k`` times element ``k``'s pixel masses to ``imgs[which_k]``: the splatting of
+    ``pndf._pndf_images`` (isotropic part by erf masses, rank-one part by a line quadrature)."""
+    R = imgs.shape[1]
+    hi = lo + R * h
+    px = np.zeros(R)
+    py = np.zeros(R)
+    for k in range(mx.shape[0]):
+        img = imgs[which[k]]
+        half = 0.5 * (a[k] + d[k])
+        dif = math.sqrt(0.25 * (a[k] - d[k]) ** 2 + b[k] * b[k])
+        nu1 = half + dif
+        nu2 = max(half - dif, 0.0)
+        reach = trunc * math.sqrt(nu1 + sr * sr)
+        if mx[k] + reach < lo or mx[k] - reach > hi or my[k] + reach < lo or my[k] - reach > hi:
+            continue
+        siso = math.sqrt(sr * sr + nu2)
+        kappa = math.sqrt(max(nu1 - nu2, 0.0))
+        if kappa < 1e-3 * siso:
+            _splat(img, px, py, mx[k], my[k], siso, w[k], lo, h, trunc)
+            continue
+        if a[k] >= d[k]:
+            vx, vy = nu1 - d[k], b[k]
+        else:
+            vx, vy = b[k], nu1 - a[k]
+        vn = math.sqrt(vx * vx + vy * vy)
+        vx /= vn
+        vy /= vn
+        if kappa <= 0.7 * siso:
+            t = math.sqrt(3.0) * kappa
+            _splat(img, px, py, mx[k], my[k], siso, w[k] * (2.0 / 3.0), lo, h, trunc)
+            _splat(img, px, py, mx[k] + t * vx, my[k] + t * vy, siso, w[k] / 6.0, lo, h, trunc)
+            _splat(img, px, py, mx[k] - t * vx, my[k] - t * vy, siso, w[k] / 6.0, lo, h, trunc)
+            continue
+        n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+        norm = 0.0
+        for q in range(n):
+            tq = -trunc + 2.0 * trunc * q / (n - 1)
+            norm += math.exp(-0.5 * tq * tq)
+        for q in range(n):
+            tq = -trunc + 2.0 * trunc * q / (n - 1)
+            _splat(img, px, py, mx[k] + kappa * tq * vx, my[k] + kappa * tq * vy, siso,
+                   w[k] * math.exp(-0.5 * tq * tq) / norm, lo, h, trunc)
+
+
+def _texel_s(wn: TiledNDF, index, gx, gy):
+    """Projected normals ``(..., 2)`` of global texels ``(gx, gy)`` of the tiled plane."""
+    T = wn.wang.size
+    t = _lookup(wn, index, gx // T, gy // T)
+    return wn.wang.tiles[t, gy % T, gx % T, :2]
+
+
+def _dependent_images(wn: TiledNDF, c, sp, index, ij):
+    """Contributions ``(k, R, R)`` of the dependent texels (:func:`dependent_texels`) of the
+    tiles ``ij (k, 2)``, with their exact Jacobians (the actual neighbours, looked up) and the
+    direct P-NDF's weights and normalisation (Yan et al. 2016 closed-form elements)."""
+    T, R = wn.wang.size, wn.resolution
+    imgs = np.zeros((len(ij), R, R))
+    if not len(ij) or not len(wn.dependent):
+        return imgs
+    sh2 = SIGMA_H**2
+    tot2 = sp * sp + sh2
+    rad = TRUNCATION * math.sqrt(tot2)
+    lo_x, hi_x = math.ceil(c[0] - rad - 0.5), math.floor(c[0] + rad - 0.5)
+    lo_y, hi_y = math.ceil(c[1] - rad - 0.5), math.floor(c[1] + rad - 0.5)
+    # the direct P-NDF's normaliser: all texels of the window, a separable sum
+    wsum = (np.exp(-(c[0] - np.arange(lo_x, hi_x + 1) - 0.5) ** 2 / (2 * tot2)).sum()
+            * np.exp(-(c[1] - np.arange(lo_y, hi_y + 1) - 0.5) ** 2 / (2 * tot2)).sum())
+    gx = (ij[:, :1] * T + wn.dependent[None, :, 1]).ravel()
+    gy = (ij[:, 1:] * T + wn.dependent[None, :, 0]).ravel()
+    which = np.repeat(np.arange(len(ij)), len(wn.dependent))
+    keep = (gx >= lo_x) & (gx <= hi_x) & (gy >= lo_y) & (gy <= hi_y)
+    gx, gy, which = gx[keep], gy[keep], which[keep]
+    s0 = _texel_s(wn, index, gx, gy)
+    Jx = 0.5 * (_texel_s(wn, index, gx + 1, gy) - _texel_s(wn, index, gx - 1, gy))
+    Jy = 0.5 * (_texel_s(wn, index, gx, gy + 1) - _texel_s(wn, index, gx, gy - 1))
+    dx = c[0] - (gx + 0.5)
+    dy = c[1] - (gy + 0.5)
+    f, var = sh2 / tot2, sp * sp * sh2 / tot2
+    mean = s0 + f * (Jx * dx[:, None] + Jy * dy[:, None])
+    a = var * (Jx[:, 0] ** 2 + Jy[:, 0] ** 2)
+    b = var * (Jx[:, 0] * Jx[:, 1] + Jy[:, 0] * Jy[:, 1])
+    d = var * (Jx[:, 1] ** 2 + Jy[:, 1] ** 2)
+    w = np.exp(-(dx * dx + dy * dy) / (2 * tot2))
+    cc = np.ascontiguousarray
+    h = 2.0 * wn.support / R
+    _splat_elements(cc(mean[:, 0]), cc(mean[:, 1]), a, b, d, w, which.astype(np.int64),
+                    wn.intrinsic_roughness, -wn.support, h, TRUNCATION, imgs)
+    return imgs / (wsum * h * h)
+
+
+def _prepare(wn, center, sigma_p, index):
+    if not isinstance(wn, TiledNDF):
+        raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
+    c = _as_center(center)
+    sp = _as_sigma_p(sigma_p)
+    if sp.shape != ():
+        raise PrefilterError(f"sigma_p: expected one footprint std, got shape {sp.shape}")
+    return c, float(sp), _as_index(index)
+
+
+def _direct_image(wn: TiledNDF, c, sp, index):
+    if index is None:
+        return pndf_image_implicit(wn.wang, c, sp, wn.resolution, wn.support,
+                                   wn.intrinsic_roughness)
+    T = wn.wang.size
+    i0, j0, nx, ny = _window(wn.wang, c, sp)
+    J, I = np.meshgrid(np.arange(ny) + j0, np.arange(nx) + i0, indexing="ij")
+    local = assemble(wn.wang, _lookup(wn, index, I, J))
+    return pndf_image(local, c - np.array([i0 * T, j0 * T]), sp, wn.resolution, wn.support,
+                      wn.intrinsic_roughness)
+
+
+def contributions(wn: TiledNDF, center, sigma_p, *, index=None):
+    """Per-tile contributions to one footprint's NDF image (paper sec. 5.5, Fig. 12).
+
+    Parameters
+    ----------
+    wn : TiledNDF; center : (2,) texels, any position; sigma_p : footprint std in texels.
+    index : optional explicit ``(ny, nx)`` tile index map (periodic, tile ``(0, 0)`` at the
+        origin) instead of the implicit hashing.
+
+    Returns
+    -------
+    ij : (k, 2) tile coordinates ``(i, j)``; images : (k, R, R) their contributions, each
+    carrying its share of the footprint mass; their sum is the footprint's NDF image. For
+    footprints below ``wn.min_sigma`` (direct P-NDF) or at/above ``wn.wide_sigma``
+    (tile-independent NDF) ``ij`` is empty and ``images`` holds the one image.
+    """
+    c, sp, index = _prepare(wn, center, sigma_p, index)
+    regime = _regime(wn, sp)
+    if regime == "direct":
+        return np.zeros((0, 2), np.int64), _direct_image(wn, c, sp, index)[None]
+    if regime == "wide":
+        return np.zeros((0, 2), np.int64), wn.mean[None].copy()
+    m, terms = _tile_terms(wn, c, sp, index)
+    ij = np.array([(x[0], x[1]) for x in terms], np.int64).reshape(-1, 2)
+    imgs = _dependent_images(wn, c, sp, index, ij)
+    for n, (_, _, t, ay, wy, ax, wx) in enumerate(terms):
+        if ay.size and ax.size:
+            block = wn.images[m][t][ay[:, None], ax[None, :]]  # (ny, nx, R, R)
+            imgs[n] += np.tensordot(np.outer(wy, wx), block, axes=2)
+    return ij, imgs
+
+
+def ndf_image(wn: TiledNDF, center, sigma_p, *, index=None) -> np.ndarray:
+    """NDF image ``(R, R)`` of one footprint over the tiled plane: sum of the tile contributions
+    (direct P-NDF below ``wn.min_sigma``, the tile-independent NDF from ``wn.wide_sigma``)."""
+    return contributions(wn, center, sigma_p, index=index)[1].sum(axis=0)
+
+
+def _pixels(wn: TiledNDF, s):
+    q = as_float_array(s, "s", ndim_min=1, last_dim=2)
+    R, S = wn.resolution, wn.support
+    h = 2.0 * S / R
+    ix = np.floor((q[..., 0] + S) / h).astype(np.int64)
+    iy = np.floor((q[..., 1] + S) / h).astype(np.int64)
+    inside = (ix >= 0) & (ix < R) & (iy >= 0) & (iy < R)
+    return np.clip(iy, 0, R - 1), np.clip(ix, 0, R - 1), inside
+
+
+def ndf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
+    """NDF values ``(...)`` of one footprint at ``s (..., 2)``: the value of the image pixel
+    holding ``s`` (0 outside the support), summed over the tiles under the footprint.
+
+    Cost per ``s``: taps x tiles under the footprint, bounded by ``wide_sigma`` (constant)."""
+    c, sp, index = _prepare(wn, center, sigma_p, index)
+    iy, ix, inside = _pixels(wn, s)
+    regime = _regime(wn, sp)
+    if regime == "direct":
+        v = _direct_image(wn, c, sp, index)[iy, ix]
+    elif regime == "wide":
+        v = wn.mean[iy, ix]
+    else:
+        m, terms = _tile_terms(wn, c, sp, index)
+        ij = np.array([(x[0], x[1]) for x in terms], np.int64).reshape(-1, 2)
+        v = _dependent_images(wn, c, sp, index, ij).sum(axis=0)[iy, ix]
+        py, px = iy.reshape(-1), ix.reshape(-1)
+        for _, _, t, ay, wy, ax, wx in terms:
+            if not (ay.size and ax.size):
+                continue
+            vals = wn.images[m][t][ay[:, None, None], ax[None, :, None], py, px]
+            v += np.tensordot(np.outer(wy, wx), vals, axes=2).reshape(iy.shape)
+    return np.where(inside, v, 0.0)
+
+
+def ndf_pdf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
+    """Density w.r.t. ``s`` that :func:`sample` draws: :func:`ndf` over the image's mass."""
+    img = ndf_image(wn, center, sigma_p, index=index)
+    M = img.sum() * (2.0 * wn.support / wn.resolution) ** 2
+    iy, ix, inside = _pixels(wn, s)
+    return np.where(inside & (M > 0), img[iy, ix] / max(M, 1e-300), 0.0)
+
+
+def sample(wn: TiledNDF, center, sigma_p, n: int, rng=0, *, index=None):
+    """``n`` projected half vectors distributed as one footprint's NDF image (sec. 5.5).
+
+    A tile contribution is chosen with probability proportional to its mass (the paper picks
+    tiles uniformly; by mass the samples follow the sum exactly), then a pixel of it by its
+    inverse CDF, then a uniform point in the pixel.
+
+    Returns
+    -------
+    s : (n, 2); pdf : (n,) the density of ``s``: ``image(pixel) / mass`` (the mixture over the
+    contributions, equal to :func:`ndf_pdf`); 0 for an empty image.
+    """
+    n = as_positive_int(n, "n")
+    gen = as_rng(rng)
+    _, imgs = contributions(wn, center, sigma_p, index=index)
+    R, S = wn.resolution, wn.support
+    h = 2.0 * S / R
+    flat = imgs.reshape(len(imgs), -1)
+    masses = flat.sum(axis=1)
+    total = masses.sum()
+    if total <= 0:
+        return np.zeros((n, 2)), np.zeros(n)
+    part = np.minimum(np.searchsorted(np.cumsum(masses) / total, gen.random(n), side="right"),
+                      len(masses) - 1)
+    pix = np.empty(n, np.int64)
+    u = gen.random(n)
+    for k in np.unique(part):
+        sel = part == k
+        cdf = np.cumsum(flat[k])
+        cdf /= cdf[-1]
+        pix[sel] = np.minimum(np.searchsorted(cdf, u[sel], side="right"), R * R - 1)
+    iy, ix = np.divmod(pix, R)
+    edges = pixel_edges(R, S)
+    jit = gen.random((n, 2))
+    s = np.stack([edges[ix] + h * jit[:, 0], edges[iy] + h * jit[:, 1]], axis=-1)
+    img = flat.sum(axis=0)
+    return s, img[pix] / (total * h * h)
