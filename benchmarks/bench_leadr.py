@@ -15,7 +15,11 @@ specular kernel: ``--convergence`` (:func:`prefilter.leadr.acceptance.convergenc
 Acceptance (``--acceptance``): :mod:`prefilter.leadr.acceptance` (LEADR, normal-mapped reference
 and naive mip-mapped normal mapping vs the displaced height field, 16 to 64 texels per pixel);
 ``--acceptance-env`` the same under the procedural environment (add ``--no-shadowing`` for a
-reference without self-shadowing, the model of the simplified algorithms).
+reference without self-shadowing, the model of the simplified algorithms; ``--surfaces``,
+``--shadings``, ``--blocks`` select rows, ``--k`` / ``--spp`` set the reference's view rays per
+side and MIS samples per hit, e.g. ``--surfaces 'iso 0.1' --shadings diffuse --k 64 --spp 64``
+for a 16x reference); the diffuse rows are also printed against naive shading with the same
+irradiance representation (``acceptance.env_diffuse_table``).
 
 Point-light images (``--image-point``, ~30-50 min): :func:`prefilter.leadr.acceptance.image_point`,
 planes and spheres, iso / anisotropic height fields, specular and diffuse, 4 and 16 texels per
@@ -176,6 +180,16 @@ if __name__ == "__main__":
                     help="far (16 texels/pixel) flicker rows with the reference's own flicker "
                          "floor (acceptance.image_point(noise_floor=True)), ~15 min")
     ap.add_argument("--points", type=int, default=None)
+    ap.add_argument("--surfaces", default=None,
+                    help="with --acceptance-env: comma-separated subset of acceptance.SURFACES "
+                         "(e.g. 'iso 0.1')")
+    ap.add_argument("--shadings", default="specular,diffuse",
+                    help="with --acceptance-env: specular, diffuse or both")
+    ap.add_argument("--blocks", default="16,32,64", help="with --acceptance-env: texels/pixel")
+    ap.add_argument("--k", type=int, default=32,
+                    help="with --acceptance-env: reference view rays per footprint side")
+    ap.add_argument("--spp", type=int, default=16,
+                    help="with --acceptance-env: MIS samples per reference hit")
     a = ap.parse_args()
     if a.flicker_floor:
         from prefilter.leadr.acceptance import flicker_table, image_point
@@ -191,9 +205,17 @@ if __name__ == "__main__":
     elif a.render:
         render_times()
     elif a.acceptance_env:
-        from prefilter.leadr.acceptance import env_table, run_env
+        from prefilter.leadr.acceptance import SURFACES, env_diffuse_table, env_table, run_env
 
-        print(env_table(run_env(shadowing=not a.no_shadowing, log=lambda row: None)))
+        surf = None if a.surfaces is None else {
+            k: SURFACES[k.strip()] for k in a.surfaces.split(",")}
+        rows = run_env(shadowing=not a.no_shadowing, surfaces=surf, k=a.k, spp=a.spp,
+                       shadings=tuple(x.strip() for x in a.shadings.split(",")),
+                       blocks=tuple(int(b) for b in a.blocks.split(",")), log=lambda row: None)
+        print(env_table(rows))
+        if any(r["shading"] == "diffuse" for r in rows):
+            print()
+            print(env_diffuse_table(rows))
     elif a.convergence:
         from prefilter.leadr.acceptance import convergence as conv, convergence_table
 

@@ -3,7 +3,8 @@ height map, mip-mapped by averaging, shaded as a non-centred anisotropic Beckman
 (closed form for point lights, Gaussian-grid integration for environment and irradiance maps).
 """
 
-from prefilter.leadr.envmap import EnvMap, procedural_env, sh9_irradiance, sh9_project
+from prefilter.leadr.envmap import (EnvMap, IrradianceMap, procedural_env, sh9_irradiance,
+                                    sh9_project)
 from prefilter.leadr.maps import (
     CHANNELS,
     LeadrMaps,
@@ -16,6 +17,7 @@ from prefilter.leadr.maps import (
 from prefilter.leadr.shading import (
     artificial_micronormal,
     diffuse_directional,
+    diffuse_irradiance,
     diffuse_sh,
     diffuse_shadowing,
     env_specular,
@@ -27,8 +29,8 @@ from prefilter.leadr.shading import (
 )
 
 __all__ = [
-    "CHANNELS", "EnvMap", "LeadrMaps", "artificial_micronormal", "diffuse_directional",
-    "diffuse_sh", "diffuse_shadowing", "env_specular", "gaussian_grid", "grid_normals", "moments",
+    "CHANNELS", "EnvMap", "IrradianceMap", "LeadrMaps", "artificial_micronormal",
+    "diffuse_directional", "diffuse_irradiance", "diffuse_sh", "diffuse_shadowing", "env_specular", "gaussian_grid", "grid_normals", "moments",
     "point_light", "procedural_env", "schlick", "sh9_irradiance", "sh9_project", "shading_stats",
     "shadowing_ratio", "slopes_from_height", "slopes_from_normals", "stats_to_moments",
 ]

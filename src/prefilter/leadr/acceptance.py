@@ -26,11 +26,11 @@ import numpy as np
 from prefilter.leadr.displaced import (cell_moments, displaced_env_radiance, displaced_radiance,
                                        naive_env_radiance, naive_radiance,
                                        normal_mapped_env_radiance, normal_mapped_radiance)
-from prefilter.leadr.envmap import (EnvMap, procedural_env, sh9_irradiance, sh9_project,
-                                    texel_directions)
+from prefilter.leadr.envmap import (EnvMap, IrradianceMap, procedural_env, sh9_irradiance,
+                                    sh9_project, texel_directions)
 from prefilter.leadr.maps import shading_stats
-from prefilter.leadr.shading import (diffuse_directional, diffuse_sh, env_specular,
-                                     grid_normals, point_light)
+from prefilter.leadr.shading import (diffuse_directional, diffuse_irradiance, diffuse_sh,
+                                     env_specular, grid_normals, point_light)
 from prefilter.microfacet import Beckmann
 from prefilter.texture import height_map
 
@@ -180,12 +180,16 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
     shadow rays each), the normal-mapped reference, naive mip-mapped normal mapping and LEADR
     (``n_grid^2`` grid; diffuse: order-2 SH irradiance), plus ``leadr shadowed`` (the paper's
     non-simplified Algorithms 1 / 2+3 with ``G2 / G1`` per sample; diffuse with the exact
-    irradiance), ``leadr-env`` (what the render method computes since session 3: compiled
-    Algorithm 1 with ``G2 / G1``; diffuse: SH on the 5 x 5 grid plus
-    :func:`~prefilter.leadr.shading.diffuse_shadowing`), and for diffuse ``leadr exact E``
+    irradiance), ``leadr-env`` (what the render method computes: compiled Algorithm 1 with
+    ``G2 / G1``; diffuse since session 5: the irradiance map
+    (:class:`~prefilter.leadr.envmap.IrradianceMap`) on the 5 x 5 grid plus
+    :func:`~prefilter.leadr.shading.diffuse_shadowing`), and for diffuse ``leadr-env SH`` (the
+    session-4 ``leadr-env``: order-2 SH instead of the map), ``leadr exact E``
     (Simplified Algorithm 3 with the exact
-    irradiance instead of SH) and ``naive SH`` (SH irradiance at the naive normal, what
-    ``leadr-irradiance-naive`` renders). ``err``: relative RMSE of the luminance over views and
+    irradiance instead of SH), ``naive SH`` (SH irradiance at the naive normal, what
+    ``leadr-irradiance-naive`` rendered until session 4) and ``naive E map`` (the irradiance
+    map at the naive normal, what it renders now; ``naive`` is Monte Carlo of the exact
+    environment at that normal). ``err``: relative RMSE of the luminance over views and
     shifts; ``bias``: mean signed error, relative; ``flicker``: std over the shifts of
     ``method - reference``, relative, averaged over views (includes the reference's MC noise).
     """
@@ -194,6 +198,7 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
 
     env = EnvMap(procedural_env(env_rows))
     sh = sh9_project(env)
+    irr = IrradianceMap(env)
     rows = []
     for name, spec in (surfaces or SURFACES).items():
         params = dict(spec)
@@ -205,7 +210,8 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
                 sq = {"leadr": 0.0, "leadr shadowed": 0.0, "leadr-env": 0.0,
                       "normal-mapped": 0.0, "naive": 0.0}
                 if not specular:
-                    sq.update({"leadr exact E": 0.0, "naive SH": 0.0})
+                    sq.update({"leadr exact E": 0.0, "naive SH": 0.0, "leadr-env SH": 0.0,
+                               "naive E map": 0.0})
                 dev = {m: [] for m in sq}
                 refs, bias = [], {}
                 for v, (wo, _) in enumerate(PAIRS):
@@ -233,16 +239,19 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
                             vals["leadr shadowed"].append(float(
                                 diffuse_exact(env, wo, mu, cov, n_grid, shadowing=True) @ LUM))
                             lv = diffuse_sh(sh, wo, mu, cov, n_grid)
-                            # the render method's diffuse: SH on its 5 x 5 grid + the compiled
-                            # shadowing correction
+                            # the render method's diffuse: the irradiance map on its 5 x 5
+                            # grid + the compiled shadowing correction (session 4: SH)
                             dg = lr.DIFFUSE_GRID
+                            corr = diffuse_shadowing(env, wo, mu, cov, dg)
                             vals["leadr-env"].append(float(np.maximum(
-                                diffuse_sh(sh, wo, mu, cov, dg)
-                                + diffuse_shadowing(env, wo, mu, cov, dg), 0.0) @ LUM))
+                                diffuse_irradiance(irr, wo, mu, cov, dg) + corr, 0.0) @ LUM))
+                            vals["leadr-env SH"].append(float(np.maximum(
+                                diffuse_sh(sh, wo, mu, cov, dg) + corr, 0.0) @ LUM))
                             vals["leadr exact E"].append(
                                 float(diffuse_exact(env, wo, mu, cov, n_grid) @ LUM))
                             nb = np.array([-mu[0], -mu[1], 1.0]) / np.hypot(1.0, np.hypot(*mu))
                             vals["naive SH"].append(float(sh9_irradiance(sh, nb) @ LUM) / np.pi)
+                            vals["naive E map"].append(float(irr.lookup(nb) @ LUM) / np.pi)
                         vals["leadr"].append(float(lv @ LUM))
                     ref = np.asarray(vals["ref"])
                     refs.append(ref)
@@ -358,6 +367,31 @@ def env_table(rows) -> str:
     return "\n".join(out)
 
 
+def env_diffuse_table(rows) -> str:
+    """Markdown table of :func:`run_env`'s diffuse rows: ``leadr-env`` (irradiance map) and its
+    session-4 SH variant against naive with the same representation: Monte Carlo of the exact
+    environment (``naive``), the irradiance map (``naive E map``), order-2 SH (``naive SH``);
+    signed biases and flickers (std over the shifts, includes the reference's noise)."""
+    out = ["| surface | texels/pixel | leadr-env | leadr-env SH | LEADR + shadowing 9x9 | naive | "
+           "naive E map | naive SH | leadr-env / naive | leadr-env / naive E map | "
+           "leadr-env SH / naive SH | bias leadr-env / SH | flicker leadr-env / naive |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    pc = lambda r, k: f"{100 * r[k]:.1f}%" if k in r else "-"  # noqa: E731
+    ratio = lambda r, a, b: f"{r[f'err {a}'] / max(r[f'err {b}'], 1e-12):.2f}"  # noqa: E731
+    for r in rows:
+        if r["shading"] != "diffuse":
+            continue
+        out.append(
+            f"| {r['surface']} | {r['block']} | {pc(r, 'err leadr-env')} | "
+            f"{pc(r, 'err leadr-env SH')} | {pc(r, 'err leadr shadowed')} | "
+            f"{pc(r, 'err naive')} | {pc(r, 'err naive E map')} | {pc(r, 'err naive SH')} | "
+            f"{ratio(r, 'leadr-env', 'naive')} | {ratio(r, 'leadr-env', 'naive E map')} | "
+            f"{ratio(r, 'leadr-env SH', 'naive SH')} | "
+            f"{100 * r['bias leadr-env']:+.1f}% / {100 * r['bias leadr-env SH']:+.1f}% | "
+            f"{100 * r['flicker leadr-env']:.2f}% / {100 * r['flicker naive']:.2f}% |")
+    return "\n".join(out)
+
+
 def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48,
               height: int = 32, sub: int = 8, spp: int = 16, sigma_b: float = 0.1,
               tex_size: int = 128, shadowing: bool = True, seed: int = 0,
@@ -422,7 +456,8 @@ def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48
             else:
                 methods = {"leadr": lr.render_leadr_irradiance,
                            "leadr simplified": lambda sc, st: lr._render_irradiance(
-                               sc, st, True, "leadr-irradiance-simplified", shadowing=False),
+                               sc, st, True, "leadr-irradiance-simplified", shadowing=False,
+                               irradiance_map=False),
                            "naive": lr.render_leadr_irradiance_naive}
             imgs = {m: np.asarray(f(scene, settings), np.float64) for m, f in methods.items()}
             # reference: sub x sub rays per pixel through the displaced plane

@@ -13,14 +13,17 @@ Self-shadowing is on by default (the displaced reference has it and it lowers th
 docs/leadr.md): specular under point/directional lights by the closed form of supplemental 3.3
 with ``G2``; under the environment by Algorithm 1 with ``G2 / G1`` per grid sample (compiled,
 :func:`prefilter.leadr.shading.env_specular` with ``shadowing``); diffuse by Algorithm 3 with
-``E(m) = <m, wl> G2 / G1`` per delta light and, for the environment, order-2 SH irradiance
-(Simplified Algorithm 2) plus :func:`prefilter.leadr.shading.diffuse_shadowing`. Schlick Fresnel
+``E(m) = <m, wl> G2 / G1`` per delta light and, for the environment, the exact irradiance
+(:class:`prefilter.leadr.envmap.IrradianceMap`, looked up per grid normal) plus
+:func:`prefilter.leadr.shading.diffuse_shadowing`; ``leadr-env-simplified`` keeps the
+supplemental's order-2 SH irradiance (Simplified Algorithm 2). Schlick Fresnel
 per grid sample is linear in ``f0``, so rgb ``f0`` costs two scalar passes (``f0 = 1`` and
 ``f0 = 0``) blended per channel. ``leadr-irradiance`` renders the diffuse layer only
 (``base_color``). The environment orientation is
 :data:`prefilter.leadr.envmap.ENV_FROM_WORLD` (``docs/leadr.md``).
 
-The ``-naive`` variants are naive mip-mapped normal mapping under the same integrators: the mean
+The ``-naive`` variants are naive mip-mapped normal mapping under the same integrators (and the
+same irradiance map): the mean
 slope of the footprint (the mip-averaged height-map normal) with the micro roughness only, i.e.
 without the meso-scale slope covariance.
 """
@@ -32,11 +35,12 @@ import weakref
 import numpy as np
 
 from prefilter.errors import PrefilterError
-from prefilter.leadr.envmap import (ENV_FROM_WORLD, env_from_image, latlong_resample,
-                                    sh9_project)
+from prefilter.leadr.envmap import (ENV_FROM_WORLD, IrradianceMap, env_from_image,
+                                    latlong_resample, sh9_project)
 from prefilter.leadr.maps import shading_stats
-from prefilter.leadr.shading import (diffuse_directional, diffuse_sh, diffuse_shadowing,
-                                     env_specular, grid_normals, point_light, schlick)
+from prefilter.leadr.shading import (diffuse_directional, diffuse_irradiance, diffuse_sh,
+                                     diffuse_shadowing, env_specular, grid_normals, point_light,
+                                     schlick)
 from prefilter.microfacet import beckmann_lambda
 
 DIFFUSE_GRID = 5
@@ -199,11 +203,12 @@ def _env_rotation(t, b, n) -> np.ndarray:
 
 def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int = ENV_GRID,
                     diffuse_grid: int = DIFFUSE_GRID, shadowing: bool = True,
-                    mips=None) -> np.ndarray:
+                    mips=None, irradiance=None) -> np.ndarray:
     """Radiance ``(N, 3)`` of hits ``g``: environment specular (Algorithm 1 with self-shadowing,
-    compiled; ``shadowing=False``: Simplified Algorithm 1) + diffuse (Simplified Algorithm 3 on
-    SH irradiance, plus :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``) +
-    point/directional lights (:func:`shade_leadr_delta`)."""
+    compiled; ``shadowing=False``: Simplified Algorithm 1) + diffuse (Algorithm 3's grid on the
+    irradiance map ``irradiance``, or on the SH irradiance ``sh`` if it is ``None``, plus
+    :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``) + point/directional
+    lights (:func:`shade_leadr_delta`)."""
     t, b, n, wo = _frame(g)
     mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips)
     rot = _env_rotation(t, b, n)
@@ -219,7 +224,7 @@ def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int
             if np.any(f0 != 1.0):
                 out += (1.0 - f0) * spec(0.0)
         if np.any(base != 0.0):
-            diff = diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=rot)
+            diff = _diffuse_env(sh, irradiance, wo, mean, cov, diffuse_grid, rot)
             if shadowing:
                 diff = np.maximum(diff + diffuse_shadowing(env, wo, mean, cov, diffuse_grid,
                                                            to_world=rot), 0.0)
@@ -231,15 +236,17 @@ def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int
 
 def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
                            diffuse_grid: int = DIFFUSE_GRID, shadowing: bool = True,
-                           env=None, mips=None, taps: int | None = None) -> np.ndarray:
-    """Diffuse radiance ``(N, 3)`` of hits ``g``: SH irradiance ``sh (9, 3)`` (environment, map
-    coordinates) by Simplified Algorithm 3 (plus the environment ``env``'s
+                           env=None, mips=None, taps: int | None = None,
+                           irradiance=None) -> np.ndarray:
+    """Diffuse radiance ``(N, 3)`` of hits ``g``: the environment's irradiance map
+    ``irradiance`` (or, if ``None``, its SH irradiance ``sh (9, 3)``; map coordinates) by
+    Algorithm 3's grid (plus the environment ``env``'s
     :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``); point and directional
     lights one by one (Algorithm 3 for one light, times ``G2 / G1`` if ``shadowing``)."""
     t, b, n, wo = _frame(g)
     mean, cov, base, _ = leadr_stats(scene, g, meso=meso, mips=mips, taps=taps)
     rot = _env_rotation(t, b, n)
-    out = diffuse_sh(sh, wo, mean, cov, diffuse_grid, to_world=rot)
+    out = _diffuse_env(sh, irradiance, wo, mean, cov, diffuse_grid, rot)
     if shadowing and env is not None:
         out = np.maximum(out + diffuse_shadowing(env, wo, mean, cov, diffuse_grid, to_world=rot),
                          0.0)
@@ -326,6 +333,12 @@ def env_specular_shadowed(env, wo, mean, cov, n: int = ENV_GRID, *, f0=None, to_
     return out
 
 
+def _diffuse_env(sh, irradiance, wo, mean, cov, n, rot):
+    if irradiance is None:
+        return diffuse_sh(sh, wo, mean, cov, n, to_world=rot)
+    return diffuse_irradiance(irradiance, wo, mean, cov, n, to_world=rot)
+
+
 def _lights_without_quads(scene, method):
     if any(light.type == "quad" for light in scene.lights):
         raise PrefilterError(f"method {method!r}: quad lights are not supported; expected "
@@ -333,28 +346,32 @@ def _lights_without_quads(scene, method):
     return scene.light_set()
 
 
-def _render_env(scene, settings, meso: bool, name: str, shadowing: bool = True) -> np.ndarray:
+def _render_env(scene, settings, meso: bool, name: str, shadowing: bool = True,
+                irradiance_map: bool = True) -> np.ndarray:
     from prefilter.render.pipeline import render_samples
 
     lights = _lights_without_quads(scene, name)
     env = scene_environment(scene)
     sh = sh9_project(env) if env is not None else np.zeros((9, 3))
+    irr = IrradianceMap(env) if env is not None and irradiance_map else None
     return render_samples(scene, settings,
                           lambda g, _u: shade_leadr_env(scene, g, env, sh, lights, meso=meso,
-                                                        shadowing=shadowing),
+                                                        shadowing=shadowing, irradiance=irr),
                           stratified=settings.spp > 1, desc=name)
 
 
 def _render_irradiance(scene, settings, meso: bool, name: str,
-                       shadowing: bool = True) -> np.ndarray:
+                       shadowing: bool = True, irradiance_map: bool = True) -> np.ndarray:
     from prefilter.render.pipeline import render_samples
 
     lights = _lights_without_quads(scene, name)
     env = scene_environment(scene)
     sh = sh9_project(env) if env is not None else np.zeros((9, 3))
+    irr = IrradianceMap(env) if env is not None and irradiance_map else None
     return render_samples(scene, settings,
                           lambda g, _u: shade_leadr_irradiance(scene, g, sh, lights, meso=meso,
-                                                               env=env, shadowing=shadowing),
+                                                               env=env, shadowing=shadowing,
+                                                               irradiance=irr),
                           stratified=settings.spp > 1, desc=name)
 
 
@@ -372,8 +389,9 @@ def render_leadr_env_shadowed(scene, settings) -> np.ndarray:
 
 def render_leadr_env_simplified(scene, settings) -> np.ndarray:
     """``leadr-env-simplified``: the supplemental's Simplified Algorithms 1-3 (masking only, no
-    self-shadowing) for every layer and light."""
-    return _render_env(scene, settings, True, "leadr-env-simplified", shadowing=False)
+    self-shadowing; order-2 SH irradiance) for every layer and light."""
+    return _render_env(scene, settings, True, "leadr-env-simplified", shadowing=False,
+                       irradiance_map=False)
 
 
 def render_leadr_env_naive(scene, settings) -> np.ndarray:
@@ -382,8 +400,8 @@ def render_leadr_env_naive(scene, settings) -> np.ndarray:
 
 
 def render_leadr_irradiance(scene, settings) -> np.ndarray:
-    """The ``leadr-irradiance`` method (diffuse layer; environment, point, directional lights;
-    with self-shadowing)."""
+    """The ``leadr-irradiance`` method (diffuse layer; environment by its irradiance map,
+    point, directional lights; with self-shadowing)."""
     return _render_irradiance(scene, settings, True, "leadr-irradiance")
 
 

@@ -366,6 +366,25 @@ def diffuse_sh(sh_coeffs, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None
     return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, None, to_world)
 
 
+def diffuse_irradiance(irradiance, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None,
+                       to_world=None) -> np.ndarray:
+    """Rough diffuse microfacets (albedo 1) under an environment's exact irradiance: Simplified
+    Algorithm 3 with ``E(m)`` read from a :class:`prefilter.leadr.envmap.IrradianceMap` instead
+    of order-2 SH (:func:`diffuse_sh`), ``(1 / pi) sum W S_ E(m) / sum W S_``; ``(..., C)``.
+    Without self-shadowing (add :func:`diffuse_shadowing`)."""
+    from prefilter.leadr.envmap import IrradianceMap
+
+    if not isinstance(irradiance, IrradianceMap):
+        raise PrefilterError("irradiance: expected a prefilter.leadr.envmap.IrradianceMap, got "
+                             f"{type(irradiance).__name__}")
+    n = as_positive_int(n, "n")
+
+    def radiance(m, wi, jac, cell, tw):
+        return irradiance.lookup(_rotate(tw[:, None] if tw is not None else None, m)) / np.pi
+
+    return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, None, to_world)
+
+
 def shadowing_ratio(wo, wi, mean_slope, slope_cov) -> np.ndarray:
     """``G2 / G1 = (1 + Lambda(wo)) / (1 + Lambda(wo) + Lambda(wi))`` of non-centred Gaussian
     slopes (LEADR supplemental eq. 9 and 3.3: the shadowing the simplified algorithms drop),
