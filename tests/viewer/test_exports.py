@@ -156,6 +156,23 @@ def test_footprint_bias_follows_the_method_defaults():
     assert f"MS_LOD_BIAS = {bias!r}, MS_LOD_START = {start!r}" in ms_glsl.glsl_source()
 
 
+def test_footprint_taps_follow_the_method_defaults():
+    from prefilter.multiscale import render as ms_render
+
+    def f(scene, settings, *, taps=3, taps_below=float("inf"), taps_ratio=2, taps_normalize=1):
+        pass
+
+    assert ms_glsl.footprint_taps(f) == (3, float("inf"), 2.0, True)
+    assert ms_glsl.footprint_taps(lambda scene, settings: None) == (0, 4.0, 1.5, False)
+    assert ms_glsl.footprint_taps(ms_render.render_multiscale) == (
+        ms_render.TAPS, ms_render.TAPS_BELOW, ms_render.TAPS_RATIO, False)
+    src = ms_glsl.glsl_source()
+    assert f"const int MS_TAPS = {ms_render.TAPS};" in src
+    assert (f"const float MS_TAPS_BELOW = {ms_render.TAPS_BELOW!r}, "
+            f"MS_TAPS_RATIO = {ms_render.TAPS_RATIO!r};") in src
+    assert "const bool MS_TAPS_NORM = false;" in src
+
+
 def test_export_height_chains_for_leadr(tmp_path):
     """An object with a normal map and a height map keeps both (LTC modes read the normal map,
     leadr-point the height map's slope moments); the float16 atlas is the float32 one rounded."""

@@ -1,7 +1,9 @@
 """The viewer against the Python renderer: the same scenes, methods and settings rendered by
 WebGL2 (headless Chromium, SwiftShader) and by ``prefilter.render.render``; linear radiance,
 relative RMSE over covered pixels <= 1 % per method, for float32 and float16 tables (and, for
-``leadr-point``, float32 and float16 moment maps)."""
+``leadr-point``, float32 and float16 moment maps). ``near-grazing`` exercises
+``ltc-multiscale``'s anisotropic taps: the page with one tap (its exported constant patched)
+fails the bound there."""
 
 import numpy as np
 import pytest
@@ -11,14 +13,16 @@ from prefilter.viewer import METHODS, pixel_match
 from prefilter.viewer.match import scene
 
 TOL = 0.01
-CASES = [(s, m) for s in ("delta", "textured") for m in METHODS
+LIT = ("delta", "textured", "near-grazing")
+CASES = [(s, m) for s in LIT for m in METHODS
          if m != "leadr-point" and not m.startswith("colormap-")] + [
     ("leadr", "leadr-point"), ("colormap", "colormap-filtered"), ("colormap", "colormap-naive")]
 
 
 @pytest.fixture(scope="module")
 def rows(browser):
-    return (pixel_match(scenes=("delta", "textured"), driver=browser, width=96, height=72)
+    return (pixel_match(scenes=LIT, methods=[m for m in METHODS if m.startswith("ltc")],
+                        driver=browser, width=96, height=72)
             + pixel_match(scenes=("leadr",), methods=("leadr-point",), driver=browser, width=96,
                           height=72)
             + pixel_match(scenes=("colormap",), methods=("colormap-filtered", "colormap-naive"),
@@ -69,3 +73,74 @@ def test_other_scenes_all_methods(browser):
 def test_colormap_filtered_differs_from_naive_by_more_than_the_tolerance():
     sc = scene("colormap", 96, 72)
     assert _rel(render(sc, "colormap-naive"), render(sc, "colormap-filtered")) > 10 * TOL
+
+
+# -- ltc-multiscale's anisotropic taps on near, grazing footprints -----------------------------
+
+
+def _rel_covered(img, ref, covered):
+    e, r = (img - ref)[covered], ref[covered]
+    return float(np.sqrt(np.mean(e * e)) / np.sqrt(np.mean(r * r)))
+
+
+def _page_with(browser, tmp_path, sc, old, new):
+    """The page's ``ltc-multiscale`` image (f32) of scene ``sc`` with the line ``old`` of the
+    exported ``multiscale.glsl`` replaced by ``new`` (``(H, W, 3)`` radiance, coverage)."""
+    from prefilter.viewer import export_scene, serve
+    from prefilter.viewer.browser import open_viewer, render_linear
+
+    out = export_scene(sc, tmp_path / "page", builtin_maps=False)
+    g = out / "data" / "multiscale.glsl"
+    src = g.read_text()
+    assert src.count(old) == 1
+    g.write_text(src.replace(old, new))
+    server, url = serve(out)
+    try:
+        open_viewer(browser, url + "index.html")
+        return render_linear(browser, "ltc-multiscale", "f32")
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+@pytest.fixture(scope="module")
+def near():
+    """``near-grazing`` at 96 x 72 and its Python ``ltc-multiscale`` images: the default (taps),
+    one tap (``taps=0``) and renormalised taps (``taps_normalize=True``)."""
+    from prefilter.multiscale.render import render_multiscale
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.scene import load_scene
+
+    sc = scene("near-grazing", 96, 72)
+    s = load_scene(sc)
+    return sc, {k: render_multiscale(s, RenderSettings(), **kw) for k, kw in
+                (("taps", {}), ("one", {"taps": 0}), ("norm", {"taps_normalize": True}))}
+
+
+def test_near_grazing_exercises_the_taps(near):
+    """The taps change the Python image of ``near-grazing`` by far more than the bound (measured
+    16 %), so the pixel match there checks them."""
+    _, py = near
+    assert _rel(py["one"], py["taps"]) > 10 * TOL
+
+
+def test_page_with_one_tap_fails_the_bound(browser, tmp_path, near):
+    """The page with its taps switched off (``MS_TAPS = 0``) is the Python one-tap image but
+    fails the 1 % bound against the Python method (measured 16 %): the pixel match of
+    ``near-grazing`` would catch a viewer reading one tap."""
+    sc, py = near
+    img, covered = _page_with(browser, tmp_path, sc, "const int MS_TAPS = 4;",
+                              "const int MS_TAPS = 0;")
+    assert covered.sum() > 0.3 * 96 * 72
+    assert _rel_covered(img, py["one"], covered) <= TOL
+    assert _rel_covered(img, py["taps"], covered) > 5 * TOL
+
+
+def test_page_renormalised_taps_match_python(browser, tmp_path, near):
+    """``MS_TAPS_NORM = true`` (not the default) is ``taps_normalize=True`` of the Python method,
+    which differs from the default by more than the bound (measured 5.3 %)."""
+    sc, py = near
+    img, covered = _page_with(browser, tmp_path, sc, "const bool MS_TAPS_NORM = false;",
+                              "const bool MS_TAPS_NORM = true;")
+    assert _rel_covered(img, py["norm"], covered) <= TOL
+    assert _rel_covered(py["taps"], py["norm"], covered) > 2 * TOL

@@ -8,9 +8,11 @@ normals) and ``alpha_total`` combines micro and meso roughness (eq. 7 form). The
 texture of ``ALPHA_MESO_WIDTH`` texels per row (:func:`alpha_meso_nodes`) and interpolates them
 the same way. ``alpha_total`` is our refit (:data:`prefilter.multiscale.FIT_COEFFS`) in closed
 form. The normal-map footprint bias of each method's default (``lod_bias``, ``lod_bias_start``)
-is read from its signature; its anisotropic taps (``taps``, below 4 texels) are not in the
-shader, which reads the single isotropic tap. :func:`alpha_meso_twin` is the shader's
-``alphaMeso`` in NumPy.
+and its anisotropic taps of near, elongated footprints (``taps``, ``taps_below``, ``taps_ratio``,
+``taps_normalize``) are read from their signatures (:func:`footprint_bias`,
+:func:`footprint_taps`), so the shader follows the Python defaults; the viewer's
+``viewer.frag.glsl`` (``footprintMs``) reads the normal map with them.
+:func:`alpha_meso_twin` is the shader's ``alphaMeso`` in NumPy.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ import numpy as np
 from prefilter._io import atomic_path
 
 __all__ = ["ALPHA_MESO_WIDTH", "GLSL", "alpha_meso_nodes", "alpha_meso_twin", "export_all",
-           "footprint_bias", "glsl_source"]
+           "footprint_bias", "footprint_taps", "glsl_source"]
 
 #: Texels per row of the ``alpha_meso`` node texture (WebGL2 guarantees 2048).
 ALPHA_MESO_WIDTH = 64
@@ -51,6 +53,15 @@ float msLodScale(float major, float bias, float start) {{
     if (start < 0.0) return exp2(bias);
     return exp2(clamp(log2(max(major, 1.0)) - start, 0.0, bias));
 }}
+
+// ltc-multiscale's anisotropic taps (prefilter.multiscale.render.taps_lookup): a footprint whose
+// major axis is below MS_TAPS_BELOW texels and longer than MS_TAPS_RATIO times the minor one is
+// read as the mean of clamp(ceil(major / minor), 2, MS_TAPS) unnormalised trilinear taps along
+// the major axis at the LOD of max(minor, major / n); MS_TAPS < 2: off. MS_TAPS_NORM: each tap's
+// level-0 read renormalised below LOD 1.
+const int MS_TAPS = {taps};
+const float MS_TAPS_BELOW = {below}, MS_TAPS_RATIO = {ratio};
+const bool MS_TAPS_NORM = {norm};
 
 // eqs. 6-7, our refit: alpha^2 = a^2 + b^2 + ab (c0 + p (c1 + c2 p) + c3 ab), p = a + b
 float alphaTotal(float a, float b) {{
@@ -88,9 +99,30 @@ def footprint_bias(fn) -> tuple[float, float]:
     return float(default("lod_bias", 0.0)), -1.0 if start is None else float(start)
 
 
+def footprint_taps(fn) -> tuple[int, float, float, bool]:
+    """``(taps, taps_below, taps_ratio, taps_normalize)`` defaults of a render method's signature
+    (``(0, 4.0, 1.5, False)``, i.e. no taps, for methods without the options)."""
+    import inspect
+
+    params = inspect.signature(fn).parameters
+
+    def default(name, fallback):
+        p = params.get(name)
+        return fallback if p is None or p.default is inspect.Parameter.empty else p.default
+
+    return (int(default("taps", 0)), float(default("taps_below", 4.0)),
+            float(default("taps_ratio", 1.5)), bool(default("taps_normalize", False)))
+
+
+def _glsl_float(x: float) -> str:
+    # GLSL ES has no inf literal: "below inf texels" (every footprint) is below float32's max
+    return "3.0e38" if x > 3.0e38 else repr(float(x))
+
+
 def glsl_source() -> str:
-    """:data:`GLSL` with the node count, :data:`~prefilter.multiscale.FIT_COEFFS` and the
-    default footprint biases of ``render_multiscale`` / ``render_multiscale_aniso`` filled in."""
+    """:data:`GLSL` with the node count, :data:`~prefilter.multiscale.FIT_COEFFS`, the default
+    footprint biases of ``render_multiscale`` / ``render_multiscale_aniso`` and the default
+    anisotropic taps of ``render_multiscale`` filled in."""
     from prefilter.multiscale.aniso import render_multiscale_aniso
     from prefilter.multiscale.convolution import FIT_COEFFS
     from prefilter.multiscale.meso import _A_NODES
@@ -100,8 +132,11 @@ def glsl_source() -> str:
     n = len(_A_NODES)
     bias, start = footprint_bias(render_multiscale)
     abias, astart = footprint_bias(render_multiscale_aniso)
+    taps, below, ratio, norm = footprint_taps(render_multiscale)
     return GLSL.format(n=n, last=n - 1, w=ALPHA_MESO_WIDTH, c0=c0, c1=c1, c2=c2, c3=c3,
-                       bias=bias, start=start, abias=abias, astart=astart)
+                       bias=bias, start=start, abias=abias, astart=astart, taps=taps,
+                       below=_glsl_float(below), ratio=_glsl_float(ratio),
+                       norm="true" if norm else "false")
 
 
 def alpha_meso_twin(nodes, r) -> np.ndarray:

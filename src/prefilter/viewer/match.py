@@ -39,9 +39,11 @@ def _camera(width, height):
 #: crosses the plane seen by a close sphere (horizon clipping everywhere), the default scene with
 #: a point and a directional light added, a height-mapped plane and a sphere with colour maps,
 #: and height-mapped objects under point and directional lights only (``leadr-point``; in
-#: ``leadr-grazing`` low lights on a mostly diffuse material, where self-shadowing shows).
+#: ``leadr-grazing`` low lights on a mostly diffuse material, where self-shadowing shows), a
+#: texture-driven colour map (``colormap-*``), and a bump-mapped plane seen from just above it
+#: (``near-grazing``: near, elongated footprints, where ``ltc-multiscale`` reads anisotropic taps).
 SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr",
-          "leadr-grazing", "colormap")
+          "leadr-grazing", "colormap", "near-grazing")
 
 
 def applies(sc, method: str) -> bool:
@@ -133,6 +135,14 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
                                         "texture": {"procedural": "noise", "size": 64,
                                                     "seed": 3, "corr_length": 1.5},
                                         "range": [-4, 4], "sigma_max": 1.5}}}
+    if name == "near-grazing":
+        # the camera 0.4 above the Gaussian-bump plane (1/4 of the default texel density): the
+        # footprints of the near half are 1-4 texels long and 1.5-10x longer than wide
+        return {"camera": {**_camera(width, height), "origin": [0.0, 0.4, 2.0],
+                           "target": [0.0, 0.0, -1.0]},
+                "lights": [_quad(y0=0.2, y1=1.0)],
+                "objects": [_plane({"alpha": 0.1, "base_color": 0.02, "f0": 0.9,
+                                    "normal_map": dict(BUILTIN_MAPS["gaussian"])}, uv=2.0)]}
     raise PrefilterError(f"scene: expected one of {', '.join(SCENES)}, got {name!r}")
 
 

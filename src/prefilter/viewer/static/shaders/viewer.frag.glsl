@@ -155,19 +155,84 @@ float footprintMajor(ivec2 chain, vec4 dudv) {
     return sqrt(0.5 * (p + r) + disc);
 }
 
-// isotropic trilinear lookup at lod = log2(major axis of the footprint in texels)
-void footprint(ivec2 chain, vec2 uv, vec4 dudv, out vec4 A, out vec4 B) {
-    A = vec4(0.0); B = vec4(0.0);
-    float major = footprintMajor(chain, dudv);
-    float n = float(chain.y);
-    float lod = clamp(log2(max(major, 1.0)), 0.0, n - 1.0);
+// the footprint ellipse in texels of the chain's level 0: major and minor axis, the major
+// direction as a unit vector in texel space (kernels._footprint_axes, texture.mip.footprint_axes)
+void footprintAxes(ivec2 chain, vec4 dudv, out float major, out float minor, out vec2 dir) {
+    ivec4 L0 = texelFetch(uLevels, ivec2(chain.x, 0), 0);
+    float w0 = float(L0.z), h0 = float(L0.y);
+    float j00 = dudv.x * w0, j01 = dudv.y * w0, j10 = dudv.z * h0, j11 = dudv.w * h0;
+    float p = j00 * j00 + j01 * j01, r = j10 * j10 + j11 * j11, q = j00 * j10 + j01 * j11;
+    float disc = sqrt(max(0.25 * (p - r) * (p - r) + q * q, 0.0));
+    float l1 = 0.5 * (p + r) + disc, l2 = max(0.5 * (p + r) - disc, 0.0);
+    // eigenvector of l1: (q, l1 - p) or (l1 - r, q), whichever is longer (stable)
+    vec2 v1 = vec2(q, l1 - p), v2 = vec2(l1 - r, q);
+    dir = dot(v1, v1) >= dot(v2, v2) ? v1 : v2;
+    float nd = length(dir);
+    dir = nd > 0.0 ? dir / nd : vec2(1.0, 0.0);
+    major = sqrt(l1);
+    minor = sqrt(l2);
+}
+
+// trilinear read of the chain at `lod` (clamped to its levels), weight added
+// (kernels._trilinear_into)
+void trilinearAdd(ivec2 chain, vec2 uv, float lod, float wgt, inout vec4 A, inout vec4 B) {
+    lod = clamp(lod, 0.0, float(chain.y - 1));
     if (chain.y > 1) {
         int l0 = min(int(floor(lod)), chain.y - 2);
         float t = lod - float(l0);
-        bilinearAdd(chain.x + l0, uv, 1.0 - t, A, B);
-        bilinearAdd(chain.x + l0 + 1, uv, t, A, B);
+        bilinearAdd(chain.x + l0, uv, wgt * (1.0 - t), A, B);
+        bilinearAdd(chain.x + l0 + 1, uv, wgt * t, A, B);
     } else {
-        bilinearAdd(chain.x, uv, 1.0, A, B);
+        bilinearAdd(chain.x, uv, wgt, A, B);
+    }
+}
+
+// isotropic trilinear lookup at lod = log2(major axis of the footprint in texels)
+void footprint(ivec2 chain, vec2 uv, vec4 dudv, out vec4 A, out vec4 B) {
+    A = vec4(0.0); B = vec4(0.0);
+    trilinearAdd(chain, uv, log2(max(footprintMajor(chain, dudv), 1.0)), 1.0, A, B);
+}
+
+// ltc-multiscale's normal-map read (multiscale.render.taps_lookup; the fused
+// kernels.ltc_samples_kernel): the footprint biased by MS_LOD_BIAS / MS_LOD_START; below
+// MS_TAPS_BELOW texels, a footprint more than MS_TAPS_RATIO times longer than wide is the mean of
+// n = clamp(ceil(major / minor), 2, MS_TAPS) unnormalised trilinear taps at the cell centres of
+// the major axis, at lod = log2(max(minor, major / n)): the averaged normal's length r then sees
+// the spread of normals along the whole elongated footprint, not of a blurred isotropic one.
+void footprintMs(ivec2 chain, vec2 uv, vec4 dudv, out vec4 A, out vec4 B) {
+    A = vec4(0.0); B = vec4(0.0);
+    float major, minor;
+    vec2 dir;
+    footprintAxes(chain, dudv, major, minor, dir);
+    // a constant bias scales the footprint; a ramped one (start >= 0) is added to the LOD
+    float ns = MS_LOD_START < 0.0 ? exp2(MS_LOD_BIAS) : 1.0;
+    float lod = log2(max(ns * major, 1.0));
+    float bias = MS_LOD_START < 0.0 ? 0.0 : clamp(lod - MS_LOD_START, 0.0, MS_LOD_BIAS);
+    int n = 1;
+    if (MS_TAPS >= 2 && major < MS_TAPS_BELOW && major > MS_TAPS_RATIO * minor)
+        n = int(min(max(ceil(major / max(minor, 1e-30)), 2.0), float(MS_TAPS)));
+    if (n == 1) {
+        trilinearAdd(chain, uv, lod + bias, 1.0, A, B);
+        return;
+    }
+    float lodT = log2(max(ns * max(minor, major / float(n)), 1.0)) + bias;
+    float lodc = clamp(lodT, 0.0, float(chain.y - 1));
+    ivec4 L0 = texelFetch(uLevels, ivec2(chain.x, 0), 0);
+    vec2 axis = dir * major / vec2(float(L0.z), float(L0.y));
+    float w = 1.0 / float(n);
+    for (int i = 0; i < MS_TAPS; ++i) {
+        if (i >= n) break;
+        vec2 p = uv + ((float(i) + 0.5) / float(n) - 0.5) * axis;
+        if (MS_TAPS_NORM && lodc < 1.0 && chain.y > 1) {
+            // the level-0 bilinear normal renormalised, then blended with level 1
+            vec4 a0 = vec4(0.0), b0 = vec4(0.0);
+            bilinearAdd(chain.x, p, 1.0, a0, b0);
+            float ln = length(a0.xyz);
+            A += w * (ln > 0.0 ? (1.0 - lodc) / ln : 1.0 - lodc) * a0;
+            bilinearAdd(chain.x + 1, p, w * lodc, A, B);
+        } else {
+            trilinearAdd(chain, p, lodT, w, A, B);
+        }
     }
 }
 
@@ -310,15 +375,9 @@ vec3 shadeColormap(Hit h, bool filtered) {
     if (ch.x < 0) return vec3(0.0);
     ivec4 L0 = texelFetch(uLevels, ivec2(ch.x, 0), 0);
     float w = float(L0.z), hh = float(L0.y);
-    float a00 = h.dudv.x * w, a01 = h.dudv.y * w, a10 = h.dudv.z * hh, a11 = h.dudv.w * hh;
-    float p = a00 * a00 + a01 * a01, r = a10 * a10 + a11 * a11, q = a00 * a10 + a01 * a11;
-    float disc = sqrt(max(0.25 * (p - r) * (p - r) + q * q, 0.0));
-    float l1 = 0.5 * (p + r) + disc, l2 = max(0.5 * (p + r) - disc, 0.0);
-    vec2 v1 = vec2(q, l1 - p), v2 = vec2(l1 - r, q);
-    vec2 dir = dot(v1, v1) >= dot(v2, v2) ? v1 : v2;
-    float nd = length(dir);
-    dir = nd > 0.0 ? dir / nd : vec2(1.0, 0.0);
-    float major = sqrt(l1), minor = sqrt(l2);
+    float major, minor;
+    vec2 dir;
+    footprintAxes(ch, h.dudv, major, minor, dir);
     int taps = minor > 0.0 ? int(min(max(ceil(major / minor), 1.0), 8.0)) : 8;
     float lod = log2(max(max(minor, major / 8.0), 1.0));
     vec2 axis = dir * major / vec2(w, hh);
@@ -396,10 +455,8 @@ vec3 shade(Hit h, vec3 view, int method) {
         ay = min(sqrt(2.0 * l2), 1.0);
     } else if (map.x >= 0) {
         vec4 A, B;
-        vec4 fp = h.dudv;
-        if (method == METHOD_MULTISCALE)
-            fp *= msLodScale(footprintMajor(map.xy, h.dudv), MS_LOD_BIAS, MS_LOD_START);
-        footprint(map.xy, h.uv, fp, A, B);
+        if (method == METHOD_MULTISCALE) footprintMs(map.xy, h.uv, h.dudv, A, B);
+        else footprint(map.xy, h.uv, h.dudv, A, B);
         shadingFrame(gt, gb, gn, A.xyz, ts, bs, ns);
         if (method == METHOD_MULTISCALE) {
             float am = alphaMeso(min(length(A.xyz), 1.0));
