@@ -1,25 +1,89 @@
 """Numba kernels of the compressed queries (kept apart from ``query.py``, whose public ``range``
 would shadow the builtin inside compiled code).
 
-Every kernel takes the prefix sums ``A``, ``Bp`` rank-contiguous, ``(G, B + 1, R)``
-(:func:`prefilter.glints.query._prefix_t`, what ``query._args`` passes): the kernels read all
-components of a group at one or two NDF pixels, which the stored ``(G, R, B + 1)`` layout spreads
-over one cache line per component (17 floats apart)."""
+Every kernel takes the packed arrays of :func:`prefilter.glints.query._args`, in this order:
+
+* ``Pa``, ``Pb`` ``(M, B + 1)`` (``M``: sum of the groups' ranks): the 1D prefix sums of the row /
+  column factors, each group's block of ``r_g (B + 1)`` values rank-innermost (flat index
+  ``m_g (B + 1) + i r_g + r``), so a group's components at one NDF pixel are adjacent;
+* ``C``: the tuple ``(cq, wsc, Fa, Fb)``: the third factors, flat (row ``k`` of group ``g`` at
+  ``c0_g + (k - k0_g) stride_g``), the scale of each component ``(M,)`` and the factors
+  themselves ``(M, B)`` (flat ``m_g B + i r_g + r``);
+* ``block_index``, ``image_cell`` (as in :class:`prefilter.glints.store.GlintsMap`);
+* ``meta (G, 5)`` int64 per group: ``r_g``, ``m_g``, ``k0_g``, ``c0_g``, ``stride_g``.
+
+A pixel of a block of group ``g`` is ``sum_r wsc[m_g + r] cq[k, r] Fa[i, r] Fb[j, r]`` and a
+rectangle's sum the same with prefix-sum differences. For version-3 maps these are the stored
+8-bit codes (uint8 ``cq``, ``Fa``, ``Fb``; integer prefix sums, exact in uint16) and ``wsc =
+c_scale / (255 S_a S_b)`` with ``S`` the code sums (the loader's renormalisation), i.e. the values
+the float arrays ``A``, ``Bp``, ``C`` hold, without their float32 prefix-sum rounding, at 1/4 to
+1/8 of their memory traffic; other maps pass float32 arrays and ``wsc = 1`` (Numba compiles one
+specialisation per dtype)."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange
 
+#: Queries ahead of the one being computed whose ``block_index`` entries (``_AHEAD_INDEX``) and
+#: factor rows (``_AHEAD_ROWS``) the point and range kernels prefetch. A random query stream over
+#: a 512^2 map misses the cache ~6 times per level-0 point query (``block_index``, ``cq``, ``Fa``,
+#: ``Fb``, ``wsc`` lines, each a DRAM latency with little overlap: a chain of dependent loads);
+#: prefetching them a few queries ahead overlaps the misses of several queries. Distances 2/4
+#: were the best of 2/4 .. 16/32 (level-0 point kernel 0.28 -> 0.18 us, CPU time, 1 thread).
+_AHEAD_ROWS = 2
+_AHEAD_INDEX = 4
+
+
+@intrinsic
+def _prefetch(typingctx, arr, index):
+    """Hint the cache to load the line of ``arr[index]`` (integer or tuple index, no bounds or
+    wrap-around check: the address must lie inside the array): LLVM's ``llvm.prefetch``."""
+    if not isinstance(arr, types.Array):
+        return None
+    if isinstance(index, types.Integer):
+        n_idx = 1
+    elif isinstance(index, types.UniTuple) and isinstance(index.dtype, types.Integer):
+        n_idx = index.count
+    else:
+        return None
+    if n_idx != arr.ndim:
+        return None
+
+    def codegen(context, builder, signature, args):
+        aryty, idxty = signature.args
+        ary = context.make_array(aryty)(context, builder, args[0])
+        if n_idx == 1:
+            idx = [args[1]]
+        else:
+            idx = [builder.extract_value(args[1], i) for i in range(n_idx)]
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, idx, wraparound=False)
+        i8p = builder.bitcast(ptr, ir.IntType(8).as_pointer())
+        i32 = ir.IntType(32)
+        fnty = ir.FunctionType(ir.VoidType(), [i8p.type, i32, i32, i32])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0")
+        # read, high temporal locality, data cache
+        builder.call(fn, [i8p, ir.Constant(i32, 0), ir.Constant(i32, 3), ir.Constant(i32, 1)])
+        return context.get_dummy_value()
+
+    return types.void(arr, index), codegen
+
 
 @njit_serial
-def _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bi, bj, i0, i1, j0, j1):
+def _rect_mass(Pa, Pb, C, block_index, image_cell, meta, idx, wts, q, bi, bj, i0, i1, j0, j1):
     """Sum of the blended image's pixel values over rows ``[i0, i1)``, columns ``[j0, j1)`` of
-    block ``(bi, bj)`` (block-local pixel indices). ``granks``: the rank of each CP group (its
-    components come first; adaptive-rank maps pad the others with zeros, skipped here)."""
+    block ``(bi, bj)`` (block-local pixel indices, integers): exact prefix-sum differences."""
+    cq, wsc = C[0], C[1]
+    pa = Pa.ravel()
+    pb = Pb.ravel()
+    B1 = Pa.shape[1]
     nb = block_index.shape[1]
     acc = 0.0
     for c in range(idx.shape[1]):
@@ -31,103 +95,237 @@ def _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bi, bj, i
         if k < 0:
             continue
         g = image_cell[img] * nb * nb + bi * nb + bj
+        nr, m = meta[g, 0], meta[g, 1]
+        kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+        base = m * B1
+        # slices: indices from range() are known non-negative, so the loop vectorises (flat
+        # indices with a computed offset kept a wrap-around check per element: 3x slower)
+        a1, a0 = pa[base + i1 * nr:base + (i1 + 1) * nr], pa[base + i0 * nr:base + (i0 + 1) * nr]
+        b1, b0 = pb[base + j1 * nr:base + (j1 + 1) * nr], pb[base + j0 * nr:base + (j0 + 1) * nr]
+        cr, wr = cq[kc:kc + nr], wsc[m:m + nr]
         s = 0.0
-        for r in range(granks[g]):
-            s += C[k, r] * ((A[g, i1, r] - A[g, i0, r]) * (Bp[g, j1, r] - Bp[g, j0, r]))
+        for r in range(nr):
+            s += wr[r] * (float(cr[r]) * (float(a1[r]) - float(a0[r]))
+                          * (float(b1[r]) - float(b0[r])))
         acc += w * s
     return acc
 
 
+@njit_inline
+def _pixel(sx, sy, lo, h, R, B):
+    """Block ``(bi, bj)`` and in-block pixel ``(i0, j0)`` of ``s``; ``bi = -1`` outside."""
+    fx = (sx - lo) / h
+    fy = (sy - lo) / h
+    if fx >= 0.0 and fy >= 0.0 and fx < R and fy < R:
+        i = int(fy)
+        j = int(fx)
+        bi, bj = i // B, j // B
+        return bi, bj, i - bi * B, j - bj * B
+    return -1, -1, 0, 0
+
+
+@njit_inline
+def _prefetch_index(block_index, image_cell, meta, idx, wts, p, n_pf, bi0, bi1, bj0, bj1):
+    """Prefetch the ``block_index`` entries and group records of query ``p``'s images below
+    ``n_pf`` over blocks ``[bi0, bi1] x [bj0, bj1]``."""
+    nb = block_index.shape[1]
+    for c in range(idx.shape[1]):
+        img = idx[p, c]
+        if wts[p, c] == 0.0 or img >= n_pf:
+            continue
+        for bi in range(bi0, bi1 + 1):
+            for bj in range(bj0, bj1 + 1):
+                _prefetch(block_index, (img, bi, bj))
+                _prefetch(meta, (image_cell[img] * nb * nb + bi * nb + bj, 0))
+
+
 @njit_parallel
-def point_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy, lo, h, out):
-    R = block_index.shape[1] * (A.shape[1] - 1)
-    B = A.shape[1] - 1
-    for q in prange(out.shape[0]):
-        fx = (sx[q] - lo) / h
-        fy = (sy[q] - lo) / h
+def point_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, sx, sy, lo, h, n_pf, out):
+    """Values of the blended images at ``(sx, sy)``: the stored pixel's factor values. The data
+    of images below ``n_pf`` (the levels too large for the cache) is prefetched a few queries
+    ahead."""
+    cq, wsc, Fa, Fb = C
+    B = Pa.shape[1] - 1
+    nb = block_index.shape[1]
+    R = nb * B
+    n = out.shape[0]
+    for q in prange(n):
+        p = q + _AHEAD_INDEX
+        if p < n and idx[p, 0] < n_pf:
+            bi, bj, i0, j0 = _pixel(sx[p], sy[p], lo, h, R, B)
+            if bi >= 0:
+                _prefetch_index(block_index, image_cell, meta, idx, wts, p, n_pf, bi, bi, bj,
+                                bj)
+        p = q + _AHEAD_ROWS
+        if p < n and idx[p, 0] < n_pf:
+            bi, bj, i0, j0 = _pixel(sx[p], sy[p], lo, h, R, B)
+            if bi >= 0:
+                for c in range(idx.shape[1]):
+                    img = idx[p, c]
+                    if wts[p, c] == 0.0 or img >= n_pf:
+                        continue
+                    k = block_index[img, bi, bj]
+                    if k < 0:
+                        continue
+                    g = image_cell[img] * nb * nb + bi * nb + bj
+                    nr, m = meta[g, 0], meta[g, 1]
+                    kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                    _prefetch(cq, kc)
+                    _prefetch(cq, kc + nr - 1)
+                    _prefetch(Fa, m * B + i0 * nr)
+                    _prefetch(Fb, m * B + j0 * nr)
+                    _prefetch(wsc, m)
+        bi, bj, i0, j0 = _pixel(sx[q], sy[q], lo, h, R, B)
         acc = 0.0
-        if fx >= 0.0 and fy >= 0.0 and fx < R and fy < R:
-            j = int(fx)
-            i = int(fy)
-            bi, bj = i // B, j // B
-            i0, j0 = i - bi * B, j - bj * B
-            acc = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bi, bj, i0,
-                             i0 + 1, j0, j0 + 1)
+        if bi >= 0:
+            for c in range(idx.shape[1]):
+                w = wts[q, c]
+                if w == 0.0:
+                    continue
+                img = idx[q, c]
+                k = block_index[img, bi, bj]
+                if k < 0:
+                    continue
+                g = image_cell[img] * nb * nb + bi * nb + bj
+                nr, m = meta[g, 0], meta[g, 1]
+                kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                fa = m * B + i0 * nr
+                fb = m * B + j0 * nr
+                ar, br, cr, wr = Fa[fa:fa + nr], Fb[fb:fb + nr], cq[kc:kc + nr], wsc[m:m + nr]
+                s = 0.0
+                for r in range(nr):
+                    s += wr[r] * (float(cr[r]) * float(ar[r]) * float(br[r]))
+                acc += w * s
         out[q] = acc
 
 
-@njit_serial
-def _prefix_at(P, g, u):
-    """Integral over ``[0, u]`` pixels of the factors of group ``g`` (prefix sums linear inside a
-    pixel), written to ``P``'s row of the group: ``P (G, B + 1, R)`` is rank-contiguous, so the
-    group's components at one ``u`` are a few cache lines; returns the row index and weight."""
-    B = P.shape[1] - 1
+@njit_inline
+def _rect(x0, y0, x1, y1, lo, h, R, B, nb):
+    """Pixel rectangle of ``[x0, x1] x [y0, y1]`` clipped to the support ``(cx0, cx1, cy0,
+    cy1)``, its blocks ``bi0..bi1``, ``bj0..bj1`` (``bi0 > bi1``: empty) and its unclipped area
+    in pixels."""
+    px0 = (x0 - lo) / h
+    px1 = (x1 - lo) / h
+    py0 = (y0 - lo) / h
+    py1 = (y1 - lo) / h
+    area = (px1 - px0) * (py1 - py0)
+    cx0, cx1 = max(px0, 0.0), min(px1, float(R))
+    cy0, cy1 = max(py0, 0.0), min(py1, float(R))
+    if cx1 > cx0 and cy1 > cy0:
+        return (cx0, cx1, cy0, cy1, int(cy0) // B, min(int(math.ceil(cy1)) // B, nb - 1),
+                int(cx0) // B, min(int(math.ceil(cx1)) // B, nb - 1), area)
+    return cx0, cx1, cy0, cy1, 0, -1, 0, -1, area
+
+
+@njit_parallel
+def range_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y0, x1, y1, lo, h, n_pf,
+                 out):
+    """Mean of the piecewise-constant NDF image over ``[x0, x1] x [y0, y1]`` (zero outside the
+    support); the rectangle is split at block boundaries (paper, sec. 4.4). Data of images below
+    ``n_pf`` is prefetched a few queries ahead (as in :func:`point_kernel`)."""
+    cq, wsc = C[0], C[1]
+    pa = Pa.ravel()
+    pb = Pb.ravel()
+    B = Pa.shape[1] - 1
+    nb = block_index.shape[1]
+    R = nb * B
+    n = out.shape[0]
+    for q in prange(n):
+        p = q + _AHEAD_INDEX
+        if p < n and idx[p, 0] < n_pf:
+            g0 = _rect(x0[p], y0[p], x1[p], y1[p], lo, h, R, B, nb)
+            _prefetch_index(block_index, image_cell, meta, idx, wts, p, n_pf, g0[4], g0[5],
+                            g0[6], g0[7])
+        p = q + _AHEAD_ROWS
+        if p < n and idx[p, 0] < n_pf:
+            cx0, cx1, cy0, cy1, bi0, bi1, bj0, bj1, _ = _rect(x0[p], y0[p], x1[p], y1[p], lo, h,
+                                                              R, B, nb)
+            for c in range(idx.shape[1]):
+                img = idx[p, c]
+                if wts[p, c] == 0.0 or img >= n_pf:
+                    continue
+                for bi in range(bi0, bi1 + 1):
+                    na0 = _prefix_pos(cy0 - bi * B, B)[0]
+                    na1 = _prefix_pos(cy1 - bi * B, B)[0]
+                    for bj in range(bj0, bj1 + 1):
+                        k = block_index[img, bi, bj]
+                        if k < 0:
+                            continue
+                        g = image_cell[img] * nb * nb + bi * nb + bj
+                        nr, m = meta[g, 0], meta[g, 1]
+                        kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                        base = m * (B + 1)
+                        _prefetch(cq, kc)
+                        _prefetch(wsc, m)
+                        _prefetch(pa, base + na0 * nr)
+                        _prefetch(pa, base + na1 * nr)
+                        _prefetch(pb, base + _prefix_pos(cx0 - bj * B, B)[0] * nr)
+                        _prefetch(pb, base + _prefix_pos(cx1 - bj * B, B)[0] * nr)
+        cx0, cx1, cy0, cy1, bi0, bi1, bj0, bj1, area = _rect(x0[q], y0[q], x1[q], y1[q], lo, h,
+                                                             R, B, nb)
+        acc = 0.0
+        for c in range(idx.shape[1]):
+            w = wts[q, c]
+            if w == 0.0:
+                continue
+            img = idx[q, c]
+            for bi in range(bi0, bi1 + 1):
+                na0, ta0 = _prefix_pos(cy0 - bi * B, B)
+                na1, ta1 = _prefix_pos(cy1 - bi * B, B)
+                for bj in range(bj0, bj1 + 1):
+                    k = block_index[img, bi, bj]
+                    if k < 0:
+                        continue
+                    nb0, tb0 = _prefix_pos(cx0 - bj * B, B)
+                    nb1, tb1 = _prefix_pos(cx1 - bj * B, B)
+                    g = image_cell[img] * nb * nb + bi * nb + bj
+                    nr, m = meta[g, 0], meta[g, 1]
+                    kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                    base = m * (B + 1)
+                    # rows n and n + 1 of each of the four prefix sums (the next row is read
+                    # only with a nonzero weight: it may be past the block's end)
+                    ea0 = ra0 = base + na0 * nr
+                    ea1 = ra1 = base + na1 * nr
+                    eb0 = rb0 = base + nb0 * nr
+                    eb1 = rb1 = base + nb1 * nr
+                    if ta0 != 0.0:
+                        ea0 += nr
+                    if ta1 != 0.0:
+                        ea1 += nr
+                    if tb0 != 0.0:
+                        eb0 += nr
+                    if tb1 != 0.0:
+                        eb1 += nr
+                    a0s, a0e = pa[ra0:ra0 + nr], pa[ea0:ea0 + nr]
+                    a1s, a1e = pa[ra1:ra1 + nr], pa[ea1:ea1 + nr]
+                    b0s, b0e = pb[rb0:rb0 + nr], pb[eb0:eb0 + nr]
+                    b1s, b1e = pb[rb1:rb1 + nr], pb[eb1:eb1 + nr]
+                    cr, wr = cq[kc:kc + nr], wsc[m:m + nr]
+                    s = 0.0
+                    for r in range(nr):
+                        a0 = float(a0s[r])
+                        a0 += ta0 * (float(a0e[r]) - a0)
+                        a1 = float(a1s[r])
+                        a1 += ta1 * (float(a1e[r]) - a1)
+                        b0 = float(b0s[r])
+                        b0 += tb0 * (float(b0e[r]) - b0)
+                        b1 = float(b1s[r])
+                        b1 += tb1 * (float(b1e[r]) - b1)
+                        s += wr[r] * (float(cr[r]) * (a1 - a0) * (b1 - b0))
+                    acc += w * s
+        out[q] = acc / area
+
+
+@njit_inline
+def _prefix_pos(u, B):
+    """Row ``n`` and weight ``t`` of the prefix sum at ``u`` pixels of a block (linear inside a
+    pixel, clamped to ``[0, B]``): value ``P[n] + t (P[n + 1] - P[n])``."""
     if u <= 0.0:
         return 0, 0.0
     if u >= B:
         return B, 0.0
     n = int(u)
     return n, u - n
-
-
-@njit_parallel
-def range_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, x0, y0, x1, y1, lo, h, out):
-    """Mean of the piecewise-constant NDF image over ``[x0, x1] x [y0, y1]`` (zero outside the
-    support); the rectangle is split at block boundaries (paper, sec. 4.4). ``A``, ``Bp``: the
-    prefix sums rank-contiguous, ``(G, B + 1, R)`` (:func:`prefilter.glints.query._prefix_t`)."""
-    B = A.shape[1] - 1
-    nb = block_index.shape[1]
-    R = nb * B
-    for q in prange(out.shape[0]):
-        px0 = (x0[q] - lo) / h
-        px1 = (x1[q] - lo) / h
-        py0 = (y0[q] - lo) / h
-        py1 = (y1[q] - lo) / h
-        area = (px1 - px0) * (py1 - py0)
-        cx0, cx1 = max(px0, 0.0), min(px1, float(R))
-        cy0, cy1 = max(py0, 0.0), min(py1, float(R))
-        acc = 0.0
-        if cx1 > cx0 and cy1 > cy0:
-            bj0 = int(cx0) // B
-            bj1 = min(int(math.ceil(cx1)) // B, nb - 1)
-            bi0 = int(cy0) // B
-            bi1 = min(int(math.ceil(cy1)) // B, nb - 1)
-            for c in range(idx.shape[1]):
-                w = wts[q, c]
-                if w == 0.0:
-                    continue
-                img = idx[q, c]
-                for bi in range(bi0, bi1 + 1):
-                    v0 = cy0 - bi * B
-                    v1 = cy1 - bi * B
-                    for bj in range(bj0, bj1 + 1):
-                        k = block_index[img, bi, bj]
-                        if k < 0:
-                            continue
-                        u0 = cx0 - bj * B
-                        u1 = cx1 - bj * B
-                        g = image_cell[img] * nb * nb + bi * nb + bj
-                        na1, ta1 = _prefix_at(A, g, v1)
-                        na0, ta0 = _prefix_at(A, g, v0)
-                        nb1, tb1 = _prefix_at(Bp, g, u1)
-                        nb0, tb0 = _prefix_at(Bp, g, u0)
-                        s = 0.0
-                        for r in range(granks[g]):
-                            a1 = A[g, na1, r]
-                            if ta1 != 0.0:
-                                a1 += ta1 * (A[g, na1 + 1, r] - a1)
-                            a0 = A[g, na0, r]
-                            if ta0 != 0.0:
-                                a0 += ta0 * (A[g, na0 + 1, r] - a0)
-                            b1 = Bp[g, nb1, r]
-                            if tb1 != 0.0:
-                                b1 += tb1 * (Bp[g, nb1 + 1, r] - b1)
-                            b0 = Bp[g, nb0, r]
-                            if tb0 != 0.0:
-                                b0 += tb0 * (Bp[g, nb0 + 1, r] - b0)
-                            s += C[k, r] * (a1 - a0) * (b1 - b0)
-                        acc += w * s
-        out[q] = acc / area
 
 
 @njit_inline
@@ -148,13 +346,14 @@ def _block_tap(p0, w0, w1, d, B):
 
 
 @njit_parallel
-def bilinear_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy, lo, h, out):
+def bilinear_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, sx, sy, lo, h, out):
     """Point values of the blended images reconstructed bilinearly between pixel centres.
 
     The CP image of a block is ``sum_r c_r a_r (x) b_r``, so a bilinear combination of pixels of
     one block is ``sum_r c_r (sum_i u_i a_r[i]) (sum_j v_j b_r[j])``: two factor lookups per axis
     instead of four pixel values; neighbours in another block are taken from that block."""
-    B = A.shape[1] - 1
+    cq, wsc, Fa, Fb = C
+    B = Pa.shape[1] - 1
     nb = block_index.shape[1]
     R = nb * B
     for q in prange(out.shape[0]):
@@ -178,17 +377,31 @@ def bilinear_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, sx, sy,
                     if k < 0:
                         continue
                     g = image_cell[img] * nb * nb + bi * nb + bj
-                    s = 0.0
-                    for r in range(granks[g]):
-                        fa = wa0 * (A[g, ia + 1, r] - A[g, ia, r])
-                        if wa1 != 0.0:
-                            fa += wa1 * (A[g, ia + 2, r] - A[g, ia + 1, r])
-                        fb = wb0 * (Bp[g, ja + 1, r] - Bp[g, ja, r])
-                        if wb1 != 0.0:
-                            fb += wb1 * (Bp[g, ja + 2, r] - Bp[g, ja + 1, r])
-                        s += C[k, r] * fa * fb
-                    acc += w * s
+                    nr, m = meta[g, 0], meta[g, 1]
+                    kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                    acc += w * _factor_dot(Fa, Fb, wsc, m, B, nr, ia, wa0, wa1, ja, wb0, wb1, cq,
+                                           kc)
         out[q] = acc
+
+
+@njit_inline
+def _factor_dot(Fa, Fb, wsc, m, B, nr, ia, wa0, wa1, ja, wb0, wb1, cw, kc):
+    """``sum_r wsc[m + r] cw[kc + r] fa_r fb_r`` over the ``nr`` components of the group whose
+    factors start at flat index ``m B``, with ``fa_r = wa0 Fa[ia, r] + wa1 Fa[ia + 1, r]`` (the
+    second tap skipped when ``wa1 == 0``; ``fb`` likewise)."""
+    ra = m * B + ia * nr
+    rb = m * B + ja * nr
+    # the second row only with a nonzero weight (it may be past the group's block)
+    ea = ra + nr if wa1 != 0.0 else ra
+    eb = rb + nr if wb1 != 0.0 else rb
+    a0, a1, b0, b1 = Fa[ra:ra + nr], Fa[ea:ea + nr], Fb[rb:rb + nr], Fb[eb:eb + nr]
+    cr, wr = cw[kc:kc + nr], wsc[m:m + nr]
+    s = 0.0
+    for r in range(nr):
+        fa = wa0 * float(a0[r]) + wa1 * float(a1[r])
+        fb = wb0 * float(b0[r]) + wb1 * float(b1[r])
+        s += wr[r] * (float(cr[r]) * fa * fb)
+    return s
 
 
 @njit_serial
@@ -210,44 +423,34 @@ _SLOTS = 16
 
 
 @njit_serial
-def _flush_slots(Pa, Pb, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja):
-    """``sum_slots sum_r cw[slot, r] fa_r fb_r`` with each slot's group factors at the bilinear
-    NDF taps (rows ``ia, ia + 1`` weighted ``wi, wa1``; columns ``ja, ja + 1``: ``wj, wb1``).
-    ``Pa``, ``Pb`` ``(G, B + 1, R)``: the factors' prefix sums, rank-contiguous."""
+def _flush_slots(Fa, Fb, wsc, meta, B, gs, cw, ns, wi, wa1, wj, wb1, ia, ja):
+    """``sum_slots sum_r cw[slot, r] wsc_r fa_r fb_r`` with each slot's group factors at the
+    bilinear NDF taps (rows ``ia, ia + 1`` weighted ``wi, wa1``; columns ``ja, ja + 1``: ``wj,
+    wb1``)."""
     acc = 0.0
     for t in range(ns):
         g = gs[t]
-        s = 0.0
-        for rr in range(granks[g]):
-            a = wi * (Pa[g, ia + 1, rr] - Pa[g, ia, rr])
-            if wa1 != 0.0:
-                a += wa1 * (Pa[g, ia + 2, rr] - Pa[g, ia + 1, rr])
-            b = wj * (Pb[g, ja + 1, rr] - Pb[g, ja, rr])
-            if wb1 != 0.0:
-                b += wb1 * (Pb[g, ja + 2, rr] - Pb[g, ja + 1, rr])
-            s += cw[t, rr] * a * b
-        acc += s
+        acc += _factor_dot(Fa, Fb, wsc, meta[g, 1], B, meta[g, 0], ia, wi, wa1, ja, wj, wb1,
+                           cw[t], 0)
     return acc
 
 
 @njit_parallel
-def resample_point_kernel(Pa, Pb, C, block_index, image_cell, granks, offs, ny_l, nx_l, sig_l,
+def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, nx_l, sig_l,
                           st_l, cx, cy, sp, sx, sy, lo, h, trunc, q_min, bilinear, out, done):
     """Point values of Gaussian-resampled footprints (:func:`prefilter.glints.pyramid.
     resample_weights`, the same level choice and taps) without materialising the tap lists:
-    taps of one CP group share its factor values at ``s``, which are read once per group.
-    ``granks``: the rank of each group (its components come first; adaptive-rank maps pad the
-    rest with zeros). ``Pa``, ``Pb`` ``(G, B + 1, R)``: the prefix sums ``A``, ``Bp`` with the
-    rank innermost (:func:`prefilter.glints.query._prefix_t`): a group's factors at one NDF
-    pixel are a few cache lines instead of one per component (``A[g, :, i]``: 17 floats apart),
-    which made level-0 footprints, spread over many groups, 2x slower per tap than upper levels.
-    ``done[q] = False`` where no level qualifies (the caller uses another
-    path)."""
+    taps of one CP group share its factor values at ``s``, which are read once per group (the
+    taps' ``cq`` rows are summed first). ``done[q] = False`` where no level qualifies (the
+    caller uses another path)."""
+    cq, wsc, Fa, Fb = C
     B = Pa.shape[1] - 1
     nb = block_index.shape[1]
     R = nb * B
     L = sig_l.shape[0]
-    rank = C.shape[1]
+    rank = 1
+    for g in range(meta.shape[0]):
+        rank = max(rank, meta[g, 0])
     for q in prange(out.shape[0]):
         s = sp[q]
         m = -1
@@ -313,7 +516,7 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, granks, offs, ny_l
                         if k < 0:
                             continue
                         g = image_cell[img] * nb * nb + bi * nb + bj
-                        nr = granks[g]
+                        nr = meta[g, 0]
                         if g != last:
                             slot = -1
                             for t in range(ns):
@@ -322,8 +525,8 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, granks, offs, ny_l
                                     break
                             if slot < 0:
                                 if ns == _SLOTS:
-                                    acc += _flush_slots(Pa, Pb, granks, gs, cw, ns, wi, wa1, wj,
-                                                        wb1, ia, ja)
+                                    acc += _flush_slots(Fa, Fb, wsc, meta, B, gs, cw, ns, wi,
+                                                        wa1, wj, wb1, ia, ja)
                                     ns = 0
                                 slot = ns
                                 gs[slot] = g
@@ -332,7 +535,8 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, granks, offs, ny_l
                                 ns += 1
                             last = g
                         wt = wy[ty] * wx[tx]
+                        kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
                         for rr in range(nr):
-                            cw[slot, rr] += wt * C[k, rr]
-                acc += _flush_slots(Pa, Pb, granks, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
+                            cw[slot, rr] += wt * float(cq[kc + rr])
+                acc += _flush_slots(Fa, Fb, wsc, meta, B, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
         out[q] = acc / (sxw * syw)

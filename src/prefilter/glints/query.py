@@ -30,7 +30,7 @@ from prefilter.glints._qkernels import (bilinear_kernel, point_kernel, range_ker
 from prefilter.glints.pndf import _as_sigma_p
 from prefilter.glints.pyramid import (RESAMPLE_Q_MIN, RESAMPLE_TRUNCATION, interp_weights,
                                       resample_weights)
-from prefilter.glints.store import GlintsMap
+from prefilter.glints.store import Q, GlintsMap
 
 INTERP = ("trilinear", "resample")
 #: Query kernels run serially below this many items: their work per item is ~1-10 us, and on the
@@ -76,9 +76,11 @@ def point_weighted(gm: GlintsMap, idx, w, s, *, bilinear: bool = False) -> np.nd
     arrs, lo, h = _args(gm)
     s = np.asarray(s, dtype=np.float64)
     out = np.empty(idx.shape[0])
-    kern = bilinear_kernel if bilinear else point_kernel
-    serial(kern, _n(idx))(*arrs, idx, w, np.ascontiguousarray(s[:, 0]),
-                                  np.ascontiguousarray(s[:, 1]), lo, h, out)
+    sx, sy = np.ascontiguousarray(s[:, 0]), np.ascontiguousarray(s[:, 1])
+    if bilinear:
+        serial(bilinear_kernel, _n(idx))(*arrs, idx, w, sx, sy, lo, h, out)
+    else:
+        serial(point_kernel, _n(idx))(*arrs, idx, w, sx, sy, lo, h, _n_prefetch(gm), out)
     return out
 
 
@@ -93,7 +95,7 @@ def range_weighted(gm: GlintsMap, idx, w, s_min, s_max) -> np.ndarray:
     out = np.empty(idx.shape[0])
     c = np.ascontiguousarray
     serial(range_kernel, _n(idx))(*arrs, idx, w, c(lo_[:, 0]), c(lo_[:, 1]), c(hi_[:, 0]),
-                                  c(hi_[:, 1]), lo, h, out)
+                                  c(hi_[:, 1]), lo, h, _n_prefetch(gm), out)
     return out
 
 
@@ -157,26 +159,124 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points, interp="trilinear"):
 
 
 def _args(gm):
+    """Kernel arguments of ``gm`` (see :mod:`prefilter.glints._qkernels`), the support's lower
+    corner and the NDF pixel pitch."""
     h = 2.0 * gm.support / gm.resolution
-    return (_prefix_t(gm) + (gm.C, gm.block_index, gm.image_cell, _group_ranks(gm)),
-            -gm.support, h)
+    pa, pb, c, meta, index, _ = packed(gm)
+    return (pa, pb, c, index, gm.image_cell, meta), -gm.support, h
 
 
-_PREFIX_T: dict = {}
+_PACKED: dict = {}
 
 
-def _prefix_t(gm):
-    """The prefix sums ``A``, ``Bp`` as ``(G, B + 1, R)`` float32 (rank innermost): the layout of
-    every query and sampler kernel, which read all components of a group at one or two NDF
-    pixels. Cached per map while its ``A`` lives (weak references: a process that loads many
-    maps does not keep their copies)."""
-    key = id(gm.A)
-    hit = _PREFIX_T.get(key)
-    if hit is None or hit[0]() is not gm.A or hit[1]() is not gm.Bp:
-        at, bt = (np.ascontiguousarray(f.transpose(0, 2, 1)) for f in (gm.A, gm.Bp))
-        hit = _PREFIX_T[key] = (weakref.ref(gm.A), weakref.ref(gm.Bp), (at, bt))
-        weakref.finalize(gm.A, _PREFIX_T.pop, key, None)
-    return hit[2]
+def packed(gm: GlintsMap):
+    """The query kernels' arrays ``(Pa, Pb, (cq, wsc, Fa, Fb), meta, block_index)`` of a map
+    (layout in :mod:`prefilter.glints._qkernels`; ``block_index`` with the image innermost) and
+    the number of images whose data the kernels prefetch; built once per map (cached while the
+    map lives).
+
+    Version-3 maps: the stored 8-bit codes (uint8 factors, their integer prefix sums, exact in
+    uint16, and ``wsc = c_scale / (255 S_a S_b)``, ``S``: each component's code sum, the loader's
+    renormalisation), so every value is the float64 evaluation of what the file stores. Other
+    maps: the float32 arrays ``A``, ``Bp``, ``C`` (``wsc = 1``)."""
+    key = id(gm)
+    hit = _PACKED.get(key)
+    src = (gm.A, gm.C, gm.codes)
+    if hit is not None and hit[0]() is gm and all(x is y for x, y in zip(hit[1], src)):
+        return hit[2]
+    arrs = _pack_codes(gm.codes) if gm.codes is not None else _pack_float(gm)
+    # block_index with the image innermost (same shape and indexing): the pyramid neighbours a
+    # query blends, at one block position, share cache lines
+    bt = np.ascontiguousarray(gm.block_index.transpose(1, 2, 0)).transpose(2, 0, 1)
+    pa, _, (cq, wsc, fa, _), meta = arrs
+    arrs = arrs + (bt, _count_prefetch(gm, pa, wsc, fa, cq, meta))
+    _PACKED[key] = (weakref.ref(gm), src, arrs)
+    weakref.finalize(gm, _PACKED.pop, key, None)
+    return arrs
+
+
+def _rank_major(f, ranks):
+    """Factors ``f (M, n)`` of groups of ``ranks`` (consecutive components) reordered so that
+    group ``g``'s block of ``r_g n`` values is ``[i, r]``: flat index ``m_g n + i r_g + r``."""
+    M, n = f.shape
+    r = np.asarray(ranks, np.int64)
+    m = np.concatenate([[0], np.cumsum(r)])
+    comp_g = np.repeat(np.arange(r.size), r)
+    rr = np.arange(M) - m[comp_g]
+    pos = (m[comp_g] * n + rr)[:, None] + np.arange(n) * r[comp_g][:, None]
+    out = np.empty(M * n, f.dtype)
+    out[pos] = f
+    return out.reshape(M, n) if M else out.reshape(0, n)
+
+
+def _meta(ranks, k0, c0, stride):
+    r = np.asarray(ranks, np.int64)
+    m = np.concatenate([[0], np.cumsum(r)])[:-1]
+    return np.ascontiguousarray(np.stack([r, m, k0, c0, stride], axis=1).astype(np.int64))
+
+
+def _pack_codes(codes):
+    ranks = np.asarray(codes["ranks"], np.int64)
+    a, b = codes["a"], codes["b"]
+    B = a.shape[1]
+    pdt = np.uint16 if Q * B <= np.iinfo(np.uint16).max else np.uint32
+    prefix = [np.concatenate([np.zeros((f.shape[0], 1), pdt), np.cumsum(f, axis=1, dtype=pdt)],
+                             axis=1) for f in (a, b)]
+    sa, sb = (p[:, -1].astype(np.float64) for p in prefix)
+    den = Q * sa * sb
+    wsc = np.divide(codes["c_scale"].astype(np.float64), den, out=np.zeros_like(den),
+                    where=den > 0).astype(np.float32)
+    rows = np.asarray(codes["group_rows"], np.int64)
+    n_rows = np.diff(rows)
+    c0 = np.concatenate([[0], np.cumsum(n_rows * ranks)])[:-1]
+    fa, fb = (_rank_major(f, ranks).ravel() for f in (a, b))
+    pa, pb = (_rank_major(p, ranks) for p in prefix)
+    return pa, pb, (np.ascontiguousarray(codes["c"]), wsc, fa, fb), _meta(ranks, rows[:-1], c0,
+                                                                           ranks)
+
+
+def _pack_float(gm):
+    G, W = gm.A.shape[:2]
+    ranks = _group_ranks(gm)
+    comp_g = np.repeat(np.arange(G), ranks)
+    comp_r = np.arange(comp_g.size) - np.concatenate([[0], np.cumsum(ranks)])[:-1][comp_g]
+    pa, pb = (_rank_major(P[comp_g, comp_r], ranks) for P in (gm.A, gm.Bp))
+    fa, fb = (_rank_major(np.diff(P[comp_g, comp_r], axis=1), ranks).ravel()
+              for P in (gm.A, gm.Bp))
+    zeros = np.zeros(G, np.int64)
+    C = np.ascontiguousarray(gm.C, dtype=np.float32)
+    return pa, pb, (C.ravel(), np.ones(comp_g.size, np.float32), fa, fb), _meta(
+        ranks, zeros, zeros, np.full(G, C.shape[1], np.int64))
+
+
+#: levels whose query data (factor rows and codes of their images) exceeds this many bytes are
+#: prefetched by the point and range kernels: below it they stay in the cache (2 MB of L2 per
+#: core here), where prefetching only costs instructions
+PREFETCH_ABOVE = 1 << 20
+
+
+def _n_prefetch(gm) -> int:
+    """Images ``[0, n)`` whose data the kernels prefetch (cached with :func:`packed`)."""
+    return packed(gm)[5]
+
+
+def _count_prefetch(gm, pa, wsc, fa, cq, meta) -> int:
+    """Images ``[0, n)`` whose data the kernels prefetch: the finest levels, while a level's
+    factor bytes exceed :data:`PREFETCH_ABOVE` (levels are stored finest first)."""
+    pyr = gm.pyramid
+    nb2 = (gm.resolution // gm.block) ** 2
+    offs = pyr.offsets
+    per_comp = pa.itemsize * pa.shape[1] * 2 + fa.itemsize * gm.block * 2 + wsc.itemsize
+    for lv in np.arange(pyr.n_levels):
+        img = np.arange(offs[lv], offs[lv + 1])
+        groups = np.unique(gm.image_cell[img]).astype(np.int64)
+        g = (groups[:, None] * nb2 + np.arange(nb2)).ravel()
+        kept = int(np.count_nonzero(gm.block_index[img] >= 0))
+        nbytes = (int(meta[g, 0].sum()) * per_comp
+                  + kept * cq.itemsize * float(meta[g, 0].mean() if g.size else 0))
+        if nbytes <= PREFETCH_ABOVE:
+            return int(offs[lv])
+    return int(offs[-1])
 
 
 def _group_ranks(gm):

@@ -70,6 +70,11 @@ class GlintsMap:
     #: ``(G,)`` rank of each group (version 3; its components come first in ``A``, ``Bp``, ``C``,
     #: zeros after them up to ``rank``); None: every group uses all ``rank`` components
     ranks: np.ndarray | None = None
+    #: version 3: the stored 8-bit arrays ``ranks``, ``a``, ``b``, ``c``, ``c_scale`` and
+    #: ``group_rows (G + 1,)``, what the query kernels compute on (exact w.r.t. the stored
+    #: values, a fraction of the memory traffic of ``A``, ``Bp``, ``C``); None: the kernels use
+    #: the float arrays
+    codes: dict | None = None
 
     @property
     def pyramid(self) -> Pyramid:
@@ -375,5 +380,6 @@ def _decode_checked_v3(path, data, header) -> dict:
     if not np.all(np.isfinite(sc)) or np.any(sc < 0):
         _fail(path, "c_scale: expected finite, non-negative values")
     A, Bp, C = decode(ranks, arrs["a"], arrs["b"], arrs["c"], sc, rows, width)
+    codes = dict(ranks=ranks, a=arrs["a"], b=arrs["b"], c=arrs["c"], c_scale=sc, group_rows=rows)
     return dict(A=A, Bp=Bp, C=C, block_index=index, image_cell=cell,
-                ranks=ranks.astype(np.int32))
+                ranks=ranks.astype(np.int32), codes=codes)
