@@ -41,7 +41,7 @@ Storage: 16 tiles' pyramids, independent of the synthesised area.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -262,6 +262,11 @@ class TiledNDF:
     ``images[l]`` is ``(16, n_l, n_l, R, R)`` float32: tile ``t``'s contribution for footprints
     of std ``sigma0 2^l`` centred at ``((k0[l] + a) stride_l + 0.5, (k0[l] + b) stride_l + 0.5)``
     relative to the tile's corner (index ``[t, b, a]``); contributions of centres outside are 0.
+    Compressed (``block > 0``): ``images[l]`` is the CP triple ``A, Bf (16, nb^2, rank, B)``,
+    ``C (16, n_l, n_l, nb^2, rank)`` float32 of the ``B x B`` angular blocks (group ``g = bi nb
+    + bj``): pixel ``(bi B + i, bj B + j)`` of image ``[t, b, a]`` is
+    ``sum_r A[t, g, r, i] Bf[t, g, r, j] C[t, b, a, g, r]`` (glints paper eq. 5);
+    ``cp_error[l]``: relative L2 error of level ``l``'s stored images.
     ``mean (R, R)``: the tile-independent NDF image (expected tiling).
     """
 
@@ -276,6 +281,8 @@ class TiledNDF:
     intrinsic_roughness: float
     wide_sigma: float
     dependent: np.ndarray  # (n_dep, 2) (row, col) of dependent_texels(wang)
+    block: int = 0
+    cp_error: tuple = ()
 
     @property
     def n_levels(self) -> int:
@@ -290,7 +297,15 @@ class TiledNDF:
     @property
     def nbytes(self) -> int:
         """Bytes stored: tiles, per-tile pyramids and the mean image (no per-area data)."""
-        return int(self.wang.nbytes + sum(a.nbytes for a in self.images) + self.mean.nbytes)
+        levels = [a if isinstance(a, np.ndarray) else sum(f.nbytes for f in a)
+                  for a in self.images]
+        return int(self.wang.nbytes + sum(x if isinstance(x, int) else x.nbytes for x in levels)
+                   + self.mean.nbytes)
+
+    def crop(self, level: int) -> int:
+        """Footprint centres per axis stored for each tile at ``level``."""
+        a = self.images[level]
+        return int((a if isinstance(a, np.ndarray) else a[2]).shape[1])
 
     @property
     def min_sigma(self) -> float:
@@ -306,8 +321,10 @@ def _margin(sigma: float) -> float:
 
 def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
                intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int | None = None,
-               wide_tiles: float = 0.5) -> TiledNDF:
-    """Per-tile footprint pyramids, uncompressed float32 (glints paper sec. 5.5, Fig. 12).
+               wide_tiles: float = 0.5, rank: int | None = None, block: int = 8,
+               n_iter_max: int = 100, seed: int = 0) -> TiledNDF:
+    """Per-tile footprint pyramids (glints paper sec. 5.5, Fig. 12), float32, uncompressed or
+    CP-compressed (``rank``).
 
     Parameters
     ----------
@@ -316,6 +333,9 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     stride0 : level-0 centre stride in texels (``sigma0 = stride0``); default ``T // 8``.
     wide_tiles : footprints with ``sigma_p >= wide_tiles * T`` use the tile-independent NDF; the
         pyramid has levels up to the first ``sigma_l >= wide_tiles * T``.
+    rank, block : if ``rank`` is given, each (tile, level) is compressed like a bake cell
+        (``cp.nn_cp_batch`` of one ``(B, B, n_l^2)`` tensor per angular block position, all
+        groups at ``rank``; all-zero groups dropped); ``n_iter_max``, ``seed``: of the fits.
     """
     T = wt.size
     R = as_positive_int(ndf_res, "ndf_res")
@@ -365,8 +385,59 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
         # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
         mean += pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
                            elements_=(s_el[t], J_el[t])) / 16.0
-    return TiledNDF(wt, tuple(images), tuple(k0), mean, st0, float(st0), R, S, sr, wide * T,
-                    np.argwhere(dep))
+    wn = TiledNDF(wt, tuple(images), tuple(k0), mean, st0, float(st0), R, S, sr, wide * T,
+                  np.argwhere(dep))
+    return wn if rank is None else compress_tiles(wn, rank, block, n_iter_max=n_iter_max,
+                                                  seed=seed)
+
+
+def compress_tiles(wn: TiledNDF, rank: int, block: int = 8, *, n_iter_max: int = 100,
+                   seed: int = 0) -> TiledNDF:
+    """CP-compressed copy of uncompressed per-tile pyramids (glints paper sec. 4.2 per tile):
+    one ``(B, B, n_l^2)`` tensor per (tile, level, angular block), all at ``rank``."""
+    if not isinstance(wn, TiledNDF) or wn.block:
+        raise PrefilterError("wn: expected uncompressed per-tile pyramids (bake_tiles without "
+                             "rank)")
+    r = as_positive_int(rank, "rank")
+    B = as_positive_int(block, "block")
+    from prefilter.glints.cp import single_threaded_blas
+
+    # small products: a multi-threaded BLAS spent 100x longer waking threads on a busy machine
+    with single_threaded_blas():
+        packed, errs = zip(*(_compress(x, r, B, as_positive_int(n_iter_max, "n_iter_max"),
+                                       seed + lv) for lv, x in enumerate(wn.images)))
+    return replace(wn, images=tuple(packed), block=B, cp_error=tuple(errs))
+
+
+def _compress(x, rank, B, n_iter_max, seed):
+    """CP triple ``(A, Bf, C)`` (:class:`TiledNDF`) of one level ``x (16, n, n, R, R)`` and its
+    relative L2 error."""
+    from prefilter.glints import cp as cpmod
+
+    n_t, n, R = x.shape[0], x.shape[1], x.shape[-1]
+    if R % B:
+        raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {B}")
+    nb = R // B
+    K = n * n
+    blocks = cpmod.cut_blocks(x.reshape(n_t, K, R, R), B)  # (16, K, nb, nb, B, B)
+    tensors = np.ascontiguousarray(blocks.transpose(0, 2, 3, 4, 5, 1), dtype=np.float64)
+    tensors = tensors.reshape(n_t * nb * nb, B, B, K)
+    live = np.flatnonzero(tensors.max(axis=(1, 2, 3)) > 0.0)
+    A = np.zeros((n_t * nb * nb, rank, B), np.float32)
+    Bf = np.zeros_like(A)
+    C = np.zeros((n_t * nb * nb, K, rank), np.float32)
+    fits = cpmod.nn_cp_batch([tensors[g] for g in live], rank, n_iter_max=n_iter_max, seed=seed)
+    err2 = 0.0
+    for g, (a, b, c, _) in zip(live, fits):
+        A[g], Bf[g], C[g] = a.T, b.T, c
+        d = cpmod.reconstruct(A[g].T.astype(np.float64), Bf[g].T.astype(np.float64),
+                              C[g].astype(np.float64)) - tensors[g]
+        err2 += float(np.einsum("ijk,ijk->", d, d))
+    C = C.reshape(n_t, nb * nb, n, n, rank).transpose(0, 2, 3, 1, 4)
+    packed = (A.reshape(n_t, nb * nb, rank, B), Bf.reshape(n_t, nb * nb, rank, B),
+              np.ascontiguousarray(C))
+    return packed, math.sqrt(err2 / max(float(np.einsum("gijk,gijk->", tensors, tensors)),
+                                        1e-300))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -427,7 +498,7 @@ def _axis_taps(wn: TiledNDF, m: int, c: float, r: float, n_tiles_lo: int, n_tile
     k = np.arange(math.ceil(g - half), math.floor(g + half) + 1)
     w = np.exp(-0.5 * ((k * st + 0.5 - c) / r) ** 2)
     w /= w.sum()
-    n = wn.images[m].shape[1]
+    n = wn.crop(m)
     out = []
     for i in range(n_tiles_lo, n_tiles_hi + 1):
         a = k - i * (T // st) - wn.k0[m]  # tile-relative centre index, then crop index
@@ -436,9 +507,9 @@ def _axis_taps(wn: TiledNDF, m: int, c: float, r: float, n_tiles_lo: int, n_tile
     return out
 
 
-def _tiles_window(wn: TiledNDF, c, reach, sigma):
+def _tiles_window(wn: TiledNDF, c, sp):
     T = wn.wang.size
-    rad = reach + _margin(sigma)
+    rad = _margin(sp)
     return (math.floor((c[0] - rad) / T), math.floor((c[0] + rad) / T),
             math.floor((c[1] - rad) / T), math.floor((c[1] + rad) / T))
 
@@ -448,9 +519,9 @@ def _tile_terms(wn: TiledNDF, c, sp, index):
     the tile's crop, possibly none)."""
     m = _level(wn, sp)
     r = math.sqrt(sp * sp - wn.sigma(m) ** 2)
-    # every tile a tap's footprint reaches (the resampled footprint's tails beyond the direct
-    # truncation carry ~1e-3 of the mass at small r)
-    i0, i1, j0, j1 = _tiles_window(wn, c, _TAP_TRUNCATION * r, wn.sigma(m))
+    # the tiles with texels in the direct P-NDF's truncation window (the taps' footprints reach
+    # further, but what they add there is the Gaussian's tail beyond TRUNCATION stds)
+    i0, i1, j0, j1 = _tiles_window(wn, c, sp)
     xs = _axis_taps(wn, m, float(c[0]), r, i0, i1)
     ys = _axis_taps(wn, m, float(c[1]), r, j0, j1)
     terms = [(i, j, ay, wy, ax, wx) for j, ay, wy in ys for i, ax, wx in xs]
@@ -599,9 +670,37 @@ def contributions(wn: TiledNDF, center, sigma_p, *, index=None):
     imgs = _dependent_images(wn, c, sp, index, ij)
     for n, (_, _, t, ay, wy, ax, wx) in enumerate(terms):
         if ay.size and ax.size:
-            block = wn.images[m][t][ay[:, None], ax[None, :]]  # (ny, nx, R, R)
-            imgs[n] += np.tensordot(np.outer(wy, wx), block, axes=2)
+            imgs[n] += _tap_image(wn, m, t, ay, wy, ax, wx)
     return ij, imgs
+
+
+def _tap_image(wn: TiledNDF, m, t, ay, wy, ax, wx) -> np.ndarray:
+    """``sum_taps w image`` ``(R, R)`` of tile type ``t`` at level ``m``; compressed: the taps
+    blend the ``C`` rows first (``rank`` numbers per block instead of ``B^2``). ``einsum``
+    without BLAS: small products, and BLAS threads cost more than they save here."""
+    lv = wn.images[m]
+    W = np.outer(wy, wx)
+    if isinstance(lv, np.ndarray):
+        return np.einsum("ab,abij->ij", W, lv[t][ay[:, None], ax[None, :]])
+    A, Bf, C = lv
+    coef = np.einsum("ab,abgr->gr", W, C[t][ay[:, None], ax[None, :]])
+    B, R = wn.block, wn.resolution
+    nb = R // B
+    blocks = np.einsum("gr,gri,grj->gij", coef, A[t], Bf[t])
+    return blocks.reshape(nb, nb, B, B).swapaxes(1, 2).reshape(R, R)
+
+
+def _tap_points(wn: TiledNDF, m, t, ay, wy, ax, wx, py, px) -> np.ndarray:
+    """Pixels ``(py, px)`` ``(N,)`` of :func:`_tap_image` without forming the image."""
+    lv = wn.images[m]
+    W = np.outer(wy, wx)
+    if isinstance(lv, np.ndarray):
+        return np.einsum("ab,abn->n", W, lv[t][ay[:, None, None], ax[None, :, None], py, px])
+    A, Bf, C = lv
+    coef = np.einsum("ab,abgr->gr", W, C[t][ay[:, None], ax[None, :]])
+    B = wn.block
+    g = (py // B) * (wn.resolution // B) + px // B
+    return np.einsum("nr,nr,nr->n", coef[g], A[t][g, :, py % B], Bf[t][g, :, px % B])
 
 
 def ndf_image(wn: TiledNDF, center, sigma_p, *, index=None) -> np.ndarray:
@@ -638,10 +737,8 @@ def ndf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
         v = _dependent_images(wn, c, sp, index, ij).sum(axis=0)[iy, ix]
         py, px = iy.reshape(-1), ix.reshape(-1)
         for _, _, t, ay, wy, ax, wx in terms:
-            if not (ay.size and ax.size):
-                continue
-            vals = wn.images[m][t][ay[:, None, None], ax[None, :, None], py, px]
-            v += np.tensordot(np.outer(wy, wx), vals, axes=2).reshape(iy.shape)
+            if ay.size and ax.size:
+                v += _tap_points(wn, m, t, ay, wy, ax, wx, py, px).reshape(iy.shape)
     return np.where(inside, v, 0.0)
 
 
