@@ -349,39 +349,28 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     L = 1
     while st0 * 2.0 ** (L - 1) < wide * T:
         L += 1
-    st_top = st0 << (L - 1)
-    if T % st_top:
-        raise PrefilterError(f"stride0: expected stride0 * 2^(levels - 1) = {st_top} to divide the "
-                             f"tile size {T} (stride0 = {st0}, wide_tiles = {wide}): lower "
-                             "stride0 or wide_tiles")
     sig = [float(st0 << lv) for lv in range(L)]
     k0 = [math.floor((-_margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
     k1 = [math.ceil((T + _margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
-    # periodic canvas: the tile once, far enough from its copies that no cropped centre sees them
-    m_top = _margin(sig[-1]) + st_top
-    P = st_top * math.ceil((T + 2.0 * m_top + 2 * st_top) / st_top)
-    o = st_top * math.ceil(0.5 * (P - T) / st_top)  # tile corner in the canvas, on every grid
+    # level-0 element canvas: the tile and every texel a cropped level-0 footprint reaches
+    o = st0 * math.ceil((_margin(sig[0]) + st0) / st0)  # tile corner, on the level-0 grid
+    P = o + st0 * math.ceil((T + _margin(sig[0]) + st0) / st0)
     s_el, J_el = tile_elements(wt)
     dep = dependent_texels(wt)
     images = [np.empty((16, k1[lv] - k0[lv] + 1, k1[lv] - k0[lv] + 1, R, R), np.float32)
               for lv in range(L)]
     mean = np.zeros((R, R))
+    g = (np.arange(k0[0], k1[0] + 1) * st0 + 0.5) + o
+    cen = np.stack(np.meshgrid(g, g), axis=-1)
     for t in range(16):
         cs = np.full((P, P, 2), _AWAY)
         cj = np.zeros((P, P, 2, 2))
         cs[o:o + T, o:o + T] = np.where(dep[..., None], _AWAY, s_el[t])
         cj[o:o + T, o:o + T] = J_el[t]
-        ks = np.arange(k0[0], k1[0] + 1)
-        g = (ks + o // st0) * st0 + 0.5
-        cen = np.stack(np.meshgrid(g, g), axis=-1)
-        grid = np.zeros((P // st0, P // st0, R, R), np.float32)
-        a0, a1 = k0[0] + o // st0, k1[0] + o // st0 + 1
-        grid[a0:a1, a0:a1] = pndf_image(None, cen, sig[0], R, S, sr, elements_=(cs, cj))
-        for lv in range(L):
-            if lv:
-                grid = next_level(grid, sig[0] / st0)
-            off = o // (st0 << lv)
-            images[lv][t] = grid[k0[lv] + off:k1[lv] + off + 1, k0[lv] + off:k1[lv] + off + 1]
+        images[0][t] = pndf_image(None, cen, sig[0], R, S, sr, elements_=(cs, cj))
+        for lv in range(1, L):
+            images[lv][t] = _filter_crop(images[lv - 1][t], k0[lv - 1], k0[lv], k1[lv],
+                                         sig[0] / st0)
         # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
         mean += pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
                            elements_=(s_el[t], J_el[t])) / 16.0
@@ -389,6 +378,24 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
                   np.argwhere(dep))
     return wn if rank is None else compress_tiles(wn, rank, block, n_iter_max=n_iter_max,
                                                   seed=seed)
+
+
+def _filter_crop(crop, a0, b0, b1, sigma_over_stride):
+    """Level ``l + 1`` images of centres ``b0 .. b1`` (per axis) from the level-``l`` crop
+    ``(n, n, R, R)`` of centres ``a0 ..``: the crop zero-padded on a periodic grid wide enough
+    that the filter (``pyramid.next_level``, ~7 strides) never wraps, starting at an even
+    index so that level-``l`` centre ``2 k`` is level-``l + 1`` centre ``k``. The contributions
+    beyond a crop are Gaussian tails (``TRUNCATION`` stds out) and are dropped."""
+    n = crop.shape[0]
+    pad = math.ceil(4.0 * math.sqrt(3.0) * sigma_over_stride) + 1
+    lo = min(a0, 2 * b0) - pad
+    lo -= lo % 2
+    hi = max(a0 + n - 1, 2 * b1) + pad
+    N = hi - lo + 1 + (hi - lo + 1) % 2
+    grid = np.zeros((N, N) + crop.shape[2:], np.float32)
+    grid[a0 - lo:a0 - lo + n, a0 - lo:a0 - lo + n] = crop
+    out = next_level(grid, sigma_over_stride)
+    return out[b0 - lo // 2:b1 - lo // 2 + 1, b0 - lo // 2:b1 - lo // 2 + 1]
 
 
 def compress_tiles(wn: TiledNDF, rank: int, block: int = 8, *, n_iter_max: int = 100,
@@ -490,18 +497,21 @@ def _level(wn: TiledNDF, sp: float) -> int:
 
 def _axis_taps(wn: TiledNDF, m: int, c: float, r: float, n_tiles_lo: int, n_tiles_hi: int):
     """Per tile column ``i`` in ``[n_tiles_lo, n_tiles_hi]``: crop indices and weights of the
-    Gaussian resampling taps along one axis, the weights normalised over all taps."""
+    Gaussian resampling taps along one axis on that tile's centre grid (tile-relative; the grids
+    of neighbouring tiles differ when the stride does not divide the tile), the weights
+    normalised over all of the tile's taps."""
     st = wn.stride(m)
     T = wn.wang.size
-    g = (c - 0.5) / st
     half = _TAP_TRUNCATION * r / st
-    k = np.arange(math.ceil(g - half), math.floor(g + half) + 1)
-    w = np.exp(-0.5 * ((k * st + 0.5 - c) / r) ** 2)
-    w /= w.sum()
     n = wn.crop(m)
     out = []
     for i in range(n_tiles_lo, n_tiles_hi + 1):
-        a = k - i * (T // st) - wn.k0[m]  # tile-relative centre index, then crop index
+        cr = c - i * T
+        g = (cr - 0.5) / st
+        k = np.arange(math.ceil(g - half), math.floor(g + half) + 1)
+        w = np.exp(-0.5 * ((k * st + 0.5 - cr) / r) ** 2)
+        w /= w.sum()
+        a = k - wn.k0[m]  # crop index
         keep = (a >= 0) & (a < n)
         out.append((i, a[keep], w[keep]))
     return out
