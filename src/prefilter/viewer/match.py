@@ -136,8 +136,8 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
                                                     "seed": 3, "corr_length": 1.5},
                                         "range": [-4, 4], "sigma_max": 1.5}}}
     if name == "near-grazing":
-        # the camera 0.4 above the Gaussian-bump plane (1/4 of the default texel density): the
-        # footprints of the near half are 1-4 texels long and 1.5-10x longer than wide
+        # the camera 0.4 above the Gaussian-bump plane (1/4 of the default texel density): over
+        # half of the covered pixels have footprints < 4 texels long, 2-6x longer than wide
         return {"camera": {**_camera(width, height), "origin": [0.0, 0.4, 2.0],
                            "target": [0.0, 0.0, -1.0]},
                 "lights": [_quad(y0=0.2, y1=1.0)],
