@@ -230,7 +230,11 @@ def range_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y0, x1,
     nb = block_index.shape[1]
     R = nb * B
     n = out.shape[0]
+    rmax = 1
+    for g in range(meta.shape[0]):
+        rmax = max(rmax, meta[g, 0])
     for q in prange(n):
+        v = np.empty(rmax)
         p = q + _AHEAD_INDEX
         if p < n and idx[p, 0] < n_pf:
             g0 = _rect(x0[p], y0[p], x1[p], y1[p], lo, h, R, B, nb)
@@ -264,54 +268,63 @@ def range_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y0, x1,
         cx0, cx1, cy0, cy1, bi0, bi1, bj0, bj1, area = _rect(x0[q], y0[q], x1[q], y1[q], lo, h,
                                                              R, B, nb)
         acc = 0.0
-        for c in range(idx.shape[1]):
-            w = wts[q, c]
-            if w == 0.0:
-                continue
-            img = idx[q, c]
-            for bi in range(bi0, bi1 + 1):
-                na0, ta0 = _prefix_pos(cy0 - bi * B, B)
-                na1, ta1 = _prefix_pos(cy1 - bi * B, B)
-                for bj in range(bj0, bj1 + 1):
+        # per block, the corners' images of one CP group (neighbours in the pyramid: usually all
+        # of them) share the group's factor means v_r = wsc_r (da_r db_r): computed once per
+        # group, then one dot product with each image's code row
+        for bi in range(bi0, bi1 + 1):
+            na0, ta0 = _prefix_pos(cy0 - bi * B, B)
+            na1, ta1 = _prefix_pos(cy1 - bi * B, B)
+            for bj in range(bj0, bj1 + 1):
+                nb0, tb0 = _prefix_pos(cx0 - bj * B, B)
+                nb1, tb1 = _prefix_pos(cx1 - bj * B, B)
+                last = -1
+                for c in range(idx.shape[1]):
+                    w = wts[q, c]
+                    if w == 0.0:
+                        continue
+                    img = idx[q, c]
                     k = block_index[img, bi, bj]
                     if k < 0:
                         continue
-                    nb0, tb0 = _prefix_pos(cx0 - bj * B, B)
-                    nb1, tb1 = _prefix_pos(cx1 - bj * B, B)
                     g = image_cell[img] * nb * nb + bi * nb + bj
                     nr, m = meta[g, 0], meta[g, 1]
+                    if g != last:
+                        last = g
+                        base = m * (B + 1)
+                        # rows n and n + 1 of each of the four prefix sums (the next row is read
+                        # only with a nonzero weight: it may be past the block's end)
+                        ea0 = ra0 = base + na0 * nr
+                        ea1 = ra1 = base + na1 * nr
+                        eb0 = rb0 = base + nb0 * nr
+                        eb1 = rb1 = base + nb1 * nr
+                        if ta0 != 0.0:
+                            ea0 += nr
+                        if ta1 != 0.0:
+                            ea1 += nr
+                        if tb0 != 0.0:
+                            eb0 += nr
+                        if tb1 != 0.0:
+                            eb1 += nr
+                        a0s, a0e = pa[ra0:ra0 + nr], pa[ea0:ea0 + nr]
+                        a1s, a1e = pa[ra1:ra1 + nr], pa[ea1:ea1 + nr]
+                        b0s, b0e = pb[rb0:rb0 + nr], pb[eb0:eb0 + nr]
+                        b1s, b1e = pb[rb1:rb1 + nr], pb[eb1:eb1 + nr]
+                        wr = wsc[m:m + nr]
+                        for r in range(nr):
+                            a0 = float(a0s[r])
+                            a0 += ta0 * (float(a0e[r]) - a0)
+                            a1 = float(a1s[r])
+                            a1 += ta1 * (float(a1e[r]) - a1)
+                            b0 = float(b0s[r])
+                            b0 += tb0 * (float(b0e[r]) - b0)
+                            b1 = float(b1s[r])
+                            b1 += tb1 * (float(b1e[r]) - b1)
+                            v[r] = wr[r] * ((a1 - a0) * (b1 - b0))
                     kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
-                    base = m * (B + 1)
-                    # rows n and n + 1 of each of the four prefix sums (the next row is read
-                    # only with a nonzero weight: it may be past the block's end)
-                    ea0 = ra0 = base + na0 * nr
-                    ea1 = ra1 = base + na1 * nr
-                    eb0 = rb0 = base + nb0 * nr
-                    eb1 = rb1 = base + nb1 * nr
-                    if ta0 != 0.0:
-                        ea0 += nr
-                    if ta1 != 0.0:
-                        ea1 += nr
-                    if tb0 != 0.0:
-                        eb0 += nr
-                    if tb1 != 0.0:
-                        eb1 += nr
-                    a0s, a0e = pa[ra0:ra0 + nr], pa[ea0:ea0 + nr]
-                    a1s, a1e = pa[ra1:ra1 + nr], pa[ea1:ea1 + nr]
-                    b0s, b0e = pb[rb0:rb0 + nr], pb[eb0:eb0 + nr]
-                    b1s, b1e = pb[rb1:rb1 + nr], pb[eb1:eb1 + nr]
-                    cr, wr = cq[kc:kc + nr], wsc[m:m + nr]
+                    cr = cq[kc:kc + nr]
                     s = 0.0
                     for r in range(nr):
-                        a0 = float(a0s[r])
-                        a0 += ta0 * (float(a0e[r]) - a0)
-                        a1 = float(a1s[r])
-                        a1 += ta1 * (float(a1e[r]) - a1)
-                        b0 = float(b0s[r])
-                        b0 += tb0 * (float(b0e[r]) - b0)
-                        b1 = float(b1s[r])
-                        b1 += tb1 * (float(b1e[r]) - b1)
-                        s += wr[r] * (float(cr[r]) * (a1 - a0) * (b1 - b0))
+                        s += float(cr[r]) * v[r]
                     acc += w * s
         out[q] = acc / area
 
@@ -536,7 +549,8 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, 
                             last = g
                         wt = wy[ty] * wx[tx]
                         kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                        cr, cs = cq[kc:kc + nr], cw[slot]
                         for rr in range(nr):
-                            cw[slot, rr] += wt * float(cq[kc + rr])
+                            cs[rr] += wt * float(cr[rr])
                 acc += _flush_slots(Fa, Fb, wsc, meta, B, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
         out[q] = acc / (sxw * syw)
