@@ -64,7 +64,8 @@ def _lambda_a(wx, wy, wz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
     if s2 <= 0.0:
         return 0.0
     a = d / math.sqrt(2.0 * s2)
-    if a > 26.0:
+    if a > 5.0:
+        # Lambda(5) = 1.6e-14: skip exp / erfc (most directions of a smooth surface)
         return 0.0
     lam = 0.5 * (math.exp(-a * a) / (a * 1.7724538509055159) - math.erfc(a))
     return max(lam, 0.0)
@@ -165,36 +166,45 @@ def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no 
         r = sxy / (sx * sy)
         r_ = math.sqrt(max(1.0 - r * r, 0.0))
         lam_o = _lambda_a(ox, oy, oz, mu[q, 0], mu[q, 1], sxx, syy, sxy)
-        # local light directions and their lost fraction 1 - G2 / G1
-        loc = np.empty((nd, 3))
-        lost = np.empty(nd)
-        for k in range(nd):
-            dx = rot[q, 0, 0] * dirs[k, 0] + rot[q, 1, 0] * dirs[k, 1] + rot[q, 2, 0] * dirs[k, 2]
-            dy = rot[q, 0, 1] * dirs[k, 0] + rot[q, 1, 1] * dirs[k, 1] + rot[q, 2, 1] * dirs[k, 2]
-            dz = rot[q, 0, 2] * dirs[k, 0] + rot[q, 1, 2] * dirs[k, 1] + rot[q, 2, 2] * dirs[k, 2]
-            loc[k, 0], loc[k, 1], loc[k, 2] = dx, dy, dz
-            lam_i = _lambda_a(dx, dy, dz, mu[q, 0], mu[q, 1], sxx, syy, sxy)
-            lost[k] = 1.0 - _g2_over_g1(lam_o, lam_i, dz)
-        num = np.zeros(nc)
+        # the grid's micronormals, their weights W S and the steepest slope |s|
+        gm = np.empty((n * n, 3))
+        gw = np.empty(n * n)
         den = 0.0
+        steep = 0.0
         for j in range(n):
             for i in range(n):
                 x = mu[q, 0] + p[j] * sx
                 y = mu[q, 1] + (p[j] * r + p[i] * r_) * sy
                 inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
-                mx, my, mz = -x * inv, -y * inv, inv
-                ws = w[j] * w[i] * max(mx * ox + my * oy + mz * oz, 0.0) / mz
-                if ws <= 0.0:
+                k = j * n + i
+                gm[k, 0], gm[k, 1], gm[k, 2] = -x * inv, -y * inv, inv
+                gw[k] = w[j] * w[i] * max(-x * inv * ox - y * inv * oy + inv * oz, 0.0) / inv
+                den += gw[k]
+                steep = max(steep, math.sqrt(x * x + y * y))
+        num = np.zeros(nc)
+        for k in range(nd):
+            dx = rot[q, 0, 0] * dirs[k, 0] + rot[q, 1, 0] * dirs[k, 1] + rot[q, 2, 0] * dirs[k, 2]
+            dy = rot[q, 0, 1] * dirs[k, 0] + rot[q, 1, 1] * dirs[k, 1] + rot[q, 2, 1] * dirs[k, 2]
+            dz = rot[q, 0, 2] * dirs[k, 0] + rot[q, 1, 2] * dirs[k, 1] + rot[q, 2, 2] * dirs[k, 2]
+            if dz <= 0.0:
+                # blocked by the height field itself (lost = 1), but only the grid's steepest
+                # micronormals see below the horizon: m.d > 0 needs |d_z| < |s| |d_xy|
+                if -dz >= steep * math.sqrt(dx * dx + dy * dy):
                     continue
-                den += ws
-                for k in range(nd):
-                    if lost[k] <= 0.0:
-                        continue
-                    c_ = mx * loc[k, 0] + my * loc[k, 1] + mz * loc[k, 2]
-                    if c_ > 0.0:
-                        f = ws * c_ * lost[k]
-                        for c in range(nc):
-                            num[c] += f * lw[k, c]
+                lost = 1.0
+            else:
+                lost = 1.0 - _g2_over_g1(
+                    lam_o, _lambda_a(dx, dy, dz, mu[q, 0], mu[q, 1], sxx, syy, sxy), dz)
+                if lost <= 0.0:
+                    continue
+            acc = 0.0
+            for g in range(n * n):
+                c_ = gm[g, 0] * dx + gm[g, 1] * dy + gm[g, 2] * dz
+                if c_ > 0.0:
+                    acc += gw[g] * c_
+            if acc > 0.0:
+                for c in range(nc):
+                    num[c] += acc * lost * lw[k, c]
         for c in range(nc):
             out[q, c] = -num[c] / (den * math.pi) if den > 1e-300 else 0.0
     return out

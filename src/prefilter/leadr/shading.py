@@ -401,19 +401,25 @@ def shadowing_ratio(wo, wi, mean_slope, slope_cov) -> np.ndarray:
     return np.where(np.isfinite(li) & (wi[..., 2] > 0.0) & np.isfinite(g), g, 0.0)
 
 
-#: Rows of the environment level that :func:`diffuse_shadowing` integrates over.
+#: Rows of the environment level that :func:`diffuse_shadowing` integrates over; footprints
+#: whose largest slope std is below :data:`SHADOW_FINE_SIGMA` use ``2 * SHADOW_ROWS``: their
+#: ``1 - G2 / G1`` lives in a band of ~15 degrees above the horizon that 16 rows (11 degrees)
+#: resolve poorly (+0.30 % bias of the shadowed radiance at slope std 0.1, +0.07 % with 32 rows;
+#: at std 0.5 16 rows are within 0.1 % of the level-0 quadrature with a 9 x 9 grid).
 SHADOW_ROWS = 16
+SHADOW_FINE_SIGMA = 0.2
 
 
 def diffuse_shadowing(env, wo, mean_slope, slope_cov, n: int = 5, *, to_world=None,
-                      rows: int = SHADOW_ROWS) -> np.ndarray:
+                      rows: int | None = None) -> np.ndarray:
     """What self-shadowing removes from the diffuse layer under ``env``, ``(..., C)`` (<= 0):
     the paper's Algorithm 2 irradiance ``int L <m, wi> / (1 + Lambda_o + Lambda_i)`` minus
     Simplified Algorithm 2's ``int L <m, wi>``, through Algorithm 3's grid (the projected-area
     sum turns ``1 / (1 + Lambda_o + Lambda_i)`` into ``G2 / G1``):
     ``-(1 / pi) sum W S int L <m, wi>+ (1 - G2 / G1) / sum W S``. Quadrature over the texels of
     the environment's mip level with ``rows`` rows (``1 - G2 / G1`` is smooth: it lives near the
-    horizon); add it to :func:`diffuse_sh` (order-2 SH keeps the unshadowed part cheap).
+    horizon; ``None``: :data:`SHADOW_ROWS`, twice that for footprints smoother than
+    :data:`SHADOW_FINE_SIGMA`); add it to :func:`diffuse_irradiance` or :func:`diffuse_sh`.
     Compiled (:func:`prefilter.leadr.kernels.diffuse_shadow_kernel`)."""
     from prefilter.leadr.envmap import EnvMap, texel_directions
     from prefilter.leadr.kernels import diffuse_shadow_kernel
@@ -421,24 +427,40 @@ def diffuse_shadowing(env, wo, mean_slope, slope_cov, n: int = 5, *, to_world=No
     if not isinstance(env, EnvMap):
         raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
     n = as_positive_int(n, "n")
-    rows = as_positive_int(rows, "rows")
+    if rows is not None:
+        rows = as_positive_int(rows, "rows")
     wo = as_directions(wo, "wo")
-    mu, sxx, _, _ = _stats(mean_slope, slope_cov)
+    mu, sxx, syy, sxy = _stats(mean_slope, slope_cov)
     to_world = _as_rotation(to_world)
     shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
                             **({} if to_world is None else {"to_world": to_world.shape[:-2]}))
-    lev = next((a for a in env.levels if a.shape[0] <= rows), env.levels[-1])
-    d, omega = texel_directions(*lev.shape[:2])
-    lw = np.ascontiguousarray((lev * omega[..., None]).reshape(-1, lev.shape[2]))
     flat = (int(np.prod(shape, dtype=np.int64)),)
     b = lambda a, tail: np.ascontiguousarray(  # noqa: E731
         np.broadcast_to(a, shape + tail).reshape(flat + tail), dtype=np.float64)
+    if rows is None:
+        # largest eigenvalue of the slope covariance
+        big = 0.5 * (sxx + syy) + np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+        fine = b(big < SHADOW_FINE_SIGMA ** 2, ()) > 0
+        groups = [(SHADOW_ROWS, ~fine), (2 * SHADOW_ROWS, fine)]
+    else:
+        groups = [(rows, np.ones(flat, bool))]
     p, w, _ = gaussian_grid(n)
-    out = np.empty(flat + (lw.shape[1],))
-    diffuse_shadow_kernel(np.ascontiguousarray(d.reshape(-1, 3)), lw, b(wo, (3,)), b(mu, (2,)),
-                          b(np.asarray(slope_cov, np.float64), (2, 2)),
-                          b(np.eye(3) if to_world is None else to_world, (3, 3)), p, w, out)
-    return out.reshape(shape + (lw.shape[1],))
+    args = (b(wo, (3,)), b(mu, (2,)), b(np.asarray(slope_cov, np.float64), (2, 2)),
+            b(np.eye(3) if to_world is None else to_world, (3, 3)))
+    out = None
+    for r, sel in groups:
+        lev = next((a for a in env.levels if a.shape[0] <= r), env.levels[-1])
+        if out is None:
+            out = np.zeros(flat + (lev.shape[2],))
+        if not np.any(sel):
+            continue
+        d, omega = texel_directions(*lev.shape[:2])
+        lw = np.ascontiguousarray((lev * omega[..., None]).reshape(-1, lev.shape[2]))
+        part = np.empty((int(sel.sum()), lw.shape[1]))
+        diffuse_shadow_kernel(np.ascontiguousarray(d.reshape(-1, 3)), lw,
+                              *(np.ascontiguousarray(a[sel]) for a in args), p, w, part)
+        out[sel] = part
+    return out.reshape(shape + (out.shape[1],))
 
 
 def diffuse_directional(wo, wl, mean_slope, slope_cov, n: int = 5, *, spacing=None,
