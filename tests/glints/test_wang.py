@@ -257,17 +257,22 @@ def test_compressed_tiles(wn):
 
 @pytest.mark.slow
 def test_tiled_matches_direct_heightfield_32():
-    """Tile 32, NDF 64^2, a Gaussian random heightfield: errors of the per-tile path and of the
-    tile-independent switch vs the direct P-NDF (numbers in docs/glints-wang.md)."""
+    """Tile 32, NDF 64^2, a Gaussian random heightfield: errors of the per-tile path, of the
+    tile-independent switch and of rank-16 compression vs the direct P-NDF (measured numbers in
+    docs/glints-wang.md; bounds ~2x those)."""
     nm, _ = gaussian_heightfield(128, corr=3.0, slope_std=0.15, seed=2)
     wt = synthesize(nm, tile=32, band=4.0, rng=1)
     wn = bake_tiles(wt, ndf_res=64, support=0.5, intrinsic_roughness=0.01, wide_tiles=0.5)
+    wc = compress_tiles(wn, 16, 16)
     rng = np.random.default_rng(0)
-    errs = []
+    errs, cerrs = {}, {}
     for sp in (5.5, 9.0, 14.0):
         for c in rng.uniform(-500, 500, (4, 2)):
-            errs.append(_rel(ndf_image(wn, c, sp), pndf_image_implicit(wt, c, sp, 64, 0.5, 0.01)))
-    assert max(errs) < 2e-3
+            d = pndf_image_implicit(wt, c, sp, 64, 0.5, 0.01)
+            errs.setdefault(sp, []).append(_rel(ndf_image(wn, c, sp), d))
+            cerrs.setdefault(sp, []).append(_rel(ndf_image(wc, c, sp), d))
+    assert max(max(e) for e in errs.values()) < 2e-3
+    assert np.median(cerrs[5.5]) < 0.2 and np.median(cerrs[14.0]) < 0.06
     wide = [_rel(wn.mean, pndf_image_implicit(wt, c, 32.0, 64, 0.5, 0.01))
             for c in rng.uniform(-500, 500, (4, 2))]
     assert max(wide) < 0.15

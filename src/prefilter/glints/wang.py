@@ -31,11 +31,15 @@ precomputed for footprint centres on and around the tile (a margin of ``TRUNCATI
 stds: footprints centred on neighbouring tiles reaching in), on the footprint pyramid of
 ``pyramid.py`` (level 0 by ``pndf_image`` with the other texels' elements moved out of the NDF
 square, so they count in the normalisation only; upper levels by exact Gaussian filtering).
+The border texels whose Jacobian depends on the neighbour tile beyond its edge colour (the
+corner squares, :func:`dependent_texels`) are left out and added exactly at query time.
 Queries between centres/levels use Gaussian resampling (``pyramid.resample_weights``' scheme) per
 tile, summed over the tiles under the truncation window; smaller footprints use the direct P-NDF;
 footprints with ``sigma_p >= wide_tiles * T`` use the tile-independent NDF of the expected tiling
 (every tile equally likely), which is the position average of the footprint NDF at any size.
-Storage: 16 tiles' pyramids, independent of the synthesised area.
+Optionally CP-compressed per (tile, level, angular block) (:func:`compress_tiles`). Storage: 16
+tiles' pyramids, independent of the synthesised area. Sampling: a tile contribution by mass, a
+pixel by its CDF, uniform in the pixel.
 """
 
 from __future__ import annotations
@@ -297,10 +301,9 @@ class TiledNDF:
     @property
     def nbytes(self) -> int:
         """Bytes stored: tiles, per-tile pyramids and the mean image (no per-area data)."""
-        levels = [a if isinstance(a, np.ndarray) else sum(f.nbytes for f in a)
-                  for a in self.images]
-        return int(self.wang.nbytes + sum(x if isinstance(x, int) else x.nbytes for x in levels)
-                   + self.mean.nbytes)
+        levels = sum(a.nbytes if isinstance(a, np.ndarray) else sum(f.nbytes for f in a)
+                     for a in self.images)
+        return int(self.wang.nbytes + levels + self.mean.nbytes)
 
     def crop(self, level: int) -> int:
         """Footprint centres per axis stored for each tile at ``level``."""
