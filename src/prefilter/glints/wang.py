@@ -271,7 +271,8 @@ class TiledNDF:
     + bj``): pixel ``(bi B + i, bj B + j)`` of image ``[t, b, a]`` is
     ``sum_r A[t, g, r, i] Bf[t, g, r, j] C[t, b, a, g, r]`` (glints paper eq. 5);
     ``cp_error[l]``: relative L2 error of level ``l``'s stored images.
-    ``mean (R, R)``: the tile-independent NDF image (expected tiling).
+    ``tile_means (16, R, R)``: each tile's ``sigma_p -> inf`` NDF (its texels with equal
+    weights); ``mean (R, R)``: their average, the tile-independent NDF (expected tiling).
     """
 
     wang: WangTiles
@@ -285,6 +286,8 @@ class TiledNDF:
     intrinsic_roughness: float
     wide_sigma: float
     dependent: np.ndarray  # (n_dep, 2) (row, col) of dependent_texels(wang)
+    tile_means: np.ndarray | None = None  # (16, R, R) each tile's sigma_p -> inf NDF
+    uniform_sigma: float = math.inf
     block: int = 0
     cp_error: tuple = ()
 
@@ -303,7 +306,7 @@ class TiledNDF:
         """Bytes stored: tiles, per-tile pyramids and the mean image (no per-area data)."""
         levels = sum(a.nbytes if isinstance(a, np.ndarray) else sum(f.nbytes for f in a)
                      for a in self.images)
-        return int(self.wang.nbytes + levels + self.mean.nbytes)
+        return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
 
     def crop(self, level: int) -> int:
         """Footprint centres per axis stored for each tile at ``level``."""
@@ -324,8 +327,8 @@ def _margin(sigma: float) -> float:
 
 def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
                intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int | None = None,
-               wide_tiles: float = 0.5, rank: int | None = None, block: int = 8,
-               n_iter_max: int = 100, seed: int = 0) -> TiledNDF:
+               wide_tiles: float = 0.5, uniform_tiles: float = 4.0, rank: int | None = None,
+               block: int = 8, n_iter_max: int = 100, seed: int = 0) -> TiledNDF:
     """Per-tile footprint pyramids (glints paper sec. 5.5, Fig. 12), float32, uncompressed or
     CP-compressed (``rank``).
 
@@ -334,8 +337,11 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     wt : the 16 tiles (:func:`synthesize`).
     ndf_res, support, intrinsic_roughness : NDF images ``R x R`` over ``[-support, support]^2``.
     stride0 : level-0 centre stride in texels (``sigma0 = stride0``); default ``T // 8``.
-    wide_tiles : footprints with ``sigma_p >= wide_tiles * T`` use the tile-independent NDF; the
-        pyramid has levels up to the first ``sigma_l >= wide_tiles * T``.
+    wide_tiles : footprints with ``sigma_p >= wide_tiles * T`` use the tile-type shares (each
+        tile's ``sigma_p -> inf`` NDF times its share of the footprint weight); the pyramid has
+        levels up to the first ``sigma_l >= wide_tiles * T``.
+    uniform_tiles : footprints with ``sigma_p >= uniform_tiles * T`` use the tile-independent
+        NDF (expected tiling, O(1)); ``inf`` never.
     rank, block : if ``rank`` is given, each (tile, level) is compressed like a bake cell
         (``cp.nn_cp_batch`` of one ``(B, B, n_l^2)`` tensor per angular block position, all
         groups at ``rank``; all-zero groups dropped); ``n_iter_max``, ``seed``: of the fits.
@@ -349,6 +355,10 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     if not (0.0 < wide <= 4.0):
         raise PrefilterError(f"wide_tiles: expected a footprint std in tiles in (0, 4], got "
                              f"{wide_tiles!r}")
+    uniform = float(uniform_tiles)
+    if not uniform >= wide:
+        raise PrefilterError(f"uniform_tiles: expected a footprint std in tiles >= wide_tiles = "
+                             f"{wide}, got {uniform_tiles!r}")
     L = 1
     while st0 * 2.0 ** (L - 1) < wide * T:
         L += 1
@@ -362,7 +372,7 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     dep = dependent_texels(wt)
     images = [np.empty((16, k1[lv] - k0[lv] + 1, k1[lv] - k0[lv] + 1, R, R), np.float32)
               for lv in range(L)]
-    mean = np.zeros((R, R))
+    tile_means = np.empty((16, R, R))
     g = (np.arange(k0[0], k1[0] + 1) * st0 + 0.5) + o
     cen = np.stack(np.meshgrid(g, g), axis=-1)
     for t in range(16):
@@ -375,10 +385,10 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
             images[lv][t] = _filter_crop(images[lv - 1][t], k0[lv - 1], k0[lv], k1[lv],
                                          sig[0] / st0)
         # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
-        mean += pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
-                           elements_=(s_el[t], J_el[t])) / 16.0
-    wn = TiledNDF(wt, tuple(images), tuple(k0), mean, st0, float(st0), R, S, sr, wide * T,
-                  np.argwhere(dep))
+        tile_means[t] = pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
+                                   elements_=(s_el[t], J_el[t]))
+    wn = TiledNDF(wt, tuple(images), tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
+                  sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
     return wn if rank is None else compress_tiles(wn, rank, block, n_iter_max=n_iter_max,
                                                   seed=seed)
 
@@ -485,7 +495,32 @@ _Q_MIN = 0.6
 def _regime(wn: TiledNDF, sp: float) -> str:
     if sp < wn.min_sigma:
         return "direct"
-    return "wide" if sp >= wn.wide_sigma else "tiles"
+    if sp >= wn.uniform_sigma:
+        return "uniform"
+    return "shares" if sp >= wn.wide_sigma else "tiles"
+
+
+def type_shares(wn: TiledNDF, center, sigma_p, *, index=None) -> np.ndarray:
+    """``(16,)`` share of one footprint's weight on each tile type: the direct P-NDF's Gaussian
+    weights over its truncation window (separable sums per tile row and column), summed by
+    type. Cost: O(tiles under the footprint)."""
+    c, sp, index = _prepare(wn, center, sigma_p, index)
+    return _type_shares(wn, c, sp, index)
+
+
+def _type_shares(wn, c, sp, index):
+    T = wn.wang.size
+    tot2 = sp * sp + SIGMA_H**2
+    rad = TRUNCATION * math.sqrt(tot2)
+    per_axis = []
+    for a in (0, 1):
+        x = np.arange(math.ceil(c[a] - rad - 0.5), math.floor(c[a] + rad - 0.5) + 1)
+        w = np.exp(-(c[a] - x - 0.5) ** 2 / (2.0 * tot2))
+        tiles, inv = np.unique(x // T, return_inverse=True)
+        per_axis.append((tiles, np.bincount(inv, weights=w) / w.sum()))
+    (ti, wi), (tj, wj) = per_axis
+    t = _lookup(wn, index, ti[None, :], tj[:, None])
+    return np.bincount(t.ravel(), weights=np.outer(wj, wi).ravel(), minlength=16)
 
 
 def _level(wn: TiledNDF, sp: float) -> int:
@@ -669,15 +704,20 @@ def contributions(wn: TiledNDF, center, sigma_p, *, index=None):
     -------
     ij : (k, 2) tile coordinates ``(i, j)``; images : (k, R, R) their contributions, each
     carrying its share of the footprint mass; their sum is the footprint's NDF image. For
-    footprints below ``wn.min_sigma`` (direct P-NDF) or at/above ``wn.wide_sigma``
-    (tile-independent NDF) ``ij`` is empty and ``images`` holds the one image.
+    footprints below ``wn.min_sigma`` (direct P-NDF) or at/above ``wn.uniform_sigma``
+    (tile-independent NDF) ``ij`` is empty and ``images`` holds the one image; between
+    ``wn.wide_sigma`` and ``wn.uniform_sigma`` ``ij`` is empty and ``images (16, R, R)`` are the
+    tile types' contributions ``share_t * tile_means[t]``.
     """
     c, sp, index = _prepare(wn, center, sigma_p, index)
     regime = _regime(wn, sp)
+    none = np.zeros((0, 2), np.int64)
     if regime == "direct":
-        return np.zeros((0, 2), np.int64), _direct_image(wn, c, sp, index)[None]
-    if regime == "wide":
-        return np.zeros((0, 2), np.int64), wn.mean[None].copy()
+        return none, _direct_image(wn, c, sp, index)[None]
+    if regime == "uniform":
+        return none, wn.mean[None].copy()
+    if regime == "shares":
+        return none, _type_shares(wn, c, sp, index)[:, None, None] * wn.tile_means
     m, terms = _tile_terms(wn, c, sp, index)
     ij = np.array([(x[0], x[1]) for x in terms], np.int64).reshape(-1, 2)
     imgs = _dependent_images(wn, c, sp, index, ij)
@@ -718,7 +758,8 @@ def _tap_points(wn: TiledNDF, m, t, ay, wy, ax, wx, py, px) -> np.ndarray:
 
 def ndf_image(wn: TiledNDF, center, sigma_p, *, index=None) -> np.ndarray:
     """NDF image ``(R, R)`` of one footprint over the tiled plane: sum of the tile contributions
-    (direct P-NDF below ``wn.min_sigma``, the tile-independent NDF from ``wn.wide_sigma``)."""
+    (direct P-NDF below ``wn.min_sigma``, tile-type shares from ``wn.wide_sigma``, the
+    tile-independent NDF from ``wn.uniform_sigma``)."""
     return contributions(wn, center, sigma_p, index=index)[1].sum(axis=0)
 
 
@@ -736,14 +777,17 @@ def ndf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
     """NDF values ``(...)`` of one footprint at ``s (..., 2)``: the value of the image pixel
     holding ``s`` (0 outside the support), summed over the tiles under the footprint.
 
-    Cost per ``s``: taps x tiles under the footprint, bounded by ``wide_sigma`` (constant)."""
+    Cost per ``s``: taps x tiles under the footprint below ``wn.wide_sigma``, one value per tile
+    type above (plus O(tiles) for the shares below ``wn.uniform_sigma``): bounded."""
     c, sp, index = _prepare(wn, center, sigma_p, index)
     iy, ix, inside = _pixels(wn, s)
     regime = _regime(wn, sp)
     if regime == "direct":
         v = _direct_image(wn, c, sp, index)[iy, ix]
-    elif regime == "wide":
+    elif regime == "uniform":
         v = wn.mean[iy, ix]
+    elif regime == "shares":
+        v = np.einsum("t,t...->...", _type_shares(wn, c, sp, index), wn.tile_means[:, iy, ix])
     else:
         m, terms = _tile_terms(wn, c, sp, index)
         ij = np.array([(x[0], x[1]) for x in terms], np.int64).reshape(-1, 2)
