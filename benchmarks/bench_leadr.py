@@ -28,6 +28,10 @@ ray-traced displaced surface (``--quick``: one surface, the plane only). ``--fli
 (~15 min): the far rows' flickers with the reference's own sampling-error floor
 (:func:`prefilter.leadr.acceptance.flicker_table`).
 
+Specular diagnosis (``--spec-diagnosis --blocks 16,32``, ~15 min per block on a loaded machine):
+:func:`prefilter.leadr.acceptance.specular_diagnosis`, why sigma 0.5 specular misses 0.5x naive
+(reference noise, grid N, LOD bias, parallax, the footprint's non-Gaussian slope histogram).
+
 Render methods (``--render``): wall time of ``leadr-env``, ``leadr-env-simplified``,
 ``leadr-irradiance`` and the naive methods on a 160 x 90 plane + sphere scene with a Gaussian
 height map under ``procedural_env(128)``.
@@ -180,6 +184,9 @@ if __name__ == "__main__":
                     help="far (16 texels/pixel) flicker rows with the reference's own flicker "
                          "floor (acceptance.image_point(noise_floor=True)), ~15 min")
     ap.add_argument("--points", type=int, default=None)
+    ap.add_argument("--spec-diagnosis", action="store_true",
+                    help="why specular sigma 0.5 misses 0.5x naive at 16 / 32 texels "
+                         "(acceptance.specular_diagnosis; --blocks, --surfaces: one surface)")
     ap.add_argument("--surfaces", default=None,
                     help="with --acceptance-env: comma-separated subset of acceptance.SURFACES "
                          "(e.g. 'iso 0.1')")
@@ -191,7 +198,13 @@ if __name__ == "__main__":
     ap.add_argument("--spp", type=int, default=16,
                     help="with --acceptance-env: MIS samples per reference hit")
     a = ap.parse_args()
-    if a.flicker_floor:
+    if a.spec_diagnosis:
+        from prefilter.leadr.acceptance import diagnosis_table, specular_diagnosis
+
+        print(diagnosis_table(specular_diagnosis(
+            a.surfaces or "iso 0.5", blocks=tuple(int(b) for b in a.blocks.split(",")),
+            log=lambda row: None)))
+    elif a.flicker_floor:
         from prefilter.leadr.acceptance import flicker_table, image_point
 
         print(flicker_table(image_point(texels_per_pixel=(16.0,), noise_floor=True,

@@ -30,7 +30,8 @@ from prefilter.leadr.shading import (
 
 __all__ = [
     "CHANNELS", "EnvMap", "IrradianceMap", "LeadrMaps", "artificial_micronormal",
-    "diffuse_directional", "diffuse_irradiance", "diffuse_sh", "diffuse_shadowing", "env_specular", "gaussian_grid", "grid_normals", "moments",
-    "point_light", "procedural_env", "schlick", "sh9_irradiance", "sh9_project", "shading_stats",
-    "shadowing_ratio", "slopes_from_height", "slopes_from_normals", "stats_to_moments",
+    "diffuse_directional", "diffuse_irradiance", "diffuse_sh", "diffuse_shadowing", "env_specular",
+    "gaussian_grid", "grid_normals", "moments", "point_light", "procedural_env", "schlick",
+    "sh9_irradiance", "sh9_project", "shading_stats", "shadowing_ratio", "slopes_from_height",
+    "slopes_from_normals", "stats_to_moments",
 ]
