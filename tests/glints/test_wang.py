@@ -169,7 +169,7 @@ def test_wide_footprints_use_the_expected_tiling(wn, wt):
     at every footprint size (Monte Carlo over random centres of the direct P-NDF at half the
     switch size: agreement within 3 standard errors + the dependent texels' expected-Jacobian
     bias)."""
-    assert wn.uniform_sigma == 4 * wn.wang.size
+    assert wn.uniform_sigma == 8 * wn.wang.size
     sp = wn.uniform_sigma
     rng = np.random.default_rng(5)
     cs = rng.uniform(-1e4, 1e4, (24, 2))
@@ -244,6 +244,8 @@ def test_tiled_validation(wn, wt):
         ndf_image(wn, (1.0, 2.0), 3.0, index=np.full((2, 2), 16))
     with pytest.raises(PrefilterError, match="sigma_p"):
         ndf_image(wn, (1.0, 2.0), [3.0, 4.0])
+    with pytest.raises(PrefilterError, match="sigma_p"):
+        pndf_image_implicit(wt, (1.0, 2.0), [3.0, 4.0])
     with pytest.raises(PrefilterError, match="center"):
         ndf(wn, (1.0, 2.0, 3.0), 3.0, [0.0, 0.0])
     with pytest.raises(PrefilterError, match="wn"):

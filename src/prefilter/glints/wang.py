@@ -165,7 +165,7 @@ def pndf_implicit(wt: WangTiles, center, sigma_p, s,
     c = as_float_array(center, "center")
     if c.shape != (2,):
         raise PrefilterError(f"center: expected one footprint centre (x, y), got shape {c.shape}")
-    sp = float(sigma_p)
+    sp = _as_one_sigma(sigma_p)
     i0, j0, nx, ny = _window(wt, c, sp)
     local = assemble(wt, index_map(wt, ny, nx, i0, j0))
     T = wt.size
@@ -186,12 +186,19 @@ def pndf_image_implicit(wt: WangTiles, center, sigma_p, resolution: int = 64,
     ``sigma_p`` over the implicitly tiled plane (tiles assembled locally, as
     :func:`pndf_implicit`)."""
     c = _as_center(center)
-    sp = float(_as_sigma_p(sigma_p))
+    sp = _as_one_sigma(sigma_p)
     i0, j0, nx, ny = _window(wt, c, sp)
     local = assemble(wt, index_map(wt, ny, nx, i0, j0))
     T = wt.size
     return pndf_image(local, c - np.array([i0 * T, j0 * T]), sp, resolution, support,
                       intrinsic_roughness)
+
+
+def _as_one_sigma(sigma_p) -> float:
+    sp = _as_sigma_p(sigma_p)
+    if sp.shape != ():
+        raise PrefilterError(f"sigma_p: expected one footprint std, got shape {sp.shape}")
+    return float(sp)
 
 
 def _as_center(center) -> np.ndarray:
@@ -327,7 +334,7 @@ def _margin(sigma: float) -> float:
 
 def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
                intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int | None = None,
-               wide_tiles: float = 0.5, uniform_tiles: float = 4.0, rank: int | None = None,
+               wide_tiles: float = 0.5, uniform_tiles: float = 8.0, rank: int | None = None,
                block: int = 8, n_iter_max: int = 100, seed: int = 0) -> TiledNDF:
     """Per-tile footprint pyramids (glints paper sec. 5.5, Fig. 12), float32, uncompressed or
     CP-compressed (``rank``).
@@ -672,11 +679,7 @@ def _dependent_images(wn: TiledNDF, c, sp, index, ij):
 def _prepare(wn, center, sigma_p, index):
     if not isinstance(wn, TiledNDF):
         raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
-    c = _as_center(center)
-    sp = _as_sigma_p(sigma_p)
-    if sp.shape != ():
-        raise PrefilterError(f"sigma_p: expected one footprint std, got shape {sp.shape}")
-    return c, float(sp), _as_index(index)
+    return _as_center(center), _as_one_sigma(sigma_p), _as_index(index)
 
 
 def _direct_image(wn: TiledNDF, c, sp, index):
