@@ -224,6 +224,10 @@ def test_sampling_pdf_equals_eval_and_chi2(wn):
     assert chi2.sf(stat, len(obs) - 1) > 1e-3
     s2, pdf2 = sample(wn, c, sp, n, rng=11)
     assert s2.tobytes() == s.tobytes() and pdf2.tobytes() == pdf.tobytes()
+    for sp_other in (1.5, 20.0, 200.0):  # direct, tile-type shares, expected tiling
+        s3, pdf3 = sample(wn, c, sp_other, 500, rng=2)
+        np.testing.assert_allclose(pdf3, ndf_pdf(wn, c, sp_other, s3), rtol=1e-12)
+        assert np.all(pdf3 > 0)
 
 
 def test_tiled_constant_storage(wn):
