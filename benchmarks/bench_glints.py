@@ -46,31 +46,43 @@ def _best(fn, repeat=3, clock=time.perf_counter):
 
 
 def level_footprint(gm):
-    """Per pyramid level: images, groups, mean rank of the kept blocks' groups and the MB of
-    ``C`` rows and prefix sums (in-memory layout) a random-order query stream at that level
-    reads from: the cause of the per-level spread of the query time (see docs/glints.md)."""
-    from prefilter.glints.query import _group_ranks
+    """Per pyramid level: images, groups, mean rank of the kept blocks' groups and the MB a
+    random-order query stream at that level reads from, in the packed layout the kernels use
+    (8-bit code rows ``cq``; per group: uint8 factors, uint16 prefix sums, float32 scales) and,
+    for comparison, in the float32 arrays ``A``, ``Bp``, ``C`` (padded to the largest rank):
+    the cause of the per-level spread of the query time (see docs/glints.md)."""
+    from prefilter.glints.query import _group_ranks, _n_prefetch, packed
 
     pyr = gm.pyramid
     nb = gm.block_index.shape[1]
     ranks = _group_ranks(gm)
+    pa, _, (cq, wsc, fa, _), _, _, _ = packed(gm)
+    per_comp = 2 * (pa.itemsize * pa.shape[1] + fa.itemsize * gm.block) + wsc.itemsize
     row_c = gm.C.shape[1] * gm.C.itemsize
     row_g = 2 * gm.A[0].nbytes
-    print(f"{'level':>5} {'images':>7} {'groups':>7} {'mean rank':>9} {'C MB':>7} {'A+Bp MB':>8}")
+    n_pf = _n_prefetch(gm)
+    print(f"{'level':>5} {'images':>7} {'groups':>7} {'mean rank':>9} {'codes MB':>9} "
+          f"{'factors MB':>10} {'float C MB':>10} {'A+Bp MB':>8} prefetched")
     for lv in np.arange(pyr.n_levels):
         lv = int(lv)
         img = np.arange(pyr.offsets[lv], pyr.offsets[lv + 1])
         k = gm.block_index[img]
         g = (gm.image_cell[img, None, None].astype(np.int64) * nb * nb
              + np.arange(nb * nb).reshape(nb, nb))[k >= 0]
-        n_groups = np.unique(g).size
-        print(f"{lv:5d} {img.size:7d} {n_groups:7d} {ranks[g].mean() if g.size else 0:9.1f} "
-              f"{(k >= 0).sum() * row_c / 1e6:7.1f} {n_groups * row_g / 1e6:8.1f}")
+        ug = np.unique(g)
+        print(f"{lv:5d} {img.size:7d} {ug.size:7d} {ranks[g].mean() if g.size else 0:9.1f} "
+              f"{ranks[g].sum() * cq.itemsize / 1e6:9.2f} "
+              f"{ranks[ug].sum() * per_comp / 1e6:10.2f} "
+              f"{(k >= 0).sum() * row_c / 1e6:10.1f} {ug.size * row_g / 1e6:8.1f} "
+              f"{'yes' if img[0] < n_pf else 'no'}")
 
 
-def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False, clock=time.perf_counter):
+def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False, clock=time.perf_counter,
+                  corner=None):
     """Per-query cost. ``coherent`` sorts the queries by footprint centre (rows of 8 texels), as
     a renderer's neighbouring pixels would be; random order measures cache misses as well.
+    ``corner``: centres confined to a ``corner^2`` texel square (the control: the same operations
+    on 1/(H/corner)^2 of the finest levels' data).
     ``clock``: ``time.process_time`` (with ``NUMBA_NUM_THREADS=1``) is not charged for the time
     other processes of a loaded machine hold the cores."""
     rng = np.random.default_rng(seed)
@@ -81,7 +93,7 @@ def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False, clock=time.pe
     rows = []
     for w in WIDTHS:
         sp = w / 2.0
-        c = rng.uniform(0, H, (n_queries, 2))
+        c = rng.uniform(0, corner or H, (n_queries, 2))
         if coherent:
             c = c[np.lexsort((c[:, 0], c[:, 1] // 8))]
         s = rng.normal(0.0, 0.15, (n_queries, 2))
@@ -98,6 +110,7 @@ def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False, clock=time.pe
                    clock) / n_direct
         rows.append((w, tp, tr, td))
     print(f"query cost per query ({'coherent' if coherent else 'random'} order, map {H}^2, "
+          f"{f'centres in a {corner}^2 corner, ' if corner else ''}"
           f"{n_queries} queries, NUMBA threads "
           f"{os.environ.get('NUMBA_NUM_THREADS', 'all')}, clock {clock.__name__})")
     print(f"{'width':>6} {'point us':>9} {'range us':>9} {'direct us':>11} {'direct/point':>13}")
@@ -255,6 +268,8 @@ def main():
     ap.add_argument("--kinds", default="gaussian,brushed,flakes,scratches")
     ap.add_argument("--scaling", default="64,128,256")
     ap.add_argument("--map", default=None, help="use this baked .npz for the query benchmark")
+    ap.add_argument("--corner", type=int, default=None,
+                    help="queries: also a random-order run with centres in a CORNER^2 square")
     ap.add_argument("--frames", action="store_true", help="only the frame-time benchmark")
     ap.add_argument("--direct", action="store_true", help="--frames: also glints-direct + FLIP")
     ap.add_argument("--lights", default="point", help="--frames: point, quad or environment")
@@ -297,6 +312,8 @@ def main():
         level_footprint(gm)
         bench_queries(gm, nm, clock=clock)
         bench_queries(gm, nm, coherent=True, clock=clock)
+        if a.corner:
+            bench_queries(gm, nm, clock=clock, corner=a.corner)
         if a.scaling:
             bench_bake_scaling([int(x) for x in a.scaling.split(",")], tmp)
         if a.ranks:

@@ -7,10 +7,11 @@ Every kernel takes the packed arrays of :func:`prefilter.glints.query._args`, in
   column factors, each group's block of ``r_g (B + 1)`` values rank-innermost (flat index
   ``m_g (B + 1) + i r_g + r``), so a group's components at one NDF pixel are adjacent;
 * ``C``: the tuple ``(cq, wsc, Fa, Fb)``: the third factors, flat (row ``k`` of group ``g`` at
-  ``c0_g + (k - k0_g) stride_g``), the scale of each component ``(M,)`` and the factors
+  ``cb_g + k stride_g``), the scale of each component ``(M,)`` and the factors
   themselves ``(M, B)`` (flat ``m_g B + i r_g + r``);
 * ``block_index``, ``image_cell`` (as in :class:`prefilter.glints.store.GlintsMap`);
-* ``meta (G, 5)`` int64 per group: ``r_g``, ``m_g``, ``k0_g``, ``c0_g``, ``stride_g``.
+* ``meta (G, 4)`` int32 (int64 for very large maps) per group: ``r_g``, ``m_g``, ``cb_g``,
+  ``stride_g``; row ``k`` of ``cq`` starts at ``cb_g + k stride_g``.
 
 A pixel of a block of group ``g`` is ``sum_r wsc[m_g + r] cq[k, r] Fa[i, r] Fb[j, r]`` and a
 rectangle's sum the same with prefix-sum differences. For version-3 maps these are the stored
@@ -96,7 +97,7 @@ def _rect_mass(Pa, Pb, C, block_index, image_cell, meta, idx, wts, q, bi, bj, i0
             continue
         g = image_cell[img] * nb * nb + bi * nb + bj
         nr, m = meta[g, 0], meta[g, 1]
-        kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+        kc = meta[g, 2] + k * meta[g, 3]
         base = m * B1
         # slices: indices from range() are known non-negative, so the loop vectorises (flat
         # indices with a computed offset kept a wrap-around check per element: 3x slower)
@@ -160,6 +161,7 @@ def point_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, sx, sy, lo,
         if p < n and idx[p, 0] < n_pf:
             bi, bj, i0, j0 = _pixel(sx[p], sy[p], lo, h, R, B)
             if bi >= 0:
+                last = -1
                 for c in range(idx.shape[1]):
                     img = idx[p, c]
                     if wts[p, c] == 0.0 or img >= n_pf:
@@ -169,12 +171,14 @@ def point_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, sx, sy, lo,
                         continue
                     g = image_cell[img] * nb * nb + bi * nb + bj
                     nr, m = meta[g, 0], meta[g, 1]
-                    kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                    kc = meta[g, 2] + k * meta[g, 3]
                     _prefetch(cq, kc)
                     _prefetch(cq, kc + nr - 1)
-                    _prefetch(Fa, m * B + i0 * nr)
-                    _prefetch(Fb, m * B + j0 * nr)
-                    _prefetch(wsc, m)
+                    if g != last:  # the blended neighbours usually share the group's rows
+                        last = g
+                        _prefetch(Fa, m * B + i0 * nr)
+                        _prefetch(Fb, m * B + j0 * nr)
+                        _prefetch(wsc, m)
         bi, bj, i0, j0 = _pixel(sx[q], sy[q], lo, h, R, B)
         acc = 0.0
         if bi >= 0:
@@ -188,7 +192,7 @@ def point_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, sx, sy, lo,
                     continue
                 g = image_cell[img] * nb * nb + bi * nb + bj
                 nr, m = meta[g, 0], meta[g, 1]
-                kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                kc = meta[g, 2] + k * meta[g, 3]
                 fa = m * B + i0 * nr
                 fb = m * B + j0 * nr
                 ar, br, cr, wr = Fa[fa:fa + nr], Fb[fb:fb + nr], cq[kc:kc + nr], wsc[m:m + nr]
@@ -244,27 +248,34 @@ def range_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y0, x1,
         if p < n and idx[p, 0] < n_pf:
             cx0, cx1, cy0, cy1, bi0, bi1, bj0, bj1, _ = _rect(x0[p], y0[p], x1[p], y1[p], lo, h,
                                                               R, B, nb)
-            for c in range(idx.shape[1]):
-                img = idx[p, c]
-                if wts[p, c] == 0.0 or img >= n_pf:
-                    continue
-                for bi in range(bi0, bi1 + 1):
-                    na0 = _prefix_pos(cy0 - bi * B, B)[0]
-                    na1 = _prefix_pos(cy1 - bi * B, B)[0]
-                    for bj in range(bj0, bj1 + 1):
+            for bi in range(bi0, bi1 + 1):
+                na0 = _prefix_pos(cy0 - bi * B, B)[0]
+                na1 = _prefix_pos(cy1 - bi * B, B)[0]
+                for bj in range(bj0, bj1 + 1):
+                    nb0 = _prefix_pos(cx0 - bj * B, B)[0]
+                    nb1 = _prefix_pos(cx1 - bj * B, B)[0]
+                    last = -1
+                    for c in range(idx.shape[1]):
+                        img = idx[p, c]
+                        if wts[p, c] == 0.0 or img >= n_pf:
+                            continue
                         k = block_index[img, bi, bj]
                         if k < 0:
                             continue
                         g = image_cell[img] * nb * nb + bi * nb + bj
                         nr, m = meta[g, 0], meta[g, 1]
-                        kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                        _prefetch(cq, meta[g, 2] + k * meta[g, 3])
+                        if g == last:
+                            continue
+                        last = g
                         base = m * (B + 1)
-                        _prefetch(cq, kc)
                         _prefetch(wsc, m)
-                        _prefetch(pa, base + na0 * nr)
+                        if na0 > 0:  # row 0 is zero, never read
+                            _prefetch(pa, base + na0 * nr)
                         _prefetch(pa, base + na1 * nr)
-                        _prefetch(pb, base + _prefix_pos(cx0 - bj * B, B)[0] * nr)
-                        _prefetch(pb, base + _prefix_pos(cx1 - bj * B, B)[0] * nr)
+                        if nb0 > 0:
+                            _prefetch(pb, base + nb0 * nr)
+                        _prefetch(pb, base + nb1 * nr)
         cx0, cx1, cy0, cy1, bi0, bi1, bj0, bj1, area = _rect(x0[q], y0[q], x1[q], y1[q], lo, h,
                                                              R, B, nb)
         acc = 0.0
@@ -305,6 +316,14 @@ def range_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y0, x1,
                             eb0 += nr
                         if tb1 != 0.0:
                             eb1 += nr
+                        # prefix row 0 is zero: not read (its line is often the only one
+                        # missing), the row-1 slice stands in with weight 0
+                        ka0 = 0.0 if ea0 == base else 1.0
+                        kb0 = 0.0 if eb0 == base else 1.0
+                        if ea0 == base:
+                            ra0 = ea0 = ra1
+                        if eb0 == base:
+                            rb0 = eb0 = rb1
                         a0s, a0e = pa[ra0:ra0 + nr], pa[ea0:ea0 + nr]
                         a1s, a1e = pa[ra1:ra1 + nr], pa[ea1:ea1 + nr]
                         b0s, b0e = pb[rb0:rb0 + nr], pb[eb0:eb0 + nr]
@@ -312,15 +331,15 @@ def range_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y0, x1,
                         wr = wsc[m:m + nr]
                         for r in range(nr):
                             a0 = float(a0s[r])
-                            a0 += ta0 * (float(a0e[r]) - a0)
+                            a0 = ka0 * (a0 + ta0 * (float(a0e[r]) - a0))
                             a1 = float(a1s[r])
                             a1 += ta1 * (float(a1e[r]) - a1)
                             b0 = float(b0s[r])
-                            b0 += tb0 * (float(b0e[r]) - b0)
+                            b0 = kb0 * (b0 + tb0 * (float(b0e[r]) - b0))
                             b1 = float(b1s[r])
                             b1 += tb1 * (float(b1e[r]) - b1)
                             v[r] = wr[r] * ((a1 - a0) * (b1 - b0))
-                    kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                    kc = meta[g, 2] + k * meta[g, 3]
                     cr = cq[kc:kc + nr]
                     s = 0.0
                     for r in range(nr):
@@ -391,7 +410,7 @@ def bilinear_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, sx, sy, 
                         continue
                     g = image_cell[img] * nb * nb + bi * nb + bj
                     nr, m = meta[g, 0], meta[g, 1]
-                    kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                    kc = meta[g, 2] + k * meta[g, 3]
                     acc += w * _factor_dot(Fa, Fb, wsc, m, B, nr, ia, wa0, wa1, ja, wb0, wb1, cq,
                                            kc)
         out[q] = acc
@@ -548,7 +567,7 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, 
                                 ns += 1
                             last = g
                         wt = wy[ty] * wx[tx]
-                        kc = meta[g, 3] + (k - meta[g, 2]) * meta[g, 4]
+                        kc = meta[g, 2] + k * meta[g, 3]
                         cr, cs = cq[kc:kc + nr], cw[slot]
                         for rr in range(nr):
                             cs[rr] += wt * float(cr[rr])

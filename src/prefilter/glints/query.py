@@ -210,9 +210,17 @@ def _rank_major(f, ranks):
 
 
 def _meta(ranks, k0, c0, stride):
+    """Group records ``(G, 4)``: rank, first component, code-row base ``c0 - k0 stride`` (row
+    ``k`` of the group starts at ``base + k stride``) and stride; int32 when every value and
+    code index fits (a quarter of the int64 record's cache footprint)."""
     r = np.asarray(ranks, np.int64)
     m = np.concatenate([[0], np.cumsum(r)])[:-1]
-    return np.ascontiguousarray(np.stack([r, m, k0, c0, stride], axis=1).astype(np.int64))
+    stride = np.asarray(stride, np.int64)
+    meta = np.stack([r, m, np.asarray(c0, np.int64) - np.asarray(k0, np.int64) * stride, stride],
+                    axis=1)
+    big = max(int(np.abs(meta).max(initial=0)), int(m[-1] + r[-1]) if r.size else 0)
+    dt = np.int32 if big < 2**31 // 4 else np.int64
+    return np.ascontiguousarray(meta.astype(dt))
 
 
 def _pack_codes(codes):
