@@ -4,6 +4,9 @@
     python benchmarks/study_glints_scenes.py --lights quad --out m.jsonl   # appends, resumes
     python benchmarks/study_glints_scenes.py --lights quad,environment --floor  # + MC floor
     python benchmarks/study_glints_scenes.py --table m.jsonl           # only print the table
+    python benchmarks/study_glints_scenes.py --reference --lights quad,environment \
+        --shapes plane --distances mid --out ref.jsonl                 # against converged refs
+    python benchmarks/study_glints_scenes.py --reference --table ref.jsonl
 
 Scenes: the plane of :func:`prefilter.glints.render.measurement_scene` (camera and light scaled
 with the distance, so only the footprint changes), and a sphere of radius ``0.25 d`` at the same
@@ -17,6 +20,17 @@ Wall times are single frames on a shared machine: indicative only. Quad and envi
 noise-free range queries, so their FLIP includes the estimator's noise; ``--floor`` measures it
 (FLIP of ``glints-direct`` seed 1 vs seed 0). Rows are appended to
 ``--out`` as JSON lines as they finish and cells already there are skipped.
+
+``--reference`` (quad and environment lights) judges against deterministic references instead
+(:mod:`prefilter.glints.reference`; no Monte Carlo noise): ``converged`` = the expectation of
+``glints-direct`` (the light integral with the direct P-NDF by quadrature); for environments also
+``matched`` = the expectation of ``glints``' prefiltered SG estimator with the direct P-NDF
+(the same epsilon-support blur), for quads ``compressed`` = the light integral by the same
+quadrature with ``glints``' compressed NDF (its point queries). ``glints`` is averaged over
+``--seeds`` seeds (its SG and MIS estimators are noisy; range-path pixels are not) and FLIP is
+reported after 1, 4 and all seeds, so a value that stops falling is error, not noise.
+Compression error alone: quad ``compressed`` vs ``converged`` (both noise-free); environment
+``glints`` (averaged) vs ``matched``. CPU times are process times (``time.process_time``).
 """
 
 from __future__ import annotations
@@ -102,6 +116,96 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
                 **extra)
 
 
+def _flip_pair(a, b, hit):
+    from prefilter.render.metrics import flip
+
+    f = flip(a, b)
+    return float(f.mean), float(f.error_map[hit].mean())
+
+
+def reference_cell(shape: str, dist_name: str, kind: str, lights: str, seeds: int = 16,
+                   direct: bool = True) -> dict:
+    """One cell against the deterministic references (see the module docstring); FLIP values are
+    pairs (frame, object pixels)."""
+    from prefilter.glints.reference import render_converged
+    from prefilter.render.pipeline import render
+    from prefilter.render.scene import load_scene
+
+    sc = load_scene(scene(shape, DISTANCES[dist_name], kind, lights))
+    render(sc, "glints")  # bake (disk cache) and compile outside the timing
+    sp, hit = coverage(sc)
+    t0 = time.process_time()
+    imgs = [render(sc, "glints", seed=k) for k in range(seeds)]
+    t_glints = (time.process_time() - t0) / seeds
+    t0 = time.process_time()
+    conv = render_converged(sc)
+    t_conv = time.process_time() - t0
+    row = dict(mode="reference", lights=lights, shape=shape, distance=dist_name, map=kind,
+               sigma_p_median=sp, object_pixels=float(hit.mean()), seeds=seeds,
+               cpu_glints=t_glints, cpu_converged=t_conv)
+    if lights == "environment":
+        t0 = time.process_time()
+        other = render_converged(sc, matched=True)
+        row.update(cpu_matched=time.process_time() - t0, other="matched")
+    else:
+        t0 = time.process_time()
+        other = render_converged(sc, ndf="compressed")
+        row.update(cpu_compressed=time.process_time() - t0, other="compressed")
+        row["flip_compressed_converged"] = _flip_pair(other, conv, hit)
+        row["mean_compressed_converged"] = float(other.mean() / conv.mean())
+    for n in sorted({1, min(4, seeds), seeds}):
+        g = np.mean(imgs[:n], 0)
+        row[f"flip_glints{n}_converged"] = _flip_pair(g, conv, hit)
+        row[f"flip_glints{n}_{row['other']}"] = _flip_pair(g, other, hit)
+    row["mean_glints_converged"] = float(np.mean(imgs) / conv.mean())
+    row["mean_glints_other"] = float(np.mean(imgs) / other.mean())
+    if direct:
+        t0 = time.process_time()
+        d = render(sc, "glints-direct")
+        row.update(cpu_direct=time.process_time() - t0,
+                   flip_direct_converged=_flip_pair(d, conv, hit),
+                   flip_glints1_direct=_flip_pair(imgs[0], d, hit),
+                   mean_direct_converged=float(d.mean() / conv.mean()))
+    return row
+
+
+def _pair(p, obj: bool) -> str:
+    if p is None:
+        return "-"
+    txt = f"{p[0]:.3f}" + (f" ({p[1]:.3f})" if obj else "")
+    return f"**{txt}**" if max(p) > TARGET else txt
+
+
+def table_reference(rows: list[dict]) -> str:
+    """Markdown: one row per (lights, shape, map, distance) of ``--reference`` cells."""
+    out = ["| lights | shape | map | d | compression only | glints vs converged, 1 / 4 / S seeds "
+           "| glints(S) vs matched or compressed | glints-direct (1 spp) vs converged | "
+           "glints vs glints-direct (1 spp) | mean glints(S) / converged | CPU s: glints frame / "
+           "converged / direct |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
+    rows = [r for r in rows if r.get("mode") == "reference"]
+    order = {d: i for i, d in enumerate(DISTANCES)}
+    rows.sort(key=lambda r: (r["lights"] != "quad", r["shape"] != "plane", KINDS.index(r["map"]),
+                             order[r["distance"]]))
+    for r in rows:
+        obj = r["object_pixels"] < 0.999
+        S = r["seeds"]
+        ns = sorted({1, min(4, S), S})
+        if r["other"] == "compressed":
+            comp = _pair(r["flip_compressed_converged"], obj)
+        else:
+            comp = _pair(r[f"flip_glints{S}_matched"], obj) + f" (S={S})"
+        conv = " / ".join(_pair(r[f"flip_glints{n}_converged"], obj) for n in ns)
+        oth = _pair(r[f"flip_glints{S}_{r['other']}"], obj)
+        cpu = (f"{r['cpu_glints']:.2f} / {r['cpu_converged']:.0f} / "
+               + (f"{r['cpu_direct']:.0f}" if "cpu_direct" in r else "-"))
+        out.append(f"| {r['lights']} | {r['shape']} | {r['map']} | {r['distance']} | {comp} | "
+                   f"{conv} | {oth} | {_pair(r.get('flip_direct_converged'), obj)} | "
+                   f"{_pair(r.get('flip_glints1_direct'), obj)} | "
+                   f"{r['mean_glints_converged']:.3f} | {cpu} |")
+    return "\n".join(out)
+
+
 def worst(r: dict) -> float:
     """The FLIP a cell is judged by: over the frame and over the object's pixels."""
     return max(r["flip"], r.get("flip_object", r["flip"]))
@@ -162,9 +266,15 @@ def main():
     ap.add_argument("--converged", type=int, default=0,
                     help="also FLIP between the means of this many seeds of each method")
     ap.add_argument("--table", default=None, help="only print the table of this .jsonl")
+    ap.add_argument("--reference", action="store_true",
+                    help="judge against the deterministic references (quad, environment)")
+    ap.add_argument("--seeds", type=int, default=16, help="--reference: glints seeds averaged")
+    ap.add_argument("--no-direct", action="store_true",
+                    help="--reference: skip the 1-spp glints-direct frame (costly far away)")
     a = ap.parse_args()
+    fmt = table_reference if a.reference else table
     if a.table:
-        print(table([json.loads(x) for x in Path(a.table).read_text().splitlines() if x]))
+        print(fmt([json.loads(x) for x in Path(a.table).read_text().splitlines() if x]))
         return
     out = Path(a.out)
     done = set()
@@ -172,19 +282,26 @@ def main():
         for x in out.read_text().splitlines():
             if x:
                 r = json.loads(x)
-                done.add((r["lights"], r["shape"], r["map"], r["distance"]))
+                if (r.get("mode") == "reference") == a.reference:
+                    done.add((r["lights"], r["shape"], r["map"], r["distance"]))
     for lights in a.lights.split(","):
         for kind in a.kinds.split(","):  # map-major: one bake, then all its cells
             for shape in a.shapes.split(","):
                 for dn in a.distances.split(","):
                     if (lights, shape, kind, dn) in done:
                         continue
-                    r = cell(shape, dn, kind, lights, a.floor, a.converged)
+                    if a.reference:
+                        r = reference_cell(shape, dn, kind, lights, a.seeds, not a.no_direct)
+                    else:
+                        r = cell(shape, dn, kind, lights, a.floor, a.converged)
                     print(json.dumps(r), flush=True)
                     with out.open("a") as fh:
                         fh.write(json.dumps(r) + "\n")
     rows = [json.loads(x) for x in out.read_text().splitlines() if x]
-    print(table(rows))
+    print(fmt(rows))
+    if a.reference:
+        return
+    rows = [r for r in rows if r.get("mode") != "reference"]
     bad = [r for r in rows if worst(r) > TARGET]
     print(f"cells over FLIP {TARGET}: {len(bad)} of {len(rows)}")
 

@@ -40,8 +40,9 @@ MAX_CELLS = 96
 #: Environment lights: nodes per axis of the table of ``K`` over ``s in [-1, 1]^2`` (spacing
 #: 0.021; ``K`` varies on the scale of the SG lobes, ~0.13 in ``s`` for the render's fit).
 ENV_RES = 97
-#: Element cubature along a wide principal axis: node spacing in ``s``.
-LINE_STEP = 0.01
+#: Element cubature along a wide principal axis: node spacing in ``s`` (the table is bilinear
+#: at 0.021 and smooth on ~0.1).
+LINE_STEP = 0.025
 
 
 def _surface_arrays(surf):
@@ -282,7 +283,8 @@ def _smooth_factor(wo, wi, f0):
 
 
 def quad_integral(surf, center, sigma_p, wo, corners, radiance, f0=1.0, *,
-                  ds_max: float = DS_MAX, max_cells: int = MAX_CELLS) -> np.ndarray:
+                  ds_max: float = DS_MAX, max_cells: int = MAX_CELLS,
+                  ndf: str = "direct") -> np.ndarray:
     """Specular ``int_quad f cos L dw`` of a quad light with the direct P-NDF, by quadrature.
 
     Glints paper eq. 1 (microfacet BRDF with the footprint's P-NDF) integrated over the light:
@@ -296,11 +298,16 @@ def quad_integral(surf, center, sigma_p, wo, corners, radiance, f0=1.0, *,
     wo : (N, 3) local view directions; corners : (N, 4, 3) quad corners relative to the shading
         point in the local frame, counter-clockwise seen from the lit side.
     radiance : (3,); f0 : (3,) or scalar.
+    ndf : ``"direct"`` (the direct P-NDF, :func:`pndf_multi`) or ``"surface"`` (the surface's own
+        evaluation, :func:`prefilter.glints.brdf.glint_ndf`: the compressed NDF of ``glints``'
+        point queries), for separating compression from a light estimator's error.
 
     Returns
     -------
     (N, 3).
     """
+    if ndf not in ("direct", "surface"):
+        raise PrefilterError(f"ndf: expected 'direct' or 'surface', got {ndf!r}")
     wo = as_float_array(wo, "wo", ndim_min=2, last_dim=3)
     V = as_float_array(corners, "corners", ndim_min=3)
     N = len(wo)
@@ -329,11 +336,11 @@ def quad_integral(surf, center, sigma_p, wo, corners, radiance, f0=1.0, *,
         sl = slice(c0, c0 + step)
         if cnt[sl].sum() > 0:
             out[sl] = _quad_cells(surf, center[sl], sigma_p[sl], wo[sl], V[sl], na[sl], nb[sl],
-                                  cnt[sl], f0)
+                                  cnt[sl], f0, ndf)
     return out * L
 
 
-def _quad_cells(surf, center, sigma_p, wo, V, na, nb, cnt, f0):
+def _quad_cells(surf, center, sigma_p, wo, V, na, nb, cnt, f0, ndf):
     N = len(wo)
     off = np.concatenate([[0], np.cumsum(cnt)])
     P = int(off[-1])
@@ -352,7 +359,12 @@ def _quad_cells(surf, center, sigma_p, wo, V, na, nb, cnt, f0):
     # |cr| cos(theta_l) = |cr . wi| (cr is along the light's normal)
     dw = np.abs(np.sum(cr * wi, -1)) / (r2 * na[owner] * nb[owner])
     k, hh, ok = _smooth_factor(wo[owner], wi, f0)
-    D = pndf_multi(surf, center, sigma_p, hh[:, :2], off)
+    if ndf == "direct":
+        D = pndf_multi(surf, center, sigma_p, hh[:, :2], off)
+    else:
+        from prefilter.glints.brdf import glint_ndf
+
+        D = glint_ndf(surf, center[owner], sigma_p[owner], hh[:, :2])
     val = np.where(ok[:, None], np.broadcast_to(k, (P, 3)) * (D * dw)[:, None], 0.0)
     return np.stack([np.bincount(owner, val[:, ch], minlength=N) for ch in range(3)], -1)
 
@@ -387,6 +399,9 @@ def environment_integral(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, blur=
     ``[-1, 1]^2`` per footprint and integrated against each P-NDF element
     (:func:`pndf_integral`).
 
+    The table covers the square of ``s`` the P-NDF's elements reach (within 4 stds), at most
+    ``[-1, 1]^2``, with node spacing ``2 / (res - 1)``.
+
     Parameters
     ----------
     wo : (N, 3) local view directions; mu (K, 3), lam (K,), p (N, K, 3) or (K, 3): the SG
@@ -412,8 +427,18 @@ def environment_integral(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, blur=
     if np.any(r_blur < 0):
         raise PrefilterError("blur: expected half-widths >= 0")
     f0 = np.atleast_1d(np.asarray(f0, dtype=np.float64))
-    lo, hstep = -1.0, 2.0 / (res - 1)
-    g = lo + hstep * np.arange(res)
+    # the table spans the square the elements can reach (means shift by < 4 sqrt2 sigma_h |J|,
+    # positional std < sigma_h |J|; 4 stds beyond): beyond it the integrand has no mass
+    surf, s_el, J = _surface_arrays(surf)
+    reach = np.abs(s_el).max(-1) + 10.0 * SIGMA_H * np.sqrt(np.sum(J * J, axis=(-2, -1)))
+    # (+ the blur: a blurred node reads K up to r away)
+    rmax = float(r_blur.max(initial=0.0))
+    bound = min(1.0, float(reach.max()) + 4.0 * surf.intrinsic_roughness) + rmax
+    hstep = 2.0 / (res - 1)
+    n_nodes = int(np.ceil(2.0 * bound / hstep)) + 1
+    lo = -0.5 * hstep * (n_nodes - 1)
+    g = lo + hstep * np.arange(n_nodes)
+    res = n_nodes
     SX, SY = np.meshgrid(g, g)  # row = s_y
     s2 = SX**2 + SY**2
     inside = s2 < 1.0
@@ -438,3 +463,105 @@ def environment_integral(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, blur=
                 T[i] = _box_blur_axis(_box_blur_axis(T[i], r, hstep, 1), r, hstep, 0)
         out[sl] = pndf_integral(surf, c[sl], sp[sl], T, lo, hstep)
     return out
+
+
+# ------------------------------------------------------------------------------------ frames
+
+
+def shade_converged(scene, g, *, matched: bool = False, ndf: str = "direct") -> np.ndarray:
+    """Radiance ``(N, 3)`` of hit samples ``g`` with the direct P-NDF, without sampling noise.
+
+    ``matched=False``: the expectation of ``glints-direct`` (point / directional lights as that
+    method; quads by :func:`quad_integral`; environments by :func:`environment_integral`).
+    ``matched=True``: the expectation of ``glints``' own estimators with the direct P-NDF in
+    place of the compressed one: environments blurred over the lobes' epsilon-support where
+    ``glints`` prefilters (footprints at or above the compressed map's ``sigma_min``); quads as
+    for ``False`` (the range path's patch-centre factors and bounding-box means are not
+    mirrored, so they stay in a comparison of ``glints`` against this).
+    ``ndf="compressed"`` (quad, point and directional lights only): the same integrals with
+    ``glints``' compressed NDF (its point queries, the render cache's map) instead of the direct
+    P-NDF, i.e. ``glints`` without its light estimator's error.
+    Footprints and shading frames are those of :func:`prefilter.glints.render.shade_glints`.
+    """
+    if ndf not in ("direct", "compressed"):
+        raise PrefilterError(f"ndf: expected 'direct' or 'compressed', got {ndf!r}")
+    from prefilter.glints.brdf import glint_brdf_cos
+    from prefilter.glints.envlight import eps_support
+    from prefilter.glints.render import (ENV_EPS, _local, baked_surface, environment_sgs,
+                                         footprints)
+    from prefilter.ltc import clamped_cosine_integral
+
+    lights = scene.light_set()
+    env = [lt for lt in scene.lights if lt.type == "environment"]
+    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
+    t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
+    wo = _local(g.view, t, b, n)
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    out = np.zeros((len(wo), 3))
+    for k in np.unique(g.object_id):
+        m = g.object_id == k
+        mat = scene.objects[int(k)].material
+        if mat.normal_map is None:
+            raise PrefilterError(f"objects[{int(k)}].material.normal_map: expected a normal map "
+                                 "(the microstructure), got none")
+        nm = mat.normal_map.load()
+        surf = baked_surface(nm, direct=(ndf == "direct"))
+        c, sp = footprints(g.select(m), surf.shape)
+        base = np.asarray(mat.base_color, dtype=np.float64)
+        f0 = np.asarray(mat.f0, dtype=np.float64)
+        tm, bm, nmm = t[m], b[m], n[m]
+        for pl in lights.points:
+            d = pl.position - g.position[m]
+            d2 = np.maximum(np.sum(d * d, -1), 1e-300)
+            wi = _local(d / np.sqrt(d2)[:, None], tm, bm, nmm)
+            wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
+            out[m] += (glint_brdf_cos(surf, c, sp, wo[m], wi, f0)
+                       + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * pl.intensity / \
+                d2[:, None]
+        for dl in lights.directionals:
+            wi = _local(np.broadcast_to(-dl.direction, tm.shape), tm, bm, nmm)
+            wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
+            out[m] += (glint_brdf_cos(surf, c, sp, wo[m], wi, f0)
+                       + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * dl.irradiance
+        for ql in lights.quads:
+            corners = np.stack([_local(v - g.position[m], tm, bm, nmm) for v in ql.vertices], 1)
+            if np.any(base > 0):
+                out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
+            out[m] += quad_integral(surf, c, sp, wo[m], corners, ql.radiance, f0,
+                                    ndf="direct" if ndf == "direct" else "surface")
+        if env and np.any(base > 0):
+            raise PrefilterError(f"objects[{int(k)}].material.base_color: the converged "
+                                 "environment reference is specular only; expected 0")
+        if env and ndf != "direct":
+            raise PrefilterError("ndf: the environment reference needs the direct P-NDF "
+                                 "(element cubature); expected 'direct'")
+        for light in env:
+            mu, lam, p = environment_sgs(light)
+            pl = np.stack([p @ tm.T, p @ bm.T, p @ nmm.T], -1).transpose(1, 0, 2)
+            blur = None
+            if matched:
+                if np.ptp(lam) > 0:
+                    raise PrefilterError("lam: the matched reference expects one sharpness for "
+                                         "all lobes (one blur width)")
+                big = sp >= baked_surface(nm).sigma_min
+                blur = np.where(big, 0.5 * eps_support(mu, lam[:1], ENV_EPS)[0], 0.0)
+            out[m] += environment_integral(surf, c, sp, wo[m], mu, lam, pl, f0, blur=blur)
+    return out
+
+
+def render_converged(scene, *, matched: bool = False, ndf: str = "direct",
+                     chunk_samples: int = 1 << 14) -> np.ndarray:
+    """Image ``(H, W, 3)`` float32 of :func:`shade_converged` at the pixel centres (the 1-spp
+    samples of the ``glints`` methods)."""
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.pipeline import render_samples
+    from prefilter.render.scene import Scene, load_scene
+
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    settings = RenderSettings(spp=1, seed=0, jitter=(0.0, 0.0), progress=False,
+                              chunk_samples=int(chunk_samples), table=None)
+    img = render_samples(scene, settings,
+                         lambda g, u: shade_converged(scene, g, matched=matched, ndf=ndf),
+                         random_dims=0, stratified=False, desc="glints-converged")
+    return np.asarray(img, dtype=np.float32)
