@@ -49,12 +49,12 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from prefilter._numba import njit_serial
-from prefilter._validate import as_float_array, as_positive_int, as_rng
+from prefilter._numba import njit_parallel, njit_serial, prange, serial
+from prefilter._validate import as_float_array, as_positive_int, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, _as_roughness,
-                                   _as_sigma_p, _as_support, _splat, as_normal_map, pixel_edges,
-                                   pndf, pndf_image)
+                                   _as_sigma_p, _as_support, _phi, _splat, as_normal_map,
+                                   pixel_edges, pndf, pndf_image)
 from prefilter.glints.pyramid import next_level
 
 
@@ -847,3 +847,234 @@ def sample(wn: TiledNDF, center, sigma_p, n: int, rng=0, *, index=None):
     s = np.stack([edges[ix] + h * jit[:, 0], edges[iy] + h * jit[:, 1]], axis=-1)
     img = flat.sum(axis=0)
     return s, img[pix] / (total * h * h)
+
+
+# ---------------------------------------------------------------------------------------------
+# batched point queries (Numba): the same arithmetic as ndf(), one kernel for many footprints
+
+_H1, _H2, _H3 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), \
+    np.uint64(0x165667B19E3779F9)
+_H4, _S29, _S32, _ONE = np.uint64(0xBF58476D1CE4E5B9), np.uint64(29), np.uint64(32), np.uint64(1)
+
+
+@njit_serial
+def _nb_bits(i, j, seed):  # pragma: no cover - compiled; _hash_bits
+    h = (np.uint64(i) * _H1) ^ (np.uint64(j) * _H2) ^ (np.uint64(seed) * _H3)
+    h ^= h >> _S29
+    h *= _H4
+    h ^= h >> _S32
+    return np.int64(h & _ONE), np.int64((h >> _ONE) & _ONE)
+
+
+@njit_serial
+def _nb_type(i, j, seed, index):  # pragma: no cover - compiled; _lookup
+    if index.shape[0] > 0:
+        return index[j % index.shape[0], i % index.shape[1]]
+    r_ij, b_ij = _nb_bits(i, j, seed)
+    r_below = _nb_bits(i, j + 1, seed)[0]
+    b_right = _nb_bits(i + 1, j, seed)[1]
+    return r_ij + 2 * r_below + 4 * b_ij + 8 * b_right
+
+
+@njit_serial
+def _nb_s(tiles, seed, index, gx, gy, comp):  # pragma: no cover - compiled; _texel_s
+    T = tiles.shape[1]
+    t = _nb_type(gx // T, gy // T, seed, index)
+    return tiles[t, gy % T, gx % T, comp]
+
+
+@njit_serial
+def _nb_axis(lo, h, R, m, rad, iz):  # pragma: no cover - compiled
+    # pixel iz's mass along one axis of N(m, .) as _splat gives it (0 outside its pixel range)
+    z0 = max(0, int(math.floor((m - rad - lo) / h)))
+    z1 = min(R - 1, int(math.floor((m + rad - lo) / h)))
+    return z0 <= iz <= z1
+
+
+@njit_serial
+def _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix):  # pragma: no cover - compiled
+    """``w`` times pixel ``(iy, ix)``'s mass of ``N((mx, my), siso^2 I)`` (``pndf._splat``)."""
+    rad = trunc * siso
+    if not (_nb_axis(lo, h, R, mx, rad, ix) and _nb_axis(lo, h, R, my, rad, iy)):
+        return 0.0
+    inv = 1.0 / siso
+    px = _phi((lo + (ix + 1) * h - mx) * inv) - _phi((lo + ix * h - mx) * inv)
+    py = _phi((lo + (iy + 1) * h - my) * inv) - _phi((lo + iy * h - my) * inv)
+    return w * py * px
+
+
+@njit_serial
+def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no cover
+    """Pixel ``(iy, ix)`` of :func:`_splat_elements` for one element."""
+    hi = lo + R * h
+    half = 0.5 * (a + d)
+    dif = math.sqrt(0.25 * (a - d) ** 2 + b * b)
+    nu1 = half + dif
+    nu2 = max(half - dif, 0.0)
+    reach = trunc * math.sqrt(nu1 + sr * sr)
+    if mx + reach < lo or mx - reach > hi or my + reach < lo or my - reach > hi:
+        return 0.0
+    siso = math.sqrt(sr * sr + nu2)
+    kappa = math.sqrt(max(nu1 - nu2, 0.0))
+    if kappa < 1e-3 * siso:
+        return _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix)
+    if a >= d:
+        vx, vy = nu1 - d, b
+    else:
+        vx, vy = b, nu1 - a
+    vn = math.sqrt(vx * vx + vy * vy)
+    vx /= vn
+    vy /= vn
+    if kappa <= 0.7 * siso:
+        t = math.sqrt(3.0) * kappa
+        return (_nb_pixel(mx, my, siso, w * (2.0 / 3.0), lo, h, R, trunc, iy, ix)
+                + _nb_pixel(mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix)
+                + _nb_pixel(mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix))
+    n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+    norm = 0.0
+    for q in range(n):
+        tq = -trunc + 2.0 * trunc * q / (n - 1)
+        norm += math.exp(-0.5 * tq * tq)
+    acc = 0.0
+    for q in range(n):
+        tq = -trunc + 2.0 * trunc * q / (n - 1)
+        acc += _nb_pixel(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
+                         w * math.exp(-0.5 * tq * tq) / norm, lo, h, R, trunc, iy, ix)
+    return acc
+
+
+@njit_serial
+def _nb_texel(tiles, seed, index, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
+              ix):  # pragma: no cover - compiled
+    """Unnormalised pixel value of texel ``(gx, gy)``'s element (exact neighbours)."""
+    tl, sd, ind = tiles, seed, index
+    jx0 = 0.5 * (_nb_s(tl, sd, ind, gx + 1, gy, 0) - _nb_s(tl, sd, ind, gx - 1, gy, 0))
+    jx1 = 0.5 * (_nb_s(tl, sd, ind, gx + 1, gy, 1) - _nb_s(tl, sd, ind, gx - 1, gy, 1))
+    jy0 = 0.5 * (_nb_s(tl, sd, ind, gx, gy + 1, 0) - _nb_s(tl, sd, ind, gx, gy - 1, 0))
+    jy1 = 0.5 * (_nb_s(tl, sd, ind, gx, gy + 1, 1) - _nb_s(tl, sd, ind, gx, gy - 1, 1))
+    dx = cx - (gx + 0.5)
+    dy = cy - (gy + 0.5)
+    mx = _nb_s(tl, sd, ind, gx, gy, 0) + f * (jx0 * dx + jy0 * dy)
+    my = _nb_s(tl, sd, ind, gx, gy, 1) + f * (jx1 * dx + jy1 * dy)
+    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+    return _nb_element(mx, my, var * (jx0 * jx0 + jy0 * jy0), var * (jx0 * jx1 + jy0 * jy1),
+                       var * (jx1 * jx1 + jy1 * jy1), w, sr, lo, h, R, trunc, iy, ix)
+
+
+@njit_parallel
+def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, st0, sigma0, dep,
+                   tile_means, mean, sr, lo, h, min_sigma, wide_sigma, uniform_sigma, q_min,
+                   tap_trunc, trunc, sh, out):  # pragma: no cover - compiled
+    T = tiles.shape[1]
+    R = mean.shape[0]
+    L = len(images)
+    for q in prange(out.shape[0]):
+        out[q] = 0.0
+        if not inside[q]:
+            continue
+        c0, c1, s, py, px = cx[q], cy[q], sp[q], iy[q], ix[q]
+        if s >= uniform_sigma:
+            out[q] = mean[py, px]
+            continue
+        tot2 = s * s + sh * sh
+        rad = trunc * math.sqrt(tot2)
+        wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
+        wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+        sx = 0.0
+        for x in range(wx0, wx1 + 1):
+            sx += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+        sy = 0.0
+        for y in range(wy0, wy1 + 1):
+            sy += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+        if s >= wide_sigma:  # tile-type shares: weights per tile column and row, then types
+            i0, j0 = wx0 // T, wy0 // T
+            wcol = np.zeros(wx1 // T - i0 + 1)
+            wrow = np.zeros(wy1 // T - j0 + 1)
+            for x in range(wx0, wx1 + 1):
+                wcol[x // T - i0] += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+            for y in range(wy0, wy1 + 1):
+                wrow[y // T - j0] += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+            acc = 0.0
+            for b in range(wrow.shape[0]):
+                for a in range(wcol.shape[0]):
+                    acc += wrow[b] * wcol[a] * tile_means[_nb_type(i0 + a, j0 + b, seed, index),
+                                                          py, px]
+            out[q] = acc / (sx * sy)
+            continue
+        f = sh * sh / tot2
+        var = s * s * sh * sh / tot2
+        if s < min_sigma:  # direct P-NDF
+            acc = 0.0
+            for y in range(wy0, wy1 + 1):
+                for x in range(wx0, wx1 + 1):
+                    acc += _nb_texel(tiles, seed, index, x, y, c0, c1, f, var, tot2, sr, lo, h,
+                                     R, trunc, py, px)
+            out[q] = acc / (sx * sy * h * h)
+            continue
+        m = 0
+        for lv in range(L):
+            sg = sigma0 * 2.0**lv
+            st = st0 * 2.0**lv
+            if sg < s and math.sqrt(1.0 - (sg / s) ** 2) * sg / st >= q_min:
+                m = lv
+        sg = sigma0 * 2.0**m
+        st = st0 * 2.0**m
+        r = math.sqrt(s * s - sg * sg)
+        half = tap_trunc * r / st
+        img = images[m]
+        n = img.shape[1]
+        marg = rad + 1.0
+        acc = 0.0
+        dsum = 0.0
+        for j in range(int(math.floor((c1 - marg) / T)), int(math.floor((c1 + marg) / T)) + 1):
+            gy = (c1 - j * T - 0.5) / st
+            ky0, ky1 = int(math.ceil(gy - half)), int(math.floor(gy + half))
+            ny = 0.0
+            for k in range(ky0, ky1 + 1):
+                ny += math.exp(-0.5 * ((k * st + 0.5 - (c1 - j * T)) / r) ** 2)
+            for i in range(int(math.floor((c0 - marg) / T)), int(math.floor((c0 + marg) / T)) + 1):
+                t = _nb_type(i, j, seed, index)
+                gx = (c0 - i * T - 0.5) / st
+                kx0, kx1 = int(math.ceil(gx - half)), int(math.floor(gx + half))
+                nx = 0.0
+                for k in range(kx0, kx1 + 1):
+                    nx += math.exp(-0.5 * ((k * st + 0.5 - (c0 - i * T)) / r) ** 2)
+                for ky in range(max(ky0, k0[m]), min(ky1, k0[m] + n - 1) + 1):
+                    wy = math.exp(-0.5 * ((ky * st + 0.5 - (c1 - j * T)) / r) ** 2) / ny
+                    for kx in range(max(kx0, k0[m]), min(kx1, k0[m] + n - 1) + 1):
+                        wx = math.exp(-0.5 * ((kx * st + 0.5 - (c0 - i * T)) / r) ** 2) / nx
+                        acc += wy * wx * img[t, ky - k0[m], kx - k0[m], py, px]
+                for e in range(dep.shape[0]):
+                    x = i * T + dep[e, 1]
+                    y = j * T + dep[e, 0]
+                    if wx0 <= x <= wx1 and wy0 <= y <= wy1:
+                        dsum += _nb_texel(tiles, seed, index, x, y, c0, c1, f, var, tot2, sr,
+                                          lo, h, R, trunc, py, px)
+        out[q] = acc + dsum / (sx * sy * h * h)
+
+
+def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
+    """Batched :func:`ndf`: NDF values ``(...)`` of footprints ``center (..., 2)``,
+    ``sigma_p (...)`` at ``s (..., 2)`` (broadcast together), one Numba kernel for all regimes
+    (uncompressed pyramids). Same arithmetic as :func:`ndf`, without Python per footprint."""
+    if not isinstance(wn, TiledNDF) or wn.block:
+        raise PrefilterError("wn: expected uncompressed per-tile pyramids (bake_tiles without "
+                             "rank)")
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = _as_sigma_p(sigma_p)
+    q = as_float_array(s, "s", ndim_min=1, last_dim=2)
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
+    idx = _as_index(index)
+    idx = np.zeros((0, 0), np.int64) if idx is None else np.ascontiguousarray(idx, np.int64)
+    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    sp = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1))
+    iy, ix, inside = _pixels(wn, np.broadcast_to(q, shape + (2,)).reshape(-1, 2))
+    out = np.empty(sp.shape[0])
+    cc = np.ascontiguousarray
+    serial(_points_kernel, len(out))(
+        cc(c[:, 0]), cc(c[:, 1]), sp, iy, ix, inside, cc(wn.wang.tiles[..., :2]),
+        np.uint64(wn.wang.seed), idx, tuple(wn.images), np.asarray(wn.k0, np.int64),
+        float(wn.stride0), wn.sigma0, cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean,
+        wn.intrinsic_roughness, -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma,
+        wn.wide_sigma, wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
+    return out.reshape(shape)
