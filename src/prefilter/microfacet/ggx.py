@@ -103,6 +103,10 @@ class GGX(MicrofacetModel):
         k = self.albedo_nodes
         xg, wg = np.polynomial.legendre.leggauss(k)
         tg, wg = (xg + 1) / 2, wg / 2
+        # Outer nodes packed by t = (1 - cos(pi tau)) / 2 towards both ends: the chord of the
+        # disk vanishes like sqrt(psi - psi_lo) there, which plain Gauss-Legendre resolves only
+        # as O(k^-1.5) (relative error 8e-5 at k = 64 for alpha 0.02 at 89 deg).
+        tp, wp = (1.0 - np.cos(np.pi * tg)) / 2, wg * np.pi / 2 * np.sin(np.pi * tg)
         seen = wo[..., 2] > 0.0
         wo = np.where(seen[..., None], wo, np.array([0.0, 0.0, 1.0]))
         ax, ay = self.alpha_x, self.alpha_y
@@ -128,7 +132,7 @@ class GGX(MicrofacetModel):
         psi_lo = np.arctan(np.minimum(x1, x2))
         psi_hi = np.maximum(np.arctan(x_top), psi_lo)
         dpsi = psi_hi - psi_lo
-        psi = psi_lo[..., None] + dpsi[..., None] * tg
+        psi = psi_lo[..., None] + dpsi[..., None] * tp
         x = np.tan(psi)
         # y chord for each x: |c + y q|^2 = r^2 with c = b + x p.
         cx = bx[..., None] + x * px[..., None]
@@ -157,5 +161,5 @@ class GGX(MicrofacetModel):
                          0.0)
         ramp = (wz[..., None] * np.cos(psi) - sigma[..., None] * np.sin(psi))
         inner = np.sum(ratio * np.cos(th) ** 2 * wg, axis=-1) * dth
-        total = np.sum(inner * ramp * wg, axis=-1) * dpsi / np.pi
+        total = np.sum(inner * ramp * wp, axis=-1) * dpsi / np.pi
         return np.where(seen, total / (wz * (1.0 + lam_o)), 0.0)

@@ -10,11 +10,14 @@ from prefilter.sphere.sampling import (
     uniform_sphere,
     uniform_sphere_pdf,
 )
-from prefilter.sphere.chi2 import Chi2Result, chi2_sphere, lobe_cap
+from prefilter.sphere.chi2 import Chi2Result, Warp, chi2_sphere, chi2_warped, lobe_cap, slope_warp
 
 __all__ = [
     "Chi2Result",
     "chi2_sphere",
+    "chi2_warped",
+    "slope_warp",
+    "Warp",
     "lobe_cap",
     "cosine_hemisphere",
     "cosine_hemisphere_pdf",
