@@ -877,10 +877,19 @@ def _nb_type(i, j, seed, index):  # pragma: no cover - compiled; _lookup
 
 
 @njit_serial
-def _nb_s(tiles, seed, index, gx, gy, comp):  # pragma: no cover - compiled; _texel_s
+def _nb_types(i0, i1, j0, j1, seed, index):  # pragma: no cover - compiled
+    """Tile types ``(j1 - j0 + 1, i1 - i0 + 1)`` of a block of tiles (hashed once per query)."""
+    out = np.empty((j1 - j0 + 1, i1 - i0 + 1), np.int64)
+    for j in range(j0, j1 + 1):
+        for i in range(i0, i1 + 1):
+            out[j - j0, i - i0] = _nb_type(i, j, seed, index)
+    return out
+
+
+@njit_serial
+def _nb_s(tiles, types, i0, j0, gx, gy, comp):  # pragma: no cover - compiled; _texel_s
     T = tiles.shape[1]
-    t = _nb_type(gx // T, gy // T, seed, index)
-    return tiles[t, gy % T, gx % T, comp]
+    return tiles[types[gy // T - j0, gx // T - i0], gy % T, gx % T, comp]
 
 
 @njit_serial
@@ -916,6 +925,10 @@ def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no 
         return 0.0
     siso = math.sqrt(sr * sr + nu2)
     kappa = math.sqrt(max(nu1 - nu2, 0.0))
+    # every node splat lies within trunc (kappa + siso) of the mean: most pixels are beyond
+    ext = trunc * (kappa + siso) + h
+    if abs(lo + (ix + 0.5) * h - mx) > ext or abs(lo + (iy + 0.5) * h - my) > ext:
+        return 0.0
     if kappa < 1e-3 * siso:
         return _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix)
     if a >= d:
@@ -944,18 +957,19 @@ def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no 
 
 
 @njit_serial
-def _nb_texel(tiles, seed, index, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
+def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
               ix):  # pragma: no cover - compiled
-    """Unnormalised pixel value of texel ``(gx, gy)``'s element (exact neighbours)."""
-    tl, sd, ind = tiles, seed, index
-    jx0 = 0.5 * (_nb_s(tl, sd, ind, gx + 1, gy, 0) - _nb_s(tl, sd, ind, gx - 1, gy, 0))
-    jx1 = 0.5 * (_nb_s(tl, sd, ind, gx + 1, gy, 1) - _nb_s(tl, sd, ind, gx - 1, gy, 1))
-    jy0 = 0.5 * (_nb_s(tl, sd, ind, gx, gy + 1, 0) - _nb_s(tl, sd, ind, gx, gy - 1, 0))
-    jy1 = 0.5 * (_nb_s(tl, sd, ind, gx, gy + 1, 1) - _nb_s(tl, sd, ind, gx, gy - 1, 1))
+    """Unnormalised pixel value of texel ``(gx, gy)``'s element (exact neighbours; ``types``
+    covers its tile and the neighbouring ones, from tile ``(i0, j0)``)."""
+    ty = types
+    jx0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 0) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 0))
+    jx1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 1) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 1))
+    jy0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 0) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 0))
+    jy1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 1) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 1))
     dx = cx - (gx + 0.5)
     dy = cy - (gy + 0.5)
-    mx = _nb_s(tl, sd, ind, gx, gy, 0) + f * (jx0 * dx + jy0 * dy)
-    my = _nb_s(tl, sd, ind, gx, gy, 1) + f * (jx1 * dx + jy1 * dy)
+    mx = _nb_s(tiles, ty, i0, j0, gx, gy, 0) + f * (jx0 * dx + jy0 * dy)
+    my = _nb_s(tiles, ty, i0, j0, gx, gy, 1) + f * (jx1 * dx + jy1 * dy)
     w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
     return _nb_element(mx, my, var * (jx0 * jx0 + jy0 * jy0), var * (jx0 * jx1 + jy0 * jy1),
                        var * (jx1 * jx1 + jy1 * jy1), w, sr, lo, h, R, trunc, iy, ix)
@@ -1005,10 +1019,12 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, s
         var = s * s * sh * sh / tot2
         if s < min_sigma:  # direct P-NDF
             acc = 0.0
+            ti0, tj0 = wx0 // T - 1, wy0 // T - 1
+            types = _nb_types(ti0, wx1 // T + 1, tj0, wy1 // T + 1, seed, index)
             for y in range(wy0, wy1 + 1):
                 for x in range(wx0, wx1 + 1):
-                    acc += _nb_texel(tiles, seed, index, x, y, c0, c1, f, var, tot2, sr, lo, h,
-                                     R, trunc, py, px)
+                    acc += _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var, tot2, sr, lo,
+                                     h, R, trunc, py, px)
             out[q] = acc / (sx * sy * h * h)
             continue
         m = 0
@@ -1026,6 +1042,10 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, s
         marg = rad + 1.0
         acc = 0.0
         dsum = 0.0
+        ti0 = int(math.floor((c0 - marg) / T)) - 1
+        tj0 = int(math.floor((c1 - marg) / T)) - 1
+        types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
+                          int(math.floor((c1 + marg) / T)) + 1, seed, index)
         for j in range(int(math.floor((c1 - marg) / T)), int(math.floor((c1 + marg) / T)) + 1):
             gy = (c1 - j * T - 0.5) / st
             ky0, ky1 = int(math.ceil(gy - half)), int(math.floor(gy + half))
@@ -1033,7 +1053,7 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, s
             for k in range(ky0, ky1 + 1):
                 ny += math.exp(-0.5 * ((k * st + 0.5 - (c1 - j * T)) / r) ** 2)
             for i in range(int(math.floor((c0 - marg) / T)), int(math.floor((c0 + marg) / T)) + 1):
-                t = _nb_type(i, j, seed, index)
+                t = types[j - tj0, i - ti0]
                 gx = (c0 - i * T - 0.5) / st
                 kx0, kx1 = int(math.ceil(gx - half)), int(math.floor(gx + half))
                 nx = 0.0
@@ -1048,8 +1068,8 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, s
                     x = i * T + dep[e, 1]
                     y = j * T + dep[e, 0]
                     if wx0 <= x <= wx1 and wy0 <= y <= wy1:
-                        dsum += _nb_texel(tiles, seed, index, x, y, c0, c1, f, var, tot2, sr,
-                                          lo, h, R, trunc, py, px)
+                        dsum += _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var, tot2,
+                                          sr, lo, h, R, trunc, py, px)
         out[q] = acc + dsum / (sx * sy * h * h)
 
 
