@@ -362,8 +362,32 @@ def slope_warp(mean_slope=(0.0, 0.0), scale=((1.0, 0.0), (0.0, 1.0)), *, wo=None
             S = S @ np.array([[gy, gx], [-gx, gy]])
             S_inv = np.linalg.inv(S)
 
+    # u = 1/2 + atan(z / spread) / pi per coordinate, except z0 in reflect mode: the horizon
+    # disk spans z0 in [za, zb], mapped onto all of [0, 1] through t = (1 - cos(pi u)) / 2 so
+    # the chord, which vanishes like sqrt(zb - z0) at the disk's ends, is smooth in u0.
+    a_lo, a_hi, packed = -np.pi / 2, np.pi / 2, False
+    if reflect:
+        e0, d1 = S[:, 0], S[:, 1]
+        m0 = mu + wo[:2] / wo[2]
+        cde = d1[0] * e0[1] - d1[1] * e0[0]
+        cdm = d1[0] * m0[1] - d1[1] * m0[0]
+        rd = np.linalg.norm(d1) / wo[2]
+        za, zb = sorted(((-rd - cdm) / cde, (rd - cdm) / cde))
+        a_lo, a_hi, packed = np.arctan(za / spread), np.arctan(zb / spread), True
+
     def to_u(z):
         return 0.5 + np.arctan(z / spread) / np.pi
+
+    def to_u0(z0):
+        t = np.clip((np.arctan(z0 / spread) - a_lo) / (a_hi - a_lo), 0.0, 1.0)
+        return np.arccos(1.0 - 2.0 * t) / np.pi if packed else t
+
+    def from_u0(u0):
+        """``z0`` and ``dz0 / du0``."""
+        t, dt = ((1.0 - np.cos(np.pi * u0)) / 2, np.pi / 2 * np.sin(np.pi * u0)) if packed \
+            else (u0, 1.0)
+        tn = np.tan(a_lo + (a_hi - a_lo) * t)
+        return spread * tn, spread * (1.0 + tn * tn) * (a_hi - a_lo) * dt
 
     def to_square(w):
         h = w + wo if reflect else w
@@ -376,14 +400,16 @@ def slope_warp(mean_slope=(0.0, 0.0), scale=((1.0, 0.0), (0.0, 1.0)), *, wo=None
             ok &= w @ wo > 0.0
         hz = np.where(ok, h[..., 2], 1.0)
         z = (-h[..., :2] / hz[..., None] - mu) @ S_inv.T
-        return np.where(ok[..., None], to_u(z), np.nan)
+        u = np.stack([to_u0(z[..., 0]), to_u(z[..., 1])], axis=-1)
+        return np.where(ok[..., None], u, np.nan)
 
     def from_square(u):
-        t = np.tan(np.pi * (u - 0.5))
-        s = mu + (spread * t) @ S.T
+        z0, dz0 = from_u0(u[..., 0])
+        t1 = np.tan(np.pi * (u[..., 1] - 0.5))
+        s = mu + np.stack(np.broadcast_arrays(z0, spread * t1), axis=-1) @ S.T
         hz = 1.0 / np.sqrt(1.0 + np.sum(s * s, axis=-1))
         h = np.concatenate([-s * hz[..., None], hz[..., None]], axis=-1)
-        jac = np.prod(spread * np.pi * (1.0 + t * t), axis=-1) * abs(det) * hz**3
+        jac = dz0 * spread * np.pi * (1.0 + t1 * t1) * abs(det) * hz**3
         if wo is None:
             return h, jac
         c = h @ wo
@@ -398,7 +424,7 @@ def slope_warp(mean_slope=(0.0, 0.0), scale=((1.0, 0.0), (0.0, 1.0)), *, wo=None
 
     def v_range(u0):
         # The line s = p + z1 d at fixed z0, intersected with the domain.
-        p = mu + np.multiply.outer(spread * np.tan(np.pi * (u0 - 0.5)), S[:, 0])
+        p = mu + np.multiply.outer(from_u0(u0)[0], S[:, 0])
         d = S[:, 1]
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             if not reflect:  # wo_z - s.wo_xy > 0, linear in z1
