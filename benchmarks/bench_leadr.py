@@ -188,8 +188,8 @@ if __name__ == "__main__":
                     help="why specular sigma 0.5 misses 0.5x naive at 16 / 32 texels "
                          "(acceptance.specular_diagnosis; --blocks, --surfaces: one surface)")
     ap.add_argument("--surfaces", default=None,
-                    help="with --acceptance-env: comma-separated subset of acceptance.SURFACES "
-                         "(e.g. 'iso 0.1')")
+                    help="with --acceptance-env: ';'-separated subset of acceptance.SURFACES "
+                         "(e.g. 'iso 0.5;aniso (0.45, 0.15)')")
     ap.add_argument("--shadings", default="specular,diffuse",
                     help="with --acceptance-env: specular, diffuse or both")
     ap.add_argument("--blocks", default="16,32,64", help="with --acceptance-env: texels/pixel")
@@ -221,7 +221,7 @@ if __name__ == "__main__":
         from prefilter.leadr.acceptance import SURFACES, env_diffuse_table, env_table, run_env
 
         surf = None if a.surfaces is None else {
-            k: SURFACES[k.strip()] for k in a.surfaces.split(",")}
+            k.strip(): SURFACES[k.strip()] for k in a.surfaces.split(";")}
         rows = run_env(shadowing=not a.no_shadowing, surfaces=surf, k=a.k, spp=a.spp,
                        shadings=tuple(x.strip() for x in a.shadings.split(",")),
                        blocks=tuple(int(b) for b in a.blocks.split(",")), log=lambda row: None)

@@ -181,8 +181,9 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
     (``n_grid^2`` grid; diffuse: order-2 SH irradiance), plus ``leadr shadowed`` (the paper's
     non-simplified Algorithms 1 / 2+3 with ``G2 / G1`` per sample; diffuse with the exact
     irradiance), ``leadr-env`` (what the render method computes: compiled Algorithm 1 with
-    ``G2 / G1``; diffuse since session 5: the irradiance map
-    (:class:`~prefilter.leadr.envmap.IrradianceMap`) on the 5 x 5 grid plus
+    ``G2 / G1``, 9 x 9 or, since session 5, 17 x 17 for footprints with a slope std >= 0.35
+    (:func:`~prefilter.leadr.render.env_specular_adaptive`); diffuse since session 5: the
+    irradiance map (:class:`~prefilter.leadr.envmap.IrradianceMap`) on the 5 x 5 grid plus
     :func:`~prefilter.leadr.shading.diffuse_shadowing`), and for diffuse ``leadr-env SH`` (the
     session-4 ``leadr-env``: order-2 SH instead of the map), ``leadr exact E``
     (Simplified Algorithm 3 with the exact
@@ -231,8 +232,8 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
                                              @ LUM)
                         if specular:
                             lv = env_specular(env, wo, mu, cov, n_grid)
-                            vals["leadr-env"].append(float(env_specular(
-                                env, wo, mu, cov, n_grid, shadowing=True) @ LUM))
+                            vals["leadr-env"].append(float(lr.env_specular_adaptive(
+                                env, wo, mu, cov, shadowing=True)[0] @ LUM))
                             vals["leadr shadowed"].append(
                                 float(env_specular_shadowed(env, wo, mu, cov, n_grid) @ LUM))
                         else:

@@ -47,6 +47,13 @@ DIFFUSE_GRID = 5
 #: Specular grid of ``leadr-env``: 9 x 9 is within ~3% of the N = 128 grid for isotropic lobes
 #: (docs/leadr.md convergence table), 5 x 5 within 7-14%.
 ENV_GRID = 9
+#: Footprints whose largest slope std (meso + micro) is at least :data:`ROUGH_SIGMA` use a
+#: ``ENV_GRID_ROUGH`` grid: against the N = 128 grid 9 x 9 is 5.5% off at std 0.5 and 16% for an
+#: anisotropic (0.5, 0.1) lobe, 17 x 17 1.3% / 3.7% (docs/leadr.md convergence table; the
+#: supplemental: specular needs more samples above 0.25). Far field, sigma 0.5, 32 texels per
+#: pixel: 10.4% -> 7.8% error vs the displaced surface (0.57 -> 0.42x naive).
+ENV_GRID_ROUGH = 17
+ROUGH_SIGMA = 0.35
 #: Moment lookups box-filter the pixel footprint: up to ``FOOTPRINT_TAPS^2`` trilinear taps
 #: spread over the footprint parallelogram (one per ~2 x 2 texels), each at the LOD of its share.
 #: Moments are linear, so this is a box filter over the pixel's own texels; a single trilinear
@@ -205,8 +212,10 @@ def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int
                     diffuse_grid: int = DIFFUSE_GRID, shadowing: bool = True,
                     mips=None, irradiance=None) -> np.ndarray:
     """Radiance ``(N, 3)`` of hits ``g``: environment specular (Algorithm 1 with self-shadowing,
-    compiled; ``shadowing=False``: Simplified Algorithm 1) + diffuse (Algorithm 3's grid on the
-    irradiance map ``irradiance``, or on the SH irradiance ``sh`` if it is ``None``, plus
+    compiled; ``shadowing=False``: Simplified Algorithm 1; ``n_grid`` x ``n_grid`` or
+    :data:`ENV_GRID_ROUGH` for rough footprints, :func:`env_specular_adaptive`) + diffuse
+    (Algorithm 3's grid on the irradiance map ``irradiance``, or on the SH irradiance ``sh`` if
+    it is ``None``, plus
     :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``) + point/directional
     lights (:func:`shade_leadr_delta`)."""
     t, b, n, wo = _frame(g)
@@ -214,8 +223,9 @@ def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int
     rot = _env_rotation(t, b, n)
     out = np.zeros((len(wo), 3))
     if env is not None:
-        spec = lambda f: env_specular(env, wo, mean, cov, n_grid, f0=f, to_world=rot,  # noqa
-                                      shadowing=shadowing)
+        spec = lambda f: env_specular_adaptive(env, wo, mean, cov, f0=f,  # noqa: E731
+                                               to_world=rot, shadowing=shadowing,
+                                               n_grid=n_grid)
         if np.all(f0 == f0[:, :1]):
             out += spec(f0[:, 0])
         elif np.any(f0 != 0.0):
@@ -330,6 +340,41 @@ def env_specular_shadowed(env, wo, mean, cov, n: int = ENV_GRID, *, f0=None, to_
             bad = np.flatnonzero(~ok) + s0
             out[bad] = env_specular(env, wo[bad], mean[bad], cov[bad], n,
                                     to_world=None if to_world is None else to_world[bad])
+    return out
+
+
+def specular_grid_size(cov, n_grid: int = ENV_GRID, n_rough: int = ENV_GRID_ROUGH) -> np.ndarray:
+    """Grid size per footprint ``(...)`` of slope covariances ``cov (..., 2, 2)``: ``n_rough``
+    where the largest slope std is at least :data:`ROUGH_SIGMA`, else ``n_grid``."""
+    c = np.asarray(cov, np.float64)
+    sxx, syy, sxy = c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
+    big = 0.5 * (sxx + syy) + np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+    return np.where(big >= ROUGH_SIGMA ** 2, n_rough, n_grid)
+
+
+def env_specular_adaptive(env, wo, mean, cov, *, f0=None, to_world=None, shadowing: bool = True,
+                          n_grid: int = ENV_GRID, n_rough: int = ENV_GRID_ROUGH) -> np.ndarray:
+    """:func:`~prefilter.leadr.shading.env_specular` of points ``wo (P, 3)``, ``mean (P, 2)``,
+    ``cov (P, 2, 2)`` (``f0`` scalar or ``(P,)``, ``to_world (P, 3, 3)`` or ``None``) with the
+    grid size of :func:`specular_grid_size` per point; ``(P, C)``."""
+    wo = np.asarray(wo, np.float64).reshape(-1, 3)
+    mean = np.asarray(mean, np.float64).reshape(-1, 2)
+    cov = np.asarray(cov, np.float64).reshape(-1, 2, 2)
+    p = len(wo)
+    sizes = specular_grid_size(cov, n_grid, n_rough)
+    f = None if f0 is None else np.broadcast_to(np.asarray(f0, np.float64), (p,))
+    out = None
+    for n in np.unique(sizes):
+        sel = sizes == n
+        part = env_specular(env, wo[sel], mean[sel], cov[sel], int(n),
+                            f0=None if f is None else f[sel],
+                            to_world=None if to_world is None else to_world[sel],
+                            shadowing=shadowing)
+        if out is None:
+            out = np.empty((p, part.shape[1]))
+        out[sel] = part
+    if out is None:  # no points
+        out = env_specular(env, wo, mean, cov, n_grid, shadowing=shadowing)
     return out
 
 
