@@ -358,9 +358,9 @@ def env_specular_adaptive(env, wo, mean, cov, *, f0=None, to_world=None, shadowi
     ``cov (P, 2, 2)`` (``f0`` scalar or ``(P,)``, ``to_world (P, 3, 3)`` or ``None``) with the
     grid size of :func:`specular_grid_size` per point; ``(P, C)``."""
     wo = np.asarray(wo, np.float64).reshape(-1, 3)
-    mean = np.asarray(mean, np.float64).reshape(-1, 2)
-    cov = np.asarray(cov, np.float64).reshape(-1, 2, 2)
     p = len(wo)
+    mean = np.broadcast_to(np.asarray(mean, np.float64).reshape(-1, 2), (p, 2))
+    cov = np.broadcast_to(np.asarray(cov, np.float64).reshape(-1, 2, 2), (p, 2, 2))
     sizes = specular_grid_size(cov, n_grid, n_rough)
     f = None if f0 is None else np.broadcast_to(np.asarray(f0, np.float64), (p,))
     out = None
