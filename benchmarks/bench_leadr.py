@@ -47,8 +47,9 @@ import time
 
 import numpy as np
 
-from prefilter.leadr import (EnvMap, diffuse_directional, diffuse_sh, diffuse_shadowing,
-                             env_specular, point_light, procedural_env, sh9_project)
+from prefilter.leadr import (EnvMap, IrradianceMap, diffuse_directional, diffuse_irradiance,
+                             diffuse_sh, diffuse_shadowing, env_specular, point_light,
+                             procedural_env, sh9_project)
 
 LUM = np.array([0.2126, 0.7152, 0.0722])
 
@@ -124,7 +125,11 @@ def throughput(p: int = 1 << 16) -> None:
     runs["env specular 9x9 + shadowing"] = lambda: env_specular(env, wo, mu, cov, 9, f0=0.04,
                                                                shadowing=True)
     runs["diffuse shadowing 5x5 (16 x 32 directions)"] = lambda: diffuse_shadowing(
-        env, wo, mu, cov, 5)
+        env, wo, mu, cov, 5, rows=16)
+    runs["diffuse shadowing 5x5 (32 x 64 directions)"] = lambda: diffuse_shadowing(
+        env, wo, mu, cov, 5, rows=32)
+    irr = IrradianceMap(env)
+    runs["diffuse irradiance map 5x5"] = lambda: diffuse_irradiance(irr, wo, mu, cov, 5)
     for n in (5, 9):
         runs[f"diffuse SH {n}x{n}"] = lambda n=n: diffuse_sh(sh, wo, mu, cov, n)
         runs[f"diffuse directional {n}x{n}"] = lambda n=n: diffuse_directional(wo, wl, mu, cov, n)
@@ -132,6 +137,8 @@ def throughput(p: int = 1 << 16) -> None:
     for name, fn in runs.items():
         _, t = _timed(fn)
         print(f"| {name} | {p / t:,.0f} |", flush=True)
+    _, t = _timed(lambda: IrradianceMap(env))
+    print(f"\nIrradianceMap build (once per environment, 128 rows): {1e3 * t:.0f} ms")
 
 
 METHODS = ("leadr-env", "leadr-env-simplified", "leadr-env-naive", "leadr-irradiance",
