@@ -182,24 +182,80 @@ def point_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, sx, sy, lo,
         bi, bj, i0, j0 = _pixel(sx[q], sy[q], lo, h, R, B)
         acc = 0.0
         if bi >= 0:
-            for c in range(idx.shape[1]):
-                w = wts[q, c]
-                if w == 0.0:
+            # corners in runs of 4 (a pyramid level's bilinear neighbours): when the run's
+            # images all lie in one CP group (one cell), the group's factor product is read once
+            # and the code rows are blended first
+            for c0 in range(0, idx.shape[1], 4):
+                n4 = min(4, idx.shape[1] - c0)
+                gq = -1
+                kp = 0
+                one = n4 == 4
+                # scalars, not arrays: an allocation per query cost as much as the upper levels'
+                # whole query
+                k0 = k1 = k2 = k3 = 0
+                w0 = w1 = w2 = w3 = 0.0
+                for t in range(n4):
+                    w = wts[q, c0 + t]
+                    if w == 0.0:
+                        continue
+                    img = idx[q, c0 + t]
+                    k = block_index[img, bi, bj]
+                    if k < 0:
+                        continue
+                    g = image_cell[img] * nb * nb + bi * nb + bj
+                    if gq < 0:
+                        gq = g
+                    elif g != gq:
+                        one = False
+                    kp = k
+                    if t == 0:
+                        k0, w0 = k, w
+                    elif t == 1:
+                        k1, w1 = k, w
+                    elif t == 2:
+                        k2, w2 = k, w
+                    else:
+                        k3, w3 = k, w
+                if gq < 0:
                     continue
-                img = idx[q, c]
-                k = block_index[img, bi, bj]
-                if k < 0:
+                if one:
+                    nr, m = meta[gq, 0], meta[gq, 1]
+                    fa = m * B + i0 * nr
+                    fb = m * B + j0 * nr
+                    ar, br, wr = Fa[fa:fa + nr], Fb[fb:fb + nr], wsc[m:m + nr]
+                    cb, st = meta[gq, 2], meta[gq, 3]
+                    # absent corners: weight 0 on a present row
+                    e0 = cb + (k0 if w0 != 0.0 else kp) * st
+                    e1 = cb + (k1 if w1 != 0.0 else kp) * st
+                    e2 = cb + (k2 if w2 != 0.0 else kp) * st
+                    e3 = cb + (k3 if w3 != 0.0 else kp) * st
+                    r0, r1, r2, r3 = cq[e0:e0 + nr], cq[e1:e1 + nr], cq[e2:e2 + nr], \
+                        cq[e3:e3 + nr]
+                    s = 0.0
+                    for r in range(nr):
+                        cw = (w0 * float(r0[r]) + w1 * float(r1[r]) + w2 * float(r2[r])
+                              + w3 * float(r3[r]))
+                        s += wr[r] * (cw * float(ar[r]) * float(br[r]))
+                    acc += s
                     continue
-                g = image_cell[img] * nb * nb + bi * nb + bj
-                nr, m = meta[g, 0], meta[g, 1]
-                kc = meta[g, 2] + k * meta[g, 3]
-                fa = m * B + i0 * nr
-                fb = m * B + j0 * nr
-                ar, br, cr, wr = Fa[fa:fa + nr], Fb[fb:fb + nr], cq[kc:kc + nr], wsc[m:m + nr]
-                s = 0.0
-                for r in range(nr):
-                    s += wr[r] * (float(cr[r]) * float(ar[r]) * float(br[r]))
-                acc += w * s
+                for t in range(n4):
+                    w = wts[q, c0 + t]
+                    if w == 0.0:
+                        continue
+                    img = idx[q, c0 + t]
+                    k = block_index[img, bi, bj]
+                    if k < 0:
+                        continue
+                    g = image_cell[img] * nb * nb + bi * nb + bj
+                    nr, m = meta[g, 0], meta[g, 1]
+                    kc = meta[g, 2] + k * meta[g, 3]
+                    fa = m * B + i0 * nr
+                    fb = m * B + j0 * nr
+                    ar, br, cr, wr = Fa[fa:fa + nr], Fb[fb:fb + nr], cq[kc:kc + nr], wsc[m:m + nr]
+                    s = 0.0
+                    for r in range(nr):
+                        s += wr[r] * (float(cr[r]) * float(ar[r]) * float(br[r]))
+                    acc += w * s
         out[q] = acc
 
 
