@@ -582,7 +582,10 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, 
         # per CP group, the weighted sum of its taps' C rows first (nr multiply-adds per tap),
         # then one product with the group's factor values: taps spanning several cells no
         # longer recompute the factors at every change of group (the mid frame's level-0 taps)
-        cw = np.empty((_SLOTS, rank))
+        # float32 sums of weighted 8-bit rows (relative rounding ~1e-7, far below the codes'):
+        # twice the vector width of float64, which the far frame's long rows of wide-rank
+        # groups (up to 3x the budget) are bound by
+        cw = np.empty((_SLOTS, rank), np.float32)
         gs = np.empty(_SLOTS, np.int64)
         acc = 0.0
         for di in range(2):
@@ -624,8 +627,9 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, 
                             last = g
                         wt = wy[ty] * wx[tx]
                         kc = meta[g, 2] + k * meta[g, 3]
-                        cr, cs = cq[kc:kc + nr], cw[slot]
+                        cr = cq[kc:kc + nr]
+                        wt32 = np.float32(wt)
                         for rr in range(nr):
-                            cs[rr] += wt * float(cr[rr])
+                            cw[slot, rr] += wt32 * np.float32(cr[rr])
                 acc += _flush_slots(Fa, Fb, wsc, meta, B, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
         out[q] = acc / (sxw * syw)
