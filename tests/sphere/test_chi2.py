@@ -3,11 +3,14 @@
 import numpy as np
 import pytest
 
+from prefilter.errors import PrefilterError
 from prefilter.sphere import (
     chi2_sphere,
+    chi2_warped,
     cosine_hemisphere,
     cosine_hemisphere_pdf,
     lobe_cap,
+    slope_warp,
     uniform_sphere,
     uniform_sphere_pdf,
 )
@@ -68,3 +71,51 @@ def test_lobe_cap_contains_the_quantile():
     np.testing.assert_allclose(axis, [0, 0, 1], atol=0.02)
     # P(theta < t) = sin^2 t for the cosine lobe: the 0.9 quantile is asin(sqrt(0.9)), x 1.05.
     assert th == pytest.approx(1.05 * np.arcsin(np.sqrt(0.9)), rel=0.02)
+
+
+def _direction(theta_deg, phi_deg):
+    th, ph = np.radians(theta_deg), np.radians(phi_deg)
+    return np.array([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)])
+
+
+@pytest.mark.parametrize("theta", [0.0, 60.0, 89.0])
+def test_slope_warp_domains_have_closed_form_masses(theta):
+    # The power-cosine density 5 z^4 / (2 pi) has mass 1 on the upper hemisphere: over all
+    # normals, and over reflected directions (the half-vector Jacobian 4 (wo.h) h_z^3, the
+    # horizon-disk packing and the chord clipping are all exercised). Visible normals from
+    # wo = z: the same hemisphere.
+    wo = _direction(theta, 35)
+    scale = [[1.0, 0.2], [0.0, 0.5]]
+    pdf = lambda d: 5 * np.maximum(d[..., 2], 0) ** 4 / (2 * np.pi)  # noqa: E731
+    u = np.random.default_rng(5).random((20_000, 2))
+    z = u[:, 0] ** (1 / 5)  # inverse CDF of 5 z^4 dz
+    r = np.sqrt(1 - z * z)
+    w = np.stack([r * np.cos(2 * np.pi * u[:, 1]), r * np.sin(2 * np.pi * u[:, 1]), z], -1)
+    warps = [slope_warp((0.1, -0.2), scale), slope_warp((0.1, -0.2), scale, wo=wo, reflect=True),
+             slope_warp((0.1, -0.2), scale, wo=_direction(0, 0))]
+    for warp in warps:
+        res = chi2_warped(w, pdf, warp, res=(8, 8))
+        # the bins are integrated to 0.05 sd of their counts: |error| < 0.05 sqrt(64 / n)
+        assert res.mass_in_cap == pytest.approx(1.0, abs=1e-3)
+        assert res.passed(), res
+
+
+def test_chi2_warped_accepts_cosine_and_rejects_uniform():
+    wo = _direction(60, 10)
+    warp = slope_warp((0.0, 0.0), [[1.0, 0.0], [0.0, 1.0]], wo=wo, reflect=True)
+    w = cosine_hemisphere(np.random.default_rng(7).random((20_000, 2)))
+    assert chi2_warped(w, cosine_hemisphere_pdf, warp, res=(16, 16)).passed()
+    uni = lambda d: np.where(d[..., 2] > 0, 1 / (2 * np.pi), 0.0)  # noqa: E731
+    assert chi2_warped(w, uni, warp, res=(16, 16)).p_value < 1e-6
+
+
+def test_chi2_warped_bad_input():
+    w = cosine_hemisphere(np.random.default_rng(8).random((100, 2)))
+    with pytest.raises(PrefilterError, match="warp"):
+        chi2_warped(w, cosine_hemisphere_pdf, "slopes")
+    with pytest.raises(PrefilterError, match="scale"):
+        slope_warp((0, 0), [[1.0, 2.0], [2.0, 4.0]])
+    with pytest.raises(PrefilterError, match="wo"):
+        slope_warp((0, 0), reflect=True)
+    with pytest.raises(PrefilterError, match="spread"):
+        slope_warp((0, 0), spread=0.0)

@@ -5,6 +5,11 @@ bin for everything outside; the histogram of the samples is compared with the de
 over each bin by Gauss-Legendre quadrature. Bins expecting fewer than ``min_expected`` samples are
 pooled. A cap around the lobe keeps the test sharp for narrow lobes (alpha = 0.02), where bins over
 the whole sphere would put every sample in one bin and the test could not fail.
+
+For very narrow, anisotropic or grazing lobes (alpha 0.001, views at 89 deg) no cap works: the
+lobe covers a sliver of a few bins whose density quadrature cannot resolve it. :func:`chi2_warped`
+bins instead in a warp of the sphere onto the unit square (as Mitsuba's domains do), and
+:func:`slope_warp` is one under which microfacet lobes fill the square evenly.
 """
 
 from __future__ import annotations
