@@ -332,7 +332,8 @@ def slope_warp(mean_slope=(0.0, 0.0), scale=((1.0, 0.0), (0.0, 1.0)), *, wo=None
     ``above (3,)`` further restricts that domain to ``wi.above > 0`` (e.g. the mean surface of
     non-centred slopes, below which a lobe vanishes). ``d(omega_h) = h_z^3 ds``. Each domain's
     edge is given to the quadrature as ``v_range``; with ``wo``, ``z`` is turned so that its
-    second axis is along ``scale^T wo_xy``.
+    second axis is along ``scale^T wo_xy``, and with ``reflect`` the first coordinate's range
+    over the horizon disk is mapped onto all of [0, 1] (cosine-packed at both ends).
     """
     mu = as_float_array(mean_slope, "mean_slope", ndim_min=1, last_dim=2)
     S = as_float_array(scale, "scale", ndim_min=2, last_dim=2)
