@@ -157,10 +157,10 @@ def test_fused_resampling_equals_the_weighted_blend(rough, bilinear):
 
 
 def test_render_bake_keeps_dim_ndf_blocks(tmp_path, monkeypatch):
-    """The render bake (``render.BAKE_SETTINGS``) keeps NDF blocks whose maximum is 1e-5 to 1e-4
-    of their image's maximum: their compressed mass equals the direct pixel averages
-    (``pndf_image`` at the bake's roughness). Dropped as blank (``blank_tol`` 1e-4), they were
-    zero, which moved the dim glints of the scratches map (FLIP 0.08 at mid distance)."""
+    """The render bake (``render.BAKE_SETTINGS``) keeps NDF blocks whose maximum is 1e-6 to 1e-4
+    of their image's maximum: their compressed mass follows the direct pixel averages
+    (``pndf_image`` at the bake's roughness). Dropped as blank (the bake's default ``blank_tol``
+    1e-4), they were zero, which moved the dim glints of the scratches map (FLIP 0.08 at mid)."""
     import prefilter.glints.render as gr
     from prefilter.glints import pndf_image
     from prefilter.texture.procedural import normal_map
@@ -184,9 +184,11 @@ def test_render_bake_keeps_dim_ndf_blocks(tmp_path, monkeypatch):
     wb = want.reshape(-1, nb, gm.block, nb, gm.block)
     gb = got.reshape(wb.shape)
     rel = wb.max(axis=(2, 4)) / want.max(axis=(1, 2))[:, None, None]
-    dim = (rel > 1e-5) & (rel <= 1e-4)
-    assert dim.sum() >= 50, dim.sum()  # 126 such blocks
-    mg, mw = gb.sum(axis=(2, 4))[dim], wb.sum(axis=(2, 4))[dim]
-    # measured: total 0.977, per block median 1.00, quartiles 0.975 / 1.008 (blank_tol 1e-4: 0)
-    assert mg.sum() / mw.sum() == pytest.approx(1.0, abs=0.1)
-    assert np.median(mg / mw) == pytest.approx(1.0, abs=0.05)
+    # measured (blank_tol 1e-6): total mass 0.96 / 0.80, per-block median 0.996 / 0.997 for the
+    # 1e-5..1e-4 (126 blocks) / 1e-6..1e-5 (99 blocks) bands; dropped blocks give 0
+    for lo, total in ((1e-5, 0.1), (1e-6, 0.35)):
+        dim = (rel > lo) & (rel <= 10 * lo)
+        assert dim.sum() >= 50, (lo, dim.sum())
+        mg, mw = gb.sum(axis=(2, 4))[dim], wb.sum(axis=(2, 4))[dim]
+        assert mg.sum() / mw.sum() == pytest.approx(1.0, abs=total), lo
+        assert np.median(mg / mw) == pytest.approx(1.0, abs=0.05), lo

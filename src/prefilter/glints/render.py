@@ -63,12 +63,13 @@ PIXEL_SIGMA = 0.5
 #: ``blank_tol``: NDF blocks whose maximum is below this fraction of their image's maximum are
 #: dropped (zero). The bake's default 1e-4 zeroed the dim lines of the scratches map next to its
 #: bright flat-surface peak (and dim flakes next to bright ones), which the point light sees at
-#: mid/far distance: FLIP vs glints-direct 0.081 on the scratches plane at mid, 0.080 from the
-#: uncompressed pyramid with the same blocks dropped, 0.018 with 1e-5 (docs/glints-part2.md).
-#: Cost: 1.1-1.5x the kept blocks and bytes (flakes 11.0 -> 14.6 MB, scratches 13.3 -> 18.0 MB).
+#: mid/far distance: FLIP vs glints-direct 0.081 on the scratches plane at mid; the uncompressed
+#: pyramid with the same blocks dropped gives 0.080, with 1e-5 / 1e-6 0.018 / 0.015 (rendered
+#: with 1e-6: 0.017; docs/glints-part2.md). Cost: 1.2-1.9x the kept blocks and bytes (flakes
+#: 11.0 -> 17.5 MB, scratches 13.3 -> 21.6 MB), frame time +5 % at mid.
 BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
-                     blank_tol=1e-5)
+                     blank_tol=1e-6)
 #: How ``glints`` evaluates compressed footprints (:func:`prefilter.glints.brdf.surface`):
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid
