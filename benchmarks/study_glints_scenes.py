@@ -236,7 +236,8 @@ def table(rows: list[dict]) -> str:
     out = ["| lights | shape | map | FLIP near | mid | far | glints s (n/m/f) | "
            "glints-direct s (n/m/f) | mean glints/direct (n/m/f) | MC floor (n/m/f) |",
            "|---|---|---|---|---|---|---|---|---|---|"]
-    by = {(r["lights"], r["shape"], r["map"], r["distance"]): r for r in rows}
+    by = {(r["lights"], r["shape"], r["map"], r["distance"]): r for r in rows
+          if r.get("mode") != "reference"}
     for lights in ("point", "quad", "environment"):
         for shape in ("plane", "sphere"):
             for kind in KINDS:
