@@ -92,7 +92,7 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
 
     ``direct=True`` returns a surface without the compressed map (``glints-direct``).
     """
-    from prefilter.glints.bake import bake
+    from prefilter.glints.bake import bake_if_missing
     from prefilter.glints.store import load
 
     # the renderer passes the same (cached) texture array every frame: skip validating and
@@ -118,9 +118,10 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
             _SURFACES[mem] = surface(None, nm, intrinsic_roughness=st["intrinsic_roughness"])
         else:
             path = cache_dir() / f"{digest[:20]}-{key}.npz"
-            if not path.exists():
-                path.parent.mkdir(parents=True, exist_ok=True)
-                bake(nm, path, progress=progress, **st)
+            # several renderers (pytest workers, CLI runs) may share the cache: the first bakes
+            # under the lock, the others wait for it and load its file
+            path.parent.mkdir(parents=True, exist_ok=True)
+            bake_if_missing(nm, path, progress=progress, **st)
             _SURFACES[mem] = surface(load(path), nm, check=False, interp=INTERP,
                                      bilinear=BILINEAR, intrinsic_roughness=sr)
     if isinstance(normal_map, np.ndarray):

@@ -85,12 +85,13 @@ _DESCRIPTIONS: dict[str, str] = {
     "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2; "
                    "box-filtered moments, G2/G1 diffuse)",
     "leadr-env": "LEADR under environment (+ point/directional) light: Algorithm 1 specular "
-                 "grid with self-shadowing (G2/G1), SH irradiance diffuse with shadowing",
+                 "grid with self-shadowing (G2/G1), exact irradiance-map diffuse with shadowing",
     "leadr-env-shadowed": "alias of leadr-env (self-shadowing is now its default)",
     "leadr-env-simplified": "LEADR with the supplemental's simplified algorithms (masking only, "
-                            "no self-shadowing)",
+                            "no self-shadowing, order-2 SH irradiance)",
     "leadr-env-naive": "naive counterpart of leadr-env: mip-averaged normal, micro roughness only",
-    "leadr-irradiance": "LEADR diffuse layer: SH irradiance of environment and directional lights",
+    "leadr-irradiance": "LEADR diffuse layer: exact irradiance map (FFT) of environment and "
+                        "directional lights",
     "leadr-irradiance-naive": "naive counterpart of leadr-irradiance",
     "ltc-aniso": "area lights by the anisotropic GGX LTC table (alpha_x, alpha_y, tangent frame)",
     "colormap-filtered": "colour-map filtering (Heitz et al. 2013): the filtered colour term of a "
