@@ -12,10 +12,10 @@ from scipy.stats import chi2
 
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import SIGMA_H, TRUNCATION
-from prefilter.glints.wang import (TiledNDF, assemble, bake_tiles, compress_tiles, contributions,
-                                   index_map, ndf, ndf_image, ndf_pdf, ndf_points, pndf_explicit,
-                                   pndf_image_implicit, pndf_implicit, sample, synthesize,
-                                   tile_index, type_shares)
+from prefilter.glints.wang import (assemble, index_map, pndf_explicit, pndf_image_implicit,
+                                   pndf_implicit, synthesize, tile_index)
+from prefilter.glints.wang_ndf import (TiledNDF, bake_tiles, compress_tiles, contributions, ndf,
+                                       ndf_image, ndf_pdf, ndf_points, sample, type_shares)
 
 T = 16
 

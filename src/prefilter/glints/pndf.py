@@ -67,7 +67,8 @@ def as_normal_map(normal_map, name: str = "normal_map") -> np.ndarray:
     return np.ascontiguousarray(as_upper_directions(a, name, tol=1e-2))
 
 
-def _as_roughness(sigma_r, name: str = "intrinsic_roughness") -> float:
+def as_intrinsic_roughness(sigma_r, name: str = "intrinsic_roughness") -> float:
+    """A validated intrinsic roughness ``sigma_r`` (std of each element in ``s``)."""
     try:
         v = float(sigma_r)
     except (TypeError, ValueError) as exc:
@@ -77,14 +78,16 @@ def _as_roughness(sigma_r, name: str = "intrinsic_roughness") -> float:
     return v
 
 
-def _as_sigma_p(sigma_p, name: str = "sigma_p") -> np.ndarray:
+def as_sigma_p(sigma_p, name: str = "sigma_p") -> np.ndarray:
+    """Validated footprint stds ``(...)`` in texels."""
     a = as_float_array(sigma_p, name)
     if np.any(a < 0.0) or np.any(a > 1e6):
         raise PrefilterError(f"{name}: expected footprint std in texels in [0, 1e6], got {a}")
     return a
 
 
-def _as_support(support, name: str = "support") -> float:
+def as_support(support, name: str = "support") -> float:
+    """A validated half-width of the NDF images' square in ``s``."""
     try:
         v = float(support)
     except (TypeError, ValueError) as exc:
@@ -131,7 +134,7 @@ def pixel_centers(resolution: int, support: float) -> np.ndarray:
 
 
 # ---------------------------------------------------------------------------------------------
-# Numba kernels
+# Numba kernels (the public ones are shared by the other glints kernels)
 
 
 _PHI_LO, _PHI_N = -6.0, 8192
@@ -143,7 +146,8 @@ _PHI_TABLE = np.array([0.5 * math.erfc(-(_PHI_LO + k * _PHI_STEP) / math.sqrt(2.
 
 
 @njit_serial
-def _phi(z):
+def normal_cdf(z):  # pragma: no cover - compiled
+    """Standard normal CDF ``Phi(z)``, interpolated in a table (the splats' pixel masses)."""
     t = (z - _PHI_LO) / _PHI_STEP
     if t <= 0.0:
         return 0.0
@@ -155,13 +159,14 @@ def _phi(z):
 
 
 @njit_serial
-def _window(c, rad):
-    # texel indices whose centres (index + 0.5) lie within c +- rad
+def texel_window(c, rad):  # pragma: no cover - compiled
+    """First and last texel index along one axis whose centre ``index + 0.5`` lies within
+    ``c +- rad``."""
     return int(math.ceil(c - rad - 0.5)), int(math.floor(c + rad - 0.5))
 
 
 @njit_serial
-def _footprint(cx, cy, sp, sh2, trunc, H, W, lim2):
+def footprint_window(cx, cy, sp, sh2, trunc, H, W, lim2):
     """Texel window, mean-shift factor ``f``, element variance ``var`` and whether the footprint
     covers so many tiles that it is the sigma_p -> inf limit (``wide``: every texel once, equal
     weights, no mean shift, ``var = sigma_h^2``). The limit is exact to ``exp(-2 pi^2 tot2 / L^2)``
@@ -172,13 +177,13 @@ def _footprint(cx, cy, sp, sh2, trunc, H, W, lim2):
     if tot2 >= lim2:
         return 0, W - 1, 0, H - 1, 0.0, sh2, tot2, True
     rad = trunc * math.sqrt(tot2)
-    x0, x1 = _window(cx, rad)
-    y0, y1 = _window(cy, rad)
+    x0, x1 = texel_window(cx, rad)
+    y0, y1 = texel_window(cy, rad)
     return x0, x1, y0, y1, sh2 / tot2, sp2 * sh2 / tot2, tot2, False
 
 
 @njit_inline
-def _element(s_el, J, r, c, dx, dy, f, var):  # pragma: no cover - compiled
+def element_moments(s_el, J, r, c, dx, dy, f, var):  # pragma: no cover - compiled
     """Mean slope ``(mx, my)`` and positional covariance ``(a, b, d)`` (without the intrinsic
     roughness) of texel ``(r, c)``'s element seen from a footprint offset ``(dx, dy)``: the
     4D Gaussian's slope marginal conditioned on the footprint (Yan et al. 2016)."""
@@ -194,8 +199,8 @@ def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
     H, W = s_el.shape[0], s_el.shape[1]
     sh2 = sh * sh
     for q in prange(out.shape[0]):
-        x0, x1, y0, y1, f, var, tot2, wide = _footprint(cx[q], cy[q], sp[q], sh2, trunc, H, W,
-                                                        lim2)
+        x0, x1, y0, y1, f, var, tot2, wide = footprint_window(cx[q], cy[q], sp[q], sh2, trunc,
+                                                              H, W, lim2)
         acc = 0.0
         wsum = 0.0
         for y in range(y0, y1 + 1):
@@ -206,7 +211,7 @@ def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
                 c = x % W
                 w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
                 wsum += w
-                mx, my, a, b, d = _element(s_el, J, r, c, dx, dy, f, var)
+                mx, my, a, b, d = element_moments(s_el, J, r, c, dx, dy, f, var)
                 a += sr * sr
                 d += sr * sr
                 det = a * d - b * b
@@ -219,7 +224,7 @@ def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
 
 
 @njit_serial
-def _splat(img, px, py, mx, my, siso, w, lo, h, trunc):
+def splat(img, px, py, mx, my, siso, w, lo, h, trunc):
     """Add ``w`` times the pixel masses of ``N((mx, my), siso^2 I)`` to ``img`` (separable erf)."""
     R = img.shape[0]
     rad = trunc * siso
@@ -230,14 +235,14 @@ def _splat(img, px, py, mx, my, siso, w, lo, h, trunc):
     if j0 > j1 or i0 > i1:
         return
     inv = 1.0 / siso
-    prev = _phi((lo + j0 * h - mx) * inv)
+    prev = normal_cdf((lo + j0 * h - mx) * inv)
     for j in range(j0, j1 + 1):
-        cur = _phi((lo + (j + 1) * h - mx) * inv)
+        cur = normal_cdf((lo + (j + 1) * h - mx) * inv)
         px[j] = cur - prev
         prev = cur
-    prev = _phi((lo + i0 * h - my) * inv)
+    prev = normal_cdf((lo + i0 * h - my) * inv)
     for i in range(i0, i1 + 1):
-        cur = _phi((lo + (i + 1) * h - my) * inv)
+        cur = normal_cdf((lo + (i + 1) * h - my) * inv)
         py[i] = cur - prev
         prev = cur
     for i in range(i0, i1 + 1):
@@ -263,8 +268,8 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
         img = out[q]
         px = np.zeros(R)
         py = np.zeros(R)
-        x0, x1, y0, y1, f, var, tot2, wide = _footprint(cx[q], cy[q], sp[q], sh2, trunc, H, W,
-                                                        lim2)
+        x0, x1, y0, y1, f, var, tot2, wide = footprint_window(cx[q], cy[q], sp[q], sh2, trunc,
+                                                              H, W, lim2)
         wsum = 0.0
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
@@ -274,7 +279,7 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
                 c = x % W
                 w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
                 wsum += w
-                mx, my, a, b, d = _element(s_el, J, r, c, dx, dy, f, var)
+                mx, my, a, b, d = element_moments(s_el, J, r, c, dx, dy, f, var)
                 half = 0.5 * (a + d)
                 dif = math.sqrt(0.25 * (a - d) * (a - d) + b * b)
                 nu1 = half + dif
@@ -285,7 +290,7 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
                 siso = math.sqrt(sr * sr + nu2)
                 kappa = math.sqrt(max(nu1 - nu2, 0.0))
                 if kappa < 1e-3 * siso:
-                    _splat(img, px, py, mx, my, siso, w, lo, h, trunc)
+                    splat(img, px, py, mx, my, siso, w, lo, h, trunc)
                     continue
                 # principal direction of J J^T
                 if a >= d:
@@ -298,9 +303,9 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
                 if kappa <= 0.7 * siso:
                     # 3-point Gauss-Hermite along v: exact mean, variance and kurtosis
                     t = math.sqrt(3.0) * kappa
-                    _splat(img, px, py, mx, my, siso, w * (2.0 / 3.0), lo, h, trunc)
-                    _splat(img, px, py, mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, trunc)
-                    _splat(img, px, py, mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, trunc)
+                    splat(img, px, py, mx, my, siso, w * (2.0 / 3.0), lo, h, trunc)
+                    splat(img, px, py, mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, trunc)
+                    splat(img, px, py, mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, trunc)
                     continue
                 n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
                 norm = 0.0
@@ -310,7 +315,7 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
                 for k in range(n):
                     tk = -trunc + 2.0 * trunc * k / (n - 1)
                     wk = w * math.exp(-0.5 * tk * tk) / norm
-                    _splat(img, px, py, mx + kappa * tk * vx, my + kappa * tk * vy, siso, wk,
+                    splat(img, px, py, mx + kappa * tk * vx, my + kappa * tk * vy, siso, wk,
                            lo, h, trunc)
         scale = 1.0 / (wsum * h * h)
         for i in range(R):
@@ -338,12 +343,14 @@ def _prepared(normal_map, elements_=None):
 
 
 #: Footprints with ``sigma_p^2 + sigma_h^2 >= WIDE_FOOTPRINT^2`` (in tiles, at least
-#: ``WIDE_MIN`` texels) use the sigma_p -> inf limit (:func:`_footprint`).
+#: ``WIDE_MIN`` texels) use the sigma_p -> inf limit (:func:`footprint_window`).
 WIDE_FOOTPRINT = 1.0
 WIDE_MIN = 32.0
 
 
-def _wide2(s_el) -> float:
+def wide_limit2(s_el) -> float:
+    """``lim2`` of :func:`footprint_window` for elements ``s_el (H, W, 2)``: the squared total
+    footprint std from which the sigma_p -> inf limit is used."""
     L = max(WIDE_FOOTPRINT * max(s_el.shape[0], s_el.shape[1]), WIDE_MIN)
     return float(L * L)
 
@@ -368,9 +375,9 @@ def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_RO
     (...) densities; ``D(m) = D_p(m_xy)`` on the hemisphere (see module docstring).
     """
     s_el, J = _prepared(normal_map, elements_)
-    sr = _as_roughness(intrinsic_roughness)
+    sr = as_intrinsic_roughness(intrinsic_roughness)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = _as_sigma_p(sigma_p)
+    sp = as_sigma_p(sigma_p)
     q = as_float_array(s, "s", ndim_min=1, last_dim=2)
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
@@ -379,7 +386,7 @@ def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_RO
     out = np.empty(c.shape[0])
     _pndf_points(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
                  np.ascontiguousarray(sp), np.ascontiguousarray(q[:, 0]),
-                 np.ascontiguousarray(q[:, 1]), sr, SIGMA_H, TRUNCATION, _wide2(s_el), out)
+                 np.ascontiguousarray(q[:, 1]), sr, SIGMA_H, TRUNCATION, wide_limit2(s_el), out)
     return out.reshape(shape)
 
 
@@ -402,18 +409,18 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     times the pixel area ``(2 support / R)^2`` is the mass of ``D_p`` inside the square (<= 1).
     """
     s_el, J = _prepared(normal_map, elements_)
-    sr = _as_roughness(intrinsic_roughness)
+    sr = as_intrinsic_roughness(intrinsic_roughness)
     R = as_positive_int(resolution, "resolution")
-    S = _as_support(support)
+    S = as_support(support)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = _as_sigma_p(sigma_p)
+    sp = as_sigma_p(sigma_p)
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     out = np.zeros((c.shape[0], R, R))
     _pndf_images(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
-                 np.ascontiguousarray(sp), sr, SIGMA_H, TRUNCATION, -S, 2.0 * S / R, _wide2(s_el),
-                 out)
+                 np.ascontiguousarray(sp), sr, SIGMA_H, TRUNCATION, -S, 2.0 * S / R,
+                 wide_limit2(s_el), out)
     return out.reshape(shape + (R, R))
 
 
@@ -426,3 +433,11 @@ def hemisphere_ndf(D_s, m) -> np.ndarray:
     m = as_float_array(m, "m", ndim_min=1, last_dim=3)
     D = as_float_array(D_s, "D_s")
     return np.where(m[..., 2] > 0.0, D, 0.0)
+
+
+# Old private names, still imported by bake.py, brdf.py, query.py and sample.py.
+_as_roughness = as_intrinsic_roughness
+_as_sigma_p = as_sigma_p
+_as_support = as_support
+_window = texel_window
+_element = element_moments

@@ -31,7 +31,9 @@ import numpy as np
 from prefilter._numba import njit_inline, njit_parallel, prange, serial
 from prefilter._validate import as_float_array
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import SIGMA_H, TRUNCATION, _element, _footprint, _wide2
+# public kernels of pndf.py, under the short local names the kernels below use
+from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, element_moments as _element,
+                                   footprint_window as _footprint, wide_limit2 as _wide2)
 
 #: Quad lights: the largest cell of the quadrature grid in ``s`` (0.4 of the render's intrinsic
 #: roughness 0.01) and the most cells per side.

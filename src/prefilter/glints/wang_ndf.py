@@ -1,0 +1,927 @@
+"""Per-tile footprint pyramids over Wang tiles: bake, compression, queries, sampling (sec. 5.5).
+
+The tiles, their implicit tiling and the direct P-NDF across tiles are in
+:mod:`prefilter.glints.wang`; this module precomputes and queries footprint NDFs over the tiled
+plane without assembling the texels under the footprint.
+
+**Per-tile pyramids** (:func:`bake_tiles`, design and measurements in docs/glints-wang.md). The
+P-NDF is linear in the texel weights: ``D_p = sum_tiles sum_{i in tile} w_i N_i / sum_all w_i``,
+so a footprint's NDF is the sum over the tiles it touches of that tile's *contribution*, an image
+carrying the tile's share of the footprint mass. For each of the 16 tiles the contribution is
+precomputed for footprint centres on and around the tile (a margin of ``TRUNCATION`` footprint
+stds: footprints centred on neighbouring tiles reaching in), on the footprint pyramid of
+``pyramid.py`` (level 0 by ``pndf_image`` with the other texels' elements moved out of the NDF
+square, so they count in the normalisation only; upper levels by exact Gaussian filtering).
+The border texels whose Jacobian depends on the neighbour tile beyond its edge colour (the
+corner squares, :func:`dependent_texels`) are left out and added exactly at query time.
+Queries between centres/levels use Gaussian resampling (``pyramid.resample_weights``' scheme) per
+tile, summed over the tiles under the truncation window; smaller footprints use the direct P-NDF;
+footprints with ``sigma_p >= wide_tiles * T`` use the tile-independent NDF of the expected tiling
+(every tile equally likely), which is the position average of the footprint NDF at any size.
+Optionally CP-compressed per (tile, level, angular block) (:func:`compress_tiles`). Storage: 16
+tiles' pyramids, independent of the synthesised area. Sampling: a tile contribution by mass, a
+pixel by its CDF, uniform in the pixel.
+
+**File format** (:func:`save_tiles` / :func:`load_tiles`): see the section at the end of the
+module.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from prefilter._numba import njit_parallel, njit_serial, prange, serial
+from prefilter._validate import as_float_array, as_positive_int, as_rng, broadcast_batch
+from prefilter.errors import PrefilterError
+from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
+                                   as_sigma_p, as_support, normal_cdf, pixel_edges, pndf_image,
+                                   splat)
+from prefilter.glints.pyramid import next_level
+from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
+                                   pndf_image_implicit, tile_index, tile_window)
+
+
+def tile_elements(wt: WangTiles) -> tuple[np.ndarray, np.ndarray]:
+    """Per-tile elements ``s (16, T, T, 2)``, ``J (16, T, T, 2, 2)`` (as ``pndf.elements``).
+
+    The central differences at a tile's border need the neighbour's texels, which depend on the
+    edge colour only away from the corner squares (module docstring). Each side is padded with
+    the mean of the adjacent rows of the 8 tiles that can sit there (the expected neighbour, so
+    the Jacobian is its expectation over tilings); exact except in the corner squares.
+    """
+    T = wt.size
+    S = wt.tiles[..., :2]
+    n, s, w, e = edge_colours(np.arange(16))
+    pad = np.zeros((16, T + 2, T + 2, 2))
+    pad[:, 1:-1, 1:-1] = S
+    for t in range(16):
+        pad[t, 0, 1:-1] = S[s == n[t], T - 1].mean(axis=0)  # bottom rows of the tiles above
+        pad[t, -1, 1:-1] = S[n == s[t], 0].mean(axis=0)
+        pad[t, 1:-1, 0] = S[e == w[t], :, T - 1].mean(axis=0)
+        pad[t, 1:-1, -1] = S[w == e[t], :, 0].mean(axis=0)
+    J = np.empty((16, T, T, 2, 2))
+    J[..., :, 0] = 0.5 * (pad[:, 1:-1, 2:] - pad[:, 1:-1, :-2])
+    J[..., :, 1] = 0.5 * (pad[:, 2:, 1:-1] - pad[:, :-2, 1:-1])
+    return np.ascontiguousarray(S), J
+
+
+def dependent_texels(wt: WangTiles) -> np.ndarray:
+    """``(T, T)`` mask of the border texels whose Jacobian depends on which neighbour tile sits
+    across the edge (not only on the edge colour): the ends of the edges, where the neighbour's
+    corner square is. The per-tile pyramids leave them out; queries add them exactly."""
+    T = wt.size
+    S = wt.tiles[..., :2]
+    n, s, w, e = edge_colours(np.arange(16))
+
+    def varies(rows):  # (8, T, 2) candidate neighbour rows -> (T,) differ anywhere
+        return np.any(np.abs(rows - rows[:1]) > 1e-12, axis=(0, 2))
+
+    dep = np.zeros((T, T), bool)
+    for c in (0, 1):
+        dep[0] |= varies(S[s == c, T - 1])
+        dep[-1] |= varies(S[n == c, 0])
+        dep[:, 0] |= varies(S[e == c, :, T - 1])
+        dep[:, -1] |= varies(S[w == c, :, 0])
+    return dep
+
+
+#: Elements moved here contribute nothing to an NDF image (``support <= 1``) but keep their
+#: footprint weight in its normalisation.
+_AWAY = 9.0
+
+
+@dataclass(frozen=True)
+class TiledNDF:
+    """Per-tile footprint pyramids of a :class:`WangTiles` set (:func:`bake_tiles`).
+
+    ``images[l]`` is ``(16, n_l, n_l, R, R)`` float32: tile ``t``'s contribution for footprints
+    of std ``sigma0 2^l`` centred at ``((k0[l] + a) stride_l + 0.5, (k0[l] + b) stride_l + 0.5)``
+    relative to the tile's corner (index ``[t, b, a]``); contributions of centres outside are 0.
+    Compressed (``block > 0``): ``images[l]`` is the CP triple ``A, Bf (16, nb^2, rank, B)``,
+    ``C (16, n_l, n_l, nb^2, rank)`` float32 of the ``B x B`` angular blocks (group ``g = bi nb
+    + bj``): pixel ``(bi B + i, bj B + j)`` of image ``[t, b, a]`` is
+    ``sum_r A[t, g, r, i] Bf[t, g, r, j] C[t, b, a, g, r]`` (glints paper eq. 5);
+    ``cp_error[l]``: relative L2 error of level ``l``'s stored images.
+    ``tile_means (16, R, R)``: each tile's ``sigma_p -> inf`` NDF (its texels with equal
+    weights); ``mean (R, R)``: their average, the tile-independent NDF (expected tiling).
+    """
+
+    wang: WangTiles
+    images: tuple
+    k0: tuple
+    mean: np.ndarray
+    stride0: int
+    sigma0: float
+    resolution: int
+    support: float
+    intrinsic_roughness: float
+    wide_sigma: float
+    dependent: np.ndarray  # (n_dep, 2) (row, col) of dependent_texels(wang)
+    tile_means: np.ndarray | None = None  # (16, R, R) each tile's sigma_p -> inf NDF
+    uniform_sigma: float = math.inf
+    block: int = 0
+    cp_error: tuple = ()
+
+    @property
+    def n_levels(self) -> int:
+        return len(self.images)
+
+    def stride(self, level: int) -> int:
+        return self.stride0 << level
+
+    def sigma(self, level: int) -> float:
+        return self.sigma0 * 2.0**level
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes stored: tiles, per-tile pyramids and the mean image (no per-area data)."""
+        levels = sum(a.nbytes if isinstance(a, np.ndarray) else sum(f.nbytes for f in a)
+                     for a in self.images)
+        return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
+
+    def crop(self, level: int) -> int:
+        """Footprint centres per axis stored for each tile at ``level``."""
+        a = self.images[level]
+        return int((a if isinstance(a, np.ndarray) else a[2]).shape[1])
+
+    @property
+    def min_sigma(self) -> float:
+        """Footprints below this std use the direct P-NDF (no pyramid level resamples them)."""
+        a = _Q_MIN * self.stride0 / self.sigma0
+        return self.sigma0 / math.sqrt(1.0 - a * a) if a < 1.0 else math.inf
+
+
+def _margin(sigma: float) -> float:
+    # texel centres within TRUNCATION total stds of a footprint centre carry weight
+    return TRUNCATION * math.sqrt(sigma * sigma + SIGMA_H**2) + 1.0
+
+
+def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
+               intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int | None = None,
+               wide_tiles: float = 0.5, uniform_tiles: float = 8.0, rank: int | None = None,
+               block: int = 8, n_iter_max: int = 100, seed: int = 0) -> TiledNDF:
+    """Per-tile footprint pyramids (glints paper sec. 5.5, Fig. 12), float32, uncompressed or
+    CP-compressed (``rank``).
+
+    Parameters
+    ----------
+    wt : the 16 tiles (:func:`synthesize`).
+    ndf_res, support, intrinsic_roughness : NDF images ``R x R`` over ``[-support, support]^2``.
+    stride0 : level-0 centre stride in texels (``sigma0 = stride0``); default ``T // 8``.
+    wide_tiles : footprints with ``sigma_p >= wide_tiles * T`` use the tile-type shares (each
+        tile's ``sigma_p -> inf`` NDF times its share of the footprint weight); the pyramid has
+        levels up to the first ``sigma_l >= wide_tiles * T``.
+    uniform_tiles : footprints with ``sigma_p >= uniform_tiles * T`` use the tile-independent
+        NDF (expected tiling, O(1)); ``inf`` never.
+    rank, block : if ``rank`` is given, each (tile, level) is compressed like a bake cell
+        (``cp.nn_cp_batch`` of one ``(B, B, n_l^2)`` tensor per angular block position, all
+        groups at ``rank``; all-zero groups dropped); ``n_iter_max``, ``seed``: of the fits.
+    """
+    T = wt.size
+    R = as_positive_int(ndf_res, "ndf_res")
+    S = as_support(support)
+    sr = as_intrinsic_roughness(intrinsic_roughness)
+    st0 = max(1, T // 8) if stride0 is None else as_positive_int(stride0, "stride0")
+    wide = float(wide_tiles)
+    if not (0.0 < wide <= 4.0):
+        raise PrefilterError(f"wide_tiles: expected a footprint std in tiles in (0, 4], got "
+                             f"{wide_tiles!r}")
+    uniform = float(uniform_tiles)
+    if not uniform >= wide:
+        raise PrefilterError(f"uniform_tiles: expected a footprint std in tiles >= wide_tiles = "
+                             f"{wide}, got {uniform_tiles!r}")
+    L = 1
+    while st0 * 2.0 ** (L - 1) < wide * T:
+        L += 1
+    sig = [float(st0 << lv) for lv in range(L)]
+    k0 = [math.floor((-_margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
+    k1 = [math.ceil((T + _margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
+    # level-0 element canvas: the tile and every texel a cropped level-0 footprint reaches
+    o = st0 * math.ceil((_margin(sig[0]) + st0) / st0)  # tile corner, on the level-0 grid
+    P = o + st0 * math.ceil((T + _margin(sig[0]) + st0) / st0)
+    s_el, J_el = tile_elements(wt)
+    dep = dependent_texels(wt)
+    images = [np.empty((16, k1[lv] - k0[lv] + 1, k1[lv] - k0[lv] + 1, R, R), np.float32)
+              for lv in range(L)]
+    tile_means = np.empty((16, R, R))
+    g = (np.arange(k0[0], k1[0] + 1) * st0 + 0.5) + o
+    cen = np.stack(np.meshgrid(g, g), axis=-1)
+    for t in range(16):
+        cs = np.full((P, P, 2), _AWAY)
+        cj = np.zeros((P, P, 2, 2))
+        cs[o:o + T, o:o + T] = np.where(dep[..., None], _AWAY, s_el[t])
+        cj[o:o + T, o:o + T] = J_el[t]
+        images[0][t] = pndf_image(None, cen, sig[0], R, S, sr, elements_=(cs, cj))
+        for lv in range(1, L):
+            images[lv][t] = _filter_crop(images[lv - 1][t], k0[lv - 1], k0[lv], k1[lv],
+                                         sig[0] / st0)
+        # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
+        tile_means[t] = pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
+                                   elements_=(s_el[t], J_el[t]))
+    wn = TiledNDF(wt, tuple(images), tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
+                  sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
+    return wn if rank is None else compress_tiles(wn, rank, block, n_iter_max=n_iter_max,
+                                                  seed=seed)
+
+
+def _filter_crop(crop, a0, b0, b1, sigma_over_stride):
+    """Level ``l + 1`` images of centres ``b0 .. b1`` (per axis) from the level-``l`` crop
+    ``(n, n, R, R)`` of centres ``a0 ..``: the crop zero-padded on a periodic grid wide enough
+    that the filter (``pyramid.next_level``, ~7 strides) never wraps, starting at an even
+    index so that level-``l`` centre ``2 k`` is level-``l + 1`` centre ``k``. The contributions
+    beyond a crop are Gaussian tails (``TRUNCATION`` stds out) and are dropped."""
+    n = crop.shape[0]
+    pad = math.ceil(4.0 * math.sqrt(3.0) * sigma_over_stride) + 1
+    lo = min(a0, 2 * b0) - pad
+    lo -= lo % 2
+    hi = max(a0 + n - 1, 2 * b1) + pad
+    N = hi - lo + 1 + (hi - lo + 1) % 2
+    grid = np.zeros((N, N) + crop.shape[2:], np.float32)
+    grid[a0 - lo:a0 - lo + n, a0 - lo:a0 - lo + n] = crop
+    out = next_level(grid, sigma_over_stride)
+    return out[b0 - lo // 2:b1 - lo // 2 + 1, b0 - lo // 2:b1 - lo // 2 + 1]
+
+
+def compress_tiles(wn: TiledNDF, rank: int, block: int = 8, *, n_iter_max: int = 100,
+                   seed: int = 0) -> TiledNDF:
+    """CP-compressed copy of uncompressed per-tile pyramids (glints paper sec. 4.2 per tile):
+    one ``(B, B, n_l^2)`` tensor per (tile, level, angular block), all at ``rank``."""
+    if not isinstance(wn, TiledNDF) or wn.block:
+        raise PrefilterError("wn: expected uncompressed per-tile pyramids (bake_tiles without "
+                             "rank)")
+    r = as_positive_int(rank, "rank")
+    B = as_positive_int(block, "block")
+    from prefilter.glints.cp import single_threaded_blas
+
+    # small products: a multi-threaded BLAS spent 100x longer waking threads on a busy machine
+    with single_threaded_blas():
+        packed, errs = zip(*(_compress(x, r, B, as_positive_int(n_iter_max, "n_iter_max"),
+                                       seed + lv) for lv, x in enumerate(wn.images)))
+    return replace(wn, images=tuple(packed), block=B, cp_error=tuple(errs))
+
+
+def _compress(x, rank, B, n_iter_max, seed):
+    """CP triple ``(A, Bf, C)`` (:class:`TiledNDF`) of one level ``x (16, n, n, R, R)`` and its
+    relative L2 error."""
+    from prefilter.glints import cp as cpmod
+
+    n_t, n, R = x.shape[0], x.shape[1], x.shape[-1]
+    if R % B:
+        raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {B}")
+    nb = R // B
+    K = n * n
+    blocks = cpmod.cut_blocks(x.reshape(n_t, K, R, R), B)  # (16, K, nb, nb, B, B)
+    tensors = np.ascontiguousarray(blocks.transpose(0, 2, 3, 4, 5, 1), dtype=np.float64)
+    tensors = tensors.reshape(n_t * nb * nb, B, B, K)
+    live = np.flatnonzero(tensors.max(axis=(1, 2, 3)) > 0.0)
+    A = np.zeros((n_t * nb * nb, rank, B), np.float32)
+    Bf = np.zeros_like(A)
+    C = np.zeros((n_t * nb * nb, K, rank), np.float32)
+    fits = cpmod.nn_cp_batch([tensors[g] for g in live], rank, n_iter_max=n_iter_max, seed=seed)
+    err2 = 0.0
+    for g, (a, b, c, _) in zip(live, fits):
+        A[g], Bf[g], C[g] = a.T, b.T, c
+        d = cpmod.reconstruct(A[g].T.astype(np.float64), Bf[g].T.astype(np.float64),
+                              C[g].astype(np.float64)) - tensors[g]
+        err2 += float(np.einsum("ijk,ijk->", d, d))
+    C = C.reshape(n_t, nb * nb, n, n, rank).transpose(0, 2, 3, 1, 4)
+    packed = (A.reshape(n_t, nb * nb, rank, B), Bf.reshape(n_t, nb * nb, rank, B),
+              np.ascontiguousarray(C))
+    return packed, math.sqrt(err2 / max(float(np.einsum("gijk,gijk->", tensors, tensors)),
+                                        1e-300))
+
+
+# ---------------------------------------------------------------------------------------------
+# queries
+
+
+def _lookup(wn: TiledNDF, index, i, j):
+    if index is None:
+        return tile_index(wn.wang, i, j)
+    ny, nx = index.shape
+    return index[np.asarray(j) % ny, np.asarray(i) % nx]
+
+
+def _as_index(index):
+    if index is None:
+        return None
+    a = np.asarray(index)
+    if a.ndim != 2 or not np.issubdtype(a.dtype, np.integer) or a.size == 0 \
+            or a.min() < 0 or a.max() > 15:
+        raise PrefilterError(f"index: expected a 2D integer tile index map in [0, 15], got "
+                             f"{a.dtype} {a.shape}")
+    return a
+
+
+#: Resampling taps within this many stds of the resampling kernel (``pyramid.resample_weights``
+#: uses 3: cutting it there narrows the footprint by ~1 %, which moves the tile shares of a
+#: footprint on a tile corner by ~3e-3).
+_TAP_TRUNCATION = 4.0
+#: Smallest std of a resampling tap's product Gaussian in strides (``pyramid.RESAMPLE_Q_MIN`` is
+#: 0.45): the Riemann sum over centres aliases like ``exp(-2 pi^2 q^2)``, 2 % at 0.45 for the sharp
+#: per-tile contributions, 8e-4 at 0.6; below it the direct P-NDF is used.
+_Q_MIN = 0.6
+
+
+def _regime(wn: TiledNDF, sp: float) -> str:
+    if sp < wn.min_sigma:
+        return "direct"
+    if sp >= wn.uniform_sigma:
+        return "uniform"
+    return "shares" if sp >= wn.wide_sigma else "tiles"
+
+
+def type_shares(wn: TiledNDF, center, sigma_p, *, index=None) -> np.ndarray:
+    """``(16,)`` share of one footprint's weight on each tile type: the direct P-NDF's Gaussian
+    weights over its truncation window (separable sums per tile row and column), summed by
+    type. Cost: O(tiles under the footprint)."""
+    c, sp, index = _prepare(wn, center, sigma_p, index)
+    return _type_shares(wn, c, sp, index)
+
+
+def _type_shares(wn, c, sp, index):
+    T = wn.wang.size
+    tot2 = sp * sp + SIGMA_H**2
+    rad = TRUNCATION * math.sqrt(tot2)
+    per_axis = []
+    for a in (0, 1):
+        x = np.arange(math.ceil(c[a] - rad - 0.5), math.floor(c[a] + rad - 0.5) + 1)
+        w = np.exp(-(c[a] - x - 0.5) ** 2 / (2.0 * tot2))
+        tiles, inv = np.unique(x // T, return_inverse=True)
+        per_axis.append((tiles, np.bincount(inv, weights=w) / w.sum()))
+    (ti, wi), (tj, wj) = per_axis
+    t = _lookup(wn, index, ti[None, :], tj[:, None])
+    return np.bincount(t.ravel(), weights=np.outer(wj, wi).ravel(), minlength=16)
+
+
+def _level(wn: TiledNDF, sp: float) -> int:
+    """Coarsest level whose footprints resample ``sp`` (``pyramid.resample_weights``' rule)."""
+    m = 0
+    for lv in range(wn.n_levels):
+        sg = wn.sigma(lv)
+        if sg < sp and math.sqrt(1.0 - (sg / sp) ** 2) * sg / wn.stride(lv) >= _Q_MIN:
+            m = lv
+    return m
+
+
+def _axis_taps(wn: TiledNDF, m: int, c: float, r: float, n_tiles_lo: int, n_tiles_hi: int):
+    """Per tile column ``i`` in ``[n_tiles_lo, n_tiles_hi]``: crop indices and weights of the
+    Gaussian resampling taps along one axis on that tile's centre grid (tile-relative; the grids
+    of neighbouring tiles differ when the stride does not divide the tile), the weights
+    normalised over all of the tile's taps."""
+    st = wn.stride(m)
+    T = wn.wang.size
+    half = _TAP_TRUNCATION * r / st
+    n = wn.crop(m)
+    out = []
+    for i in range(n_tiles_lo, n_tiles_hi + 1):
+        cr = c - i * T
+        g = (cr - 0.5) / st
+        k = np.arange(math.ceil(g - half), math.floor(g + half) + 1)
+        w = np.exp(-0.5 * ((k * st + 0.5 - cr) / r) ** 2)
+        w /= w.sum()
+        a = k - wn.k0[m]  # crop index
+        keep = (a >= 0) & (a < n)
+        out.append((i, a[keep], w[keep]))
+    return out
+
+
+def _tiles_window(wn: TiledNDF, c, sp):
+    T = wn.wang.size
+    rad = _margin(sp)
+    return (math.floor((c[0] - rad) / T), math.floor((c[0] + rad) / T),
+            math.floor((c[1] - rad) / T), math.floor((c[1] + rad) / T))
+
+
+def _tile_terms(wn: TiledNDF, c, sp, index):
+    """Level and ``(i, j, t, ay, wy, ax, wx)`` per tile under the footprint's window (taps in
+    the tile's crop, possibly none)."""
+    m = _level(wn, sp)
+    r = math.sqrt(sp * sp - wn.sigma(m) ** 2)
+    # the tiles with texels in the direct P-NDF's truncation window (the taps' footprints reach
+    # further, but what they add there is the Gaussian's tail beyond TRUNCATION stds)
+    i0, i1, j0, j1 = _tiles_window(wn, c, sp)
+    xs = _axis_taps(wn, m, float(c[0]), r, i0, i1)
+    ys = _axis_taps(wn, m, float(c[1]), r, j0, j1)
+    terms = [(i, j, ay, wy, ax, wx) for j, ay, wy in ys for i, ax, wx in xs]
+    t = _lookup(wn, index, np.array([x[0] for x in terms]), np.array([x[1] for x in terms]))
+    return m, [(i, j, int(tt), ay, wy, ax, wx) for (i, j, ay, wy, ax, wx), tt in zip(terms, t)]
+
+
+@njit_serial
+def _splat_elements(mx, my, a, b, d, w, which, sr, lo, h, trunc, imgs):
+    """Add ``w_k`` times element ``k``'s pixel masses to ``imgs[which_k]``: the splatting of
+    ``pndf._pndf_images`` (isotropic part by erf masses, rank-one part by a line quadrature)."""
+    R = imgs.shape[1]
+    hi = lo + R * h
+    px = np.zeros(R)
+    py = np.zeros(R)
+    for k in range(mx.shape[0]):
+        img = imgs[which[k]]
+        half = 0.5 * (a[k] + d[k])
+        dif = math.sqrt(0.25 * (a[k] - d[k]) ** 2 + b[k] * b[k])
+        nu1 = half + dif
+        nu2 = max(half - dif, 0.0)
+        reach = trunc * math.sqrt(nu1 + sr * sr)
+        if mx[k] + reach < lo or mx[k] - reach > hi or my[k] + reach < lo or my[k] - reach > hi:
+            continue
+        siso = math.sqrt(sr * sr + nu2)
+        kappa = math.sqrt(max(nu1 - nu2, 0.0))
+        if kappa < 1e-3 * siso:
+            splat(img, px, py, mx[k], my[k], siso, w[k], lo, h, trunc)
+            continue
+        if a[k] >= d[k]:
+            vx, vy = nu1 - d[k], b[k]
+        else:
+            vx, vy = b[k], nu1 - a[k]
+        vn = math.sqrt(vx * vx + vy * vy)
+        vx /= vn
+        vy /= vn
+        if kappa <= 0.7 * siso:
+            t = math.sqrt(3.0) * kappa
+            splat(img, px, py, mx[k], my[k], siso, w[k] * (2.0 / 3.0), lo, h, trunc)
+            splat(img, px, py, mx[k] + t * vx, my[k] + t * vy, siso, w[k] / 6.0, lo, h, trunc)
+            splat(img, px, py, mx[k] - t * vx, my[k] - t * vy, siso, w[k] / 6.0, lo, h, trunc)
+            continue
+        n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+        norm = 0.0
+        for q in range(n):
+            tq = -trunc + 2.0 * trunc * q / (n - 1)
+            norm += math.exp(-0.5 * tq * tq)
+        for q in range(n):
+            tq = -trunc + 2.0 * trunc * q / (n - 1)
+            splat(img, px, py, mx[k] + kappa * tq * vx, my[k] + kappa * tq * vy, siso,
+                   w[k] * math.exp(-0.5 * tq * tq) / norm, lo, h, trunc)
+
+
+def _texel_s(wn: TiledNDF, index, gx, gy):
+    """Projected normals ``(..., 2)`` of global texels ``(gx, gy)`` of the tiled plane."""
+    T = wn.wang.size
+    t = _lookup(wn, index, gx // T, gy // T)
+    return wn.wang.tiles[t, gy % T, gx % T, :2]
+
+
+def _dependent_images(wn: TiledNDF, c, sp, index, ij):
+    """Contributions ``(k, R, R)`` of the dependent texels (:func:`dependent_texels`) of the
+    tiles ``ij (k, 2)``, with their exact Jacobians (the actual neighbours, looked up) and the
+    direct P-NDF's weights and normalisation (Yan et al. 2016 closed-form elements)."""
+    T, R = wn.wang.size, wn.resolution
+    imgs = np.zeros((len(ij), R, R))
+    if not len(ij) or not len(wn.dependent):
+        return imgs
+    sh2 = SIGMA_H**2
+    tot2 = sp * sp + sh2
+    rad = TRUNCATION * math.sqrt(tot2)
+    lo_x, hi_x = math.ceil(c[0] - rad - 0.5), math.floor(c[0] + rad - 0.5)
+    lo_y, hi_y = math.ceil(c[1] - rad - 0.5), math.floor(c[1] + rad - 0.5)
+    # the direct P-NDF's normaliser: all texels of the window, a separable sum
+    wsum = (np.exp(-(c[0] - np.arange(lo_x, hi_x + 1) - 0.5) ** 2 / (2 * tot2)).sum()
+            * np.exp(-(c[1] - np.arange(lo_y, hi_y + 1) - 0.5) ** 2 / (2 * tot2)).sum())
+    gx = (ij[:, :1] * T + wn.dependent[None, :, 1]).ravel()
+    gy = (ij[:, 1:] * T + wn.dependent[None, :, 0]).ravel()
+    which = np.repeat(np.arange(len(ij)), len(wn.dependent))
+    keep = (gx >= lo_x) & (gx <= hi_x) & (gy >= lo_y) & (gy <= hi_y)
+    gx, gy, which = gx[keep], gy[keep], which[keep]
+    s0 = _texel_s(wn, index, gx, gy)
+    Jx = 0.5 * (_texel_s(wn, index, gx + 1, gy) - _texel_s(wn, index, gx - 1, gy))
+    Jy = 0.5 * (_texel_s(wn, index, gx, gy + 1) - _texel_s(wn, index, gx, gy - 1))
+    dx = c[0] - (gx + 0.5)
+    dy = c[1] - (gy + 0.5)
+    f, var = sh2 / tot2, sp * sp * sh2 / tot2
+    mean = s0 + f * (Jx * dx[:, None] + Jy * dy[:, None])
+    a = var * (Jx[:, 0] ** 2 + Jy[:, 0] ** 2)
+    b = var * (Jx[:, 0] * Jx[:, 1] + Jy[:, 0] * Jy[:, 1])
+    d = var * (Jx[:, 1] ** 2 + Jy[:, 1] ** 2)
+    w = np.exp(-(dx * dx + dy * dy) / (2 * tot2))
+    cc = np.ascontiguousarray
+    h = 2.0 * wn.support / R
+    _splat_elements(cc(mean[:, 0]), cc(mean[:, 1]), a, b, d, w, which.astype(np.int64),
+                    wn.intrinsic_roughness, -wn.support, h, TRUNCATION, imgs)
+    return imgs / (wsum * h * h)
+
+
+def _prepare(wn, center, sigma_p, index):
+    if not isinstance(wn, TiledNDF):
+        raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
+    return as_center(center), as_one_sigma_p(sigma_p), _as_index(index)
+
+
+def _direct_image(wn: TiledNDF, c, sp, index):
+    if index is None:
+        return pndf_image_implicit(wn.wang, c, sp, wn.resolution, wn.support,
+                                   wn.intrinsic_roughness)
+    T = wn.wang.size
+    i0, j0, nx, ny = tile_window(wn.wang, c, sp)
+    J, I = np.meshgrid(np.arange(ny) + j0, np.arange(nx) + i0, indexing="ij")
+    local = assemble(wn.wang, _lookup(wn, index, I, J))
+    return pndf_image(local, c - np.array([i0 * T, j0 * T]), sp, wn.resolution, wn.support,
+                      wn.intrinsic_roughness)
+
+
+def contributions(wn: TiledNDF, center, sigma_p, *, index=None):
+    """Per-tile contributions to one footprint's NDF image (paper sec. 5.5, Fig. 12).
+
+    Parameters
+    ----------
+    wn : TiledNDF; center : (2,) texels, any position; sigma_p : footprint std in texels.
+    index : optional explicit ``(ny, nx)`` tile index map (periodic, tile ``(0, 0)`` at the
+        origin) instead of the implicit hashing.
+
+    Returns
+    -------
+    ij : (k, 2) tile coordinates ``(i, j)``; images : (k, R, R) their contributions, each
+    carrying its share of the footprint mass; their sum is the footprint's NDF image. For
+    footprints below ``wn.min_sigma`` (direct P-NDF) or at/above ``wn.uniform_sigma``
+    (tile-independent NDF) ``ij`` is empty and ``images`` holds the one image; between
+    ``wn.wide_sigma`` and ``wn.uniform_sigma`` ``ij`` is empty and ``images (16, R, R)`` are the
+    tile types' contributions ``share_t * tile_means[t]``.
+    """
+    c, sp, index = _prepare(wn, center, sigma_p, index)
+    regime = _regime(wn, sp)
+    none = np.zeros((0, 2), np.int64)
+    if regime == "direct":
+        return none, _direct_image(wn, c, sp, index)[None]
+    if regime == "uniform":
+        return none, wn.mean[None].copy()
+    if regime == "shares":
+        return none, _type_shares(wn, c, sp, index)[:, None, None] * wn.tile_means
+    m, terms = _tile_terms(wn, c, sp, index)
+    ij = np.array([(x[0], x[1]) for x in terms], np.int64).reshape(-1, 2)
+    imgs = _dependent_images(wn, c, sp, index, ij)
+    for n, (_, _, t, ay, wy, ax, wx) in enumerate(terms):
+        if ay.size and ax.size:
+            imgs[n] += _tap_image(wn, m, t, ay, wy, ax, wx)
+    return ij, imgs
+
+
+def _tap_image(wn: TiledNDF, m, t, ay, wy, ax, wx) -> np.ndarray:
+    """``sum_taps w image`` ``(R, R)`` of tile type ``t`` at level ``m``; compressed: the taps
+    blend the ``C`` rows first (``rank`` numbers per block instead of ``B^2``). ``einsum``
+    without BLAS: small products, and BLAS threads cost more than they save here."""
+    lv = wn.images[m]
+    W = np.outer(wy, wx)
+    if isinstance(lv, np.ndarray):
+        return np.einsum("ab,abij->ij", W, lv[t][ay[:, None], ax[None, :]])
+    A, Bf, C = lv
+    coef = np.einsum("ab,abgr->gr", W, C[t][ay[:, None], ax[None, :]])
+    B, R = wn.block, wn.resolution
+    nb = R // B
+    blocks = np.einsum("gr,gri,grj->gij", coef, A[t], Bf[t])
+    return blocks.reshape(nb, nb, B, B).swapaxes(1, 2).reshape(R, R)
+
+
+def _tap_points(wn: TiledNDF, m, t, ay, wy, ax, wx, py, px) -> np.ndarray:
+    """Pixels ``(py, px)`` ``(N,)`` of :func:`_tap_image` without forming the image."""
+    lv = wn.images[m]
+    W = np.outer(wy, wx)
+    if isinstance(lv, np.ndarray):
+        return np.einsum("ab,abn->n", W, lv[t][ay[:, None, None], ax[None, :, None], py, px])
+    A, Bf, C = lv
+    coef = np.einsum("ab,abgr->gr", W, C[t][ay[:, None], ax[None, :]])
+    B = wn.block
+    g = (py // B) * (wn.resolution // B) + px // B
+    return np.einsum("nr,nr,nr->n", coef[g], A[t][g, :, py % B], Bf[t][g, :, px % B])
+
+
+def ndf_image(wn: TiledNDF, center, sigma_p, *, index=None) -> np.ndarray:
+    """NDF image ``(R, R)`` of one footprint over the tiled plane: sum of the tile contributions
+    (direct P-NDF below ``wn.min_sigma``, tile-type shares from ``wn.wide_sigma``, the
+    tile-independent NDF from ``wn.uniform_sigma``)."""
+    return contributions(wn, center, sigma_p, index=index)[1].sum(axis=0)
+
+
+def _pixels(wn: TiledNDF, s):
+    q = as_float_array(s, "s", ndim_min=1, last_dim=2)
+    R, S = wn.resolution, wn.support
+    h = 2.0 * S / R
+    ix = np.floor((q[..., 0] + S) / h).astype(np.int64)
+    iy = np.floor((q[..., 1] + S) / h).astype(np.int64)
+    inside = (ix >= 0) & (ix < R) & (iy >= 0) & (iy < R)
+    return np.clip(iy, 0, R - 1), np.clip(ix, 0, R - 1), inside
+
+
+def ndf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
+    """NDF values ``(...)`` of one footprint at ``s (..., 2)``: the value of the image pixel
+    holding ``s`` (0 outside the support), summed over the tiles under the footprint.
+
+    Cost per ``s``: taps x tiles under the footprint below ``wn.wide_sigma``, one value per tile
+    type above (plus O(tiles) for the shares below ``wn.uniform_sigma``): bounded."""
+    c, sp, index = _prepare(wn, center, sigma_p, index)
+    iy, ix, inside = _pixels(wn, s)
+    regime = _regime(wn, sp)
+    if regime == "direct":
+        v = _direct_image(wn, c, sp, index)[iy, ix]
+    elif regime == "uniform":
+        v = wn.mean[iy, ix]
+    elif regime == "shares":
+        v = np.einsum("t,t...->...", _type_shares(wn, c, sp, index), wn.tile_means[:, iy, ix])
+    else:
+        m, terms = _tile_terms(wn, c, sp, index)
+        ij = np.array([(x[0], x[1]) for x in terms], np.int64).reshape(-1, 2)
+        v = _dependent_images(wn, c, sp, index, ij).sum(axis=0)[iy, ix]
+        py, px = iy.reshape(-1), ix.reshape(-1)
+        for _, _, t, ay, wy, ax, wx in terms:
+            if ay.size and ax.size:
+                v += _tap_points(wn, m, t, ay, wy, ax, wx, py, px).reshape(iy.shape)
+    return np.where(inside, v, 0.0)
+
+
+def ndf_pdf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
+    """Density w.r.t. ``s`` that :func:`sample` draws: :func:`ndf` over the image's mass."""
+    img = ndf_image(wn, center, sigma_p, index=index)
+    M = img.sum() * (2.0 * wn.support / wn.resolution) ** 2
+    iy, ix, inside = _pixels(wn, s)
+    return np.where(inside & (M > 0), img[iy, ix] / max(M, 1e-300), 0.0)
+
+
+def sample(wn: TiledNDF, center, sigma_p, n: int, rng=0, *, index=None):
+    """``n`` projected half vectors distributed as one footprint's NDF image (sec. 5.5).
+
+    A tile contribution is chosen with probability proportional to its mass (the paper picks
+    tiles uniformly; by mass the samples follow the sum exactly), then a pixel of it by its
+    inverse CDF, then a uniform point in the pixel.
+
+    Returns
+    -------
+    s : (n, 2); pdf : (n,) the density of ``s``: ``image(pixel) / mass`` (the mixture over the
+    contributions, equal to :func:`ndf_pdf`); 0 for an empty image.
+    """
+    n = as_positive_int(n, "n")
+    gen = as_rng(rng)
+    _, imgs = contributions(wn, center, sigma_p, index=index)
+    R, S = wn.resolution, wn.support
+    h = 2.0 * S / R
+    flat = imgs.reshape(len(imgs), -1)
+    masses = flat.sum(axis=1)
+    total = masses.sum()
+    if total <= 0:
+        return np.zeros((n, 2)), np.zeros(n)
+    part = np.minimum(np.searchsorted(np.cumsum(masses) / total, gen.random(n), side="right"),
+                      len(masses) - 1)
+    pix = np.empty(n, np.int64)
+    u = gen.random(n)
+    for k in np.unique(part):
+        sel = part == k
+        cdf = np.cumsum(flat[k])
+        cdf /= cdf[-1]
+        pix[sel] = np.minimum(np.searchsorted(cdf, u[sel], side="right"), R * R - 1)
+    iy, ix = np.divmod(pix, R)
+    edges = pixel_edges(R, S)
+    jit = gen.random((n, 2))
+    s = np.stack([edges[ix] + h * jit[:, 0], edges[iy] + h * jit[:, 1]], axis=-1)
+    img = flat.sum(axis=0)
+    return s, img[pix] / (total * h * h)
+
+
+# ---------------------------------------------------------------------------------------------
+# batched point queries (Numba): the same arithmetic as ndf(), one kernel for many footprints
+
+_H1, _H2, _H3 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), \
+    np.uint64(0x165667B19E3779F9)
+_H4, _S29, _S32, _ONE = np.uint64(0xBF58476D1CE4E5B9), np.uint64(29), np.uint64(32), np.uint64(1)
+
+
+@njit_serial
+def _nb_bits(i, j, seed):  # pragma: no cover - compiled; wang._hash_bits
+    h = (np.uint64(i) * _H1) ^ (np.uint64(j) * _H2) ^ (np.uint64(seed) * _H3)
+    h ^= h >> _S29
+    h *= _H4
+    h ^= h >> _S32
+    return np.int64(h & _ONE), np.int64((h >> _ONE) & _ONE)
+
+
+@njit_serial
+def _nb_type(i, j, seed, index):  # pragma: no cover - compiled; _lookup
+    if index.shape[0] > 0:
+        return index[j % index.shape[0], i % index.shape[1]]
+    r_ij, b_ij = _nb_bits(i, j, seed)
+    r_below = _nb_bits(i, j + 1, seed)[0]
+    b_right = _nb_bits(i + 1, j, seed)[1]
+    return r_ij + 2 * r_below + 4 * b_ij + 8 * b_right
+
+
+@njit_serial
+def _nb_types(i0, i1, j0, j1, seed, index):  # pragma: no cover - compiled
+    """Tile types ``(j1 - j0 + 1, i1 - i0 + 1)`` of a block of tiles (hashed once per query)."""
+    out = np.empty((j1 - j0 + 1, i1 - i0 + 1), np.int64)
+    for j in range(j0, j1 + 1):
+        for i in range(i0, i1 + 1):
+            out[j - j0, i - i0] = _nb_type(i, j, seed, index)
+    return out
+
+
+@njit_serial
+def _nb_s(tiles, types, i0, j0, gx, gy, comp):  # pragma: no cover - compiled; _texel_s
+    T = tiles.shape[1]
+    return tiles[types[gy // T - j0, gx // T - i0], gy % T, gx % T, comp]
+
+
+@njit_serial
+def _nb_axis(lo, h, R, m, rad, iz):  # pragma: no cover - compiled
+    # pixel iz's mass along one axis of N(m, .) as pndf.splat gives it (0 outside its pixel range)
+    z0 = max(0, int(math.floor((m - rad - lo) / h)))
+    z1 = min(R - 1, int(math.floor((m + rad - lo) / h)))
+    return z0 <= iz <= z1
+
+
+@njit_serial
+def _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix):  # pragma: no cover - compiled
+    """``w`` times pixel ``(iy, ix)``'s mass of ``N((mx, my), siso^2 I)`` (``pndf.splat``)."""
+    rad = trunc * siso
+    if not (_nb_axis(lo, h, R, mx, rad, ix) and _nb_axis(lo, h, R, my, rad, iy)):
+        return 0.0
+    inv = 1.0 / siso
+    px = normal_cdf((lo + (ix + 1) * h - mx) * inv) - normal_cdf((lo + ix * h - mx) * inv)
+    py = normal_cdf((lo + (iy + 1) * h - my) * inv) - normal_cdf((lo + iy * h - my) * inv)
+    return w * py * px
+
+
+@njit_serial
+def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no cover
+    """Pixel ``(iy, ix)`` of :func:`_splat_elements` for one element."""
+    hi = lo + R * h
+    half = 0.5 * (a + d)
+    dif = math.sqrt(0.25 * (a - d) ** 2 + b * b)
+    nu1 = half + dif
+    nu2 = max(half - dif, 0.0)
+    reach = trunc * math.sqrt(nu1 + sr * sr)
+    if mx + reach < lo or mx - reach > hi or my + reach < lo or my - reach > hi:
+        return 0.0
+    siso = math.sqrt(sr * sr + nu2)
+    kappa = math.sqrt(max(nu1 - nu2, 0.0))
+    # every node splat lies within trunc (kappa + siso) of the mean: most pixels are beyond
+    ext = trunc * (kappa + siso) + h
+    if abs(lo + (ix + 0.5) * h - mx) > ext or abs(lo + (iy + 0.5) * h - my) > ext:
+        return 0.0
+    if kappa < 1e-3 * siso:
+        return _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix)
+    if a >= d:
+        vx, vy = nu1 - d, b
+    else:
+        vx, vy = b, nu1 - a
+    vn = math.sqrt(vx * vx + vy * vy)
+    vx /= vn
+    vy /= vn
+    if kappa <= 0.7 * siso:
+        t = math.sqrt(3.0) * kappa
+        return (_nb_pixel(mx, my, siso, w * (2.0 / 3.0), lo, h, R, trunc, iy, ix)
+                + _nb_pixel(mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix)
+                + _nb_pixel(mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix))
+    n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+    norm = 0.0
+    for q in range(n):
+        tq = -trunc + 2.0 * trunc * q / (n - 1)
+        norm += math.exp(-0.5 * tq * tq)
+    acc = 0.0
+    for q in range(n):
+        tq = -trunc + 2.0 * trunc * q / (n - 1)
+        acc += _nb_pixel(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
+                         w * math.exp(-0.5 * tq * tq) / norm, lo, h, R, trunc, iy, ix)
+    return acc
+
+
+@njit_serial
+def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
+              ix):  # pragma: no cover - compiled
+    """Unnormalised pixel value of texel ``(gx, gy)``'s element (exact neighbours; ``types``
+    covers its tile and the neighbouring ones, from tile ``(i0, j0)``)."""
+    ty = types
+    jx0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 0) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 0))
+    jx1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 1) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 1))
+    jy0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 0) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 0))
+    jy1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 1) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 1))
+    dx = cx - (gx + 0.5)
+    dy = cy - (gy + 0.5)
+    mx = _nb_s(tiles, ty, i0, j0, gx, gy, 0) + f * (jx0 * dx + jy0 * dy)
+    my = _nb_s(tiles, ty, i0, j0, gx, gy, 1) + f * (jx1 * dx + jy1 * dy)
+    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+    return _nb_element(mx, my, var * (jx0 * jx0 + jy0 * jy0), var * (jx0 * jx1 + jy0 * jy1),
+                       var * (jx1 * jx1 + jy1 * jy1), w, sr, lo, h, R, trunc, iy, ix)
+
+
+@njit_parallel
+def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, st0, sigma0, dep,
+                   tile_means, mean, sr, lo, h, min_sigma, wide_sigma, uniform_sigma, q_min,
+                   tap_trunc, trunc, sh, out):  # pragma: no cover - compiled
+    T = tiles.shape[1]
+    R = mean.shape[0]
+    L = len(images)
+    for q in prange(out.shape[0]):
+        out[q] = 0.0
+        if not inside[q]:
+            continue
+        c0, c1, s, py, px = cx[q], cy[q], sp[q], iy[q], ix[q]
+        if s >= uniform_sigma:
+            out[q] = mean[py, px]
+            continue
+        tot2 = s * s + sh * sh
+        rad = trunc * math.sqrt(tot2)
+        wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
+        wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+        sx = 0.0
+        for x in range(wx0, wx1 + 1):
+            sx += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+        sy = 0.0
+        for y in range(wy0, wy1 + 1):
+            sy += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+        if s >= wide_sigma:  # tile-type shares: weights per tile column and row, then types
+            i0, j0 = wx0 // T, wy0 // T
+            wcol = np.zeros(wx1 // T - i0 + 1)
+            wrow = np.zeros(wy1 // T - j0 + 1)
+            for x in range(wx0, wx1 + 1):
+                wcol[x // T - i0] += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+            for y in range(wy0, wy1 + 1):
+                wrow[y // T - j0] += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+            acc = 0.0
+            for b in range(wrow.shape[0]):
+                for a in range(wcol.shape[0]):
+                    acc += wrow[b] * wcol[a] * tile_means[_nb_type(i0 + a, j0 + b, seed, index),
+                                                          py, px]
+            out[q] = acc / (sx * sy)
+            continue
+        f = sh * sh / tot2
+        var = s * s * sh * sh / tot2
+        if s < min_sigma:  # direct P-NDF
+            acc = 0.0
+            ti0, tj0 = wx0 // T - 1, wy0 // T - 1
+            types = _nb_types(ti0, wx1 // T + 1, tj0, wy1 // T + 1, seed, index)
+            for y in range(wy0, wy1 + 1):
+                for x in range(wx0, wx1 + 1):
+                    acc += _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var, tot2, sr, lo,
+                                     h, R, trunc, py, px)
+            out[q] = acc / (sx * sy * h * h)
+            continue
+        m = 0
+        for lv in range(L):
+            sg = sigma0 * 2.0**lv
+            st = st0 * 2.0**lv
+            if sg < s and math.sqrt(1.0 - (sg / s) ** 2) * sg / st >= q_min:
+                m = lv
+        sg = sigma0 * 2.0**m
+        st = st0 * 2.0**m
+        r = math.sqrt(s * s - sg * sg)
+        half = tap_trunc * r / st
+        img = images[m]
+        n = img.shape[1]
+        marg = rad + 1.0
+        acc = 0.0
+        dsum = 0.0
+        ti0 = int(math.floor((c0 - marg) / T)) - 1
+        tj0 = int(math.floor((c1 - marg) / T)) - 1
+        types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
+                          int(math.floor((c1 + marg) / T)) + 1, seed, index)
+        for j in range(int(math.floor((c1 - marg) / T)), int(math.floor((c1 + marg) / T)) + 1):
+            gy = (c1 - j * T - 0.5) / st
+            ky0, ky1 = int(math.ceil(gy - half)), int(math.floor(gy + half))
+            ny = 0.0
+            for k in range(ky0, ky1 + 1):
+                ny += math.exp(-0.5 * ((k * st + 0.5 - (c1 - j * T)) / r) ** 2)
+            for i in range(int(math.floor((c0 - marg) / T)), int(math.floor((c0 + marg) / T)) + 1):
+                t = types[j - tj0, i - ti0]
+                gx = (c0 - i * T - 0.5) / st
+                kx0, kx1 = int(math.ceil(gx - half)), int(math.floor(gx + half))
+                nx = 0.0
+                for k in range(kx0, kx1 + 1):
+                    nx += math.exp(-0.5 * ((k * st + 0.5 - (c0 - i * T)) / r) ** 2)
+                for ky in range(max(ky0, k0[m]), min(ky1, k0[m] + n - 1) + 1):
+                    wy = math.exp(-0.5 * ((ky * st + 0.5 - (c1 - j * T)) / r) ** 2) / ny
+                    for kx in range(max(kx0, k0[m]), min(kx1, k0[m] + n - 1) + 1):
+                        wx = math.exp(-0.5 * ((kx * st + 0.5 - (c0 - i * T)) / r) ** 2) / nx
+                        acc += wy * wx * img[t, ky - k0[m], kx - k0[m], py, px]
+                for e in range(dep.shape[0]):
+                    x = i * T + dep[e, 1]
+                    y = j * T + dep[e, 0]
+                    if wx0 <= x <= wx1 and wy0 <= y <= wy1:
+                        dsum += _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var, tot2,
+                                          sr, lo, h, R, trunc, py, px)
+        out[q] = acc + dsum / (sx * sy * h * h)
+
+
+def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
+    """Batched :func:`ndf`: NDF values ``(...)`` of footprints ``center (..., 2)``,
+    ``sigma_p (...)`` at ``s (..., 2)`` (broadcast together), one Numba kernel for all regimes
+    (uncompressed pyramids). Same arithmetic as :func:`ndf`, without Python per footprint."""
+    if not isinstance(wn, TiledNDF) or wn.block:
+        raise PrefilterError("wn: expected uncompressed per-tile pyramids (bake_tiles without "
+                             "rank)")
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_sigma_p(sigma_p)
+    q = as_float_array(s, "s", ndim_min=1, last_dim=2)
+    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
+    idx = _as_index(index)
+    idx = np.zeros((0, 0), np.int64) if idx is None else np.ascontiguousarray(idx, np.int64)
+    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    sp = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1))
+    iy, ix, inside = _pixels(wn, np.broadcast_to(q, shape + (2,)).reshape(-1, 2))
+    out = np.empty(sp.shape[0])
+    cc = np.ascontiguousarray
+    serial(_points_kernel, len(out))(
+        cc(c[:, 0]), cc(c[:, 1]), sp, iy, ix, inside, cc(wn.wang.tiles[..., :2]),
+        np.uint64(wn.wang.seed), idx, tuple(wn.images), np.asarray(wn.k0, np.int64),
+        float(wn.stride0), wn.sigma0, cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean,
+        wn.intrinsic_roughness, -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma,
+        wn.wide_sigma, wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
+    return out.reshape(shape)
