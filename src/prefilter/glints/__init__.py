@@ -6,6 +6,10 @@ position-normal distributions. See ``docs/glints.md`` for conventions and measur
 ``pndf`` / ``pndf_image``: direct P-NDF; ``bake``: normal map -> compressed pyramid file;
 ``load``: validated :class:`GlintsMap`; ``point`` / ``range_mean`` (alias ``query.range``):
 constant-time queries.
+
+Wang tiles (sec. 5.5, not imported here): :mod:`prefilter.glints.wang` (tile synthesis, implicit
+tiling, direct P-NDF over tiles) and :mod:`prefilter.glints.wang_ndf` (per-tile pyramids,
+queries, sampling, ``save_tiles`` / ``load_tiles``).
 """
 
 from prefilter.glints.bake import bake
