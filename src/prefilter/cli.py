@@ -46,6 +46,7 @@ BAKE_COMMANDS = {
     "colormap": "prefilter.colormap.commands:bake_colormap",
     "leadr": "prefilter.leadr.commands:bake_leadr",
     "glints": "prefilter.glints.commands:bake_glints",
+    "glints-wang": "prefilter.glints.commands:bake_glints_wang",
 }
 
 TOP_COMMANDS = {

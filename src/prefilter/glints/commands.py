@@ -1,4 +1,4 @@
-"""``prefilter bake glints``: a thin CLI over :func:`prefilter.glints.bake.bake`."""
+"""``prefilter bake glints`` and ``prefilter bake glints-wang``: thin CLIs over the bakes."""
 
 from __future__ import annotations
 
@@ -91,4 +91,68 @@ def bake_glints(normal_map, out, rank, max_rank, ndf_res, block, support, roughn
     click.echo(f"relative L2 error {100 * s['rel_l2_error']:.2f} % (per level: "
                + ", ".join(f"{100 * e:.1f}" for e in s["rel_l2_error_per_level"]) + ")")
     click.echo(f"time {s['seconds']:.1f} s -> {out}")
+    click.echo(json.dumps(summary))
+
+
+@click.command("glints-wang")
+@click.argument("normal_map")
+@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
+              help="Output .npz (written atomically; prefilter.glints.wang_store format).")
+@click.option("--tile", default=32, show_default=True, help="Tile size T in texels (even).")
+@click.option("--band", default=4.0, show_default=True,
+              help="Width of the diagonal seams' cross-fade in texels.")
+@click.option("--rank", default=16, show_default=True,
+              help="CP rank of every (tile, level, angular block); 0 stores the images "
+                   "uncompressed.")
+@click.option("--block", default=8, show_default=True, help="Block size B of the NDF images.")
+@click.option("--ndf-res", default=64, show_default=True, help="NDF image resolution.")
+@click.option("--support", default=0.5, show_default=True,
+              help="Half-width of the NDF images in projected normals s.")
+@click.option("--roughness", default=0.005, show_default=True, help="Intrinsic roughness sigma_r.")
+@click.option("--stride0", default=None, type=int,
+              help="Level-0 footprint stride (texels) [default: tile / 8].")
+@click.option("--wide-tiles", default=0.5, show_default=True,
+              help="Footprint std (in tiles) from which the tile-type shares replace the pyramids.")
+@click.option("--uniform-tiles", default=8.0, show_default=True,
+              help="Footprint std (in tiles) from which the expected tiling is used.")
+@click.option("--iters", default=100, show_default=True, help="Max CP iterations per group.")
+@click.option("--seed", default=0, show_default=True,
+              help="Seeds the tile synthesis (patches, hashing seed) and the CP fits.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support, roughness,
+                     stride0, wide_tiles, uniform_tiles, iters, seed, quiet):
+    """Synthesise 16 Wang tiles from NORMAL_MAP and precompute their per-tile NDF pyramids
+    (glints paper, sec. 5.5; docs/glints-wang.md).
+
+    NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
+    'procedural:KIND[:SIZE[:SEED]]'. Load the result with prefilter.glints.wang_store.load_tiles.
+    """
+    import os
+    import time
+
+    from prefilter.glints.wang import synthesize
+    from prefilter.glints.wang_ndf import bake_tiles
+    from prefilter.glints.wang_store import save_tiles
+
+    if rank < 0:
+        raise PrefilterError(f"--rank: expected a CP rank >= 0 (0: uncompressed), got {rank}")
+    t0 = time.perf_counter()
+    wt = synthesize(load_normal_map(normal_map), tile=tile, band=band, rng=seed)
+    wn = bake_tiles(wt, ndf_res=ndf_res, support=support, intrinsic_roughness=roughness,
+                    stride0=stride0, wide_tiles=wide_tiles, uniform_tiles=uniform_tiles,
+                    rank=rank or None, block=block, n_iter_max=iters, seed=seed,
+                    progress=not quiet)
+    save_tiles(wn, out)
+    summary = dict(tiles=16, tile=wt.size, levels=wn.n_levels,
+                   crops=[wn.crop(lv) for lv in range(wn.n_levels)],
+                   rank=rank, block=wn.block, stored_bytes=wn.nbytes,
+                   file_bytes=os.path.getsize(out), cp_error=list(wn.cp_error),
+                   seconds=time.perf_counter() - t0)
+    click.echo(f"16 tiles of {wt.size}^2 texels, {wn.n_levels} levels (centres per axis "
+               + ", ".join(str(n) for n in summary["crops"]) + ")")
+    click.echo(f"storage {wn.nbytes / 2**20:.2f} MiB in memory, file "
+               f"{summary['file_bytes'] / 2**20:.2f} MiB"
+               + ("" if not wn.block else ", CP rel. L2 error per level "
+                  + ", ".join(f"{100 * e:.1f} %" for e in wn.cp_error)))
+    click.echo(f"time {summary['seconds']:.1f} s -> {out}")
     click.echo(json.dumps(summary))

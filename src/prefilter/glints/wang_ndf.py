@@ -162,7 +162,8 @@ def _margin(sigma: float) -> float:
 def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
                intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int | None = None,
                wide_tiles: float = 0.5, uniform_tiles: float = 8.0, rank: int | None = None,
-               block: int = 8, n_iter_max: int = 100, seed: int = 0) -> TiledNDF:
+               block: int = 8, n_iter_max: int = 100, seed: int = 0,
+               progress: bool = False) -> TiledNDF:
     """Per-tile footprint pyramids (glints paper sec. 5.5, Fig. 12), float32, uncompressed or
     CP-compressed (``rank``).
 
@@ -179,6 +180,7 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     rank, block : if ``rank`` is given, each (tile, level) is compressed like a bake cell
         (``cp.nn_cp_batch`` of one ``(B, B, n_l^2)`` tensor per angular block position, all
         groups at ``rank``; all-zero groups dropped); ``n_iter_max``, ``seed``: of the fits.
+    progress : a progress bar per tile (and per compressed level) on stderr.
     """
     T = wt.size
     R = as_positive_int(ndf_res, "ndf_res")
@@ -209,7 +211,9 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     tile_means = np.empty((16, R, R))
     g = (np.arange(k0[0], k1[0] + 1) * st0 + 0.5) + o
     cen = np.stack(np.meshgrid(g, g), axis=-1)
-    for t in range(16):
+    from tqdm import tqdm
+
+    for t in tqdm(range(16), desc="tile pyramids", disable=not progress):
         cs = np.full((P, P, 2), _AWAY)
         cj = np.zeros((P, P, 2, 2))
         cs[o:o + T, o:o + T] = np.where(dep[..., None], _AWAY, s_el[t])
@@ -224,7 +228,7 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     wn = TiledNDF(wt, tuple(images), tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
                   sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
     return wn if rank is None else compress_tiles(wn, rank, block, n_iter_max=n_iter_max,
-                                                  seed=seed)
+                                                  seed=seed, progress=progress)
 
 
 def _filter_crop(crop, a0, b0, b1, sigma_over_stride):
@@ -246,20 +250,24 @@ def _filter_crop(crop, a0, b0, b1, sigma_over_stride):
 
 
 def compress_tiles(wn: TiledNDF, rank: int, block: int = 8, *, n_iter_max: int = 100,
-                   seed: int = 0) -> TiledNDF:
+                   seed: int = 0, progress: bool = False) -> TiledNDF:
     """CP-compressed copy of uncompressed per-tile pyramids (glints paper sec. 4.2 per tile):
-    one ``(B, B, n_l^2)`` tensor per (tile, level, angular block), all at ``rank``."""
+    one ``(B, B, n_l^2)`` tensor per (tile, level, angular block), all at ``rank``; ``progress``:
+    a progress bar per level on stderr."""
     if not isinstance(wn, TiledNDF) or wn.block:
         raise PrefilterError("wn: expected uncompressed per-tile pyramids (bake_tiles without "
                              "rank)")
     r = as_positive_int(rank, "rank")
     B = as_positive_int(block, "block")
+    it = as_positive_int(n_iter_max, "n_iter_max")
+    from tqdm import tqdm
+
     from prefilter.glints.cp import single_threaded_blas
 
     # small products: a multi-threaded BLAS spent 100x longer waking threads on a busy machine
     with single_threaded_blas():
-        packed, errs = zip(*(_compress(x, r, B, as_positive_int(n_iter_max, "n_iter_max"),
-                                       seed + lv) for lv, x in enumerate(wn.images)))
+        levels = tqdm(list(enumerate(wn.images)), desc="CP levels", disable=not progress)
+        packed, errs = zip(*(_compress(x, r, B, it, seed + lv) for lv, x in levels))
     return replace(wn, images=tuple(packed), block=B, cp_error=tuple(errs))
 
 
