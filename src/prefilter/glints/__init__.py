@@ -8,8 +8,8 @@ position-normal distributions. See ``docs/glints.md`` for conventions and measur
 constant-time queries.
 
 Wang tiles (sec. 5.5, not imported here): :mod:`prefilter.glints.wang` (tile synthesis, implicit
-tiling, direct P-NDF over tiles) and :mod:`prefilter.glints.wang_ndf` (per-tile pyramids,
-queries, sampling, ``save_tiles`` / ``load_tiles``).
+tiling, direct P-NDF over tiles), :mod:`prefilter.glints.wang_ndf` (per-tile pyramids, queries,
+sampling) and :mod:`prefilter.glints.wang_store` (``save_tiles`` / ``load_tiles``).
 """
 
 from prefilter.glints.bake import bake

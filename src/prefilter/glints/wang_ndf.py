@@ -22,8 +22,7 @@ Optionally CP-compressed per (tile, level, angular block) (:func:`compress_tiles
 tiles' pyramids, independent of the synthesised area. Sampling: a tile contribution by mass, a
 pixel by its CDF, uniform in the pixel.
 
-**File format** (:func:`save_tiles` / :func:`load_tiles`): see the section at the end of the
-module.
+On-disk format: :mod:`prefilter.glints.wang_store` (``save_tiles`` / ``load_tiles``).
 """
 
 from __future__ import annotations
