@@ -376,3 +376,73 @@ def test_8bit_path_matches_the_float_path(baked):
         np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-4 * b.max())
     a, b = range_mean(gm, c, sp, lo, hi), range_mean(gf, c, sp, lo, hi)
     np.testing.assert_allclose(a, b, rtol=1e-4, atol=1e-4 * b.max())
+
+
+def _group_levels(gm):
+    """Pyramid level ``(G,)`` of every CP group (-1: a cell without images) and its kept
+    blocks ``(G,)`` (rows of ``C``)."""
+    nb2 = (gm.resolution // gm.block) ** 2
+    img_level = np.searchsorted(gm.pyramid.offsets, np.arange(gm.image_cell.size), "right") - 1
+    cell_level = np.full(gm.ranks.size // nb2, -1)
+    cell_level[gm.image_cell] = img_level
+    return np.repeat(cell_level, nb2), np.diff(gm.codes["group_rows"])
+
+
+@pytest.mark.slow
+def test_bake_level_rank_budget_per_level(tmp_path):
+    """``level_rank="level"``: every pyramid level's groups average at most ``rank`` per byte
+    (bytes per rank: kept blocks + 2 block + 4) and the map's bytes are within the budget of a
+    uniform rank; ``"uniform"``: every group at ``rank``; ``"global"`` (default) is uneven."""
+    nm = sinusoid(32, ax=0.25, ay=0.2, px=16, py=8)
+    kw = dict(rank=4, ndf_res=16, block=4, support=S, cell=8, converge=0.0, n_iter_max=20,
+              progress=False, levels_dir=tmp_path / "levels")
+    maps = {}
+    for mode in ("global", "level", "uniform"):
+        s = bake(nm, tmp_path / f"{mode}.npz", level_rank=mode, **kw)
+        maps[mode] = (s, load(tmp_path / f"{mode}.npz"))
+        assert maps[mode][1].header["settings"]["level_rank"] == mode
+    gu = maps["uniform"][1]
+    lv, kept = _group_levels(gu)
+    live = kept > 0
+    assert np.all(gu.ranks[live] == 4) and np.all(gu.ranks[~live] == 0)
+    unit = kept + 2 * 4 + 4
+    spread = {}
+    for mode in ("global", "level"):
+        s, gm = maps[mode]
+        np.testing.assert_array_equal(_group_levels(gm)[1], kept)  # same blocks kept
+        means = [unit[(lv == k) & live] @ gm.ranks[(lv == k) & live]
+                 / unit[(lv == k) & live].sum() for k in range(gm.pyramid.n_levels)]
+        spread[mode] = max(means) - min(means)
+        assert unit @ gm.ranks <= 4 * unit.sum() + 1e-9
+        assert s["compressed_bytes"] <= maps["uniform"][0]["compressed_bytes"]
+        if mode == "level":
+            assert max(means) <= 4 + 1e-9 and min(means) >= 2  # base = rank // 2
+    assert gu.pyramid.n_levels >= 3 and spread["global"] > spread["level"]
+    with pytest.raises(PrefilterError, match="level_rank"):
+        bake(nm, tmp_path / "x.npz", level_rank="per-level", **kw)
+
+
+def test_float_arrays_are_decoded_lazily(baked):
+    """A loaded version-3 map holds only the codes: queries and ``block_means`` leave ``A``,
+    ``Bp``, ``C`` undecoded; on access they equal the eager decoding of the codes, and
+    ``block_means`` from the codes equals the sums of ``C``'s rows."""
+    import dataclasses
+
+    _, out, _, _ = baked
+    gm = load(out)
+    assert all(gm.__dict__[f"_{k}"] is None for k in ("A", "Bp", "C"))
+    point(gm, [[3.0, 5.0]], [2.0], [[0.01, 0.02]])
+    range_mean(gm, [[3.0, 5.0]], [2.0], [[-0.1, -0.1]], [[0.1, 0.1]])
+    img = np.arange(gm.pyramid.n_images)
+    means = block_means(gm, img)
+    assert all(gm.__dict__[f"_{k}"] is None for k in ("A", "Bp", "C"))
+    A, Bp, C = decode(**gm.codes, width=gm.rank)
+    for name, eager in (("A", A), ("Bp", Bp), ("C", C)):
+        lazy = getattr(gm, name)
+        assert lazy.dtype == eager.dtype and lazy.shape == eager.shape
+        np.testing.assert_array_equal(lazy, eager)
+    assert getattr(gm, "C") is gm.C  # decoded once
+    gf = dataclasses.replace(gm, codes=None)
+    np.testing.assert_allclose(means, block_means(gf, img), rtol=1e-6, atol=1e-12)
+    assert np.count_nonzero(means) > means.size // 4
+    assert "images" in repr(load(out))

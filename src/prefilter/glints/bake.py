@@ -54,6 +54,9 @@ CELL_CHUNK = 100_000
 FINAL_CHUNK = 500_000
 #: relative steps of the candidate ranks above the pass-1 rank ``base = rank // 2``
 RANK_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
+#: how the rank budget is split (``bake(level_rank=...)``): over the whole map, per pyramid
+#: level, or not at all (every group at ``rank``)
+LEVEL_RANK = ("global", "level", "uniform")
 
 
 def _memmap(path, shape):
@@ -102,13 +105,31 @@ def bake_if_missing(normal_map, out, **kwargs) -> bool:
     return True
 
 
+def split_budget(err2, unit, group_level, rank, base, candidates, level_rank="global"):
+    """Ranks ``(G,)`` of the groups under the budget of ``rank`` per byte on average
+    (:func:`prefilter.glints.cp.allocate_ranks`), over the whole map or per pyramid level
+    (``level_rank``, see :func:`bake`). ``err2 (G,)``: squared error of each group at rank
+    ``base``; ``unit (G,)``: its bytes per rank; ``group_level (G,)``: its pyramid level."""
+    if level_rank == "uniform":
+        return np.full(len(unit), rank, np.int64)
+    if level_rank == "global":
+        return cpmod.allocate_ranks(err2, unit, base, candidates, budget=rank * unit.sum())
+    out = np.zeros(len(unit), np.int64)
+    for lv in np.unique(group_level):
+        # each level's bytes at rank ``rank``: the levels' mean ranks per byte are all ``rank``
+        sel = group_level == lv
+        out[sel] = cpmod.allocate_ranks(err2[sel], unit[sel], base, candidates,
+                                        budget=rank * unit[sel].sum())
+    return out
+
+
 @_serialised
 def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16,
          support: float = 0.5, intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int = 4,
          sigma0: float | None = None, cell: int = 32, converge: float = 0.01,
          max_levels: int | None = None, blank_tol: float = 1e-4, n_iter_max: int = 50,
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
-         levels_dir=None, max_rank: int | None = None) -> dict:
+         levels_dir=None, max_rank: int | None = None, level_rank: str = "global") -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -121,6 +142,12 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     for the scale), i.e. the bytes a uniform rank ``rank`` would take. Groups get ranks between
     ``rank // 2`` and ``max_rank`` (default ``3 rank``; it is the width of the in-memory factors,
     so it sets the query cost). The summary reports the resulting mean and histogram.
+
+    ``level_rank`` (issue #8, query cost vs footprint size): ``"global"`` spends the budget
+    where the predicted error drop per byte is largest over the whole map (level-0 groups end up
+    with about twice the rank of the top levels'); ``"level"`` gives every pyramid level its own
+    budget of ``rank`` per byte (the same total, the same mean rank per byte at every level);
+    ``"uniform"`` gives every group rank ``rank`` (``max_rank`` is then unused).
     """
     from tqdm import tqdm
 
@@ -142,6 +169,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     max_rank = 3 * rank if max_rank is None else as_positive_int(max_rank, "max_rank")
     if max_rank < rank:
         raise PrefilterError(f"max_rank: expected at least rank = {rank}, got {max_rank}")
+    if level_rank not in LEVEL_RANK:
+        raise PrefilterError(f"level_rank: expected one of {LEVEL_RANK}, got {level_rank!r}")
     # pass 1 fits every group at rank // 2; the budget (rank per group on average, weighted by
     # bytes) is then spent where the predicted error drop per byte is largest
     base = max(1, rank // 2)
@@ -151,7 +180,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     settings = dict(rank=rank, ndf_res=R, block=B, support=S, intrinsic_roughness=sr,
                     stride0=pyr.stride0, sigma0=pyr.sigma0, cell=cell, converge=converge,
                     max_levels=max_levels, blank_tol=blank_tol, n_iter_max=n_iter_max, tol=tol,
-                    seed=seed, layout=3, max_rank=max_rank)
+                    seed=seed, layout=3, max_rank=max_rank, level_rank=level_rank)
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
@@ -303,8 +332,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
             counts.append(np.diff(p1["rows"]))
         counts = np.concatenate(counts)
         unit = np.where(counts > 0, counts + unit_bytes_group, 0.0)
-        ranks_ = cpmod.allocate_ranks(np.concatenate(err2_all), unit, base, candidates,
-                                      budget=rank * unit.sum())
+        group_level = np.repeat([m[0][0] for m in members], nb * nb)
+        ranks_ = split_budget(np.concatenate(err2_all), unit, group_level, rank, base,
+                              candidates, level_rank)
         ck.save(ALLOC_CHUNK, ranks=np.where(counts > 0, ranks_, 0).astype(np.int64))
     alloc = ck.load(ALLOC_CHUNK)["ranks"]
     run(refit_cell, range(n_cells), "CP refit")
@@ -340,11 +370,12 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     per_level = np.sqrt(err2 / np.maximum(norm2, 1e-300))
     enc = {k: np.concatenate(v) for k, v in parts.items()}
     width = int(enc["ranks"].max(initial=0))
-    A, Bp, C = decode(**enc, group_rows=np.concatenate(group_rows), width=width)
     on_disk = dict(enc, block_mask=pack_mask(block_index >= 0), image_cell=image_cell)
-    gm = GlintsMap(header={}, A=A, Bp=Bp, C=C, block_index=block_index, image_cell=image_cell,
-                   stored_bytes=sum(v.nbytes for v in on_disk.values()),
-                   ranks=enc["ranks"].astype(np.int32))
+    # only saved: the float arrays are never decoded here
+    gm = GlintsMap(header={}, A=None, Bp=None, C=None, block_index=block_index,
+                   image_cell=image_cell, stored_bytes=sum(v.nbytes for v in on_disk.values()),
+                   ranks=enc["ranks"].astype(np.int32),
+                   codes=dict(enc, group_rows=np.concatenate(group_rows)))
     live = enc["ranks"] > 0
     unit = np.diff(np.concatenate(group_rows)) + unit_bytes_group
     e2g = np.concatenate(err2_groups)

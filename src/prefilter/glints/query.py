@@ -181,7 +181,8 @@ def packed(gm: GlintsMap):
     maps: the float32 arrays ``A``, ``Bp``, ``C`` (``wsc = 1``)."""
     key = id(gm)
     hit = _PACKED.get(key)
-    src = (gm.A, gm.C, gm.codes)
+    # the kernels read the codes when there are any: A, C are then not decoded (GlintsMap)
+    src = (gm.codes,) if gm.codes is not None else (gm.A, gm.C)
     if hit is not None and hit[0]() is gm and all(x is y for x, y in zip(hit[1], src)):
         return hit[2]
     arrs = _pack_codes(gm.codes) if gm.codes is not None else _pack_float(gm)
@@ -329,5 +330,27 @@ def block_means(gm: GlintsMap, image: np.ndarray) -> np.ndarray:
         raise PrefilterError(f"image: expected indices in [0, {n}), got range [{img.min()}, "
                              f"{img.max()}]")
     k = gm.block_index[img]
-    vals = gm.C.sum(axis=1, dtype=np.float64)[np.maximum(k, 0)] / gm.block**2
-    return np.where(k >= 0, vals, 0.0)
+    kept = k >= 0
+    out = np.zeros(k.shape)
+    if gm.codes is None:
+        out[kept] = gm.C.sum(axis=1, dtype=np.float64)[k[kept]]
+    else:
+        out[kept] = _row_sums_from_codes(gm.codes, k[kept].astype(np.int64))
+    return out / gm.block**2
+
+
+def _row_sums_from_codes(codes, k):
+    """``sum_r C[k, r]`` ``(n,)`` float64 of rows ``k (n,)`` from the 8-bit codes (the row's
+    ``rank`` entries times their component's ``c_scale / 255``), without decoding ``C``."""
+    ranks = np.asarray(codes["ranks"], np.int64)
+    rows = np.asarray(codes["group_rows"], np.int64)
+    m0 = np.concatenate([[0], np.cumsum(ranks)])
+    c0 = np.concatenate([[0], np.cumsum(np.diff(rows) * ranks)])
+    g = np.searchsorted(rows, k, side="right") - 1
+    r = ranks[g]
+    # one entry per (requested row, component): code position and component index
+    rep = np.repeat(np.arange(k.size), r)
+    j = np.arange(rep.size) - np.repeat(np.cumsum(r) - r, r)
+    pos = c0[g][rep] + (k - rows[g])[rep] * r[rep] + j
+    val = codes["c"][pos].astype(np.float64) * codes["c_scale"][m0[g][rep] + j] / Q
+    return np.bincount(rep, weights=val, minlength=k.size)

@@ -13,7 +13,8 @@ In memory (:class:`GlintsMap`; ``G`` groups, ``R`` rank, ``B`` block size, ``nb 
   group of block ``[bi, bj]`` of an image is ``image_cell * nb^2 + bi * nb + bj``.
 
 On disk, version 3 (what :func:`save` writes with :func:`encode`'s arrays) stores per-group ranks
-and 8-bit factors (decoded at load into the arrays above, zero-padded to the largest rank):
+and 8-bit factors (the arrays above are decoded from them on first access, zero-padded to the
+largest rank; the queries compute on the 8-bit codes and never decode them):
 
 * ``ranks (G,)`` uint16: rank of each group (the bake allocates them under a storage budget; 0 for
   a group without kept blocks).
@@ -55,14 +56,37 @@ ARRAYS_V2 = ("a", "b", "c", "c_scale", "group_rows", "block_index", "image_cell"
 ARRAYS_V3 = ("ranks", "a", "b", "c", "c_scale", "block_mask", "image_cell")
 
 
-@dataclass
+class _Decoded:
+    """A float factor array of :class:`GlintsMap` (``A``, ``Bp`` or ``C``) decoded from the
+    map's 8-bit ``codes`` on first access when it was given as None: the query kernels compute
+    on the codes, so a loaded version-3 map holds only them (the float arrays of a 512^2 map are
+    ~340 MB). A required dataclass field (no default)."""
+
+    def __set_name__(self, owner, name):
+        self.name, self.key = name, "_" + name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            raise AttributeError(self.name)  # the dataclass sees no default
+        value = obj.__dict__.get(self.key)
+        if value is None and obj.__dict__.get("codes") is not None:
+            value = obj.__dict__[self.key] = decode(**obj.codes, width=obj.rank,
+                                                    which=self.name)[0]
+        return value
+
+    def __set__(self, obj, value):
+        obj.__dict__[self.key] = value
+
+
+@dataclass(repr=False)
 class GlintsMap:
-    """A compressed NDF pyramid (see the module docstring for the arrays)."""
+    """A compressed NDF pyramid (see the module docstring for the arrays). ``A``, ``Bp``, ``C``
+    may be given as None when ``codes`` is set: each is then decoded on first access."""
 
     header: dict
-    A: np.ndarray
-    Bp: np.ndarray
-    C: np.ndarray
+    A: np.ndarray = _Decoded()
+    Bp: np.ndarray = _Decoded()
+    C: np.ndarray = _Decoded()
     block_index: np.ndarray
     image_cell: np.ndarray
     #: bytes of the arrays as stored on disk (set by :func:`encode` / :func:`load`)
@@ -104,6 +128,10 @@ class GlintsMap:
         if self.stored_bytes is not None:
             return int(self.stored_bytes)
         return int(sum(getattr(self, k).nbytes for k in ARRAYS))
+
+    def __repr__(self):  # without decoding the lazy float arrays
+        n = self.block_index.shape[0] if self.block_index is not None else 0
+        return f"GlintsMap({n} images, rank {self.header.get('ndf', {}).get('rank')})"
 
     def point(self, center, sigma_p, s):
         from prefilter.glints.query import point
@@ -151,11 +179,12 @@ def encode(groups: list) -> dict:
                 c_scale=cat(sc, (0,)).astype(np.float32))
 
 
-def decode(ranks, a, b, c, c_scale, group_rows, width: int | None = None
-           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def decode(ranks, a, b, c, c_scale, group_rows, width: int | None = None,
+           which: str | None = None) -> tuple[np.ndarray, ...]:
     """Float32 prefix sums ``A``, ``Bp`` ``(G, width, B + 1)`` and ``C (K, width)`` of version-3
     arrays, each group's components first and zeros after them (``width`` defaults to the
-    largest rank); ``group_rows (G + 1,)``: first row of ``C`` of each group."""
+    largest rank); ``group_rows (G + 1,)``: first row of ``C`` of each group. ``which``
+    (``"A"``, ``"Bp"`` or ``"C"``): only that array, as a 1-tuple."""
     ranks = np.asarray(ranks, np.int64)
     G = ranks.shape[0]
     W = int(ranks.max(initial=0)) if width is None else int(width)
@@ -163,10 +192,13 @@ def decode(ranks, a, b, c, c_scale, group_rows, width: int | None = None
     off = np.concatenate([[0], np.cumsum(ranks)])
     comp_g = np.repeat(np.arange(G), ranks)
     comp_r = np.arange(off[-1]) - off[comp_g]
-    A = np.zeros((G, W, B + 1), np.float32)
-    Bp = np.zeros_like(A)
-    A[comp_g, comp_r] = _prefix(a)
-    Bp[comp_g, comp_r] = _prefix(b)
+    out = {}
+    for name, f in (("A", a), ("Bp", b)):
+        if which in (None, name):
+            out[name] = np.zeros((G, W, B + 1), np.float32)
+            out[name][comp_g, comp_r] = _prefix(f)
+    if which not in (None, "C"):
+        return (out[which],)
     rows = np.asarray(group_rows, np.int64)
     K = int(rows[-1])
     row_g = np.repeat(np.arange(G), np.diff(rows))
@@ -177,7 +209,7 @@ def decode(ranks, a, b, c, c_scale, group_rows, width: int | None = None
     C = np.zeros((K, W), np.float32)
     C[e_row, e_col] = (c.astype(np.float32) * np.float32(1.0 / Q)
                        * c_scale[off[row_g[e_row]] + e_col])
-    return A, Bp, C
+    return (C,) if which == "C" else (out["A"], out["Bp"], C)
 
 
 def pack_mask(kept: np.ndarray) -> np.ndarray:
@@ -295,27 +327,33 @@ def load(path: str | os.PathLike) -> GlintsMap:
         _fail(path, f"header.ndf: expected positive resolution, block and rank with block "
                     f"dividing resolution, got {R}, {B}, {rank}")
     nb = R // B
-    G = gm.A.shape[0] if gm.A.ndim == 3 else -1
-    checks = [
-        ("A", gm.A, np.float32, (G, rank, B + 1)),
-        ("Bp", gm.Bp, np.float32, (G, rank, B + 1)),
-        ("C", gm.C, np.float32, (gm.C.shape[0] if gm.C.ndim == 2 else -1, rank)),
-        ("block_index", gm.block_index, np.int32, (n_images, nb, nb)),
-        ("image_cell", gm.image_cell, np.int32, (n_images,)),
-    ]
+    if version == 3:
+        # the float arrays are decoded on demand from codes checked by _decode_checked_v3:
+        # finite, non-negative, non-decreasing prefix sums and C's rows by construction
+        G, K = arrays["ranks"].shape[0], int(arrays["codes"]["group_rows"][-1])
+        checks = []
+    else:
+        G = gm.A.shape[0] if gm.A.ndim == 3 else -1
+        K = gm.C.shape[0] if gm.C.ndim == 2 else -1
+        checks = [("A", gm.A, np.float32, (G, rank, B + 1)),
+                  ("Bp", gm.Bp, np.float32, (G, rank, B + 1)),
+                  ("C", gm.C, np.float32, (K, rank))]
+    checks += [("block_index", gm.block_index, np.int32, (n_images, nb, nb)),
+               ("image_cell", gm.image_cell, np.int32, (n_images,))]
     for name, arr, dtype, shape in checks:
         if arr.dtype != dtype or arr.shape != shape:
             _fail(path, f"{name}: expected {np.dtype(dtype)} of shape {shape}, got {arr.dtype} "
                         f"of shape {arr.shape}")
-    if gm.block_index.size and (gm.block_index.max() >= gm.C.shape[0] or gm.block_index.min() < -1):
-        _fail(path, f"block_index: expected rows of C in [-1, {gm.C.shape[0]})")
+    if gm.block_index.size and (gm.block_index.max() >= K or gm.block_index.min() < -1):
+        _fail(path, f"block_index: expected rows of C in [-1, {K})")
     if gm.image_cell.size and (gm.image_cell.min() < 0 or (gm.image_cell.max() + 1) * nb * nb > G):
         _fail(path, f"image_cell: expected cells of the {G} groups")
-    for name in ("A", "Bp", "C"):
+    for name, _, _, _ in checks[:-2]:
         a = getattr(gm, name)
         if not np.all(np.isfinite(a)) or np.any(a < 0):
             _fail(path, f"{name}: expected finite, non-negative values")
-    if np.any(np.diff(gm.A, axis=-1) < -1e-6) or np.any(np.diff(gm.Bp, axis=-1) < -1e-6):
+    if version != 3 and (np.any(np.diff(gm.A, axis=-1) < -1e-6)
+                         or np.any(np.diff(gm.Bp, axis=-1) < -1e-6)):
         _fail(path, "A, Bp: expected non-decreasing prefix sums")
     verify_npz(path, "glints map", raw_data, format_name=FORMAT, format_version=version)
     return gm
@@ -379,7 +417,7 @@ def _decode_checked_v3(path, data, header) -> dict:
     sc = arrs["c_scale"]
     if not np.all(np.isfinite(sc)) or np.any(sc < 0):
         _fail(path, "c_scale: expected finite, non-negative values")
-    A, Bp, C = decode(ranks, arrs["a"], arrs["b"], arrs["c"], sc, rows, width)
     codes = dict(ranks=ranks, a=arrs["a"], b=arrs["b"], c=arrs["c"], c_scale=sc, group_rows=rows)
-    return dict(A=A, Bp=Bp, C=C, block_index=index, image_cell=cell,
+    # A, Bp, C: decoded from the codes on first access (GlintsMap), the queries do not need them
+    return dict(A=None, Bp=None, C=None, block_index=index, image_cell=cell,
                 ranks=ranks.astype(np.int32), codes=codes)
