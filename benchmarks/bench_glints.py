@@ -5,6 +5,9 @@
     python benchmarks/bench_glints.py --size 256      # map size of the query benchmark
     NUMBA_NUM_THREADS=1 python benchmarks/bench_glints.py --map m.npz --scaling "" --cpu
                                                       # queries in process CPU time (loaded box)
+    python benchmarks/bench_glints.py --map f.npz --bake-kind flakes --size 512 \
+        --level-rank level --scaling ""               # bake f.npz first if missing (512^2)
+    python benchmarks/bench_glints.py --map m.npz --rss   # only: resident memory of a loaded map
     python benchmarks/bench_glints.py --frames        # only: glints frame time at 3 distances
     python benchmarks/bench_glints.py --frames --direct   # also glints-direct, speed-up, FLIP
     python benchmarks/bench_glints.py --frames --runs 3 --interp trilinear --nearest \
@@ -58,8 +61,9 @@ def level_footprint(gm):
     ranks = _group_ranks(gm)
     pa, _, (cq, wsc, fa, _), _, _, _ = packed(gm)
     per_comp = 2 * (pa.itemsize * pa.shape[1] + fa.itemsize * gm.block) + wsc.itemsize
-    row_c = gm.C.shape[1] * gm.C.itemsize
-    row_g = 2 * gm.A[0].nbytes
+    # the float32 arrays' sizes without decoding them (loaded maps decode them on first access)
+    row_c = gm.rank * 4
+    row_g = 2 * gm.rank * (gm.block + 1) * 4
     n_pf = _n_prefetch(gm)
     print(f"{'level':>5} {'images':>7} {'groups':>7} {'mean rank':>9} {'codes MB':>9} "
           f"{'factors MB':>10} {'float C MB':>10} {'A+Bp MB':>8} prefetched")
@@ -124,6 +128,32 @@ def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False, clock=time.pe
         r = next(r for r in rows if r[0] == w)
         print(f"speed-up of the compressed point query over the direct P-NDF at width {w}: "
               f"{r[3] / r[1]:.0f}x")
+
+
+def _vm_rss_mb():
+    """Resident set size of this process (MB, /proc/self/status ``VmRSS``)."""
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) for line in f if line.startswith("VmRSS")) / 1024
+
+
+def bench_rss(path):
+    """Resident memory of a loaded map: after the imports, after :func:`load`, after queries
+    (the kernels' packed arrays) and after touching the float arrays ``A``, ``Bp``, ``C`` (which
+    version-3 maps decode on first access)."""
+    from prefilter.glints import _qkernels  # noqa: F401  (Numba's own memory, before the map)
+
+    base = _vm_rss_mb()
+    gm = load(path)
+    after_load = _vm_rss_mb()
+    rng = np.random.default_rng(0)
+    c = rng.uniform(0, gm.pyramid.height, (1000, 2))
+    point(gm, c, 8.0, rng.normal(0, 0.15, (1000, 2)))
+    after_query = _vm_rss_mb()
+    floats = sum(getattr(gm, k).nbytes for k in ("A", "Bp", "C")) / 1e6
+    after_floats = _vm_rss_mb()
+    print(f"VmRSS MB ({path}): imports {base:.0f}, +load {after_load - base:.0f}, +queries "
+          f"{after_query - after_load:.0f}, +A/Bp/C accessed {after_floats - after_query:.0f} "
+          f"(their nbytes {floats:.0f} MB); codes on disk {gm.compressed_bytes / 1e6:.1f} MB")
 
 
 def bench_bake_scaling(sizes, tmp):
@@ -268,6 +298,11 @@ def main():
     ap.add_argument("--kinds", default="gaussian,brushed,flakes,scratches")
     ap.add_argument("--scaling", default="64,128,256")
     ap.add_argument("--map", default=None, help="use this baked .npz for the query benchmark")
+    ap.add_argument("--bake-kind", default=None,
+                    help="--map: bake it first if missing, from this procedural map of --size")
+    ap.add_argument("--level-rank", default="global",
+                    help="--bake-kind: the bake's rank split (global, level or uniform)")
+    ap.add_argument("--rss", action="store_true", help="only: resident memory of --map loaded")
     ap.add_argument("--corner", type=int, default=None,
                     help="queries: also a random-order run with centres in a CORNER^2 square")
     ap.add_argument("--frames", action="store_true", help="only the frame-time benchmark")
@@ -284,6 +319,14 @@ def main():
     ap.add_argument("--breakdown", action="store_true",
                     help="only: where the frame CPU time goes (queries, taps, fallback)")
     a = ap.parse_args()
+    if a.map and a.bake_kind:
+        from prefilter.glints.bake import bake_if_missing
+
+        bake_if_missing(normal_map(a.bake_kind, a.size, seed=0), a.map, progress=False,
+                        level_rank=a.level_rank, levels_dir=Path(a.map).with_suffix(".levels"))
+    if a.rss:
+        bench_rss(a.map)
+        return
     if a.breakdown:
         bench_breakdown()
         return
