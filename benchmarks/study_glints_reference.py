@@ -124,42 +124,58 @@ def pick_pixels(image, hit, n: int, seed: int) -> np.ndarray:
 # ------------------------------------------------------------------------------------- images
 
 
-def line_nodes(J, spacing: float = 1.0, span: float = 4.0, max_nodes: int = 128):
-    """Quadrature of the pixel Gaussian's texel ellipse as a line of isotropic Gaussians.
+def pixel_nodes(J, shrink: float = 1.0, spacing: float = 1.0, span: float = 4.0,
+                max_nodes: int = 4096):
+    """Quadrature of the pixel Gaussian as a grid of sub-pixel nodes, each carrying an isotropic
+    texel Gaussian (the closed-form P-NDF's footprint).
 
-    The pixel Gaussian (std ``PIXEL_SIGMA`` px) maps through ``J (N, 2, 2)`` (texels per pixel)
-    to the covariance ``PIXEL_SIGMA^2 J J^T = s_min^2 I + s_line^2 u1 u1^T`` (``J = U S V^T``,
-    ``s_min = PIXEL_SIGMA S_1``, ``s_line = PIXEL_SIGMA sqrt(S_0^2 - S_1^2)``): the isotropic
-    footprint of std ``s_min`` convolved with a 1D Gaussian along the major axis, which is
-    reached by moving the sub-pixel position along ``v1`` by ``t / S_0`` pixels. The trapezoid
-    rule over ``t`` in ``+-span s_line`` with nodes ``spacing sqrt(s_min^2 + sigma_h^2)`` apart
-    (the P-NDF is smooth at that scale in the footprint centre) converges geometrically
-    (plane, near brushed and mid gaussian: spacing 1 vs 0.25, FLIP 1e-4 / 4e-4).
+    The pixel Gaussian ``N(0, p^2 I)`` (``p = PIXEL_SIGMA`` px) maps through ``J (N, 2, 2)``
+    (texels per pixel, ``J = U S V^T``) to the texel covariance ``p^2 J J^T``. Split it into an
+    isotropic residual of std ``s_res = shrink p S_1`` texels and node offsets in pixels along
+    ``v1`` / ``v2`` of stds ``p sqrt(1 - shrink^2 S_1^2 / S_0^2)`` / ``p sqrt(1 - shrink^2)``
+    (the two add up to ``p^2 J J^T`` exactly). ``shrink = 1``: one line of nodes along the major
+    axis (the anisotropy only); smaller: a 2D grid, so that the half vector, which the closed
+    form holds fixed over the residual, varies between nodes as in ``glints-reference``
+    (within the residual it spans ``shrink`` of the pixel's range). Nodes on the trapezoid grid
+    ``+-span`` stds, ``spacing sqrt(s_res^2 + sigma_h^2)`` texels apart (the P-NDF is smooth at
+    that scale in the footprint centre): converges geometrically (plane, near brushed and mid
+    gaussian, ``shrink = 1``: spacing 1 vs 0.25, FLIP 1e-4 / 4e-4).
 
     Returns ``pixel (M,)`` (index into ``J``), ``offset (M, 2)`` pixels, ``weight (M,)`` (sum 1
-    per pixel) and ``s_min (N,)`` texels."""
+    per pixel) and ``s_res (N,)`` texels."""
     from prefilter.glints.pndf import SIGMA_H
     from prefilter.glints.render import PIXEL_SIGMA
 
-    U, S, Vt = np.linalg.svd(J)
-    s_min = PIXEL_SIGMA * S[:, 1]
-    s_line = PIXEL_SIGMA * np.sqrt(np.maximum(S[:, 0] ** 2 - S[:, 1] ** 2, 0.0))
-    h = spacing * np.sqrt(s_min**2 + SIGMA_H**2)
-    k = np.clip(np.ceil(2.0 * span * s_line / h).astype(int) + 1, 1, max_nodes)
+    _, S, Vt = np.linalg.svd(J)
+    S0, S1 = S[:, 0], S[:, 1]
+    s_res = PIXEL_SIGMA * shrink * S1
+    a1 = PIXEL_SIGMA * np.sqrt(np.maximum(1.0 - (shrink * S1 / np.maximum(S0, 1e-300))**2, 0.0))
+    a2 = np.full_like(S0, PIXEL_SIGMA * np.sqrt(max(1.0 - shrink * shrink, 0.0)))
+    h = spacing * np.sqrt(s_res**2 + SIGMA_H**2)
+    k1 = np.ceil(2.0 * span * S0 * a1 / h).astype(int) + 1
+    k2 = np.ceil(2.0 * span * S1 * a2 / h).astype(int) + 1
+    k2 = np.clip(k2, 1, max_nodes)
+    k1 = np.clip(k1, 1, max_nodes // k2)
+    k = k1 * k2
     pixel = np.repeat(np.arange(len(J)), k)
-    start = np.cumsum(k) - k
-    j = np.arange(pixel.size) - start[pixel]
-    x = np.where(k[pixel] > 1, -span + 2.0 * span * j / np.maximum(k[pixel] - 1, 1), 0.0)
-    w = np.exp(-0.5 * x * x)
+    j = np.arange(pixel.size) - (np.cumsum(k) - k)[pixel]
+
+    def grid(i, n):  # trapezoid abscissae in stds
+        return np.where(n > 1, -span + 2.0 * span * i / np.maximum(n - 1, 1), 0.0)
+
+    x1, x2 = grid(j // k2[pixel], k1[pixel]), grid(j % k2[pixel], k2[pixel])
+    w = np.exp(-0.5 * (x1 * x1 + x2 * x2))
     w /= np.bincount(pixel, w)[pixel]
-    a = x * s_line[pixel] / np.maximum(S[pixel, 0], 1e-300)
-    return pixel, a[:, None] * Vt[pixel, 0, :], w, s_min
+    off = ((x1 * a1[pixel])[:, None] * Vt[pixel, 0, :]
+           + (x2 * a2[pixel])[:, None] * Vt[pixel, 1, :])
+    return pixel, off, w, s_res
 
 
-def reference_expectation(sc, chunk: int = 1 << 15, **nodes) -> np.ndarray:
+def reference_expectation(sc, shrink: float = 1.0, chunk: int = 1 << 15,
+                          **nodes) -> np.ndarray:
     """``(H, W, 3)``: the expectation of ``glints-reference`` without sampling, for point and
     directional lights (Yan et al. 2016's P-NDF is linear in the footprint weights): per pixel,
-    :func:`line_nodes` positions (the exact G-buffer there: position, ``uv``, view and light
+    :func:`pixel_nodes` positions (the exact G-buffer there: position, ``uv``, view and light
     directions), each shaded with the closed-form isotropic P-NDF of std ``s_min``. Left out:
     the variation of the half vector within the isotropic part and the curvature of ``uv``
     across the pixel."""
@@ -177,7 +193,7 @@ def reference_expectation(sc, chunk: int = 1 << 15, **nodes) -> np.ndarray:
     for j in np.unique(oid):
         hh, ww = sc.objects[int(j)].material.normal_map.load().shape[:2]
         J[oid == j] = g0.dudv[hit][oid == j] * np.array([ww, hh], dtype=np.float64)[:, None]
-    pixel, off, w, s_min = line_nodes(J, **nodes)
+    pixel, off, w, s_min = pixel_nodes(J, shrink, **nodes)
     for k0 in range(0, pixel.size, chunk):
         p = pixel[k0:k0 + chunk]
         g = gbuffer_at(sc, xy.reshape(-1, 2)[hit[p]] + off[k0:k0 + chunk])
@@ -196,7 +212,7 @@ def _flip_pair(a, b, hit):
 
 
 def cell(shape: str, dist_name: str, kind: str, spp: int = REF_SPP, n_pixels: int = N_PIXELS,
-         expectation: bool = False, seed: int = 0) -> dict:
+         expectation: bool = False, shrink: float = 1.0, seed: int = 0) -> dict:
     """One point-light cell (see the module docstring); FLIP values are ``[frame, object]``."""
     from prefilter.glints.render import baked_surface, footprints
     from prefilter.render.camera import gbuffer_at
@@ -212,14 +228,15 @@ def cell(shape: str, dist_name: str, kind: str, spp: int = REF_SPP, n_pixels: in
             ("ref0", lambda: render(sc, "glints-reference", spp=spp, seed=0)),
             ("ref1", lambda: render(sc, "glints-reference", spp=spp, seed=1))]
     if expectation:
-        jobs.append(("exp", lambda: reference_expectation(sc)))
+        jobs.append(("exp", lambda: reference_expectation(sc, shrink)))
     for name, job in jobs:
         t0 = time.process_time()
         img[name] = job()
         cpu[name] = time.process_time() - t0
     img["ref2"] = 0.5 * (img["ref0"] + img["ref1"])
     row = dict(lights="point", shape=shape, distance=dist_name, map=kind, spp=spp,
-               expectation=expectation, sigma_p_median=sp_med, object_pixels=float(hit.mean()),
+               expectation=expectation, shrink=shrink if expectation else None,
+               sigma_p_median=sp_med, object_pixels=float(hit.mean()),
                noise=_flip_pair(img["ref1"], img["ref0"], hit),
                flip_glints_direct=_flip_pair(img["glints"], img["direct"], hit), cpu=cpu)
     refs = ("ref0", "ref2", "exp") if expectation else ("ref0", "ref2")
@@ -260,43 +277,59 @@ def _pair(p, obj: bool) -> str:
 
 
 def _cells(rows):
-    """One row per cell: the one with the expectation if there is one, else the last."""
-    by = {}
+    """Per cell ``(row, fine)``: the row with the line expectation (``shrink = 1``; else the
+    last), and the row with the smallest ``shrink < 1`` (or None)."""
+    by, fine = {}, {}
     for r in rows:
         k = (r["shape"], r["map"], r["distance"])
-        if k not in by or r.get("expectation") or not by[k].get("expectation"):
+        sh = r.get("shrink") or 1.0
+        if sh < 1.0:
+            if k not in fine or sh <= fine[k]["shrink"]:
+                fine[k] = r
+        elif k not in by or r.get("expectation") or not by[k].get("expectation"):
             by[k] = r
+    for k, r in fine.items():
+        by.setdefault(k, r)
     order = {d: i for i, d in enumerate(DISTANCES)}
-    return sorted(by.values(), key=lambda r: (r["shape"] != "plane", KINDS.index(r["map"]),
-                                              order[r["distance"]]))
+    keys = sorted(by, key=lambda k: (k[0] != "plane", KINDS.index(k[1]), order[k[2]]))
+    return [(by[k], fine.get(k)) for k in keys]
 
 
 def table(rows: list[dict]) -> str:
     """Markdown: one row per cell; FLIP ``frame (object pixels)`` where the background shows,
     bold over the 0.05 target; NDF errors are medians over the cell's footprints."""
     out = ["| shape | map | d | sigma_p | glints vs ref N / 2N | glints-direct vs ref N / 2N | "
-           "ref noise (N vs N) | glints vs direct | direct / glints / ref 2N vs expectation | "
-           "mean glints / direct / ref 2N vs exp. (or direct vs ref 2N) | "
-           "NDF err compressed / smooth (median) | CPU s: glints / direct / ref N / exp. |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for r in _cells(rows):
+           "ref noise (N vs N) | glints vs direct | direct vs E(1) | glints / direct / ref 2N "
+           "vs E(s) | mean glints / direct / ref 2N vs E | NDF err compressed / smooth (median) "
+           "| CPU s: glints / direct / ref N / E(1) / E(s) |",
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r, f in _cells(rows):
         obj = r["object_pixels"] < 0.999
-        p = lambda k, r=r: _pair(r.get(k), obj)  # noqa: E731
         c = r["cpu"]
-        if r.get("expectation"):
-            ex = f"{p('flip_direct_exp')} / {p('flip_glints_exp')} / {p('flip_ref2_exp')}"
-            mean = (f"{r['mean_glints_exp']:.3f} / {r['mean_direct_exp']:.3f} / "
-                    f"{r['mean_ref2_exp']:.3f}")
+
+        def p(k, r=r):
+            return _pair(r.get(k), obj)
+
+        line = r.get("expectation") and (r.get("shrink") or 1.0) == 1.0
+        e1 = p("flip_direct_exp") if line else "-"
+        e = f or (r if r.get("expectation") else None)
+        if f is not None:
+            es = (f"{p('flip_glints_exp', f)} / {p('flip_direct_exp', f)} / "
+                  f"{p('flip_ref2_exp', f)} (s={f['shrink']:g})")
         else:
-            ex, mean = "-", f"- / {r['mean_direct_ref2']:.3f} / -"
+            es = "-"
+        mean = "-" if e is None else (f"{e['mean_glints_exp']:.3f} / {e['mean_direct_exp']:.3f}"
+                                      f" / {e['mean_ref2_exp']:.3f}")
+        cpu = (f"{c['glints']:.2f} / {c['direct']:.1f} / {c['ref0']:.0f} / "
+               + (f"{c['exp']:.0f}" if line else "-") + " / "
+               + (f"{f['cpu']['exp']:.0f}" if f is not None else "-"))
         out.append(
             f"| {r['shape']} | {r['map']} | {r['distance']} | {r['sigma_p_median']:.1f} | "
             f"{p('flip_glints_ref0')} / {p('flip_glints_ref2')} | "
             f"{p('flip_direct_ref0')} / {p('flip_direct_ref2')} | {p('noise')} | "
-            f"{p('flip_glints_direct')} | {ex} | {mean} | "
+            f"{p('flip_glints_direct')} | {e1} | {es} | {mean} | "
             f"{100 * r['ndf_compressed_median']:.1f} % / {100 * r['ndf_smooth_median']:.0f} % | "
-            f"{c['glints']:.2f} / {c['direct']:.1f} / {c['ref0']:.0f} / "
-            + (f"{c['exp']:.0f} |" if "exp" in c else "- |"))
+            f"{cpu} |")
     return "\n".join(out)
 
 
@@ -309,6 +342,8 @@ def main():
     ap.add_argument("--pixels", type=int, default=N_PIXELS, help="NDF footprints per cell")
     ap.add_argument("--expectation", action="store_true",
                     help="also the deterministic expectation of glints-reference (costly far)")
+    ap.add_argument("--shrink", type=float, default=1.0,
+                    help="--expectation: residual share of the pixel (1: anisotropy only)")
     ap.add_argument("--out", default="glints_reference.jsonl")
     ap.add_argument("--table", default=None, help="only print the table of this .jsonl")
     a = ap.parse_args()
@@ -318,14 +353,15 @@ def main():
     out = Path(a.out)
     done = set()
     if out.exists():
-        done = {(r["shape"], r["map"], r["distance"], r["spp"], r["expectation"]) for r in
+        done = {(r["shape"], r["map"], r["distance"], r["spp"], r["expectation"],
+                 r.get("shrink", 1.0)) for r in
                 (json.loads(x) for x in out.read_text().splitlines() if x)}
     for shape in a.shapes.split(","):
         for kind in a.kinds.split(","):
             for dn in a.distances.split(","):
-                if (shape, kind, dn, a.spp, a.expectation) in done:
+                if (shape, kind, dn, a.spp, a.expectation, a.shrink) in done:
                     continue
-                r = cell(shape, dn, kind, a.spp, a.pixels, a.expectation)
+                r = cell(shape, dn, kind, a.spp, a.pixels, a.expectation, a.shrink)
                 print(json.dumps(r), flush=True)
                 with out.open("a") as fh:
                     fh.write(json.dumps(r) + "\n")

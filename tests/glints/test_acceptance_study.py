@@ -58,25 +58,32 @@ def test_flat_map_both_errors_vanish(maps):
     assert np.all(smooth < 0.05), smooth
 
 
-def test_line_nodes_reproduce_the_pixel_ellipse():
-    """``s_min^2 I`` plus the weighted node offsets mapped to texels is ``PIXEL_SIGMA^2 J J^T``
-    (trapezoid over a Gaussian: the second moment to ~1e-3); an isotropic ``J`` gives one node."""
+@pytest.mark.parametrize("shrink", [1.0, 0.3])
+def test_pixel_nodes_reproduce_the_pixel_ellipse(shrink):
+    """``s_res^2 I`` plus the weighted node offsets mapped to texels is ``PIXEL_SIGMA^2 J J^T``
+    (trapezoid over a Gaussian: the second moment to ~1e-3), with zero mean; ``shrink = 1``: the
+    nodes lie on the major axis and an isotropic ``J`` gets a single node."""
     from prefilter.glints.render import PIXEL_SIGMA
 
     rng = np.random.default_rng(0)
     J = rng.normal(0.0, 3.0, (5, 2, 2))
     J[0] = [[2.0, 0.0], [0.0, -2.0]]
-    pixel, off, w, s_min = study.line_nodes(J)
+    pixel, off, w, s_res = study.pixel_nodes(J, shrink)
     np.testing.assert_allclose(np.bincount(pixel, w), 1.0, rtol=1e-12)
-    assert np.sum(pixel == 0) == 1 and np.allclose(off[pixel == 0], 0.0)
     t = np.einsum("nij,nj->ni", J[pixel], off)  # texel offsets of the nodes
     cov = np.zeros((5, 2, 2))
     np.add.at(cov, pixel, w[:, None, None] * t[:, :, None] * t[:, None, :])
-    cov += s_min[:, None, None] ** 2 * np.eye(2)
+    cov += s_res[:, None, None] ** 2 * np.eye(2)
     want = PIXEL_SIGMA**2 * np.einsum("nij,nkj->nik", J, J)
     np.testing.assert_allclose(cov, want, rtol=2e-3, atol=1e-9)
-    # the nodes lie on the major axis: zero mean offset
-    np.testing.assert_allclose(np.bincount(pixel, w * t[:, 0]), 0.0, atol=1e-9)
+    np.testing.assert_allclose(np.stack([np.bincount(pixel, w * t[:, i]) for i in (0, 1)]), 0.0,
+                               atol=1e-9)
+    if shrink == 1.0:
+        assert np.sum(pixel == 0) == 1 and np.allclose(off[pixel == 0], 0.0)
+        d = off[pixel == 1]
+        assert np.allclose(d[:, 0] * d[1, 1] - d[:, 1] * d[1, 0], 0.0)  # collinear
+    else:
+        assert np.sum(pixel == 0) > 9  # a 2D grid even for an isotropic footprint
 
 
 def test_pick_pixels_takes_the_brightest_hits_then_random_ones():
