@@ -1,27 +1,33 @@
 """Issue #9 acceptance, point-light cells: ``glints`` and ``glints-direct`` against
 ``glints-reference``, and the glint look against a smooth lobe (NDF images).
 
-    python benchmarks/study_glints_reference.py --shapes plane --out ref_point.jsonl  # resumes
-    python benchmarks/study_glints_reference.py --table ref_point.jsonl               # table only
+    python benchmarks/study_glints_reference.py --expectation --out ref_point.jsonl  # resumes
+    python benchmarks/study_glints_reference.py --expectation --shrink 0.3 --distances near \
+        --out ref_point.jsonl                                   # + the finer expectation
+    python benchmarks/study_glints_reference.py --table ref_point.jsonl  # table only
+    python benchmarks/study_glints_reference.py --check --shapes plane --distances near \
+        --kinds flakes                      # the expectation vs Monte Carlo at a few pixels
 
 Cells: those of ``study_glints_scenes.py --lights point`` (plane and sphere, the four glint maps
 at 128^2, near / mid / far; 64x48). Per cell:
 
 1. **Images.** HDR FLIP (:func:`prefilter.render.metrics.flip`) of ``glints`` and of
    ``glints-direct`` (1 spp, as shipped) against ``glints-reference`` at ``--spp N`` (seed 0) and
-   against the mean of two N-spp references (seeds 0 and 1, i.e. 2N); a value that falls from N to
-   2N is noise-limited. ``noise`` = FLIP between the two N-spp references. ``glints-reference``
-   samples the *true* pixel Gaussian (an ellipse in texel space), while both methods use the
-   isotropic Gaussian of the same area (:func:`prefilter.glints.render.footprints`); to separate
-   that approximation from the methods' own errors, ``iso`` is a Monte Carlo reference of the
-   isotropic footprint: the same point P-NDF (``sigma_p = 0``) at ``N`` texel positions drawn
-   from the isotropic footprint Gaussian, with the pixel centre's view and light directions. Its
-   expectation is ``glints-direct``'s closed form, so FLIP(``glints-direct``, ``iso``) is noise
-   only. No registered method renders a plain smooth microfacet BRDF of these materials (``ltc``,
-   ``reference`` and ``leadr-point`` shade GGX with the material's ``alpha`` and normal or height
-   mip levels, not the glint map's footprint NDF), so the smooth comparison is on NDF images (2).
+   against the mean of two N-spp references (seeds 0 and 1, i.e. 2N); a value that falls from N
+   to 2N is noise-limited. ``noise`` = FLIP between the two N-spp references.
+   ``--expectation``: also the reference's expectation without sampling,
+   :func:`reference_expectation` ``E(shrink)``: the pixel Gaussian as a quadrature of sub-pixel
+   nodes, each with the closed-form isotropic P-NDF (Yan et al. 2016, linear in the footprint
+   weights). ``E(1)`` splits off only the anisotropy of the pixel's texel ellipse (both methods
+   use the isotropic Gaussian of the same area, :func:`prefilter.glints.render.footprints`), so
+   FLIP(``glints-direct``, ``E(1)``) is that approximation's error alone; smaller ``shrink`` also
+   lets the half vector vary across the pixel, as it does in ``glints-reference`` (both methods
+   take it at the pixel centre). No registered method renders a plain smooth microfacet BRDF of
+   these materials (``ltc``, ``reference`` and ``leadr-point`` shade GGX with the material's
+   ``alpha`` and normal or height mip levels, not the glint map's footprint NDF), so the smooth
+   comparison is on NDF images (2).
 2. **NDF images** at ``--pixels`` hit pixels (half the brightest of the ``glints-direct`` image,
-   half random, seeded): relative L2 error, against the direct P-NDF image
+   half random, seeded per cell): relative L2 error, against the direct P-NDF image
    (:func:`prefilter.glints.pndf_image`, pixel averages, 256^2 over ``[-1, 1]^2``, the render
    cache's intrinsic roughness), of (a) ``glints``' own NDF query at the pixel centres
    (:func:`prefilter.glints.brdf.glint_ndf` on the render's surface: resampled pyramid, bilinear
@@ -204,6 +210,49 @@ def reference_expectation(sc, shrink: float = 1.0, chunk: int = 1 << 15,
     return out.reshape(cam.height, cam.width, 3).astype(np.float32)
 
 
+def pixel_mc(sc, pixels, samples: int, seed: int = 0):
+    """``glints-reference``'s estimator at flat pixel indices ``pixels (K,)`` with ``samples``
+    sub-pixel samples each: mean and standard error ``(K, 3)`` (a check of the expectation)."""
+    from prefilter.glints.render import PIXEL_SIGMA, shade_glints
+    from prefilter.render.camera import gbuffer_at
+
+    rng = np.random.default_rng(seed)
+    W = sc.camera.width
+    mean, err = [], []
+    for p in pixels:
+        xy = np.array([p % W + 0.5, p // W + 0.5]) + rng.normal(0.0, PIXEL_SIGMA, (samples, 2))
+        g = gbuffer_at(sc, xy)
+        v = np.zeros((samples, 3))
+        v[g.hit] = shade_glints(sc, g.select(g.hit), mode="direct", sigma=0.0)
+        mean.append(v.mean(0))
+        err.append(v.std(0) / np.sqrt(samples))
+    return np.array(mean), np.array(err)
+
+
+def check(shape: str, dist_name: str, kind: str, shrinks=(1.0, 0.5, 0.3), n: int = 8,
+          samples: int = 20000) -> None:
+    """Print, at the ``n // 2`` brightest pixels of ``E(min shrink)`` and ``n - n // 2`` random
+    ones, ``glints-direct``, ``E(shrink)`` for each shrink and :func:`pixel_mc` (green)."""
+    from prefilter.render.pipeline import render
+    from prefilter.render.scene import load_scene
+
+    sc = load_scene(scene(shape, DISTANCES[dist_name], kind, "point"))
+    d = render(sc, "glints-direct")
+    E = {}
+    for sh in shrinks:
+        t0 = time.process_time()
+        E[sh] = reference_expectation(sc, sh)
+        print(f"E({sh:g}): CPU {time.process_time() - t0:.1f} s", flush=True)
+    _, hit = coverage(sc)
+    pix = pick_pixels(E[min(shrinks)], hit, n, 0)
+    mc, se = pixel_mc(sc, pix, samples)
+    for k, p in enumerate(pix):
+        y, x = divmod(int(p), sc.camera.width)
+        es = " ".join(f"E({sh:g}) {E[sh][y, x, 1]:.4g}" for sh in shrinks)
+        print(f"pixel ({x}, {y}): direct {d[y, x, 1]:.4g} {es} MC {mc[k, 1]:.4g} +- "
+              f"{se[k, 1]:.2g}", flush=True)
+
+
 def _flip_pair(a, b, hit):
     from prefilter.render.metrics import flip
 
@@ -346,9 +395,15 @@ def main():
                     help="--expectation: residual share of the pixel (1: anisotropy only)")
     ap.add_argument("--out", default="glints_reference.jsonl")
     ap.add_argument("--table", default=None, help="only print the table of this .jsonl")
+    ap.add_argument("--check", action="store_true",
+                    help="print E(1), E(0.5), E(0.3) and a Monte Carlo of glints-reference's "
+                         "estimator at a few pixels of the first cell, then exit")
     a = ap.parse_args()
     if a.table:
         print(table([json.loads(x) for x in Path(a.table).read_text().splitlines() if x]))
+        return
+    if a.check:
+        check(a.shapes.split(",")[0], a.distances.split(",")[0], a.kinds.split(",")[0])
         return
     out = Path(a.out)
     done = set()
