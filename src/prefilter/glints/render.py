@@ -159,11 +159,19 @@ _U_PAIR = 11
 #: mean is over the box).
 QUAD_SUB = 2
 RANGE_MAX = 0.08
-#: Pyramid weights of the range queries (quad and environment lights). The range mean blurs the
-#: NDF over the light's half-vector region, which hides the trilinear blend's displaced glints,
-#: and resampling's 15-170 taps per query made the quad-light frame 5-7x slower (CPU 145 ->
-#: 980 ms at mid distance).
+#: Pyramid weights of the quad lights' range queries: Gaussian resampling, the point queries'
+#: footprint (:data:`INTERP`). The trilinear blend (8 images of the wrong sizes and places) was
+#: the systematic error of the range path (issue #9): plane flakes mid, range pixels vs the
+#: deterministic reference FLIP 0.143 trilinear, 0.042 resampled (docs/glints-part2.md,
+#: session 5). The weights are computed once per pixel and shared by its patches.
+QUAD_INTERP = "resample"
+#: Pyramid weights of the environment lights' range queries (:mod:`prefilter.glints.envlight`):
+#: resampling's 15-170 taps per query made those frames 5-7x slower, and their error is below
+#: the SG estimator's noise (docs/glints-part2.md).
 RANGE_INTERP = "trilinear"
+#: The rectangle of each patch's range query: ``"equal-area"`` (:func:`_equal_area_rects`) or
+#: ``"box"`` (the bounding box of its half-vector polygon, the mean scaled by the polygon's area).
+QUAD_RECT = "equal-area"
 FILL_MIN = 0.5
 _HORIZON = 1e-3
 
@@ -179,15 +187,34 @@ def _brdf_terms(wo, wi, f0):
     return k[..., None] * schlick(f0, np.sum(wi * h, -1)), h
 
 
+def _equal_area_rects(x, y, area, lo, hi):
+    """Rectangles ``(lo, hi)`` (..., 2) of area ``area`` (...) centred on the centroids of the
+    polygons ``x, y`` (..., V), with their bounding boxes' ``lo, hi`` aspect ratio.
+
+    The range mean is over an axis-aligned rectangle: the bounding box spreads a skewed patch's
+    weight over up to twice its area (fill >= ``FILL_MIN``), the equal-area rectangle keeps it
+    where the patch is (plane flakes mid, range pixels vs the reference: FLIP 0.042 -> 0.027)."""
+    xs, ys = np.roll(x, -1, -1), np.roll(y, -1, -1)
+    cr = x * ys - xs * y
+    a2 = np.sum(cr, -1)
+    a2 = np.where(np.abs(a2) > 1e-300, a2, 1e-300)
+    ctr = (np.stack([np.sum((x + xs) * cr, -1), np.sum((y + ys) * cr, -1)], -1)
+           / (3.0 * a2[..., None]))
+    ext = hi - lo
+    f = np.sqrt(area / np.maximum(np.prod(ext, -1), 1e-300))[..., None]
+    return ctr - 0.5 * f * ext, ctr + 0.5 * f * ext
+
+
 def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *,
-               n_sub: int = QUAD_SUB):
+               n_sub: int | None = None):
     """Specular radiance of a quad light by range queries over its half-vector footprint.
 
     ``int_quad f cos L dwi = int_S D(s) F G L (wi.h) / (wo_z h_z) ds`` (``dwi = 4 (wi.h) dw_h``,
     ``dw_h = ds / h_z``) over the light's half-vector region ``S``: per patch of an
-    ``n_sub x n_sub`` split of the quad, the smooth factor at the patch centre times the patch's
-    ``s``-polygon area times the range mean of the footprint NDF over the polygon's bounding box
-    (glints paper, sec. 3 and eq. 7: the angularly prefiltered NDF).
+    ``n_sub x n_sub`` split of the quad (default :data:`QUAD_SUB`), the smooth factor at the patch
+    centre times the patch's ``s``-polygon area times the range mean of the footprint NDF (pyramid
+    weights :data:`QUAD_INTERP`) over a rectangle of the same area at the polygon's centroid
+    (:data:`QUAD_RECT`; glints paper, sec. 3 and eq. 7: the angularly prefiltered NDF).
 
     Parameters
     ----------
@@ -203,6 +230,7 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     at or above the finest level); ``value`` is 0 elsewhere (use :func:`quad_mis` there).
     """
     N = corners.shape[0]
+    n_sub = QUAD_SUB if n_sub is None else int(n_sub)
     f0 = np.atleast_1d(np.asarray(f0, dtype=np.float64))
     g = (np.arange(n_sub + 1) / n_sub)
     A, B = np.meshgrid(g, g, indexing="ij")
@@ -231,12 +259,15 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     nv = int(valid.sum())
     m = n_sub * n_sub
     eps = 1e-9
+    if QUAD_RECT == "equal-area":
+        lo, hi = _equal_area_rects(x, y, area, lo, hi)
     lo_v, hi_v = lo[valid].reshape(-1, 2), hi[valid].reshape(-1, 2) + eps
-    cen = np.repeat(np.asarray(center)[valid], m, 0)
-    spv = np.repeat(np.asarray(sigma_p)[valid], m, 0)
     from prefilter.glints.query import range_weighted, weights
 
-    idx, w, _ = weights(surf.gm, cen, spv, interp=RANGE_INTERP)
+    # one footprint per pixel: its (up to ~170) resampling weights serve all its patches
+    idx, w, _ = weights(surf.gm, np.asarray(center)[valid], np.asarray(sigma_p)[valid],
+                        interp=QUAD_INTERP)
+    idx, w = np.repeat(idx, m, 0), np.repeat(w, m, 0)
     mean = range_weighted(surf.gm, idx, w, lo_v, hi_v).reshape(nv, m)
     # smooth factor at each patch centre direction
     ac = ((np.arange(n_sub) + 0.5) / n_sub)
