@@ -26,7 +26,9 @@ planes and spheres, iso / anisotropic height fields, specular and diffuse, 4 and
 pixel, RMSE / FLIP / flicker of LEADR, the normal-mapped reference and naive normal mapping vs the
 ray-traced displaced surface (``--quick``: one surface, the plane only). ``--flicker-floor``
 (~15 min): the far rows' flickers with the reference's own sampling-error floor
-(:func:`prefilter.leadr.acceptance.flicker_table`).
+(:func:`prefilter.leadr.acceptance.flicker_table`). ``--flicker-source 'iso 0.25, sphere; ...'
+--tpp 16``: flicker against the displaced and the normal-mapped references
+(:func:`prefilter.leadr.acceptance.flicker_source_table`).
 
 Specular diagnosis (``--spec-diagnosis --blocks 16,32``, ~15 min per block on a loaded machine):
 :func:`prefilter.leadr.acceptance.specular_diagnosis`, why sigma 0.5 specular misses 0.5x naive
@@ -190,6 +192,12 @@ if __name__ == "__main__":
     ap.add_argument("--flicker-floor", action="store_true",
                     help="far (16 texels/pixel) flicker rows with the reference's own flicker "
                          "floor (acceptance.image_point(noise_floor=True)), ~15 min")
+    ap.add_argument("--flicker-source", default=None, metavar="'SURFACE, SHAPE; ...'",
+                    help="far flicker against the displaced and the normal-mapped references "
+                         "(acceptance.flicker_source_table), e.g. 'iso 0.25, sphere; iso 0.1, "
+                         "plane'; ~3 min per row at --tpp 16")
+    ap.add_argument("--tpp", type=float, default=16.0,
+                    help="with --flicker-source: texels per pixel")
     ap.add_argument("--points", type=int, default=None)
     ap.add_argument("--spec-diagnosis", action="store_true",
                     help="why specular sigma 0.5 misses 0.5x naive at 16 / 32 texels "
@@ -211,6 +219,15 @@ if __name__ == "__main__":
         print(diagnosis_table(specular_diagnosis(
             a.surfaces or "iso 0.5", blocks=tuple(int(b) for b in a.blocks.split(",")),
             log=lambda row: None)))
+    elif a.flicker_source:
+        from prefilter.leadr.acceptance import POINT_SURFACES, flicker_source_table, image_point
+
+        rows = []
+        for spec in a.flicker_source.split(";"):
+            surf, shape = (x.strip() for x in spec.rsplit(",", 1))
+            rows += image_point(surfaces={surf: POINT_SURFACES[surf]}, shapes=(shape,),
+                                texels_per_pixel=(a.tpp,), log=lambda row: None)
+        print(flicker_source_table(rows))
     elif a.flicker_floor:
         from prefilter.leadr.acceptance import flicker_table, image_point
 

@@ -917,6 +917,12 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                             if both:
                                 row[f"flicker2 {m}"] = float(np.mean(np.std(
                                     (ims - 0.5 * (refs_k + ref2))[:, mask], axis=0)) / mref)
+                            # against the normal-mapped reference (same rays, exact per-ray
+                            # normals on the mean surface: no parallax, masking or shadowing):
+                            # how well a method tracks the ideal filtered normal map
+                            nm_k = np.asarray(a["normal-mapped"])
+                            row[f"nm flicker {m}"] = float(
+                                np.mean(np.std((ims - nm_k)[:, mask], axis=0)) / mref)
                     if len(refs_k) > 1:
                         # the flicker score of a perfectly steady image (the jitter-mean of the
                         # reference): what no filter can go below on this row
@@ -974,4 +980,26 @@ def flicker_table(rows) -> str:
             f"{pc(r['flicker ref'])} | {pc(fl)} | {fl / fn:.2f} | "
             f"{'yes' if fl < 0.5 * fn else 'no'} | {pc(f2l)} / {pc(f2n)} ({f2l / f2n:.2f}), "
             f"{pc(fl / np.sqrt(2.0))} |")
+    return "\n".join(out)
+
+
+def flicker_source_table(rows) -> str:
+    """Markdown table splitting the far flicker of :func:`image_point`'s rows by what it is
+    measured against: the displaced reference (the acceptance's score) and the normal-mapped
+    reference (the same rays with exact per-ray normals on the mean surface: no parallax,
+    masking or shadowing), i.e. how far each method is from a perfect filter of the normal map.
+    ``LEADR box`` shades the exact moments of the texels the reference's rays hit."""
+    out = ["| surface | shape | shading | texels/pixel | vs displaced: LEADR / naive (ratio) | "
+           "normal-mapped / naive | vs normal-mapped: LEADR / LEADR box / naive (ratio) |",
+           "|---|---|---|---|---|---|---|"]
+    pc = lambda v: f"{100 * v:.2f}%"  # noqa: E731
+    for r in rows:
+        if "nm flicker leadr" not in r:
+            continue
+        fl, fn, fm = r["flicker leadr"], r["flicker naive"], r["flicker normal-mapped"]
+        ml, mb, mn = r["nm flicker leadr"], r["nm flicker leadr box"], r["nm flicker naive"]
+        out.append(
+            f"| {r['surface']} | {r['shape']} | {r['shading']} | {r['texels/pixel']:.0f} | "
+            f"{pc(fl)} / {pc(fn)} ({fl / fn:.2f}) | {pc(fm)} ({fm / fn:.2f}) | "
+            f"{pc(ml)} / {pc(mb)} / {pc(mn)} ({ml / mn:.2f}) |")
     return "\n".join(out)
