@@ -375,9 +375,10 @@ def table(rows: list[dict]) -> str:
     bold over the 0.05 target; NDF errors are medians over the cell's footprints."""
     out = ["| shape | map | d | sigma_p | glints vs ref N / 2N | glints-direct vs ref N / 2N | "
            "ref noise (N vs N) | glints vs direct | direct vs E(1) | glints / direct / ref 2N "
-           "vs E(s) | mean glints / direct / ref 2N vs E | NDF err compressed / smooth (median) "
+           "vs E(s) | mean glints / direct vs ref 2N | mean ref 2N vs E(1) / E(s) | "
+           "NDF err compressed / smooth (median) "
            "| CPU s: glints / direct / ref N / E(1) / E(s) |",
-           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r, f in _cells(rows):
         obj = r["object_pixels"] < 0.999
         c = r["cpu"]
@@ -387,14 +388,14 @@ def table(rows: list[dict]) -> str:
 
         line = r.get("expectation") and (r.get("shrink") or 1.0) == 1.0
         e1 = p("flip_direct_exp") if line else "-"
-        e = f or (r if r.get("expectation") else None)
         if f is not None:
             es = (f"{p('flip_glints_exp', f)} / {p('flip_direct_exp', f)} / "
                   f"{p('flip_ref2_exp', f)} (s={f['shrink']:g})")
         else:
             es = "-"
-        mean = "-" if e is None else (f"{e['mean_glints_exp']:.3f} / {e['mean_direct_exp']:.3f}"
-                                      f" / {e['mean_ref2_exp']:.3f}")
+        mean = f"{r['mean_glints_ref2']:.3f} / {r['mean_direct_ref2']:.3f}"
+        mean_e = ((f"{r['mean_ref2_exp']:.3f}" if line else "-") + " / "
+                  + (f"{f['mean_ref2_exp']:.3f}" if f is not None else "-"))
         cpu = (f"{c['glints']:.2f} / {c['direct']:.1f} / {c['ref0']:.0f} / "
                + (f"{c['exp']:.0f}" if line else "-") + " / "
                + (f"{f['cpu']['exp']:.0f}" if f is not None else "-"))
@@ -402,7 +403,7 @@ def table(rows: list[dict]) -> str:
             f"| {r['shape']} | {r['map']} | {r['distance']} | {r['sigma_p_median']:.1f} | "
             f"{p('flip_glints_ref0')} / {p('flip_glints_ref2')} | "
             f"{p('flip_direct_ref0')} / {p('flip_direct_ref2')} | {p('noise')} | "
-            f"{p('flip_glints_direct')} | {e1} | {es} | {mean} | "
+            f"{p('flip_glints_direct')} | {e1} | {es} | {mean} | {mean_e} | "
             f"{100 * r['ndf_compressed_median']:.1f} % / {100 * r['ndf_smooth_median']:.0f} % | "
             f"{cpu} |")
     return "\n".join(out)
