@@ -8,6 +8,8 @@
     python benchmarks/bench_glints.py --map f.npz --bake-kind flakes --size 512 \
         --level-rank level --scaling ""               # bake f.npz first if missing (512^2)
     python benchmarks/bench_glints.py --map m.npz --rss   # only: resident memory of a loaded map
+    NUMBA_NUM_THREADS=1 python benchmarks/bench_glints.py --cpu --compare a.npz b.npz
+                                                      # only: query cost of maps, interleaved
     python benchmarks/bench_glints.py --frames        # only: glints frame time at 3 distances
     python benchmarks/bench_glints.py --frames --direct   # also glints-direct, speed-up, FLIP
     python benchmarks/bench_glints.py --frames --runs 3 --interp trilinear --nearest \
@@ -130,6 +132,49 @@ def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False, clock=time.pe
               f"{r[3] / r[1]:.0f}x")
 
 
+def bench_compare(paths, n_queries=50000, repeat=15, seed=0, clock=time.process_time):
+    """Per-query cost of several maps of the same normal map (e.g. bakes with different
+    ``level_rank``) on the same queries, measured interleaved: within every round each width
+    times every map back to back, so load changes hit all maps alike; best of ``repeat`` rounds.
+    Orders as :func:`bench_queries`: random, coherent, random in a 32^2 corner."""
+    gms = [load(p) for p in paths]
+    H = gms[0].pyramid.height
+    h = 2 * gms[0].support / gms[0].resolution
+    names = [Path(p).stem for p in paths]
+    for order in ("random", "coherent", "corner"):
+        rng = np.random.default_rng(seed)
+        qs = []
+        for w in WIDTHS:
+            c = rng.uniform(0, 32 if order == "corner" else H, (n_queries, 2))
+            if order == "coherent":
+                c = c[np.lexsort((c[:, 0], c[:, 1] // 8))]
+            s = rng.normal(0.0, 0.15, (n_queries, 2))
+            lo = s - rng.uniform(1, 12, (n_queries, 2)) * h
+            hi = s + rng.uniform(1, 12, (n_queries, 2)) * h
+            qs.append((c, w / 2.0, s, lo, hi))
+        t = np.full((len(gms), len(WIDTHS), 2), np.inf)
+        for gm in gms:  # compile and build the packed arrays outside the timing
+            point(gm, qs[0][0][:10], 1.0, qs[0][2][:10])
+            range_mean(gm, qs[0][0][:10], 1.0, qs[0][3][:10], qs[0][4][:10])
+        for _ in range(repeat):
+            for j, (c, sp, s, lo, hi) in enumerate(qs):
+                for i, gm in enumerate(gms):
+                    t0 = clock()
+                    point(gm, c, sp, s)
+                    t1 = clock()
+                    range_mean(gm, c, sp, lo, hi)
+                    t[i, j] = np.minimum(t[i, j], [t1 - t0, clock() - t1])
+        t *= 1e6 / n_queries
+        print(f"{order} order, {n_queries} queries, best of {repeat} interleaved rounds, "
+              f"{clock.__name__}, NUMBA threads {os.environ.get('NUMBA_NUM_THREADS', 'all')}, "
+              f"load {os.getloadavg()[0]:.1f}; us per query at widths {WIDTHS}")
+        for i, name in enumerate(names):
+            for k, kind in enumerate(("point", "range")):
+                v = t[i, :, k]
+                print(f"  {name:>24} {kind}: " + " ".join(f"{x:6.3f}" for x in v)
+                      + f" | slowest/fastest {v.max() / v.min():.2f}", flush=True)
+
+
 def _vm_rss_mb():
     """Resident set size of this process (MB, /proc/self/status ``VmRSS``)."""
     with open("/proc/self/status") as f:
@@ -167,8 +212,9 @@ def bench_bake_scaling(sizes, tmp):
 
 
 def bench_ranks(size, tmp, ranks=(8, 16, 32, 64),
-                kinds=("gaussian", "brushed", "flakes", "scratches")):
-    print(f"rank study: {size}^2 procedural maps, ndf-res 128, block 16, levels shared")
+                kinds=("gaussian", "brushed", "flakes", "scratches"), level_rank="global"):
+    print(f"rank study: {size}^2 procedural maps, ndf-res 128, block 16, levels shared, "
+          f"level_rank {level_rank}")
     print(f"{'map':>10} {'rank':>5} {'ratio %':>8} {'rel L2 %':>9} {'level 0 %':>9} "
           f"{'top %':>6} {'CP s':>6}")
     for kind in kinds:
@@ -177,7 +223,7 @@ def bench_ranks(size, tmp, ranks=(8, 16, 32, 64),
         for rank in ranks:
             t = time.perf_counter()
             s = bake(nm, Path(tmp) / f"{kind}_{rank}.npz", rank=rank, progress=False,
-                     cell=min(32, size), levels_dir=lv)
+                     cell=min(32, size), levels_dir=lv, level_rank=level_rank)
             e = s["rel_l2_error_per_level"]
             print(f"{kind:>10} {rank:5d} {100 * s['ratio']:8.2f} {100 * s['rel_l2_error']:9.2f} "
                   f"{100 * e[0]:9.2f} {100 * e[-1]:6.2f} {time.perf_counter() - t:6.1f}",
@@ -301,8 +347,12 @@ def main():
     ap.add_argument("--bake-kind", default=None,
                     help="--map: bake it first if missing, from this procedural map of --size")
     ap.add_argument("--level-rank", default="global",
-                    help="--bake-kind: the bake's rank split (global, level or uniform)")
+                    help="--bake-kind and --ranks: the bakes' rank split (global, level or "
+                         "uniform)")
     ap.add_argument("--rss", action="store_true", help="only: resident memory of --map loaded")
+    ap.add_argument("--compare", nargs="+", default=None,
+                    help="only: query cost of these maps measured interleaved (bench_compare)")
+    ap.add_argument("--repeat", type=int, default=15, help="--compare: rounds")
     ap.add_argument("--corner", type=int, default=None,
                     help="queries: also a random-order run with centres in a CORNER^2 square")
     ap.add_argument("--frames", action="store_true", help="only the frame-time benchmark")
@@ -326,6 +376,10 @@ def main():
                         level_rank=a.level_rank, levels_dir=Path(a.map).with_suffix(".levels"))
     if a.rss:
         bench_rss(a.map)
+        return
+    if a.compare:
+        bench_compare(a.compare, repeat=a.repeat,
+                      clock=time.process_time if a.cpu else time.perf_counter)
         return
     if a.breakdown:
         bench_breakdown()
@@ -361,7 +415,7 @@ def main():
             bench_bake_scaling([int(x) for x in a.scaling.split(",")], tmp)
         if a.ranks:
             bench_ranks(a.rank_size, tmp, [int(r) for r in a.rank_list.split(",")],
-                        a.kinds.split(","))
+                        a.kinds.split(","), a.level_rank)
 
 
 if __name__ == "__main__":
