@@ -132,11 +132,28 @@ def bench_queries(gm, nm, n_queries=50000, seed=0, coherent=False, clock=time.pe
               f"{r[3] / r[1]:.0f}x")
 
 
-def bench_compare(paths, n_queries=50000, repeat=15, seed=0, clock=time.process_time):
+def bench_compare(paths, n_queries=50000, repeat=15, seed=0, clock=time.process_time,
+                  kernel=False):
     """Per-query cost of several maps of the same normal map (e.g. bakes with different
     ``level_rank``) on the same queries, measured interleaved: within every round each width
     times every map back to back, so load changes hit all maps alike; best of ``repeat`` rounds.
-    Orders as :func:`bench_queries`: random, coherent, random in a 32^2 corner."""
+    Orders as :func:`bench_queries`: random, coherent, random in a 32^2 corner. ``kernel``: time
+    only ``point_weighted`` / ``range_weighted`` on weights computed outside the timing (the
+    kernels without the Python side of a call)."""
+    from prefilter.glints.query import point_weighted, range_weighted, weights
+
+    if kernel:
+        def run_point(gm, c, sp, s, wts):
+            return point_weighted(gm, *wts, s)
+
+        def run_range(gm, c, sp, lo, hi, wts):
+            return range_weighted(gm, *wts, lo, hi)
+    else:
+        def run_point(gm, c, sp, s, wts):
+            return point(gm, c, sp, s)
+
+        def run_range(gm, c, sp, lo, hi, wts):
+            return range_mean(gm, c, sp, lo, hi)
     gms = [load(p) for p in paths]
     H = gms[0].pyramid.height
     h = 2 * gms[0].support / gms[0].resolution
@@ -151,21 +168,23 @@ def bench_compare(paths, n_queries=50000, repeat=15, seed=0, clock=time.process_
             s = rng.normal(0.0, 0.15, (n_queries, 2))
             lo = s - rng.uniform(1, 12, (n_queries, 2)) * h
             hi = s + rng.uniform(1, 12, (n_queries, 2)) * h
-            qs.append((c, w / 2.0, s, lo, hi))
+            wts = weights(gms[0], c, np.full(n_queries, w / 2.0))[:2] if kernel else None
+            qs.append((c, w / 2.0, s, lo, hi, wts))
         t = np.full((len(gms), len(WIDTHS), 2), np.inf)
         for gm in gms:  # compile and build the packed arrays outside the timing
             point(gm, qs[0][0][:10], 1.0, qs[0][2][:10])
             range_mean(gm, qs[0][0][:10], 1.0, qs[0][3][:10], qs[0][4][:10])
         for _ in range(repeat):
-            for j, (c, sp, s, lo, hi) in enumerate(qs):
+            for j, (c, sp, s, lo, hi, wts) in enumerate(qs):
                 for i, gm in enumerate(gms):
                     t0 = clock()
-                    point(gm, c, sp, s)
+                    run_point(gm, c, sp, s, wts)
                     t1 = clock()
-                    range_mean(gm, c, sp, lo, hi)
+                    run_range(gm, c, sp, lo, hi, wts)
                     t[i, j] = np.minimum(t[i, j], [t1 - t0, clock() - t1])
         t *= 1e6 / n_queries
-        print(f"{order} order, {n_queries} queries, best of {repeat} interleaved rounds, "
+        print(f"{order} order, {'kernels only, ' if kernel else ''}{n_queries} queries, "
+              f"best of {repeat} interleaved rounds, "
               f"{clock.__name__}, NUMBA threads {os.environ.get('NUMBA_NUM_THREADS', 'all')}, "
               f"load {os.getloadavg()[0]:.1f}; us per query at widths {WIDTHS}")
         for i, name in enumerate(names):
@@ -353,6 +372,8 @@ def main():
     ap.add_argument("--compare", nargs="+", default=None,
                     help="only: query cost of these maps measured interleaved (bench_compare)")
     ap.add_argument("--repeat", type=int, default=15, help="--compare: rounds")
+    ap.add_argument("--kernel", action="store_true",
+                    help="--compare: time the query kernels on precomputed weights only")
     ap.add_argument("--corner", type=int, default=None,
                     help="queries: also a random-order run with centres in a CORNER^2 square")
     ap.add_argument("--frames", action="store_true", help="only the frame-time benchmark")
@@ -378,7 +399,7 @@ def main():
         bench_rss(a.map)
         return
     if a.compare:
-        bench_compare(a.compare, repeat=a.repeat,
+        bench_compare(a.compare, repeat=a.repeat, kernel=a.kernel,
                       clock=time.process_time if a.cpu else time.perf_counter)
         return
     if a.breakdown:
