@@ -446,3 +446,21 @@ def test_float_arrays_are_decoded_lazily(baked):
     np.testing.assert_allclose(means, block_means(gf, img), rtol=1e-6, atol=1e-12)
     assert np.count_nonzero(means) > means.size // 4
     assert "images" in repr(load(out))
+
+
+def test_cli_bake_level_rank(tmp_path):
+    from click.testing import CliRunner
+
+    from prefilter.glints.commands import bake_glints
+
+    np.save(tmp_path / "n.npy", sinusoid(16, px=16, py=8))
+    args = [str(tmp_path / "n.npy"), "--rank", "4", "--ndf-res", "16", "--block", "8",
+            "--cell", "8", "--iters", "10", "--quiet"]
+    res = CliRunner().invoke(bake_glints, args + ["-o", str(tmp_path / "u.npz"),
+                                                  "--level-rank", "uniform"])
+    assert res.exit_code == 0, res.output
+    gm = load(tmp_path / "u.npz")
+    assert (np.asarray(gm.ranks) == 4).all()
+    bad = CliRunner().invoke(bake_glints, args + ["-o", str(tmp_path / "b.npz"),
+                                                  "--level-rank", "per-texel"])
+    assert bad.exit_code != 0 and "level-rank" in bad.output

@@ -51,6 +51,10 @@ def load_normal_map(spec: str) -> np.ndarray:
 @click.option("--max-rank", default=None, type=int,
               help="Largest rank of a group (the width of the in-memory factors, which sets the "
                    "query cost) [default: 3 x rank].")
+@click.option("--level-rank", default="global", show_default=True,
+              type=click.Choice(["global", "level", "uniform"]),
+              help="How the rank budget is spread: over all groups, per pyramid level (equal "
+                   "query work at every footprint size), or every group at --rank.")
 @click.option("--ndf-res", default=128, show_default=True, help="NDF image resolution.")
 @click.option("--block", default=16, show_default=True, help="Block size B of the NDF images.")
 @click.option("--support", default=0.5, show_default=True,
@@ -66,8 +70,8 @@ def load_normal_map(spec: str) -> np.ndarray:
 @click.option("--iters", default=50, show_default=True, help="Max CP iterations per group.")
 @click.option("--seed", default=0, show_default=True)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def bake_glints(normal_map, out, rank, max_rank, ndf_res, block, support, roughness, stride0,
-                sigma0, cell, converge, iters, seed, quiet):
+def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
+                stride0, sigma0, cell, converge, iters, seed, quiet):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
@@ -79,7 +83,7 @@ def bake_glints(normal_map, out, rank, max_rank, ndf_res, block, support, roughn
     summary = bake(nm, out, rank=rank, ndf_res=ndf_res, block=block, support=support,
                    intrinsic_roughness=roughness, stride0=stride0, sigma0=sigma0, cell=cell,
                    converge=converge, n_iter_max=iters, seed=seed, progress=not quiet,
-                   max_rank=max_rank)
+                   max_rank=max_rank, level_rank=level_rank)
     s = summary
     click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
     click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "
