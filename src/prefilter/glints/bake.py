@@ -42,7 +42,7 @@ from prefilter._io import Checkpoints, exclusive_lock
 from prefilter._validate import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
-from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, _as_roughness, _as_support,
+from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, as_support,
                                    as_normal_map, elements, pndf_image)
 from prefilter.glints.pyramid import level_difference, next_level, plan
 from prefilter.glints.store import GlintsMap, decode, encode, pack_mask, save
@@ -159,8 +159,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     B = as_positive_int(block, "block")
     if R % B:
         raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {B}")
-    S = _as_support(support)
-    sr = _as_roughness(intrinsic_roughness)
+    S = as_support(support)
+    sr = as_intrinsic_roughness(intrinsic_roughness)
     cell = as_positive_int(cell, "cell")
     pyr = plan(H, W, stride0, sigma0, max_levels)
     if cell % pyr.stride0 or H % cell or W % cell:

@@ -38,7 +38,7 @@ import numpy as np
 from prefilter._numba import njit_parallel, prange, serial
 from prefilter._validate import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, _as_roughness, _window,
+from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, texel_window,
                                    as_normal_map, elements, pndf)
 from prefilter.glints.query import point_flat
 from prefilter.glints.store import GlintsMap
@@ -121,7 +121,7 @@ def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
     else:
         sr = DEFAULT_ROUGHNESS
     if intrinsic_roughness is not None:
-        sr = _as_roughness(intrinsic_roughness)
+        sr = as_intrinsic_roughness(intrinsic_roughness)
     return GlintSurface(gm, nm, el, sr, interp, bool(bilinear))
 
 
@@ -132,7 +132,7 @@ def bilinear_bake_roughness(intrinsic_roughness: float, support: float, ndf_res:
     by the pixel box (variance ``h^2 / 12``) and the tent (``h^2 / 6``), i.e. adds ``(h / 2)^2``
     to the variance of every element's Gaussian: baking with ``sqrt(sigma_r^2 - (h/2)^2)`` puts it
     back (not below ``sigma_r / 2`` when the pixels are too coarse for that)."""
-    sr = _as_roughness(intrinsic_roughness)
+    sr = as_intrinsic_roughness(intrinsic_roughness)
     hh = float(support) / int(ndf_res)
     return max(math.sqrt(max(sr * sr - hh * hh, 0.0)), 0.5 * sr)
 
@@ -171,8 +171,8 @@ def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
         var = sp2 * sh2 / tot2
         sv = math.sqrt(var)
         rad = trunc * math.sqrt(tot2)
-        x0, x1 = _window(cx[q], rad)
-        y0, y1 = _window(cy[q], rad)
+        x0, x1 = texel_window(cx[q], rad)
+        y0, y1 = texel_window(cy[q], rad)
         nx = x1 - x0 + 1
         wx = np.empty(nx)
         col = np.empty(nx, np.int64)
@@ -233,8 +233,8 @@ def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, 
         f = sh2 / tot2
         var = sp2 * sh2 / tot2
         rad = trunc * math.sqrt(tot2)
-        x0, x1 = _window(cx[q], rad)
-        y0, y1 = _window(cy[q], rad)
+        x0, x1 = texel_window(cx[q], rad)
+        y0, y1 = texel_window(cy[q], rad)
         nx = x1 - x0 + 1
         xs = x0 % W
         wx = np.empty(nx)

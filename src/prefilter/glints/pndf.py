@@ -433,11 +433,3 @@ def hemisphere_ndf(D_s, m) -> np.ndarray:
     m = as_float_array(m, "m", ndim_min=1, last_dim=3)
     D = as_float_array(D_s, "D_s")
     return np.where(m[..., 2] > 0.0, D, 0.0)
-
-
-# Old private names, still imported by bake.py, brdf.py, query.py and sample.py.
-_as_roughness = as_intrinsic_roughness
-_as_sigma_p = as_sigma_p
-_as_support = as_support
-_window = texel_window
-_element = element_moments

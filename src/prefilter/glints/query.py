@@ -27,7 +27,7 @@ from prefilter._validate import as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import (bilinear_kernel, point_kernel, range_kernel,
                                        resample_point_kernel)
-from prefilter.glints.pndf import _as_sigma_p
+from prefilter.glints.pndf import as_sigma_p
 from prefilter.glints.pyramid import (RESAMPLE_Q_MIN, RESAMPLE_TRUNCATION, interp_weights,
                                       resample_weights)
 from prefilter.glints.store import Q, GlintsMap
@@ -58,7 +58,7 @@ def weights(gm: GlintsMap, center, sigma_p, *, interp: str = "trilinear"):
     _check_map(gm)
     _check_interp(interp)
     c = as_float_array(center, "center", ndim_min=2, last_dim=2)
-    sp = _as_sigma_p(sigma_p)
+    sp = as_sigma_p(sigma_p)
     if c.ndim != 2 or sp.shape != c.shape[:1]:
         raise PrefilterError(f"center, sigma_p: expected shapes (N, 2) and (N,), got {c.shape} "
                              f"and {sp.shape}")
@@ -145,7 +145,7 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points, interp="trilinear"):
     if interp is not None:
         _check_interp(interp)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = _as_sigma_p(sigma_p)
+    sp = as_sigma_p(sigma_p)
     pts = [as_float_array(p, name, ndim_min=1, last_dim=2) for p, name in points]
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape,
                             **{name: p.shape[:-1] for p, (_, name) in zip(pts, points)})

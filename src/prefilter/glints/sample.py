@@ -31,7 +31,7 @@ from prefilter._numba import njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_directions, as_float_array, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _rect_mass
-from prefilter.glints.pndf import _element, _window
+from prefilter.glints.pndf import element_moments, texel_window
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.query import point
 from prefilter.glints.store import GlintsMap
@@ -329,8 +329,8 @@ def _direct_kernel(s_el, J, cx, cy, sp, sr, sh, trunc, u, out):
         f = sh2 / tot2
         var = sp2 * sh2 / tot2
         rad = trunc * math.sqrt(tot2)
-        x0, x1 = _window(cx[q], rad)
-        y0, y1 = _window(cy[q], rad)
+        x0, x1 = texel_window(cx[q], rad)
+        y0, y1 = texel_window(cy[q], rad)
         wsum = 0.0
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
@@ -355,7 +355,7 @@ def _direct_kernel(s_el, J, cx, cy, sp, sr, sh, trunc, u, out):
         dx = cx[q] - (bx + 0.5)
         dy = cy[q] - (by + 0.5)
         r, c = by % H, bx % W
-        mx, my, a, b, d = _element(s_el, J, r, c, dx, dy, f, var)
+        mx, my, a, b, d = element_moments(s_el, J, r, c, dx, dy, f, var)
         a += sr * sr
         d += sr * sr
         # Cholesky of [[a, b], [b, d]] applied to a Box-Muller pair
