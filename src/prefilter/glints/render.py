@@ -165,12 +165,12 @@ RANGE_MAX = 0.08
 #: Pyramid weights of the quad lights' range queries: Gaussian resampling, the point queries'
 #: footprint (:data:`INTERP`). The trilinear blend (8 images of the wrong sizes and places) was
 #: the systematic error of the range path (issue #9): plane flakes mid, range pixels vs the
-#: deterministic reference FLIP 0.143 trilinear, 0.042 resampled (docs/glints-part2.md,
-#: session 5). The weights are computed once per pixel and shared by its patches.
+#: deterministic reference FLIP 0.143 trilinear, 0.042 resampled (both with bounding boxes;
+#: docs/glints-part2.md, session 5). The weights are computed once per pixel and shared by its patches.
 QUAD_INTERP = "resample"
 #: Pyramid weights of the environment lights' range queries (:mod:`prefilter.glints.envlight`):
-#: resampling's 15-170 taps per query made those frames 5-7x slower, and their error is below
-#: the SG estimator's noise (docs/glints-part2.md).
+#: kept trilinear (resampling has 15-170 taps per query; not measured there), their error is
+#: below the SG estimator's noise at the seeds measured (docs/glints-part2.md).
 RANGE_INTERP = "trilinear"
 #: The rectangle of each patch's range query: ``"equal-area"`` (:func:`_equal_area_rects`) or
 #: ``"box"`` (the bounding box of its half-vector polygon, the mean scaled by the polygon's area).
