@@ -166,7 +166,8 @@ RANGE_MAX = 0.08
 #: footprint (:data:`INTERP`). The trilinear blend (8 images of the wrong sizes and places) was
 #: the systematic error of the range path (issue #9): plane flakes mid, range pixels vs the
 #: deterministic reference FLIP 0.143 trilinear, 0.042 resampled (both with bounding boxes;
-#: docs/glints-part2.md, session 5). The weights are computed once per pixel and shared by its patches.
+#: docs/glints-part2.md, session 5). The weights are computed once per pixel and shared by its
+#: patches.
 QUAD_INTERP = "resample"
 #: Pyramid weights of the environment lights' range queries (:mod:`prefilter.glints.envlight`):
 #: kept trilinear (resampling has 15-170 taps per query; not measured there), their error is
