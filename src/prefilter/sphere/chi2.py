@@ -156,8 +156,8 @@ def _binned_test(observed, cells, density, *, quad, min_expected, max_refine, re
     ``density(p0, p1)`` the density per unit parameter area. Each bin's mass uses ``quad x quad``
     Gauss-Legendre nodes, split 2 x 2 adaptively (see :func:`chi2_sphere`). ``p1_range(p0)``,
     if given, bounds the domain: a list of intervals ``(lo, hi)`` of ``p1`` at each ``p0``; the
-    inner rule then spans only those chords of a cell, so a density that vanishes outside the domain has no jump or kink
-    inside a quadrature cell.
+    inner rule then spans only those chords of a cell, so a density that vanishes outside the
+    domain has no jump or kink inside a quadrature cell.
     """
     n = int(observed.sum())
     n_bins = observed.size - 1
