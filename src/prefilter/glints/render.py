@@ -29,8 +29,11 @@ footprint divided by the sample count").
   intrinsic roughness: ``spp`` sub-pixel positions drawn from the same pixel Gaussian, each shaded
   with the P-NDF of a point (``sigma_p = 0``: Yan's partition of unity of per-texel linearised
   normals, each blurred by the intrinsic roughness). Its mean converges to the Gaussian-footprint
-  integral, which ``glints-direct`` evaluates in closed form (up to the isotropic approximation of
-  the footprint and the linearisation of ``uv`` across the pixel).
+  integral with the view and light directions of each sub-pixel position; ``glints-direct``
+  evaluates that integral in closed form up to the isotropic approximation of the footprint, the
+  linearisation of ``uv`` across the pixel and the half vector taken at the pixel centre (it moves
+  by about the intrinsic roughness per half pixel: docs/glints-part2.md, "Against
+  ``glints-reference``").
 """
 
 from __future__ import annotations
@@ -45,7 +48,7 @@ from tqdm import tqdm
 
 from prefilter.errors import PrefilterError
 from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, bilinear_bake_roughness,
-                                   glint_brdf_cos, surface)
+                                   glint_brdf_cos, glint_ndf, surface)
 from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
 
 PIXEL_SIGMA = 0.5
@@ -641,10 +644,11 @@ def measure(distances=(0.5, 2.0, 8.0), kind: str = "flakes", size: int = 128,
 def ndf_errors(kinds=("gaussian", "brushed", "flakes", "scratches"), size: int = 64,
                sigmas=(4.0, 8.0, 16.0), n: int = 6, seed: int = 0) -> list[dict]:
     """Relative L2 error of NDF images against the direct P-NDF images (pixel averages) for
-    ``n`` random footprints per size: the compressed query, and a smooth lobe (a Gaussian NDF of
-    ``s`` with the footprint's mean and covariance: a plain microfacet model with matched
-    moments)."""
-    from prefilter.glints import pndf_image, point
+    ``n`` random footprints per size: the compressed query as ``glints`` renders it
+    (:func:`prefilter.glints.brdf.glint_ndf` on the render cache's surface), and a smooth lobe (a
+    Gaussian NDF of ``s`` with the footprint's mean and covariance: a plain microfacet model with
+    matched moments)."""
+    from prefilter.glints import pndf_image
     from prefilter.texture.procedural import normal_map
 
     R, S = BAKE_SETTINGS["ndf_res"], BAKE_SETTINGS["support"]
@@ -661,7 +665,7 @@ def ndf_errors(kinds=("gaussian", "brushed", "flakes", "scratches"), size: int =
         for sp in sigmas:
             c = rng.uniform(0, size, (n, 2))
             ref = pndf_image(nm, c, sp, R, S, sr)
-            got = point(surf.gm, c[:, None, None], sp, grid[None])
+            got = glint_ndf(surf, c[:, None, None], sp, grid[None])
             w = ref * h * h
             m = w.sum((1, 2))
             mx, my = (w * X).sum((1, 2)) / m, (w * Y).sum((1, 2)) / m
