@@ -149,6 +149,18 @@ def read_npz(path: str | os.PathLike, what: str) -> dict[str, np.ndarray]:
                              ) from None
 
 
+def decode_json_object(raw: np.ndarray) -> dict | None:
+    """The JSON object held by the text scalar ``raw`` (an ``.npz`` entry), or ``None`` when it
+    is not one (another dtype or shape, invalid JSON, or JSON other than an object)."""
+    if raw.dtype.kind != "U" or raw.shape != ():
+        return None
+    try:
+        obj = json.loads(str(raw))
+    except ValueError:
+        return None
+    return obj if isinstance(obj, dict) else None
+
+
 def verify_npz(path: str | os.PathLike, what: str, data: dict[str, np.ndarray], *,
                format_name: str | None = None,
                format_version: int | None = None) -> dict[str, np.ndarray]:
@@ -163,15 +175,10 @@ def verify_npz(path: str | os.PathLike, what: str, data: dict[str, np.ndarray], 
     if raw is None:
         return data
     field = f"{what} {path}: {META_KEY}"
-    try:
-        if raw.dtype.kind != "U" or raw.shape != ():
-            raise ValueError
-        meta = json.loads(str(raw))
-        if not isinstance(meta, dict):
-            raise ValueError
-    except ValueError:
+    meta = decode_json_object(raw)
+    if meta is None:
         raise TableFileError(f"{field}: expected a JSON object string, got "
-                             f"{raw.dtype} array of shape {raw.shape}") from None
+                             f"{raw.dtype} array of shape {raw.shape}")
     if meta.get("checksum") != "sha256" or not isinstance(meta.get("sha256"), str):
         raise TableFileError(f"{field}.checksum: expected 'sha256' with a 'sha256' digest, got "
                              f"{meta.get('checksum')!r}")
@@ -238,11 +245,8 @@ def expect_table_header(data: Mapping[str, np.ndarray], need, where: str, versio
 def expect_json_object(data: Mapping[str, np.ndarray], key: str, where: str) -> dict:
     """``data[key]``, a text scalar holding a JSON object, decoded; else a TableFileError."""
     expect_array(data, key, where, kind="U", shape=())
-    try:
-        obj = json.loads(str(data[key]))
-    except ValueError:
-        obj = None
-    if not isinstance(obj, dict):
+    obj = decode_json_object(data[key])
+    if obj is None:
         raise TableFileError(f"{where}: {key}: expected a JSON object string")
     return obj
 

@@ -44,7 +44,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._io import META_KEY, read_npz, save_npz_atomic, verify_npz
+from prefilter._io import (META_KEY, decode_json_object, read_npz, save_npz_atomic,
+                          verify_npz)
 from prefilter.errors import TableFileError
 from prefilter.glints.pyramid import Pyramid
 
@@ -287,13 +288,8 @@ def load(path: str | os.PathLike) -> GlintsMap:
     if "header" not in data:
         _fail(path, "missing array 'header'")
     raw = data["header"]
-    try:
-        if raw.dtype.kind != "U" or raw.shape != ():
-            raise ValueError
-        header = json.loads(str(raw))
-        if not isinstance(header, dict):
-            raise ValueError
-    except ValueError:
+    header = decode_json_object(raw)
+    if header is None:
         _fail(path, f"header: expected a JSON object string, got {raw.dtype} {raw.shape}")
     if header.get("format") != FORMAT:
         _fail(path, f"header.format: expected {FORMAT!r}, got {header.get('format')!r}")
