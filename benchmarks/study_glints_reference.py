@@ -53,7 +53,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from study_glints_scenes import DISTANCES, KINDS, TARGET, coverage, scene  # noqa: E402
+from study_glints_scenes import (DISTANCES, KINDS, _flip_pair, _pair, coverage,  # noqa: E402
+                                 scene)
 
 REF_SPP = 1024
 N_PIXELS = 8
@@ -69,22 +70,6 @@ def ndf_grid(resolution: int, support: float):
     x = (np.arange(resolution) + 0.5) * h - support
     X, Y = np.meshgrid(x, x)
     return X, Y, h
-
-
-def matched_lobe(ref, X, Y, h):
-    """Gaussian NDFs ``(K, R, R)`` with the mass, mean and covariance of the images ``ref
-    (K, R, R)``: a plain smooth microfacet lobe with the footprint's moments (``ndf_errors``)."""
-    w = ref * h * h
-    m = w.sum((1, 2))
-    mx = (w * X).sum((1, 2)) / m
-    my = (w * Y).sum((1, 2)) / m
-    dx, dy = X - mx[:, None, None], Y - my[:, None, None]
-    cxx = ((w * dx * dx).sum((1, 2)) / m)[:, None, None]
-    cyy = ((w * dy * dy).sum((1, 2)) / m)[:, None, None]
-    cxy = ((w * dx * dy).sum((1, 2)) / m)[:, None, None]
-    det = cxx * cyy - cxy**2
-    q = (cyy * dx * dx - 2.0 * cxy * dx * dy + cxx * dy * dy) / det
-    return m[:, None, None] * np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(det))
 
 
 def rel_l2(a, ref):
@@ -104,6 +89,7 @@ def ndf_image_errors(normal_map, surf, center, sigma_p, *, resolution: int = 256
     ``roughness``: the model's intrinsic roughness (default ``surf.intrinsic_roughness``)."""
     from prefilter.glints import pndf_image
     from prefilter.glints.brdf import FALLBACK_TRUNCATION, glint_ndf
+    from prefilter.glints.render import matched_lobe
 
     sr = surf.intrinsic_roughness if roughness is None else roughness
     X, Y, h = ndf_grid(resolution, support)
@@ -280,13 +266,6 @@ def check(shape: str, dist_name: str, kind: str, shrinks=(1.0, 0.5, 0.3), n: int
               f"{se[k, 1]:.2g}", flush=True)
 
 
-def _flip_pair(a, b, hit):
-    from prefilter.render.metrics import flip
-
-    f = flip(a, b)
-    return [float(f.mean), float(f.error_map[hit].mean())]
-
-
 def cell(shape: str, dist_name: str, kind: str, spp: int = REF_SPP, n_pixels: int = N_PIXELS,
          expectation: bool = False, shrink: float = 1.0, seed: int = 0) -> dict:
     """One point-light cell (see the module docstring); FLIP values are ``[frame, object]``."""
@@ -343,13 +322,6 @@ def cell(shape: str, dist_name: str, kind: str, spp: int = REF_SPP, n_pixels: in
 
 
 # -------------------------------------------------------------------------------------- table
-
-
-def _pair(p, obj: bool) -> str:
-    if p is None:
-        return "-"
-    txt = f"{p[0]:.3f}" + (f" ({p[1]:.3f})" if obj else "")
-    return f"**{txt}**" if max(p) > TARGET else txt
 
 
 def _cells(rows):

@@ -642,6 +642,23 @@ def measure(distances=(0.5, 2.0, 8.0), kind: str = "flakes", size: int = 128,
     return rows
 
 
+def matched_lobe(ref, X, Y, h):
+    """Gaussian NDFs ``(K, R, R)`` with the mass, mean and covariance of the NDF images ``ref
+    (K, R, R)`` (pixel centres ``X, Y (R, R)``, pitch ``h``): a plain smooth microfacet lobe with
+    the footprint's moments, the comparison of "the glint look preserved" (issue #9)."""
+    w = ref * h * h
+    m = w.sum((1, 2))
+    mx = (w * X).sum((1, 2)) / m
+    my = (w * Y).sum((1, 2)) / m
+    dx, dy = X - mx[:, None, None], Y - my[:, None, None]
+    cxx = ((w * dx * dx).sum((1, 2)) / m)[:, None, None]
+    cyy = ((w * dy * dy).sum((1, 2)) / m)[:, None, None]
+    cxy = ((w * dx * dy).sum((1, 2)) / m)[:, None, None]
+    det = cxx * cyy - cxy**2
+    q = (cyy * dx * dx - 2.0 * cxy * dx * dy + cxx * dy * dy) / det
+    return m[:, None, None] * np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(det))
+
+
 def ndf_errors(kinds=("gaussian", "brushed", "flakes", "scratches"), size: int = 64,
                sigmas=(4.0, 8.0, 16.0), n: int = 6, seed: int = 0) -> list[dict]:
     """Relative L2 error of NDF images against the direct P-NDF images (pixel averages) for
@@ -667,16 +684,7 @@ def ndf_errors(kinds=("gaussian", "brushed", "flakes", "scratches"), size: int =
             c = rng.uniform(0, size, (n, 2))
             ref = pndf_image(nm, c, sp, R, S, sr)
             got = glint_ndf(surf, c[:, None, None], sp, grid[None])
-            w = ref * h * h
-            m = w.sum((1, 2))
-            mx, my = (w * X).sum((1, 2)) / m, (w * Y).sum((1, 2)) / m
-            dx, dy = X - mx[:, None, None], Y - my[:, None, None]
-            cxx, cyy = (w * dx * dx).sum((1, 2)) / m, (w * dy * dy).sum((1, 2)) / m
-            cxy = (w * dx * dy).sum((1, 2)) / m
-            det = (cxx * cyy - cxy**2)[:, None, None]
-            q = (cyy[:, None, None] * dx * dx - 2 * cxy[:, None, None] * dx * dy
-                 + cxx[:, None, None] * dy * dy) / det
-            smooth = m[:, None, None] * np.exp(-0.5 * q) / (2 * np.pi * np.sqrt(det))
+            smooth = matched_lobe(ref, X, Y, h)
 
             def err(a):
                 d = np.linalg.norm((a - ref).reshape(n, -1), axis=1)
