@@ -897,10 +897,18 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                            "ref noise": float(np.sqrt(np.mean((a["ref2"][0] - refs_k[0])[mask]
                                                               ** 2) / 2) / mref)}
                     both = len(a["ref2"]) == len(refs_k) > 1
+
+                    def jitter_std(x):  # (jitters, H, W) -> mean per-pixel std, relative
+                        return float(np.mean(np.std(x[:, mask], axis=0)) / mref)
+
                     if both:
                         ref2 = np.asarray(a["ref2"])
                         row["flicker floor"] = float(np.mean(np.std(
                             (ref2 - refs_k)[:, mask], axis=0)) / np.sqrt(2.0) / mref)
+                    # against the normal-mapped reference too (same rays, exact per-ray normals
+                    # on the mean surface: no parallax, masking or shadowing): how well a method
+                    # tracks the ideal filtered normal map
+                    nm_k = np.asarray(a["normal-mapped"])
                     for m in [q for q in a if q not in ("mask", "ref", "ref2")]:
                         ims = np.asarray(a[m])
                         dif = (ims - refs_k)[:, mask]
@@ -910,23 +918,16 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                             np.repeat(np.where(mask, rf, 0.0)[..., None], 3, -1)).mean
                             for im, rf in zip(ims, refs_k)]))
                         if len(ims) > 1:
-                            row[f"flicker {m}"] = float(np.mean(np.std(dif, axis=0)) / mref)
+                            row[f"flicker {m}"] = jitter_std(ims - refs_k)
                             # the image's own change under the shake, without the reference
-                            row[f"own flicker {m}"] = float(
-                                np.mean(np.std(ims[:, mask], axis=0)) / mref)
+                            row[f"own flicker {m}"] = jitter_std(ims)
                             if both:
-                                row[f"flicker2 {m}"] = float(np.mean(np.std(
-                                    (ims - 0.5 * (refs_k + ref2))[:, mask], axis=0)) / mref)
-                            # against the normal-mapped reference (same rays, exact per-ray
-                            # normals on the mean surface: no parallax, masking or shadowing):
-                            # how well a method tracks the ideal filtered normal map
-                            nm_k = np.asarray(a["normal-mapped"])
-                            row[f"nm flicker {m}"] = float(
-                                np.mean(np.std((ims - nm_k)[:, mask], axis=0)) / mref)
+                                row[f"flicker2 {m}"] = jitter_std(ims - 0.5 * (refs_k + ref2))
+                            row[f"nm flicker {m}"] = jitter_std(ims - nm_k)
                     if len(refs_k) > 1:
                         # the flicker score of a perfectly steady image (the jitter-mean of the
                         # reference): what no filter can go below on this row
-                        row["flicker ref"] = float(np.mean(np.std(refs_k[:, mask], axis=0)) / mref)
+                        row["flicker ref"] = jitter_std(refs_k)
                     rows.append(row)
                     log(row)
     return rows
