@@ -194,8 +194,9 @@ if __name__ == "__main__":
                          "floor (acceptance.image_point(noise_floor=True)), ~15 min")
     ap.add_argument("--flicker-source", default=None, metavar="'SURFACE, SHAPE; ...'",
                     help="far flicker against the displaced and the normal-mapped references "
-                         "(acceptance.flicker_source_table), e.g. 'iso 0.25, sphere; iso 0.1, "
-                         "plane'; ~3 min per row at --tpp 16")
+                         "(acceptance.flicker_source_table), e.g. 'iso 0.25, sphere; flat, "
+                         "plane' (surfaces of acceptance.POINT_SURFACES, or flat: rms slope "
+                         "1e-3); ~3 min per row at --tpp 16")
     ap.add_argument("--tpp", type=float, default=16.0,
                     help="with --flicker-source: texels per pixel")
     ap.add_argument("--points", type=int, default=None)
@@ -222,10 +223,12 @@ if __name__ == "__main__":
     elif a.flicker_source:
         from prefilter.leadr.acceptance import POINT_SURFACES, flicker_source_table, image_point
 
+        # 'flat': a nearly flat height map, every method's flicker is then macro geometry only
+        known = dict(POINT_SURFACES, flat=dict(procedural="gaussian", rms_slope=1e-3))
         rows = []
         for spec in a.flicker_source.split(";"):
             surf, shape = (x.strip() for x in spec.rsplit(",", 1))
-            rows += image_point(surfaces={surf: POINT_SURFACES[surf]}, shapes=(shape,),
+            rows += image_point(surfaces={surf: known[surf]}, shapes=(shape,),
                                 texels_per_pixel=(a.tpp,), log=lambda row: None)
         print(flicker_source_table(rows))
     elif a.flicker_floor:
