@@ -77,12 +77,14 @@ def coverage(sc, size: int = 128):
 
 
 def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False,
-         converged: int = 0) -> dict:
+         converged: int = 0, stop_exposure: float | None = None) -> dict:
     """One matrix cell. ``floor``: also ``glints-direct`` with another seed, and FLIP between
     its two images: the Monte Carlo noise floor of a comparison against a 1-spp MIS / SG-sampled
     ``glints-direct`` (quad and environment lights; 0 for point lights). ``converged``: also
     FLIP between the means of ``converged`` seeds of each method (the Monte Carlo noise of both
-    averaged down, the compression error stays)."""
+    averaged down, the compression error stays). ``stop_exposure``: also HDR-FLIP with FLIP's own
+    start exposure but the top exposure capped at this many stops (``flip_capped``): on nearly
+    black frames FLIP's automatic top (+24 stops) compares tails far below the peak."""
     from prefilter.render.metrics import flip
     from prefilter.render.pipeline import render
     from prefilter.render.scene import load_scene
@@ -107,6 +109,12 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
         extra.update(converged=converged, flip_converged=float(fl3.mean),
                      flip_converged_object=float(fl3.error_map[hit].mean()))
     fl = flip(img["glints"], img["glints-direct"])
+    if stop_exposure is not None:
+        fc = flip(img["glints"], img["glints-direct"],
+                  start_exposure=fl.settings["start_exposure"],
+                  stop_exposure=min(stop_exposure, fl.settings["stop_exposure"]))
+        extra.update(stop_exposure=stop_exposure, flip_capped=float(fc.mean),
+                     flip_capped_object=float(fc.error_map[hit].mean()))
     # the sphere leaves black background pixels (zero error): also the mean over the object
     return dict(lights=lights, shape=shape, distance=dist_name, map=kind, sigma_p_median=sp,
                 flip=float(fl.mean), flip_object=float(fl.error_map[hit].mean()),
@@ -266,6 +274,8 @@ def main():
                     help="also FLIP of glints-direct seed 1 vs seed 0 (MC noise floor)")
     ap.add_argument("--converged", type=int, default=0,
                     help="also FLIP between the means of this many seeds of each method")
+    ap.add_argument("--stop-exposure", type=float, default=None,
+                    help="also FLIP with the top exposure capped at this many stops")
     ap.add_argument("--table", default=None, help="only print the table of this .jsonl")
     ap.add_argument("--reference", action="store_true",
                     help="judge against the deterministic references (quad, environment)")
@@ -294,7 +304,8 @@ def main():
                     if a.reference:
                         r = reference_cell(shape, dn, kind, lights, a.seeds, not a.no_direct)
                     else:
-                        r = cell(shape, dn, kind, lights, a.floor, a.converged)
+                        r = cell(shape, dn, kind, lights, a.floor, a.converged,
+                                 a.stop_exposure)
                     print(json.dumps(r), flush=True)
                     with out.open("a") as fh:
                         fh.write(json.dumps(r) + "\n")
