@@ -180,3 +180,26 @@ def test_invalid_inputs_raise_prefilter_error():
         pndf(flat(8), [1, 1], 1.0, [0, 0, 1])
     with pytest.raises(PrefilterError, match="support"):
         pndf_image(flat(8), [1, 1], 1.0, 8, 2.0)
+
+
+def test_ndf_truncation_keeps_the_element_tails():
+    """Pixels 4.6-5.9 element stds from the (flat map's) element: cut at 4 stds they are zero, at
+    6 they hold the exact pixel masses (the cut the renderer's direct evaluation uses)."""
+    from scipy.special import ndtr
+
+    sr, R, S = 0.01, 24, 0.12
+    h = 2 * S / R
+    e = np.linspace(-S, S, R + 1)
+    m = np.diff(ndtr(e / sr))
+    ref = np.outer(m, m) / h**2
+    ctr = e[:-1] + 0.5 * h
+    X, Y = np.meshgrid(ctr, ctr)
+    band = (np.hypot(X, Y) / sr > 4.6) & (np.hypot(X, Y) / sr < 5.9)
+    cut4 = pndf_image(flat(), [5.5, 7.25], 3.0, R, S, sr)
+    cut6 = pndf_image(flat(), [5.5, 7.25], 3.0, R, S, sr, ndf_truncation=6.0)
+    # splats cover whole pixels: the first pixel past the cut may still hold mass
+    far_x = np.abs(X) - 0.5 * h > 4.0 * sr + h
+    assert far_x[band].sum() >= 4 and np.all(cut4[band & far_x] == 0.0)
+    np.testing.assert_allclose(cut6[band], ref[band], rtol=1e-2)  # normal_cdf in the far tail
+    with pytest.raises(PrefilterError, match="ndf_truncation"):
+        pndf_image(flat(), [5.5, 7.25], 3.0, R, S, sr, ndf_truncation=2.0)

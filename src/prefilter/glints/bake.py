@@ -42,8 +42,9 @@ from prefilter._io import Checkpoints, exclusive_lock
 from prefilter._validate import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
-from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, as_support,
-                                   as_normal_map, elements, pndf_image)
+from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
+                                   as_ndf_truncation, as_normal_map, as_support, elements,
+                                   pndf_image)
 from prefilter.glints.pyramid import level_difference, next_level, plan
 from prefilter.glints.store import GlintsMap, decode, encode, pack_mask, save
 
@@ -129,7 +130,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          sigma0: float | None = None, cell: int = 32, converge: float = 0.01,
          max_levels: int | None = None, blank_tol: float = 1e-4, n_iter_max: int = 50,
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
-         levels_dir=None, max_rank: int | None = None, level_rank: str = "global") -> dict:
+         levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
+         ndf_truncation: float = TRUNCATION) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -148,6 +150,10 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     with about twice the rank of the top levels'); ``"level"`` gives every pyramid level its own
     budget of ``rank`` per byte (the same total, the same mean rank per byte at every level);
     ``"uniform"`` gives every group rank ``rank`` (``max_rank`` is then unused).
+
+    ``ndf_truncation``: stds at which each element's Gaussian in ``s`` is cut in the level-0 NDF
+    images (:func:`prefilter.glints.pndf.pndf_image`); the renderer bakes with 6, the cut of the
+    direct evaluation it is compared with.
     """
     from tqdm import tqdm
 
@@ -161,6 +167,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {B}")
     S = as_support(support)
     sr = as_intrinsic_roughness(intrinsic_roughness)
+    nt = as_ndf_truncation(ndf_truncation)
     cell = as_positive_int(cell, "cell")
     pyr = plan(H, W, stride0, sigma0, max_levels)
     if cell % pyr.stride0 or H % cell or W % cell:
@@ -181,10 +188,12 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                     stride0=pyr.stride0, sigma0=pyr.sigma0, cell=cell, converge=converge,
                     max_levels=max_levels, blank_tol=blank_tol, n_iter_max=n_iter_max, tol=tol,
                     seed=seed, layout=3, max_rank=max_rank, level_rank=level_rank)
+    if nt != TRUNCATION:  # files and checkpoints of the default cut keep their old settings
+        settings["ndf_truncation"] = nt
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
-                "max_levels")
+                "max_levels") + (("ndf_truncation",) if "ndf_truncation" in settings else ())
     lk = ck if levels_dir is None else Checkpoints(
         str(levels_dir).removesuffix(".parts"),
         dict({k: settings[k] for k in ndf_keys}, map_sha1=digest, shape=[H, W]))
@@ -200,7 +209,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         if lk.done(LEVEL0_CHUNK + ch):
             continue
         rows = slice(ch * rows_per_chunk, (ch + 1) * rows_per_chunk)
-        levels[0][rows] = pndf_image(nm, centers0[rows], pyr.sigma(0), R, S, sr, elements_=el)
+        levels[0][rows] = pndf_image(nm, centers0[rows], pyr.sigma(0), R, S, sr, elements_=el,
+                                     ndf_truncation=nt)
         levels[0].flush()
         lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
     lk.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))

@@ -97,6 +97,18 @@ def as_support(support, name: str = "support") -> float:
     return v
 
 
+def as_ndf_truncation(ndf_truncation, name: str = "ndf_truncation") -> float:
+    """A validated cut of the elements' Gaussians in ``s``, in stds, in [3, 8]."""
+    try:
+        v = float(ndf_truncation)
+    except (TypeError, ValueError) as exc:
+        raise PrefilterError(f"{name}: expected a number, got {ndf_truncation!r}") from exc
+    if not (3.0 <= v <= 8.0):
+        raise PrefilterError(f"{name}: expected a number of standard deviations in [3, 8], "
+                             f"got {v!r}")
+    return v
+
+
 # ---------------------------------------------------------------------------------------------
 # elements
 
@@ -252,8 +264,11 @@ def splat(img, px, py, mx, my, siso, w, lo, h, trunc):
 
 
 @njit_parallel
-def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
+def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, ntrunc, lo, h, lim2, out):
     """NDF images ``out (N, R, R)``: pixel averages of ``D_p`` (row = s_y, column = s_x).
+
+    ``trunc``: footprint weights cut at that many stds per axis; ``ntrunc``: each element's
+    Gaussian in ``s`` cut at that many stds (its splats and its rank-one nodes).
 
     Each element's covariance ``sr^2 I + var J J^T`` is split exactly into an isotropic part
     ``siso^2 I`` (splatted with separable erf pixel masses) and a rank-one part ``kappa^2 v v^T``
@@ -284,13 +299,13 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
                 dif = math.sqrt(0.25 * (a - d) * (a - d) + b * b)
                 nu1 = half + dif
                 nu2 = max(half - dif, 0.0)
-                reach = trunc * math.sqrt(nu1 + sr * sr)
+                reach = ntrunc * math.sqrt(nu1 + sr * sr)
                 if mx + reach < lo or mx - reach > hi or my + reach < lo or my - reach > hi:
                     continue
                 siso = math.sqrt(sr * sr + nu2)
                 kappa = math.sqrt(max(nu1 - nu2, 0.0))
                 if kappa < 1e-3 * siso:
-                    splat(img, px, py, mx, my, siso, w, lo, h, trunc)
+                    splat(img, px, py, mx, my, siso, w, lo, h, ntrunc)
                     continue
                 # principal direction of J J^T
                 if a >= d:
@@ -303,20 +318,20 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, lo, h, lim2, out):
                 if kappa <= 0.7 * siso:
                     # 3-point Gauss-Hermite along v: exact mean, variance and kurtosis
                     t = math.sqrt(3.0) * kappa
-                    splat(img, px, py, mx, my, siso, w * (2.0 / 3.0), lo, h, trunc)
-                    splat(img, px, py, mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, trunc)
-                    splat(img, px, py, mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, trunc)
+                    splat(img, px, py, mx, my, siso, w * (2.0 / 3.0), lo, h, ntrunc)
+                    splat(img, px, py, mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, ntrunc)
+                    splat(img, px, py, mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, ntrunc)
                     continue
-                n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+                n = max(9, int(math.ceil(2.0 * ntrunc * kappa / (1.5 * siso))) + 1)
                 norm = 0.0
                 for k in range(n):
-                    tk = -trunc + 2.0 * trunc * k / (n - 1)
+                    tk = -ntrunc + 2.0 * ntrunc * k / (n - 1)
                     norm += math.exp(-0.5 * tk * tk)
                 for k in range(n):
-                    tk = -trunc + 2.0 * trunc * k / (n - 1)
+                    tk = -ntrunc + 2.0 * ntrunc * k / (n - 1)
                     wk = w * math.exp(-0.5 * tk * tk) / norm
                     splat(img, px, py, mx + kappa * tk * vx, my + kappa * tk * vy, siso, wk,
-                           lo, h, trunc)
+                           lo, h, ntrunc)
         scale = 1.0 / (wsum * h * h)
         for i in range(R):
             for j in range(R):
@@ -391,7 +406,8 @@ def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_RO
 
 
 def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: float = 0.5,
-               intrinsic_roughness: float = DEFAULT_ROUGHNESS, *, elements_=None) -> np.ndarray:
+               intrinsic_roughness: float = DEFAULT_ROUGHNESS, *, elements_=None,
+               ndf_truncation: float = TRUNCATION) -> np.ndarray:
     """NDF images of Gaussian footprints: pixel averages of ``D_p`` over ``[-support, support]^2``.
 
     Yan et al. 2016 P-NDF, integrated exactly over each pixel (separable erf masses plus a
@@ -402,6 +418,9 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     normal_map : (H, W, 3) unit normals (periodic).
     center : (..., 2) footprint centres in texels; sigma_p : (...) footprint stds in texels.
     resolution : pixels per side ``R``; support : half-width of the square in ``s``.
+    ndf_truncation : each element's Gaussian in ``s`` is cut at this many stds (the footprint
+        weights at :data:`TRUNCATION`). The direct evaluation the renderer compares against
+        (``brdf``) cuts at 6: bakes for it use 6 (:data:`prefilter.glints.render.BAKE_SETTINGS`).
 
     Returns
     -------
@@ -414,12 +433,13 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     S = as_support(support)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = as_sigma_p(sigma_p)
+    nt = as_ndf_truncation(ndf_truncation)
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     out = np.zeros((c.shape[0], R, R))
     _pndf_images(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
-                 np.ascontiguousarray(sp), sr, SIGMA_H, TRUNCATION, -S, 2.0 * S / R,
+                 np.ascontiguousarray(sp), sr, SIGMA_H, TRUNCATION, nt, -S, 2.0 * S / R,
                  wide_limit2(s_el), out)
     return out.reshape(shape + (R, R))
 
