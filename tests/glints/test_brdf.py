@@ -10,8 +10,10 @@ from maps import sinusoid
 from scipy.special import erf
 
 from prefilter.errors import PrefilterError
-from prefilter.glints import bake, load, pndf, pndf_image
+from prefilter.glints import load, pndf_image
+from prefilter.glints.bake import bake
 from prefilter.glints.brdf import glint_brdf_cos, glint_ndf, surface, vcavity_g1, vcavity_g2
+from prefilter.glints.pndf import pndf
 from prefilter.glints.pyramid import resample_min_sigma
 from prefilter.glints.query import point
 from prefilter.microfacet import GGX

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from maps import sinusoid
 
-from prefilter.glints import bake, load
+from prefilter.glints import load
+from prefilter.glints.bake import bake
 from prefilter.glints.brdf import surface
 from prefilter.glints.envlight import eps_support, sample_sg, sg_eval, sg_pdf, shade_sg
 from prefilter.sphere import chi2_sphere

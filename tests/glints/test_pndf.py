@@ -5,8 +5,8 @@ import pytest
 from maps import bilinear_s, gaussian_heightfield, normals_from_s, sinusoid, sinusoid_s
 
 from prefilter.errors import PrefilterError
-from prefilter.glints import elements, hemisphere_ndf, pndf, pndf_image
-from prefilter.glints.pndf import SIGMA_H
+from prefilter.glints import elements, hemisphere_ndf, pndf_image
+from prefilter.glints.pndf import SIGMA_H, pndf
 
 
 def flat(size=32):
@@ -203,3 +203,29 @@ def test_ndf_truncation_keeps_the_element_tails():
     np.testing.assert_allclose(cut6[band], ref[band], rtol=1e-2)  # normal_cdf in the far tail
     with pytest.raises(PrefilterError, match="ndf_truncation"):
         pndf_image(flat(), [5.5, 7.25], 3.0, R, S, sr, ndf_truncation=2.0)
+
+
+@pytest.mark.parametrize("name", ["pndf", "bake"])
+def test_package_attribute_is_the_submodule(name):
+    """``prefilter.glints.pndf`` / ``.bake`` are the modules, not their namesake functions: a
+    shadowing function made ``import prefilter.glints.pndf as P; P.TRUNCATION = 6`` a no-op."""
+    import importlib
+
+    import prefilter.glints as G
+
+    module = importlib.import_module(f"prefilter.glints.{name}")
+    assert getattr(G, name) is module
+    assert name not in G.__all__
+    assert callable(getattr(module, name))
+    exec(f"import prefilter.glints.{name} as alias", ns := {})
+    assert ns["alias"] is module
+
+
+def test_calling_the_pndf_module_is_deprecated_but_forwards():
+    """The bridge for callers of the former package-level ``pndf``: same values, with a warning."""
+    import prefilter.glints as G
+
+    s = np.array([[0.0, 0.0], [0.01, -0.004]])
+    with pytest.warns(DeprecationWarning, match=r"prefilter\.glints\.pndf\.pndf"):
+        got = G.pndf(flat(), [5.5, 7.25], 3.0, s, 0.01)
+    np.testing.assert_array_equal(got, pndf(flat(), [5.5, 7.25], 3.0, s, 0.01))

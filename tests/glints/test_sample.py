@@ -8,7 +8,8 @@ from maps import sinusoid
 from scipy import stats
 
 from prefilter.errors import PrefilterError
-from prefilter.glints import bake, load
+from prefilter.glints import load
+from prefilter.glints.bake import bake
 from prefilter.glints.sample import mass, n_uniforms, ndf_pdf, sample_s, sample_wi
 from prefilter.sphere import chi2_sphere
 
@@ -141,7 +142,8 @@ def test_deterministic_and_validated(gm):
 def test_direct_sampling_chi2(gm):
     """Direct P-NDF sampling (footprints below level 0) against the exact pixel masses of
     ``pndf_image`` (independent integration), chi-square; pdf == pndf at the samples."""
-    from prefilter.glints import pndf, pndf_image
+    from prefilter.glints import pndf_image
+    from prefilter.glints.pndf import pndf
     from prefilter.glints.brdf import surface
     from prefilter.glints.sample import sample_s_direct
 
@@ -164,7 +166,7 @@ def test_direct_sampling_chi2(gm):
 def test_sample_wi_surface_routes_small_footprints(gm):
     """With the normal map, footprints below sigma0 are sampled from the direct P-NDF: the
     returned pdf is pndf(h_xy) h_z / (4 wo.h), and the compressed one elsewhere."""
-    from prefilter.glints import pndf
+    from prefilter.glints.pndf import pndf
     from prefilter.glints.brdf import surface
 
     nm = sinusoid(64, ax=0.25, ay=0.2, px=16, py=8)

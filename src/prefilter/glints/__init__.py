@@ -3,22 +3,27 @@
 Implements sections 3-4 of the glints tensor-prefiltering paper on top of Yan et al. 2016's
 position-normal distributions. See ``docs/glints.md`` for conventions and measurements.
 
-``pndf`` / ``pndf_image``: direct P-NDF; ``bake``: normal map -> compressed pyramid file;
-``load``: validated :class:`GlintsMap`; ``point`` / ``range_mean`` (alias ``query.range``):
-constant-time queries.
+``pndf.pndf`` / ``pndf_image``: direct P-NDF; ``bake.bake``: normal map -> compressed pyramid
+file; ``load``: validated :class:`GlintsMap`; ``point`` / ``range_mean`` (alias ``query.range``):
+constant-time queries. ``bake`` and ``pndf`` are the submodules here, never their namesake
+functions: a re-exported function would shadow the module, so ``import prefilter.glints.pndf as
+P`` gave the function and ``P.TRUNCATION = 6`` silently set an attribute on it.
 
 Wang tiles (sec. 5.5, not imported here): :mod:`prefilter.glints.wang` (tile synthesis, implicit
 tiling, direct P-NDF over tiles), :mod:`prefilter.glints.wang_ndf` (per-tile pyramids, queries,
 sampling) and :mod:`prefilter.glints.wang_store` (``save_tiles`` / ``load_tiles``).
 """
 
-from prefilter.glints.bake import bake
-from prefilter.glints.pndf import elements, hemisphere_ndf, pndf, pndf_image
+import types
+import warnings
+
+from prefilter.glints import bake, pndf
+from prefilter.glints.pndf import elements, hemisphere_ndf, pndf_image
 from prefilter.glints.query import block_means, point, range_mean
 from prefilter.glints.store import GlintsMap, load
 
-__all__ = ["GlintsMap", "bake", "block_means", "elements", "hemisphere_ndf", "load", "pndf",
-           "pndf_image", "point", "range_mean"]
+__all__ = ["GlintsMap", "block_means", "elements", "hemisphere_ndf", "load", "pndf_image", "point",
+           "range_mean"]
 
 # part 2 (issue 9): BRDF and sampling
 from prefilter.glints.brdf import GlintSurface, glint_brdf_cos, glint_ndf, surface  # noqa: E402
@@ -26,3 +31,20 @@ from prefilter.glints.sample import ndf_pdf, sample_s, sample_s_direct, sample_w
 
 __all__ += ["GlintSurface", "glint_brdf_cos", "glint_ndf", "ndf_pdf", "sample_s",
             "sample_s_direct", "sample_wi", "surface"]
+
+
+class _CallableModule(types.ModuleType):
+    """Deprecated bridge: ``prefilter.glints.bake(...)`` / ``pndf(...)`` were functions until
+    the package stopped re-exporting them; calling the module still forwards to its namesake
+    function (with a DeprecationWarning) until every caller uses ``bake.bake`` / ``pndf.pndf``."""
+
+    def __call__(self, *args, **kwargs):
+        name = self.__name__.rpartition(".")[2]
+        warnings.warn(f"calling the module {self.__name__} is deprecated: call "
+                      f"{self.__name__}.{name}", DeprecationWarning, stacklevel=2)
+        return getattr(self, name)(*args, **kwargs)
+
+
+for _module in (bake, pndf):
+    _module.__class__ = _CallableModule
+del _module
