@@ -3,8 +3,8 @@
 ``point`` evaluates the NDF image of any footprint at projected half vectors ``s`` (eq. 6, with
 trilinear interpolation over the footprint pyramid); ``range`` returns the mean of that image over
 an axis-aligned rectangle of ``s`` (eq. 7: products of 1D factor means from prefix sums, split at
-block boundaries). Both are densities w.r.t. ``s`` like :func:`prefilter.glints.pndf`, and cost
-O(8 * rank) (O(8 * rank * blocks spanned) for ranges) whatever the footprint size.
+block boundaries). Both are densities w.r.t. ``s`` like :func:`prefilter.glints.pndf.pndf`, and
+cost O(8 * rank) (O(8 * rank * blocks spanned) for ranges) whatever the footprint size.
 
 ``interp="resample"`` replaces the trilinear blend by Gaussian resampling of a finer level
 (:func:`prefilter.glints.pyramid.resample_weights`: the exact footprint up to aliasing, ~10-100
