@@ -131,7 +131,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          max_levels: int | None = None, blank_tol: float = 1e-4, n_iter_max: int = 50,
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
          levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
-         ndf_truncation: float = TRUNCATION) -> dict:
+         ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -151,9 +151,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     budget of ``rank`` per byte (the same total, the same mean rank per byte at every level);
     ``"uniform"`` gives every group rank ``rank`` (``max_rank`` is then unused).
 
-    ``ndf_truncation``: stds at which each element's Gaussian in ``s`` is cut in the level-0 NDF
-    images (:func:`prefilter.glints.pndf.pndf_image`); the renderer bakes with 6, the cut of the
-    direct evaluation it is compared with.
+    ``ndf_truncation`` / ``footprint_truncation``: stds at which each element's Gaussian in ``s``
+    / the footprint weights are cut in the level-0 NDF images
+    (:func:`prefilter.glints.pndf.pndf_image`); the renderer bakes with 6 / 6.
     """
     from tqdm import tqdm
 
@@ -168,6 +168,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     S = as_support(support)
     sr = as_intrinsic_roughness(intrinsic_roughness)
     nt = as_ndf_truncation(ndf_truncation)
+    ft = as_ndf_truncation(footprint_truncation, "footprint_truncation")
     cell = as_positive_int(cell, "cell")
     pyr = plan(H, W, stride0, sigma0, max_levels)
     if cell % pyr.stride0 or H % cell or W % cell:
@@ -188,12 +189,16 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                     stride0=pyr.stride0, sigma0=pyr.sigma0, cell=cell, converge=converge,
                     max_levels=max_levels, blank_tol=blank_tol, n_iter_max=n_iter_max, tol=tol,
                     seed=seed, layout=3, max_rank=max_rank, level_rank=level_rank)
-    if nt != TRUNCATION:  # files and checkpoints of the default cut keep their old settings
+    # files and checkpoints of the default cuts keep their old settings
+    if nt != TRUNCATION:
         settings["ndf_truncation"] = nt
+    if ft != TRUNCATION:
+        settings["footprint_truncation"] = ft
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
-                "max_levels") + (("ndf_truncation",) if "ndf_truncation" in settings else ())
+                "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation")
+                                      if k in settings)
     lk = ck if levels_dir is None else Checkpoints(
         str(levels_dir).removesuffix(".parts"),
         dict({k: settings[k] for k in ndf_keys}, map_sha1=digest, shape=[H, W]))
@@ -210,7 +215,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
             continue
         rows = slice(ch * rows_per_chunk, (ch + 1) * rows_per_chunk)
         levels[0][rows] = pndf_image(nm, centers0[rows], pyr.sigma(0), R, S, sr, elements_=el,
-                                     ndf_truncation=nt)
+                                     ndf_truncation=nt, footprint_truncation=ft)
         levels[0].flush()
         lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
     lk.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))

@@ -98,7 +98,7 @@ def as_support(support, name: str = "support") -> float:
 
 
 def as_ndf_truncation(ndf_truncation, name: str = "ndf_truncation") -> float:
-    """A validated cut of the elements' Gaussians in ``s``, in stds, in [3, 8]."""
+    """A validated cut of a Gaussian (elements in ``s``, footprint weights), in stds, in [3, 8]."""
     try:
         v = float(ndf_truncation)
     except (TypeError, ValueError) as exc:
@@ -407,7 +407,8 @@ def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_RO
 
 def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: float = 0.5,
                intrinsic_roughness: float = DEFAULT_ROUGHNESS, *, elements_=None,
-               ndf_truncation: float = TRUNCATION) -> np.ndarray:
+               ndf_truncation: float = TRUNCATION,
+               footprint_truncation: float = TRUNCATION) -> np.ndarray:
     """NDF images of Gaussian footprints: pixel averages of ``D_p`` over ``[-support, support]^2``.
 
     Yan et al. 2016 P-NDF, integrated exactly over each pixel (separable erf masses plus a
@@ -418,9 +419,10 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     normal_map : (H, W, 3) unit normals (periodic).
     center : (..., 2) footprint centres in texels; sigma_p : (...) footprint stds in texels.
     resolution : pixels per side ``R``; support : half-width of the square in ``s``.
-    ndf_truncation : each element's Gaussian in ``s`` is cut at this many stds (the footprint
-        weights at :data:`TRUNCATION`). The direct evaluation the renderer compares against
-        (``brdf``) cuts at 6: bakes for it use 6 (:data:`prefilter.glints.render.BAKE_SETTINGS`).
+    ndf_truncation : each element's Gaussian in ``s`` is cut at this many stds.
+    footprint_truncation : the footprint weights are cut at this many stds per axis.
+        The renderer's bakes use 6 for both (:data:`prefilter.glints.render.BAKE_SETTINGS`):
+        HDR-FLIP at the top exposures of a mostly black frame sees the tails beyond 4.
 
     Returns
     -------
@@ -434,12 +436,13 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = as_sigma_p(sigma_p)
     nt = as_ndf_truncation(ndf_truncation)
+    ft = as_ndf_truncation(footprint_truncation, "footprint_truncation")
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     out = np.zeros((c.shape[0], R, R))
     _pndf_images(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
-                 np.ascontiguousarray(sp), sr, SIGMA_H, TRUNCATION, nt, -S, 2.0 * S / R,
+                 np.ascontiguousarray(sp), sr, SIGMA_H, ft, nt, -S, 2.0 * S / R,
                  wide_limit2(s_el), out)
     return out.reshape(shape + (R, R))
 
