@@ -35,11 +35,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, prange, serial
+from prefilter._numba import njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, texel_window,
-                                   as_normal_map, elements, pndf)
+                                   as_normal_map, element_moments, elements, pndf)
+from prefilter.glints._qkernels import _rect_mass
 from prefilter.glints.query import point_flat
 from prefilter.glints.store import GlintsMap
 
@@ -454,7 +455,336 @@ def glint_brdf_cos(surf, center, sigma_p, wo, wi, f0=1.0, *,
                     wi=wi.shape[:-1], f0=f0.shape[:-1])
     h = _half(wo, wi)
     D = glint_ndf(surf, center, sigma_p, h[..., :2], fallback_truncation=fallback_truncation)
+    return _brdf_cos_from_ndf(wo, wi, h, D, f0)
+
+
+def _brdf_cos_from_ndf(wo, wi, h, D, f0):
+    """:func:`glint_brdf_cos` given its unit ``wo``, ``wi``, half vector ``h`` (..., 3), NDF
+    value ``D (...)`` and ``f0 (..., C)`` (shared with the quad lights' fused MIS)."""
     G = vcavity_g2(wo, wi, h)
     ok = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0) & (h[..., 2] > 0.0)
     val = np.where(ok, D * G / (4.0 * np.where(ok, wo[..., 2], 1.0)), 0.0)
     return val[..., None] * schlick(f0, np.sum(wi * h, axis=-1))
+
+
+# ------------------------------------------------------- several points per footprint (quad MIS)
+# The quad lights' MIS (prefilter.glints.render.quad_mis) needs, per footprint, the NDF at its
+# 2 QUAD_MIS half vectors, the direct sampler's QUAD_MIS draws and their exact densities. The
+# kernels below evaluate all points of a footprint in one walk over its texels, with the
+# arithmetic of the single-point kernels per point (the same values to rounding), so that each
+# texel's element is loaded, and its covariance formed, once instead of once per point.
+
+
+@njit_parallel
+def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, out):
+    """:func:`_direct_rows` at ``K`` points per footprint: ``qx, qy, out (N, K)``. A row's
+    covariances, determinants and mean shifts are formed once and shared by the ``K`` points."""
+    H = SX.shape[0]
+    W = SX.shape[1] // 2
+    K = qx.shape[1]
+    sh2 = sh * sh
+    sr2 = sr * sr
+    for q in prange(out.shape[0]):
+        sp2 = sp[q] * sp[q]
+        tot2 = sp2 + sh2
+        f = sh2 / tot2
+        var = sp2 * sh2 / tot2
+        rad = trunc * math.sqrt(tot2)
+        x0, x1 = texel_window(cx[q], rad)
+        y0, y1 = texel_window(cy[q], rad)
+        nx = x1 - x0 + 1
+        xs = x0 % W
+        wx = np.empty(nx)
+        fdx = np.empty(nx)
+        quad = np.empty(nx)
+        det = np.empty(nx)
+        ca = np.empty(nx)
+        cb = np.empty(nx)
+        cd = np.empty(nx)
+        ox = np.empty(nx)
+        oy = np.empty(nx)
+        acc = np.zeros(K)
+        inv = 1.0 / (2.0 * tot2)
+        sx = 0.0
+        for i in range(nx):
+            dx = cx[q] - (x0 + i + 0.5)
+            fdx[i] = f * dx
+            wx[i] = math.exp(-dx * dx * inv)
+            sx += wx[i]
+        sy = 0.0
+        for y in range(y0, y1 + 1):
+            dy = cy[q] - (y + 0.5)
+            wy = math.exp(-dy * dy * inv)
+            sy += wy
+            r = y % H
+            fdy = f * dy
+            sxr = SX[r, xs:xs + nx]
+            syr = SY[r, xs:xs + nx]
+            a0 = J00[r, xs:xs + nx]
+            a1 = J01[r, xs:xs + nx]
+            b0 = J10[r, xs:xs + nx]
+            b1 = J11[r, xs:xs + nx]
+            for i in range(nx):
+                j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
+                ox[i] = j00 * fdx[i] + j01 * fdy
+                oy[i] = j10 * fdx[i] + j11 * fdy
+                a = sr2 + var * (j00 * j00 + j01 * j01)
+                d = sr2 + var * (j10 * j10 + j11 * j11)
+                b = var * (j00 * j10 + j01 * j11)
+                ca[i] = a
+                cb[i] = b
+                cd[i] = d
+                det[i] = a * d - b * b
+            for k in range(K):
+                qxk = qx[q, k]
+                qyk = qy[q, k]
+                for i in range(nx):
+                    ex = qxk - sxr[i] - ox[i]
+                    ey = qyk - syr[i] - oy[i]
+                    quad[i] = cd[i] * ex * ex - 2.0 * cb[i] * ex * ey + ca[i] * ey * ey
+                racc = 0.0
+                for i in range(nx):
+                    if quad[i] < 36.0 * det[i]:
+                        racc += wx[i] * math.exp(-0.5 * quad[i] / det[i]) / math.sqrt(det[i])
+                acc[k] += wy * racc
+        for k in range(K):
+            out[q, k] = acc[k] / (2.0 * math.pi * sx * sy)
+
+
+def direct_ndf_k(surf, center, sigma_p, s, *, truncation: float = FALLBACK_TRUNCATION):
+    """:func:`direct_ndf` at ``K`` points per footprint: ``center (N, 2)``, ``sigma_p (N,)``,
+    ``s (N, K, 2)`` -> ``(N, K)``, each footprint's texels walked once for its ``K`` points
+    (footprints wider than the map: :func:`direct_ndf` point by point)."""
+    if surf.elements_ is None:
+        raise PrefilterError("surf: the direct P-NDF needs the normal map "
+                             "(surface(gm, normal_map))")
+    if not (1.0 <= float(truncation) <= 8.0):
+        raise PrefilterError(f"truncation: expected a number of stds in [1, 8], got {truncation}")
+    s_el, J = surf.elements_
+    cc = np.ascontiguousarray
+    c = cc(center, dtype=np.float64)
+    q = np.asarray(s, dtype=np.float64)
+    N, K = q.shape[:2]
+    sp = cc(np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,)))
+    out = np.empty((N, K))
+    W = s_el.shape[1]
+    wide = 2.0 * float(truncation) * np.sqrt(sp * sp + SIGMA_H * SIGMA_H) + 2.0 > W
+    k = ~wide
+    if np.any(k):
+        o = np.empty((int(k.sum()), K))
+        _serial_below(_direct_rows_k, o.shape[0])(
+            *_element_planes(s_el, J), cc(c[k, 0]), cc(c[k, 1]), sp[k], cc(q[k, :, 0]),
+            cc(q[k, :, 1]), surf.intrinsic_roughness, SIGMA_H, float(truncation), o)
+        out[k] = o
+    if np.any(wide):
+        n = int(wide.sum())
+        out[wide] = direct_ndf(surf, np.repeat(c[wide], K, 0), np.repeat(sp[wide], K),
+                               q[wide].reshape(n * K, 2), truncation=truncation).reshape(n, K)
+    return out
+
+
+@njit_parallel
+def _direct_sample_k(s_el, J, cx, cy, sp, sr, sh, trunc, lim2, u, out_s, out_pdf):
+    """``K`` draws per footprint from the direct P-NDF's element mixture (the arithmetic of
+    :func:`prefilter.glints.sample._direct_kernel`, uniforms ``u (N, K, 3)``) and their exact
+    densities (that of :func:`prefilter.glints.pndf.pndf`'s kernel, cut at ``quad < 8 trunc^2``):
+    the footprint weights are computed once and serve the element choices and the densities.
+    Footprints at the sigma_p -> inf limit (``tot2 >= lim2``) are left to the caller."""
+    H, W = s_el.shape[0], s_el.shape[1]
+    K = u.shape[1]
+    sh2 = sh * sh
+    cut = 2.0 * trunc * trunc * 4.0
+    for q in prange(out_pdf.shape[0]):
+        sp2 = sp[q] * sp[q]
+        tot2 = sp2 + sh2
+        if tot2 >= lim2:
+            continue
+        f = sh2 / tot2
+        var = sp2 * sh2 / tot2
+        rad = trunc * math.sqrt(tot2)
+        x0, x1 = texel_window(cx[q], rad)
+        y0, y1 = texel_window(cy[q], rad)
+        nx = x1 - x0 + 1
+        wb = np.empty(nx * (y1 - y0 + 1))
+        wsum = 0.0
+        n = 0
+        for y in range(y0, y1 + 1):
+            dy = cy[q] - (y + 0.5)
+            for x in range(x0, x1 + 1):
+                dx = cx[q] - (x + 0.5)
+                wb[n] = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+                wsum += wb[n]
+                n += 1
+        for k in range(K):
+            t = u[q, k, 0] * wsum
+            run = 0.0
+            n = 0
+            bx, by = x1, y1
+            done = False
+            for y in range(y0, y1 + 1):
+                for x in range(x0, x1 + 1):
+                    run += wb[n]
+                    n += 1
+                    if t < run:
+                        bx, by = x, y
+                        done = True
+                        break
+                if done:
+                    break
+            dx = cx[q] - (bx + 0.5)
+            dy = cy[q] - (by + 0.5)
+            mx, my, a, b, d = element_moments(s_el, J, by % H, bx % W, dx, dy, f, var)
+            a += sr * sr
+            d += sr * sr
+            l11 = math.sqrt(a)
+            l21 = b / l11
+            l22 = math.sqrt(max(d - l21 * l21, 0.0))
+            rr = math.sqrt(-2.0 * math.log(1.0 - u[q, k, 1]))
+            z1 = rr * math.cos(2.0 * math.pi * u[q, k, 2])
+            z2 = rr * math.sin(2.0 * math.pi * u[q, k, 2])
+            out_s[q, k, 0] = mx + l11 * z1
+            out_s[q, k, 1] = my + l21 * z1 + l22 * z2
+        acc = np.zeros(K)
+        n = 0
+        for y in range(y0, y1 + 1):
+            dy = cy[q] - (y + 0.5)
+            r = y % H
+            for x in range(x0, x1 + 1):
+                dx = cx[q] - (x + 0.5)
+                w = wb[n]
+                n += 1
+                mx, my, a, b, d = element_moments(s_el, J, r, x % W, dx, dy, f, var)
+                a += sr * sr
+                d += sr * sr
+                det = a * d - b * b
+                for k in range(K):
+                    ex = out_s[q, k, 0] - mx
+                    ey = out_s[q, k, 1] - my
+                    quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
+                    if quad < cut:
+                        acc[k] += w * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+        for k in range(K):
+            out_pdf[q, k] = acc[k] / wsum
+
+
+def sample_s_direct_k(surf, center, sigma_p, u):
+    """:func:`prefilter.glints.sample.sample_s_direct` for ``K`` draws per footprint:
+    ``center (N, 2)``, ``sigma_p (N,)``, uniforms ``u (N, K, 3)`` -> ``s (N, K, 2)``,
+    ``pdf (N, K)`` (the same draws and densities to rounding, in one walk per footprint)."""
+    from prefilter.glints.pndf import TRUNCATION, wide_limit2
+    from prefilter.glints.sample import sample_s_direct
+
+    if surf.elements_ is None:
+        raise PrefilterError("surf: direct sampling needs the normal map (surface(gm, normal_map))")
+    cc = np.ascontiguousarray
+    c = cc(center, dtype=np.float64)
+    uu = cc(u, dtype=np.float64)
+    N, K = uu.shape[:2]
+    sp = cc(np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,)))
+    s_el, J = surf.elements_
+    lim2 = wide_limit2(s_el)
+    s = np.zeros((N, K, 2))
+    pdf = np.zeros((N, K))
+    _serial_below(_direct_sample_k, N)(s_el, J, cc(c[:, 0]), cc(c[:, 1]), sp,
+                                       surf.intrinsic_roughness, SIGMA_H, TRUNCATION, lim2, uu,
+                                       s, pdf)
+    wide = sp * sp + SIGMA_H * SIGMA_H >= lim2
+    if np.any(wide):  # the sigma_p -> inf limit of pndf: the single-point functions
+        n = int(wide.sum())
+        sw, pw = sample_s_direct(surf, np.repeat(c[wide], K, 0), np.repeat(sp[wide], K),
+                                 u=uu[wide].reshape(n * K, 3))
+        s[wide], pdf[wide] = sw.reshape(n, K, 2), pw.reshape(n, K)
+    return s, pdf
+
+
+@njit_serial
+def _choose_k(masses, n, u):
+    """Index in ``[0, n)`` with probability ``masses[k] / sum`` (-1 if all are zero) and that
+    probability: :func:`prefilter.glints.sample._choose`'s arithmetic."""
+    tot = 0.0
+    for k in range(n):
+        tot += masses[k]
+    if not tot > 0.0:
+        return -1, 0.0
+    t = u * tot
+    last = -1
+    run = 0.0
+    for k in range(n):
+        if masses[k] > 0.0:
+            last = k
+            run += masses[k]
+            if t < run:
+                return k, masses[k] / tot
+    return last, masses[last] / tot
+
+
+@njit_parallel
+def _sample_masses_k(A, Bp, C, block_index, image_cell, granks, idx, wts, bm, u, lo, h, out_s,
+                     out_pdf):
+    """:func:`prefilter.glints.sample._sample_kernel` for ``K`` draws per footprint (uniforms
+    ``u (N, K, k)``) with the footprint's block masses ``bm (N, nb * nb)`` given: they depend on
+    the footprint only, and were the kernel's cost (every block's mass for every draw)."""
+    B = A.shape[1] - 1
+    nb = block_index.shape[1]
+    for q in prange(out_pdf.shape[0]):
+        cm = np.empty(4)
+        ci0 = np.empty(4, np.int64)
+        ci1 = np.empty(4, np.int64)
+        cj0 = np.empty(4, np.int64)
+        cj1 = np.empty(4, np.int64)
+        for kk in range(u.shape[1]):
+            kb, p = _choose_k(bm[q], nb * nb, u[q, kk, 0])
+            if kb < 0:
+                out_s[q, kk, 0] = 0.0
+                out_s[q, kk, 1] = 0.0
+                out_pdf[q, kk] = 0.0
+                continue
+            bi, bj = kb // nb, kb % nb
+            i0, i1, j0, j1 = 0, B, 0, B
+            lev = 1
+            while i1 - i0 > 1 or j1 - j0 > 1:
+                im = (i0 + i1) // 2 if i1 - i0 > 1 else i1
+                jm = (j0 + j1) // 2 if j1 - j0 > 1 else j1
+                n = 0
+                for a0, a1 in ((i0, im), (im, i1)):
+                    if a1 <= a0:
+                        continue
+                    for b0, b1 in ((j0, jm), (jm, j1)):
+                        if b1 <= b0:
+                            continue
+                        ci0[n], ci1[n], cj0[n], cj1[n] = a0, a1, b0, b1
+                        cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts,
+                                           q, bi, bj, a0, a1, b0, b1)
+                        n += 1
+                k, pk = _choose_k(cm, n, u[q, kk, lev])
+                p *= pk
+                i0, i1, j0, j1 = ci0[k], ci1[k], cj0[k], cj1[k]
+                lev += 1
+            out_s[q, kk, 0] = lo + (bj * B + j0 + u[q, kk, lev]) * h
+            out_s[q, kk, 1] = lo + (bi * B + i0 + u[q, kk, lev + 1]) * h
+            out_pdf[q, kk] = p / (h * h)
+
+
+def sample_s_k(gm: GlintsMap, center, sigma_p, u):
+    """:func:`prefilter.glints.sample.sample_s` for ``K`` draws per footprint: ``center (N, 2)``,
+    ``sigma_p (N,)``, uniforms ``u (N, K, n_uniforms(gm))`` -> ``s (N, K, 2)``, ``pdf (N, K)``
+    and the footprints' NDF masses ``M (N,)`` (:func:`prefilter.glints.sample.mass`), the block
+    masses computed once per footprint (the same draws, densities and masses to rounding)."""
+    from prefilter.glints.pyramid import interp_weights
+    from prefilter.glints.query import kernel_args
+    from prefilter.glints.sample import block_masses
+
+    cc = np.ascontiguousarray
+    c = cc(center, dtype=np.float64)
+    uu = cc(u, dtype=np.float64)
+    N, K = uu.shape[:2]
+    sp = cc(np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,)))
+    bm = block_masses(gm, c, sp)
+    h = 2.0 * gm.support / gm.resolution
+    M = bm.sum(axis=(-2, -1)) * h * h
+    idx, w = interp_weights(gm.pyramid, c, sp)
+    s = np.empty((N, K, 2))
+    pdf = np.empty((N, K))
+    _serial_below(_sample_masses_k, N)(*kernel_args(gm)[0], cc(idx), cc(w),
+                                       cc(bm.reshape(N, -1)), uu, -gm.support, h, s, pdf)
+    return s, pdf, M

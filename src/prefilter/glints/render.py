@@ -304,6 +304,158 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     Parameters
     ----------
     position : (N, 3) world shading points; frame : (t, b, n) each (N, 3) (world);
+    light : QuadLight; u : (N, n * 11) uniforms in ``[0, 1)``; fallback_truncation: see
+    :func:`prefilter.glints.brdf.glint_ndf` (the BRDF's direct P-NDF below the finest level).
+
+    Returns
+    -------
+    (N, 3) the unbiased estimate of ``int_quad f cos L dwi``: that of :func:`quad_mis_unfused`
+    (to rounding), with each footprint's NDF evaluated once per direction for the BRDF and the
+    density of a light sample, at all ``2 n`` half vectors in one walk over its texels, its
+    ``n`` draws taken together, and its block masses computed once (not per draw and density).
+    """
+    from prefilter._validate import as_directions, as_float_array
+    from prefilter.glints.brdf import _brdf_cos_from_ndf, _half
+    from prefilter.glints.sample import half_from_s
+    from prefilter.render.lights import quad_light_pdf, quad_light_sample
+
+    t, b, n = frame
+    N = len(wo)
+    P = u.shape[1] // _U_PAIR
+    L = np.asarray(light.radiance, dtype=np.float64)
+    if P == 0:
+        return np.zeros((N, 3)) * L
+    f0 = np.atleast_1d(as_float_array(f0, "f0"))
+    wo = as_directions(wo, "wo")
+    c = np.asarray(center, dtype=np.float64)
+    sp = np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,))
+    # light samples, their half vectors (as glint_brdf_cos and pdf_wi form them)
+    wl, pl, hl = [], [], []
+    for j in range(P):
+        w, p = quad_light_sample(light, position, u[:, j * _U_PAIR:j * _U_PAIR + 2])
+        wl.append(as_directions(_local(w, t, b, n), "wi"))
+        pl.append(p)
+        hl.append(_half(wo, wl[-1]))
+    # BRDF samples: sample_wi's draws, then its reflection and density; glint_brdf_cos's wi
+    s, ps, M = _mis_draws(surf, c, sp, np.stack(
+        [u[:, j * _U_PAIR + 2:(j + 1) * _U_PAIR] for j in range(P)], 1))
+    wb, pb2, pl2, hb = [], [], [], []
+    for j in range(P):
+        m = half_from_s(s[:, j])
+        wom = np.sum(wo * m, axis=-1)
+        ok = (ps[:, j] > 0) & (np.sum(s[:, j] * s[:, j], axis=-1) < 1.0) & (wom > 0)
+        w = 2.0 * wom[..., None] * m - wo
+        pb2.append(np.where(ok, ps[:, j] * m[..., 2] / (4.0 * np.where(ok, wom, 1.0)), 0.0))
+        ok = pb2[-1] > 0
+        w = np.where(ok[:, None], w, np.array([0.0, 0.0, 1.0]))
+        pl2.append(quad_light_pdf(light, position, _world(w, t, b, n)))
+        wb.append(as_directions(w, "wi"))
+        hb.append(_half(wo, wb[-1]))
+    D = _mis_ndf(surf, c, sp, np.stack([h[:, :2] for h in hl + hb], 1), fallback_truncation)
+    pb = _mis_light_pdf(surf, c, sp, wo, np.stack(hl, 1), D[:, :P], M, fallback_truncation)
+    out = np.zeros((N, 3))
+    for j in range(P):
+        fl = _brdf_cos_from_ndf(wo, wl[j], hl[j], D[:, j], f0)
+        w = np.where(pl[j] > 0, 1.0 / np.where(pl[j] > 0, pl[j] + pb[:, j], 1.0), 0.0)
+        out += fl * w[:, None]
+        fb = _brdf_cos_from_ndf(wo, wb[j], hb[j], D[:, P + j], f0)
+        ok = pb2[j] > 0
+        w2 = np.where(ok & (pl2[j] > 0), 1.0 / np.where(ok, pb2[j] + pl2[j], 1.0), 0.0)
+        out += fb * w2[:, None]
+    return out * L / P
+
+
+def _mis_small(surf, sp):
+    """Footprints that :func:`prefilter.glints.sample.sample_wi` and ``pdf_wi`` give to the
+    direct P-NDF (below the finest level, with the normal map)."""
+    return sp < surf.sigma0 if surf.normal_map is not None else np.zeros(sp.shape, bool)
+
+
+def _mis_draws(surf, c, sp, u):
+    """``sample_wi``'s projected half vectors ``s (N, K, 2)`` and densities ``(N, K)`` for the
+    uniforms ``u (N, K, 9)``, and the compressed footprints' NDF masses ``M (N,)`` (NaN for the
+    direct ones)."""
+    from prefilter.glints.brdf import sample_s_direct_k, sample_s_k
+    from prefilter.glints.sample import n_uniforms
+
+    N, K = u.shape[:2]
+    s = np.zeros((N, K, 2))
+    ps = np.zeros((N, K))
+    M = np.full(N, np.nan)
+    small = _mis_small(surf, sp)
+    if np.any(small):
+        s[small], ps[small] = sample_s_direct_k(surf, c[small], sp[small], u[small][:, :, :3])
+    if not np.all(small):
+        if surf.gm is None:
+            raise PrefilterError("gm: footprints at or above sigma0 need a compressed map")
+        k = ~small
+        s[k], ps[k], M[k] = sample_s_k(surf.gm, c[k], sp[k], u[k][:, :, :n_uniforms(surf.gm)])
+    return s, ps, M
+
+
+def _mis_ndf(surf, c, sp, q, fallback_truncation):
+    """``glint_ndf`` at ``q (N, K, 2)`` -> ``(N, K)``, the ``K`` points of a footprint together."""
+    from prefilter.glints.brdf import direct_ndf_k
+    from prefilter.glints.pndf import pndf
+    from prefilter.glints.query import point_flat
+
+    N, K = q.shape[:2]
+    out = np.zeros((N, K))
+    direct = sp < surf.sigma_min if surf.normal_map is not None else np.zeros(sp.shape, bool)
+    if np.any(direct) and fallback_truncation is not None:
+        out[direct] = direct_ndf_k(surf, c[direct], sp[direct], q[direct],
+                                   truncation=fallback_truncation)
+    elif np.any(direct):
+        n = int(direct.sum())
+        out[direct] = pndf(surf.normal_map, np.repeat(c[direct], K, 0),
+                           np.repeat(sp[direct], K), q[direct].reshape(n * K, 2),
+                           surf.intrinsic_roughness, elements_=surf.elements_).reshape(n, K)
+    if surf.gm is not None and not np.all(direct):
+        k = ~direct
+        n = int(k.sum())
+        out[k] = point_flat(surf.gm, np.repeat(c[k], K, 0), np.repeat(sp[k], K),
+                            q[k].reshape(n * K, 2), interp=surf.interp,
+                            bilinear=surf.bilinear).reshape(n, K)
+    return out
+
+
+def _mis_light_pdf(surf, c, sp, wo, h, D, M, fallback_truncation):
+    """``pdf_wi`` of light samples with half vectors ``h (N, K, 3)``: the direct P-NDF at 4 stds
+    below the finest level (``D``, the BRDF's values, when it was evaluated so), else the
+    compressed NDF over its mass ``M``."""
+    from prefilter.glints.brdf import direct_ndf_k
+    from prefilter.glints.pndf import TRUNCATION
+    from prefilter.glints.query import point
+
+    N, K = h.shape[:2]
+    ps = np.zeros((N, K))
+    small = _mis_small(surf, sp)
+    if np.any(small):
+        if fallback_truncation == TRUNCATION and np.all(sp[small] < surf.sigma_min):
+            ps[small] = D[small]
+        else:
+            ps[small] = direct_ndf_k(surf, c[small], sp[small], h[small][..., :2],
+                                     truncation=TRUNCATION)
+    k = ~small
+    if np.any(k):
+        n = int(k.sum())
+        v = point(surf.gm, np.repeat(c[k], K, 0), np.repeat(sp[k], K),
+                  h[k][..., :2].reshape(n * K, 2)).reshape(n, K)
+        Mk = M[k][:, None]
+        ps[k] = np.where(Mk > 0, v / np.where(Mk > 0, Mk, 1.0), 0.0)
+    woh = np.sum(wo[:, None] * h, -1)
+    ok = (h[..., 2] > 0) & (woh > 0) & (wo[:, None, 2] > 0)
+    return np.where(ok, ps * h[..., 2] / (4.0 * np.where(ok, woh, 1.0)), 0.0)
+
+
+def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u, *,
+             fallback_truncation: float | None = None):
+    """:func:`quad_mis` spelled out with the per-direction functions (the NDF walked once per
+    BRDF value, density and draw): the same estimate to rounding, slower; its reference.
+
+    Parameters
+    ----------
+    position : (N, 3) world shading points; frame : (t, b, n) each (N, 3) (world);
     light : QuadLight; u : (N, n * 9) uniforms in ``[0, 1)``; fallback_truncation: see
     :func:`prefilter.glints.brdf.glint_ndf` (the BRDF's direct P-NDF below the finest level).
 
