@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 from maps import sinusoid
 
+from prefilter.errors import PrefilterError
 from prefilter.glints import load
 from prefilter.glints.bake import bake
 from prefilter.glints.brdf import surface
-from prefilter.glints.envlight import eps_support, sample_sg, sg_eval, sg_pdf, shade_sg
+from prefilter.glints.envlight import as_lobes, eps_support, sample_sg, sg_eval, sg_pdf, shade_sg
 from prefilter.sphere import chi2_sphere
 
 MU = np.array([[5.0, 5, 5], [2, 1, 0.5]])
@@ -26,6 +27,18 @@ def test_eps_support_closed_form():
     th = eps_support(np.ones((3, 3)), lam, 0.1)
     np.testing.assert_allclose(np.exp(lam * (np.cos(th) - 1)), 0.1, rtol=1e-12)
     assert eps_support(1.0, 1.0, 1e-3) == pytest.approx(math.pi)  # never drops that low
+
+
+def test_as_lobes_normalises_axes_and_rejects_bad_lobes():
+    mu, lam, p = as_lobes([[1, 1, 1], [0, 0, 0]], [2.0, 3.0], [[0, 0, 2], [3, 4, 0]])
+    np.testing.assert_allclose(p, [[0, 0, 1], [0.6, 0.8, 0]], rtol=1e-15)
+    assert mu.dtype == lam.dtype == np.float64 and lam.shape == (2,)
+    per_sample = as_lobes(np.ones((2, 3)), [1.0, 1.0], np.ones((5, 2, 3)))[2]
+    np.testing.assert_allclose(np.linalg.norm(per_sample, axis=-1), 1.0, rtol=1e-15)
+    with pytest.raises(PrefilterError, match="mu, lam"):
+        as_lobes([[1, 1, 1]], [0.0], [[0, 0, 1]])
+    with pytest.raises(PrefilterError, match="lam: expected K lobes"):
+        as_lobes(np.ones((2, 3)), [1.0], np.ones((2, 3)))
 
 
 def test_sample_sg_chi2():

@@ -267,6 +267,13 @@ def test_query_input_errors(baked):
         range_mean(gm, [1, 1], 4.0, [0.1, 0.1], [0.0, 0.2])
     with pytest.raises(PrefilterError, match="gm"):
         point(None, [1, 1], 4.0, [0, 0])
+    with pytest.raises(PrefilterError, match="interp"):
+        point(gm, [1, 1], 4.0, [0, 0], interp="cubic")
+    from prefilter.glints.query import check_interp
+
+    check_interp("resample")
+    with pytest.raises(PrefilterError, match=r"interp: expected one of"):
+        check_interp("bilinear")
 
 
 def test_cli_bake(tmp_path):
@@ -320,13 +327,13 @@ def test_queries_are_the_stored_codes_evaluated_in_float64(baked, prefetch):
     random fractional rectangles of single images == the float64 images rebuilt from the codes
     (1e-6 relative: the float32 per-component scale), with or without the prefetch stage."""
     from prefilter.glints import _qkernels as qk
-    from prefilter.glints.query import _args
+    from prefilter.glints.query import kernel_args
 
     _, _, _, gm = baked
     rng = np.random.default_rng(7)
     images = rng.choice(gm.pyramid.n_images, 6, replace=False)
     ref = _images_from_codes(gm, images)
-    arrs, lo, h = _args(gm)
+    arrs, lo, h = kernel_args(gm)
     n_pf = gm.pyramid.n_images if prefetch else 0
     s, _ = pixel_grid()
     n = R * R

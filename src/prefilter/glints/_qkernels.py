@@ -1,7 +1,8 @@
 """Numba kernels of the compressed queries (kept apart from ``query.py``, whose public ``range``
 would shadow the builtin inside compiled code).
 
-Every kernel takes the packed arrays of :func:`prefilter.glints.query._args`, in this order:
+Every kernel takes the packed arrays of :func:`prefilter.glints.query.kernel_args`, in this
+order:
 
 * ``Pa``, ``Pb`` ``(M, B + 1)`` (``M``: sum of the groups' ranks): the 1D prefix sums of the row /
   column factors, each group's block of ``r_g (B + 1)`` values rank-innermost (flat index

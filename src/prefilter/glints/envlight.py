@@ -30,7 +30,9 @@ from prefilter.glints.brdf import _as_surface, glint_ndf, schlick, vcavity_g2
 from prefilter.glints.query import range_weighted, weights
 
 
-def _lobes(mu, lam, p):
+def as_lobes(mu, lam, p):
+    """Validated SG lobes: amplitudes ``mu (K, 3)`` >= 0, sharpness ``lam (K,)`` > 0 and axes
+    ``p (K, 3)`` or per-sample ``(N, K, 3)``, returned as float64 arrays with ``p`` normalised."""
     mu = as_float_array(mu, "mu", ndim_min=2, last_dim=3)
     lam = as_float_array(lam, "lam", ndim_min=1)
     p = as_float_array(p, "p", ndim_min=2, last_dim=3)
@@ -52,7 +54,7 @@ def _dots(w, p):
 
 def sg_eval(w, mu, lam, p) -> np.ndarray:
     """Radiance ``(..., 3)`` of the SG environment at directions ``w (..., 3)``."""
-    return _sg_eval(w, *_lobes(mu, lam, p))
+    return _sg_eval(w, *as_lobes(mu, lam, p))
 
 
 def _sg_eval(w, mu, lam, p):
@@ -83,7 +85,7 @@ def _frame(p):
 def sample_sg(mu, lam, p, u) -> tuple[np.ndarray, np.ndarray]:
     """Directions ``(N, 3)`` from the lobe mixture (lobe chosen by luminance energy) and their
     mixture pdf ``(N,)``; ``u (N, 3)`` uniforms."""
-    return _sample_sg(*_lobes(mu, lam, p), u)
+    return _sample_sg(*as_lobes(mu, lam, p), u)
 
 
 def _lobe_probabilities(wgt) -> np.ndarray:
@@ -112,7 +114,7 @@ def _sample_sg(mu, lam, p, u):
 
 def sg_pdf(w, mu, lam, p) -> np.ndarray:
     """Mixture pdf of :func:`sample_sg` at ``w (..., 3)``."""
-    return _sg_pdf(w, *_lobes(mu, lam, p))
+    return _sg_pdf(w, *as_lobes(mu, lam, p))
 
 
 def _sg_pdf(w, mu, lam, p):
@@ -136,7 +138,7 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
     ``fallback_truncation``: that of :func:`glint_ndf`'s direct P-NDF (the render's ``glints``
     passes 4 stds: the same values to 3e-8, the fast row kernel)."""
     surf = _as_surface(surf)
-    mu, lam, p = _lobes(mu, lam, p)
+    mu, lam, p = as_lobes(mu, lam, p)
     c = as_float_array(center, "center", ndim_min=2, last_dim=2)
     sp = np.broadcast_to(as_float_array(sigma_p, "sigma_p"), c.shape[:1])
     wo = np.broadcast_to(as_float_array(wo, "wo", ndim_min=1, last_dim=3), c.shape[:1] + (3,))

@@ -44,9 +44,16 @@ def _check_map(gm):
                              f"{type(gm).__name__}")
 
 
-def _check_interp(interp):
+def check_interp(interp: str) -> None:
+    """Validate an NDF interpolation mode across the pyramid: one of :data:`INTERP`
+    (``"trilinear"``: the paper's 8-image blend, ``"resample"``: Gaussian resampling of a finer
+    level). Raises :class:`~prefilter.errors.PrefilterError` otherwise."""
     if interp not in INTERP:
         raise PrefilterError(f"interp: expected one of {INTERP}, got {interp!r}")
+
+
+#: Former private name, still imported by :mod:`prefilter.glints.brdf`.
+_check_interp = check_interp
 
 
 def weights(gm: GlintsMap, center, sigma_p, *, interp: str = "trilinear"):
@@ -56,7 +63,7 @@ def weights(gm: GlintsMap, center, sigma_p, *, interp: str = "trilinear"):
     ``interp="resample"`` applied (elsewhere the trilinear weights: footprints below
     :func:`prefilter.glints.pyramid.resample_min_sigma` or at/above the top level)."""
     _check_map(gm)
-    _check_interp(interp)
+    check_interp(interp)
     c = as_float_array(center, "center", ndim_min=2, last_dim=2)
     sp = as_sigma_p(sigma_p)
     if c.ndim != 2 or sp.shape != c.shape[:1]:
@@ -73,7 +80,7 @@ def weights(gm: GlintsMap, center, sigma_p, *, interp: str = "trilinear"):
 def point_weighted(gm: GlintsMap, idx, w, s, *, bilinear: bool = False) -> np.ndarray:
     """NDF values ``(N,)`` at ``s (N, 2)`` of the blends ``(idx, w)`` of :func:`weights`;
     ``bilinear``: interpolated between the NDF pixel centres instead of the pixel's value."""
-    arrs, lo, h = _args(gm)
+    arrs, lo, h = kernel_args(gm)
     s = np.asarray(s, dtype=np.float64)
     out = np.empty(idx.shape[0])
     sx, sy = np.ascontiguousarray(s[:, 0]), np.ascontiguousarray(s[:, 1])
@@ -91,7 +98,7 @@ def range_weighted(gm: GlintsMap, idx, w, s_min, s_max) -> np.ndarray:
     hi_ = np.asarray(s_max, dtype=np.float64)
     if np.any(hi_ <= lo_):
         raise PrefilterError("s_max: expected s_max > s_min in both coordinates")
-    arrs, lo, h = _args(gm)
+    arrs, lo, h = kernel_args(gm)
     out = np.empty(idx.shape[0])
     c = np.ascontiguousarray
     serial(range_kernel, _n(idx))(*arrs, idx, w, c(lo_[:, 0]), c(lo_[:, 1]), c(hi_[:, 0]),
@@ -105,7 +112,7 @@ def point_flat(gm: GlintsMap, center, sigma_p, s, *, interp: str = "trilinear",
     renderer's batch call). Resampled footprints go through one fused kernel (taps generated
     in place, factor values shared by the taps of a CP group); the rest as :func:`point`."""
     _check_map(gm)
-    _check_interp(interp)
+    check_interp(interp)
     c = np.ascontiguousarray(center, dtype=np.float64)
     sp = np.ascontiguousarray(sigma_p, dtype=np.float64)
     q = np.ascontiguousarray(s, dtype=np.float64)
@@ -116,7 +123,7 @@ def point_flat(gm: GlintsMap, center, sigma_p, s, *, interp: str = "trilinear",
         L = pyr.n_levels
         levels = [int(lv) for lv in np.arange(L)]  # `range` is this module's range query
         shapes = np.array([pyr.shape(lv) for lv in levels], dtype=np.int64)
-        arrs, lo, h = _args(gm)
+        arrs, lo, h = kernel_args(gm)
         done = np.zeros(sp.shape[0], bool)
         serial(resample_point_kernel, _n(sp))(
             *arrs, pyr.offsets, shapes[:, 0].copy(), shapes[:, 1].copy(),
@@ -143,7 +150,7 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points, interp="trilinear"):
     ``interp=None`` the flat centres and stds instead of the weights."""
     _check_map(gm)
     if interp is not None:
-        _check_interp(interp)
+        check_interp(interp)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = as_sigma_p(sigma_p)
     pts = [as_float_array(p, name, ndim_min=1, last_dim=2) for p, name in points]
@@ -158,9 +165,15 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points, interp="trilinear"):
     return shape, idx, w, pts
 
 
-def _args(gm):
-    """Kernel arguments of ``gm`` (see :mod:`prefilter.glints._qkernels`), the support's lower
-    corner and the NDF pixel pitch."""
+def kernel_args(gm: GlintsMap):
+    """Arguments of the query kernels of :mod:`prefilter.glints._qkernels` for map ``gm``.
+
+    Returns ``(arrs, lo, h)``: ``arrs = (Pa, Pb, C, block_index, image_cell, meta)``, the leading
+    arguments of every kernel (from :func:`packed`; ``Pa``, ``Pb`` ``(M, B + 1)`` factor prefix
+    sums, ``C = (cq, wsc, Fa, Fb)``, ``block_index (N, nb, nb)`` with the image innermost in
+    memory, ``image_cell (N,)``, ``meta (G, 4)``; layout in :mod:`prefilter.glints._qkernels`),
+    ``lo = -support``, the NDF images' lower corner in ``s`` (both axes), and ``h = 2 support /
+    R``, their pixel pitch."""
     h = 2.0 * gm.support / gm.resolution
     pa, pb, c, meta, index, _ = packed(gm)
     return (pa, pb, c, index, gm.image_cell, meta), -gm.support, h

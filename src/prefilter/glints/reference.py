@@ -416,9 +416,9 @@ def environment_integral(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, blur=
     -------
     (N, 3).
     """
-    from prefilter.glints.envlight import _lobes
+    from prefilter.glints.envlight import as_lobes
 
-    mu, lam, p = _lobes(mu, lam, p)
+    mu, lam, p = as_lobes(mu, lam, p)
     wo = as_float_array(wo, "wo", ndim_min=2, last_dim=3)
     N = len(wo)
     if p.ndim == 3 and p.shape[0] != N:

@@ -133,9 +133,9 @@ def _prep(gm, center, sigma_p):
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     idx, w = interp_weights(gm.pyramid, c, sp)
-    from prefilter.glints.query import _args
+    from prefilter.glints.query import kernel_args
 
-    arrs = _args(gm)[0]
+    arrs = kernel_args(gm)[0]
     return shape, arrs, np.ascontiguousarray(idx), np.ascontiguousarray(w)
 
 
