@@ -186,3 +186,22 @@ def test_cli_bake_glints_wang(tmp_path):
     bad = CliRunner().invoke(cli, ["bake", "glints-wang", str(tmp_path / "n.npy"), "-o",
                                    str(tmp_path / "w3.npz"), "--tile", "7"])
     assert bad.exit_code != 0 and "tile" in str(bad.exception) + bad.output
+
+
+def test_bakes_share_their_options_with_per_command_defaults():
+    """``glints`` and ``glints-wang`` declare the shared options once (commands.shared_options),
+    each with its own defaults, help and position in ``--help``."""
+    from prefilter.glints.commands import bake_glints, bake_glints_wang
+
+    shared = ("ndf_res", "block", "support", "roughness", "iters", "seed", "quiet")
+    opts = {c.name: {p.name: p for p in c.params} for c in (bake_glints, bake_glints_wang)}
+    want = {"glints": (128, 16, 0.5, 0.005, 50, 0, False),
+            "glints-wang": (64, 8, 0.5, 0.005, 100, 0, False)}
+    for name, defaults in want.items():
+        assert tuple(opts[name][k].default for k in shared) == defaults
+        assert opts[name]["quiet"].is_flag and opts[name]["block"].show_default
+    assert opts["glints"]["seed"].help is None
+    assert opts["glints-wang"]["seed"].help.startswith("Seeds the tile synthesis")
+    order = [[p.name for p in c.params if p.name in shared]
+             for c in (bake_glints, bake_glints_wang)]
+    assert order == [list(shared), ["block", "ndf_res", *shared[2:]]]

@@ -41,6 +41,33 @@ def load_normal_map(spec: str) -> np.ndarray:
         raise PrefilterError(f"{path}: {exc}") from None
 
 
+# Options both bakes declare: click declarations, fixed keyword arguments and help.
+_SHARED_OPTIONS = {
+    "ndf_res": (("--ndf-res",), dict(show_default=True), "NDF image resolution."),
+    "block": (("--block",), dict(show_default=True), "Block size B of the NDF images."),
+    "support": (("--support",), dict(show_default=True),
+                "Half-width of the NDF images in projected normals s."),
+    "roughness": (("--roughness",), dict(show_default=True), "Intrinsic roughness sigma_r."),
+    "iters": (("--iters",), dict(show_default=True), "Max CP iterations per group."),
+    "seed": (("--seed",), dict(show_default=True), None),
+    "quiet": (("--quiet",), dict(is_flag=True), "No progress bar."),
+}
+
+
+def shared_options(**defaults):
+    """Decorator adding the bakes' shared options in the order of ``defaults``, each with this
+    command's default; a value ``(default, help)`` replaces the shared help text.
+
+    ``@shared_options(ndf_res=128, block=16)`` == the two ``click.option`` lines in that order."""
+    def decorate(f):
+        for name, value in reversed(defaults.items()):  # click lists the last-applied first
+            decls, kwargs, help_ = _SHARED_OPTIONS[name]
+            default, help_ = value if isinstance(value, tuple) else (value, help_)
+            f = click.option(*decls, default=default, help=help_, **kwargs)(f)
+        return f
+    return decorate
+
+
 @click.command("glints")
 @click.argument("normal_map")
 @click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
@@ -55,11 +82,7 @@ def load_normal_map(spec: str) -> np.ndarray:
               type=click.Choice(["global", "level", "uniform"]),
               help="How the rank budget is spread: over all groups, per pyramid level (equal "
                    "query work at every footprint size), or every group at --rank.")
-@click.option("--ndf-res", default=128, show_default=True, help="NDF image resolution.")
-@click.option("--block", default=16, show_default=True, help="Block size B of the NDF images.")
-@click.option("--support", default=0.5, show_default=True,
-              help="Half-width of the NDF images in projected normals s.")
-@click.option("--roughness", default=0.005, show_default=True, help="Intrinsic roughness sigma_r.")
+@shared_options(ndf_res=128, block=16, support=0.5, roughness=0.005)
 @click.option("--stride0", default=4, show_default=True, help="Level-0 footprint stride (texels).")
 @click.option("--sigma0", default=None, type=float,
               help="Level-0 footprint std [default: stride0].")
@@ -67,9 +90,7 @@ def load_normal_map(spec: str) -> np.ndarray:
               help="Spatial cell of a group at level 0 (texels; doubles with each level).")
 @click.option("--converge", default=0.01, show_default=True,
               help="Stop adding levels when one differs from the previous by less (rel. L2).")
-@click.option("--iters", default=50, show_default=True, help="Max CP iterations per group.")
-@click.option("--seed", default=0, show_default=True)
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@shared_options(iters=50, seed=0, quiet=False)
 def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
                 stride0, sigma0, cell, converge, iters, seed, quiet):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
@@ -108,21 +129,16 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
 @click.option("--rank", default=16, show_default=True,
               help="CP rank of every (tile, level, angular block); 0 stores the images "
                    "uncompressed.")
-@click.option("--block", default=8, show_default=True, help="Block size B of the NDF images.")
-@click.option("--ndf-res", default=64, show_default=True, help="NDF image resolution.")
-@click.option("--support", default=0.5, show_default=True,
-              help="Half-width of the NDF images in projected normals s.")
-@click.option("--roughness", default=0.005, show_default=True, help="Intrinsic roughness sigma_r.")
+@shared_options(block=8, ndf_res=64, support=0.5, roughness=0.005)
 @click.option("--stride0", default=None, type=int,
               help="Level-0 footprint stride (texels) [default: tile / 8].")
 @click.option("--wide-tiles", default=0.5, show_default=True,
               help="Footprint std (in tiles) from which the tile-type shares replace the pyramids.")
 @click.option("--uniform-tiles", default=8.0, show_default=True,
               help="Footprint std (in tiles) from which the expected tiling is used.")
-@click.option("--iters", default=100, show_default=True, help="Max CP iterations per group.")
-@click.option("--seed", default=0, show_default=True,
-              help="Seeds the tile synthesis (patches, hashing seed) and the CP fits.")
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@shared_options(iters=100,
+                seed=(0, "Seeds the tile synthesis (patches, hashing seed) and the CP fits."),
+                quiet=False)
 def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support, roughness,
                      stride0, wide_tiles, uniform_tiles, iters, seed, quiet):
     """Synthesise 16 Wang tiles from NORMAL_MAP and precompute their per-tile NDF pyramids
