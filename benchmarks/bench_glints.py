@@ -16,6 +16,9 @@
         --bake-rank 16  # the evaluation and bake of the previous version
     python benchmarks/bench_glints.py --frames --stride0 2 --sigma0 2  # finer level 0 (bakes)
     python benchmarks/bench_glints.py --breakdown     # frame CPU time: queries, taps, fallback
+    python benchmarks/bench_glints.py --frames --lights quad --cpu --unfused
+                                  # also the per-direction quad MIS (quad_mis_unfused), interleaved,
+                                  # and the max relative difference of the two float64 frames
 
 The machine is shared, so every ratio is computed from timings of the same run; the absolute
 numbers are only indicative. Footprint "width" is 2 sigma_p (texels).
@@ -249,15 +252,27 @@ def bench_ranks(size, tmp, ranks=(8, 16, 32, 64),
                   flush=True)
 
 
+def _rel_diff(a, b):
+    """Largest ``|a - b| / |b|`` over the entries where ``b != 0`` (and whether ``a == 0`` where
+    ``b == 0``)."""
+    nz = b != 0
+    r = np.abs(a[nz] - b[nz]) / np.abs(b[nz])
+    return (float(r.max()) if r.size else 0.0), bool(np.all(a[~nz] == 0))
+
+
 def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=False, lights="point",
-                 interp=None, bilinear=None, bake_settings=None, clock=time.perf_counter):
+                 interp=None, bilinear=None, bake_settings=None, clock=time.perf_counter,
+                 unfused=False):
     """Whole-frame time of ``glints`` at several distances in one run (the measurement scene of
     :mod:`prefilter.glints.render`: 64 x 48 pixels, 128^2 map, footprint ~ distance). Rounds are
     interleaved over the distances so that load changes hit all of them; best of ``repeat``.
     ``interp``, ``bilinear``, ``bake_settings``: override the render module's evaluation
     (``INTERP``, ``BILINEAR``) and bake settings (e.g. ``stride0``/``sigma0``). ``clock``:
     ``time.process_time`` counts this process's CPU time (all threads), which a loaded machine
-    disturbs far less than the wall time (the render kernels are serial at this size)."""
+    disturbs far less than the wall time (the render kernels are serial at this size).
+    ``unfused``: each round also times the frames with :func:`prefilter.glints.render.
+    quad_mis_unfused` (the per-direction MIS) right after the default, and the float64 frames of
+    the two are compared (largest relative difference per pixel channel)."""
     from prefilter.glints import render as grender
     from prefilter.glints.render import measurement_scene
 
@@ -271,15 +286,31 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
     from prefilter.render.pipeline import render
     from prefilter.render.scene import load_scene
 
+    from prefilter.render.methods import RenderSettings
+
+    fused = grender.quad_mis
+    mis = [fused, grender.quad_mis_unfused] if unfused else [fused]
+
+    def frame(sc, f):  # the float64 radiance (render() returns float32)
+        grender.quad_mis = f
+        try:
+            return grender.render_glints(sc, RenderSettings())
+        finally:
+            grender.quad_mis = fused
+
     scenes = [load_scene(measurement_scene(d, kind, lights=lights)) for d in distances]
-    for sc in scenes:
-        render(sc, "glints")  # bake (disk cache) and compile outside the timing
+    imgs = [[frame(sc, f) for f in mis] for sc in scenes]  # bake and compile outside the timing
     best = [np.inf] * len(scenes)
+    best_u = [np.inf] * len(scenes)
     for _ in range(repeat):
         for i, sc in enumerate(scenes):
             t = clock()
-            render(sc, "glints")
+            frame(sc, fused)
             best[i] = min(best[i], clock() - t)
+            if unfused:
+                t = clock()
+                frame(sc, mis[1])
+                best_u[i] = min(best_u[i], clock() - t)
     print(f"glints frame time ({lights} light, {kind} 128^2 map, 64x48 pixels, best of {repeat}, "
           f"NUMBA threads {os.environ.get('NUMBA_NUM_THREADS', 'all')}, interp "
           f"{grender.INTERP}, bilinear {grender.BILINEAR}, stride0 "
@@ -287,6 +318,11 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
           f"clock {clock.__name__})")
     for d, t in zip(distances, best):
         line = f"  distance {d:4g}: glints {t * 1e3:8.1f} ms"
+        if unfused:
+            i = distances.index(d)
+            rel, zeros = _rel_diff(imgs[i][0], imgs[i][1])
+            line += (f", unfused MIS {best_u[i] * 1e3:8.1f} ms (x{best_u[i] / t:.2f}), max rel "
+                     f"diff {rel:.1e}{'' if zeros else ' (nonzero where unfused is 0)'}")
         if direct:
             sc = scenes[distances.index(d)]
             t0 = clock()  # the same clock as glints' (CPU time with --cpu: all threads)
@@ -295,7 +331,8 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
             fl = flip(render(sc, "glints"), img_d).mean
             line += f", glints-direct {td * 1e3:9.1f} ms, speed-up {td / t:6.1f}x, FLIP {fl:.3f}"
         print(line, flush=True)
-    print(f"max/min over distances: {max(best) / min(best):.2f} (target <= 1.5)")
+    print(f"max/min over distances: {max(best) / min(best):.2f} (target <= 1.5)"
+          + (f"; unfused MIS {max(best_u) / min(best_u):.2f}" if unfused else ""))
     return best
 
 
@@ -378,6 +415,8 @@ def main():
                     help="queries: also a random-order run with centres in a CORNER^2 square")
     ap.add_argument("--frames", action="store_true", help="only the frame-time benchmark")
     ap.add_argument("--direct", action="store_true", help="--frames: also glints-direct + FLIP")
+    ap.add_argument("--unfused", action="store_true",
+                    help="--frames: also the per-direction quad MIS, interleaved, + difference")
     ap.add_argument("--lights", default="point", help="--frames: point, quad or environment")
     ap.add_argument("--runs", type=int, default=1, help="--frames: repeat the measurement")
     ap.add_argument("--interp", default=None, help="--frames: resample (default) or trilinear")
@@ -412,7 +451,8 @@ def main():
         for _ in range(a.runs):
             best = bench_frames(direct=a.direct, lights=a.lights, interp=a.interp,
                                 bilinear=False if a.nearest else None, bake_settings=bs,
-                                clock=time.process_time if a.cpu else time.perf_counter)
+                                clock=time.process_time if a.cpu else time.perf_counter,
+                                unfused=a.unfused)
             ratios.append(max(best) / min(best))
         if a.runs > 1:
             print("max/min per run: " + ", ".join(f"{r:.2f}" for r in ratios))

@@ -11,7 +11,7 @@ from prefilter.errors import PrefilterError
 from prefilter.glints import bake, load
 from prefilter.glints.brdf import glint_brdf_cos, surface
 from prefilter.glints.envlight import equirect_directions, fibonacci_axes, fit_sg, shade_sg
-from prefilter.glints.render import _U_PAIR, QUAD_MIS, quad_mis, quad_range
+from prefilter.glints.render import _U_PAIR, QUAD_MIS, quad_mis, quad_mis_unfused, quad_range
 from prefilter.render.lights import QuadLight, sample_quad_area
 
 NM = sinusoid(64, ax=0.25, ay=0.2, px=16, py=8)
@@ -159,6 +159,61 @@ def test_quad_mis_matches_monte_carlo(surf, sp, size):
     assert e2 < 0.05 * mc
 
 
+def _mis_pair(surf, c, sp, wo, light, u, trunc):
+    N = len(sp)
+    frame = tuple(np.tile(EYE[k], (N, 1)) for k in range(3))
+    args = (surf, c, sp, wo, np.zeros((N, 3)), frame, light, [0.9, 0.5, 0.2], u)
+    return (quad_mis(*args, fallback_truncation=trunc),
+            quad_mis_unfused(*args, fallback_truncation=trunc))
+
+
+@pytest.mark.parametrize("trunc", [4.0, 3.0, None])
+def test_quad_mis_fused_equals_unfused(surf, trunc):
+    """quad_mis evaluates a footprint's samples together (the NDF once per direction for the
+    BRDF and the light sample's density, all half vectors in one texel walk, the draws and their
+    densities in one walk, block masses once): for the same uniforms it is quad_mis_unfused (the
+    per-direction functions) to rounding. Footprints below sigma0 (direct sampler), between
+    sigma0 and sigma_min (compressed sampler, direct NDF) and above (compressed NDF); every
+    fallback truncation the renderer uses (4; None: the exact P-NDF, glints-direct)."""
+    rng = np.random.default_rng(7)
+    N = 240
+    assert surf.sigma0 < surf.sigma_min
+    sp = np.concatenate([rng.uniform(0.0, surf.sigma0, N // 2),
+                         rng.uniform(surf.sigma0, surf.sigma_min, N // 4),
+                         rng.uniform(surf.sigma_min, 12.0, N // 4)])
+    c = rng.uniform(-10, 74, (N, 2))
+    wo = np.stack([_wo(t) for t in rng.uniform(0.0, 0.9, N)])
+    light = facing_quad(_wo(0.4), 0.4, 2.0)
+    u = rng.random((N, QUAD_MIS * _U_PAIR))
+    a, b = _mis_pair(surf, c, sp, wo, light, u, trunc)
+    assert np.count_nonzero(b[:, 0]) > N // 2  # most estimates see the light
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=0)
+    # a different estimator is not "equal to rounding": one uniform column changed
+    u2 = u.copy()
+    u2[:, 2] = (u2[:, 2] + 0.5) % 1.0
+    a2, _ = _mis_pair(surf, c, sp, wo, light, u2, trunc)
+    assert not np.allclose(a2, b, rtol=1e-9, atol=0)
+
+
+def test_quad_mis_fused_direct_surface():
+    """Without a compressed map (glints-direct): footprints wider than the 64^2 map (the rows
+    wrap: single-point direct kernel) and at the P-NDF's sigma_p -> inf limit (the single-point
+    sampler) take the per-direction paths inside the fused evaluation; same values."""
+    surf = surface(None, NM, intrinsic_roughness=0.01)
+    rng = np.random.default_rng(8)
+    N = 60
+    sp = np.concatenate([rng.uniform(0.5, 4.0, 20), rng.uniform(8.0, 20.0, 20),
+                         rng.uniform(64.0, 80.0, 20)])
+    c = rng.uniform(0, 64, (N, 2))
+    wo = np.stack([_wo(t) for t in rng.uniform(0.0, 0.9, N)])
+    light = facing_quad(_wo(0.4), 0.4, 2.0)
+    u = rng.random((N, QUAD_MIS * _U_PAIR))
+    for trunc in (4.0, None):
+        a, b = _mis_pair(surf, c, sp, wo, light, u, trunc)
+        assert np.count_nonzero(b[:, 0]) > N // 2
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=0)
+
+
 def test_equirect_convention():
     """docs/scenes.md: row 0 is the zenith (+y); u = 0 looks towards +z, u = 1/4 towards -x,
     u = 1/2 (the centre) towards -z, u = 3/4 towards +x."""
@@ -249,6 +304,36 @@ def test_render_area_and_environment_lights(small_render, lights):
     d = render(sc, "glints-direct", seed=3, spp=16)
     assert np.all(np.isfinite(a)) and a.mean() > 0
     assert a.mean() == pytest.approx(d.mean(), rel=0.15)
+
+
+@pytest.mark.parametrize("distance", [0.5, 1.0])
+def test_render_quad_mis_fused_equals_unfused(small_render, monkeypatch, distance):
+    """A small quad-lit scene near the camera (most footprints below the finest level, some
+    between sigma0 and the resampling range; the rest by range queries): the float64 frames of
+    glints and glints-direct with the fused quad_mis and with quad_mis_unfused agree to 1e-9."""
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.scene import load_scene
+
+    gr = small_render
+    sc = load_scene(gr.measurement_scene(distance, "flakes", 64, width=16, height=12,
+                                         lights="quad"))
+    st = RenderSettings(spp=2, seed=4)
+    calls = []
+
+    def spy(surf, c, sp, *a, **kw):
+        band = (sp >= surf.sigma0) & (sp < surf.sigma_min)
+        calls.append((np.sum(sp < surf.sigma0), np.sum(band)))
+        return fused(surf, c, sp, *a, **kw)
+
+    fused = gr.quad_mis
+    monkeypatch.setattr(gr, "quad_mis", spy)
+    a = gr.render_glints(sc, st)
+    ad = gr.render_glints_direct(sc, st)
+    assert calls[0][0] > 10 and calls[0][1] > 10  # both samplers of the compressed mode
+    monkeypatch.setattr(gr, "quad_mis", gr.quad_mis_unfused)
+    np.testing.assert_allclose(a, gr.render_glints(sc, st), rtol=1e-9, atol=0)
+    np.testing.assert_allclose(ad, gr.render_glints_direct(sc, st), rtol=1e-9, atol=0)
+    assert a.max() > 0 and ad.max() > 0
 
 
 def test_render_rejects_textured_quads(small_render):
