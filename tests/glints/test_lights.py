@@ -195,6 +195,48 @@ def test_quad_mis_fused_equals_unfused(surf, trunc):
     assert not np.allclose(a2, b, rtol=1e-9, atol=0)
 
 
+def test_multi_point_kernels_equal_single_point(surf):
+    """The per-footprint kernels of the fused MIS against the per-point functions: draws and
+    densities (direct and compressed samplers, the masses), the direct NDF at K points, and the
+    one-walk direct_mis_k (NDF at given points; draws, densities and NDF at the draws)."""
+    from prefilter.glints.brdf import (direct_mis_fits, direct_mis_k, direct_ndf,
+                                       direct_ndf_k, sample_s_direct_k, sample_s_k)
+    from prefilter.glints.sample import mass, n_uniforms, sample_s, sample_s_direct
+
+    rng = np.random.default_rng(9)
+    N, K = 50, 3
+    c = rng.uniform(0, 64, (N, 2))
+    sp = rng.uniform(0.2, 3.9, N)
+    u = rng.random((N, K, 9))
+    q = rng.uniform(-0.3, 0.3, (N, K, 2))
+    rep = (np.repeat(c, K, 0), np.repeat(sp, K))
+
+    def close(a, b):
+        np.testing.assert_allclose(a, np.reshape(b, np.shape(a)), rtol=1e-12, atol=0)
+
+    s1, p1 = sample_s_direct(surf, *rep, u=u[..., :3].reshape(N * K, 3))
+    s, p = sample_s_direct_k(surf, c, sp, u[..., :3])
+    close(s, s1)
+    close(p, p1)
+    close(direct_ndf_k(surf, c, sp, q), direct_ndf(surf, *rep, q.reshape(-1, 2)))
+    assert np.all(direct_mis_fits(surf, sp))
+    dl, s2, p2, db = direct_mis_k(surf, c, sp, q, u[..., :3])
+    close(s2, s1)
+    close(p2, p1)
+    close(dl, direct_ndf(surf, *rep, q.reshape(-1, 2)))
+    close(db, direct_ndf(surf, *rep, s1.reshape(-1, 2)))
+    assert np.all(p2 > 0) and np.count_nonzero(dl) > N
+    k = n_uniforms(surf.gm)
+    sp3 = rng.uniform(surf.sigma0, 20.0, N)
+    s3, p3 = sample_s(surf.gm, np.repeat(c, K, 0), np.repeat(sp3, K),
+                      u=u[..., :k].reshape(N * K, k))
+    s4, p4, M = sample_s_k(surf.gm, c, sp3, u[..., :k])
+    close(s4, s3)
+    close(p4, p3)
+    close(M, mass(surf.gm, c, sp3))
+    assert np.all(p4 > 0)
+
+
 def test_quad_mis_fused_direct_surface():
     """Without a compressed map (glints-direct): footprints wider than the 64^2 map (the rows
     wrap: single-point direct kernel) and at the P-NDF's sigma_p -> inf limit (the single-point

@@ -845,3 +845,178 @@ def sample_s_k(gm: GlintsMap, center, sigma_p, u):
     _serial_below(_sample_masses_k, N)(*kernel_args(gm)[0], idx, w, cc(bm.reshape(N, -1)), uu,
                                        -gm.support, h, s, pdf)
     return s, pdf, M
+
+
+@njit_parallel
+def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, sr, sh, trunc,
+                  out_s, out_pdf, out_dl, out_db):
+    """Everything the quad MIS needs of a footprint's direct P-NDF in one walk over its texels:
+    the NDF (as :func:`_direct_rows`) at the ``P`` light samples' half vectors ``qlx, qly (N, P)``
+    -> ``out_dl``; ``P`` draws from the element mixture (uniforms ``u (N, P, 3)``, as
+    ``sample._direct_kernel``) -> ``out_s (N, P, 2)``, their density (as ``pndf``: cut at
+    ``quad < 8 trunc^2``) -> ``out_pdf`` and the NDF at them (the BRDF sample's half vector is
+    the draw) -> ``out_db``. The footprint weights are separable (one exp per row and column, the
+    single-point kernels' per-texel weights to rounding) and shared by the draws and the sums;
+    a texel's term is formed once for the density and the NDF of a draw."""
+    H = SX.shape[0]
+    W = SX.shape[1] // 2
+    P = qlx.shape[1]
+    Hs, Ws = s_el.shape[0], s_el.shape[1]
+    sh2 = sh * sh
+    sr2 = sr * sr
+    cut = 2.0 * trunc * trunc * 4.0
+    for q in prange(out_pdf.shape[0]):
+        sp2 = sp[q] * sp[q]
+        tot2 = sp2 + sh2
+        f = sh2 / tot2
+        var = sp2 * sh2 / tot2
+        rad = trunc * math.sqrt(tot2)
+        x0, x1 = texel_window(cx[q], rad)
+        y0, y1 = texel_window(cy[q], rad)
+        nx = x1 - x0 + 1
+        ny = y1 - y0 + 1
+        xs = x0 % W
+        wx = np.empty(nx)
+        fdx = np.empty(nx)
+        wy = np.empty(ny)
+        inv = 1.0 / (2.0 * tot2)
+        sx = 0.0
+        for i in range(nx):
+            dx = cx[q] - (x0 + i + 0.5)
+            fdx[i] = f * dx
+            wx[i] = math.exp(-dx * dx * inv)
+            sx += wx[i]
+        sy = 0.0
+        wsum = 0.0
+        for j in range(ny):
+            dy = cy[q] - (y0 + j + 0.5)
+            wy[j] = math.exp(-dy * dy * inv)
+            sy += wy[j]
+            for i in range(nx):
+                wsum += wy[j] * wx[i]
+        qx = np.empty(2 * P)
+        qy = np.empty(2 * P)
+        for k in range(P):
+            qx[k] = qlx[q, k]
+            qy[k] = qly[q, k]
+            t = u[q, k, 0] * wsum
+            run = 0.0
+            bi, bj = nx - 1, ny - 1
+            done = False
+            for j in range(ny):
+                for i in range(nx):
+                    run += wy[j] * wx[i]
+                    if t < run:
+                        bi, bj = i, j
+                        done = True
+                        break
+                if done:
+                    break
+            mx, my, a, b, d = element_moments(s_el, J, (y0 + bj) % Hs, (x0 + bi) % Ws,
+                                              cx[q] - (x0 + bi + 0.5), cy[q] - (y0 + bj + 0.5),
+                                              f, var)
+            a += sr2
+            d += sr2
+            # Cholesky of [[a, b], [b, d]] applied to a Box-Muller pair
+            l11 = math.sqrt(a)
+            l21 = b / l11
+            l22 = math.sqrt(max(d - l21 * l21, 0.0))
+            rr = math.sqrt(-2.0 * math.log(1.0 - u[q, k, 1]))
+            z1 = rr * math.cos(2.0 * math.pi * u[q, k, 2])
+            z2 = rr * math.sin(2.0 * math.pi * u[q, k, 2])
+            qx[P + k] = mx + l11 * z1
+            qy[P + k] = my + l21 * z1 + l22 * z2
+            out_s[q, k, 0] = qx[P + k]
+            out_s[q, k, 1] = qy[P + k]
+        quad = np.empty(nx)
+        det = np.empty(nx)
+        ca = np.empty(nx)
+        cb = np.empty(nx)
+        cd = np.empty(nx)
+        ox = np.empty(nx)
+        oy = np.empty(nx)
+        acc = np.zeros(2 * P)
+        accp = np.zeros(P)
+        for j in range(ny):
+            y = y0 + j
+            r = y % H
+            fdy = f * (cy[q] - (y + 0.5))
+            sxr = SX[r, xs:xs + nx]
+            syr = SY[r, xs:xs + nx]
+            a0 = J00[r, xs:xs + nx]
+            a1 = J01[r, xs:xs + nx]
+            b0 = J10[r, xs:xs + nx]
+            b1 = J11[r, xs:xs + nx]
+            for i in range(nx):
+                j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
+                ox[i] = j00 * fdx[i] + j01 * fdy
+                oy[i] = j10 * fdx[i] + j11 * fdy
+                a = sr2 + var * (j00 * j00 + j01 * j01)
+                d = sr2 + var * (j10 * j10 + j11 * j11)
+                b = var * (j00 * j10 + j01 * j11)
+                ca[i] = a
+                cb[i] = b
+                cd[i] = d
+                det[i] = a * d - b * b
+            for k in range(2 * P):
+                qxk = qx[k]
+                qyk = qy[k]
+                for i in range(nx):
+                    ex = qxk - sxr[i] - ox[i]
+                    ey = qyk - syr[i] - oy[i]
+                    quad[i] = cd[i] * ex * ex - 2.0 * cb[i] * ex * ey + ca[i] * ey * ey
+                racc = 0.0
+                if k < P:
+                    for i in range(nx):
+                        if quad[i] < 36.0 * det[i]:
+                            racc += wx[i] * math.exp(-0.5 * quad[i] / det[i]) / math.sqrt(det[i])
+                else:
+                    pacc = 0.0
+                    for i in range(nx):
+                        if quad[i] < cut * det[i]:
+                            e = wx[i] * math.exp(-0.5 * quad[i] / det[i]) / math.sqrt(det[i])
+                            pacc += e
+                            if quad[i] < 36.0 * det[i]:
+                                racc += e
+                    accp[k - P] += wy[j] * pacc
+                acc[k] += wy[j] * racc
+        for k in range(P):
+            out_dl[q, k] = acc[k] / (2.0 * math.pi * sx * sy)
+            out_db[q, k] = acc[P + k] / (2.0 * math.pi * sx * sy)
+            out_pdf[q, k] = accp[k] / (2.0 * math.pi * wsum)
+
+
+def direct_mis_fits(surf, sigma_p) -> np.ndarray:
+    """Footprints ``(N,)`` whose direct P-NDF :func:`direct_mis_k` evaluates: rows narrower
+    than the map and below the P-NDF's sigma_p -> inf limit (``pndf.wide_limit2``)."""
+    from prefilter.glints.pndf import TRUNCATION, wide_limit2
+
+    s_el = surf.elements_[0]
+    tot2 = np.asarray(sigma_p, dtype=np.float64) ** 2 + SIGMA_H * SIGMA_H
+    return (2.0 * TRUNCATION * np.sqrt(tot2) + 2.0 <= s_el.shape[1]) & (tot2 < wide_limit2(s_el))
+
+
+def direct_mis_k(surf, center, sigma_p, q_light, u):
+    """The quad MIS's direct P-NDF of footprints ``center (N, 2)``, ``sigma_p (N,)`` (all
+    :func:`direct_mis_fits`) in one walk each (:func:`_direct_mis_k`, 4-std truncation):
+    ``D_light (N, P)`` at ``q_light (N, P, 2)``; draws ``s (N, P, 2)`` for uniforms
+    ``u (N, P, 3)`` as :func:`prefilter.glints.sample.sample_s_direct`, their density
+    ``pdf (N, P)`` (its ``pndf``) and ``D_draw (N, P)`` at them; all to rounding."""
+    from prefilter.glints.pndf import TRUNCATION
+
+    cc = np.ascontiguousarray
+    c = cc(center, dtype=np.float64)
+    ql = np.asarray(q_light, dtype=np.float64)
+    uu = cc(u, dtype=np.float64)
+    N, P = uu.shape[:2]
+    sp = cc(np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,)))
+    if not np.all(direct_mis_fits(surf, sp)):
+        raise PrefilterError("sigma_p: expected footprints narrower than the map "
+                             "(direct_mis_fits)")
+    s_el, J = surf.elements_
+    s = np.empty((N, P, 2))
+    pdf, dl, db = np.empty((N, P)), np.empty((N, P)), np.empty((N, P))
+    _serial_below(_direct_mis_k, N)(*_element_planes(s_el, J), s_el, J, cc(c[:, 0]), cc(c[:, 1]),
+                                    sp, cc(ql[..., 0]), cc(ql[..., 1]), uu,
+                                    surf.intrinsic_roughness, SIGMA_H, TRUNCATION, s, pdf, dl, db)
+    return dl, s, pdf, db

@@ -315,7 +315,8 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     ``n`` draws taken together, and its block masses computed once (not per draw and density).
     """
     from prefilter._validate import as_directions, as_float_array
-    from prefilter.glints.brdf import _brdf_cos_from_ndf, _half
+    from prefilter.glints.brdf import _brdf_cos_from_ndf, _half, direct_mis_fits, direct_mis_k
+    from prefilter.glints.pndf import TRUNCATION
     from prefilter.glints.sample import half_from_s
     from prefilter.render.lights import quad_light_pdf, quad_light_sample
 
@@ -336,9 +337,23 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
         wl.append(as_directions(_local(w, t, b, n), "wi"))
         pl.append(p)
         hl.append(_half(wo, wl[-1]))
-    # BRDF samples: sample_wi's draws, then its reflection and density; glint_brdf_cos's wi
-    s, ps, M = _mis_draws(surf, c, sp, np.stack(
-        [u[:, j * _U_PAIR + 2:(j + 1) * _U_PAIR] for j in range(P)], 1))
+    # BRDF samples: sample_wi's draws, then its reflection and density; glint_brdf_cos's wi.
+    # Footprints below the finest level (4-std fallback): draws, densities and the NDF at the
+    # light samples' and the draws' half vectors in one walk (direct_mis_k); the others: draws
+    # together (_mis_draws), then the NDF at all half vectors together (_mis_ndf)
+    U = np.stack([u[:, j * _U_PAIR + 2:(j + 1) * _U_PAIR] for j in range(P)], 1)
+    Hl = np.stack(hl, 1)
+    one = np.zeros(N, bool)
+    if fallback_truncation == TRUNCATION and surf.normal_map is not None:
+        one = (sp < surf.sigma0) & (sp < surf.sigma_min) & direct_mis_fits(surf, sp)
+    rest = ~one
+    s, ps, D = np.zeros((N, P, 2)), np.zeros((N, P)), np.zeros((N, 2 * P))
+    M = np.full(N, np.nan)
+    if np.any(one):
+        D[one, :P], s[one], ps[one], D[one, P:] = direct_mis_k(
+            surf, c[one], sp[one], Hl[one][..., :2], U[one][..., :3])
+    if np.any(rest):
+        s[rest], ps[rest], M[rest] = _mis_draws(surf, c[rest], sp[rest], U[rest])
     wb, pb2, pl2, hb = [], [], [], []
     for j in range(P):
         m = half_from_s(s[:, j])
@@ -351,8 +366,10 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
         pl2.append(quad_light_pdf(light, position, _world(w, t, b, n)))
         wb.append(as_directions(w, "wi"))
         hb.append(_half(wo, wb[-1]))
-    D = _mis_ndf(surf, c, sp, np.stack([h[:, :2] for h in hl + hb], 1), fallback_truncation)
-    pb = _mis_light_pdf(surf, c, sp, wo, np.stack(hl, 1), D[:, :P], M, fallback_truncation)
+    if np.any(rest):
+        D[rest] = _mis_ndf(surf, c[rest], sp[rest],
+                           np.stack([h[rest, :2] for h in hl + hb], 1), fallback_truncation)
+    pb = _mis_light_pdf(surf, c, sp, wo, Hl, D[:, :P], M, fallback_truncation)
     out = np.zeros((N, 3))
     for j in range(P):
         fl = _brdf_cos_from_ndf(wo, wl[j], hl[j], D[:, j], f0)
