@@ -240,6 +240,18 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     N = corners.shape[0]
     n_sub = QUAD_SUB if n_sub is None else int(n_sub)
     f0 = np.atleast_1d(np.asarray(f0, dtype=np.float64))
+    sp = np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,))
+    cand = sp >= surf.sigma_min if surf.gm is not None else np.zeros(N, bool)
+    if not np.all(cand):
+        # footprints below the finest level are never valid: the patch geometry only for the
+        # others (near the camera 9 in 10 pixels, all to quad_mis)
+        out = np.zeros((N, len(np.broadcast_to(f0, (3,)))))
+        valid = np.zeros(N, bool)
+        if np.any(cand):
+            out[cand], valid[cand] = quad_range(surf, np.asarray(center)[cand], sp[cand],
+                                                wo[cand], corners[cand], radiance, f0,
+                                                n_sub=n_sub)
+        return out, valid
     g = (np.arange(n_sub + 1) / n_sub)
     A, B = np.meshgrid(g, g, indexing="ij")
     a, b = A.ravel()[None, :, None], B.ravel()[None, :, None]
