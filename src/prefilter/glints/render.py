@@ -70,9 +70,14 @@ PIXEL_SIGMA = 0.5
 #: pyramid with the same blocks dropped gives 0.080, with 1e-5 / 1e-6 0.018 / 0.015 (rendered
 #: with 1e-6: 0.017; docs/glints-part2.md). Cost: 1.2-1.9x the kept blocks and bytes (flakes
 #: 11.0 -> 17.5 MB, scratches 13.3 -> 21.6 MB), frame time +5 % at mid.
+#: ``ndf_truncation`` / ``footprint_truncation`` (6 / 6, the bake's default 4 / 4): HDR-FLIP of
+#: the mostly black brushed plane frames exposes up to +24 stops, where the element and footprint
+#: tails beyond 4 stds show: plane brushed mid / far 0.101 / 0.097 -> 0.078 / 0.079 (6 / 6;
+#: angular cut alone 0.100 / 0.081), no cell of the point matrix worse; bake time ~2x, storage
+#: +1-4 % (docs/glints-part2.md, session 6).
 BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
-                     blank_tol=1e-6)
+                     blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0)
 #: How ``glints`` evaluates compressed footprints (:func:`prefilter.glints.brdf.surface`):
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid
