@@ -337,7 +337,6 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     from prefilter.glints.sample import half_from_s
     from prefilter.render.lights import quad_light_pdf, quad_light_sample
 
-    t, b, n = frame
     N = len(wo)
     P = u.shape[1] // _U_PAIR
     L = np.asarray(light.radiance, dtype=np.float64)
@@ -347,19 +346,22 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     wo = as_directions(wo, "wo")
     c = np.asarray(center, dtype=np.float64)
     sp = np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,))
-    # light samples, their half vectors (as glint_brdf_cos and pdf_wi form them)
-    wl, pl, hl = [], [], []
-    for j in range(P):
-        w, p = quad_light_sample(light, position, u[:, j * _U_PAIR:j * _U_PAIR + 2])
-        wl.append(as_directions(_local(w, t, b, n), "wi"))
-        pl.append(p)
-        hl.append(_half(wo, wl[-1]))
+    # the P pairs of every shading sample at once: rows pair-major (P N), element-wise the
+    # operations of glint_brdf_cos, pdf_wi and sample_wi per pair
+    t, b, n = (np.tile(x, (P, 1)) for x in frame)
+    pos = np.tile(position, (P, 1))
+    woP = np.tile(wo, (P, 1))
+    uu = u[:, :P * _U_PAIR].reshape(N, P, _U_PAIR)
+    # light samples and their half vectors
+    w, pl = quad_light_sample(light, pos, uu[:, :, :2].transpose(1, 0, 2).reshape(P * N, 2))
+    wl = as_directions(_local(w, t, b, n), "wi")
+    hl = _half(woP, wl)
+    Hl = hl.reshape(P, N, 3).transpose(1, 0, 2)
     # BRDF samples: sample_wi's draws, then its reflection and density; glint_brdf_cos's wi.
     # Footprints below the finest level (4-std fallback): draws, densities and the NDF at the
     # light samples' and the draws' half vectors in one walk (direct_mis_k); the others: draws
     # together (_mis_draws), then the NDF at all half vectors together (_mis_ndf)
-    U = np.stack([u[:, j * _U_PAIR + 2:(j + 1) * _U_PAIR] for j in range(P)], 1)
-    Hl = np.stack(hl, 1)
+    U = np.ascontiguousarray(uu[:, :, 2:])
     one = np.zeros(N, bool)
     if fallback_truncation == TRUNCATION and surf.normal_map is not None:
         one = (sp < surf.sigma0) & (sp < surf.sigma_min) & direct_mis_fits(surf, sp)
@@ -371,31 +373,32 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
             surf, c[one], sp[one], Hl[one][..., :2], U[one][..., :3])
     if np.any(rest):
         s[rest], ps[rest], M[rest] = _mis_draws(surf, c[rest], sp[rest], U[rest])
-    wb, pb2, pl2, hb = [], [], [], []
-    for j in range(P):
-        m = half_from_s(s[:, j])
-        wom = np.sum(wo * m, axis=-1)
-        ok = (ps[:, j] > 0) & (np.sum(s[:, j] * s[:, j], axis=-1) < 1.0) & (wom > 0)
-        w = 2.0 * wom[..., None] * m - wo
-        pb2.append(np.where(ok, ps[:, j] * m[..., 2] / (4.0 * np.where(ok, wom, 1.0)), 0.0))
-        ok = pb2[-1] > 0
-        w = np.where(ok[:, None], w, np.array([0.0, 0.0, 1.0]))
-        pl2.append(quad_light_pdf(light, position, _world(w, t, b, n)))
-        wb.append(as_directions(w, "wi"))
-        hb.append(_half(wo, wb[-1]))
+    s = s.transpose(1, 0, 2).reshape(P * N, 2)
+    ps = ps.T.reshape(P * N)
+    m = half_from_s(s)
+    wom = np.sum(woP * m, axis=-1)
+    ok = (ps > 0) & (np.sum(s * s, axis=-1) < 1.0) & (wom > 0)
+    w = 2.0 * wom[..., None] * m - woP
+    pb2 = np.where(ok, ps * m[..., 2] / (4.0 * np.where(ok, wom, 1.0)), 0.0)
+    ok = pb2 > 0
+    w = np.where(ok[:, None], w, np.array([0.0, 0.0, 1.0]))
+    pl2 = quad_light_pdf(light, pos, _world(w, t, b, n))
+    wb = as_directions(w, "wi")
+    hb = _half(woP, wb)
     if np.any(rest):
+        Hb = hb.reshape(P, N, 3).transpose(1, 0, 2)
         D[rest] = _mis_ndf(surf, c[rest], sp[rest],
-                           np.stack([h[rest, :2] for h in hl + hb], 1), fallback_truncation)
-    pb = _mis_light_pdf(surf, c, sp, wo, Hl, D[:, :P], M, fallback_truncation)
+                           np.concatenate([Hl[rest, :, :2], Hb[rest, :, :2]], 1),
+                           fallback_truncation)
+    pb = _mis_light_pdf(surf, c, sp, wo, Hl, D[:, :P], M, fallback_truncation).T.reshape(P * N)
+    fl = _brdf_cos_from_ndf(woP, wl, hl, D[:, :P].T.reshape(P * N), f0).reshape(P, N, -1)
+    wgt = np.where(pl > 0, 1.0 / np.where(pl > 0, pl + pb, 1.0), 0.0).reshape(P, N)
+    fb = _brdf_cos_from_ndf(woP, wb, hb, D[:, P:].T.reshape(P * N), f0).reshape(P, N, -1)
+    wgt2 = np.where(ok & (pl2 > 0), 1.0 / np.where(ok, pb2 + pl2, 1.0), 0.0).reshape(P, N)
     out = np.zeros((N, 3))
-    for j in range(P):
-        fl = _brdf_cos_from_ndf(wo, wl[j], hl[j], D[:, j], f0)
-        w = np.where(pl[j] > 0, 1.0 / np.where(pl[j] > 0, pl[j] + pb[:, j], 1.0), 0.0)
-        out += fl * w[:, None]
-        fb = _brdf_cos_from_ndf(wo, wb[j], hb[j], D[:, P + j], f0)
-        ok = pb2[j] > 0
-        w2 = np.where(ok & (pl2[j] > 0), 1.0 / np.where(ok, pb2[j] + pl2[j], 1.0), 0.0)
-        out += fb * w2[:, None]
+    for j in range(P):  # the pairs' order of summation
+        out += fl[j] * wgt[j][:, None]
+        out += fb[j] * wgt2[j][:, None]
     return out * L / P
 
 
