@@ -327,9 +327,14 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     Returns
     -------
     (N, 3) the unbiased estimate of ``int_quad f cos L dwi``: that of :func:`quad_mis_unfused`
-    (to rounding), with each footprint's NDF evaluated once per direction for the BRDF and the
-    density of a light sample, at all ``2 n`` half vectors in one walk over its texels, its
-    ``n`` draws taken together, and its block masses computed once (not per draw and density).
+    to rounding, evaluated per footprint instead of per direction. Below the finest level (with
+    the 4-std fallback) one walk over its texels gives the NDF at the light samples' half
+    vectors (also their density), the draws, their densities and the NDF at them
+    (:func:`prefilter.glints.brdf.direct_mis_k`); elsewhere the draws are taken together with
+    the block masses computed once (:func:`prefilter.glints.brdf.sample_s_k`), then the NDF at
+    all ``2 n`` half vectors together (:func:`prefilter.glints.brdf.direct_ndf_k`). The
+    per-direction version walked a near footprint's texels ~16 times (the NDF for the BRDF and
+    again for the density, the sampler twice and the exact P-NDF for the draw's density).
     """
     from prefilter._validate import as_directions, as_float_array
     from prefilter.glints.brdf import _brdf_cos_from_ndf, _half, direct_mis_fits, direct_mis_k
@@ -485,15 +490,15 @@ def _mis_light_pdf(surf, c, sp, wo, h, D, M, fallback_truncation):
     return np.where(ok, ps * h[..., 2] / (4.0 * np.where(ok, woh, 1.0)), 0.0)
 
 
-def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u, *,
-             fallback_truncation: float | None = None):
+def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u,
+                     *, fallback_truncation: float | None = None):
     """:func:`quad_mis` spelled out with the per-direction functions (the NDF walked once per
     BRDF value, density and draw): the same estimate to rounding, slower; its reference.
 
     Parameters
     ----------
     position : (N, 3) world shading points; frame : (t, b, n) each (N, 3) (world);
-    light : QuadLight; u : (N, n * 9) uniforms in ``[0, 1)``; fallback_truncation: see
+    light : QuadLight; u : (N, n * 11) uniforms in ``[0, 1)``; fallback_truncation: see
     :func:`prefilter.glints.brdf.glint_ndf` (the BRDF's direct P-NDF below the finest level).
 
     Returns
@@ -538,7 +543,7 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
     ``mode``: ``"compressed"`` or ``"direct"``; ``sigma`` overrides the footprint stds (the
     reference passes zeros). Point and directional lights: the BRDF at the light direction
     (point query). Quad lights: :func:`quad_range` where valid (``use_range``, default for the
-    compressed mode), else :func:`quad_mis` with the uniforms ``u (N, n_quads * QUAD_MIS * 9)``;
+    compressed mode), else :func:`quad_mis` with the uniforms ``u (N, n_quads * QUAD_MIS * 11)``;
     the diffuse term by Lambert's polygon formula. Environment lights: see
     :func:`environment_radiance` (uniforms after the quads')."""
     from prefilter.ltc import clamped_cosine_integral
