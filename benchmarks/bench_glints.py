@@ -333,6 +333,11 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
         print(line, flush=True)
     print(f"max/min over distances: {max(best) / min(best):.2f} (target <= 1.5)"
           + (f"; unfused MIS {max(best_u) / min(best_u):.2f}" if unfused else ""))
+    if unfused:  # the fused MIS is the same estimator: equal frames to rounding
+        worst = [_rel_diff(a, b) for a, b in imgs]
+        if max(r for r, _ in worst) > 1e-9 or not all(z for _, z in worst):
+            raise SystemExit(f"fused vs unfused quad MIS: max relative difference {worst} "
+                             "exceeds 1e-9")
     return best
 
 
