@@ -31,6 +31,12 @@ quadrature with ``glints``' compressed NDF (its point queries). ``glints`` is av
 reported after 1, 4 and all seeds, so a value that stops falling is error, not noise.
 Compression error alone: quad ``compressed`` vs ``converged`` (both noise-free); environment
 ``glints`` (averaged) vs ``matched``. CPU times are process times (``time.process_time``).
+
+``--bake '{"ndf_truncation": 4}'`` overrides entries of the render bake settings
+(:data:`prefilter.glints.render.BAKE_SETTINGS`; the cache is keyed by them, so other settings
+bake into other files). ``--by-luminance`` adds the share of each cell's FLIP error sum by the
+pixel's luminance relative to the frame maximum (:func:`error_by_luminance`): on a mostly black
+frame HDR-FLIP's automatic exposure range reaches +24 stops and the tails count.
 """
 
 from __future__ import annotations
@@ -76,8 +82,30 @@ def coverage(sc, size: int = 128):
     return float(np.median(sp)), g.hit.reshape(sc.camera.height, sc.camera.width)
 
 
+#: relative-luminance bin edges of :func:`error_by_luminance`
+LUMINANCE_BINS = (0.0, 1e-12, 1e-9, 1e-6, 1e-4, 1e-2, np.inf)
+
+
+def error_by_luminance(error_map, test, reference) -> dict:
+    """Share of the FLIP error sum ``error_map (H, W)`` in pixels whose luminance
+    ``max(test, reference)`` relative to the reference's maximum falls in each
+    :data:`LUMINANCE_BINS` interval (and the pixel fraction there), keyed ``"[lo,hi)"``."""
+    w = np.array([0.2126, 0.7152, 0.0722])
+    yr, yt = reference @ w, test @ w
+    top = float(yr.max())
+    rel = np.maximum(yr, yt) / top if top > 0 else np.zeros_like(yr)
+    tot = float(error_map.sum())
+    out = {}
+    for lo, hi in zip(LUMINANCE_BINS[:-1], LUMINANCE_BINS[1:]):
+        m = (rel >= lo) & (rel < hi)
+        out[f"[{lo:g},{hi:g})"] = dict(error_share=float(error_map[m].sum()) / tot if tot else 0.0,
+                                       pixels=float(m.mean()))
+    return out
+
+
 def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False,
-         converged: int = 0, stop_exposure: float | None = None) -> dict:
+         converged: int = 0, stop_exposure: float | None = None,
+         by_luminance: bool = False) -> dict:
     """One matrix cell. ``floor``: also ``glints-direct`` with another seed, and FLIP between
     its two images: the Monte Carlo noise floor of a comparison against a 1-spp MIS / SG-sampled
     ``glints-direct`` (quad and environment lights; 0 for point lights). ``converged``: also
@@ -115,6 +143,10 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
                   stop_exposure=min(stop_exposure, fl.settings["stop_exposure"]))
         extra.update(stop_exposure=stop_exposure, flip_capped=float(fc.mean),
                      flip_capped_object=float(fc.error_map[hit].mean()))
+    if by_luminance:
+        extra.update(stop_exposure_auto=fl.settings["stop_exposure"],
+                     by_luminance=error_by_luminance(fl.error_map, img["glints"],
+                                                     img["glints-direct"]))
     # the sphere leaves black background pixels (zero error): also the mean over the object
     return dict(lights=lights, shape=shape, distance=dist_name, map=kind, sigma_p_median=sp,
                 flip=float(fl.mean), flip_object=float(fl.error_map[hit].mean()),
@@ -263,6 +295,27 @@ def table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def table_exposure(rows: list[dict]) -> str:
+    """Markdown: per cell with ``--stop-exposure`` / ``--by-luminance`` data, FLIP at FLIP's own
+    exposure range, capped, and the error share by relative luminance."""
+    rs = [r for r in rows if r.get("mode") != "reference"
+          and ("flip_capped" in r or "by_luminance" in r)]
+    if not rs:
+        return ""
+    bins = [f"[{lo:g},{hi:g})" for lo, hi in zip(LUMINANCE_BINS[:-1], LUMINANCE_BINS[1:])]
+    out = ["| lights | shape | map | d | FLIP (top stop) | capped | error share by luminance / "
+           "frame max: " + " / ".join(bins) + " |", "|---|---|---|---|---|---|---|"]
+    for r in rs:
+        top = f" (+{r['stop_exposure_auto']:.1f})" if "stop_exposure_auto" in r else ""
+        cap = (f"{r['flip_capped']:.3f} (+{r['stop_exposure']:g})" if "flip_capped" in r
+               else "-")
+        lum = r.get("by_luminance")
+        share = " / ".join(f"{lum[b]['error_share']:.2f}" for b in bins) if lum else "-"
+        out.append(f"| {r['lights']} | {r['shape']} | {r['map']} | {r['distance']} | "
+                   f"{r['flip']:.3f}{top} | {cap} | {share} |")
+    return "\n".join(out)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--lights", default="point", help="comma list: point, quad, environment")
@@ -277,12 +330,20 @@ def main():
     ap.add_argument("--stop-exposure", type=float, default=None,
                     help="also FLIP with the top exposure capped at this many stops")
     ap.add_argument("--table", default=None, help="only print the table of this .jsonl")
+    ap.add_argument("--bake", default=None,
+                    help="JSON object overriding entries of the render bake settings")
+    ap.add_argument("--by-luminance", action="store_true",
+                    help="also the FLIP error share by relative pixel luminance")
     ap.add_argument("--reference", action="store_true",
                     help="judge against the deterministic references (quad, environment)")
     ap.add_argument("--seeds", type=int, default=16, help="--reference: glints seeds averaged")
     ap.add_argument("--no-direct", action="store_true",
                     help="--reference: skip the 1-spp glints-direct frame (costly far away)")
     a = ap.parse_args()
+    if a.bake:
+        from prefilter.glints.render import BAKE_SETTINGS
+
+        BAKE_SETTINGS.update(json.loads(a.bake))
     fmt = table_reference if a.reference else table
     if a.table:
         print(fmt([json.loads(x) for x in Path(a.table).read_text().splitlines() if x]))
@@ -305,7 +366,9 @@ def main():
                         r = reference_cell(shape, dn, kind, lights, a.seeds, not a.no_direct)
                     else:
                         r = cell(shape, dn, kind, lights, a.floor, a.converged,
-                                 a.stop_exposure)
+                                 a.stop_exposure, a.by_luminance)
+                        if a.bake:
+                            r["bake"] = json.loads(a.bake)
                     print(json.dumps(r), flush=True)
                     with out.open("a") as fh:
                         fh.write(json.dumps(r) + "\n")
@@ -314,6 +377,9 @@ def main():
     if a.reference:
         return
     rows = [r for r in rows if r.get("mode") != "reference"]
+    extra = table_exposure(rows)
+    if extra:
+        print(extra)
     bad = [r for r in rows if worst(r) > TARGET]
     print(f"cells over FLIP {TARGET}: {len(bad)} of {len(rows)}")
 
