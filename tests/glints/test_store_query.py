@@ -471,3 +471,77 @@ def test_cli_bake_level_rank(tmp_path):
     bad = CliRunner().invoke(bake_glints, args + ["-o", str(tmp_path / "b.npz"),
                                                   "--level-rank", "per-texel"])
     assert bad.exit_code != 0 and "level-rank" in bad.output
+
+
+def _multi_case(gm, rng, n=300, k=5, interp="resample"):
+    """Footprints over all pyramid levels with their blends (some taps zeroed) and ``k``
+    rectangles each: small ones, ones crossing block borders, ones partly or wholly outside the
+    support (``[-S, S]^2``)."""
+    from prefilter.glints.query import weights
+
+    c = rng.uniform(0, 32, (n, 2))
+    sp = np.exp(rng.uniform(np.log(0.5), np.log(40), n))
+    idx, w, _ = weights(gm, c, sp, interp=interp)
+    w = np.where(rng.random(w.shape) < 0.2, 0.0, w)
+    ctr = rng.uniform(-1.3 * S, 1.3 * S, (n, 1, 2)) + rng.normal(0, 0.05, (n, k, 2))
+    half = np.exp(rng.uniform(np.log(0.002), np.log(0.3), (n, k, 2)))
+    return idx, w, ctr - half, ctr + half
+
+
+@pytest.mark.parametrize("interp", ["resample", "trilinear"])
+def test_range_multi_equals_range_weighted_per_rectangle(baked, interp):
+    """One blend and K rectangles per footprint == :func:`range_weighted` of each rectangle:
+    rtol 1e-5 on the 8-bit maps (taps' code rows summed in float32), 1e-9 on the float maps
+    (float64 sums); the former path (``RANGE_SHARED = False``) exactly."""
+    import dataclasses
+
+    from prefilter.glints import query as gq
+
+    _, _, _, gm0 = baked
+    B = gm0.block
+    rng = np.random.default_rng(11)
+    # blocks missing from some images (dropped by the bake where an image's block is empty)
+    bi = gm0.block_index.copy()
+    bi[rng.random(bi.shape) < 0.2] = -1
+    gm = dataclasses.replace(gm0, block_index=bi)
+    idx, w, lo, hi = _multi_case(gm, rng, interp=interp)
+    n, k = lo.shape[:2]
+    # rectangles crossing block borders and outside the support are both covered
+    px_lo, px_hi = (lo + S) / (2 * S / R), (hi + S) / (2 * S / R)
+    assert np.mean(np.floor(px_lo / B) != np.floor(px_hi / B)) > 0.3
+    assert np.mean((px_lo < 0) | (px_hi > R)) > 0.1 and np.any((px_hi < 0) | (px_lo > R))
+    for m, rtol in ((gm, 1e-5), (dataclasses.replace(gm, codes=None), 1e-9)):
+        want = gq.range_weighted(m, np.repeat(idx, k, 0), np.repeat(w, k, 0),
+                                 lo.reshape(-1, 2), hi.reshape(-1, 2)).reshape(n, k)
+        assert np.count_nonzero(want) > want.size // 3
+        got = gq.range_multi(m, idx, w, lo, hi)
+        np.testing.assert_allclose(got, want, rtol=rtol, atol=rtol * 1e-3 * want.max())
+        assert np.all(got[want == 0] == 0)
+        try:
+            gq.RANGE_SHARED = False
+            np.testing.assert_array_equal(gq.range_multi(m, idx, w, lo, hi), want)
+        finally:
+            gq.RANGE_SHARED = True
+        # serial and parallel kernels alike
+        big = np.repeat(np.arange(n), 120 // k * 300 // n + 1)
+        got_p = gq.range_multi(m, idx[big], w[big], lo[big], hi[big])
+        assert got_p.size >= gq.SERIAL_BELOW
+        np.testing.assert_array_equal(got_p, got[big])
+
+
+def test_range_multi_input_errors(baked):
+    from prefilter.glints.query import range_multi
+
+    _, _, _, gm = baked
+    idx = np.zeros((2, 3), np.int64)
+    w = np.ones((2, 3))
+    lo = np.zeros((2, 4, 2))
+    with pytest.raises(PrefilterError, match="s_max > s_min"):
+        range_multi(gm, idx, w, lo, lo)
+    with pytest.raises(PrefilterError, match=r"s_min, s_max: expected shapes \(N, K, 2\)"):
+        range_multi(gm, idx, w, lo[0], lo[0] + 1)
+    with pytest.raises(PrefilterError, match="idx, w: expected"):
+        range_multi(gm, idx, w[:, :2], lo, lo + 1)
+    with pytest.raises(PrefilterError, match="idx: expected image indices"):
+        range_multi(gm, idx - 1, w, lo, lo + 1)
+    assert range_multi(gm, idx[:0], w[:0], lo[:0], lo[:0] + 1).shape == (0, 4)

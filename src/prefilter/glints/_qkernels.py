@@ -634,3 +634,150 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, 
                             cw[slot, rr] += wt32 * np.float32(cr[rr])
                 acc += _flush_slots(Fa, Fb, wsc, meta, B, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
         out[q] = acc / (sxw * syw)
+
+
+@njit_serial
+def _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, acc):
+    """Add ``sum_r cw[slot, r] wsc_r (a1_r - a0_r) (b1_r - b0_r)`` of every slot's group to
+    ``acc[k]`` of each rectangle ``k = touch[:nt]`` of the block: ``rp[k]`` the prefix rows
+    ``(na0, na1, nb0, nb1)``, ``rt[k]`` their weights (:func:`_prefix_pos`)."""
+    B1 = B + 1
+    for t in range(ns):
+        g = gs[t]
+        nr, m = meta[g, 0], meta[g, 1]
+        base = m * B1
+        wr = wsc[m:m + nr]
+        cr = cw[t]
+        for u in range(nt):
+            k = touch[u]
+            # rows n and n + 1 of the four prefix sums; the next row only with a nonzero
+            # weight (it may lie past the group's block), row 0 (zero) never read
+            na0, na1, nb0, nb1 = rp[k, 0], rp[k, 1], rp[k, 2], rp[k, 3]
+            ta0, ta1, tb0, tb1 = rt[k, 0], rt[k, 1], rt[k, 2], rt[k, 3]
+            ka0 = 0.0 if (na0 == 0 and ta0 == 0.0) else 1.0
+            kb0 = 0.0 if (nb0 == 0 and tb0 == 0.0) else 1.0
+            ra0 = base + na0 * nr
+            ra1 = base + na1 * nr
+            rb0 = base + nb0 * nr
+            rb1 = base + nb1 * nr
+            ea0 = ra0 + nr if ta0 != 0.0 else ra0
+            ea1 = ra1 + nr if ta1 != 0.0 else ra1
+            eb0 = rb0 + nr if tb0 != 0.0 else rb0
+            eb1 = rb1 + nr if tb1 != 0.0 else rb1
+            if ka0 == 0.0:
+                ra0 = ea0 = ra1
+            if kb0 == 0.0:
+                rb0 = eb0 = rb1
+            a0s, a0e = pa[ra0:ra0 + nr], pa[ea0:ea0 + nr]
+            a1s, a1e = pa[ra1:ra1 + nr], pa[ea1:ea1 + nr]
+            b0s, b0e = pb[rb0:rb0 + nr], pb[eb0:eb0 + nr]
+            b1s, b1e = pb[rb1:rb1 + nr], pb[eb1:eb1 + nr]
+            s = 0.0
+            for r in range(nr):
+                a0 = float(a0s[r])
+                a0 = ka0 * (a0 + ta0 * (float(a0e[r]) - a0))
+                a1 = float(a1s[r])
+                a1 += ta1 * (float(a1e[r]) - a1)
+                b0 = float(b0s[r])
+                b0 = kb0 * (b0 + tb0 * (float(b0e[r]) - b0))
+                b1 = float(b1s[r])
+                b1 += tb1 * (float(b1e[r]) - b1)
+                s += float(cr[r]) * (wr[r] * ((a1 - a0) * (b1 - b0)))
+            acc[k] += s
+
+
+@njit_parallel
+def range_multi_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y0, x1, y1, lo,
+                       h, proto, out):
+    """:func:`range_kernel` for ``K`` rectangles per footprint: ``x0 .. y1 (N, K)``, one blend
+    ``idx, wts (N, T)`` per footprint, ``out (N, K)``.
+
+    Per block touched by any of a footprint's rectangles, the taps' code rows are summed per CP
+    group first (weighted, in ``proto``'s dtype: float32 for 8-bit codes, as
+    :func:`resample_point_kernel`), then one dot product of each group's sum with the group's
+    factor differences per rectangle touching the block: the taps are walked once per block,
+    not once per (block, rectangle)."""
+    cq, wsc = C[0], C[1]
+    pa = Pa.ravel()
+    pb = Pb.ravel()
+    B = Pa.shape[1] - 1
+    nb = block_index.shape[1]
+    R = nb * B
+    N, K = out.shape
+    T = idx.shape[1]
+    rank = 1
+    for g in range(meta.shape[0]):
+        rank = max(rank, meta[g, 0])
+    for q in prange(N):
+        cw = np.empty((_SLOTS, rank), proto.dtype)
+        one = np.empty(1, proto.dtype)  # the weight in the accumulator's dtype
+        gs = np.empty(_SLOTS, np.int64)
+        rbk = np.empty((K, 4), np.int64)  # blocks bi0, bi1, bj0, bj1 (bi0 > bi1: empty)
+        rcl = np.empty((K, 4))  # clipped pixel bounds cx0, cx1, cy0, cy1
+        rp = np.empty((K, 4), np.int64)
+        rt = np.empty((K, 4))
+        area = np.empty(K)
+        acc = np.zeros(K)
+        touch = np.empty(K, np.int64)
+        ubi0, ubi1, ubj0, ubj1 = nb, -1, nb, -1
+        for k in range(K):
+            cx0, cx1, cy0, cy1, bi0, bi1, bj0, bj1, a = _rect(x0[q, k], y0[q, k], x1[q, k],
+                                                              y1[q, k], lo, h, R, B, nb)
+            rcl[k, 0], rcl[k, 1], rcl[k, 2], rcl[k, 3] = cx0, cx1, cy0, cy1
+            rbk[k, 0], rbk[k, 1], rbk[k, 2], rbk[k, 3] = bi0, bi1, bj0, bj1
+            area[k] = a
+            if bi0 <= bi1 and bj0 <= bj1:
+                ubi0, ubi1 = min(ubi0, bi0), max(ubi1, bi1)
+                ubj0, ubj1 = min(ubj0, bj0), max(ubj1, bj1)
+        for bi in range(ubi0, ubi1 + 1):
+            for bj in range(ubj0, ubj1 + 1):
+                nt = 0
+                for k in range(K):
+                    if rbk[k, 0] <= bi <= rbk[k, 1] and rbk[k, 2] <= bj <= rbk[k, 3]:
+                        touch[nt] = k
+                        nt += 1
+                        rp[k, 0], rt[k, 0] = _prefix_pos(rcl[k, 2] - bi * B, B)
+                        rp[k, 1], rt[k, 1] = _prefix_pos(rcl[k, 3] - bi * B, B)
+                        rp[k, 2], rt[k, 2] = _prefix_pos(rcl[k, 0] - bj * B, B)
+                        rp[k, 3], rt[k, 3] = _prefix_pos(rcl[k, 1] - bj * B, B)
+                if nt == 0:
+                    continue
+                ns = 0
+                last = -1
+                slot = 0
+                for c in range(T):
+                    w = wts[q, c]
+                    if w == 0.0:
+                        continue
+                    img = idx[q, c]
+                    kb = block_index[img, bi, bj]
+                    if kb < 0:
+                        continue
+                    g = image_cell[img] * nb * nb + bi * nb + bj
+                    nr = meta[g, 0]
+                    if g != last:
+                        slot = -1
+                        for t in range(ns):
+                            if gs[t] == g:
+                                slot = t
+                                break
+                        if slot < 0:
+                            if ns == _SLOTS:
+                                _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch,
+                                             nt, acc)
+                                ns = 0
+                            slot = ns
+                            gs[slot] = g
+                            for rr in range(nr):
+                                cw[slot, rr] = 0.0
+                            ns += 1
+                        last = g
+                    one[0] = w
+                    wt = one[0]
+                    kc = meta[g, 2] + kb * meta[g, 3]
+                    cr = cq[kc:kc + nr]
+                    for rr in range(nr):
+                        cw[slot, rr] += wt * cr[rr]
+                _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, acc)
+        for k in range(K):
+            out[q, k] = acc[k] / area[k]
