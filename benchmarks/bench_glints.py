@@ -19,6 +19,10 @@
     python benchmarks/bench_glints.py --frames --lights quad --cpu --unfused
                                   # also the per-direction quad MIS (quad_mis_unfused), interleaved,
                                   # and the max relative difference of the two float64 frames
+    python benchmarks/bench_glints.py --frames --lights quad --cpu --old-range
+                                  # also the former range path (weights repeated per rectangle,
+                                  # range_weighted; query.RANGE_SHARED = False), interleaved, and
+                                  # the max relative difference of the frames (quad/environment)
 
 The machine is shared, so every ratio is computed from timings of the same run; the absolute
 numbers are only indicative. Footprint "width" is 2 sigma_p (texels).
@@ -262,7 +266,7 @@ def _rel_diff(a, b):
 
 def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=False, lights="point",
                  interp=None, bilinear=None, bake_settings=None, clock=time.perf_counter,
-                 unfused=False):
+                 unfused=False, old_range=False):
     """Whole-frame time of ``glints`` at several distances in one run (the measurement scene of
     :mod:`prefilter.glints.render`: 64 x 48 pixels, 128^2 map, footprint ~ distance). Rounds are
     interleaved over the distances so that load changes hit all of them; best of ``repeat``.
@@ -272,7 +276,10 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
     disturbs far less than the wall time (the render kernels are serial at this size).
     ``unfused``: each round also times the frames with :func:`prefilter.glints.render.
     quad_mis_unfused` (the per-direction MIS) right after the default, and the float64 frames of
-    the two are compared (largest relative difference per pixel channel)."""
+    the two are compared (largest relative difference per pixel channel). ``old_range``: the
+    same with the former range path (:data:`prefilter.glints.query.RANGE_SHARED` False) in place
+    of the per-direction MIS."""
+    from prefilter.glints import query as gquery
     from prefilter.glints import render as grender
     from prefilter.glints.render import measurement_scene
 
@@ -290,13 +297,23 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
 
     fused = grender.quad_mis
     mis = [fused, grender.quad_mis_unfused] if unfused else [fused]
+    label, tol = "unfused MIS", 1e-9
+    if old_range:  # the variant: the former range path (the MIS stays fused)
+        unfused = True
+        mis = [fused, "old-range"]
+        # range_multi sums the taps' 8-bit code rows in float32 (tests: rtol 1e-5 per query)
+        label, tol = "old range", 1e-5
 
     def frame(sc, f):  # the float64 radiance (render() returns float32)
+        if f == "old-range":
+            gquery.RANGE_SHARED = False
+            f = fused
         grender.quad_mis = f
         try:
             return grender.render_glints(sc, RenderSettings())
         finally:
             grender.quad_mis = fused
+            gquery.RANGE_SHARED = True
 
     scenes = [load_scene(measurement_scene(d, kind, lights=lights)) for d in distances]
     imgs = [[frame(sc, f) for f in mis] for sc in scenes]  # bake and compile outside the timing
@@ -321,8 +338,8 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
         if unfused:
             i = distances.index(d)
             rel, zeros = _rel_diff(imgs[i][0], imgs[i][1])
-            line += (f", unfused MIS {best_u[i] * 1e3:8.1f} ms (x{best_u[i] / t:.2f}), max rel "
-                     f"diff {rel:.1e}{'' if zeros else ' (nonzero where unfused is 0)'}")
+            line += (f", {label} {best_u[i] * 1e3:8.1f} ms (x{best_u[i] / t:.2f}), max rel "
+                     f"diff {rel:.1e}{'' if zeros else f' (nonzero where {label} is 0)'}")
         if direct:
             sc = scenes[distances.index(d)]
             t0 = clock()  # the same clock as glints' (CPU time with --cpu: all threads)
@@ -332,12 +349,12 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
             line += f", glints-direct {td * 1e3:9.1f} ms, speed-up {td / t:6.1f}x, FLIP {fl:.3f}"
         print(line, flush=True)
     print(f"max/min over distances: {max(best) / min(best):.2f} (target <= 1.5)"
-          + (f"; unfused MIS {max(best_u) / min(best_u):.2f}" if unfused else ""))
-    if unfused:  # the fused MIS is the same estimator: equal frames to rounding
+          + (f"; {label} {max(best_u) / min(best_u):.2f}" if unfused else ""))
+    if unfused:  # the same estimator either way: equal frames to rounding
         worst = [_rel_diff(a, b) for a, b in imgs]
-        if max(r for r, _ in worst) > 1e-9 or not all(z for _, z in worst):
-            raise SystemExit(f"fused vs unfused quad MIS: max relative difference {worst} "
-                             "exceeds 1e-9")
+        if max(r for r, _ in worst) > tol or not all(z for _, z in worst):
+            raise SystemExit(f"default vs {label}: max relative difference {worst} exceeds "
+                             f"{tol:g}")
     return best
 
 
@@ -422,6 +439,9 @@ def main():
     ap.add_argument("--direct", action="store_true", help="--frames: also glints-direct + FLIP")
     ap.add_argument("--unfused", action="store_true",
                     help="--frames: also the per-direction quad MIS, interleaved, + difference")
+    ap.add_argument("--old-range", action="store_true",
+                    help="--frames: also the former range path, interleaved, and the frames' "
+                    "max relative difference")
     ap.add_argument("--lights", default="point", help="--frames: point, quad or environment")
     ap.add_argument("--runs", type=int, default=1, help="--frames: repeat the measurement")
     ap.add_argument("--interp", default=None, help="--frames: resample (default) or trilinear")
@@ -457,7 +477,7 @@ def main():
             best = bench_frames(direct=a.direct, lights=a.lights, interp=a.interp,
                                 bilinear=False if a.nearest else None, bake_settings=bs,
                                 clock=time.process_time if a.cpu else time.perf_counter,
-                                unfused=a.unfused)
+                                unfused=a.unfused, old_range=a.old_range)
             ratios.append(max(best) / min(best))
         if a.runs > 1:
             print("max/min per run: " + ", ".join(f"{r:.2f}" for r in ratios))

@@ -27,7 +27,7 @@ import numpy as np
 from prefilter._validate import as_float_array, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.glints.brdf import _as_surface, glint_ndf, schlick, vcavity_g2
-from prefilter.glints.query import range_weighted, weights
+from prefilter.glints.query import range_multi, weights
 
 
 def as_lobes(mu, lam, p):
@@ -165,18 +165,24 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
         from prefilter.glints.render import RANGE_INTERP
 
         idx, w, _ = weights(surf.gm, c[~small], sp[~small], interp=RANGE_INTERP)
+    samples = []
     for j in range(n_samples):
         u = uu[:, 3 * j:3 * j + 3]
         wi, pdf = _sample_sg(mu, lam, p, u)
         k = np.minimum(np.searchsorted(cum, u[:, 0], side="right"), len(cum) - 1)
         h = wo + wi
         h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+        samples.append((wi, pdf, k, h))
+    if prefilter:
+        # all the samples' squares of a footprint in one call: they share its pyramid taps
+        hs = np.stack([h[~small, :2] for _, _, _, h in samples], 1)  # (n, n_samples, 2)
+        r = np.stack([np.maximum(half_eps[k], 1e-6)[~small] for _, _, k, _ in samples], 1)
+        means = range_multi(surf.gm, idx, w, hs - r[..., None], hs + r[..., None])
+    for j, (wi, pdf, k, h) in enumerate(samples):
         ok = (wi[:, 2] > 0) & (h[:, 2] > 0) & (pdf > 0)
         if prefilter:
-            r = np.maximum(half_eps[k], 1e-6)[:, None]
             D = np.empty(N)
-            D[~small] = range_weighted(surf.gm, idx, w, h[~small, :2] - r[~small],
-                                       h[~small, :2] + r[~small])
+            D[~small] = means[:, j]
             if np.any(small):
                 D[small] = glint_ndf(surf, c[small], sp[small], h[small, :2],
                                      fallback_truncation=fallback_truncation)

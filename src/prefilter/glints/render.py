@@ -286,14 +286,14 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     eps = 1e-9
     if QUAD_RECT == "equal-area":
         lo, hi = _equal_area_rects(x, y, area, lo, hi)
-    lo_v, hi_v = lo[valid].reshape(-1, 2), hi[valid].reshape(-1, 2) + eps
-    from prefilter.glints.query import range_weighted, weights
+    lo_v, hi_v = lo[valid].reshape(nv, m, 2), hi[valid].reshape(nv, m, 2) + eps
+    from prefilter.glints.query import range_multi, weights
 
-    # one footprint per pixel: its (up to ~170) resampling weights serve all its patches
+    # one footprint per pixel: its (up to ~170) resampling weights serve all its patches, whose
+    # rectangles share the walk over the taps (range_multi)
     idx, w, _ = weights(surf.gm, np.asarray(center)[valid], np.asarray(sigma_p)[valid],
                         interp=QUAD_INTERP)
-    idx, w = np.repeat(idx, m, 0), np.repeat(w, m, 0)
-    mean = range_weighted(surf.gm, idx, w, lo_v, hi_v).reshape(nv, m)
+    mean = range_multi(surf.gm, idx, w, lo_v, hi_v)
     # smooth factor at each patch centre direction
     ac = ((np.arange(n_sub) + 0.5) / n_sub)
     Ac, Bc = np.meshgrid(ac, ac, indexing="ij")
