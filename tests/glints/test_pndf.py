@@ -229,3 +229,35 @@ def test_calling_the_pndf_module_is_deprecated_but_forwards():
     with pytest.warns(DeprecationWarning, match=r"prefilter\.glints\.pndf\.pndf"):
         got = G.pndf(flat(), [5.5, 7.25], 3.0, s, 0.01)
     np.testing.assert_array_equal(got, pndf(flat(), [5.5, 7.25], 3.0, s, 0.01))
+
+
+def test_element_split_reassembles_the_covariance():
+    """``siso^2 I + kappa^2 v v^T == sr^2 I + [[a, b], [b, d]]`` with ``|v| = 1`` (random and
+    degenerate covariances: isotropic, rank one, diagonal with a < d)."""
+    from prefilter.glints.pndf import element_split, principal_axis
+
+    rng = np.random.default_rng(5)
+    M = rng.normal(size=(200, 2, 2)) * rng.uniform(1e-4, 1.0, (200, 1, 1))
+    covs = list(M @ M.transpose(0, 2, 1)) + [np.diag([0.3, 0.3]), np.diag([0.2, 0.5]),
+                                            np.outer([0.6, 0.8], [0.6, 0.8]), np.zeros((2, 2))]
+    sr = 0.01
+    for C in covs:
+        nu1, siso, kappa = element_split(C[0, 0], C[0, 1], C[1, 1], sr)
+        vx, vy = principal_axis(C[0, 0], C[0, 1], C[1, 1], nu1)
+        v = np.array([vx, vy])
+        got = siso**2 * np.eye(2) + kappa**2 * np.outer(v, v)
+        np.testing.assert_allclose(got, sr**2 * np.eye(2) + C, rtol=0, atol=1e-12)
+        assert abs(np.linalg.norm(v) - 1.0) < 1e-14
+        assert nu1 == pytest.approx(np.linalg.eigvalsh(C)[-1], abs=1e-14)
+
+
+def test_line_nodes_spacing_and_normaliser():
+    """Line quadrature of the rank-one part: nodes at most 1.5 siso apart, at least 9, and the
+    normaliser is the sum of the node weights."""
+    from prefilter.glints.pndf import line_nodes
+
+    for kappa, siso, trunc in [(0.01, 0.005, 4.0), (0.2, 0.005, 6.0), (0.004, 0.005, 4.0)]:
+        n, norm = line_nodes(kappa, siso, trunc)
+        t = kappa * np.linspace(-trunc, trunc, n)
+        assert n >= 9 and np.diff(t).max() <= 1.5 * siso * (1 + 1e-12)
+        assert norm == pytest.approx(np.exp(-0.5 * (t / kappa) ** 2).sum(), rel=1e-12)

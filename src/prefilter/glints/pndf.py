@@ -206,6 +206,52 @@ def element_moments(s_el, J, r, c, dx, dy, f, var):  # pragma: no cover - compil
             var * (j10 * j10 + j11 * j11))
 
 
+@njit_inline
+def element_split(a, b, d, sr):  # pragma: no cover - compiled
+    """Exact split of an element's slope covariance ``sr^2 I + [[a, b], [b, d]]`` into an
+    isotropic part ``siso^2 I`` and a rank-one part ``kappa^2 v v^T`` (eigenvalues ``nu1 >= nu2``
+    of ``[[a, b], [b, d]]``: ``siso^2 = sr^2 + nu2``, ``kappa^2 = nu1 - nu2``), so the isotropic
+    part splats by separable erf masses and the rest is a 1D quadrature along ``v``
+    (:func:`principal_axis`; 3-point Gauss-Hermite while ``kappa <= 0.7 siso``, else
+    :func:`line_nodes`).
+
+    Scalars in, ``(nu1, siso, kappa)`` out; ``sqrt(nu1 + sr^2)`` is the element's largest std
+    (its reach, which culls most elements before ``v`` is needed)."""
+    half = 0.5 * (a + d)
+    dif = math.sqrt(0.25 * (a - d) * (a - d) + b * b)
+    nu1 = half + dif
+    nu2 = max(half - dif, 0.0)
+    return nu1, math.sqrt(sr * sr + nu2), math.sqrt(max(nu1 - nu2, 0.0))
+
+
+@njit_inline
+def principal_axis(a, b, d, nu1):  # pragma: no cover - compiled
+    """Unit eigenvector ``(vx, vy)`` of ``[[a, b], [b, d]]`` for its largest eigenvalue ``nu1``
+    (:func:`element_split`); ``(1, 0)`` when the matrix is isotropic."""
+    # from the row of (A - nu1 I) with the larger diagonal gap (no cancellation)
+    if a >= d:
+        vx, vy = nu1 - d, b
+    else:
+        vx, vy = b, nu1 - a
+    vn = math.sqrt(vx * vx + vy * vy)
+    if vn == 0.0:
+        return 1.0, 0.0
+    return vx / vn, vy / vn
+
+
+@njit_inline
+def line_nodes(kappa, siso, trunc):  # pragma: no cover - compiled
+    """Node count ``n`` and weight normaliser ``norm`` of the rank-one part's quadrature: nodes
+    ``t_k = kappa (-trunc + 2 trunc k / (n - 1))`` spaced at most ``1.5 siso``, weights
+    ``exp(-t_k^2 / (2 kappa^2)) / norm`` (used when ``kappa > 0.7 siso``)."""
+    n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+    norm = 0.0
+    for k in range(n):
+        tk = -trunc + 2.0 * trunc * k / (n - 1)
+        norm += math.exp(-0.5 * tk * tk)
+    return n, norm
+
+
 @njit_parallel
 def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
     H, W = s_el.shape[0], s_el.shape[1]
@@ -295,26 +341,14 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, ntrunc, lo, h, lim2, out):
                 w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
                 wsum += w
                 mx, my, a, b, d = element_moments(s_el, J, r, c, dx, dy, f, var)
-                half = 0.5 * (a + d)
-                dif = math.sqrt(0.25 * (a - d) * (a - d) + b * b)
-                nu1 = half + dif
-                nu2 = max(half - dif, 0.0)
+                nu1, siso, kappa = element_split(a, b, d, sr)
                 reach = ntrunc * math.sqrt(nu1 + sr * sr)
                 if mx + reach < lo or mx - reach > hi or my + reach < lo or my - reach > hi:
                     continue
-                siso = math.sqrt(sr * sr + nu2)
-                kappa = math.sqrt(max(nu1 - nu2, 0.0))
                 if kappa < 1e-3 * siso:
                     splat(img, px, py, mx, my, siso, w, lo, h, ntrunc)
                     continue
-                # principal direction of J J^T
-                if a >= d:
-                    vx, vy = nu1 - d, b
-                else:
-                    vx, vy = b, nu1 - a
-                vn = math.sqrt(vx * vx + vy * vy)
-                vx /= vn
-                vy /= vn
+                vx, vy = principal_axis(a, b, d, nu1)
                 if kappa <= 0.7 * siso:
                     # 3-point Gauss-Hermite along v: exact mean, variance and kurtosis
                     t = math.sqrt(3.0) * kappa
@@ -322,11 +356,7 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, ntrunc, lo, h, lim2, out):
                     splat(img, px, py, mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, ntrunc)
                     splat(img, px, py, mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, ntrunc)
                     continue
-                n = max(9, int(math.ceil(2.0 * ntrunc * kappa / (1.5 * siso))) + 1)
-                norm = 0.0
-                for k in range(n):
-                    tk = -ntrunc + 2.0 * ntrunc * k / (n - 1)
-                    norm += math.exp(-0.5 * tk * tk)
+                n, norm = line_nodes(kappa, siso, ntrunc)
                 for k in range(n):
                     tk = -ntrunc + 2.0 * ntrunc * k / (n - 1)
                     wk = w * math.exp(-0.5 * tk * tk) / norm

@@ -36,8 +36,8 @@ from prefilter._numba import njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_float_array, as_positive_int, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
-                                   as_sigma_p, as_support, normal_cdf, pixel_edges, pndf_image,
-                                   splat)
+                                   as_sigma_p, as_support, element_split, line_nodes, normal_cdf,
+                                   pixel_edges, pndf_image, principal_axis, splat)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
                                    pndf_image_implicit, tile_index, tile_window)
@@ -428,36 +428,21 @@ def _splat_elements(mx, my, a, b, d, w, which, sr, lo, h, trunc, imgs):
     py = np.zeros(R)
     for k in range(mx.shape[0]):
         img = imgs[which[k]]
-        half = 0.5 * (a[k] + d[k])
-        dif = math.sqrt(0.25 * (a[k] - d[k]) ** 2 + b[k] * b[k])
-        nu1 = half + dif
-        nu2 = max(half - dif, 0.0)
+        nu1, siso, kappa = element_split(a[k], b[k], d[k], sr)
         reach = trunc * math.sqrt(nu1 + sr * sr)
         if mx[k] + reach < lo or mx[k] - reach > hi or my[k] + reach < lo or my[k] - reach > hi:
             continue
-        siso = math.sqrt(sr * sr + nu2)
-        kappa = math.sqrt(max(nu1 - nu2, 0.0))
         if kappa < 1e-3 * siso:
             splat(img, px, py, mx[k], my[k], siso, w[k], lo, h, trunc)
             continue
-        if a[k] >= d[k]:
-            vx, vy = nu1 - d[k], b[k]
-        else:
-            vx, vy = b[k], nu1 - a[k]
-        vn = math.sqrt(vx * vx + vy * vy)
-        vx /= vn
-        vy /= vn
+        vx, vy = principal_axis(a[k], b[k], d[k], nu1)
         if kappa <= 0.7 * siso:
             t = math.sqrt(3.0) * kappa
             splat(img, px, py, mx[k], my[k], siso, w[k] * (2.0 / 3.0), lo, h, trunc)
             splat(img, px, py, mx[k] + t * vx, my[k] + t * vy, siso, w[k] / 6.0, lo, h, trunc)
             splat(img, px, py, mx[k] - t * vx, my[k] - t * vy, siso, w[k] / 6.0, lo, h, trunc)
             continue
-        n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
-        norm = 0.0
-        for q in range(n):
-            tq = -trunc + 2.0 * trunc * q / (n - 1)
-            norm += math.exp(-0.5 * tq * tq)
+        n, norm = line_nodes(kappa, siso, trunc)
         for q in range(n):
             tq = -trunc + 2.0 * trunc * q / (n - 1)
             splat(img, px, py, mx[k] + kappa * tq * vx, my[k] + kappa * tq * vy, siso,
@@ -750,38 +735,23 @@ def _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix):  # pragma: no cover - c
 def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no cover
     """Pixel ``(iy, ix)`` of :func:`_splat_elements` for one element."""
     hi = lo + R * h
-    half = 0.5 * (a + d)
-    dif = math.sqrt(0.25 * (a - d) ** 2 + b * b)
-    nu1 = half + dif
-    nu2 = max(half - dif, 0.0)
+    nu1, siso, kappa = element_split(a, b, d, sr)
     reach = trunc * math.sqrt(nu1 + sr * sr)
     if mx + reach < lo or mx - reach > hi or my + reach < lo or my - reach > hi:
         return 0.0
-    siso = math.sqrt(sr * sr + nu2)
-    kappa = math.sqrt(max(nu1 - nu2, 0.0))
     # every node splat lies within trunc (kappa + siso) of the mean: most pixels are beyond
     ext = trunc * (kappa + siso) + h
     if abs(lo + (ix + 0.5) * h - mx) > ext or abs(lo + (iy + 0.5) * h - my) > ext:
         return 0.0
     if kappa < 1e-3 * siso:
         return _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix)
-    if a >= d:
-        vx, vy = nu1 - d, b
-    else:
-        vx, vy = b, nu1 - a
-    vn = math.sqrt(vx * vx + vy * vy)
-    vx /= vn
-    vy /= vn
+    vx, vy = principal_axis(a, b, d, nu1)
     if kappa <= 0.7 * siso:
         t = math.sqrt(3.0) * kappa
         return (_nb_pixel(mx, my, siso, w * (2.0 / 3.0), lo, h, R, trunc, iy, ix)
                 + _nb_pixel(mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix)
                 + _nb_pixel(mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix))
-    n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
-    norm = 0.0
-    for q in range(n):
-        tq = -trunc + 2.0 * trunc * q / (n - 1)
-        norm += math.exp(-0.5 * tq * tq)
+    n, norm = line_nodes(kappa, siso, trunc)
     acc = 0.0
     for q in range(n):
         tq = -trunc + 2.0 * trunc * q / (n - 1)
