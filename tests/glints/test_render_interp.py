@@ -6,7 +6,9 @@ import pytest
 from maps import gaussian_heightfield
 
 from prefilter.errors import PrefilterError
-from prefilter.glints import bake, load, pndf
+from prefilter.glints import load
+from prefilter.glints.bake import bake
+from prefilter.glints.pndf import pndf
 from prefilter.glints.pyramid import (interp_weights, plan, resample_min_sigma,
                                       resample_weights)
 from prefilter.glints.query import point, point_weighted, weights

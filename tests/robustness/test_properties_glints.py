@@ -7,9 +7,9 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from prefilter.errors import PrefilterError
-from prefilter.glints import (block_means, elements, hemisphere_ndf, pndf, pndf_image, point,
-                              range_mean)
+from prefilter.glints import block_means, elements, hemisphere_ndf, pndf_image, point, range_mean
 from prefilter.glints.bake import bake
+from prefilter.glints.pndf import pndf
 from prefilter.glints.store import load
 
 N = settings.default.max_examples

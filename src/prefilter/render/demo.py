@@ -448,7 +448,8 @@ def _colormap_section(report, settings: DemoSettings, seed: int, log) -> None:
 
 
 def _glints_section(report, settings: DemoSettings, seed: int, log) -> None:
-    from prefilter.glints import bake, load, pndf_image, point
+    from prefilter.glints import load, pndf_image, point
+    from prefilter.glints.bake import bake
     from prefilter.render.metrics import flip_heatmap
     from prefilter.texture.procedural import normal_map
 
