@@ -522,6 +522,9 @@ def test_range_multi_equals_range_weighted_per_rectangle(baked, interp):
             np.testing.assert_array_equal(gq.range_multi(m, idx, w, lo, hi), want)
         finally:
             gq.RANGE_SHARED = True
+        act = rng.random((n, k)) < 0.7
+        np.testing.assert_array_equal(gq.range_multi(m, idx, w, lo, hi, act),
+                                      np.where(act, got, 0.0))
         # serial and parallel kernels alike
         big = np.repeat(np.arange(n), 120 // k * 300 // n + 1)
         got_p = gq.range_multi(m, idx[big], w[big], lo[big], hi[big])
@@ -544,4 +547,6 @@ def test_range_multi_input_errors(baked):
         range_multi(gm, idx, w[:, :2], lo, lo + 1)
     with pytest.raises(PrefilterError, match="idx: expected image indices"):
         range_multi(gm, idx - 1, w, lo, lo + 1)
+    with pytest.raises(PrefilterError, match="active: expected a bool array"):
+        range_multi(gm, idx, w, lo, lo + 1, np.ones((2, 3), bool))
     assert range_multi(gm, idx[:0], w[:0], lo[:0], lo[:0] + 1).shape == (0, 4)

@@ -107,16 +107,18 @@ def range_weighted(gm: GlintsMap, idx, w, s_min, s_max) -> np.ndarray:
 
 
 #: :func:`range_multi` shares each footprint's taps across its rectangles (one fused kernel);
-#: False: the former path, the weights repeated per rectangle and :func:`range_weighted` (kept
-#: for before/after measurements: ``benchmarks/bench_glints.py --frames --old-range``).
+#: False: the former path, the weights repeated per rectangle and :func:`range_weighted` on every
+#: rectangle (``active`` ignored), kept for before/after measurements
+#: (``benchmarks/bench_glints.py --frames --old-range``).
 RANGE_SHARED = True
 
 
-def range_multi(gm: GlintsMap, idx, w, s_min, s_max) -> np.ndarray:
+def range_multi(gm: GlintsMap, idx, w, s_min, s_max, active=None) -> np.ndarray:
     """Mean NDF values ``(N, K)`` over ``K`` rectangles per footprint, ``[s_min, s_max]``
     (``(N, K, 2)`` each, ``s_max > s_min``), of the blends ``(idx, w)`` ``(N, T)`` of
     :func:`weights`: :func:`range_weighted` of each rectangle (glints paper, eq. 7), the taps
-    walked once per block for all the rectangles touching it.
+    walked once per block for all the rectangles touching it. ``active (N, K)`` bool: the
+    rectangles to evaluate, the others are 0 at no cost (default: all).
 
     Version-3 maps sum the taps' 8-bit code rows in float32 before the factor products (as
     :func:`point_flat`'s resampling kernel): relative differences to :func:`range_weighted`
@@ -140,6 +142,15 @@ def range_multi(gm: GlintsMap, idx, w, s_min, s_max) -> np.ndarray:
     if np.any(hi_ <= lo_):
         raise PrefilterError("s_max: expected s_max > s_min in both coordinates")
     N, K = lo_.shape[:2]
+    if active is not None:
+        act = np.asarray(active)
+        if act.dtype != bool or act.shape != (N, K):
+            raise PrefilterError(f"active: expected a bool array of shape {(N, K)}, got "
+                                 f"{act.dtype} {act.shape}")
+    if active is not None and RANGE_SHARED:
+        # inactive ones: a unit square outside the support (no block touched, value 0)
+        lo_ = np.where(act[..., None], lo_, 4.0 * gm.support)
+        hi_ = np.where(act[..., None], hi_, 4.0 * gm.support + 1.0)
     if not RANGE_SHARED:
         return range_weighted(gm, np.repeat(idx, K, 0), np.repeat(w, K, 0),
                               lo_.reshape(-1, 2), hi_.reshape(-1, 2)).reshape(N, K)
