@@ -491,8 +491,10 @@ def _multi_case(gm, rng, n=300, k=5, interp="resample"):
 @pytest.mark.parametrize("interp", ["resample", "trilinear"])
 def test_range_multi_equals_range_weighted_per_rectangle(baked, interp):
     """One blend and K rectangles per footprint == :func:`range_weighted` of each rectangle:
-    rtol 1e-5 on the 8-bit maps (taps' code rows summed in float32), 1e-9 on the float maps
-    (float64 sums); the former path (``RANGE_SHARED = False``) exactly."""
+    rtol 1e-5 on the 8-bit maps (float32 sums; measured <= 3e-7), 1e-6 on the float maps
+    (float64; measured <= 4e-7, the former kernel's rounding: against the float64 images
+    rebuilt from the same float32 prefix sums it is off by up to 5e-8, range_multi by 2e-14);
+    the former path (``RANGE_SHARED = False``) exactly."""
     import dataclasses
 
     from prefilter.glints import query as gq
@@ -510,7 +512,7 @@ def test_range_multi_equals_range_weighted_per_rectangle(baked, interp):
     px_lo, px_hi = (lo + S) / (2 * S / R), (hi + S) / (2 * S / R)
     assert np.mean(np.floor(px_lo / B) != np.floor(px_hi / B)) > 0.3
     assert np.mean((px_lo < 0) | (px_hi > R)) > 0.1 and np.any((px_hi < 0) | (px_lo > R))
-    for m, rtol in ((gm, 1e-5), (dataclasses.replace(gm, codes=None), 1e-9)):
+    for m, rtol in ((gm, 1e-5), (dataclasses.replace(gm, codes=None), 1e-6)):
         want = gq.range_weighted(m, np.repeat(idx, k, 0), np.repeat(w, k, 0),
                                  lo.reshape(-1, 2), hi.reshape(-1, 2)).reshape(n, k)
         assert np.count_nonzero(want) > want.size // 3

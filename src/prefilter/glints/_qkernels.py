@@ -636,11 +636,41 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, 
         out[q] = acc / (sxw * syw)
 
 
+@njit_inline
+def _axis_rows(u0, u1, B):
+    """Prefix rows ``n0..n3`` and coefficients ``(k0, c0, cm, c1)`` of the mass of pixels
+    ``[u0, u1]`` of one axis of a block (block-local, clamped to ``[0, B]``) as
+    ``c0 (P[n1] - k0 P[n0]) + cm (P[n2] - P[n1]) + c1 (P[n3] - P[n2])``: partial first pixel,
+    whole pixels, partial last pixel; nonnegative terms for nonnegative factors, so no
+    cancellation (the 8-bit path sums them in float32). Rows not needed repeat a needed one
+    (their difference is 0: row ``n + 1`` may lie past the block); row 0 (zero) is replaced by
+    row ``n1`` with ``k0 = 0`` (its cache line is often the only one missing)."""
+    na0, ta0 = _prefix_pos(u0, B)
+    na1, ta1 = _prefix_pos(u1, B)
+    if na1 > na0:
+        n0, n1, n2 = na0, na0 + 1, na1
+        n3 = na1 + 1 if ta1 != 0.0 else na1
+        c0, cm, c1 = 1.0 - ta0, 1.0, ta1
+    else:  # within one pixel
+        n0 = na0
+        n1 = na0 + 1 if ta1 > ta0 else na0
+        n2 = n3 = n1
+        c0, cm, c1 = ta1 - ta0, 0.0, 0.0
+    k0 = 1.0
+    if n0 == 0:
+        n0, k0 = n1, 0.0
+    return n0, n1, n2, n3, k0, c0, cm, c1
+
+
 @njit_serial
-def _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, acc):
-    """Add ``sum_r cw[slot, r] wsc_r (a1_r - a0_r) (b1_r - b0_r)`` of every slot's group to
-    ``acc[k]`` of each rectangle ``k = touch[:nt]`` of the block: ``rp[k]`` the prefix rows
-    ``(na0, na1, nb0, nb1)``, ``rt[k]`` their weights (:func:`_prefix_pos`)."""
+def _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc):
+    """Add ``sum_r cw[slot, r] wsc_r da_r db_r`` of every slot's group to ``acc[k]`` of each
+    rectangle ``k = touch[:nt]`` of the block, ``da_r``, ``db_r`` its factor masses over the
+    rectangle from the prefix rows ``rp[k]`` and coefficients ``rt[k]`` of
+    :func:`_axis_rows` (rows axis then columns axis). Computed in ``cw``'s dtype (``tt``: 8
+    scratch values of it): float32 for the 8-bit codes, whose integer prefix sums (< 2^24) and
+    their differences are exact in float32, the rest sums of nonnegative terms (relative
+    rounding ~1e-7)."""
     B1 = B + 1
     for t in range(ns):
         g = gs[t]
@@ -650,39 +680,35 @@ def _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, acc):
         cr = cw[t]
         for u in range(nt):
             k = touch[u]
-            # rows n and n + 1 of the four prefix sums; the next row only with a nonzero
-            # weight (it may lie past the group's block), row 0 (zero) never read
-            na0, na1, nb0, nb1 = rp[k, 0], rp[k, 1], rp[k, 2], rp[k, 3]
-            ta0, ta1, tb0, tb1 = rt[k, 0], rt[k, 1], rt[k, 2], rt[k, 3]
-            ka0 = 0.0 if (na0 == 0 and ta0 == 0.0) else 1.0
-            kb0 = 0.0 if (nb0 == 0 and tb0 == 0.0) else 1.0
-            ra0 = base + na0 * nr
-            ra1 = base + na1 * nr
-            rb0 = base + nb0 * nr
-            rb1 = base + nb1 * nr
-            ea0 = ra0 + nr if ta0 != 0.0 else ra0
-            ea1 = ra1 + nr if ta1 != 0.0 else ra1
-            eb0 = rb0 + nr if tb0 != 0.0 else rb0
-            eb1 = rb1 + nr if tb1 != 0.0 else rb1
-            if ka0 == 0.0:
-                ra0 = ea0 = ra1
-            if kb0 == 0.0:
-                rb0 = eb0 = rb1
-            a0s, a0e = pa[ra0:ra0 + nr], pa[ea0:ea0 + nr]
-            a1s, a1e = pa[ra1:ra1 + nr], pa[ea1:ea1 + nr]
-            b0s, b0e = pb[rb0:rb0 + nr], pb[eb0:eb0 + nr]
-            b1s, b1e = pb[rb1:rb1 + nr], pb[eb1:eb1 + nr]
-            s = 0.0
+            for e in range(8):
+                tt[e] = rt[k, e]
+            ka, ca0, cam, ca1 = tt[0], tt[1], tt[2], tt[3]
+            kb, cb0, cbm, cb1 = tt[4], tt[5], tt[6], tt[7]
+            one = ka - ka + 1.0
+            o = base + rp[k, 0] * nr
+            p0 = pa[o:o + nr]
+            o = base + rp[k, 1] * nr
+            p1 = pa[o:o + nr]
+            o = base + rp[k, 2] * nr
+            p2 = pa[o:o + nr]
+            o = base + rp[k, 3] * nr
+            p3 = pa[o:o + nr]
+            o = base + rp[k, 4] * nr
+            q0 = pb[o:o + nr]
+            o = base + rp[k, 5] * nr
+            q1 = pb[o:o + nr]
+            o = base + rp[k, 6] * nr
+            q2 = pb[o:o + nr]
+            o = base + rp[k, 7] * nr
+            q3 = pb[o:o + nr]
+            s = one - one
             for r in range(nr):
-                a0 = float(a0s[r])
-                a0 = ka0 * (a0 + ta0 * (float(a0e[r]) - a0))
-                a1 = float(a1s[r])
-                a1 += ta1 * (float(a1e[r]) - a1)
-                b0 = float(b0s[r])
-                b0 = kb0 * (b0 + tb0 * (float(b0e[r]) - b0))
-                b1 = float(b1s[r])
-                b1 += tb1 * (float(b1e[r]) - b1)
-                s += float(cr[r]) * (wr[r] * ((a1 - a0) * (b1 - b0)))
+                # products with one, ka, kb: the prefix values in cw's dtype
+                a1, a2 = one * p1[r], one * p2[r]
+                b1, b2 = one * q1[r], one * q2[r]
+                da = ca0 * (a1 - ka * p0[r]) + cam * (a2 - a1) + ca1 * (one * p3[r] - a2)
+                db = cb0 * (b1 - kb * q0[r]) + cbm * (b2 - b1) + cb1 * (one * q3[r] - b2)
+                s += cr[r] * (wr[r] * (da * db))
             acc[k] += s
 
 
@@ -711,11 +737,12 @@ def range_multi_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y
     for q in prange(N):
         cw = np.empty((_SLOTS, rank), proto.dtype)
         one = np.empty(1, proto.dtype)  # the weight in the accumulator's dtype
+        tt = np.empty(8, proto.dtype)
         gs = np.empty(_SLOTS, np.int64)
         rbk = np.empty((K, 4), np.int64)  # blocks bi0, bi1, bj0, bj1 (bi0 > bi1: empty)
         rcl = np.empty((K, 4))  # clipped pixel bounds cx0, cx1, cy0, cy1
-        rp = np.empty((K, 4), np.int64)
-        rt = np.empty((K, 4))
+        rp = np.empty((K, 8), np.int64)
+        rt = np.empty((K, 8))
         area = np.empty(K)
         acc = np.zeros(K)
         touch = np.empty(K, np.int64)
@@ -736,10 +763,12 @@ def range_multi_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y
                     if rbk[k, 0] <= bi <= rbk[k, 1] and rbk[k, 2] <= bj <= rbk[k, 3]:
                         touch[nt] = k
                         nt += 1
-                        rp[k, 0], rt[k, 0] = _prefix_pos(rcl[k, 2] - bi * B, B)
-                        rp[k, 1], rt[k, 1] = _prefix_pos(rcl[k, 3] - bi * B, B)
-                        rp[k, 2], rt[k, 2] = _prefix_pos(rcl[k, 0] - bj * B, B)
-                        rp[k, 3], rt[k, 3] = _prefix_pos(rcl[k, 1] - bj * B, B)
+                        (rp[k, 0], rp[k, 1], rp[k, 2], rp[k, 3], rt[k, 0], rt[k, 1],
+                         rt[k, 2], rt[k, 3]) = _axis_rows(rcl[k, 2] - bi * B,
+                                                          rcl[k, 3] - bi * B, B)
+                        (rp[k, 4], rp[k, 5], rp[k, 6], rp[k, 7], rt[k, 4], rt[k, 5],
+                         rt[k, 6], rt[k, 7]) = _axis_rows(rcl[k, 0] - bj * B,
+                                                          rcl[k, 1] - bj * B, B)
                 if nt == 0:
                     continue
                 ns = 0
@@ -764,7 +793,7 @@ def range_multi_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y
                         if slot < 0:
                             if ns == _SLOTS:
                                 _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch,
-                                             nt, acc)
+                                             nt, tt, acc)
                                 ns = 0
                             slot = ns
                             gs[slot] = g
@@ -778,6 +807,6 @@ def range_multi_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y
                     cr = cq[kc:kc + nr]
                     for rr in range(nr):
                         cw[slot, rr] += wt * cr[rr]
-                _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, acc)
+                _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
         for k in range(K):
             out[q, k] = acc[k] / area[k]

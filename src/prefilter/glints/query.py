@@ -120,9 +120,10 @@ def range_multi(gm: GlintsMap, idx, w, s_min, s_max, active=None) -> np.ndarray:
     walked once per block for all the rectangles touching it. ``active (N, K)`` bool: the
     rectangles to evaluate, the others are 0 at no cost (default: all).
 
-    Version-3 maps sum the taps' 8-bit code rows in float32 before the factor products (as
-    :func:`point_flat`'s resampling kernel): relative differences to :func:`range_weighted`
-    ~1e-6 of the result (tested at rtol 1e-5); float maps in float64."""
+    Version-3 maps compute in float32 (the taps' 8-bit code rows summed as in
+    :func:`point_flat`'s resampling kernel; the integer prefix sums exact, the rest sums of
+    nonnegative terms): relative differences to :func:`range_weighted` measured <= 3e-7, tested
+    at rtol 1e-5; float maps in float64."""
     _check_map(gm)
     idx = np.asarray(idx)
     w = np.asarray(w, dtype=np.float64)
