@@ -11,7 +11,7 @@ normal), where the NDF ``D_P`` is the P-NDF of the pixel footprint:
   sparse glints between the pyramid samples). Footprints larger than the top level are clamped
   to it (the top has converged to a smooth NDF, sec. 5.1);
 * ``sigma_p < sigma_min`` (``sigma0``, or ``~1.12 sigma0`` where resampling starts): the direct
-  P-NDF of Yan et al. 2016 (:func:`prefilter.glints.pndf`), cheap for such footprints; without
+  P-NDF of Yan et al. 2016 (:func:`prefilter.glints.pndf.pndf`), cheap for such footprints; without
   the normal map the footprint is clamped to level 0 instead.
 
 ``D(m) = D_p(m_xy)`` on the hemisphere (see ``pndf``): a density w.r.t. projected normals that
@@ -35,13 +35,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange, serial
+from prefilter._numba import njit_parallel, prange, serial
 from prefilter._validate import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, texel_window,
                                    as_normal_map, element_moments, elements, pndf)
 from prefilter.glints._qkernels import _rect_mass
 from prefilter.glints.query import point_flat
+from prefilter.glints.sample import choose_index
 from prefilter.glints.store import GlintsMap
 
 
@@ -89,7 +90,7 @@ def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
             bilinear: bool = True) -> GlintSurface:
     """Bundle a baked map and its normal map (the direct P-NDF for tiny footprints).
 
-    ``gm=None`` gives a direct-only surface (every query by :func:`prefilter.glints.pndf`, the
+    ``gm=None`` gives a direct-only surface (every query by :func:`prefilter.glints.pndf.pndf`, the
     ``glints-direct`` method). ``check`` verifies that ``normal_map`` is the one ``gm`` was baked
     from (SHA-1 of the float64 normals recorded by the bake). ``intrinsic_roughness``: that of
     the direct P-NDF (default: the bake's, else Yan et al.'s 0.005). ``interp``: how
@@ -98,9 +99,9 @@ def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
     or ``"trilinear"`` (the paper's 8-image blend); ``bilinear``: NDF values interpolated between
     the stored pixel averages (default) instead of the pixel's value.
     """
-    from prefilter.glints.query import _check_interp
+    from prefilter.glints.query import check_interp
 
-    _check_interp(interp)
+    check_interp(interp)
     if gm is None and normal_map is None:
         raise PrefilterError("surface: expected a GlintsMap, a normal map, or both; got neither")
     if gm is not None and not isinstance(gm, GlintsMap):
@@ -310,7 +311,7 @@ def _jacobian_norms(J):
 def direct_ndf(surf, center, sigma_p, s, *, truncation: float = FALLBACK_TRUNCATION):
     """The direct P-NDF (Yan et al. 2016) of ``surf``'s normal map at flat footprints
     ``center (N, 2)``, ``sigma_p (N,)`` and points ``s (N, 2)``, truncated at ``truncation``
-    stds per axis (4 reproduces :func:`prefilter.glints.pndf` to rounding)."""
+    stds per axis (4 reproduces :func:`prefilter.glints.pndf.pndf` to rounding)."""
     if surf.elements_ is None:
         raise PrefilterError("surf: the direct P-NDF needs the normal map "
                              "(surface(gm, normal_map))")
@@ -359,7 +360,7 @@ def glint_ndf(surf, center, sigma_p, s, *, fallback_truncation: float | None = N
     ``sigma_p >= surf.sigma_min``, direct P-NDF below when the normal map is known; top-level
     clamp above the pyramid. ``fallback_truncation``: evaluate
     that direct P-NDF by :func:`direct_ndf` truncated at this many stds (faster, approximate;
-    ``None``: :func:`prefilter.glints.pndf` exactly).
+    ``None``: :func:`prefilter.glints.pndf.pndf` exactly).
     """
     surf = _as_surface(surf)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
@@ -697,27 +698,6 @@ def sample_s_direct_k(surf, center, sigma_p, u):
     return s, pdf
 
 
-@njit_serial
-def _choose_k(masses, n, u):
-    """Index in ``[0, n)`` with probability ``masses[k] / sum`` (-1 if all are zero) and that
-    probability: :func:`prefilter.glints.sample._choose`'s arithmetic."""
-    tot = 0.0
-    for k in range(n):
-        tot += masses[k]
-    if not tot > 0.0:
-        return -1, 0.0
-    t = u * tot
-    last = -1
-    run = 0.0
-    for k in range(n):
-        if masses[k] > 0.0:
-            last = k
-            run += masses[k]
-            if t < run:
-                return k, masses[k] / tot
-    return last, masses[last] / tot
-
-
 @njit_parallel
 def _sample_masses_k(A, Bp, C, block_index, image_cell, granks, idx, wts, bm, u, lo, h, out_s,
                      out_pdf):
@@ -733,7 +713,7 @@ def _sample_masses_k(A, Bp, C, block_index, image_cell, granks, idx, wts, bm, u,
         cj0 = np.empty(4, np.int64)
         cj1 = np.empty(4, np.int64)
         for kk in range(u.shape[1]):
-            kb, p = _choose_k(bm[q], nb * nb, u[q, kk, 0])
+            kb, p = choose_index(bm[q], nb * nb, u[q, kk, 0])
             if kb < 0:
                 out_s[q, kk, 0] = 0.0
                 out_s[q, kk, 1] = 0.0
@@ -756,7 +736,7 @@ def _sample_masses_k(A, Bp, C, block_index, image_cell, granks, idx, wts, bm, u,
                         cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts,
                                            q, bi, bj, a0, a1, b0, b1)
                         n += 1
-                k, pk = _choose_k(cm, n, u[q, kk, lev])
+                k, pk = choose_index(cm, n, u[q, kk, lev])
                 p *= pk
                 i0, i1, j0, j1 = ci0[k], ci1[k], cj0[k], cj1[k]
                 lev += 1

@@ -50,8 +50,9 @@ def _block_masses(A, Bp, C, block_index, image_cell, granks, idx, wts, out):
 
 
 @njit_serial
-def _choose(masses, n, u):
-    """Index in ``[0, n)`` with probability ``masses[k] / sum``; -1 if all are zero."""
+def choose_index(masses, n, u):
+    """Index ``k`` in ``[0, n)`` drawn by the uniform ``u`` with probability ``masses[k] / sum``
+    of ``masses (>= n,)``, and that probability; ``(-1, 0)`` if all are zero."""
     tot = 0.0
     for k in range(n):
         tot += masses[k]
@@ -79,7 +80,7 @@ def _sample_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, u, lo, h
             for bj in range(nb):
                 bm[bi * nb + bj] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx,
                                               wts, q, bi, bj, 0, B, 0, B)
-        kb, p = _choose(bm, nb * nb, u[q, 0])
+        kb, p = choose_index(bm, nb * nb, u[q, 0])
         if kb < 0:
             out_s[q, 0] = 0.0
             out_s[q, 1] = 0.0
@@ -107,7 +108,7 @@ def _sample_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, u, lo, h
                     cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q,
                                        bi, bj, a0, a1, b0, b1)
                     n += 1
-            k, pk = _choose(cm, n, u[q, lev])
+            k, pk = choose_index(cm, n, u[q, lev])
             p *= pk
             i0, i1, j0, j1 = ci0[k], ci1[k], cj0[k], cj1[k]
             lev += 1
