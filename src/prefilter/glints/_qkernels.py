@@ -30,7 +30,7 @@ import numpy as np
 from llvmlite import ir
 from numba import types
 from numba.core import cgutils
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
 from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange
 
@@ -636,6 +636,19 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, 
         out[q] = acc / (sxw * syw)
 
 
+def _as_acc(x, like):
+    """``x`` converted to the float type of ``like`` (compiled code only: Numba types a float32
+    times a uint16 as float64)."""
+    raise NotImplementedError
+
+
+@overload(_as_acc, inline="always")
+def _as_acc_impl(x, like):
+    if isinstance(like, types.Float) and like.bitwidth == 32:
+        return lambda x, like: np.float32(x)
+    return lambda x, like: np.float64(x)
+
+
 @njit_inline
 def _axis_rows(u0, u1, B):
     """Prefix rows ``n0..n3`` and coefficients ``(k0, c0, cm, c1)`` of the mass of pixels
@@ -667,7 +680,7 @@ def _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc):
     """Add ``sum_r cw[slot, r] wsc_r da_r db_r`` of every slot's group to ``acc[k]`` of each
     rectangle ``k = touch[:nt]`` of the block, ``da_r``, ``db_r`` its factor masses over the
     rectangle from the prefix rows ``rp[k]`` and coefficients ``rt[k]`` of
-    :func:`_axis_rows` (rows axis then columns axis). Computed in ``cw``'s dtype (``tt``: 8
+    :func:`_axis_rows` (rows axis then columns axis). Computed in ``cw``'s dtype (``tt``: 9
     scratch values of it): float32 for the 8-bit codes, whose integer prefix sums (< 2^24) and
     their differences are exact in float32, the rest sums of nonnegative terms (relative
     rounding ~1e-7)."""
@@ -682,9 +695,10 @@ def _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc):
             k = touch[u]
             for e in range(8):
                 tt[e] = rt[k, e]
+            tt[8] = 1.0  # a float literal would promote the float32 arithmetic to float64
             ka, ca0, cam, ca1 = tt[0], tt[1], tt[2], tt[3]
             kb, cb0, cbm, cb1 = tt[4], tt[5], tt[6], tt[7]
-            one = ka - ka + 1.0
+            one = tt[8]
             o = base + rp[k, 0] * nr
             p0 = pa[o:o + nr]
             o = base + rp[k, 1] * nr
@@ -703,11 +717,12 @@ def _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc):
             q3 = pb[o:o + nr]
             s = one - one
             for r in range(nr):
-                # products with one, ka, kb: the prefix values in cw's dtype
-                a1, a2 = one * p1[r], one * p2[r]
-                b1, b2 = one * q1[r], one * q2[r]
-                da = ca0 * (a1 - ka * p0[r]) + cam * (a2 - a1) + ca1 * (one * p3[r] - a2)
-                db = cb0 * (b1 - kb * q0[r]) + cbm * (b2 - b1) + cb1 * (one * q3[r] - b2)
+                a1, a2 = _as_acc(p1[r], one), _as_acc(p2[r], one)
+                b1, b2 = _as_acc(q1[r], one), _as_acc(q2[r], one)
+                da = (ca0 * (a1 - ka * _as_acc(p0[r], one)) + cam * (a2 - a1)
+                      + ca1 * (_as_acc(p3[r], one) - a2))
+                db = (cb0 * (b1 - kb * _as_acc(q0[r], one)) + cbm * (b2 - b1)
+                      + cb1 * (_as_acc(q3[r], one) - b2))
                 s += cr[r] * (wr[r] * (da * db))
             acc[k] += s
 
@@ -737,7 +752,7 @@ def range_multi_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y
     for q in prange(N):
         cw = np.empty((_SLOTS, rank), proto.dtype)
         one = np.empty(1, proto.dtype)  # the weight in the accumulator's dtype
-        tt = np.empty(8, proto.dtype)
+        tt = np.empty(9, proto.dtype)
         gs = np.empty(_SLOTS, np.int64)
         rbk = np.empty((K, 4), np.int64)  # blocks bi0, bi1, bj0, bj1 (bi0 > bi1: empty)
         rcl = np.empty((K, 4))  # clipped pixel bounds cx0, cx1, cy0, cy1
