@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.glints import pndf
+from prefilter.glints.pndf import pndf
 from prefilter.glints.bake import bake
 from prefilter.glints.pndf import elements
 from prefilter.glints.query import point, range_mean

@@ -8,7 +8,8 @@ import pytest
 from maps import sinusoid
 
 from prefilter.errors import PrefilterError
-from prefilter.glints import bake, load
+from prefilter.glints import load
+from prefilter.glints.bake import bake
 from prefilter.glints.brdf import glint_brdf_cos, surface
 from prefilter.glints.envlight import equirect_directions, fibonacci_axes, fit_sg, shade_sg
 from prefilter.glints.render import _U_PAIR, QUAD_MIS, quad_mis, quad_mis_unfused, quad_range
@@ -390,7 +391,7 @@ def test_render_rejects_textured_quads(small_render):
 def test_direct_ndf_truncation(surf):
     """The separable-weight kernel: at 4 stds it is the P-NDF of ``pndf`` (the exp(-18) angular
     cut-off aside); at 3 stds within 2 % relative L2 of it."""
-    from prefilter.glints import pndf
+    from prefilter.glints.pndf import pndf
     from prefilter.glints.brdf import direct_ndf, glint_ndf
 
     rng = np.random.default_rng(5)

@@ -221,16 +221,6 @@ def test_package_attribute_is_the_submodule(name):
     assert ns["alias"] is module
 
 
-def test_calling_the_pndf_module_is_deprecated_but_forwards():
-    """The bridge for callers of the former package-level ``pndf``: same values, with a warning."""
-    import prefilter.glints as G
-
-    s = np.array([[0.0, 0.0], [0.01, -0.004]])
-    with pytest.warns(DeprecationWarning, match=r"prefilter\.glints\.pndf\.pndf"):
-        got = G.pndf(flat(), [5.5, 7.25], 3.0, s, 0.01)
-    np.testing.assert_array_equal(got, pndf(flat(), [5.5, 7.25], 3.0, s, 0.01))
-
-
 def test_element_split_reassembles_the_covariance():
     """``siso^2 I + kappa^2 v v^T == sr^2 I + [[a, b], [b, d]]`` with ``|v| = 1`` (random and
     degenerate covariances: isotropic, rank one, diagonal with a < d)."""

@@ -14,10 +14,7 @@ tiling, direct P-NDF over tiles), :mod:`prefilter.glints.wang_ndf` (per-tile pyr
 sampling) and :mod:`prefilter.glints.wang_store` (``save_tiles`` / ``load_tiles``).
 """
 
-import types
-import warnings
-
-from prefilter.glints import bake, pndf
+from prefilter.glints import bake, pndf  # noqa: F401  (the submodules, as attributes)
 from prefilter.glints.pndf import elements, hemisphere_ndf, pndf_image
 from prefilter.glints.query import block_means, point, range_mean
 from prefilter.glints.store import GlintsMap, load
@@ -32,19 +29,3 @@ from prefilter.glints.sample import ndf_pdf, sample_s, sample_s_direct, sample_w
 __all__ += ["GlintSurface", "glint_brdf_cos", "glint_ndf", "ndf_pdf", "sample_s",
             "sample_s_direct", "sample_wi", "surface"]
 
-
-class _CallableModule(types.ModuleType):
-    """Deprecated bridge: ``prefilter.glints.bake(...)`` / ``pndf(...)`` were functions until
-    the package stopped re-exporting them; calling the module still forwards to its namesake
-    function (with a DeprecationWarning) until every caller uses ``bake.bake`` / ``pndf.pndf``."""
-
-    def __call__(self, *args, **kwargs):
-        name = self.__name__.rpartition(".")[2]
-        warnings.warn(f"calling the module {self.__name__} is deprecated: call "
-                      f"{self.__name__}.{name}", DeprecationWarning, stacklevel=2)
-        return getattr(self, name)(*args, **kwargs)
-
-
-for _module in (bake, pndf):
-    _module.__class__ = _CallableModule
-del _module

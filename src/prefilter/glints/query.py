@@ -52,10 +52,6 @@ def check_interp(interp: str) -> None:
         raise PrefilterError(f"interp: expected one of {INTERP}, got {interp!r}")
 
 
-#: Former private name, still imported by :mod:`prefilter.glints.brdf`.
-_check_interp = check_interp
-
-
 def weights(gm: GlintsMap, center, sigma_p, *, interp: str = "trilinear"):
     """Pyramid images and weights of flat footprints ``center (N, 2)``, ``sigma_p (N,)``.
 
