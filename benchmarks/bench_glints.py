@@ -470,6 +470,8 @@ def main():
         bench_breakdown()
         return
     if a.frames:
+        if a.unfused and a.old_range:
+            ap.error("--unfused and --old-range: each is its own interleaved comparison; give one")
         bs = {k: v for k, v in (("stride0", a.stride0), ("sigma0", a.sigma0),
                                 ("rank", a.bake_rank)) if v is not None}
         ratios = []

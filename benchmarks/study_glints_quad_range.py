@@ -53,6 +53,7 @@ def range_image(sc):
     """Range-path radiance ``(H, W, 3)`` at the pixel centres, its validity ``(H, W)`` and CPU
     seconds (the 2x2 patches, then 4x4 where those are too large, as ``shade_glints``)."""
     from prefilter.glints import render as R
+    from prefilter.sphere.sampling import to_local
     from prefilter.render.camera import gbuffer_at
 
     cam = sc.camera
@@ -64,10 +65,10 @@ def range_image(sc):
     c, sp = R.footprints(g, surf.shape)
     flp = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
     t, b, n = g.tangent, g.bitangent * flp, g.normal * flp
-    wo = R._local(g.view, t, b, n)
+    wo = to_local(g.view, t, b, n)
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
     ql = sc.light_set().quads[0]
-    corners = np.stack([R._local(v - g.position, t, b, n) for v in ql.vertices], 1)
+    corners = np.stack([to_local(v - g.position, t, b, n) for v in ql.vertices], 1)
     f0 = np.asarray(mat.f0, dtype=np.float64)
     t0 = time.process_time()
     val, done = R.quad_range(surf, c, sp, wo, corners, ql.radiance, f0)

@@ -139,7 +139,9 @@ def bilinear_bake_roughness(intrinsic_roughness: float, support: float, ndf_res:
     return max(math.sqrt(max(sr * sr - hh * hh, 0.0)), 0.5 * sr)
 
 
-def _as_surface(surf) -> GlintSurface:
+def as_surface(surf) -> GlintSurface:
+    """``surf`` as a :class:`GlintSurface`: a surface is returned as is, a :class:`GlintsMap`
+    is wrapped by :func:`surface` (compressed queries only); anything else is an error."""
     if isinstance(surf, GlintSurface):
         return surf
     if isinstance(surf, GlintsMap):
@@ -362,7 +364,7 @@ def glint_ndf(surf, center, sigma_p, s, *, fallback_truncation: float | None = N
     that direct P-NDF by :func:`direct_ndf` truncated at this many stds (faster, approximate;
     ``None``: :func:`prefilter.glints.pndf.pndf` exactly).
     """
-    surf = _as_surface(surf)
+    surf = as_surface(surf)
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = as_float_array(sigma_p, "sigma_p")
     q = as_float_array(s, "s", ndim_min=1, last_dim=2)

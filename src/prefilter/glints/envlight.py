@@ -26,7 +26,7 @@ import numpy as np
 
 from prefilter._validate import as_float_array, as_rng
 from prefilter.errors import PrefilterError
-from prefilter.glints.brdf import _as_surface, glint_ndf, schlick, vcavity_g2
+from prefilter.glints.brdf import as_surface, glint_ndf, schlick, vcavity_g2
 from prefilter.glints.query import range_multi, weights
 
 
@@ -137,7 +137,7 @@ def shade_sg(surf, center, sigma_p, wo, mu, lam, p, f0=1.0, *, n_samples: int = 
     drawn from ``rng``). ``base_color (3,)``: adds the Lambertian term from the same samples.
     ``fallback_truncation``: that of :func:`glint_ndf`'s direct P-NDF (the render's ``glints``
     passes 4 stds: the same values to 3e-8, the fast row kernel)."""
-    surf = _as_surface(surf)
+    surf = as_surface(surf)
     mu, lam, p = as_lobes(mu, lam, p)
     c = as_float_array(center, "center", ndim_min=2, last_dim=2)
     sp = np.broadcast_to(as_float_array(sigma_p, "sigma_p"), c.shape[:1])

@@ -48,9 +48,9 @@ LINE_STEP = 0.025
 
 
 def _surface_arrays(surf):
-    from prefilter.glints.brdf import _as_surface
+    from prefilter.glints.brdf import as_surface
 
-    surf = _as_surface(surf)
+    surf = as_surface(surf)
     if surf.normal_map is None:
         raise PrefilterError("surf: the direct P-NDF needs the normal map (a surface built with "
                              "normal_map=...)")
@@ -489,15 +489,15 @@ def shade_converged(scene, g, *, matched: bool = False, ndf: str = "direct") -> 
         raise PrefilterError(f"ndf: expected 'direct' or 'compressed', got {ndf!r}")
     from prefilter.glints.brdf import glint_brdf_cos
     from prefilter.glints.envlight import eps_support
-    from prefilter.glints.render import (ENV_EPS, _local, baked_surface, environment_sgs,
-                                         footprints)
+    from prefilter.glints.render import ENV_EPS, baked_surface, environment_sgs, footprints
     from prefilter.ltc import clamped_cosine_integral
+    from prefilter.sphere.sampling import to_local
 
     lights = scene.light_set()
     env = [lt for lt in scene.lights if lt.type == "environment"]
     flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
     t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
-    wo = _local(g.view, t, b, n)
+    wo = to_local(g.view, t, b, n)
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
     out = np.zeros((len(wo), 3))
     for k in np.unique(g.object_id):
@@ -515,18 +515,18 @@ def shade_converged(scene, g, *, matched: bool = False, ndf: str = "direct") -> 
         for pl in lights.points:
             d = pl.position - g.position[m]
             d2 = np.maximum(np.sum(d * d, -1), 1e-300)
-            wi = _local(d / np.sqrt(d2)[:, None], tm, bm, nmm)
+            wi = to_local(d / np.sqrt(d2)[:, None], tm, bm, nmm)
             wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
             out[m] += (glint_brdf_cos(surf, c, sp, wo[m], wi, f0)
                        + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * pl.intensity / \
                 d2[:, None]
         for dl in lights.directionals:
-            wi = _local(np.broadcast_to(-dl.direction, tm.shape), tm, bm, nmm)
+            wi = to_local(np.broadcast_to(-dl.direction, tm.shape), tm, bm, nmm)
             wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
             out[m] += (glint_brdf_cos(surf, c, sp, wo[m], wi, f0)
                        + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * dl.irradiance
         for ql in lights.quads:
-            corners = np.stack([_local(v - g.position[m], tm, bm, nmm) for v in ql.vertices], 1)
+            corners = np.stack([to_local(v - g.position[m], tm, bm, nmm) for v in ql.vertices], 1)
             if np.any(base > 0):
                 out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
             out[m] += quad_integral(surf, c, sp, wo[m], corners, ql.radiance, f0,

@@ -50,6 +50,7 @@ from prefilter.errors import PrefilterError
 from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, bilinear_bake_roughness,
                                    glint_brdf_cos, glint_ndf, surface)
 from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
+from prefilter.sphere.sampling import to_local, to_world
 
 PIXEL_SIGMA = 0.5
 #: Bake settings of the render cache. The intrinsic roughness is twice Yan et al.'s 0.005 so that
@@ -73,8 +74,8 @@ PIXEL_SIGMA = 0.5
 #: ``ndf_truncation`` / ``footprint_truncation`` (6 / 6, the bake's default 4 / 4): HDR-FLIP of
 #: the mostly black brushed plane frames exposes up to +24 stops, where the element and footprint
 #: tails beyond 4 stds show: plane brushed mid / far 0.101 / 0.097 -> 0.078 / 0.079 (6 / 6;
-#: angular cut alone 0.100 / 0.081), no cell of the point matrix worse; bake time ~2x, storage
-#: +1-4 % (docs/glints-part2.md, session 6).
+#: element cut alone 0.100 / 0.081), no cell of the point matrix worse by more than 0.001; bake
+#: time ~2x, storage +0.1-3.5 % (docs/glints-part2.md, session 6).
 BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0)
@@ -145,14 +146,6 @@ def footprints(g, shape, spp: int = 1):
     J = g.dudv * np.array([W, H], dtype=np.float64)[:, None]
     det = np.abs(J[:, 0, 0] * J[:, 1, 1] - J[:, 0, 1] * J[:, 1, 0])
     return center, PIXEL_SIGMA * np.sqrt(det / spp)
-
-
-def _local(w, t, b, n):
-    return np.stack([np.sum(w * t, -1), np.sum(w * b, -1), np.sum(w * n, -1)], -1)
-
-
-def _world(w, t, b, n):
-    return w[:, :1] * t + w[:, 1:2] * b + w[:, 2:] * n
 
 
 #: Quad lights: each MIS estimate takes ``QUAD_MIS`` light samples and as many BRDF samples per
@@ -359,7 +352,7 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     uu = u[:, :P * _U_PAIR].reshape(N, P, _U_PAIR)
     # light samples and their half vectors
     w, pl = quad_light_sample(light, pos, uu[:, :, :2].transpose(1, 0, 2).reshape(P * N, 2))
-    wl = as_directions(_local(w, t, b, n), "wi")
+    wl = as_directions(to_local(w, t, b, n), "wi")
     hl = _half(woP, wl)
     Hl = hl.reshape(P, N, 3).transpose(1, 0, 2)
     # BRDF samples: sample_wi's draws, then its reflection and density; glint_brdf_cos's wi.
@@ -387,7 +380,7 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     pb2 = np.where(ok, ps * m[..., 2] / (4.0 * np.where(ok, wom, 1.0)), 0.0)
     ok = pb2 > 0
     w = np.where(ok[:, None], w, np.array([0.0, 0.0, 1.0]))
-    pl2 = quad_light_pdf(light, pos, _world(w, t, b, n))
+    pl2 = quad_light_pdf(light, pos, to_world(w, t, b, n))
     wb = as_directions(w, "wi")
     hb = _half(woP, wb)
     if np.any(rest):
@@ -517,7 +510,7 @@ def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, l
         uj = u[:, j * _U_PAIR:(j + 1) * _U_PAIR]
         # light sample
         wl, pl = quad_light_sample(light, position, uj[:, :2])
-        wl_loc = _local(wl, t, b, n)
+        wl_loc = to_local(wl, t, b, n)
         fl = glint_brdf_cos(surf, center, sigma_p, wo, wl_loc, f0,
                             fallback_truncation=fallback_truncation)
         pb = pdf_wi(surf, center, sigma_p, wo, wl_loc)
@@ -527,7 +520,7 @@ def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, l
         wb_loc, pb2 = sample_wi(surf, center, sigma_p, wo, u=uj[:, 2:])
         ok = pb2 > 0
         wb_loc = np.where(ok[:, None], wb_loc, np.array([0.0, 0.0, 1.0]))
-        wb = _world(wb_loc, t, b, n)
+        wb = to_world(wb_loc, t, b, n)
         pl2 = quad_light_pdf(light, position, wb)
         fb = glint_brdf_cos(surf, center, sigma_p, wo, wb_loc, f0,
                             fallback_truncation=fallback_truncation)
@@ -554,7 +547,7 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
         use_range = mode == "compressed"
     flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
     t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
-    wo = _local(g.view, t, b, n)
+    wo = to_local(g.view, t, b, n)
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
     incoming = []
     for pl in lights.points:
@@ -581,14 +574,14 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
         # reference keep the exact P-NDF
         trunc = FALLBACK_TRUNCATION if mode == "compressed" else None
         for w, e in incoming:
-            wi = _local(w[m], t[m], b[m], n[m])
+            wi = to_local(w[m], t[m], b[m], n[m])
             wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
             spec = glint_brdf_cos(surf, c, sp, wo[m], wi, f0, fallback_truncation=trunc)
             diff = base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]
             out[m] += (spec + diff) * e[m] if np.ndim(e) == 2 else (spec + diff) * e
         frame = (t[m], b[m], n[m])
         for qi, ql in enumerate(lights.quads):
-            corners = np.stack([_local(v - g.position[m], *frame) for v in ql.vertices], 1)
+            corners = np.stack([to_local(v - g.position[m], *frame) for v in ql.vertices], 1)
             if np.any(base > 0):
                 out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
             val = np.zeros((int(m.sum()), 3))

@@ -281,10 +281,10 @@ def pdf_wi(surf, center, sigma_p, wo, wi) -> np.ndarray:
     ``pdf_s(h_xy) h_z / (4 wo.h)`` with ``h`` the half vector; ``pdf_s`` is the direct P-NDF below
     the finest level (or everywhere for a surface without a compressed map), else
     :func:`ndf_pdf`. For multiple importance sampling with light samples."""
-    from prefilter.glints.brdf import GlintSurface, _as_surface, direct_ndf
+    from prefilter.glints.brdf import GlintSurface, as_surface, direct_ndf
     from prefilter.glints.pndf import TRUNCATION
 
-    surf = surf if isinstance(surf, GlintSurface) else _as_surface(surf)
+    surf = surf if isinstance(surf, GlintSurface) else as_surface(surf)
     wo = as_directions(wo, "wo")
     wi = as_directions(wi, "wi")
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
@@ -376,10 +376,10 @@ def sample_s_direct(surf, center, sigma_p, rng=0, *, u=None):
     ``pndf(s)`` (the exact mixture density, Yan et al. 2016). For footprints below the finest
     pyramid level, where :func:`prefilter.glints.brdf.glint_ndf` evaluates the direct P-NDF.
     ``u``: optional ``(n, 3)`` uniforms in ``[0, 1)`` (element choice, Box-Muller pair)."""
-    from prefilter.glints.brdf import _as_surface
+    from prefilter.glints.brdf import as_surface
     from prefilter.glints.pndf import SIGMA_H, TRUNCATION, pndf
 
-    surf = _as_surface(surf)
+    surf = as_surface(surf)
     if surf.normal_map is None:
         raise PrefilterError("surf: direct sampling needs the normal map (surface(gm, normal_map))")
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
