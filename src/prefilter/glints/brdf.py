@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, prange, serial
+from prefilter._numba import njit_inline, njit_parallel, prange, serial
 from prefilter._validate import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, texel_window,
@@ -478,6 +478,41 @@ def _brdf_cos_from_ndf(wo, wi, h, D, f0):
 # texel's element is loaded, and its covariance formed, once instead of once per point.
 
 
+@njit_inline
+def _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, ox, oy, ca, cb, cd,
+                     det):  # pragma: no cover - compiled
+    """Texels ``xs .. xs + nx - 1`` of row ``r`` of the element planes: the footprint's shift of
+    each element's mean (``ox, oy``: ``J (f dx, f dy)``) and its covariance ``[[ca, cb], [cb,
+    cd]]`` (intrinsic ``sr2`` plus ``var J J^T``) with determinant ``det``, all ``(>= nx,)``
+    (Yan et al. 2016, the element's slope marginal conditioned on the footprint)."""
+    a0 = J00[r, xs:xs + nx]
+    a1 = J01[r, xs:xs + nx]
+    b0 = J10[r, xs:xs + nx]
+    b1 = J11[r, xs:xs + nx]
+    for i in range(nx):
+        j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
+        ox[i] = j00 * fdx[i] + j01 * fdy
+        oy[i] = j10 * fdx[i] + j11 * fdy
+        a = sr2 + var * (j00 * j00 + j01 * j01)
+        d = sr2 + var * (j10 * j10 + j11 * j11)
+        b = var * (j00 * j10 + j01 * j11)
+        ca[i] = a
+        cb[i] = b
+        cd[i] = d
+        det[i] = a * d - b * b
+
+
+@njit_inline
+def _row_quadratic_forms(qx, qy, sxr, syr, ox, oy, ca, cb, cd, nx, quad):  # pragma: no cover
+    """``quad[i] = det_i e_i^T cov_i^-1 e_i`` for the point ``(qx, qy)`` and the ``nx`` elements
+    of a row (``e_i`` = point minus the element's shifted mean), without the division: callers
+    compare it with ``cut * det`` before paying for the exponential."""
+    for i in range(nx):
+        ex = qx - sxr[i] - ox[i]
+        ey = qy - syr[i] - oy[i]
+        quad[i] = cd[i] * ex * ex - 2.0 * cb[i] * ex * ey + ca[i] * ey * ey
+
+
 @njit_parallel
 def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, out):
     """:func:`_direct_rows` at ``K`` points per footprint: ``qx, qy, out (N, K)``. A row's
@@ -523,28 +558,12 @@ def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc
             fdy = f * dy
             sxr = SX[r, xs:xs + nx]
             syr = SY[r, xs:xs + nx]
-            a0 = J00[r, xs:xs + nx]
-            a1 = J01[r, xs:xs + nx]
-            b0 = J10[r, xs:xs + nx]
-            b1 = J11[r, xs:xs + nx]
-            for i in range(nx):
-                j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
-                ox[i] = j00 * fdx[i] + j01 * fdy
-                oy[i] = j10 * fdx[i] + j11 * fdy
-                a = sr2 + var * (j00 * j00 + j01 * j01)
-                d = sr2 + var * (j10 * j10 + j11 * j11)
-                b = var * (j00 * j10 + j01 * j11)
-                ca[i] = a
-                cb[i] = b
-                cd[i] = d
-                det[i] = a * d - b * b
+            _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, ox, oy, ca, cb,
+                             cd, det)
             for k in range(K):
                 qxk = qx[q, k]
                 qyk = qy[q, k]
-                for i in range(nx):
-                    ex = qxk - sxr[i] - ox[i]
-                    ey = qyk - syr[i] - oy[i]
-                    quad[i] = cd[i] * ex * ex - 2.0 * cb[i] * ex * ey + ca[i] * ey * ey
+                _row_quadratic_forms(qxk, qyk, sxr, syr, ox, oy, ca, cb, cd, nx, quad)
                 racc = 0.0
                 for i in range(nx):
                     if quad[i] < 36.0 * det[i]:
@@ -925,28 +944,12 @@ def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, 
             fdy = f * (cy[q] - (y + 0.5))
             sxr = SX[r, xs:xs + nx]
             syr = SY[r, xs:xs + nx]
-            a0 = J00[r, xs:xs + nx]
-            a1 = J01[r, xs:xs + nx]
-            b0 = J10[r, xs:xs + nx]
-            b1 = J11[r, xs:xs + nx]
-            for i in range(nx):
-                j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
-                ox[i] = j00 * fdx[i] + j01 * fdy
-                oy[i] = j10 * fdx[i] + j11 * fdy
-                a = sr2 + var * (j00 * j00 + j01 * j01)
-                d = sr2 + var * (j10 * j10 + j11 * j11)
-                b = var * (j00 * j10 + j01 * j11)
-                ca[i] = a
-                cb[i] = b
-                cd[i] = d
-                det[i] = a * d - b * b
+            _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, ox, oy, ca, cb,
+                             cd, det)
             for k in range(2 * P):
                 qxk = qx[k]
                 qyk = qy[k]
-                for i in range(nx):
-                    ex = qxk - sxr[i] - ox[i]
-                    ey = qyk - syr[i] - oy[i]
-                    quad[i] = cd[i] * ex * ex - 2.0 * cb[i] * ex * ey + ca[i] * ey * ey
+                _row_quadratic_forms(qxk, qyk, sxr, syr, ox, oy, ca, cb, cd, nx, quad)
                 racc = 0.0
                 if k < P:
                     for i in range(nx):
