@@ -479,12 +479,14 @@ def _brdf_cos_from_ndf(wo, wi, h, D, f0):
 
 
 @njit_inline
-def _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, ox, oy, ca, cb, cd,
-                     det):  # pragma: no cover - compiled
+def _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, wx, ox, oy, ca, cb, cd,
+                     det, nh, wd):  # pragma: no cover - compiled
     """Texels ``xs .. xs + nx - 1`` of row ``r`` of the element planes: the footprint's shift of
     each element's mean (``ox, oy``: ``J (f dx, f dy)``) and its covariance ``[[ca, cb], [cb,
     cd]]`` (intrinsic ``sr2`` plus ``var J J^T``) with determinant ``det``, all ``(>= nx,)``
-    (Yan et al. 2016, the element's slope marginal conditioned on the footprint)."""
+    (Yan et al. 2016, the element's slope marginal conditioned on the footprint). ``nh = -1 /
+    (2 det)`` and ``wd = wx / sqrt(det)`` (column weights ``wx``): the Gaussian of texel ``i`` at
+    a point is ``wd[i] exp(nh[i] quad[i])``, shared by all the points of the row."""
     a0 = J00[r, xs:xs + nx]
     a1 = J01[r, xs:xs + nx]
     b0 = J10[r, xs:xs + nx]
@@ -500,6 +502,8 @@ def _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, ox, oy, 
         cb[i] = b
         cd[i] = d
         det[i] = a * d - b * b
+        nh[i] = -0.5 / det[i]
+        wd[i] = wx[i] / math.sqrt(det[i])
 
 
 @njit_inline
@@ -536,6 +540,8 @@ def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc
         fdx = np.empty(nx)
         quad = np.empty(nx)
         det = np.empty(nx)
+        nh = np.empty(nx)
+        wd = np.empty(nx)
         ca = np.empty(nx)
         cb = np.empty(nx)
         cd = np.empty(nx)
@@ -558,8 +564,8 @@ def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc
             fdy = f * dy
             sxr = SX[r, xs:xs + nx]
             syr = SY[r, xs:xs + nx]
-            _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, ox, oy, ca, cb,
-                             cd, det)
+            _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, wx, ox, oy, ca,
+                             cb, cd, det, nh, wd)
             for k in range(K):
                 qxk = qx[q, k]
                 qyk = qy[q, k]
@@ -567,7 +573,7 @@ def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc
                 racc = 0.0
                 for i in range(nx):
                     if quad[i] < 36.0 * det[i]:
-                        racc += wx[i] * math.exp(-0.5 * quad[i] / det[i]) / math.sqrt(det[i])
+                        racc += wd[i] * math.exp(nh[i] * quad[i])
                 acc[k] += wy * racc
         for k in range(K):
             out[q, k] = acc[k] / (2.0 * math.pi * sx * sy)
@@ -931,6 +937,8 @@ def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, 
             out_s[q, k, 1] = qy[P + k]
         quad = np.empty(nx)
         det = np.empty(nx)
+        nh = np.empty(nx)
+        wd = np.empty(nx)
         ca = np.empty(nx)
         cb = np.empty(nx)
         cd = np.empty(nx)
@@ -944,8 +952,8 @@ def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, 
             fdy = f * (cy[q] - (y + 0.5))
             sxr = SX[r, xs:xs + nx]
             syr = SY[r, xs:xs + nx]
-            _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, ox, oy, ca, cb,
-                             cd, det)
+            _row_covariances(J00, J01, J10, J11, r, xs, nx, fdx, fdy, var, sr2, wx, ox, oy, ca,
+                             cb, cd, det, nh, wd)
             for k in range(2 * P):
                 qxk = qx[k]
                 qyk = qy[k]
@@ -954,12 +962,12 @@ def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, 
                 if k < P:
                     for i in range(nx):
                         if quad[i] < 36.0 * det[i]:
-                            racc += wx[i] * math.exp(-0.5 * quad[i] / det[i]) / math.sqrt(det[i])
+                            racc += wd[i] * math.exp(nh[i] * quad[i])
                 else:
                     pacc = 0.0
                     for i in range(nx):
                         if quad[i] < cut * det[i]:
-                            e = wx[i] * math.exp(-0.5 * quad[i] / det[i]) / math.sqrt(det[i])
+                            e = wd[i] * math.exp(nh[i] * quad[i])
                             pacc += e
                             if quad[i] < 36.0 * det[i]:
                                 racc += e
