@@ -219,6 +219,33 @@ def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
         out[q] = acc / (sx * sy)
 
 
+@njit_inline
+def _footprint_columns(cx, cy, sp, sh2, trunc, W):  # pragma: no cover - compiled
+    """A footprint's texel window and its column factors for the row kernels (Yan et al. 2016
+    weights ``exp(-|u_p - u_i|^2 / (2 (sigma_p^2 + sigma_h^2)))``, separable): mean-shift factor
+    ``f``, element variance ``var``, ``inv = 1 / (2 tot2)``, window ``x0, y0, y1``, ``nx``
+    columns starting at ``xs`` in the doubled planes (width ``2 W``), column weights ``wx`` and
+    their sum ``sx``, and ``fdx = f dx`` per column."""
+    sp2 = sp * sp
+    tot2 = sp2 + sh2
+    f = sh2 / tot2
+    var = sp2 * sh2 / tot2
+    rad = trunc * math.sqrt(tot2)
+    x0, x1 = texel_window(cx, rad)
+    y0, y1 = texel_window(cy, rad)
+    nx = x1 - x0 + 1
+    wx = np.empty(nx)
+    fdx = np.empty(nx)
+    inv = 1.0 / (2.0 * tot2)
+    sx = 0.0
+    for i in range(nx):
+        dx = cx - (x0 + i + 0.5)
+        fdx[i] = f * dx
+        wx[i] = math.exp(-dx * dx * inv)
+        sx += wx[i]
+    return f, var, inv, x0, y0, y1, nx, x0 % W, wx, fdx, sx
+
+
 @njit_parallel
 def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, out):
     """:func:`_direct_points` over planes of the elements doubled along ``x`` (``(H, 2 W)``: a
@@ -232,26 +259,10 @@ def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, 
     sh2 = sh * sh
     sr2 = sr * sr
     for q in prange(out.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = texel_window(cx[q], rad)
-        y0, y1 = texel_window(cy[q], rad)
-        nx = x1 - x0 + 1
-        xs = x0 % W
-        wx = np.empty(nx)
-        fdx = np.empty(nx)
+        f, var, inv, x0, y0, y1, nx, xs, wx, fdx, sx = _footprint_columns(
+            cx[q], cy[q], sp[q], sh2, trunc, W)
         quad = np.empty(nx)
         det = np.empty(nx)
-        inv = 1.0 / (2.0 * tot2)
-        sx = 0.0
-        for i in range(nx):
-            dx = cx[q] - (x0 + i + 0.5)
-            fdx[i] = f * dx
-            wx[i] = math.exp(-dx * dx * inv)
-            sx += wx[i]
         qxq = qx[q]
         qyq = qy[q]
         acc = 0.0
@@ -527,17 +538,8 @@ def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc
     sh2 = sh * sh
     sr2 = sr * sr
     for q in prange(out.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = texel_window(cx[q], rad)
-        y0, y1 = texel_window(cy[q], rad)
-        nx = x1 - x0 + 1
-        xs = x0 % W
-        wx = np.empty(nx)
-        fdx = np.empty(nx)
+        f, var, inv, x0, y0, y1, nx, xs, wx, fdx, sx = _footprint_columns(
+            cx[q], cy[q], sp[q], sh2, trunc, W)
         quad = np.empty(nx)
         det = np.empty(nx)
         nh = np.empty(nx)
@@ -548,13 +550,6 @@ def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc
         ox = np.empty(nx)
         oy = np.empty(nx)
         acc = np.zeros(K)
-        inv = 1.0 / (2.0 * tot2)
-        sx = 0.0
-        for i in range(nx):
-            dx = cx[q] - (x0 + i + 0.5)
-            fdx[i] = f * dx
-            wx[i] = math.exp(-dx * dx * inv)
-            sx += wx[i]
         sy = 0.0
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
@@ -873,26 +868,10 @@ def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, 
     sr2 = sr * sr
     cut = 2.0 * trunc * trunc * 4.0
     for q in prange(out_pdf.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = texel_window(cx[q], rad)
-        y0, y1 = texel_window(cy[q], rad)
-        nx = x1 - x0 + 1
+        f, var, inv, x0, y0, y1, nx, xs, wx, fdx, sx = _footprint_columns(
+            cx[q], cy[q], sp[q], sh2, trunc, W)
         ny = y1 - y0 + 1
-        xs = x0 % W
-        wx = np.empty(nx)
-        fdx = np.empty(nx)
         wy = np.empty(ny)
-        inv = 1.0 / (2.0 * tot2)
-        sx = 0.0
-        for i in range(nx):
-            dx = cx[q] - (x0 + i + 0.5)
-            fdx[i] = f * dx
-            wx[i] = math.exp(-dx * dx * inv)
-            sx += wx[i]
         sy = 0.0
         wsum = 0.0
         for j in range(ny):
