@@ -42,7 +42,7 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roug
                                    as_normal_map, element_moments, elements, pndf)
 from prefilter.glints._qkernels import _rect_mass
 from prefilter.glints.query import point_flat
-from prefilter.glints.sample import choose_index
+from prefilter.glints.sample import quadtree_draw
 from prefilter.glints.store import GlintsMap
 
 
@@ -726,45 +726,13 @@ def _sample_masses_k(A, Bp, C, block_index, image_cell, granks, idx, wts, bm, u,
     """:func:`prefilter.glints.sample._sample_kernel` for ``K`` draws per footprint (uniforms
     ``u (N, K, k)``) with the footprint's block masses ``bm (N, nb * nb)`` given: they depend on
     the footprint only, and were the kernel's cost (every block's mass for every draw)."""
-    B = A.shape[1] - 1
-    nb = block_index.shape[1]
     for q in prange(out_pdf.shape[0]):
         cm = np.empty(4)
-        ci0 = np.empty(4, np.int64)
-        ci1 = np.empty(4, np.int64)
-        cj0 = np.empty(4, np.int64)
-        cj1 = np.empty(4, np.int64)
+        ci = np.empty((4, 4), np.int64)
         for kk in range(u.shape[1]):
-            kb, p = choose_index(bm[q], nb * nb, u[q, kk, 0])
-            if kb < 0:
-                out_s[q, kk, 0] = 0.0
-                out_s[q, kk, 1] = 0.0
-                out_pdf[q, kk] = 0.0
-                continue
-            bi, bj = kb // nb, kb % nb
-            i0, i1, j0, j1 = 0, B, 0, B
-            lev = 1
-            while i1 - i0 > 1 or j1 - j0 > 1:
-                im = (i0 + i1) // 2 if i1 - i0 > 1 else i1
-                jm = (j0 + j1) // 2 if j1 - j0 > 1 else j1
-                n = 0
-                for a0, a1 in ((i0, im), (im, i1)):
-                    if a1 <= a0:
-                        continue
-                    for b0, b1 in ((j0, jm), (jm, j1)):
-                        if b1 <= b0:
-                            continue
-                        ci0[n], ci1[n], cj0[n], cj1[n] = a0, a1, b0, b1
-                        cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts,
-                                           q, bi, bj, a0, a1, b0, b1)
-                        n += 1
-                k, pk = choose_index(cm, n, u[q, kk, lev])
-                p *= pk
-                i0, i1, j0, j1 = ci0[k], ci1[k], cj0[k], cj1[k]
-                lev += 1
-            out_s[q, kk, 0] = lo + (bj * B + j0 + u[q, kk, lev]) * h
-            out_s[q, kk, 1] = lo + (bi * B + i0 + u[q, kk, lev + 1]) * h
-            out_pdf[q, kk] = p / (h * h)
+            out_s[q, kk, 0], out_s[q, kk, 1], out_pdf[q, kk] = quadtree_draw(
+                A, Bp, C, block_index, image_cell, granks, idx, wts, q, bm[q], u[q, kk], lo, h,
+                cm, ci)
 
 
 @njit_parallel

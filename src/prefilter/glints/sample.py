@@ -27,7 +27,7 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange, serial
+from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_directions, as_float_array, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _rect_mass
@@ -70,6 +70,44 @@ def choose_index(masses, n, u):
     return last, masses[last] / tot
 
 
+@njit_inline
+def quadtree_draw(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bm, u, lo, h, cm, ci):
+    """One draw ``(s_x, s_y, pdf)`` from footprint ``q``'s blended NDF (sec. 5.2): a block by
+    its mass ``bm (nb * nb,)`` (uniform ``u[0]``), a quadtree descent by the exact masses of the
+    sub-rectangles (``u[1:]``, one per level), uniform jitter in the final pixel (the last two);
+    ``(0, 0, 0)`` where every block is empty. ``cm (4,)``, ``ci (4, 4) int64``: scratch for the
+    children's masses and bounds (allocated once per footprint by the callers)."""
+    B = A.shape[1] - 1
+    nb = block_index.shape[1]
+    kb, p = choose_index(bm, nb * nb, u[0])
+    if kb < 0:
+        return 0.0, 0.0, 0.0
+    bi, bj = kb // nb, kb % nb
+    i0, i1, j0, j1 = 0, B, 0, B
+    lev = 1
+    ci0, ci1, cj0, cj1 = ci[0], ci[1], ci[2], ci[3]
+    while i1 - i0 > 1 or j1 - j0 > 1:
+        im = (i0 + i1) // 2 if i1 - i0 > 1 else i1
+        jm = (j0 + j1) // 2 if j1 - j0 > 1 else j1
+        n = 0
+        for a0, a1 in ((i0, im), (im, i1)):
+            if a1 <= a0:
+                continue
+            for b0, b1 in ((j0, jm), (jm, j1)):
+                if b1 <= b0:
+                    continue
+                ci0[n], ci1[n], cj0[n], cj1[n] = a0, a1, b0, b1
+                cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q,
+                                   bi, bj, a0, a1, b0, b1)
+                n += 1
+        k, pk = choose_index(cm, n, u[lev])
+        p *= pk
+        i0, i1, j0, j1 = ci0[k], ci1[k], cj0[k], cj1[k]
+        lev += 1
+    return (lo + (bj * B + j0 + u[lev]) * h, lo + (bi * B + i0 + u[lev + 1]) * h,
+            p / (h * h))
+
+
 @njit_parallel
 def _sample_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, u, lo, h, out_s, out_pdf):
     B = A.shape[1] - 1
@@ -80,41 +118,9 @@ def _sample_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, u, lo, h
             for bj in range(nb):
                 bm[bi * nb + bj] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx,
                                               wts, q, bi, bj, 0, B, 0, B)
-        kb, p = choose_index(bm, nb * nb, u[q, 0])
-        if kb < 0:
-            out_s[q, 0] = 0.0
-            out_s[q, 1] = 0.0
-            out_pdf[q] = 0.0
-            continue
-        bi, bj = kb // nb, kb % nb
-        i0, i1, j0, j1 = 0, B, 0, B
-        lev = 1
-        cm = np.empty(4)
-        ci0 = np.empty(4, np.int64)
-        ci1 = np.empty(4, np.int64)
-        cj0 = np.empty(4, np.int64)
-        cj1 = np.empty(4, np.int64)
-        while i1 - i0 > 1 or j1 - j0 > 1:
-            im = (i0 + i1) // 2 if i1 - i0 > 1 else i1
-            jm = (j0 + j1) // 2 if j1 - j0 > 1 else j1
-            n = 0
-            for a0, a1 in ((i0, im), (im, i1)):
-                if a1 <= a0:
-                    continue
-                for b0, b1 in ((j0, jm), (jm, j1)):
-                    if b1 <= b0:
-                        continue
-                    ci0[n], ci1[n], cj0[n], cj1[n] = a0, a1, b0, b1
-                    cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q,
-                                       bi, bj, a0, a1, b0, b1)
-                    n += 1
-            k, pk = choose_index(cm, n, u[q, lev])
-            p *= pk
-            i0, i1, j0, j1 = ci0[k], ci1[k], cj0[k], cj1[k]
-            lev += 1
-        out_s[q, 0] = lo + (bj * B + j0 + u[q, lev]) * h
-        out_s[q, 1] = lo + (bi * B + i0 + u[q, lev + 1]) * h
-        out_pdf[q] = p / (h * h)
+        out_s[q, 0], out_s[q, 1], out_pdf[q] = quadtree_draw(
+            A, Bp, C, block_index, image_cell, granks, idx, wts, q, bm, u[q], lo, h,
+            np.empty(4), np.empty((4, 4), np.int64))
 
 
 def n_uniforms(gm: GlintsMap) -> int:
