@@ -1,12 +1,15 @@
 """The shared Numba flags keep IEEE NaN and inf (``fastmath=True`` folds the checks away, so a
-NaN guard or an ``inf`` sentinel in a kernel would silently do nothing)."""
+NaN guard or an ``inf`` sentinel in a kernel would silently do nothing); the kernel cache lives
+in a directory named by the kernel sources' fingerprint."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numba
 import numpy as np
+import pytest
 
 from prefilter._numba import SERIAL_BELOW, njit_parallel, njit_serial, prange, serial
 
@@ -55,3 +58,68 @@ def test_serial_twin_below_threshold():
     assert serial(_nan_to_zero, SERIAL_BELOW) is _nan_to_zero
     twin = serial(_nan_to_zero, SERIAL_BELOW - 1)
     assert twin is not _nan_to_zero and twin is serial(_nan_to_zero, 0)
+
+
+def _write(path, text):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(text)
+
+
+def test_source_fingerprint_follows_kernel_sources_only(tmp_path):
+    from prefilter._numba import source_fingerprint
+
+    _write(tmp_path / "a" / "kern.py", "from x import njit_inline\n")
+    _write(tmp_path / "b" / "plain.py", "x = 1\n")
+    f0 = source_fingerprint(tmp_path)
+    _write(tmp_path / "b" / "plain.py", "x = 2\n")  # no kernel: same cache
+    assert source_fingerprint(tmp_path) == f0
+    _write(tmp_path / "a" / "kern.py", "from x import njit_inline  # edited helper\n")
+    f1 = source_fingerprint(tmp_path)
+    assert f1 != f0 and len(f1) == 16
+    (tmp_path / "a" / "kern.py").rename(tmp_path / "a" / "moved.py")  # the path counts too
+    assert source_fingerprint(tmp_path) != f1
+
+
+def test_cache_dir_environment(monkeypatch, tmp_path):
+    from prefilter import _numba
+
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    monkeypatch.setenv("PREFILTER_NUMBA_CACHE", str(tmp_path))
+    d = _numba.cache_dir()
+    assert d.parent == tmp_path
+    assert d.name == _numba.source_fingerprint(Path(_numba.__file__).parent)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "user"))
+    assert _numba.cache_dir() is None
+
+
+def test_kernels_cache_under_the_fingerprint_directory():
+    import os
+
+    from prefilter import _numba
+
+    if os.environ.get("NUMBA_CACHE_DIR"):
+        pytest.skip("NUMBA_CACHE_DIR set by the user: Numba's own rule applies")
+    d = Path(numba.config.CACHE_DIR)
+    assert d.name == _numba.source_fingerprint(Path(_numba.__file__).parent)
+    from prefilter.ltc import polygon  # noqa: F401  (a module with kernels)
+
+    kernels = [v for v in vars(polygon).values() if hasattr(v, "_cache")]
+    assert kernels
+    for k in kernels:
+        assert Path(k._cache._cache_path).is_relative_to(d)
+
+
+def test_prune_deletes_only_old_siblings(tmp_path):
+    import os
+    import time
+
+    from prefilter._numba import CACHE_MAX_AGE_DAYS, _prune
+
+    cur, old, recent = tmp_path / "cur", tmp_path / "old", tmp_path / "recent"
+    for d in (cur, old, recent):
+        d.mkdir()
+    past = time.time() - (CACHE_MAX_AGE_DAYS + 1) * 86400.0
+    os.utime(old, (past, past))
+    os.utime(cur, (past, past))  # the current one is never deleted
+    _prune(cur)
+    assert cur.exists() and recent.exists() and not old.exists()
