@@ -523,7 +523,7 @@ def env_table(rows) -> str:
            "simplified / naive | shadowed / naive | leadr-env / naive | leadr-env flicker | "
            "naive flicker |",
            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    pc = lambda r, k: f"{100 * r[k]:.1f}%" if k in r else "-"  # noqa: E731
+    pc = _pc_key
     for r in rows:
         lead = "err leadr" if r["shading"] == "specular" else "err leadr exact E"
         out.append(
@@ -547,7 +547,7 @@ def env_diffuse_table(rows) -> str:
            "naive E map | naive SH | leadr-env / naive | leadr-env / naive E map | "
            "leadr-env SH / naive SH | bias leadr-env / SH | flicker leadr-env / naive |",
            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    pc = lambda r, k: f"{100 * r[k]:.1f}%" if k in r else "-"  # noqa: E731
+    pc = _pc_key
     ratio = lambda r, a, b: f"{r[f'err {a}'] / max(r[f'err {b}'], 1e-12):.2f}"  # noqa: E731
     for r in rows:
         if r["shading"] != "diffuse":
@@ -958,6 +958,16 @@ def point_table(rows) -> str:
     return "\n".join(out)
 
 
+def _pc2(v) -> str:
+    """A fraction as a percentage with 2 decimals."""
+    return f"{100 * v:.2f}%"
+
+
+def _pc_key(r, k) -> str:
+    """``r[k]`` as a percentage with 1 decimal, ``-`` when missing."""
+    return f"{100 * r[k]:.1f}%" if k in r else "-"
+
+
 def flicker_table(rows) -> str:
     """Markdown table of the far flicker rows of :func:`image_point` run with ``noise_floor``:
     flicker of LEADR / naive / the normal-mapped reference against the displaced reference, the
@@ -969,7 +979,7 @@ def flicker_table(rows) -> str:
            "ref's own | floor | floor / naive | reachable | vs 2-pattern ref: LEADR / naive "
            "(ratio), floor |",
            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    pc = lambda v: f"{100 * v:.2f}%"  # noqa: E731
+    pc = _pc2
     for r in rows:
         if "flicker floor" not in r:
             continue
@@ -994,7 +1004,7 @@ def flicker_source_table(rows) -> str:
            "normal-mapped / naive | vs normal-mapped: LEADR / LEADR box / naive (ratio) | "
            "LEADR box / naive vs displaced |",
            "|---|---|---|---|---|---|---|---|"]
-    pc = lambda v: f"{100 * v:.2f}%"  # noqa: E731
+    pc = _pc2
     for r in rows:
         if "nm flicker leadr" not in r:
             continue
