@@ -1,8 +1,10 @@
 """Write docs/errors.md from the PrefilterError / TableFileError raise sites (ast) plus notes.
 
-Run `python tools/gen_errors_md.py` after adding or changing an error message;
-`tests/test_errors_doc.py` fails while docs/errors.md is out of date.
+Run `python tools/gen_errors_md.py` after adding or changing an error message (`--check` writes
+nothing and exits 1 when the file is out of date); `tests/test_errors_doc.py` fails while
+docs/errors.md is out of date.
 """
+import argparse
 import ast
 import pathlib
 import re
@@ -208,10 +210,20 @@ def generate() -> str:
     return "\n".join(out)
 
 
-def main() -> None:
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description="Write docs/errors.md from the package's raise "
+                                 "sites (or, with --check, only say whether it is current).")
+    ap.add_argument("--check", action="store_true",
+                    help="write nothing; exit 1 if docs/errors.md is out of date")
+    args = ap.parse_args(argv)
     text = generate()
+    if args.check:
+        current = DOC.read_text() if DOC.exists() else ""
+        print(f"{DOC}: {'up to date' if current == text else 'out of date'}")
+        return 0 if current == text else 1
     DOC.write_text(text)
     print(f"wrote {DOC}")
+    return 0
 
 
 HEADER = """# Error messages
@@ -269,4 +281,4 @@ The tables list every message pattern raised by the package (generated from the 
 """  # noqa: E501 -- markdown table rows cannot be wrapped
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())
