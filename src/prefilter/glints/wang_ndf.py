@@ -780,12 +780,16 @@ def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, 
 
 
 @njit_parallel
-def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, st0, sigma0, dep,
-                   tile_means, mean, sr, lo, h, min_sigma, wide_sigma, uniform_sigma, q_min,
-                   tap_trunc, trunc, sh, out):  # pragma: no cover - compiled
+def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, cpA, cpB, cpC,
+                   block, k0, st0, sigma0, dep, tile_means, mean, sr, lo, h, min_sigma,
+                   wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
+                   out):  # pragma: no cover - compiled
+    # block > 0: compressed levels, the CP triples (cpA, cpB, cpC); ``images`` is then unused
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
+    rank = cpC[0].shape[4]
+    nb = R // block if block > 0 else 1
     for q in prange(out.shape[0]):
         out[q] = 0.0
         if not inside[q]:
@@ -842,7 +846,10 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, s
         r = math.sqrt(s * s - sg * sg)
         half = tap_trunc * r / st
         img = images[m]
-        n = img.shape[1]
+        cA, cB, cC = cpA[m], cpB[m], cpC[m]
+        n = cC.shape[1] if block > 0 else img.shape[1]
+        u = np.empty(rank)
+        g = (py // max(block, 1)) * nb + px // max(block, 1)
         marg = rad + 1.0
         acc = 0.0
         dsum = 0.0
@@ -863,11 +870,22 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, s
                 nx = 0.0
                 for k in range(kx0, kx1 + 1):
                     nx += math.exp(-0.5 * ((k * st + 0.5 - (c0 - i * T)) / r) ** 2)
+                if block > 0 and ky0 <= k0[m] + n - 1 and ky1 >= k0[m]:
+                    # the query pixel's rank-one terms of this tile type (glints paper eq. 5):
+                    # a tap then costs `rank` products with its C row
+                    for rr in range(rank):
+                        u[rr] = cA[t, g, rr, py % block] * cB[t, g, rr, px % block]
                 for ky in range(max(ky0, k0[m]), min(ky1, k0[m] + n - 1) + 1):
                     wy = math.exp(-0.5 * ((ky * st + 0.5 - (c1 - j * T)) / r) ** 2) / ny
                     for kx in range(max(kx0, k0[m]), min(kx1, k0[m] + n - 1) + 1):
                         wx = math.exp(-0.5 * ((kx * st + 0.5 - (c0 - i * T)) / r) ** 2) / nx
-                        acc += wy * wx * img[t, ky - k0[m], kx - k0[m], py, px]
+                        if block > 0:
+                            v = 0.0
+                            for rr in range(rank):
+                                v += cC[t, ky - k0[m], kx - k0[m], g, rr] * u[rr]
+                            acc += wy * wx * v
+                        else:
+                            acc += wy * wx * img[t, ky - k0[m], kx - k0[m], py, px]
                 for e in range(dep.shape[0]):
                     x = i * T + dep[e, 1]
                     y = j * T + dep[e, 0]
@@ -879,11 +897,12 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, k0, s
 
 def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
     """Batched :func:`ndf`: NDF values ``(...)`` of footprints ``center (..., 2)``,
-    ``sigma_p (...)`` at ``s (..., 2)`` (broadcast together), one Numba kernel for all regimes
-    (uncompressed pyramids). Same arithmetic as :func:`ndf`, without Python per footprint."""
-    if not isinstance(wn, TiledNDF) or wn.block:
-        raise PrefilterError("wn: expected uncompressed per-tile pyramids (bake_tiles without "
-                             "rank)")
+    ``sigma_p (...)`` at ``s (..., 2)`` (broadcast together), one Numba kernel for all regimes,
+    uncompressed or CP-compressed pyramids (compressed: each tap reads its ``C`` row, ``rank``
+    numbers, against the query pixel's ``A`` and ``B`` entries). Same arithmetic as
+    :func:`ndf`, without Python per footprint."""
+    if not isinstance(wn, TiledNDF):
+        raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
     sp = as_sigma_p(sigma_p)
     q = as_float_array(s, "s", ndim_min=1, last_dim=2)
@@ -895,10 +914,26 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
     iy, ix, inside = _pixels(wn, np.broadcast_to(q, shape + (2,)).reshape(-1, 2))
     out = np.empty(sp.shape[0])
     cc = np.ascontiguousarray
+    images, cpA, cpB, cpC = _kernel_levels(wn)
     serial(_points_kernel, len(out))(
         cc(c[:, 0]), cc(c[:, 1]), sp, iy, ix, inside, cc(wn.wang.tiles[..., :2]),
-        np.uint64(wn.wang.seed), idx, tuple(wn.images), np.asarray(wn.k0, np.int64),
-        float(wn.stride0), wn.sigma0, cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean,
-        wn.intrinsic_roughness, -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma,
-        wn.wide_sigma, wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
+        np.uint64(wn.wang.seed), idx, images, cpA, cpB, cpC, int(wn.block),
+        np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
+        cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean, wn.intrinsic_roughness,
+        -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
+        wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
     return out.reshape(shape)
+
+
+def _kernel_levels(wn: TiledNDF):
+    """The levels as :func:`_points_kernel` takes them: dense images and CP triples as four
+    tuples of C-contiguous float32 arrays, 1-element placeholders for the kind not stored (one
+    compiled kernel serves both)."""
+    L = wn.n_levels
+    z4 = np.zeros((1, 1, 1, 1), np.float32)
+    z5 = np.zeros((1, 1, 1, 1, 1), np.float32)
+    if not wn.block:
+        return (tuple(np.ascontiguousarray(a, np.float32) for a in wn.images), (z4,) * L,
+                (z4,) * L, (z5,) * L)
+    return ((z5,) * L,) + tuple(tuple(np.ascontiguousarray(lv[k], np.float32)
+                                      for lv in wn.images) for k in range(3))

@@ -72,6 +72,7 @@ _REGISTRY: dict[str, Method | str] = {
     "glints": "prefilter.glints.render:render_glints",
     "glints-direct": "prefilter.glints.render:render_glints_direct",
     "glints-reference": "prefilter.glints.render:render_glints_reference",
+    "glints-wang": "prefilter.glints.wang_render:render_glints_wang",
 }
 _DESCRIPTIONS: dict[str, str] = {
     "ltc": "area lights by the isotropic LTC table, normal and colour from the footprint's mip "
@@ -103,6 +104,8 @@ _DESCRIPTIONS: dict[str, str] = {
                      "environment lights by Monte Carlo (MIS, SG sampling)",
     "glints-reference": "glints ground truth: footprint supersampling, point P-NDF of the map; "
                         "quad and environment lights by Monte Carlo",
+    "glints-wang": "glints on the implicit Wang tiling of the normal map (the exemplar): per-tile "
+                   "CP-compressed footprint pyramids, constant storage; point/directional lights",
 }
 
 

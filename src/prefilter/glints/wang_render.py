@@ -1,0 +1,191 @@
+"""The ``glints-wang`` render method: glints on an unbounded, non-periodic Wang tiling.
+
+A material's ``normal_map`` is the *exemplar*: the method synthesises 16 Wang tiles from it
+(:func:`prefilter.glints.wang.synthesize`, :data:`WANG_SETTINGS`), bakes their per-tile
+footprint pyramids (:func:`prefilter.glints.wang_ndf.bake_tiles`, CP-compressed) once and
+caches them on disk next to the ``glints`` bakes (:func:`prefilter.glints.render.cache_dir`,
+``wang-<SHA-1 of the normals>-<SHA-1 of the settings>.npz``, :mod:`~prefilter.glints.wang_store`
+format, written atomically under a lock). The surface is the implicit tiling of the plane
+(hashing, glints paper sec. 5.5): constant storage whatever the area the frame covers.
+
+Texel scale: one texel of the tiling per texel of the exemplar (the footprints of
+:func:`prefilter.glints.render.footprints` on the exemplar's shape), so ``glints-wang`` and
+``glints-direct`` see the same footprints.
+
+Point and directional lights: the glint BRDF ``F G D / (4 wo_z)`` (paper eq. 1) with ``D`` the
+footprint NDF of the tiling at the half vector (:func:`prefilter.glints.wang_ndf.ndf_points`:
+direct P-NDF below ``min_sigma``, per-tile pyramids, tile-type shares, expected tiling), one
+batched Numba query for all samples and lights of an object. Diffuse: Lambert with
+``base_color``. Quad and environment lights are rejected (not implemented).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+
+from prefilter.errors import PrefilterError
+from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
+from prefilter.glints.wang_ndf import TiledNDF, ndf_points
+
+#: Tiles and bake of the render cache. ``tile`` 32 (the CLI's default), or the exemplar's size
+#: (even, >= 4) when it is smaller (:func:`tile_size`); ``intrinsic_roughness``, ``support``:
+#: those of ``glints`` (:data:`prefilter.glints.render.BAKE_SETTINGS`, whole disk of half
+#: vectors); ``ndf_res`` 128 (pixel 1.6 intrinsic stds; 256 quadruples bake time and memory:
+#: 0.8 GB uncompressed at 128); ``rank`` 16 with ``block`` 16: stored-image error 6 / 4 / 2 %
+#: per level on the flakes map (docs/glints-wang.md, "Rendering").
+WANG_SETTINGS = dict(tile=32, band=4.0, seed=0, ndf_res=128, support=1.0,
+                     intrinsic_roughness=2 * DEFAULT_ROUGHNESS, stride0=None, wide_tiles=0.5,
+                     uniform_tiles=8.0, rank=16, block=16, n_iter_max=50)
+_TILED: dict = {}
+_BY_ID: dict = {}
+
+
+def wang_settings(settings: dict | None = None) -> dict:
+    """:data:`WANG_SETTINGS` updated by ``settings`` (unknown keys are an error)."""
+    extra = set(settings or {}) - set(WANG_SETTINGS)
+    if extra:
+        raise PrefilterError(f"settings: expected keys among {', '.join(sorted(WANG_SETTINGS))}, "
+                             f"got {', '.join(sorted(map(repr, extra)))}")
+    return dict(WANG_SETTINGS, **(settings or {}))
+
+
+def tile_size(tile: int, shape) -> int:
+    """``tile`` capped at the exemplar's smaller side (rounded down to even, at least 4): the
+    tiles of a small exemplar would repeat its patch (and cost the same bake)."""
+    return max(4, min(int(tile), 2 * (min(shape) // 2)))
+
+
+def cache_path(normal_map, settings: dict | None = None):
+    """Path of the cached per-tile pyramids of an exemplar under ``settings``."""
+    from prefilter.glints.render import cache_dir
+
+    nm = as_normal_map(normal_map)
+    st = wang_settings(settings)
+    digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
+    key = hashlib.sha1(json.dumps(st, sort_keys=True).encode()).hexdigest()[:12]
+    return cache_dir() / f"wang-{digest[:20]}-{key}.npz"
+
+
+def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = False) -> TiledNDF:
+    """The :class:`TiledNDF` of an exemplar: synthesised and baked once (disk cache), then kept
+    in memory. Several processes share the cache: the first bakes under the lock, the others
+    wait for it and load its file."""
+    from prefilter._io import exclusive_lock
+    from prefilter.glints.wang import synthesize
+    from prefilter.glints.wang_ndf import bake_tiles
+    from prefilter.glints.wang_store import load_tiles, save_tiles
+
+    st = wang_settings(settings)
+    # the renderer passes the same (cached) texture array every frame: skip hashing it again
+    ident = (id(normal_map), json.dumps(st, sort_keys=True))
+    hit = _BY_ID.get(ident)
+    if hit is not None and hit[0] is normal_map:
+        return hit[1]
+    nm = as_normal_map(normal_map)
+    st["tile"] = tile_size(st["tile"], nm.shape[:2])
+    path = cache_path(nm, st)
+    if path not in _TILED:
+        if not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            with exclusive_lock(str(path) + ".lock"):
+                if not path.exists():  # baked by the process that held the lock
+                    wt = synthesize(nm, st["tile"], st["band"], rng=st["seed"])
+                    rank = st["rank"] or None  # 0: uncompressed
+                    wn = bake_tiles(wt, ndf_res=st["ndf_res"], support=st["support"],
+                                    intrinsic_roughness=st["intrinsic_roughness"],
+                                    stride0=st["stride0"], wide_tiles=st["wide_tiles"],
+                                    uniform_tiles=st["uniform_tiles"], rank=rank,
+                                    block=st["block"], n_iter_max=st["n_iter_max"],
+                                    seed=st["seed"], progress=progress)
+                    save_tiles(wn, path)
+        _TILED[path] = load_tiles(path)
+    if isinstance(normal_map, np.ndarray):
+        _BY_ID[ident] = (normal_map, _TILED[path])
+    return _TILED[path]
+
+
+def check_lights(scene, name: str = "glints-wang") -> None:
+    """Point and directional lights only: anything else is a :class:`PrefilterError` naming the
+    method."""
+    for i, light in enumerate(scene.lights):
+        if light.type not in ("point", "directional"):
+            raise PrefilterError(f"lights[{i}]: method {name!r} expected point or directional "
+                                 f"lights, got a {light.type} light (quad and environment lights "
+                                 "are not implemented for glints-wang)")
+
+
+def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = None,
+               progress: bool = False) -> np.ndarray:
+    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point and directional lights.
+
+    ``index``: an explicit ``(ny, nx)`` tile index map (periodic, tile ``(0, 0)`` at texel
+    ``(0, 0)``) instead of the hashing; ``settings``: overrides of :data:`WANG_SETTINGS`.
+    """
+    from prefilter.glints.brdf import _brdf_cos_from_ndf, _half
+    from prefilter.glints.render import footprints
+    from prefilter.sphere.sampling import to_local
+
+    check_lights(scene)
+    lights = scene.light_set()
+    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
+    t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
+    wo = to_local(g.view, t, b, n)
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    incoming = []
+    for pl in lights.points:
+        d = pl.position - g.position
+        d2 = np.maximum(np.sum(d * d, -1), 1e-300)
+        incoming.append((d / np.sqrt(d2)[:, None], pl.intensity / d2[:, None]))
+    for dl in lights.directionals:
+        incoming.append((np.broadcast_to(-dl.direction, g.position.shape),
+                         np.broadcast_to(dl.irradiance, g.position.shape)))
+    out = np.zeros((len(wo), 3))
+    if not incoming:
+        return out
+    for k in np.unique(g.object_id):
+        m = g.object_id == k
+        mat = scene.objects[int(k)].material
+        if mat.normal_map is None:
+            raise PrefilterError(f"objects[{int(k)}].material.normal_map: method 'glints-wang' "
+                                 "expected a normal map (the exemplar), got none")
+        nm = mat.normal_map.load()
+        wn = baked_tiles(nm, settings, progress=progress)
+        c, sp = footprints(g.select(m), nm.shape[:2], spp)
+        # every light's half vector of every sample in one batched query: (n_lights, N_k)
+        wi = np.stack([to_local(w[m], t[m], b[m], n[m]) for w, _ in incoming])
+        wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
+        wok = np.broadcast_to(wo[m], wi.shape)
+        h = _half(wok, wi)
+        D = ndf_points(wn, c, sp, h[..., :2], index=index)
+        f0 = np.asarray(mat.f0, dtype=np.float64)
+        spec = _brdf_cos_from_ndf(wok, wi, h, D, f0)
+        diff = (np.asarray(mat.base_color, dtype=np.float64) / np.pi
+                * np.maximum(wi[..., 2], 0.0)[..., None])
+        for j, (_, e) in enumerate(incoming):
+            out[m] += (spec[j] + diff[j]) * e[m]
+    return out
+
+
+def render_wang(scene, settings, *, index=None, wang: dict | None = None) -> np.ndarray:
+    """Linear radiance ``(H, W, 3)`` float32 of ``scene`` by ``glints-wang`` (module docstring).
+
+    ``index``: explicit periodic tile index map (see :func:`shade_wang`); ``wang``: overrides
+    of :data:`WANG_SETTINGS`. The registered method is this with the defaults."""
+    from prefilter.render.pipeline import render_samples
+
+    check_lights(scene)
+    wang_settings(wang)
+    spp = settings.spp
+    return render_samples(scene, settings,
+                          lambda g, u: shade_wang(scene, g, spp=spp, index=index, settings=wang,
+                                                  progress=settings.progress),
+                          random_dims=0, stratified=spp > 1, desc="glints-wang")
+
+
+def render_glints_wang(scene, settings) -> np.ndarray:
+    """The ``glints-wang`` method: glint BRDF with the footprint NDF of the implicit Wang
+    tiling of the material's normal map (point and directional lights)."""
+    return render_wang(scene, settings)
