@@ -779,24 +779,69 @@ def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, 
                        var * (jx1 * jx1 + jy1 * jy1), w, sr, lo, h, R, trunc, iy, ix)
 
 
+@njit_serial
+def _nb_texel_point(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, trunc, qx,
+                    qy):  # pragma: no cover - compiled
+    """Unnormalised density at ``(qx, qy)`` of texel ``(gx, gy)``'s element (as
+    ``pndf._pndf_points``: covariance ``sr^2 I + var J J^T``, cut beyond ``2 trunc`` stds)."""
+    ty = types
+    jx0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 0) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 0))
+    jx1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 1) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 1))
+    jy0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 0) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 0))
+    jy1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 1) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 1))
+    dx = cx - (gx + 0.5)
+    dy = cy - (gy + 0.5)
+    ex = qx - _nb_s(tiles, ty, i0, j0, gx, gy, 0) - f * (jx0 * dx + jy0 * dy)
+    ey = qy - _nb_s(tiles, ty, i0, j0, gx, gy, 1) - f * (jx1 * dx + jy1 * dy)
+    a = var * (jx0 * jx0 + jy0 * jy0) + sr * sr
+    b = var * (jx0 * jx1 + jy0 * jy1)
+    d = var * (jx1 * jx1 + jy1 * jy1) + sr * sr
+    det = a * d - b * b
+    quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
+    if quad >= 8.0 * trunc * trunc:
+        return 0.0
+    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+    return w * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+
+
 @njit_parallel
-def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, cpA, cpB, cpC,
-                   block, k0, st0, sigma0, dep, tile_means, mean, sr, lo, h, min_sigma,
-                   wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
+def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, seed, index, images,
+                   cpA, cpB, cpC, block, k0, st0, sigma0, dep, tile_means, mean, sr, lo, h,
+                   min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
-    # block > 0: compressed levels, the CP triples (cpA, cpB, cpC); ``images`` is then unused
+    """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
+    pixel ``(py0 + a, px0 + b)`` (one pixel of weight 1: :func:`ndf`; 2 x 2: bilinear between
+    pixel centres); below ``min_sigma`` with ``point_sr > 0``: the direct P-NDF's value at
+    ``(qx, qy)[q]`` with intrinsic roughness ``point_sr`` instead. ``block > 0``: compressed
+    levels, the CP triples ``(cpA, cpB, cpC)`` (``images`` unused)."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
     rank = cpC[0].shape[4]
-    nb = R // block if block > 0 else 1
+    bk = max(block, 1)
+    nb = R // bk
     for q in prange(out.shape[0]):
         out[q] = 0.0
-        if not inside[q]:
+        c0, c1, s = cx[q], cy[q], sp[q]
+        # the corners with a weight: pixel rows, columns, weights (at most 4)
+        cy_ = np.empty(4, np.int64)
+        cx_ = np.empty(4, np.int64)
+        cw = np.empty(4)
+        nc = 0
+        for a in range(2):
+            for b in range(2):
+                wab = wya[q, a] * wxa[q, b]
+                if wab != 0.0:
+                    cy_[nc], cx_[nc], cw[nc] = py0[q] + a, px0[q] + b, wab
+                    nc += 1
+        point = s < min_sigma and point_sr > 0.0
+        if nc == 0 and not point:
             continue
-        c0, c1, s, py, px = cx[q], cy[q], sp[q], iy[q], ix[q]
         if s >= uniform_sigma:
-            out[q] = mean[py, px]
+            acc = 0.0
+            for k in range(nc):
+                acc += cw[k] * mean[cy_[k], cx_[k]]
+            out[q] = acc
             continue
         tot2 = s * s + sh * sh
         rad = trunc * math.sqrt(tot2)
@@ -819,8 +864,11 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, cpA, 
             acc = 0.0
             for b in range(wrow.shape[0]):
                 for a in range(wcol.shape[0]):
-                    acc += wrow[b] * wcol[a] * tile_means[_nb_type(i0 + a, j0 + b, seed, index),
-                                                          py, px]
+                    tm = tile_means[_nb_type(i0 + a, j0 + b, seed, index)]
+                    v = 0.0
+                    for k in range(nc):
+                        v += cw[k] * tm[cy_[k], cx_[k]]
+                    acc += wrow[b] * wcol[a] * v
             out[q] = acc / (sx * sy)
             continue
         f = sh * sh / tot2
@@ -831,9 +879,14 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, cpA, 
             types = _nb_types(ti0, wx1 // T + 1, tj0, wy1 // T + 1, seed, index)
             for y in range(wy0, wy1 + 1):
                 for x in range(wx0, wx1 + 1):
-                    acc += _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var, tot2, sr, lo,
-                                     h, R, trunc, py, px)
-            out[q] = acc / (sx * sy * h * h)
+                    if point:
+                        acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
+                                               tot2, point_sr, trunc, qx[q], qy[q])
+                        continue
+                    for k in range(nc):
+                        acc += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
+                                                 tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
+            out[q] = acc / (sx * sy) if point else acc / (sx * sy * h * h)
             continue
         m = 0
         for lv in range(L):
@@ -848,8 +901,21 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, cpA, 
         img = images[m]
         cA, cB, cC = cpA[m], cpB[m], cpC[m]
         n = cC.shape[1] if block > 0 else img.shape[1]
-        u = np.empty(rank)
-        g = (py // max(block, 1)) * nb + px // max(block, 1)
+        # compressed: the corners' angular blocks (distinct, at most 4) and the rank-one terms
+        # of the query per block, u[k, r] = sum_corners w a_r[i] b_r[j] (glints paper eq. 5)
+        gk = np.empty(4, np.int64)
+        slot = np.empty(4, np.int64)
+        ng = 0
+        for k in range(nc):
+            gg = (cy_[k] // bk) * nb + cx_[k] // bk
+            slot[k] = ng
+            for e in range(ng):
+                if gk[e] == gg:
+                    slot[k] = e
+            if slot[k] == ng:
+                gk[ng] = gg
+                ng += 1
+        u = np.empty((4, rank))
         marg = rad + 1.0
         acc = 0.0
         dsum = 0.0
@@ -871,36 +937,70 @@ def _points_kernel(cx, cy, sp, iy, ix, inside, tiles, seed, index, images, cpA, 
                 for k in range(kx0, kx1 + 1):
                     nx += math.exp(-0.5 * ((k * st + 0.5 - (c0 - i * T)) / r) ** 2)
                 if block > 0 and ky0 <= k0[m] + n - 1 and ky1 >= k0[m]:
-                    # the query pixel's rank-one terms of this tile type (glints paper eq. 5):
-                    # a tap then costs `rank` products with its C row
-                    for rr in range(rank):
-                        u[rr] = cA[t, g, rr, py % block] * cB[t, g, rr, px % block]
+                    # a tap then costs `rank` products with its C row per block
+                    u[:ng] = 0.0
+                    for k in range(nc):
+                        g = gk[slot[k]]
+                        for rr in range(rank):
+                            u[slot[k], rr] += (cw[k] * cA[t, g, rr, cy_[k] % bk]
+                                               * cB[t, g, rr, cx_[k] % bk])
                 for ky in range(max(ky0, k0[m]), min(ky1, k0[m] + n - 1) + 1):
                     wy = math.exp(-0.5 * ((ky * st + 0.5 - (c1 - j * T)) / r) ** 2) / ny
                     for kx in range(max(kx0, k0[m]), min(kx1, k0[m] + n - 1) + 1):
                         wx = math.exp(-0.5 * ((kx * st + 0.5 - (c0 - i * T)) / r) ** 2) / nx
+                        v = 0.0
                         if block > 0:
-                            v = 0.0
-                            for rr in range(rank):
-                                v += cC[t, ky - k0[m], kx - k0[m], g, rr] * u[rr]
-                            acc += wy * wx * v
+                            for e in range(ng):
+                                for rr in range(rank):
+                                    v += cC[t, ky - k0[m], kx - k0[m], gk[e], rr] * u[e, rr]
                         else:
-                            acc += wy * wx * img[t, ky - k0[m], kx - k0[m], py, px]
+                            for k in range(nc):
+                                v += cw[k] * img[t, ky - k0[m], kx - k0[m], cy_[k], cx_[k]]
+                        acc += wy * wx * v
                 for e in range(dep.shape[0]):
                     x = i * T + dep[e, 1]
                     y = j * T + dep[e, 0]
                     if wx0 <= x <= wx1 and wy0 <= y <= wy1:
-                        dsum += _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var, tot2,
-                                          sr, lo, h, R, trunc, py, px)
+                        for k in range(nc):
+                            dsum += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f,
+                                                      var, tot2, sr, lo, h, R, trunc, cy_[k],
+                                                      cx_[k])
         out[q] = acc + dsum / (sx * sy * h * h)
 
 
-def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
+def _pixel_taps(wn: TiledNDF, q, bilinear: bool):
+    """First pixel row / column ``(N,)`` and the weights ``(N, 2)`` of it and the next, per
+    axis: the pixel holding ``q (N, 2)`` (weight 1, 0 outside the support), or bilinear between
+    pixel centres (pixels outside the support weigh 0, as the glints map's bilinear lookup)."""
+    R, S = wn.resolution, wn.support
+    f = (q + S) / (2.0 * S / R)
+    if bilinear:
+        f = f - 0.5
+    p = np.floor(f).astype(np.int64)
+    t = f - p if bilinear else np.zeros_like(f)
+    w = np.stack([1.0 - t, t], axis=-1)  # (N, 2 axes, 2 taps)
+    w[..., 0] *= (p >= 0) & (p < R)
+    w[..., 1] *= (p + 1 >= 0) & (p + 1 < R)
+    if not bilinear:  # one pixel: outside the square on either axis, no value
+        w[..., 0] *= np.all((p >= 0) & (p < R), axis=-1)[:, None]
+    # x is axis 0 of q, the image's column
+    return p[:, 1], p[:, 0], np.ascontiguousarray(w[:, 1]), np.ascontiguousarray(w[:, 0])
+
+
+def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool = False,
+               point_roughness: float | None = None) -> np.ndarray:
     """Batched :func:`ndf`: NDF values ``(...)`` of footprints ``center (..., 2)``,
     ``sigma_p (...)`` at ``s (..., 2)`` (broadcast together), one Numba kernel for all regimes,
     uncompressed or CP-compressed pyramids (compressed: each tap reads its ``C`` row, ``rank``
     numbers, against the query pixel's ``A`` and ``B`` entries). Same arithmetic as
-    :func:`ndf`, without Python per footprint."""
+    :func:`ndf`, without Python per footprint.
+
+    ``bilinear``: the stored pixel averages interpolated between pixel centres (pixels outside
+    the support weigh 0), and below ``wn.min_sigma`` the direct P-NDF's point value
+    (``pndf.pndf``) with intrinsic roughness ``point_roughness`` (default
+    ``wn.intrinsic_roughness``); bake with
+    :func:`prefilter.glints.brdf.bilinear_bake_roughness` of it so that the interpolation's blur
+    restores it (as the ``glints`` render cache does)."""
     if not isinstance(wn, TiledNDF):
         raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
@@ -909,16 +1009,21 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
     idx = _as_index(index)
     idx = np.zeros((0, 0), np.int64) if idx is None else np.ascontiguousarray(idx, np.int64)
+    psr = 0.0
+    if bilinear:
+        psr = as_intrinsic_roughness(wn.intrinsic_roughness if point_roughness is None
+                                     else point_roughness)
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1))
-    iy, ix, inside = _pixels(wn, np.broadcast_to(q, shape + (2,)).reshape(-1, 2))
+    q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
+    py0, px0, wy, wx = _pixel_taps(wn, q, bool(bilinear))
     out = np.empty(sp.shape[0])
     cc = np.ascontiguousarray
     images, cpA, cpB, cpC = _kernel_levels(wn)
     serial(_points_kernel, len(out))(
-        cc(c[:, 0]), cc(c[:, 1]), sp, iy, ix, inside, cc(wn.wang.tiles[..., :2]),
-        np.uint64(wn.wang.seed), idx, images, cpA, cpB, cpC, int(wn.block),
-        np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
+        cc(c[:, 0]), cc(c[:, 1]), sp, py0, px0, wy, wx, cc(q[:, 0]), cc(q[:, 1]), psr,
+        cc(wn.wang.tiles[..., :2]), np.uint64(wn.wang.seed), idx, images, cpA, cpB, cpC,
+        int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean, wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)

@@ -35,10 +35,15 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: those of ``glints`` (:data:`prefilter.glints.render.BAKE_SETTINGS`, whole disk of half
 #: vectors); ``ndf_res`` 128 (pixel 1.6 intrinsic stds; 256 quadruples bake time and memory:
 #: 0.8 GB uncompressed at 128); ``rank`` 16 with ``block`` 16: stored-image error 6 / 4 / 2 %
-#: per level on the flakes map (docs/glints-wang.md, "Rendering").
+#: per level on the flakes map (docs/glints-wang.md, "Rendering"). ``bilinear``: NDF values
+#: interpolated between pixel centres, the pyramids baked with
+#: :func:`prefilter.glints.brdf.bilinear_bake_roughness` (the interpolation's blur restores the
+#: intrinsic roughness) and the exact point P-NDF below ``min_sigma``
+#: (:func:`prefilter.glints.wang_ndf.ndf_points`); the pixel's value instead cost 2x the FLIP
+#: against ``glints-direct`` (pixel pitch 1.6 intrinsic stds).
 WANG_SETTINGS = dict(tile=32, band=4.0, seed=0, ndf_res=128, support=1.0,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, stride0=None, wide_tiles=0.5,
-                     uniform_tiles=8.0, rank=16, block=16, n_iter_max=50)
+                     uniform_tiles=8.0, rank=16, block=16, n_iter_max=50, bilinear=True)
 _TILED: dict = {}
 _BY_ID: dict = {}
 
@@ -95,7 +100,7 @@ def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = Fa
                     wt = synthesize(nm, st["tile"], st["band"], rng=st["seed"])
                     rank = st["rank"] or None  # 0: uncompressed
                     wn = bake_tiles(wt, ndf_res=st["ndf_res"], support=st["support"],
-                                    intrinsic_roughness=st["intrinsic_roughness"],
+                                    intrinsic_roughness=_bake_roughness(st),
                                     stride0=st["stride0"], wide_tiles=st["wide_tiles"],
                                     uniform_tiles=st["uniform_tiles"], rank=rank,
                                     block=st["block"], n_iter_max=st["n_iter_max"],
@@ -105,6 +110,14 @@ def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = Fa
     if isinstance(normal_map, np.ndarray):
         _BY_ID[ident] = (normal_map, _TILED[path])
     return _TILED[path]
+
+
+def _bake_roughness(st: dict) -> float:
+    if not st["bilinear"]:
+        return st["intrinsic_roughness"]
+    from prefilter.glints.brdf import bilinear_bake_roughness
+
+    return bilinear_bake_roughness(st["intrinsic_roughness"], st["support"], st["ndf_res"])
 
 
 def check_lights(scene, name: str = "glints-wang") -> None:
@@ -129,6 +142,7 @@ def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = No
     from prefilter.sphere.sampling import to_local
 
     check_lights(scene)
+    st = wang_settings(settings)
     lights = scene.light_set()
     flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
     t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
@@ -159,7 +173,8 @@ def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = No
         wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
         wok = np.broadcast_to(wo[m], wi.shape)
         h = _half(wok, wi)
-        D = ndf_points(wn, c, sp, h[..., :2], index=index)
+        D = ndf_points(wn, c, sp, h[..., :2], index=index, bilinear=st["bilinear"],
+                       point_roughness=st["intrinsic_roughness"])
         f0 = np.asarray(mat.f0, dtype=np.float64)
         spec = _brdf_cos_from_ndf(wok, wi, h, D, f0)
         diff = (np.asarray(mat.base_color, dtype=np.float64) / np.pi

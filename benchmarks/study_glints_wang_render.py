@@ -1,0 +1,110 @@
+"""The ``glints-wang`` method on the glints measurement scene (docs/glints-wang.md, "Rendering").
+
+Per distance (``prefilter.glints.render.measurement_scene(d, lights="point")``, flakes 128^2):
+
+* frame times of ``glints-wang``, ``glints`` and ``glints-direct``, interleaved, ``--repeats``
+  each (after one warm-up render of each: bakes and compilation outside the timing), wall and
+  process CPU time (the machine is shared);
+* FLIP (and mean ratio) of ``glints-wang`` on an explicit periodic 4 x 4 tile index map against
+  ``glints-direct`` on the assembled 128^2 map (same texel scale: tile 32), and of the hashed
+  ``glints-wang`` against ``glints-direct`` on the exemplar (another surface: the look only);
+* storage: ``TiledNDF.nbytes`` against the texel area the frame covers (bounding box of the hit
+  samples' texel coordinates) and what an explicit map of that area would take.
+
+Run: ``.venv/bin/python benchmarks/study_glints_wang_render.py [--repeats 3]
+[--distances 0.5 2 8] [--set key=value ...]`` (``--set`` overrides ``WANG_SETTINGS``, values
+as JSON). One JSON line per distance on stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _timed(fn):
+    w, c = time.perf_counter(), time.process_time()
+    out = fn()
+    return out, time.perf_counter() - w, time.process_time() - c
+
+
+def main(argv=None):
+    from prefilter.glints import wang_render
+    from prefilter.glints.render import footprints, measurement_scene
+    from prefilter.glints.wang import assemble, index_map
+    from prefilter.render.camera import gbuffer_at
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.metrics import flip
+    from prefilter.render.pipeline import render
+    from prefilter.render.scene import load_scene
+    from prefilter.texture.normalmap import encode_normals
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--distances", type=float, nargs="+", default=[0.5, 2.0, 8.0])
+    ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--no-times", action="store_true")
+    args = ap.parse_args(argv)
+    wang = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.set)}
+    if wang:
+        wang_render.WANG_SETTINGS.update(wang)  # the registered method uses the module defaults
+    tmp = Path(tempfile.mkdtemp())
+    for d in args.distances:
+        sc = load_scene(measurement_scene(d, lights="point"))
+        nm = sc.objects[0].material.normal_map.load()
+        size = nm.shape[0]
+        (wn, t_bake, _) = _timed(lambda: wang_render.baked_tiles(nm))
+        T = wn.wang.size
+        ny = size // T
+        idx = index_map(wn.wang, ny, ny)
+        big = assemble(wn.wang, idx)
+        np.save(tmp / "assembled.npy", encode_normals(big))
+        spec = measurement_scene(d, lights="point")
+        spec["objects"][0]["material"]["normal_map"] = str(tmp / "assembled.npy")
+        sa = load_scene(spec)
+        row = dict(distance=d, tile=T, settings=wang_render.wang_settings(wang),
+                   bake_or_load_s=round(t_bake, 2), nbytes_mb=wn.nbytes / 1e6,
+                   cp_error=list(wn.cp_error))
+        xy = np.stack(np.meshgrid(np.arange(sc.camera.width) + 0.5,
+                                  np.arange(sc.camera.height) + 0.5), -1)
+        g = gbuffer_at(sc, xy).reshape(-1)
+        gh = g.select(g.hit)
+        c, sp = footprints(gh, (size, size))
+        ext = c.max(0) - c.min(0)
+        row.update(sigma_p_median=float(np.median(sp)),
+                   frame_texels=float(np.prod(ext)), frame_tiles=float(np.prod(ext) / T**2),
+                   explicit_map_mb=float(np.prod(ext)) * 3 * 4 / 1e6)
+        # FLIP on the assembled map (same surface) and the hashed tiling (another surface)
+        a_idx = wang_render.render_wang(sc, RenderSettings(), index=idx)
+        img = {"wang": render(sc, "glints-wang"), "glints": render(sc, "glints"),
+               "direct": render(sc, "glints-direct")}
+        b_idx = render(sa, "glints-direct")
+        row.update(flip_wang_index_vs_direct_assembled=float(flip(a_idx, b_idx).mean),
+                   mean_ratio_index=float(a_idx.mean() / b_idx.mean()),
+                   flip_wang_hashed_vs_direct_exemplar=float(flip(img["wang"],
+                                                                   img["direct"]).mean),
+                   mean_ratio_hashed=float(img["wang"].mean() / img["direct"].mean()),
+                   flip_glints_vs_direct=float(flip(img["glints"], img["direct"]).mean))
+        if not args.no_times:
+            wall = {m: [] for m in ("glints-wang", "glints", "glints-direct")}
+            cpu = {m: [] for m in wall}
+            for _ in range(args.repeats):
+                for m in wall:
+                    _, w, cp = _timed(lambda: render(sc, m))
+                    wall[m].append(round(w, 3))
+                    cpu[m].append(round(cp, 3))
+            row.update(wall_s=wall, cpu_s=cpu,
+                       min_wall_ratio_direct_over_wang=min(wall["glints-direct"])
+                       / min(wall["glints-wang"]),
+                       min_wall_ratio_glints_over_wang=min(wall["glints"])
+                       / min(wall["glints-wang"]))
+        print(json.dumps(row), flush=True)
+
+
+if __name__ == "__main__":
+    main()
