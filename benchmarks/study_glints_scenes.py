@@ -37,6 +37,12 @@ Compression error alone: quad ``compressed`` vs ``converged`` (both noise-free);
 bake into other files). ``--by-luminance`` adds the share of each cell's FLIP error sum by the
 pixel's luminance relative to the frame maximum (:func:`error_by_luminance`): on a mostly black
 frame HDR-FLIP's automatic exposure range reaches +24 stops and the tails count.
+
+``--same-estimator`` (environment lights): ``glints`` shades with the unprefiltered SG estimator
+(point NDF queries) instead of the epsilon-prefiltered one. Its light samples depend only on the
+uniforms, not on the NDF, so with the same seed both methods evaluate their NDFs at the same half
+vectors and the FLIP between the two frames is the compression error alone (no Monte Carlo
+noise between them); rows carry ``same_estimator``.
 """
 
 from __future__ import annotations
@@ -316,6 +322,19 @@ def table_exposure(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def _unprefiltered_environment():
+    """``glints`` shades environments with the unprefiltered SG estimator (``--same-estimator``)."""
+    import prefilter.glints.render as R
+
+    shade = R.environment_radiance
+
+    def unprefiltered(*args, **kw):
+        kw["prefilter"] = False
+        return shade(*args, **kw)
+
+    R.environment_radiance = unprefiltered
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--lights", default="point", help="comma list: point, quad, environment")
@@ -337,6 +356,9 @@ def main():
     ap.add_argument("--reference", action="store_true",
                     help="judge against the deterministic references (quad, environment)")
     ap.add_argument("--seeds", type=int, default=16, help="--reference: glints seeds averaged")
+    ap.add_argument("--same-estimator", action="store_true",
+                    help="environment: glints with the unprefiltered SG estimator (same light "
+                         "samples as glints-direct: FLIP = compression error alone)")
     ap.add_argument("--no-direct", action="store_true",
                     help="--reference: skip the 1-spp glints-direct frame (costly far away)")
     a = ap.parse_args()
@@ -344,6 +366,10 @@ def main():
         from prefilter.glints.render import BAKE_SETTINGS
 
         BAKE_SETTINGS.update(json.loads(a.bake))
+    if a.same_estimator:
+        if a.reference:
+            ap.error("--same-estimator compares glints with glints-direct, not the references")
+        _unprefiltered_environment()
     fmt = table_reference if a.reference else table
     if a.table:
         print(fmt([json.loads(x) for x in Path(a.table).read_text().splitlines() if x]))
@@ -369,6 +395,8 @@ def main():
                                  a.stop_exposure, a.by_luminance)
                         if a.bake:
                             r["bake"] = json.loads(a.bake)
+                        if a.same_estimator:
+                            r["same_estimator"] = True
                     print(json.dumps(r), flush=True)
                     with out.open("a") as fh:
                         fh.write(json.dumps(r) + "\n")
