@@ -489,8 +489,8 @@ def _brdf_cos_from_ndf(wo, wi, h, D, f0):
 # arithmetic of the single-point kernels per point (the same values to rounding), so that each
 # texel's element is loaded, and its covariance formed, once instead of once per point. Their
 # per-texel loops are written to vectorise (prefilter.glints._simd: division without Numba's
-# zero check, a polynomial exp): on the near quad frame's 2 560 footprints (950 000 texels, 8
-# points each) the one-walk kernel went 53 -> 30 ms.
+# zero check, a polynomial exp) and run over a footprint's whole window: on the near quad
+# frame's 2 560 footprints (950 000 texels, 8 points each) the one-walk kernel went 52 -> 29 ms.
 
 #: Exponent below which an element's angular Gaussian is dropped from the NDF: ``exp(-18)``, 6 of
 #: its stds (the cut ``quad < 36`` of :func:`_direct_rows`).
@@ -498,13 +498,14 @@ _ANGULAR_CUT = -18.0
 
 
 @njit_inline
-def _row_gaussians(J00, J01, J10, J11, SX, SY, r, xs, nx, fdx, fdy, var, sr2, wx, T):
+def _row_gaussians(J00, J01, J10, J11, SX, SY, r, xs, nx, fdx, fdy, var, sr2, wx, wy, T, o):
     """Texels ``xs .. xs + nx - 1`` of row ``r`` of the element planes as Gaussians in ``s``
-    (Yan et al. 2016: the element's slope marginal conditioned on the footprint): ``T (6, >= nx)``
-    gets the shifted means ``T[0], T[1]`` (``s_i + J_i (f dx, f dy)``), the exponent's
-    coefficients ``T[2..4]`` (``-e^T cov^-1 e / 2 = T2 ex^2 + T3 ex ey + T4 ey^2`` for the
-    covariance ``sr2 + var J J^T``) and ``T[5] = wx / sqrt(det cov)`` (column weights ``wx``).
-    Shared by all the points of the row; branch- and check-free, so it vectorises."""
+    (Yan et al. 2016: the element's slope marginal conditioned on the footprint), written to
+    ``T[:, o:o + nx]`` (``T (6, >= o + nx)``): the shifted means ``T[0], T[1]`` (``s_i + J_i
+    (f dx, f dy)``), the exponent's coefficients ``T[2..4]`` (``-e^T cov^-1 e / 2 = T2 ex^2 + T3
+    ex ey + T4 ey^2`` for the covariance ``sr2 + var J J^T``) and the weight ``T[5] = wy wx /
+    sqrt(det cov)`` (footprint weights ``wy`` of the row, ``wx`` of the columns). Branch- and
+    check-free, so it vectorises."""
     a0 = J00[r, xs:xs + nx]
     a1 = J01[r, xs:xs + nx]
     b0 = J10[r, xs:xs + nx]
@@ -518,20 +519,19 @@ def _row_gaussians(J00, J01, J10, J11, SX, SY, r, xs, nx, fdx, fdy, var, sr2, wx
         b = var * (j00 * j10 + j01 * j11)
         det = a * d - b * b  # >= sr^4 > 0 (Cauchy-Schwarz)
         nh = fdiv(-0.5, det)
-        T[0, i] = sxr[i] + (j00 * fdx[i] + j01 * fdy)
-        T[1, i] = syr[i] + (j10 * fdx[i] + j11 * fdy)
-        T[2, i] = d * nh
-        T[3, i] = -2.0 * b * nh
-        T[4, i] = a * nh
-        T[5, i] = fdiv(wx[i], math.sqrt(det))
+        T[0, o + i] = sxr[i] + (j00 * fdx[i] + j01 * fdy)
+        T[1, o + i] = syr[i] + (j10 * fdx[i] + j11 * fdy)
+        T[2, o + i] = d * nh
+        T[3, o + i] = -2.0 * b * nh
+        T[4, o + i] = a * nh
+        T[5, o + i] = fdiv(wy * wx[i], math.sqrt(det))
 
 
 @njit_inline
-def _row_exponents(qx, qy, T, nx, t):  # pragma: no cover - compiled
-    """``t[i]``: the exponent of texel ``i``'s Gaussian (:func:`_row_gaussians`) at the point
-    ``(qx, qy)``, for the ``nx`` texels of a row (vectorised; callers test it against the cut
-    before paying for the exponential)."""
-    for i in range(nx):
+def _exponents(qx, qy, T, n, t):  # pragma: no cover - compiled
+    """``t[i]``: the exponent of Gaussian ``i < n`` of ``T`` (:func:`_row_gaussians`) at the
+    point ``(qx, qy)`` (vectorised; callers test it against the cut before the exponential)."""
+    for i in range(n):
         ex = qx - T[0, i]
         ey = qy - T[1, i]
         t[i] = T[2, i] * ex * ex + T[3, i] * ex * ey + T[4, i] * ey * ey
@@ -539,8 +539,10 @@ def _row_exponents(qx, qy, T, nx, t):  # pragma: no cover - compiled
 
 @njit_parallel
 def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, out):
-    """:func:`_direct_rows` at ``K`` points per footprint: ``qx, qy, out (N, K)``. A row's
-    Gaussians (:func:`_row_gaussians`) are formed once and shared by the ``K`` points."""
+    """:func:`_direct_rows` at ``K`` points per footprint: ``qx, qy, out (N, K)``. The window's
+    Gaussians (:func:`_row_gaussians`) are formed once and shared by the ``K`` points; each
+    point's sum is one loop over the whole window (rows of ~20 texels left most of the vector
+    loops' work to their scalar remainders)."""
     H = SX.shape[0]
     W = SX.shape[1] // 2
     K = qx.shape[1]
@@ -549,25 +551,23 @@ def _direct_rows_k(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc
     for q in prange(out.shape[0]):
         f, var, inv, x0, y0, y1, nx, xs, wx, fdx, sx = _footprint_columns(
             cx[q], cy[q], sp[q], sh2, trunc, W)
-        T = np.empty((6, nx))
-        t = np.empty(nx)
-        acc = np.zeros(K)
+        n = nx * (y1 - y0 + 1)
+        T = np.empty((6, n))
+        t = np.empty(n)
         sy = 0.0
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
             wy = math.exp(-dy * dy * inv)
             sy += wy
             _row_gaussians(J00, J01, J10, J11, SX, SY, y % H, xs, nx, fdx, f * dy, var, sr2, wx,
-                           T)
-            for k in range(K):
-                _row_exponents(qx[q, k], qy[q, k], T, nx, t)
-                racc = 0.0
-                for i in range(nx):
-                    if t[i] > _ANGULAR_CUT:
-                        racc += T[5, i] * exp_neg(t[i])
-                acc[k] += wy * racc
+                           wy, T, (y - y0) * nx)
         for k in range(K):
-            out[q, k] = acc[k] / (2.0 * math.pi * sx * sy)
+            _exponents(qx[q, k], qy[q, k], T, n, t)
+            acc = 0.0
+            for i in range(n):
+                if t[i] > _ANGULAR_CUT:
+                    acc += T[5, i] * exp_neg(t[i])
+            out[q, k] = acc / (2.0 * math.pi * sx * sy)
 
 
 def direct_ndf_k(surf, center, sigma_p, s, *, truncation: float = FALLBACK_TRUNCATION):
@@ -880,31 +880,32 @@ def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, 
             qy[P + k] = my + l21 * z1 + l22 * z2
             out_s[q, k, 0] = qx[P + k]
             out_s[q, k, 1] = qy[P + k]
-        T = np.empty((6, nx))
-        t = np.empty(nx)
-        acc = np.zeros(2 * P)
-        accp = np.zeros(P)
+        n = nx * ny
+        T = np.empty((6, n))
+        t = np.empty(n)
         for j in range(ny):
             y = y0 + j
             _row_gaussians(J00, J01, J10, J11, SX, SY, y % H, xs, nx, fdx, f * (cy[q] - (y + 0.5)),
-                           var, sr2, wx, T)
-            for k in range(2 * P):
-                _row_exponents(qx[k], qy[k], T, nx, t)
-                racc = 0.0
-                if k < P:
-                    for i in range(nx):
+                           var, sr2, wx, wy[j], T, j * nx)
+        acc = np.zeros(2 * P)
+        accp = np.zeros(P)
+        for k in range(2 * P):
+            _exponents(qx[k], qy[k], T, n, t)
+            racc = 0.0
+            if k < P:
+                for i in range(n):
+                    if t[i] > _ANGULAR_CUT:
+                        racc += T[5, i] * exp_neg(t[i])
+            else:
+                pacc = 0.0
+                for i in range(n):
+                    if t[i] > pdf_cut:
+                        e = T[5, i] * exp_neg(t[i])
+                        pacc += e
                         if t[i] > _ANGULAR_CUT:
-                            racc += T[5, i] * exp_neg(t[i])
-                else:
-                    pacc = 0.0
-                    for i in range(nx):
-                        if t[i] > pdf_cut:
-                            e = T[5, i] * exp_neg(t[i])
-                            pacc += e
-                            if t[i] > _ANGULAR_CUT:
-                                racc += e
-                    accp[k - P] += wy[j] * pacc
-                acc[k] += wy[j] * racc
+                            racc += e
+                accp[k - P] = pacc
+            acc[k] = racc
         for k in range(P):
             out_dl[q, k] = acc[k] / (2.0 * math.pi * sx * sy)
             out_db[q, k] = acc[P + k] / (2.0 * math.pi * sx * sy)
