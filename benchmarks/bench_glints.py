@@ -16,6 +16,7 @@
         --bake-rank 16  # the evaluation and bake of the previous version
     python benchmarks/bench_glints.py --frames --stride0 2 --sigma0 2  # finer level 0 (bakes)
     python benchmarks/bench_glints.py --breakdown     # frame CPU time: queries, taps, fallback
+    python benchmarks/bench_glints.py --breakdown --lights quad  # quad frames: range, MIS, kernels
     python benchmarks/bench_glints.py --frames --lights quad --cpu --unfused
                                   # also the per-direction quad MIS (quad_mis_unfused), interleaved,
                                   # and the max relative difference of the two float64 frames
@@ -413,6 +414,68 @@ def bench_breakdown(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=5):
         brdf.point_flat, brdf.direct_ndf = orig["point_flat"], orig["direct_ndf"]
 
 
+def bench_breakdown_quad(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7):
+    """Where a ``glints`` quad-light frame's CPU time goes: each distance's frame timed whole
+    while the quad lights' functions are timed inside it (range path ``quad_range``; MIS path
+    ``quad_mis`` and, within it, the one-walk direct kernel ``direct_mis_k``, the compressed
+    sampler ``sample_s_k`` and the direct NDF at K points ``direct_ndf_k``); rounds interleaved
+    over the distances, best of ``repeat`` per entry (CPU time of this process)."""
+    import functools
+
+    from prefilter.glints import brdf
+    from prefilter.glints import render as grender
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.scene import load_scene
+
+    parts = [(grender, "quad_range"), (grender, "quad_mis"), (brdf, "direct_mis_k"),
+             (brdf, "sample_s_k"), (brdf, "direct_ndf_k")]
+    acc = {}
+    depth = {}
+    orig = {name: getattr(mod, name) for mod, name in parts}
+
+    def timed(name):
+        @functools.wraps(orig[name])
+        def f(*a, **kw):
+            # quad_range calls itself on a subset: only the outermost call is counted
+            depth[name] = depth.get(name, 0) + 1
+            t = time.process_time()
+            try:
+                return orig[name](*a, **kw)
+            finally:
+                depth[name] -= 1
+                if depth[name] == 0:
+                    acc[name] = acc.get(name, 0.0) + time.process_time() - t
+        return f
+
+    scenes = [load_scene(grender.measurement_scene(d, kind, lights="quad")) for d in distances]
+    for mod, name in parts:
+        setattr(mod, name, timed(name))
+    try:
+        for sc in scenes:  # bake and compile outside the timing
+            grender.render_glints(sc, RenderSettings())
+        best = [{} for _ in distances]
+        for _ in range(repeat):
+            for i, sc in enumerate(scenes):
+                acc.clear()
+                t = time.process_time()
+                grender.render_glints(sc, RenderSettings())
+                acc["frame"] = time.process_time() - t
+                for k, v in acc.items():
+                    best[i][k] = min(best[i].get(k, np.inf), v)
+    finally:
+        for mod, name in parts:
+            setattr(mod, name, orig[name])
+    print(f"glints quad frame CPU ms ({kind} 128^2, 64x48 pixels, best of {repeat} per entry, "
+          f"load {os.getloadavg()[0]:.1f})")
+    names = ["frame"] + [name for _, name in parts]
+    print(f"{'distance':>8} " + " ".join(f"{n:>13}" for n in names))
+    for d, b in zip(distances, best):
+        print(f"{d:8g} " + " ".join(f"{b[n] * 1e3:13.1f}" if n in b else f"{'-':>13}"
+                                     for n in names), flush=True)
+    fr = [b["frame"] for b in best]
+    print(f"max/min over distances: {max(fr) / min(fr):.2f}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=128)
@@ -452,7 +515,8 @@ def main():
                     help="--frames and queries: process CPU time, not wall")
     ap.add_argument("--bake-rank", type=int, default=None, help="--frames: bake rank budget")
     ap.add_argument("--breakdown", action="store_true",
-                    help="only: where the frame CPU time goes (queries, taps, fallback)")
+                    help="only: where the frame CPU time goes (queries, taps, fallback; with "
+                    "--lights quad: range path, MIS path and its kernels)")
     a = ap.parse_args()
     if a.map and a.bake_kind:
         from prefilter.glints.bake import bake_if_missing
@@ -467,7 +531,10 @@ def main():
                       clock=time.process_time if a.cpu else time.perf_counter)
         return
     if a.breakdown:
-        bench_breakdown()
+        if a.lights == "quad":
+            bench_breakdown_quad()
+        else:
+            bench_breakdown()
         return
     if a.frames:
         if a.unfused and a.old_range:
