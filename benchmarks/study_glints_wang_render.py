@@ -9,7 +9,8 @@ Per distance (``prefilter.glints.render.measurement_scene(d, lights="point")``, 
   ``glints-direct`` on the assembled 128^2 map (same texel scale: tile 32), and of the hashed
   ``glints-wang`` against ``glints-direct`` on the exemplar (another surface: the look only);
 * storage: ``TiledNDF.nbytes`` against the texel area the frame covers (bounding box of the hit
-  samples' texel coordinates) and what an explicit map of that area would take.
+  samples' texel coordinates) and what an explicit map of that area would take (float32
+  normals; the ``glints`` compressed pyramid at the exemplar's bytes per texel).
 
 Run: ``.venv/bin/python benchmarks/study_glints_wang_render.py [--repeats 3]
 [--distances 0.5 2 8] [--set key=value ...]`` (``--set`` overrides ``WANG_SETTINGS``, values
@@ -35,7 +36,7 @@ def _timed(fn):
 
 def main(argv=None):
     from prefilter.glints import wang_render
-    from prefilter.glints.render import footprints, measurement_scene
+    from prefilter.glints.render import baked_surface, footprints, measurement_scene
     from prefilter.glints.wang import assemble, index_map
     from prefilter.render.camera import gbuffer_at
     from prefilter.render.methods import RenderSettings
@@ -76,9 +77,14 @@ def main(argv=None):
         gh = g.select(g.hit)
         c, sp = footprints(gh, (size, size))
         ext = c.max(0) - c.min(0)
+        # the glints pyramid of the exemplar, per texel: what an explicit map of the frame's
+        # area would take in that format
+        gm_mb = baked_surface(nm).gm.nbytes / 1e6
         row.update(sigma_p_median=float(np.median(sp)),
                    frame_texels=float(np.prod(ext)), frame_tiles=float(np.prod(ext) / T**2),
-                   explicit_map_mb=float(np.prod(ext)) * 3 * 4 / 1e6)
+                   explicit_normals_mb=float(np.prod(ext)) * 3 * 4 / 1e6,
+                   glints_map_mb=gm_mb,
+                   explicit_glints_map_mb=gm_mb * float(np.prod(ext)) / size**2)
         # FLIP on the assembled map (same surface) and the hashed tiling (another surface)
         a_idx = wang_render.render_wang(sc, RenderSettings(), index=idx)
         img = {"wang": render(sc, "glints-wang"), "glints": render(sc, "glints"),

@@ -793,20 +793,28 @@ def _nb_texel_point(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, trun
     dy = cy - (gy + 0.5)
     ex = qx - _nb_s(tiles, ty, i0, j0, gx, gy, 0) - f * (jx0 * dx + jy0 * dy)
     ey = qy - _nb_s(tiles, ty, i0, j0, gx, gy, 1) - f * (jx1 * dx + jy1 * dy)
-    a = var * (jx0 * jx0 + jy0 * jy0) + sr * sr
-    b = var * (jx0 * jx1 + jy0 * jy1)
-    d = var * (jx1 * jx1 + jy1 * jy1) + sr * sr
+    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+    return w * _nb_density(ex, ey, jx0, jy0, jx1, jy1, var, sr, trunc)
+
+
+@njit_serial
+def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover - compiled
+    """``N((ex, ey); 0, sr^2 I + var J J^T)``, 0 beyond ``2 trunc`` stds (``pndf._pndf_points``;
+    ``J = [[j00, j01], [j10, j11]]``)."""
+    a = var * (j00 * j00 + j01 * j01) + sr * sr
+    b = var * (j00 * j10 + j01 * j11)
+    d = var * (j10 * j10 + j11 * j11) + sr * sr
     det = a * d - b * b
     quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
     if quad >= 8.0 * trunc * trunc:
         return 0.0
-    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-    return w * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+    return math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
 
 
 @njit_parallel
-def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, seed, index, images,
-                   cpA, cpB, cpC, block, k0, st0, sigma0, dep, tile_means, mean, sr, lo, h,
+def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J, depmask,
+                   seed, index, images, cpA, cpB, cpC, block, k0, st0, sigma0, dep, tile_means,
+                   mean, sr, lo, h,
                    min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
@@ -814,7 +822,8 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, seed
     pixel centres); with ``point_sr > 0`` the texels not in the pyramids (below ``min_sigma``
     all of them, above it the dependent texels) add their point densities at ``(qx, qy)[q]``
     with intrinsic roughness ``point_sr`` instead of pixel values. ``block > 0``: compressed
-    levels, the CP triples ``(cpA, cpB, cpC)`` (``images`` unused)."""
+    levels, the CP triples ``(cpA, cpB, cpC)`` (``images`` unused). ``el_s, el_J``:
+    :func:`tile_elements`; ``depmask (T, T)``: :func:`dependent_texels`."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
@@ -878,16 +887,38 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, seed
             acc = 0.0
             ti0, tj0 = wx0 // T - 1, wy0 // T - 1
             types = _nb_types(ti0, wx1 // T + 1, tj0, wy1 // T + 1, seed, index)
+            if point:
+                # the tiles' own elements (exact away from the dependent texels, which look
+                # up their neighbours) and separable weights: a few flops and one exp a texel
+                wcx = np.empty(wx1 - wx0 + 1)
+                for x in range(wx0, wx1 + 1):
+                    wcx[x - wx0] = math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+                for y in range(wy0, wy1 + 1):
+                    dy = c1 - (y + 0.5)
+                    wr = math.exp(-dy * dy / (2.0 * tot2))
+                    ry = y % T
+                    for x in range(wx0, wx1 + 1):
+                        rx = x % T
+                        if depmask[ry, rx]:
+                            acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
+                                                   tot2, point_sr, trunc, qx[q], qy[q])
+                            continue
+                        t = types[y // T - tj0, x // T - ti0]
+                        dx = c0 - (x + 0.5)
+                        j00, j01 = el_J[t, ry, rx, 0, 0], el_J[t, ry, rx, 0, 1]
+                        j10, j11 = el_J[t, ry, rx, 1, 0], el_J[t, ry, rx, 1, 1]
+                        ex = qx[q] - el_s[t, ry, rx, 0] - f * (j00 * dx + j01 * dy)
+                        ey = qy[q] - el_s[t, ry, rx, 1] - f * (j10 * dx + j11 * dy)
+                        acc += wr * wcx[x - wx0] * _nb_density(ex, ey, j00, j01, j10, j11, var,
+                                                               point_sr, trunc)
+                out[q] = acc / (sx * sy)
+                continue
             for y in range(wy0, wy1 + 1):
                 for x in range(wx0, wx1 + 1):
-                    if point:
-                        acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
-                                               tot2, point_sr, trunc, qx[q], qy[q])
-                        continue
                     for k in range(nc):
                         acc += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
                                                  tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
-            out[q] = acc / (sx * sy) if point else acc / (sx * sy * h * h)
+            out[q] = acc / (sx * sy * h * h)
             continue
         m = 0
         for lv in range(L):
@@ -1029,14 +1060,33 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     out = np.empty(sp.shape[0])
     cc = np.ascontiguousarray
     images, cpA, cpB, cpC = _kernel_levels(wn)
+    el_s, el_J, depmask = _kernel_elements(wn)
     serial(_points_kernel, len(out))(
         cc(c[:, 0]), cc(c[:, 1]), sp, py0, px0, wy, wx, cc(q[:, 0]), cc(q[:, 1]), psr,
-        cc(wn.wang.tiles[..., :2]), np.uint64(wn.wang.seed), idx, images, cpA, cpB, cpC,
+        cc(wn.wang.tiles[..., :2]), el_s, el_J, depmask, np.uint64(wn.wang.seed), idx, images,
+        cpA, cpB, cpC,
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean, wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
     return out.reshape(shape)
+
+
+_ELEMENTS: dict = {}
+
+
+def _kernel_elements(wn: TiledNDF):
+    """:func:`tile_elements` and the dependent-texel mask ``(T, T)`` of ``wn``'s tiles (cached
+    per tile set: the renderer queries the same tiles every frame)."""
+    key = id(wn.wang)
+    hit = _ELEMENTS.get(key)
+    if hit is None or hit[0] is not wn.wang:
+        el_s, el_J = tile_elements(wn.wang)
+        hit = _ELEMENTS[key] = (wn.wang, np.ascontiguousarray(el_s), np.ascontiguousarray(el_J))
+    T = wn.wang.size
+    dep = np.zeros((T, T), np.bool_)
+    dep[wn.dependent[:, 0], wn.dependent[:, 1]] = True
+    return hit[1], hit[2], dep
 
 
 def _kernel_levels(wn: TiledNDF):

@@ -33,15 +33,17 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: Tiles and bake of the render cache. ``tile`` 32 (the CLI's default), or the exemplar's size
 #: (even, >= 4) when it is smaller (:func:`tile_size`); ``intrinsic_roughness``, ``support``:
 #: those of ``glints`` (:data:`prefilter.glints.render.BAKE_SETTINGS`, whole disk of half
-#: vectors); ``ndf_res`` 128 (pixel 1.6 intrinsic stds; 256 quadruples bake time and memory:
-#: 0.8 GB uncompressed at 128); ``rank`` 16 with ``block`` 16: stored-image error 6 / 4 / 2 %
-#: per level on the flakes map (docs/glints-wang.md, "Rendering"). ``bilinear``: NDF values
+#: vectors); ``ndf_res`` 256 (pixel 0.78 intrinsic stds, as ``glints``): at 128 the FLIP against
+#: ``glints-direct`` on the assembled map was 0.127 instead of 0.074 at mid distance; the cost
+#: is the bake (3.2 GB uncompressed level images in memory, ~9 min on the shared machine) and
+#: 232 MB of storage at ``rank`` 16 with ``block`` 16 (stored-image error 2.5 / 1.7 / 1.0 % per
+#: level on the flakes map; docs/glints-wang.md, "Rendering"). ``bilinear``: NDF values
 #: interpolated between pixel centres, the pyramids baked with
 #: :func:`prefilter.glints.brdf.bilinear_bake_roughness` (the interpolation's blur restores the
-#: intrinsic roughness) and the exact point P-NDF below ``min_sigma``
-#: (:func:`prefilter.glints.wang_ndf.ndf_points`); the pixel's value instead cost 2x the FLIP
-#: against ``glints-direct`` (pixel pitch 1.6 intrinsic stds).
-WANG_SETTINGS = dict(tile=32, band=4.0, seed=0, ndf_res=128, support=1.0,
+#: intrinsic roughness), the texels evaluated at query time as point densities
+#: (:func:`prefilter.glints.wang_ndf.ndf_points`); the pixel's value instead: FLIP 0.167 /
+#: 0.120 / 0.104 instead of 0.004 / 0.029 / 0.027 (tests/glints/test_wang_render.py scene).
+WANG_SETTINGS = dict(tile=32, band=4.0, seed=0, ndf_res=256, support=1.0,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, stride0=None, wide_tiles=0.5,
                      uniform_tiles=8.0, rank=16, block=16, n_iter_max=50, bilinear=True)
 _TILED: dict = {}
