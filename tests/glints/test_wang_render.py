@@ -216,19 +216,21 @@ def test_errors(tmp_path, monkeypatch):
 @pytest.mark.slow
 def test_compressed_index_map_against_direct(tmp_path, monkeypatch):
     """CP-compressed per-tile pyramids (rank 16, blocks 16), T = 16 on a 64^2 Gaussian
-    heightfield exemplar, R = 64 over the whole disk, intrinsic roughness 0.03: frames with
-    median footprints 2.3 / 4.6 / 18.6 texels against glints-direct on the assembled map.
-    Measured FLIP 0.020 / 0.036 / 0.034 (uncompressed: see the docs), mean ratio within 1 %."""
+    heightfield exemplar, R = 64 over the whole disk, intrinsic roughness 0.04 (pixel 0.78
+    stds, as the render default): frames with median footprints 2.3 / 4.6 / 18.6 texels (per-tile
+    regime from 2.5, shares from 8) against glints-direct on the assembled map. Measured FLIP
+    0.054 / 0.064 / 0.062 (uncompressed: 0.020 / 0.046 / 0.062), mean ratios within 0.3 %; the
+    hashed tiling: 0.42. Storage 14.6 MB (uncompressed 199 MB). ~35 s."""
     from maps import gaussian_heightfield
 
     exemplar = gaussian_heightfield(64, corr=3, slope_std=0.15, seed=2)[0]
-    wang = dict(tile=16, band=2.0, ndf_res=64, support=1.0, intrinsic_roughness=0.03, rank=16,
+    wang = dict(tile=16, band=2.0, ndf_res=64, support=1.0, intrinsic_roughness=0.04, rank=16,
                 block=16)
-    rows, wn, other = _assembled_vs_direct(tmp_path, monkeypatch, exemplar, wang, 0.03,
+    rows, wn, other = _assembled_vs_direct(tmp_path, monkeypatch, exemplar, wang, 0.04,
                                            (0.5, 1.0, 4.0), 4)
     print(rows, other, wn.cp_error, wn.nbytes)
     assert wn.block == 16
     assert rows[0][2] < wn.wide_sigma <= rows[2][2]
     for f, ratio, _ in rows:
-        assert f < 0.06 and abs(ratio - 1.0) < 0.02
-    assert other > 2 * max(r[0] for r in rows)
+        assert f < 0.08 and abs(ratio - 1.0) < 0.01
+    assert other > 4 * max(r[0] for r in rows)
