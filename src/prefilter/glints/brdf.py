@@ -848,20 +848,20 @@ def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, 
             qy[k] = qly[q, k]
             # the texel of weight wy_j wx_i / (sx sy): its row by the rows' masses wy_j sx, then
             # its column (ny + nx steps instead of a scan over the ny nx texels)
-            t = u[q, k, 0] * sy
+            tu = u[q, k, 0] * sy
             bj = ny - 1
             run = 0.0
             for j in range(ny):
                 run += wy[j]
-                if t < run:
+                if tu < run:
                     bj = j
                     break
-            t = (t - (run - wy[bj])) * sx
+            tu = (tu - (run - wy[bj])) * sx
             bi = nx - 1
             run = 0.0
             for i in range(nx):
                 run += wy[bj] * wx[i]
-                if t < run:
+                if tu < run:
                     bi = i
                     break
             mx, my, a, b, d = element_moments(s_el, J, (y0 + bj) % Hs, (x0 + bi) % Ws,
