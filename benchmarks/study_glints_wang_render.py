@@ -79,7 +79,7 @@ def main(argv=None):
         ext = c.max(0) - c.min(0)
         # the glints pyramid of the exemplar, per texel: what an explicit map of the frame's
         # area would take in that format
-        gm_mb = baked_surface(nm).gm.nbytes / 1e6
+        gm_mb = baked_surface(nm).gm.compressed_bytes / 1e6
         row.update(sigma_p_median=float(np.median(sp)),
                    frame_texels=float(np.prod(ext)), frame_tiles=float(np.prod(ext) / T**2),
                    explicit_normals_mb=float(np.prod(ext)) * 3 * 4 / 1e6,

@@ -193,6 +193,14 @@ def test_errors(tmp_path, monkeypatch):
     assert "glints-wang" in available() and "Wang" in describe("glints-wang")
     with pytest.raises(PrefilterError, match="settings: expected keys among"):
         wang_settings({"tiles": 8})
+    monkeypatch.setenv("PREFILTER_GLINTS_WANG_SETTINGS", '{"ndf_res": 16, "rank": 0}')
+    assert wang_settings({"rank": 2})["ndf_res"] == 16 and wang_settings()["rank"] == 0
+    assert wang_settings({"rank": 2})["rank"] == 2
+    for bad in ("[1]", "{nope", '{"res": 1}'):
+        monkeypatch.setenv("PREFILTER_GLINTS_WANG_SETTINGS", bad)
+        with pytest.raises(PrefilterError, match="PREFILTER_GLINTS_WANG_SETTINGS: expected"):
+            wang_settings()
+    monkeypatch.delenv("PREFILTER_GLINTS_WANG_SETTINGS")
     for lights in ("quad", "environment"):
         sc = load_scene(grender.measurement_scene(1.0, size=8, width=4, height=3, lights=lights))
         with pytest.raises(PrefilterError, match=r"lights\[0\]: method 'glints-wang' expected "

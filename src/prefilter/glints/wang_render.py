@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 
 import numpy as np
 
@@ -50,13 +51,31 @@ _TILED: dict = {}
 _BY_ID: dict = {}
 
 
+#: Environment variable with a JSON object of :data:`WANG_SETTINGS` overrides (cheap bakes for
+#: test sessions: the default bake takes minutes whatever the exemplar's size).
+SETTINGS_ENV = "PREFILTER_GLINTS_WANG_SETTINGS"
+
+
 def wang_settings(settings: dict | None = None) -> dict:
-    """:data:`WANG_SETTINGS` updated by ``settings`` (unknown keys are an error)."""
-    extra = set(settings or {}) - set(WANG_SETTINGS)
-    if extra:
-        raise PrefilterError(f"settings: expected keys among {', '.join(sorted(WANG_SETTINGS))}, "
-                             f"got {', '.join(sorted(map(repr, extra)))}")
-    return dict(WANG_SETTINGS, **(settings or {}))
+    """:data:`WANG_SETTINGS` updated by ``$PREFILTER_GLINTS_WANG_SETTINGS`` (a JSON object),
+    then by ``settings`` (unknown keys are an error)."""
+    env = os.environ.get(SETTINGS_ENV)
+    over = {}
+    if env:
+        try:
+            over = json.loads(env)
+        except ValueError:
+            over = None
+        if not isinstance(over, dict):
+            raise PrefilterError(f"{SETTINGS_ENV}: expected a JSON object of settings, got "
+                                 f"{env!r}")
+    for what, d in ((SETTINGS_ENV, over), ("settings", settings or {})):
+        extra = set(d) - set(WANG_SETTINGS)
+        if extra:
+            raise PrefilterError(f"{what}: expected keys among "
+                                 f"{', '.join(sorted(WANG_SETTINGS))}, got "
+                                 f"{', '.join(sorted(map(repr, extra)))}")
+    return {**WANG_SETTINGS, **over, **(settings or {})}
 
 
 def tile_size(tile: int, shape) -> int:
