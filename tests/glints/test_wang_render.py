@@ -8,7 +8,8 @@ from maps import sinusoid
 
 from prefilter.errors import PrefilterError
 from prefilter.glints import render as grender
-from prefilter.glints.wang import assemble, index_map, synthesize
+from prefilter.glints.wang import (assemble, edge_colours, index_map,
+                                   periodic_index_map, synthesize)
 from prefilter.glints.wang_ndf import bake_tiles, compress_tiles, ndf, ndf_points
 from prefilter.glints.wang_render import baked_tiles, render_wang, tile_size, wang_settings
 from prefilter.render.methods import RenderSettings, available, describe
@@ -49,6 +50,18 @@ def test_compressed_batched_query_equals_per_footprint(wn_pair):
         np.testing.assert_array_equal(got[~tiles], dense[~tiles])  # no pyramid used there
 
 
+def test_periodic_index_map_is_a_wang_tiling():
+    """Edge colours match between neighbours, across the wrap too (index_map's blocks do not)."""
+    idx = periodic_index_map(5, 7, rng=2)
+    big = np.tile(idx, (2, 2))
+    n, s, w, e = edge_colours(big)
+    np.testing.assert_array_equal(s[:-1], n[1:])
+    np.testing.assert_array_equal(e[:, :-1], w[:, 1:])
+    assert len(np.unique(idx)) > 8
+    n, s, w, e = edge_colours(np.tile(index_map(synthesize(sinusoid(8), 4, 1.0), 5, 7), (2, 2)))
+    assert np.any(s[:-1] != n[1:]) or np.any(e[:, :-1] != w[:, 1:])
+
+
 def _scene(nm_file, d, size, width=32, height=24):
     sc = grender.measurement_scene(d, size=size, width=width, height=height)
     sc["objects"][0]["material"]["normal_map"] = str(nm_file)
@@ -64,7 +77,7 @@ def _assembled_vs_direct(tmp_path, monkeypatch, exemplar, wang, sr, distances, n
     np.save(tmp_path / "exemplar.npy", encode_normals(exemplar))
     nm = _scene(tmp_path / "exemplar.npy", 1.0, size).objects[0].material.normal_map.load()
     wn = baked_tiles(nm, wang)
-    idx = index_map(wn.wang, ny, ny, 3, -5)
+    idx = periodic_index_map(ny, ny, rng=3)
     big = assemble(wn.wang, idx)
     assert big.shape[0] == size  # the same texel scale for both methods
     np.save(tmp_path / "assembled.npy", encode_normals(big))
@@ -87,13 +100,14 @@ def _assembled_vs_direct(tmp_path, monkeypatch, exemplar, wang, sr, distances, n
 
 
 def test_index_map_equals_direct_on_assembled_map(tmp_path, monkeypatch):
-    """Uncompressed per-tile pyramids, T = 8 on a 32^2 exemplar (4 x 4 tiles, periodic), 32 x 24
-    pixels: near / mid / far frames (median footprint std 0.58 / 2.3 / 9.3 texels: the direct,
-    per-tile and tile-type-share regimes) against glints-direct on the assembled map. What
-    differs: the bilinear NDF lookup (pixel pitch 0.78 intrinsic stds) and the shares regime's
-    dropped position dependence. Measured FLIP 0.004 / 0.029 / 0.027, mean ratios 1.000 / 0.999
-    / 0.999 (the pixel's value instead of bilinear: 0.167 / 0.120 / 0.104); the hashed tiling
-    instead of the index map: 0.65 at near."""
+    """Uncompressed per-tile pyramids, T = 8 on a 32^2 exemplar (a periodic 4 x 4 tiling), 32 x
+    24 pixels: near / mid / far frames (median footprint std 0.58 / 2.3 / 9.3 texels: the
+    direct, per-tile and tile-type-share regimes) against glints-direct on the assembled map.
+    What differs: the bilinear NDF lookup (pixel pitch 0.78 intrinsic stds) and the shares
+    regime's dropped position dependence. Measured FLIP 0.0023 / 0.037 / 0.031, mean ratios
+    1.000 / 1.006 / 1.000; the hashed tiling instead of the index map: 0.66 at near. (With a
+    block of the implicit tiling as the map, mismatched across the wrap, and the pixel's value
+    instead of bilinear: 0.167 / 0.120 / 0.104; bilinear: 0.004 / 0.029 / 0.027.)"""
     exemplar = sinusoid(32, ax=0.3, ay=0.25, px=16, py=8)
     wang = dict(tile=8, band=2.0, ndf_res=32, support=1.0, intrinsic_roughness=0.08, rank=0,
                 uniform_tiles=64.0)
@@ -103,7 +117,7 @@ def test_index_map_equals_direct_on_assembled_map(tmp_path, monkeypatch):
     assert wn.block == 0 and wn.wang.size == 8
     assert rows[0][2] < wn.min_sigma <= rows[1][2] < wn.wide_sigma <= rows[2][2]
     for (f, ratio, _), bound in zip(rows, (0.01, 0.04, 0.04)):
-        assert f < bound and abs(ratio - 1.0) < 0.005
+        assert f < bound and abs(ratio - 1.0) < 0.01
     assert other > 0.3
 
 

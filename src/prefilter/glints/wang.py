@@ -122,6 +122,19 @@ def index_map(wt: WangTiles, ny: int, nx: int, i0: int = 0, j0: int = 0) -> np.n
     return tile_index(wt, I, J)
 
 
+def periodic_index_map(ny: int, nx: int, rng=0) -> np.ndarray:
+    """An ``(ny, nx)`` index map whose periodic repetition is a valid Wang tiling (every edge
+    colour matches across the wrap too): random colours per grid vertex of the ``ny x nx``
+    torus, tiles indexed as the implicit tiling's. ``index_map`` of a finite block wraps onto
+    mismatched edges."""
+    ny = as_positive_int(ny, "ny")
+    nx = as_positive_int(nx, "nx")
+    gen = as_rng(rng)
+    right = gen.integers(0, 2, (ny, nx))
+    below = gen.integers(0, 2, (ny, nx))
+    return right + 2 * np.roll(right, -1, axis=0) + 4 * below + 8 * np.roll(below, -1, axis=1)
+
+
 def assemble(wt: WangTiles, index: np.ndarray) -> np.ndarray:
     """Normal map ``(ny T, nx T, 3)`` of an index map ``(ny, nx)``."""
     idx = np.asarray(index)

@@ -1061,6 +1061,12 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     cc = np.ascontiguousarray
     images, cpA, cpB, cpC = _kernel_levels(wn)
     el_s, el_J, depmask = _kernel_elements(wn)
+    if idx.size:
+        # an explicit map may put mismatched edges side by side (a block of the implicit tiling
+        # wraps so): the border texels look up their actual neighbours
+        depmask = depmask.copy()
+        depmask[[0, -1]] = True
+        depmask[:, [0, -1]] = True
     serial(_points_kernel, len(out))(
         cc(c[:, 0]), cc(c[:, 1]), sp, py0, px0, wy, wx, cc(q[:, 0]), cc(q[:, 1]), psr,
         cc(wn.wang.tiles[..., :2]), el_s, el_J, depmask, np.uint64(wn.wang.seed), idx, images,
