@@ -238,6 +238,27 @@ def test_multi_point_kernels_equal_single_point(surf):
     assert np.all(p4 > 0)
 
 
+def test_direct_mis_k_element_choice_extremes(surf):
+    """The one-walk kernel picks its draws' elements by row, then column: at the uniforms' ends
+    (0: the window's first texel; just below 1: its last), on the narrowest windows (sigma_p ~ 0:
+    3-4 texels a side) and on wider ones, its draws and densities are the per-point sampler's."""
+    from prefilter.glints.brdf import direct_mis_k
+    from prefilter.glints.sample import sample_s_direct
+
+    rng = np.random.default_rng(12)
+    N, K = 24, 4
+    c = rng.uniform(0, 64, (N, 2))
+    sp = np.concatenate([rng.uniform(0.0, 0.05, N // 2), rng.uniform(0.5, 3.0, N // 2)])
+    u = rng.random((N, K, 3))
+    u[:, 0, 0] = 0.0
+    u[:, 1, 0] = 1.0 - 2.0 ** -53
+    q = rng.uniform(-0.3, 0.3, (N, K, 2))
+    _, s, p, _ = direct_mis_k(surf, c, sp, q, u)
+    s1, p1 = sample_s_direct(surf, np.repeat(c, K, 0), np.repeat(sp, K), u=u.reshape(N * K, 3))
+    np.testing.assert_allclose(s, s1.reshape(N, K, 2), rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(p, p1.reshape(N, K), rtol=1e-12, atol=0)
+
+
 def test_quad_mis_fused_direct_surface():
     """Without a compressed map (glints-direct): footprints wider than the 64^2 map (the rows
     wrap: single-point direct kernel) and at the P-NDF's sigma_p -> inf limit (the single-point
