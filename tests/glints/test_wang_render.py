@@ -256,3 +256,24 @@ def test_compressed_index_map_against_direct(tmp_path, monkeypatch):
     for f, ratio, _ in rows:
         assert f < 0.09 and abs(ratio - 1.0) < 0.015
     assert other > 4 * max(r[0] for r in rows)
+
+
+def test_directional_and_point_lights_add_up(tmp_path, monkeypatch):
+    """A directional light shades like a point light of the same irradiance at every point
+    (the same direction: a point light far away), and two lights add (one batched query)."""
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path))
+    monkeypatch.setenv("PREFILTER_GLINTS_WANG_SETTINGS",
+                       '{"ndf_res": 16, "rank": 0, "intrinsic_roughness": 0.1}')
+    sc = grender.measurement_scene(1.0, size=8, width=8, height=6)
+    sc["objects"][0]["material"]["base_color"] = [0.1, 0.2, 0.3]
+    d = np.array([0.0, 0.6, -1.0]) / np.linalg.norm([0.0, 0.6, -1.0])
+    far = 1e7
+    point = {"type": "point", "position": list(d * far), "intensity": [far * far * 2.0] * 3}
+    sun = {"type": "directional", "direction": list(-d), "irradiance": [2.0] * 3}
+    imgs = {}
+    for name, lights in (("point", [point]), ("sun", [sun]), ("both", [point, sun])):
+        sc["lights"] = lights
+        imgs[name] = render(load_scene(sc), "glints-wang")
+    assert imgs["sun"].max() > 0 and np.all(np.isfinite(imgs["both"]))
+    np.testing.assert_allclose(imgs["point"], imgs["sun"], rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(imgs["both"], imgs["point"] + imgs["sun"], rtol=1e-5, atol=1e-6)
