@@ -17,6 +17,8 @@
     python benchmarks/bench_glints.py --frames --stride0 2 --sigma0 2  # finer level 0 (bakes)
     python benchmarks/bench_glints.py --breakdown     # frame CPU time: queries, taps, fallback
     python benchmarks/bench_glints.py --breakdown --lights quad  # quad frames: range, MIS, kernels
+    git archive c576186 src | tar -x -C /tmp/old && python benchmarks/bench_glints.py --frames \
+        --lights quad --cpu --runs 6 --baseline /tmp/old/src   # before/after, alternating runs
     python benchmarks/bench_glints.py --frames --lights quad --cpu --unfused
                                   # also the per-direction quad MIS (quad_mis_unfused), interleaved,
                                   # and the max relative difference of the two float64 frames
@@ -476,6 +478,39 @@ def bench_breakdown_quad(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7):
     print(f"max/min over distances: {max(fr) / min(fr):.2f}")
 
 
+def bench_frames_baseline(src, lights="point", runs=3, cpu=False):
+    """:func:`bench_frames` of another source tree and of this one, alternating, each run in a
+    fresh process of its own (``PYTHONPATH=src`` for the other tree: e.g. ``git archive <commit>
+    src | tar -x -C /tmp/old`` and ``src = /tmp/old/src``): a before/after comparison under the
+    same load. Prints every run and each tree's range per distance and of max/min."""
+    import re
+    import subprocess
+    import sys
+
+    src = Path(src).resolve()
+    if not (src / "prefilter" / "__init__.py").is_file():
+        raise SystemExit(f"--baseline: expected a source tree containing prefilter/, got {src}")
+    cmd = [sys.executable, str(Path(__file__).resolve()), "--frames", "--lights", lights]
+    if cpu:
+        cmd.append("--cpu")
+    trees = [("baseline", {**os.environ, "PYTHONPATH": str(src)}), ("this tree", None)]
+    times = {name: [] for name, _ in trees}
+    for r in range(runs):
+        for name, env in trees:
+            out = subprocess.run(cmd, env=env, capture_output=True, text=True, check=True).stdout
+            ms = [float(x) for x in re.findall(r"glints\s+([\d.]+) ms", out)]
+            times[name].append(ms)
+            print(f"run {r + 1} {name:>9}: " + " / ".join(f"{x:6.1f}" for x in ms)
+                  + f" ms, max/min {max(ms) / min(ms):.2f} (load {os.getloadavg()[0]:.1f})",
+                  flush=True)
+    for name, rows in times.items():
+        a = np.array(rows)
+        rat = a.max(1) / a.min(1)
+        print(f"{name:>9}: " + " / ".join(f"{lo:.0f}-{hi:.0f}" for lo, hi in
+                                          zip(a.min(0), a.max(0)))
+              + f" ms; max/min {rat.min():.2f}-{rat.max():.2f}, median {np.median(rat):.2f}")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--size", type=int, default=128)
@@ -506,6 +541,9 @@ def main():
                     help="--frames: also the former range path, interleaved, and the frames' "
                     "max relative difference")
     ap.add_argument("--lights", default="point", help="--frames: point, quad or environment")
+    ap.add_argument("--baseline", default=None,
+                    help="--frames: alternate each run with a process on this source tree "
+                    "(PYTHONPATH; e.g. from git archive) and report both")
     ap.add_argument("--runs", type=int, default=1, help="--frames: repeat the measurement")
     ap.add_argument("--interp", default=None, help="--frames: resample (default) or trilinear")
     ap.add_argument("--nearest", action="store_true", help="--frames: NDF pixel value lookup")
@@ -541,6 +579,9 @@ def main():
             ap.error("--unfused and --old-range: each is its own interleaved comparison; give one")
         bs = {k: v for k, v in (("stride0", a.stride0), ("sigma0", a.sigma0),
                                 ("rank", a.bake_rank)) if v is not None}
+        if a.baseline:
+            bench_frames_baseline(a.baseline, lights=a.lights, runs=a.runs, cpu=a.cpu)
+            return
         ratios = []
         for _ in range(a.runs):
             best = bench_frames(direct=a.direct, lights=a.lights, interp=a.interp,
