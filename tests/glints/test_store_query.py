@@ -11,7 +11,7 @@ from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints import pndf_image
 from prefilter.glints.bake import bake
 from prefilter.glints.query import block_means, point, range_mean
-from prefilter.glints.store import (ARRAYS, Q, block_index_from_mask, decode, decode_v2,
+from prefilter.glints.store import (ARRAYS, block_index_from_mask, decode, decode_v2,
                                     encode, encode_v2, load, pack_mask, save)
 
 R, S, BLK = 32, 0.4, 8
@@ -184,11 +184,12 @@ def test_float16_encoding_error_is_rounding():
     assert np.all(np.abs(C - c) <= 1e-3 * per_row)
 
 
-def test_8bit_encoding_error_is_rounding():
+@pytest.mark.parametrize("bits", [8, 16])
+def test_8bit_encoding_error_is_rounding(bits):
     """decode(encode(.)) of groups of different ranks (one empty) == the factors up to the
-    rounding bounds of 255 steps: ``|c' - c| <= m_c / 510``; for ``a`` (renormalised after
-    rounding, ``q_i = 255 a_i / m + d_i``, ``|d_i| <= 1/2``):
-    ``|a' - a| <= (m / 255) (1/2 + a B / 2) / (1 - B m / 510)``."""
+    rounding bounds of ``q = 2^bits - 1`` steps: ``|c' - c| <= m_c / 2q``; for ``a``
+    (renormalised after rounding, ``q_i = q a_i / m + d_i``, ``|d_i| <= 1/2``):
+    ``|a' - a| <= (m / q) (1/2 + a B / 2) / (1 - B m / 2q)``."""
     rng = np.random.default_rng(4)
     Bs, ranks, ks = 8, [3, 0, 5, 1], [4, 2, 7, 3]
     groups = []
@@ -198,8 +199,9 @@ def test_8bit_encoding_error_is_rounding():
         b = rng.random((r, Bs))
         b /= b.sum(axis=1, keepdims=True)
         groups.append((a, b, rng.random((k, r)) * 10.0 ** rng.integers(-3, 7, (1, r))))
-    enc = encode(groups)
-    assert enc["a"].dtype == np.uint8 and enc["c"].dtype == np.uint8
+    enc = encode(groups, bits)
+    q, dt = (2**bits - 1), {8: np.uint8, 16: np.uint16}[bits]
+    assert enc["a"].dtype == enc["b"].dtype == enc["c"].dtype == dt
     rows = np.concatenate([[0], np.cumsum(ks)])
     A, Bp, C = decode(**enc, group_rows=rows, width=6)
     assert A.shape == (4, 6, Bs + 1) and C.shape == (rows[-1], 6)
@@ -207,12 +209,13 @@ def test_8bit_encoding_error_is_rounding():
         r = ranks[g]
         for f, P in ((a, A), (b, Bp)):
             m = f.max(axis=1, keepdims=True)
-            bound = m / 255 * (0.5 + 0.5 * Bs * f) / (1 - Bs * m / 510)
+            bound = m / q * (0.5 + 0.5 * Bs * f) / (1 - Bs * m / (2 * q))
+            # float32 prefix sums add ~1e-7 (more than 16-bit codes' own rounding)
             assert np.all(np.abs(np.diff(P[g, :r].astype(np.float64), axis=1) - f)
-                          <= bound + 1e-6)
+                          <= bound + (1e-6 if bits == 8 else 2e-7))
             assert np.all(P[g, r:] == 0)
         Cg = C[rows[g]:rows[g + 1]].astype(np.float64)
-        assert np.all(np.abs(Cg[:, :r] - c) <= c.max(axis=0) / (2 * Q) * (1 + 1e-5))
+        assert np.all(np.abs(Cg[:, :r] - c) <= c.max(axis=0) / (2 * q) * (1 + 1e-5))
         assert np.all(Cg[:, r:] == 0)
 
 
@@ -289,6 +292,14 @@ def test_cli_bake(tmp_path):
     gm = load(tmp_path / "o.npz")
     assert "ratio" in res.output and gm.header["settings"]["rank"] == 4
     assert gm.rank == gm.ranks.max() <= 12  # --max-rank defaults to 3 x --rank
+    res = CliRunner().invoke(bake_glints, [str(tmp_path / "n.npy"), "-o", str(tmp_path / "p.npz"),
+                                           "--rank", "4", "--ndf-res", "16", "--block", "8",
+                                           "--cell", "8", "--iters", "10", "--quiet",
+                                           "--code-bits", "16", "--ndf-truncation", "6",
+                                           "--footprint-truncation", "5"])
+    assert res.exit_code == 0, res.output
+    st = load(tmp_path / "p.npz").header["settings"]
+    assert (st["code_bits"], st["ndf_truncation"], st["footprint_truncation"]) == (16, 6.0, 5.0)
 
 
 def _images_from_codes(gm, images):
@@ -315,21 +326,67 @@ def _images_from_codes(gm, images):
                 g = gm.image_cell[img] * nb * nb + bi * nb + bj
                 r, m = ranks[g], m0[g]
                 start = c_off[g] + (k - rows[g]) * r
-                cr = cd["c"][start:start + r] / 255.0 * cd["c_scale"][m:m + r]
+                cr = (cd["c"][start:start + r] / float(np.iinfo(cd["c"].dtype).max)
+                      * cd["c_scale"][m:m + r])
                 out[n, bi * gm.block:(bi + 1) * gm.block, bj * gm.block:(bj + 1) * gm.block] = (
                     np.einsum("r,ri,rj->ij", cr, a[m:m + r], b[m:m + r]))
     return out
 
 
+@pytest.fixture(scope="module")
+def baked16(tmp_path_factory, baked):
+    """The map of ``baked`` with 16-bit codes."""
+    nm = baked[0]
+    out = tmp_path_factory.mktemp("gl16") / "map.npz"
+    summary = bake(nm, out, rank=16, ndf_res=R, block=BLK, support=S, cell=16, converge=0.0,
+                   n_iter_max=300, tol=1e-7, progress=False, code_bits=16)
+    return nm, out, summary, load(out)
+
+
+def test_16bit_codes_bake(baked, baked16):
+    """``code_bits=16``: uint16 codes recorded in the settings, about the same ranks (the
+    budget is per rank; only the 4 scale bytes per rank do not double, which moves a few
+    groups), about twice the code bytes, and an error no larger than the 8-bit bake's."""
+    _, _, s8, g8 = baked
+    _, _, s16, g16 = baked16
+    assert g16.header["settings"]["code_bits"] == 16 and "code_bits" not in g8.header["settings"]
+    assert all(g16.codes[k].dtype == np.uint16 for k in ("a", "b", "c"))
+    assert s16["mean_rank_per_byte"] == pytest.approx(s8["mean_rank_per_byte"], rel=0.05)
+    for k in ("a", "c"):
+        assert 1.8 <= s16["bytes"][k] / s8["bytes"][k] <= 2.2
+    assert s16["rel_l2_error"] <= s8["rel_l2_error"] * 1.01
+
+
+def test_bake_code_bits_errors(tmp_path):
+    with pytest.raises(PrefilterError, match="code_bits: expected one of"):
+        bake(sinusoid(16), tmp_path / "x.npz", code_bits=12, progress=False)
+    with pytest.raises(PrefilterError, match="code_bits: expected one of"):
+        encode([], 4)
+
+
+def test_loader_rejects_mixed_code_dtypes(baked16, tmp_path):
+    from prefilter._io import read_npz, save_npz_atomic
+
+    _, path, _, _ = baked16
+    data = {k: v for k, v in read_npz(path, "glints map").items() if k != "__meta__"}
+    data["a"] = data["a"].astype(np.uint8)
+    bad = tmp_path / "mixed.npz"
+    save_npz_atomic(bad, format_name="prefilter-glints", format_version=3, **data)
+    with pytest.raises(TableFileError, match="a: expected a 2-D uint16 array, got uint8"):
+        load(bad)
+
+
+@pytest.mark.parametrize("bits", [8, 16])
 @pytest.mark.parametrize("prefetch", [False, True])
-def test_queries_are_the_stored_codes_evaluated_in_float64(baked, prefetch):
-    """The kernels compute on the 8-bit codes: point values at pixel centres and range means of
-    random fractional rectangles of single images == the float64 images rebuilt from the codes
-    (1e-6 relative: the float32 per-component scale), with or without the prefetch stage."""
+def test_queries_are_the_stored_codes_evaluated_in_float64(baked, baked16, prefetch, bits):
+    """The kernels compute on the 8- or 16-bit codes: point values at pixel centres and range
+    means of random fractional rectangles of single images == the float64 images rebuilt from
+    the codes (1e-6 relative: the float32 per-component scale), with or without the prefetch
+    stage."""
     from prefilter.glints import _qkernels as qk
     from prefilter.glints.query import kernel_args
 
-    _, _, _, gm = baked
+    _, _, _, gm = baked if bits == 8 else baked16
     rng = np.random.default_rng(7)
     images = rng.choice(gm.pyramid.n_images, 6, replace=False)
     ref = _images_from_codes(gm, images)

@@ -15,12 +15,12 @@ order:
   ``stride_g``; row ``k`` of ``cq`` starts at ``cb_g + k stride_g``.
 
 A pixel of a block of group ``g`` is ``sum_r wsc[m_g + r] cq[k, r] Fa[i, r] Fb[j, r]`` and a
-rectangle's sum the same with prefix-sum differences. For version-3 maps these are the stored
-8-bit codes (uint8 ``cq``, ``Fa``, ``Fb``; integer prefix sums, exact in uint16) and ``wsc =
-c_scale / (255 S_a S_b)`` with ``S`` the code sums (the loader's renormalisation), i.e. the values
-the float arrays ``A``, ``Bp``, ``C`` hold, without their float32 prefix-sum rounding, at 1/4 to
-1/8 of their memory traffic; other maps pass float32 arrays and ``wsc = 1`` (Numba compiles one
-specialisation per dtype)."""
+rectangle's sum the same with prefix-sum differences. For version-3 maps these are the stored 8- or
+16-bit codes (uint8 or uint16 ``cq``, ``Fa``, ``Fb``; integer prefix sums, exact in uint16 / uint32)
+and ``wsc = c_scale / (Q S_a S_b)`` (``Q`` 255 / 65535) with ``S`` the code sums (the loader's
+renormalisation), i.e. the values the float arrays ``A``, ``Bp``, ``C`` hold, without their float32
+prefix-sum rounding, at 1/4 to 1/8 of their memory traffic; other maps pass float32 arrays and
+``wsc = 1`` (Numba compiles one specialisation per dtype)."""
 
 from __future__ import annotations
 

@@ -46,7 +46,7 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_in
                                    as_ndf_truncation, as_normal_map, as_support, elements,
                                    pndf_image)
 from prefilter.glints.pyramid import level_difference, next_level, plan
-from prefilter.glints.store import GlintsMap, decode, encode, pack_mask, save
+from prefilter.glints.store import CODE_BITS, GlintsMap, decode, encode, pack_mask, save
 
 LEVEL0_CHUNK = 0
 LEVEL_CHUNK = 10_000
@@ -131,7 +131,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          max_levels: int | None = None, blank_tol: float = 1e-4, n_iter_max: int = 50,
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
          levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
-         ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION) -> dict:
+         ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
+         code_bits: int = 8) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -139,11 +140,12 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     ``levels_dir``: keep the uncompressed pyramid there (keyed by the NDF settings only) so bakes
     at several ranks share it; it is not removed at the end.
 
-    ``rank`` is the storage budget: the mean rank per group weighted by the group's bytes per
-    rank (``K_g + 2 B + 4``: one byte per kept block for ``c``, ``2 B`` for ``a``, ``b``, four
-    for the scale), i.e. the bytes a uniform rank ``rank`` would take. Groups get ranks between
-    ``rank // 2`` and ``max_rank`` (default ``3 rank``; it is the width of the in-memory factors,
-    so it sets the query cost). The summary reports the resulting mean and histogram.
+    ``rank`` is the storage budget: the mean rank per group weighted by the group's bytes per rank
+    (``b (K_g + 2 B) + 4``: ``b = code_bits / 8`` bytes per code, ``K_g`` codes of ``c`` (one per
+    kept block) and ``2 B`` of ``a``, ``b``, four for the scale), i.e. the bytes a uniform rank
+    ``rank`` would take. Groups get ranks between ``rank // 2`` and ``max_rank`` (default ``3
+    rank``; it is the width of the in-memory factors, so it sets the query cost). The summary
+    reports the resulting mean and histogram.
 
     ``level_rank`` (issue #8, query cost vs footprint size): ``"global"`` spends the budget
     where the predicted error drop per byte is largest over the whole map (level-0 groups end up
@@ -154,6 +156,10 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     ``ndf_truncation`` / ``footprint_truncation``: stds at which each element's Gaussian in ``s``
     / the footprint weights are cut in the level-0 NDF images
     (:func:`prefilter.glints.pndf.pndf_image`); the renderer bakes with 6 / 6.
+
+    ``code_bits``: 8 (default) or 16 bits per stored factor value (:func:`store.encode`). The
+    budget ``rank`` keeps its meaning (the bytes per rank double, so the file about doubles);
+    16 bits remove the rounding that shows in the NDF tails (docs/glints-part2.md, session 7).
     """
     from tqdm import tqdm
 
@@ -169,6 +175,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     sr = as_intrinsic_roughness(intrinsic_roughness)
     nt = as_ndf_truncation(ndf_truncation)
     ft = as_ndf_truncation(footprint_truncation, "footprint_truncation")
+    if code_bits not in CODE_BITS:
+        raise PrefilterError(f"code_bits: expected one of {CODE_BITS}, got {code_bits!r}")
+    code_bytes = code_bits // 8
     cell = as_positive_int(cell, "cell")
     pyr = plan(H, W, stride0, sigma0, max_levels)
     if cell % pyr.stride0 or H % cell or W % cell:
@@ -184,7 +193,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     base = max(1, rank // 2)
     candidates = sorted({min(max_rank, max(base, round(base * f))) for f in RANK_STEPS}
                         | {max_rank})
-    unit_bytes_group = 2 * B + 4  # per rank: a, b (uint8), c_scale (float32); + 1 per block (c)
+    # per rank: a, b (codes), c_scale (float32); + code_bytes per block (c)
+    unit_bytes_group = 2 * B * code_bytes + 4
     settings = dict(rank=rank, ndf_res=R, block=B, support=S, intrinsic_roughness=sr,
                     stride0=pyr.stride0, sigma0=pyr.sigma0, cell=cell, converge=converge,
                     max_levels=max_levels, blank_tol=blank_tol, n_iter_max=n_iter_max, tol=tol,
@@ -194,6 +204,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["ndf_truncation"] = nt
     if ft != TRUNCATION:
         settings["footprint_truncation"] = ft
+    if code_bits != 8:
+        settings["code_bits"] = code_bits
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
@@ -313,7 +325,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         groups = [(fits[g][0].T, fits[g][1].T, fits[g][2]) if r_cell[g] else
                   (np.zeros((0, B)), np.zeros((0, B)), np.zeros((rows[g + 1] - rows[g], 0)))
                   for g in range(nb * nb)]
-        enc = encode(groups)
+        enc = encode(groups, code_bits)
         A_, B_, C_ = decode(**enc, group_rows=rows)
         a_s, b_s = np.diff(A_.astype(np.float64), axis=2), np.diff(B_.astype(np.float64), axis=2)
         err2_g = np.zeros(nb * nb)
@@ -346,7 +358,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
             err2_all.append(p1["err2_g"])
             counts.append(np.diff(p1["rows"]))
         counts = np.concatenate(counts)
-        unit = np.where(counts > 0, counts + unit_bytes_group, 0.0)
+        unit = np.where(counts > 0, code_bytes * counts + unit_bytes_group, 0.0)
         group_level = np.repeat([m[0][0] for m in members], nb * nb)
         ranks_ = split_budget(np.concatenate(err2_all), unit, group_level, rank, base,
                               candidates, level_rank)
@@ -392,7 +404,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                    ranks=enc["ranks"].astype(np.int32),
                    codes=dict(enc, group_rows=np.concatenate(group_rows)))
     live = enc["ranks"] > 0
-    unit = np.diff(np.concatenate(group_rows)) + unit_bytes_group
+    unit = code_bytes * np.diff(np.concatenate(group_rows)) + unit_bytes_group
     e2g = np.concatenate(err2_groups)
     top = np.sort(e2g)[::-1]
     summary = dict(

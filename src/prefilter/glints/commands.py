@@ -90,9 +90,17 @@ def shared_options(**defaults):
               help="Spatial cell of a group at level 0 (texels; doubles with each level).")
 @click.option("--converge", default=0.01, show_default=True,
               help="Stop adding levels when one differs from the previous by less (rel. L2).")
+@click.option("--ndf-truncation", default=4.0, show_default=True,
+              help="Stds at which each texel's Gaussian in s is cut (the renderer bakes with 6).")
+@click.option("--footprint-truncation", default=4.0, show_default=True,
+              help="Stds at which the footprint weights are cut (the renderer bakes with 6).")
+@click.option("--code-bits", default=8, show_default=True, type=click.Choice(["8", "16"]),
+              help="Bits per stored factor value: 16 doubles the file and removes the 8-bit "
+                   "rounding that shows in the NDF tails.")
 @shared_options(iters=50, seed=0, quiet=False)
 def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
-                stride0, sigma0, cell, converge, iters, seed, quiet):
+                stride0, sigma0, cell, converge, ndf_truncation, footprint_truncation,
+                code_bits, iters, seed, quiet):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
@@ -104,7 +112,8 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
     summary = bake(nm, out, rank=rank, ndf_res=ndf_res, block=block, support=support,
                    intrinsic_roughness=roughness, stride0=stride0, sigma0=sigma0, cell=cell,
                    converge=converge, n_iter_max=iters, seed=seed, progress=not quiet,
-                   max_rank=max_rank, level_rank=level_rank)
+                   max_rank=max_rank, level_rank=level_rank, ndf_truncation=ndf_truncation,
+                   footprint_truncation=footprint_truncation, code_bits=int(code_bits))
     s = summary
     click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
     click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "

@@ -30,7 +30,7 @@ from prefilter.glints._qkernels import (bilinear_kernel, point_kernel, range_ker
 from prefilter.glints.pndf import as_sigma_p
 from prefilter.glints.pyramid import (RESAMPLE_Q_MIN, RESAMPLE_TRUNCATION, interp_weights,
                                       resample_weights)
-from prefilter.glints.store import Q, GlintsMap
+from prefilter.glints.store import GlintsMap, code_levels
 
 INTERP = ("trilinear", "resample")
 #: Query kernels run serially below this many items: their work per item is ~1-10 us, and on the
@@ -245,9 +245,10 @@ def packed(gm: GlintsMap):
     the number of images whose data the kernels prefetch; built once per map (cached while the
     map lives).
 
-    Version-3 maps: the stored 8-bit codes (uint8 factors, their integer prefix sums, exact in
-    uint16, and ``wsc = c_scale / (255 S_a S_b)``, ``S``: each component's code sum, the loader's
-    renormalisation), so every value is the float64 evaluation of what the file stores. Other
+    Version-3 maps: the stored codes (uint8 or uint16 factors, their integer prefix sums, exact
+    in uint16 / uint32, and ``wsc = c_scale / (Q S_a S_b)``, ``Q`` 255 or 65535, ``S``: each
+    component's code sum, the loader's renormalisation), so every value is the float64
+    evaluation of what the file stores. Other
     maps: the float32 arrays ``A``, ``Bp``, ``C`` (``wsc = 1``)."""
     key = id(gm)
     hit = _PACKED.get(key)
@@ -298,6 +299,7 @@ def _pack_codes(codes):
     ranks = np.asarray(codes["ranks"], np.int64)
     a, b = codes["a"], codes["b"]
     B = a.shape[1]
+    Q = code_levels(codes["c"].dtype)
     pdt = np.uint16 if Q * B <= np.iinfo(np.uint16).max else np.uint32
     prefix = [np.concatenate([np.zeros((f.shape[0], 1), pdt), np.cumsum(f, axis=1, dtype=pdt)],
                              axis=1) for f in (a, b)]
@@ -422,5 +424,6 @@ def _row_sums_from_codes(codes, k):
     rep = np.repeat(np.arange(k.size), r)
     j = np.arange(rep.size) - np.repeat(np.cumsum(r) - r, r)
     pos = c0[g][rep] + (k - rows[g])[rep] * r[rep] + j
-    val = codes["c"][pos].astype(np.float64) * codes["c_scale"][m0[g][rep] + j] / Q
+    val = (codes["c"][pos].astype(np.float64) * codes["c_scale"][m0[g][rep] + j]
+           / code_levels(codes["c"].dtype))
     return np.bincount(rep, weights=val, minlength=k.size)

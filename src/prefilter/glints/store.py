@@ -23,6 +23,8 @@ largest rank; the queries compute on the 8-bit codes and never decode them):
 * ``c (sum_k ranks[group(k)],)`` uint8: the rows of ``C`` in row order, each with its group's rank
   of entries, in 255 steps of ``c_scale (sum(ranks),)`` float32 (the component's maximum over the
   group's rows).
+* ``a``, ``b``, ``c`` may instead all be uint16 (65535 steps; ``bake(code_bits=16)``): the
+  number of steps is the dtype's maximum (:func:`code_levels`), nothing else changes.
 * ``block_mask (N, ceil(nb^2 / 8))`` uint8: packed bits, set for kept blocks (row-major
   ``[bi, bj]``). The rows of ``C`` are ordered by group, then by image, so ``block_index`` and the
   group offsets follow from the mask and ``image_cell`` (:func:`block_index_from_mask`).
@@ -46,12 +48,20 @@ import numpy as np
 
 from prefilter._io import (META_KEY, decode_json_object, read_npz, save_npz_atomic,
                           verify_npz)
-from prefilter.errors import TableFileError
+from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints.pyramid import Pyramid
 
 FORMAT = "prefilter-glints"
 VERSION = 3
 Q = 255  # levels of the 8-bit factors
+#: bits of the stored factor codes :func:`encode` can write (uint8 or uint16 arrays)
+CODE_BITS = (8, 16)
+_CODE_DTYPES = {8: np.uint8, 16: np.uint16}
+
+
+def code_levels(dtype) -> int:
+    """Steps of a factor code array of ``dtype`` (uint8: 255, uint16: 65535)."""
+    return int(np.iinfo(dtype).max)
 ARRAYS = ("A", "Bp", "C", "block_index", "image_cell")  # in memory, and on disk in version 1
 ARRAYS_V2 = ("a", "b", "c", "c_scale", "group_rows", "block_index", "image_cell")
 ARRAYS_V3 = ("ranks", "a", "b", "c", "c_scale", "block_mask", "image_cell")
@@ -59,9 +69,9 @@ ARRAYS_V3 = ("ranks", "a", "b", "c", "c_scale", "block_mask", "image_cell")
 
 class _Decoded:
     """A float factor array of :class:`GlintsMap` (``A``, ``Bp`` or ``C``) decoded from the
-    map's 8-bit ``codes`` on first access when it was given as None: the query kernels compute
-    on the codes, so a loaded version-3 map holds only them (the float arrays of a 512^2 map are
-    ~340 MB). A required dataclass field (no default)."""
+    map's 8- or 16-bit ``codes`` on first access when it was given as None: the query kernels
+    compute on the codes, so a loaded version-3 map holds only them (the float arrays of a 512^2
+    map are ~340 MB). A required dataclass field (no default)."""
 
     def __set_name__(self, owner, name):
         self.name, self.key = name, "_" + name
@@ -159,11 +169,15 @@ def encode_v2(a: np.ndarray, b: np.ndarray, c: np.ndarray, group_rows: np.ndarra
                 c_scale=scale, group_rows=rows)
 
 
-def encode(groups: list) -> dict:
+def encode(groups: list, code_bits: int = 8) -> dict:
     """Version-3 factor arrays (``ranks``, ``a``, ``b``, ``c``, ``c_scale``) of groups given as
     ``(a (r_g, B), b (r_g, B), c (K_g, r_g))`` non-negative float factors (``a``, ``b`` rows
     summing to 1 or zero); concatenating the arrays of consecutive runs of groups gives those of
-    the whole run."""
+    the whole run. ``code_bits`` (8 or 16): ``a``, ``b``, ``c`` as uint8 or uint16 codes."""
+    if code_bits not in _CODE_DTYPES:
+        raise PrefilterError(f"code_bits: expected one of {CODE_BITS}, got {code_bits!r}")
+    dt = _CODE_DTYPES[code_bits]
+    Q = code_levels(dt)
     ranks, qa, qb, qc, sc = [], [], [], [], []
     for a, b, c in groups:
         ranks.append(a.shape[0])
@@ -175,8 +189,8 @@ def encode(groups: list) -> dict:
         sc.append(m)
     B = groups[0][0].shape[1] if groups else 0
     cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape))
-    return dict(ranks=np.array(ranks, np.uint16), a=cat(qa, (0, B)).astype(np.uint8),
-                b=cat(qb, (0, B)).astype(np.uint8), c=cat(qc, (0,)).astype(np.uint8),
+    return dict(ranks=np.array(ranks, np.uint16), a=cat(qa, (0, B)).astype(dt),
+                b=cat(qb, (0, B)).astype(dt), c=cat(qc, (0,)).astype(dt),
                 c_scale=cat(sc, (0,)).astype(np.float32))
 
 
@@ -208,7 +222,7 @@ def decode(ranks, a, b, c, c_scale, group_rows, width: int | None = None,
     e_row = np.repeat(np.arange(K), row_rank)
     e_col = np.arange(row_off[-1]) - row_off[e_row]
     C = np.zeros((K, W), np.float32)
-    C[e_row, e_col] = (c.astype(np.float32) * np.float32(1.0 / Q)
+    C[e_row, e_col] = (c.astype(np.float32) * np.float32(1.0 / code_levels(c.dtype))
                        * c_scale[off[row_g[e_row]] + e_col])
     return (C,) if which == "C" else (out["A"], out["Bp"], C)
 
@@ -381,8 +395,10 @@ def _decode_checked(path, data) -> dict:
 def _decode_checked_v3(path, data, header) -> dict:
     """Validate the version-3 arrays (dtypes, shapes, counts, values) and decode them."""
     arrs = {k: data[k] for k in ARRAYS_V3}
-    for name, dtype, ndim in (("ranks", np.uint16, 1), ("a", np.uint8, 2), ("b", np.uint8, 2),
-                              ("c", np.uint8, 1), ("c_scale", np.float32, 1),
+    # the factor codes: all uint8 or all uint16 (code_bits 8 / 16)
+    code = arrs["c"].dtype if arrs["c"].dtype in (np.uint8, np.uint16) else np.dtype(np.uint8)
+    for name, dtype, ndim in (("ranks", np.uint16, 1), ("a", code, 2), ("b", code, 2),
+                              ("c", code, 1), ("c_scale", np.float32, 1),
                               ("block_mask", np.uint8, 2), ("image_cell", np.int32, 1)):
         arr = arrs[name]
         if arr.dtype != dtype or arr.ndim != ndim:
