@@ -11,7 +11,8 @@ from prefilter.glints import render as grender
 from prefilter.glints.wang import (assemble, edge_colours, index_map,
                                    periodic_index_map, synthesize)
 from prefilter.glints.wang_ndf import bake_tiles, compress_tiles, ndf, ndf_points
-from prefilter.glints.wang_render import baked_tiles, render_wang, tile_size, wang_settings
+from prefilter.glints.wang_render import (baked_tiles, cache_path, render_wang, tile_size,
+                                          wang_settings)
 from prefilter.render.methods import RenderSettings, available, describe
 from prefilter.render.metrics import flip
 from prefilter.render.pipeline import render
@@ -215,6 +216,15 @@ def test_errors(tmp_path, monkeypatch):
         with pytest.raises(PrefilterError, match="PREFILTER_GLINTS_WANG_SETTINGS: expected"):
             wang_settings()
     monkeypatch.delenv("PREFILTER_GLINTS_WANG_SETTINGS")
+    with pytest.raises(PrefilterError, match="settings.tile: expected a value of type int"):
+        wang_settings({"tile": 8.5})
+    with pytest.raises(PrefilterError, match="settings.bilinear: expected a value of type bool"):
+        wang_settings({"bilinear": 1})
+    one = wang_settings({"wide_tiles": 1})
+    assert type(one["wide_tiles"]) is float and one == wang_settings({"wide_tiles": 1.0})
+    nm = sinusoid(8, 0.2, 0.2, 8, 8)
+    assert cache_path(nm, {"wide_tiles": 1}) == cache_path(nm, {"wide_tiles": 1.0})
+    assert cache_path(nm, {"seed": 1}) != cache_path(nm)
     for lights in ("quad", "environment"):
         sc = load_scene(grender.measurement_scene(1.0, size=8, width=4, height=3, lights=lights))
         with pytest.raises(PrefilterError, match=r"lights\[0\]: method 'glints-wang' expected "
