@@ -64,13 +64,17 @@ def assets(tmp_path_factory):
     bright[2, 5] = 6.0e4  # a sun: one texel 3e5 times the sky
     write_image(d / "env_sun.exr", bright)
     write_image(d / "env_odd.exr", np.linspace(0, 2, 5 * 3 * 3).reshape(5, 3, 3))
-    old = os.environ.get("PREFILTER_GLINTS_CACHE")
-    os.environ["PREFILTER_GLINTS_CACHE"] = str(d / "glints_cache")
+    # glints-wang's default bake takes minutes whatever the exemplar: a coarse, uncompressed one
+    env = {"PREFILTER_GLINTS_CACHE": str(d / "glints_cache"),
+           "PREFILTER_GLINTS_WANG_SETTINGS": '{"ndf_res": 16, "rank": 0}'}
+    old = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
     yield d
-    if old is None:
-        os.environ.pop("PREFILTER_GLINTS_CACHE", None)
-    else:
-        os.environ["PREFILTER_GLINTS_CACHE"] = old
+    for k, v in old.items():
+        if v is None:
+            os.environ.pop(k, None)
+        else:
+            os.environ[k] = v
 
 
 # -- scene pieces -------------------------------------------------------------------------------
