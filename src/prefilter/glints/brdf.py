@@ -435,7 +435,9 @@ def schlick(f0, cos_theta) -> np.ndarray:
     return f0 + (1.0 - f0) * ((1.0 - c) ** 5)[..., None]
 
 
-def _half(wo, wi):
+def half(wo, wi):
+    """Unit half vectors ``(..., 3)`` of unit ``wo``, ``wi`` ``(..., 3)``, without input checks
+    (a zero sum stays zero; the callers have validated the directions)."""
     h = wo + wi
     ln = np.linalg.norm(h, axis=-1, keepdims=True)
     return h / np.maximum(ln, 1e-300)
@@ -468,14 +470,14 @@ def glint_brdf_cos(surf, center, sigma_p, wo, wi, f0=1.0, *,
     broadcast_batch(center=as_float_array(center, "center", ndim_min=1, last_dim=2).shape[:-1],
                     sigma_p=as_float_array(sigma_p, "sigma_p").shape, wo=wo.shape[:-1],
                     wi=wi.shape[:-1], f0=f0.shape[:-1])
-    h = _half(wo, wi)
+    h = half(wo, wi)
     D = glint_ndf(surf, center, sigma_p, h[..., :2], fallback_truncation=fallback_truncation)
-    return _brdf_cos_from_ndf(wo, wi, h, D, f0)
+    return brdf_cos_from_ndf(wo, wi, h, D, f0)
 
 
-def _brdf_cos_from_ndf(wo, wi, h, D, f0):
+def brdf_cos_from_ndf(wo, wi, h, D, f0):
     """:func:`glint_brdf_cos` given its unit ``wo``, ``wi``, half vector ``h`` (..., 3), NDF
-    value ``D (...)`` and ``f0 (..., C)`` (shared with the quad lights' fused MIS)."""
+    value ``D (...)`` and ``f0 (..., C)`` (the quad lights' fused MIS and ``glints-wang``)."""
     G = vcavity_g2(wo, wi, h)
     ok = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0) & (h[..., 2] > 0.0)
     val = np.where(ok, D * G / (4.0 * np.where(ok, wo[..., 2], 1.0)), 0.0)

@@ -330,7 +330,7 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     again for the density, the sampler twice and the exact P-NDF for the draw's density).
     """
     from prefilter._validate import as_directions, as_float_array
-    from prefilter.glints.brdf import _brdf_cos_from_ndf, _half, direct_mis_fits, direct_mis_k
+    from prefilter.glints.brdf import brdf_cos_from_ndf, half, direct_mis_fits, direct_mis_k
     from prefilter.glints.pndf import TRUNCATION
     from prefilter.glints.sample import half_from_s
     from prefilter.render.lights import quad_light_pdf, quad_light_sample
@@ -353,7 +353,7 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     # light samples and their half vectors
     w, pl = quad_light_sample(light, pos, uu[:, :, :2].transpose(1, 0, 2).reshape(P * N, 2))
     wl = as_directions(to_local(w, t, b, n), "wi")
-    hl = _half(woP, wl)
+    hl = half(woP, wl)
     Hl = hl.reshape(P, N, 3).transpose(1, 0, 2)
     # BRDF samples: sample_wi's draws, then its reflection and density; glint_brdf_cos's wi.
     # Footprints below the finest level (4-std fallback): draws, densities and the NDF at the
@@ -382,16 +382,16 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     w = np.where(ok[:, None], w, np.array([0.0, 0.0, 1.0]))
     pl2 = quad_light_pdf(light, pos, to_world(w, t, b, n))
     wb = as_directions(w, "wi")
-    hb = _half(woP, wb)
+    hb = half(woP, wb)
     if np.any(rest):
         Hb = hb.reshape(P, N, 3).transpose(1, 0, 2)
         D[rest] = _mis_ndf(surf, c[rest], sp[rest],
                            np.concatenate([Hl[rest, :, :2], Hb[rest, :, :2]], 1),
                            fallback_truncation)
     pb = _mis_light_pdf(surf, c, sp, wo, Hl, D[:, :P], M, fallback_truncation).T.reshape(P * N)
-    fl = _brdf_cos_from_ndf(woP, wl, hl, D[:, :P].T.reshape(P * N), f0).reshape(P, N, -1)
+    fl = brdf_cos_from_ndf(woP, wl, hl, D[:, :P].T.reshape(P * N), f0).reshape(P, N, -1)
     wgt = np.where(pl > 0, 1.0 / np.where(pl > 0, pl + pb, 1.0), 0.0).reshape(P, N)
-    fb = _brdf_cos_from_ndf(woP, wb, hb, D[:, P:].T.reshape(P * N), f0).reshape(P, N, -1)
+    fb = brdf_cos_from_ndf(woP, wb, hb, D[:, P:].T.reshape(P * N), f0).reshape(P, N, -1)
     wgt2 = np.where(ok & (pl2 > 0), 1.0 / np.where(ok, pb2 + pl2, 1.0), 0.0).reshape(P, N)
     out = np.zeros((N, 3))
     for j in range(P):  # the pairs' order of summation

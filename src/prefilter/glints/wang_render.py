@@ -177,7 +177,7 @@ def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = No
     ``index``: an explicit ``(ny, nx)`` tile index map (periodic, tile ``(0, 0)`` at texel
     ``(0, 0)``) instead of the hashing; ``settings``: overrides of :data:`WANG_SETTINGS`.
     """
-    from prefilter.glints.brdf import _brdf_cos_from_ndf, _half
+    from prefilter.glints.brdf import brdf_cos_from_ndf, half
     from prefilter.glints.render import footprints
     from prefilter.sphere.sampling import to_local
 
@@ -212,11 +212,11 @@ def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = No
         wi = np.stack([to_local(w[m], t[m], b[m], n[m]) for w, _ in incoming])
         wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
         wok = np.broadcast_to(wo[m], wi.shape)
-        h = _half(wok, wi)
+        h = half(wok, wi)
         D = ndf_points(wn, c, sp, h[..., :2], index=index, bilinear=st["bilinear"],
                        point_roughness=st["intrinsic_roughness"])
         f0 = np.asarray(mat.f0, dtype=np.float64)
-        spec = _brdf_cos_from_ndf(wok, wi, h, D, f0)
+        spec = brdf_cos_from_ndf(wok, wi, h, D, f0)
         diff = (np.asarray(mat.base_color, dtype=np.float64) / np.pi
                 * np.maximum(wi[..., 2], 0.0)[..., None])
         for j, (_, e) in enumerate(incoming):
