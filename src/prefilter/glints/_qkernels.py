@@ -114,6 +114,53 @@ def _rect_mass(Pa, Pb, C, block_index, image_cell, meta, idx, wts, q, bi, bj, i0
 
 
 @njit_inline
+def _quad_masses(Pa, Pb, C, block_index, image_cell, meta, idx, wts, q, bi, bj, i0, im, i1, j0,
+                 jm, j1, out):  # pragma: no cover - compiled
+    """:func:`_rect_mass` of the four sub-rectangles ``[i0, im) | [im, i1)`` x ``[j0, jm) |
+    [jm, j1)`` of block ``(bi, bj)`` in one pass over the images and components (they share the
+    prefix-sum rows), written to ``out[0..3]`` (row-major; an empty interval gives 0). Each sum
+    is formed with :func:`_rect_mass`'s arithmetic, in its order."""
+    cq, wsc = C[0], C[1]
+    pa = Pa.ravel()
+    pb = Pb.ravel()
+    B1 = Pa.shape[1]
+    nb = block_index.shape[1]
+    out[0] = out[1] = out[2] = out[3] = 0.0
+    for c in range(idx.shape[1]):
+        w = wts[q, c]
+        if w == 0.0:
+            continue
+        img = idx[q, c]
+        k = block_index[img, bi, bj]
+        if k < 0:
+            continue
+        g = image_cell[img] * nb * nb + bi * nb + bj
+        nr, m = meta[g, 0], meta[g, 1]
+        kc = meta[g, 2] + k * meta[g, 3]
+        base = m * B1
+        a0, am = pa[base + i0 * nr:base + (i0 + 1) * nr], pa[base + im * nr:base + (im + 1) * nr]
+        a1 = pa[base + i1 * nr:base + (i1 + 1) * nr]
+        b0, bm = pb[base + j0 * nr:base + (j0 + 1) * nr], pb[base + jm * nr:base + (jm + 1) * nr]
+        b1 = pb[base + j1 * nr:base + (j1 + 1) * nr]
+        cr, wr = cq[kc:kc + nr], wsc[m:m + nr]
+        s00 = s01 = s10 = s11 = 0.0
+        for r in range(nr):
+            da0 = float(am[r]) - float(a0[r])
+            da1 = float(a1[r]) - float(am[r])
+            db0 = float(bm[r]) - float(b0[r])
+            db1 = float(b1[r]) - float(bm[r])
+            cf = float(cr[r])
+            s00 += wr[r] * (cf * da0 * db0)
+            s01 += wr[r] * (cf * da0 * db1)
+            s10 += wr[r] * (cf * da1 * db0)
+            s11 += wr[r] * (cf * da1 * db1)
+        out[0] += w * s00
+        out[1] += w * s01
+        out[2] += w * s10
+        out[3] += w * s11
+
+
+@njit_inline
 def _pixel(sx, sy, lo, h, R, B):
     """Block ``(bi, bj)`` and in-block pixel ``(i0, j0)`` of ``s``; ``bi = -1`` outside."""
     fx = (sx - lo) / h

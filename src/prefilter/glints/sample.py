@@ -30,7 +30,7 @@ import numpy as np
 from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange, serial
 from prefilter._validate import as_directions, as_float_array, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
-from prefilter.glints._qkernels import _rect_mass
+from prefilter.glints._qkernels import _quad_masses, _rect_mass
 from prefilter.glints.pndf import element_moments, texel_window
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.query import point
@@ -89,16 +89,21 @@ def quadtree_draw(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bm, u,
     while i1 - i0 > 1 or j1 - j0 > 1:
         im = (i0 + i1) // 2 if i1 - i0 > 1 else i1
         jm = (j0 + j1) // 2 if j1 - j0 > 1 else j1
+        # the 2-4 children's masses in one pass (they share the parent's prefix-sum rows), then
+        # the non-empty ones compacted in place (n <= 2 ra + rb)
+        _quad_masses(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bi, bj, i0, im, i1,
+                     j0, jm, j1, cm)
         n = 0
-        for a0, a1 in ((i0, im), (im, i1)):
+        for ra in range(2):
+            a0, a1 = (i0, im) if ra == 0 else (im, i1)
             if a1 <= a0:
                 continue
-            for b0, b1 in ((j0, jm), (jm, j1)):
+            for rb in range(2):
+                b0, b1 = (j0, jm) if rb == 0 else (jm, j1)
                 if b1 <= b0:
                     continue
                 ci0[n], ci1[n], cj0[n], cj1[n] = a0, a1, b0, b1
-                cm[n] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts, q,
-                                   bi, bj, a0, a1, b0, b1)
+                cm[n] = cm[2 * ra + rb]
                 n += 1
         k, pk = choose_index(cm, n, u[lev])
         p *= pk
