@@ -192,7 +192,8 @@ def test_rough_footprints_get_the_finer_specular_grid():
         assert ea < tol and ea < 0.5 * e9, (ea, e9)
     smooth = np.broadcast_to(np.eye(2) * 0.04, (p, 2, 2))
     # the same 9 x 9 grid; not bitwise: the adaptive path passes contiguous copies where the
-    # direct call passes the broadcast view, and NumPy's SIMD sums round by the data's alignment
+    # direct call passes the broadcast view, and the rounding then depends on the run (probably
+    # NumPy's alignment-dependent SIMD sums; not verified)
     # (a fresh-clone run differed by 4e-16 in 42 of 600 values; the 17 x 17 grid by up to 0.11)
     np.testing.assert_allclose(env_specular_adaptive(env, wo, mu, smooth),
                                env_specular(env, wo, mu, smooth, 9, shadowing=True),
