@@ -78,6 +78,22 @@ def _prefetch(typingctx, arr, index):
     return types.void(arr, index), codegen
 
 
+@njit_inline
+def _tap_rows(block_index, image_cell, meta, idx, wts, q, c, bi, bj, nb):  # pragma: no cover
+    """Footprint ``q``'s tap ``c`` at block ``(bi, bj)``: its weight ``w`` (0 for a zero weight
+    or a blank block), its group's rank ``nr``, first component ``m`` and the offset ``kc`` of
+    its code row (shared by :func:`_rect_mass` and :func:`_quad_masses`)."""
+    w = wts[q, c]
+    if w == 0.0:
+        return 0.0, 0, 0, 0
+    img = idx[q, c]
+    k = block_index[img, bi, bj]
+    if k < 0:
+        return 0.0, 0, 0, 0
+    g = image_cell[img] * nb * nb + bi * nb + bj
+    return w, meta[g, 0], meta[g, 1], meta[g, 2] + k * meta[g, 3]
+
+
 @njit_serial
 def _rect_mass(Pa, Pb, C, block_index, image_cell, meta, idx, wts, q, bi, bj, i0, i1, j0, j1):
     """Sum of the blended image's pixel values over rows ``[i0, i1)``, columns ``[j0, j1)`` of
@@ -89,16 +105,9 @@ def _rect_mass(Pa, Pb, C, block_index, image_cell, meta, idx, wts, q, bi, bj, i0
     nb = block_index.shape[1]
     acc = 0.0
     for c in range(idx.shape[1]):
-        w = wts[q, c]
+        w, nr, m, kc = _tap_rows(block_index, image_cell, meta, idx, wts, q, c, bi, bj, nb)
         if w == 0.0:
             continue
-        img = idx[q, c]
-        k = block_index[img, bi, bj]
-        if k < 0:
-            continue
-        g = image_cell[img] * nb * nb + bi * nb + bj
-        nr, m = meta[g, 0], meta[g, 1]
-        kc = meta[g, 2] + k * meta[g, 3]
         base = m * B1
         # slices: indices from range() are known non-negative, so the loop vectorises (flat
         # indices with a computed offset kept a wrap-around check per element: 3x slower)
@@ -127,16 +136,9 @@ def _quad_masses(Pa, Pb, C, block_index, image_cell, meta, idx, wts, q, bi, bj, 
     nb = block_index.shape[1]
     out[0] = out[1] = out[2] = out[3] = 0.0
     for c in range(idx.shape[1]):
-        w = wts[q, c]
+        w, nr, m, kc = _tap_rows(block_index, image_cell, meta, idx, wts, q, c, bi, bj, nb)
         if w == 0.0:
             continue
-        img = idx[q, c]
-        k = block_index[img, bi, bj]
-        if k < 0:
-            continue
-        g = image_cell[img] * nb * nb + bi * nb + bj
-        nr, m = meta[g, 0], meta[g, 1]
-        kc = meta[g, 2] + k * meta[g, 3]
         base = m * B1
         a0, am = pa[base + i0 * nr:base + (i0 + 1) * nr], pa[base + im * nr:base + (im + 1) * nr]
         a1 = pa[base + i1 * nr:base + (i1 + 1) * nr]

@@ -178,24 +178,14 @@ def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = No
     ``(0, 0)``) instead of the hashing; ``settings``: overrides of :data:`WANG_SETTINGS`.
     """
     from prefilter.glints.brdf import brdf_cos_from_ndf, half
-    from prefilter.glints.render import footprints
+    from prefilter.glints.render import footprints, point_incoming, shading_frames
     from prefilter.sphere.sampling import to_local
 
     check_lights(scene)
     st = wang_settings(settings)
     lights = scene.light_set()
-    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
-    t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
-    wo = to_local(g.view, t, b, n)
-    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
-    incoming = []
-    for pl in lights.points:
-        d = pl.position - g.position
-        d2 = np.maximum(np.sum(d * d, -1), 1e-300)
-        incoming.append((d / np.sqrt(d2)[:, None], pl.intensity / d2[:, None]))
-    for dl in lights.directionals:
-        incoming.append((np.broadcast_to(-dl.direction, g.position.shape),
-                         np.broadcast_to(dl.irradiance, g.position.shape)))
+    t, b, n, wo = shading_frames(g)
+    incoming = point_incoming(lights, g)
     out = np.zeros((len(wo), 3))
     if not incoming:
         return out
