@@ -10,7 +10,9 @@ import numpy as np
 import pytest
 
 from prefilter.render.lights import DirectionalLight, LightSet, PointLight, QuadLight
-from prefilter.render.shading import brdf_cos, shade_ltc, shading_frame
+from prefilter.render.camera import GBuffer
+from prefilter.render.shading import (brdf_cos, point_incoming, shade_ltc, shading_frame,
+                                      shading_frames, two_sided_frame)
 
 
 def _ggx_by_hand(wo, wi, ax, ay, f0):
@@ -227,3 +229,39 @@ def test_fused_ltc_shader_matches_the_numpy_path_on_random_inputs():
     want = _shade_ltc_numpy(pos, t, b, nn, view, alpha, base, f0, lights, table)
     assert np.count_nonzero(want.sum(-1)) > n // 4
     assert np.allclose(got, want, rtol=1e-9, atol=1e-12)
+
+
+def _hits(view, normal):
+    n = len(view)
+    z3, z2 = np.zeros((n, 3)), np.zeros((n, 2))
+    return GBuffer(hit=np.ones(n, bool), object_id=np.zeros(n, np.int32), position=z3,
+                   normal=normal, tangent=np.tile([1.0, 0.0, 0.0], (n, 1)),
+                   bitangent=np.cross(normal, [1.0, 0.0, 0.0]), uv=z2,
+                   dudv=np.zeros((n, 2, 2)), dpdx=z3, dpdy=z3, distance=np.ones(n), view=view,
+                   direction=-view)
+
+
+def test_two_sided_frame_flips_b_and_n_towards_the_viewer_and_stays_right_handed():
+    view = np.array([[0.0, 0.6, 0.8], [0.0, 0.6, -0.8]])
+    g = _hits(view, np.tile([0.0, 0.0, 1.0], (2, 1)))
+    t, b, n = two_sided_frame(g)
+    np.testing.assert_array_equal(n, [[0, 0, 1], [0, 0, -1]])
+    np.testing.assert_array_equal(b, [[0, 1, 0], [0, -1, 0]])
+    np.testing.assert_allclose(np.cross(t, b), n)
+    _, _, _, wo = shading_frames(g)
+    # the local view is above the flipped frame's horizon on both sides, and unit
+    np.testing.assert_allclose(wo, [[0.0, 0.6, 0.8], [0.0, -0.6, 0.8]], atol=1e-15)
+
+
+def test_point_incoming_is_the_inverse_square_irradiance_and_the_directionals_constant():
+    pos = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    lights = LightSet(points=(PointLight(np.array([0.0, 0.0, 2.0]), np.array([4.0, 8.0, 12.0])),),
+                      directionals=(DirectionalLight(np.array([0.0, 0.0, -1.0]),
+                                                     np.array([1.0, 2.0, 3.0])),))
+    (wp, ep), (wd, ed) = point_incoming(lights, pos)
+    np.testing.assert_allclose(wp, [[0, 0, 1], [-1 / 5 ** 0.5, 0, 2 / 5 ** 0.5]])
+    np.testing.assert_allclose(ep, [[1, 2, 3], [0.8, 1.6, 2.4]])
+    np.testing.assert_array_equal(wd, [[0, 0, 1], [0, 0, 1]])
+    assert ed.shape == (2, 3)
+    np.testing.assert_array_equal(ed, [[1, 2, 3], [1, 2, 3]])
+    assert point_incoming(LightSet(), pos) == []

@@ -491,14 +491,12 @@ def shade_converged(scene, g, *, matched: bool = False, ndf: str = "direct") -> 
     from prefilter.glints.envlight import eps_support
     from prefilter.glints.render import ENV_EPS, baked_surface, environment_sgs, footprints
     from prefilter.ltc import clamped_cosine_integral
+    from prefilter.render.shading import point_incoming, shading_frames
     from prefilter.sphere.sampling import to_local
 
     lights = scene.light_set()
     env = [lt for lt in scene.lights if lt.type == "environment"]
-    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
-    t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
-    wo = to_local(g.view, t, b, n)
-    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    t, b, n, wo = shading_frames(g)
     out = np.zeros((len(wo), 3))
     for k in np.unique(g.object_id):
         m = g.object_id == k
@@ -512,19 +510,11 @@ def shade_converged(scene, g, *, matched: bool = False, ndf: str = "direct") -> 
         base = np.asarray(mat.base_color, dtype=np.float64)
         f0 = np.asarray(mat.f0, dtype=np.float64)
         tm, bm, nmm = t[m], b[m], n[m]
-        for pl in lights.points:
-            d = pl.position - g.position[m]
-            d2 = np.maximum(np.sum(d * d, -1), 1e-300)
-            wi = to_local(d / np.sqrt(d2)[:, None], tm, bm, nmm)
+        for w, e in point_incoming(lights, g.position[m]):
+            wi = to_local(w, tm, bm, nmm)
             wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
             out[m] += (glint_brdf_cos(surf, c, sp, wo[m], wi, f0)
-                       + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * pl.intensity / \
-                d2[:, None]
-        for dl in lights.directionals:
-            wi = to_local(np.broadcast_to(-dl.direction, tm.shape), tm, bm, nmm)
-            wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
-            out[m] += (glint_brdf_cos(surf, c, sp, wo[m], wi, f0)
-                       + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * dl.irradiance
+                       + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * e
         for ql in lights.quads:
             corners = np.stack([to_local(v - g.position[m], tm, bm, nmm) for v in ql.vertices], 1)
             if np.any(base > 0):

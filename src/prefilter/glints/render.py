@@ -50,6 +50,7 @@ from prefilter.errors import PrefilterError
 from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, bilinear_bake_roughness,
                                    glint_brdf_cos, glint_ndf, surface)
 from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
+from prefilter.render.shading import point_incoming, shading_frames
 from prefilter.sphere.sampling import to_local, to_world
 
 PIXEL_SIGMA = 0.5
@@ -529,31 +530,6 @@ def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, l
     return out * L / max(n_pairs, 1)
 
 
-def shading_frames(g):
-    """Tangent frames ``t, b, n`` ``(N, 3)`` of hit samples ``g``, flipped to the viewer's side
-    of the surface, and the unit view direction ``wo (N, 3)`` in them."""
-    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
-    t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
-    wo = to_local(g.view, t, b, n)
-    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
-    return t, b, n, wo
-
-
-def point_incoming(lights, g) -> list:
-    """``(w, E)`` per point and directional light of ``lights`` (a ``LightSet``): unit world
-    directions to the light ``(N, 3)`` and irradiance at normal incidence ``(N, 3)`` at the
-    sample positions of ``g`` (inverse-square falloff for points)."""
-    incoming = []
-    for pl in lights.points:
-        d = pl.position - g.position
-        d2 = np.maximum(np.sum(d * d, -1), 1e-300)
-        incoming.append((d / np.sqrt(d2)[:, None], pl.intensity / d2[:, None]))
-    for dl in lights.directionals:
-        incoming.append((np.broadcast_to(-dl.direction, g.position.shape),
-                         np.broadcast_to(dl.irradiance, g.position.shape)))
-    return incoming
-
-
 def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
                  use_range: bool | None = None) -> np.ndarray:
     """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's lights.
@@ -571,7 +547,7 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
     if use_range is None:
         use_range = mode == "compressed"
     t, b, n, wo = shading_frames(g)
-    incoming = point_incoming(lights, g)
+    incoming = point_incoming(lights, g.position)
     out = np.zeros((len(wo), 3))
     nq = len(lights.quads)
     for k in np.unique(g.object_id):

@@ -178,14 +178,15 @@ def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = No
     ``(0, 0)``) instead of the hashing; ``settings``: overrides of :data:`WANG_SETTINGS`.
     """
     from prefilter.glints.brdf import brdf_cos_from_ndf, half
-    from prefilter.glints.render import footprints, point_incoming, shading_frames
+    from prefilter.glints.render import footprints
+    from prefilter.render.shading import point_incoming, shading_frames
     from prefilter.sphere.sampling import to_local
 
     check_lights(scene)
     st = wang_settings(settings)
     lights = scene.light_set()
     t, b, n, wo = shading_frames(g)
-    incoming = point_incoming(lights, g)
+    incoming = point_incoming(lights, g.position)
     out = np.zeros((len(wo), 3))
     if not incoming:
         return out

@@ -32,6 +32,7 @@ from prefilter.leadr.maps import shading_stats
 from prefilter.leadr.shading import (diffuse_directional, diffuse_irradiance, diffuse_sh,
                                      env_specular, gaussian_grid, grid_normals, point_light)
 from prefilter.microfacet import Beckmann
+from prefilter.render.shading import shading_frames
 from prefilter.texture import height_map
 
 SURFACES = {
@@ -805,7 +806,7 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                         g = gbuffer_at(sc, xy)
                         ok = g.hit.copy()
                         gh = g.select(ok)
-                        t, b, n, wo = lr._frame(gh)
+                        t, b, n, wo = shading_frames(gh)
                         good = wo[:, 2] >= min_cos
                         d = light.position - gh.position
                         d2 = np.sum(d * d, -1)

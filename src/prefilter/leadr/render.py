@@ -42,6 +42,7 @@ from prefilter.leadr.shading import (diffuse_directional, diffuse_irradiance, di
                                      diffuse_shadowing, env_specular, grid_normals, point_light,
                                      schlick)
 from prefilter.microfacet import beckmann_lambda
+from prefilter.render.shading import point_incoming, shading_frames
 
 DIFFUSE_GRID = 5
 #: Specular grid of ``leadr-env``: 9 x 9 is within ~3% of the N = 128 grid for isotropic lobes
@@ -152,21 +153,12 @@ def leadr_stats(scene, g, *, meso: bool = True, mips=None, taps: int | None = No
     return mean, cov, base, f0
 
 
-def _frame(g):
-    """Shading frame of two-sided hits (flipped when seen from behind) and the local view."""
-    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
-    t, b, n = g.tangent, g.bitangent * flip, g.normal * flip
-    wo = _local(g.view, t, b, n)
-    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
-    return t, b, n, wo
-
-
 def shade_leadr_delta(scene, g, lights, *, meso: bool = True, shadowing: bool = True,
                       mips=None, taps: int | None = None) -> np.ndarray:
     """Radiance ``(N, 3)`` of the hit samples ``g`` under point and directional lights:
     closed-form specular (supplemental 3.3, with G2) + the diffuse grid (Algorithm 3 for one
     light; ``shadowing`` multiplies it by ``G2 / G1``, :func:`shading.shadowing_ratio`)."""
-    t, b, n, wo = _frame(g)
+    t, b, n, wo = shading_frames(g)
     mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips, taps=taps)
     incoming = []
     for pl in lights.points:
@@ -218,7 +210,7 @@ def shade_leadr_env(scene, g, env, sh, lights, *, meso: bool = True, n_grid: int
     it is ``None``, plus
     :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``) + point/directional
     lights (:func:`shade_leadr_delta`)."""
-    t, b, n, wo = _frame(g)
+    t, b, n, wo = shading_frames(g)
     mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips)
     rot = _env_rotation(t, b, n)
     out = np.zeros((len(wo), 3))
@@ -253,21 +245,14 @@ def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
     Algorithm 3's grid (plus the environment ``env``'s
     :func:`~prefilter.leadr.shading.diffuse_shadowing` if ``shadowing``); point and directional
     lights one by one (Algorithm 3 for one light, times ``G2 / G1`` if ``shadowing``)."""
-    t, b, n, wo = _frame(g)
+    t, b, n, wo = shading_frames(g)
     mean, cov, base, _ = leadr_stats(scene, g, meso=meso, mips=mips, taps=taps)
     rot = _env_rotation(t, b, n)
     out = _diffuse_env(sh, irradiance, wo, mean, cov, diffuse_grid, rot)
     if shadowing and env is not None:
         out = np.maximum(out + diffuse_shadowing(env, wo, mean, cov, diffuse_grid, to_world=rot),
                          0.0)
-    incoming = []
-    for pl in lights.points:
-        d = pl.position - g.position
-        d2 = np.maximum(np.sum(d * d, -1), 1e-300)
-        incoming.append((d / np.sqrt(d2)[:, None], pl.intensity / d2[:, None]))
-    for dl in lights.directionals:
-        incoming.append((np.broadcast_to(-dl.direction, g.position.shape), dl.irradiance))
-    for w, e in incoming:
+    for w, e in point_incoming(lights, g.position):
         wl = _local(w, t, b, n)
         wl /= np.linalg.norm(wl, axis=-1, keepdims=True)
         out += diffuse_directional(wo, wl, mean, cov, diffuse_grid,

@@ -85,7 +85,7 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
     """
     from prefilter.multiscale.convolution import _alpha_total
     from prefilter.multiscale.render import _lookup
-    from prefilter.render.shading import shading_frame
+    from prefilter.render.shading import shading_frame, two_sided_frame
 
     if combine not in COMBINE:
         from prefilter.errors import PrefilterError
@@ -95,8 +95,7 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
     ts, bs, ns = (np.zeros((n_samples, 3)) for _ in range(3))
     ax, ay = np.zeros(n_samples), np.zeros(n_samples)
     base, f0 = np.zeros((n_samples, 3)), np.zeros((n_samples, 3))
-    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
-    gn, gt, gb = g.normal * flip, g.tangent, g.bitangent * flip
+    gt, gb, gn = two_sided_frame(g)
     for k in np.unique(g.object_id):
         m = g.object_id == k
         cnt = int(m.sum())

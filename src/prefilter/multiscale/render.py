@@ -240,7 +240,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
     """
     box_taps = as_positive_int(box_taps, "box_taps", lo=0)
     taps, taps_below, taps_ratio = _taps_args(taps, taps_below, taps_ratio)
-    from prefilter.render.shading import shading_frame
+    from prefilter.render.shading import shading_frame, two_sided_frame
     from prefilter.texture.procedural import slopes_to_normals
 
     n_samples = g.hit.size
@@ -249,8 +249,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
     alpha_micro = np.zeros(n_samples)
     base = np.zeros((n_samples, 3))
     f0 = np.zeros((n_samples, 3))
-    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
-    gn, gt, gb = g.normal * flip, g.tangent, g.bitangent * flip
+    gt, gb, gn = two_sided_frame(g)
     for k in np.unique(g.object_id):
         m = g.object_id == k
         mat = scene.objects[int(k)].material

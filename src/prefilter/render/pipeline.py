@@ -31,7 +31,7 @@ from prefilter.errors import PrefilterError
 from prefilter.render.camera import gbuffer_at
 from prefilter.render.methods import RenderSettings, get_method
 from prefilter.render.scene import Scene, load_scene
-from prefilter.render.shading import shade_ltc, shading_frame
+from prefilter.render.shading import shade_ltc, shading_frame, two_sided_frame
 from prefilter.texture.procedural import slopes_to_normals
 
 
@@ -204,9 +204,7 @@ def surface_attributes(scene: Scene, g, *, filtered: bool):
     ay = np.zeros(n_samples)
     base = np.zeros((n_samples, 3))
     f0 = np.zeros((n_samples, 3))
-    # Two-sided surfaces: flip the frame of hits seen from behind.
-    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
-    gn, gt, gb = g.normal * flip, g.tangent, g.bitangent * flip
+    gt, gb, gn = two_sided_frame(g)
 
     def tex(ref, m):
         if filtered:

@@ -35,6 +35,38 @@ def schlick(f0, cos_theta) -> np.ndarray:
     return f0 + (1.0 - f0) * ((1.0 - c) ** 5)[..., None]
 
 
+def two_sided_frame(g):
+    """Geometric frames ``t, b, n`` ``(N, 3)`` of hit samples ``g`` (a G-buffer selection),
+    flipped to the viewer's side: a two-sided surface seen from behind shades with ``-b, -n``
+    (``t`` kept, so the frame stays right-handed)."""
+    flip = np.where(np.sum(g.view * g.normal, -1) < 0.0, -1.0, 1.0)[:, None]
+    return g.tangent, g.bitangent * flip, g.normal * flip
+
+
+def shading_frames(g):
+    """:func:`two_sided_frame` of hit samples ``g`` and the unit view direction ``wo (N, 3)``
+    in it."""
+    t, b, n = two_sided_frame(g)
+    wo = to_local(g.view, t, b, n)
+    wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
+    return t, b, n, wo
+
+
+def point_incoming(lights: LightSet, position) -> list:
+    """``(w, E)`` per point and directional light of ``lights``: unit world directions to the
+    light and irradiance at normal incidence (inverse-square falloff for points), both
+    ``(N, 3)`` (directionals' are broadcast views), at ``position (N, 3)``."""
+    incoming = []
+    for pl in lights.points:
+        d = pl.position - position
+        d2 = np.maximum(np.sum(d * d, -1), 1e-300)
+        incoming.append((d / np.sqrt(d2)[:, None], pl.intensity / d2[:, None]))
+    for dl in lights.directionals:
+        incoming.append((np.broadcast_to(-dl.direction, position.shape),
+                         np.broadcast_to(dl.irradiance, position.shape)))
+    return incoming
+
+
 def shading_frame(frame_t, frame_b, frame_n, normal_ts=None):
     """Shading frame ``(t_s, b_s, n_s)``, each ``(N, 3)``, from a tangent-space normal.
 
@@ -94,14 +126,8 @@ def shade_delta_lights(position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f
                        lights: LightSet) -> np.ndarray:
     """Radiance ``(N, 3)`` from point and directional lights: the BRDF evaluated directly."""
     out = np.zeros((len(position), 3))
-    for pl in lights.points:
-        d = pl.position - position
-        d2 = np.maximum(np.sum(d * d, axis=-1), 1e-300)
-        wi = to_local(d / np.sqrt(d2)[:, None], ts, bs, ns)
-        out += brdf_cos(wo, wi, alpha_x, alpha_y, base_color, f0) * pl.intensity / d2[:, None]
-    for dl in lights.directionals:
-        wi = to_local(np.broadcast_to(-dl.direction, position.shape), ts, bs, ns)
-        out += brdf_cos(wo, wi, alpha_x, alpha_y, base_color, f0) * dl.irradiance
+    for w, e in point_incoming(lights, position):
+        out += brdf_cos(wo, to_local(w, ts, bs, ns), alpha_x, alpha_y, base_color, f0) * e
     return out
 
 
