@@ -1,6 +1,7 @@
 """On-disk format of per-tile Wang pyramids (``wang_store``): round trips (every query equal after
-load, compressed and not), corrupt / truncated / wrong-version / inconsistent files (each a
-TableFileError naming the file and the field), and the ``prefilter bake glints-wang`` CLI."""
+load of a version-1 file, compressed and not; version 2's codes within half a step), deterministic
+bytes, corrupt / truncated / wrong-version / inconsistent files (each a TableFileError naming the
+file and the field), and the ``prefilter bake glints-wang`` CLI."""
 
 import json
 
@@ -13,7 +14,8 @@ from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints.wang import index_map, synthesize
 from prefilter.glints.wang_ndf import (bake_tiles, compress_tiles, ndf, ndf_image, ndf_points,
                                        sample)
-from prefilter.glints.wang_store import FORMAT, VERSION, load_tiles, save_tiles
+from prefilter.glints.wang_store import (FORMAT, VERSION, encode_level, load_tiles,
+                                         save_tiles)
 
 T, R = 8, 16
 
@@ -72,15 +74,86 @@ def test_round_trip_uncompressed(wn, saved):
     assert got.max() > 1.0
 
 
-def test_round_trip_compressed(wc, tmp_path):
-    save_tiles(wc, tmp_path / "c.npz")
+def test_round_trip_compressed_float32(wc, tmp_path):
+    """code_bits=0: the version-1 layout (float32 factors), every query bitwise equal."""
+    save_tiles(wc, tmp_path / "c.npz", code_bits=0)
     back = load_tiles(tmp_path / "c.npz")
     assert back.block == 8 and back.cp_error == wc.cp_error and back.nbytes == wc.nbytes
     _same_queries(wc, back)
     header = json.loads(str(np.load(tmp_path / "c.npz")["header"]))
-    assert header["format"] == FORMAT and header["version"] == VERSION
+    assert header["format"] == FORMAT and header["version"] == 1
     assert header["settings"]["rank"] == 2 and header["tile"] == T
     assert header["arrays"]["C_0"]["shape"] == list(wc.images[0][2].shape)
+    assert "code_bits" not in header["settings"]
+
+
+@pytest.mark.parametrize("bits", [8, 16])
+def test_round_trip_codes(wc, tmp_path, bits):
+    """Version 2: each decoded factor within half a code step of the original, relative to its
+    component's scale (``A``, ``Bf`` normalised to maximum 1, ``C`` carrying the three maxima);
+    the rows and groups left out hold codes that round to 0; the file is smaller."""
+    path = tmp_path / f"q{bits}.npz"
+    save_tiles(wc, path, code_bits=bits)
+    back = load_tiles(path)
+    header = json.loads(str(np.load(path)["header"]))
+    assert header["version"] == VERSION == 2 and header["settings"]["code_bits"] == bits
+    assert back.block == wc.block and back.k0 == wc.k0 and back.nbytes == wc.nbytes
+    half = 0.5 / (2**bits - 1)
+    tol = half + 1e-6  # float32 decoding
+    for lv in range(wc.n_levels):
+        A, Bf, C = (x.astype(np.float64) for x in wc.images[lv])
+        A2, B2, C2 = (x.astype(np.float64) for x in back.images[lv])
+        ma, mb, mc = A.max(-1), Bf.max(-1), C.max(axis=(1, 2))
+        scale = ma * mb * mc  # (16, nb^2, rank)
+        live = np.abs(A2).max(axis=(2, 3)) > 0
+        assert live.any() and np.all(A2.max(-1)[live] <= 1.0)
+        for f, f2, m in ((A, A2, ma), (Bf, B2, mb)):
+            norm = np.divide(f, m[..., None], out=np.zeros_like(f), where=m[..., None] > 0)
+            assert np.all(np.abs(f2 - norm)[live] <= tol)
+        # C: the stored product's third factor, relative to the component's scale, everywhere
+        # (dropped rows and dead groups decode to 0 and were below half a step)
+        err = np.abs(C2 - C * (ma * mb)[:, None, None])
+        assert np.all(err <= tol * scale[:, None, None] + 1e-30)
+        assert np.all(C2.transpose(0, 3, 1, 2, 4)[~live] == 0)
+    np.testing.assert_allclose(back.tile_means, wc.tile_means, rtol=1e-6, atol=0)
+    np.testing.assert_array_equal(back.mean, back.tile_means.mean(axis=0))
+    # the queries see the decoded pyramids: close to the float32 ones
+    for c, sp in FOOTPRINTS[1:3]:
+        a, b = ndf_image(wc, c, sp), ndf_image(back, c, sp)
+        assert np.linalg.norm(b - a) / np.linalg.norm(a) < (2e-2 if bits == 8 else 1e-4)
+    path1 = tmp_path / "v1.npz"
+    save_tiles(wc, path1, code_bits=0)
+    assert path.stat().st_size < path1.stat().st_size
+
+
+def test_encode_level_drops_zero_rows_and_groups():
+    """Rows whose codes are all 0 are not stored; a group without kept rows is not stored."""
+    rng = np.random.default_rng(0)
+    A = rng.uniform(0, 1, (16, 4, 2, 3))
+    C = rng.uniform(0, 1, (16, 3, 3, 4, 2))
+    C[0, :, :, 1] = 0.0  # group (0, 1) dead
+    C[2, 1, 1, 3] = 1e-9  # a row below half a step of its components' maxima
+    enc = encode_level(A, A, C, 8)
+    assert enc["c"].shape == (16 * 9 * 4 - 9 - 1, 2) and enc["a"].shape == (16 * 4 - 1, 2, 3)
+    assert enc["c"].dtype == enc["a"].dtype == np.uint8 and enc["c_scale"].dtype == np.float32
+    assert encode_level(A, A, C, 16)["c"].dtype == np.uint16
+    with pytest.raises(PrefilterError, match="code_bits: expected 8 or 16, got 12"):
+        encode_level(A, A, C, 12)
+
+
+def test_deterministic_bytes(wn, wc, tmp_path):
+    """Same input, same file bytes (both versions)."""
+    for k, (w, bits) in enumerate(((wn, 8), (wc, 0), (wc, 8), (wc, 16))):
+        save_tiles(w, tmp_path / f"a{k}.npz", code_bits=bits)
+        save_tiles(w, tmp_path / f"b{k}.npz", code_bits=bits)
+        assert (tmp_path / f"a{k}.npz").read_bytes() == (tmp_path / f"b{k}.npz").read_bytes()
+    # an uncompressed pyramid is written in version 1 whatever code_bits
+    assert (tmp_path / "a0.npz").read_bytes() == _saved_bytes(wn, tmp_path / "u.npz", 0)
+
+
+def _saved_bytes(w, path, bits):
+    save_tiles(w, path, code_bits=bits)
+    return path.read_bytes()
 
 
 def _rewrite(src, dst, edit):
@@ -104,7 +177,8 @@ def _edit_header(**changes):
 
 def test_wrong_version_and_format(saved, tmp_path):
     p = _rewrite(saved, tmp_path / "v.npz", _edit_header(version=VERSION + 1))
-    with pytest.raises(TableFileError, match=rf"v.npz: header.version: expected {VERSION}, got"):
+    with pytest.raises(TableFileError, match=rf"v.npz: header.version: expected 1 or {VERSION}, "
+                                             rf"got {VERSION + 1}"):
         load_tiles(p)
     p = _rewrite(saved, tmp_path / "f.npz", _edit_header(format="prefilter-glints"))
     with pytest.raises(TableFileError, match="header.format: expected 'prefilter-glints-wang'"):
@@ -154,9 +228,77 @@ def test_inconsistent_layouts(saved, tmp_path):
             load_tiles(_rewrite(saved, tmp_path / f"{k}.npz", edit))
 
 
-def test_save_validation(wn, tmp_path):
+@pytest.fixture(scope="module")
+def saved2(wc, tmp_path_factory):
+    path = tmp_path_factory.mktemp("wang2") / "tiles2.npz"
+    save_tiles(wc, path)
+    return path
+
+
+def _edit_settings(**changes):
+    def edit(arrays):
+        h = json.loads(str(arrays["header"]))
+        h["settings"].update(changes)
+        arrays["header"] = np.array(json.dumps(h))
+    return edit
+
+
+def _replace(name, value):
+    """Replace array ``name`` and its header entry (so only the targeted check can fail)."""
+    def edit(arrays):
+        arrays[name] = value(arrays.get(name))
+        h = json.loads(str(arrays["header"]))
+        h["arrays"][name] = {"dtype": arrays[name].dtype.str, "shape": list(arrays[name].shape)}
+        arrays["header"] = np.array(json.dumps(h))
+    return edit
+
+
+def test_inconsistent_v2_layouts(saved2, tmp_path):
+    """Malformed version-2 files: each rejected with the file and the field named."""
+    assert load_tiles(saved2).block == 8
+    cases = {
+        r"header.settings.code_bits: expected 8 or 16 with block > 0 \(version 2\), got 12":
+            _edit_settings(code_bits=12),
+        r"header.settings.crops: expected 3 crop sizes >= 1 \(one per level\), got \[":
+            _edit_settings(crops=[3]),  # the fixture has 3 levels
+        r"header field missing or invalid \(KeyError: 'crops'\)":
+            lambda a: _edit_header(settings={k: v for k, v in json.loads(
+                str(a["header"]))["settings"].items() if k != "crops"})(a),
+        r"mask_0: expected uint8 of shape \(\d+,\) as in the header":
+            _replace("mask_0", lambda m: m[:-1]),
+        r"c_0, a_0, b_0, c_scale_0: expected \d+ rows \(kept rows of mask_0\) ":  # a bit flipped
+            _replace("mask_0", lambda m: np.concatenate([m[:-1], [m[-1] ^ 1]]).astype(np.uint8)),
+        r"c_0, a_0, b_0, c_scale_0: expected \d+ rows \(kept rows of mask_0\) and \d+ live "
+        r"groups, got":
+            _replace("c_0", lambda c: c[:-1]),
+        r"a_1: expected uint8 of shape \(n, 2, 8\) as in the header":
+            _replace("a_1", lambda x: x.astype(np.uint16)),
+        r"c_scale_1: expected finite values":
+            _replace("c_scale_1", lambda x: np.full_like(x, np.inf)),
+        r"c_scale_0: expected non-negative values":
+            _replace("c_scale_0", lambda x: -x),
+        r"tile_means: expected float32 of shape \(16, 16, 16\)":
+            _replace("tile_means", lambda x: x.astype(np.float64)),
+        r"missing arrays \['c_1'\]": lambda a: a.pop("c_1"),
+        r"header.arrays: expected \[": _replace("mean", lambda _: np.zeros((R, R))),
+    }
+    for k, (msg, edit) in enumerate(cases.items()):
+        with pytest.raises(TableFileError, match=rf"{k}.npz: {msg}"):
+            load_tiles(_rewrite(saved2, tmp_path / f"{k}.npz", edit))
+
+    def flip_code(arrays):
+        arrays["c_1"] = arrays["c_1"].copy()
+        arrays["c_1"][0, 0] ^= 1
+
+    with pytest.raises(TableFileError, match=rf"{META_KEY}.sha256: checksum mismatch"):
+        load_tiles(_rewrite(saved2, tmp_path / "s.npz", flip_code))
+
+
+def test_save_validation(wn, wc, tmp_path):
     with pytest.raises(PrefilterError, match="wn: expected a TiledNDF"):
         save_tiles(wn.wang, tmp_path / "a.npz")
+    with pytest.raises(PrefilterError, match=r"code_bits: expected one of \(0, 8, 16\), got 4"):
+        save_tiles(wc, tmp_path / "a.npz", code_bits=4)
     assert not (tmp_path / "a.npz").exists()
 
 

@@ -15,6 +15,26 @@ names, dtypes, shapes and bytes of all other arrays, plus format name and versio
   ``(16, nb^2, rank, B)`` and ``C_l (16, n_l, n_l, nb^2, rank)`` float32 (the CP triple of
   :class:`TiledNDF`).
 
+That is version 1, the float32 layout (``save_tiles(code_bits=0)``, and every uncompressed
+pyramid). Version 2 (compressed pyramids, ``code_bits`` 8 or 16, the default 8) stores the CP
+factors as integer codes, like the glints map store's version 3 (:mod:`prefilter.glints.store`):
+
+* ``tile_means (16, R, R)`` float32; no ``mean`` (it is their float64 average, recomputed at
+  load exactly as :func:`~prefilter.glints.wang_ndf.bake_tiles` computes it).
+* per level ``l``, with ``K_l`` kept rows of ``C_l`` and ``G_l`` live groups:
+  ``mask_l (2 n_l^2 nb^2,)`` uint8, the packed bits (``np.packbits``) of the rows
+  ``C_l[t, b, a, g]`` kept (row-major): rows whose codes are all 0 are not
+  stored; a group ``(t, g)`` is live when one of its rows is kept, its ``A``, ``B`` are
+  stored, in ``(t, g)`` order; ``a_l``, ``b_l (G_l, rank, B)``: each component's factor in
+  ``2^code_bits - 1`` steps of its maximum (decoded with maximum 1); ``c_l (K_l, rank)``: the
+  kept rows in the same steps of the component's maximum over the centres;
+  ``c_scale_l (G_l, rank)`` float32: the product of the three maxima (decoded
+  ``C = c / Q * c_scale``, ``Q = 2^code_bits - 1``), so ``A Bf C`` is the stored product up
+  to the rounding of the codes. All codes uint8 (``code_bits`` 8) or all uint16 (16).
+
+The kernels compute on the decoded float32 triple: the file shrinks, the memory does not
+(:attr:`TiledNDF.nbytes` counts the decoded arrays). Version 1 files still load.
+
 :func:`load_tiles` checks the layout against the header before the checksum, so a malformed
 file gets a precise message; every failure is a :class:`~prefilter.errors.TableFileError`
 naming the file and the field.
@@ -36,30 +56,88 @@ from prefilter.glints.wang import WangTiles
 from prefilter.glints.wang_ndf import TiledNDF, dependent_texels
 
 FORMAT = "prefilter-glints-wang"
-VERSION = 1
+VERSION = 2
 WHAT = "Wang tiles file"
+#: ``code_bits`` of :func:`save_tiles`: 0 = float32 factors (version 1), 8 / 16 = codes
+CODE_BITS = (0, 8, 16)
+_CODE_DTYPES = {8: np.uint8, 16: np.uint16}
 
 
-def _level_arrays(wn: TiledNDF, lv: int) -> dict:
+def encode_level(A: np.ndarray, Bf: np.ndarray, C: np.ndarray, code_bits: int = 8) -> dict:
+    """Version-2 arrays ``mask``, ``a``, ``b``, ``c``, ``c_scale`` (module docstring) of one
+    compressed level: ``A``, ``Bf (16, nb^2, rank, B)``, ``C (16, n, n, nb^2, rank)``
+    non-negative (the CP triple of :class:`TiledNDF`); codes of ``code_bits`` (8 or 16) bits."""
+    if code_bits not in _CODE_DTYPES:
+        raise PrefilterError(f"code_bits: expected 8 or 16, got {code_bits!r}")
+    dt = _CODE_DTYPES[code_bits]
+    Q = float(np.iinfo(dt).max)
+
+    def codes(f, m):  # f / m in Q steps, 0 where the component is 0
+        return np.rint(np.divide(Q * f, m, out=np.zeros(f.shape), where=m > 0)).astype(dt)
+
+    A, Bf, C = (np.asarray(x, np.float64) for x in (A, Bf, C))
+    ma, mb = A.max(axis=-1), Bf.max(axis=-1)  # (16, nb^2, rank)
+    mc = C.max(axis=(1, 2))
+    qc = codes(C, mc[:, None, None])
+    kept = qc.max(axis=-1) > 0  # (16, n, n, nb^2)
+    live = kept.any(axis=(1, 2))  # (16, nb^2)
+    return dict(mask=np.packbits(kept.ravel()), a=codes(A, ma[..., None])[live],
+                b=codes(Bf, mb[..., None])[live], c=qc[kept],
+                c_scale=(ma * mb * mc)[live].astype(np.float32))
+
+
+def decode_level(mask, a, b, c, c_scale, crop: int, n_groups: int):
+    """Float32 CP triple ``A``, ``Bf (16, nb^2, rank, B)``, ``C (16, n, n, nb^2, rank)``
+    (``n = crop``, ``nb^2 = n_groups``) of one level's version-2 arrays (module docstring)."""
+    rank, B = a.shape[1], a.shape[2]
+    inv = np.float32(1.0 / np.iinfo(c.dtype).max)
+    kept = np.unpackbits(mask, count=16 * crop * crop * n_groups).astype(bool)
+    kept = kept.reshape(16, crop, crop, n_groups)
+    live = kept.any(axis=(1, 2))
+    A = np.zeros((16, n_groups, rank, B), np.float32)
+    Bf = np.zeros_like(A)
+    A[live] = a.astype(np.float32) * inv
+    Bf[live] = b.astype(np.float32) * inv
+    scale = np.zeros((16, n_groups, rank), np.float32)
+    scale[live] = c_scale
+    t, _, _, g = np.nonzero(kept)
+    C = np.zeros((16, crop, crop, n_groups, rank), np.float32)
+    C[kept] = c.astype(np.float32) * inv * scale[t, g]
+    return A, Bf, C
+
+
+def _level_arrays(wn: TiledNDF, lv: int, code_bits: int) -> dict:
     a = wn.images[lv]
     if isinstance(a, np.ndarray):
         return {f"images_{lv}": a}
-    return {f"A_{lv}": a[0], f"B_{lv}": a[1], f"C_{lv}": a[2]}
+    if not code_bits:
+        return {f"A_{lv}": a[0], f"B_{lv}": a[1], f"C_{lv}": a[2]}
+    return {f"{k}_{lv}": v for k, v in encode_level(*a, code_bits).items()}
 
 
-def save_tiles(wn: TiledNDF, path: str | os.PathLike) -> None:
+def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> None:
     """Write ``wn`` (compressed or not) to the ``.npz`` at ``path`` atomically (module docstring
-    for the layout)."""
+    for the layout). ``code_bits``: 8 or 16, compressed pyramids in version 2 (integer codes of
+    the CP factors); 0, the float32 factors (version 1). Uncompressed pyramids are written in
+    version 1 whatever ``code_bits``."""
     if not isinstance(wn, TiledNDF):
         raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
     if wn.tile_means is None:
         raise PrefilterError("wn: expected per-tile pyramids with tile_means (bake_tiles)")
-    arrays = {"tiles": np.asarray(wn.wang.tiles, np.float64),
-              "mean": np.asarray(wn.mean, np.float64),
-              "tile_means": np.asarray(wn.tile_means, np.float64),
-              "dependent": np.asarray(wn.dependent, np.int64)}
+    if isinstance(code_bits, bool) or code_bits not in CODE_BITS:
+        raise PrefilterError(f"code_bits: expected one of {CODE_BITS}, got {code_bits!r}")
+    code_bits = int(code_bits) if wn.block else 0
+    version = 2 if code_bits else 1
+    # version 1: the arrays in the order (hence the bytes) of the files written before version 2
+    arrays = {"tiles": np.asarray(wn.wang.tiles, np.float64)}
+    if version == 1:
+        arrays.update(mean=np.asarray(wn.mean, np.float64),
+                      tile_means=np.asarray(wn.tile_means, np.float64))
+    else:
+        arrays.update(tile_means=np.asarray(wn.tile_means, np.float32))
+    arrays["dependent"] = np.asarray(wn.dependent, np.int64)
     for lv in range(wn.n_levels):
-        arrays.update(_level_arrays(wn, lv))
+        arrays.update(_level_arrays(wn, lv, code_bits))
     rank = int(wn.images[0][0].shape[2]) if wn.block else 0
     settings = dict(ndf_res=int(wn.resolution), support=float(wn.support),
                     intrinsic_roughness=float(wn.intrinsic_roughness), stride0=int(wn.stride0),
@@ -67,11 +145,13 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike) -> None:
                     uniform_sigma=None if math.isinf(wn.uniform_sigma) else float(wn.uniform_sigma),
                     block=int(wn.block), rank=rank, k0=[int(k) for k in wn.k0],
                     cp_error=[float(e) for e in wn.cp_error])
-    header = dict(format=FORMAT, version=VERSION, tile=int(wn.wang.size), seed=int(wn.wang.seed),
-                  settings=settings,
+    if version == 2:
+        settings.update(code_bits=code_bits, crops=[wn.crop(lv) for lv in range(wn.n_levels)])
+    header = dict(format=FORMAT, version=version, tile=int(wn.wang.size),
+                  seed=int(wn.wang.seed), settings=settings,
                   arrays={k: {"dtype": v.dtype.str, "shape": list(v.shape)}
                           for k, v in sorted(arrays.items())})
-    save_npz_atomic(path, format_name=FORMAT, format_version=VERSION,
+    save_npz_atomic(path, format_name=FORMAT, format_version=version,
                     header=np.array(json.dumps(header, sort_keys=True)), **arrays)
 
 
@@ -88,13 +168,15 @@ def _header(path, data) -> dict:
         _fail(path, f"header: expected a JSON object string, got {raw.dtype} {raw.shape}")
     if header.get("format") != FORMAT:
         _fail(path, f"header.format: expected {FORMAT!r}, got {header.get('format')!r}")
-    if header.get("version") != VERSION:
-        _fail(path, f"header.version: expected {VERSION}, got {header.get('version')!r}")
+    version = header.get("version")
+    if isinstance(version, bool) or version not in (1, VERSION):
+        _fail(path, f"header.version: expected 1 or {VERSION}, got {version!r}")
     return header
 
 
 def _settings(path, header) -> dict:
     """The header's scalars, typed and range-checked."""
+    v2 = header["version"] == 2
     try:
         st = header["settings"]
         out = dict(T=int(header["tile"]), seed=int(header["seed"]), R=int(st["ndf_res"]),
@@ -105,7 +187,9 @@ def _settings(path, header) -> dict:
                    wide=float(st["wide_sigma"]),
                    uniform=math.inf if st["uniform_sigma"] is None else float(st["uniform_sigma"]),
                    B=int(st["block"]), rank=int(st["rank"]), k0=[int(k) for k in st["k0"]],
-                   cp_error=[float(e) for e in st["cp_error"]])
+                   cp_error=[float(e) for e in st["cp_error"]], version=header["version"],
+                   code_bits=int(st["code_bits"]) if v2 else 0,
+                   crops=[int(n) for n in st["crops"]] if v2 else None)
         shapes = {k: (str(v["dtype"]), tuple(int(n) for n in v["shape"]))
                   for k, v in header["arrays"].items()}
     except PrefilterError as exc:
@@ -128,18 +212,36 @@ def _settings(path, header) -> dict:
                     f"{len(out['cp_error'])} cp_error for {L} levels")
     if not B and (out["rank"] or out["cp_error"]):
         _fail(path, "header.settings: expected rank 0 and no cp_error when block is 0")
+    if v2:
+        if out["code_bits"] not in _CODE_DTYPES or not B:
+            _fail(path, f"header.settings.code_bits: expected 8 or 16 with block > 0 "
+                        f"(version 2), got {out['code_bits']} with block {B}")
+        if len(out["crops"]) != L or min(out["crops"]) < 1:
+            _fail(path, f"header.settings.crops: expected {L} crop sizes >= 1 (one per level), "
+                        f"got {out['crops']}")
     out["shapes"] = shapes
     return out
 
 
 def _expected(st) -> dict:
-    """Array name -> (dtype, shape with -1 for the crop sizes) implied by the settings."""
+    """Array name -> (dtype, shape with -1 for the sizes the header does not fix) implied by
+    the settings."""
     T, R, B, rank = st["T"], st["R"], st["B"], st["rank"]
-    out = {"tiles": ("<f8", (16, T, T, 3)), "mean": ("<f8", (R, R)),
-           "tile_means": ("<f8", (16, R, R)), "dependent": ("<i8", (-1, 2))}
+    v2 = st["version"] == 2
+    out = {"tiles": ("<f8", (16, T, T, 3)), "tile_means": ("<f4" if v2 else "<f8", (16, R, R)),
+           "dependent": ("<i8", (-1, 2))}
+    if not v2:
+        out["mean"] = ("<f8", (R, R))
     nb2 = (R // B) ** 2 if B else 0
+    code = np.dtype(_CODE_DTYPES[st["code_bits"]]).str if v2 else None
     for lv in range(len(st["k0"])):
-        if B:
+        if v2:
+            n = st["crops"][lv]
+            out[f"mask_{lv}"] = ("|u1", (2 * n * n * nb2,))  # 16 n^2 nb^2 bits
+            out[f"a_{lv}"] = out[f"b_{lv}"] = (code, (-1, rank, B))
+            out[f"c_{lv}"] = (code, (-1, rank))
+            out[f"c_scale_{lv}"] = ("<f4", (-1, rank))
+        elif B:
             out[f"A_{lv}"] = out[f"B_{lv}"] = ("<f4", (16, nb2, rank, B))
             out[f"C_{lv}"] = ("<f4", (16, -1, -1, nb2, rank))
         else:
@@ -164,14 +266,18 @@ def _check_arrays(path, data, st) -> None:
         ok = (a.dtype.str == dtype and a.ndim == len(shape)
               and all(s in (-1, n) for s, n in zip(shape, a.shape)))
         if not ok or st["shapes"][k] != (a.dtype.str, a.shape):
+            dims = ["n" if s == -1 else str(s) for s in shape]
             _fail(path, f"{k}: expected {np.dtype(dtype)} of shape "
-                        f"{tuple('n' if s == -1 else s for s in shape)} as in the header "
+                        f"({', '.join(dims)}{',' if len(dims) == 1 else ''}) as in the header "
                         f"{st['shapes'][k]}, got {a.dtype} of shape {a.shape}")
         if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
             _fail(path, f"{k}: expected finite values, got NaN or inf")
         if k != "tiles" and np.any(a < 0):
             _fail(path, f"{k}: expected non-negative values")
     for lv in range(len(st["k0"])):
+        if st["version"] == 2:
+            _check_codes(path, data, st, lv)
+            continue
         c = data[f"C_{lv}" if st["B"] else f"images_{lv}"]
         if c.shape[1] != c.shape[2] or c.shape[1] < 1:
             _fail(path, f"level {lv}: expected a square crop of >= 1 centres per axis, got "
@@ -181,9 +287,23 @@ def _check_arrays(path, data, st) -> None:
         _fail(path, "tiles: expected unit normals with n_z > 0")
 
 
+def _check_codes(path, data, st, lv) -> None:
+    """Version 2: the numbers of kept rows and live groups of level ``lv``'s mask against the
+    code arrays (their dtypes and the other dimensions are checked by :func:`_check_arrays`)."""
+    n, nb2 = st["crops"][lv], (st["R"] // st["B"]) ** 2
+    kept = np.unpackbits(data[f"mask_{lv}"]).astype(bool).reshape(16, n * n, nb2)
+    K, G = int(kept.sum()), int(kept.any(axis=1).sum())
+    got = [data[f"{k}_{lv}"].shape[0] for k in ("c", "a", "b", "c_scale")]
+    if got != [K, G, G, G]:
+        _fail(path, f"c_{lv}, a_{lv}, b_{lv}, c_scale_{lv}: expected {K} rows (kept rows of "
+                    f"mask_{lv}) and {G} live groups, got {got[0]}, {got[1]}, {got[2]}, "
+                    f"{got[3]}")
+
+
 def load_tiles(path: str | os.PathLike) -> TiledNDF:
-    """Load and validate per-tile Wang pyramids written by :func:`save_tiles`; any inconsistency
-    (including a checksum mismatch) raises ``TableFileError`` naming the file and the field."""
+    """Load and validate per-tile Wang pyramids written by :func:`save_tiles` (version 1 or 2;
+    version 2's codes are decoded to the float32 CP triple); any inconsistency (including a
+    checksum mismatch) raises ``TableFileError`` naming the file and the field."""
     raw = read_npz(path, WHAT)
     data = {k: v for k, v in raw.items() if k != META_KEY}
     st = _settings(path, _header(path, data))
@@ -191,10 +311,19 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
     wang = WangTiles(data["tiles"], st["seed"])
     if not np.array_equal(data["dependent"], np.argwhere(dependent_texels(wang))):
         _fail(path, "dependent: expected the dependent texels of the stored tiles")
-    verify_npz(path, WHAT, raw, format_name=FORMAT, format_version=VERSION)
+    verify_npz(path, WHAT, raw, format_name=FORMAT, format_version=st["version"])
     L, B = len(st["k0"]), st["B"]
-    images = tuple((data[f"A_{lv}"], data[f"B_{lv}"], data[f"C_{lv}"]) if B
-                   else data[f"images_{lv}"] for lv in range(L))
-    return TiledNDF(wang, images, tuple(st["k0"]), data["mean"], st["stride0"], st["sigma0"],
+    if st["version"] == 2:
+        nb2 = (st["R"] // B) ** 2
+        images = tuple(decode_level(*(data[f"{k}_{lv}"] for k in ("mask", "a", "b", "c",
+                                                                  "c_scale")),
+                                    crop=st["crops"][lv], n_groups=nb2) for lv in range(L))
+        tile_means = data["tile_means"].astype(np.float64)
+        mean = tile_means.mean(axis=0)
+    else:
+        images = tuple((data[f"A_{lv}"], data[f"B_{lv}"], data[f"C_{lv}"]) if B
+                       else data[f"images_{lv}"] for lv in range(L))
+        tile_means, mean = data["tile_means"], data["mean"]
+    return TiledNDF(wang, images, tuple(st["k0"]), mean, st["stride0"], st["sigma0"],
                     st["R"], st["S"], st["sr"], st["wide"], data["dependent"],
-                    data["tile_means"], st["uniform"], B, tuple(st["cp_error"]))
+                    tile_means, st["uniform"], B, tuple(st["cp_error"]))
