@@ -226,6 +226,10 @@ def test_errors(tmp_path, monkeypatch):
     nm = sinusoid(8, 0.2, 0.2, 8, 8)
     assert cache_path(nm, {"wide_tiles": 1}) == cache_path(nm, {"wide_tiles": 1.0})
     assert cache_path(nm, {"seed": 1}) != cache_path(nm)
+    assert len({cache_path(nm, {"code_bits": b}) for b in (0, 8, 16)}) == 3
+    with pytest.raises(PrefilterError, match=r"settings.code_bits: expected one of \(0, 8, 16\), "
+                                             "got 12"):
+        wang_settings({"code_bits": 12})
     for lights in ("quad", "environment"):
         sc = load_scene(grender.measurement_scene(1.0, size=8, width=4, height=3, lights=lights))
         with pytest.raises(PrefilterError, match=r"lights\[0\]: method 'glints-wang' expected "

@@ -4,9 +4,11 @@ A material's ``normal_map`` is the *exemplar*: the method synthesises 16 Wang ti
 (:func:`prefilter.glints.wang.synthesize`, :data:`WANG_SETTINGS`), bakes their per-tile
 footprint pyramids (:func:`prefilter.glints.wang_ndf.bake_tiles`, CP-compressed) once and
 caches them on disk next to the ``glints`` bakes (:func:`prefilter.glints.render.cache_dir`,
-``wang-<SHA-1 of the normals>-<SHA-1 of the settings>.npz``, :mod:`~prefilter.glints.wang_store`
-format, written atomically under a lock). The surface is the implicit tiling of the plane
-(hashing, glints paper sec. 5.5): constant storage whatever the area the frame covers.
+``wang-<SHA-1 of the normals>-<SHA-1 of the settings and store version>.npz``,
+:mod:`~prefilter.glints.wang_store` format, 8-bit factor codes by default, written atomically
+under a lock; the render uses the pyramids decoded from the file, also in the baking
+process). The surface is the implicit tiling of the plane (hashing, glints paper sec. 5.5):
+constant storage whatever the area the frame covers.
 
 Texel scale: one texel of the tiling per texel of the exemplar (the footprints of
 :func:`prefilter.glints.render.footprints` on the exemplar's shape), so ``glints-wang`` and
@@ -47,9 +49,13 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: ``wide_tiles`` 1 (per-tile pyramids up to footprints of one tile, then the tile-type shares):
 #: at 0.5 the shares regime's dropped position dependence cost FLIP 0.051 / 0.032 at mid / far
 #: instead of 0.038 / 0.019, for 2.5x / 18x faster frames and 232 instead of 279 MB.
+#: ``code_bits``: the cache file's CP factors (:func:`prefilter.glints.wang_store.save_tiles`):
+#: 8 (uint8 codes, the default), 16, or 0 (float32, format version 1); docs/glints-wang.md,
+#: "Storage".
 WANG_SETTINGS = dict(tile=32, band=4.0, seed=0, ndf_res=256, support=1.0,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, stride0=None, wide_tiles=1.0,
-                     uniform_tiles=8.0, rank=16, block=16, n_iter_max=50, bilinear=True)
+                     uniform_tiles=8.0, rank=16, block=16, n_iter_max=50, bilinear=True,
+                     code_bits=8)
 _TILED: dict = {}
 _BY_ID: dict = {}
 
@@ -94,6 +100,11 @@ def wang_settings(settings: dict | None = None) -> dict:
             raise PrefilterError(f"settings.{k}: expected a value of type "
                                  f"{type(ref).__name__}, got {v!r}")
         st[k] = type(ref)(v) if ref is not None else int(v)
+    from prefilter.glints.wang_store import CODE_BITS
+
+    if st["code_bits"] not in CODE_BITS:
+        raise PrefilterError(f"settings.code_bits: expected one of {CODE_BITS}, got "
+                             f"{st['code_bits']!r}")
     return st
 
 
@@ -110,7 +121,11 @@ def cache_path(normal_map, settings: dict | None = None):
     nm = as_normal_map(normal_map)
     st = wang_settings(settings)
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
-    key = hashlib.sha1(json.dumps(st, sort_keys=True).encode()).hexdigest()[:12]
+    from prefilter.glints.wang_store import VERSION
+
+    # the store's format version in the key: a file of another layout is never looked up
+    key = hashlib.sha1(json.dumps(dict(st, store_version=VERSION), sort_keys=True)
+                       .encode()).hexdigest()[:12]
     return cache_dir() / f"wang-{digest[:20]}-{key}.npz"
 
 
@@ -145,7 +160,7 @@ def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = Fa
                                     uniform_tiles=st["uniform_tiles"], rank=rank,
                                     block=st["block"], n_iter_max=st["n_iter_max"],
                                     seed=st["seed"], progress=progress)
-                    save_tiles(wn, path)
+                    save_tiles(wn, path, code_bits=st["code_bits"])
         _TILED[path] = load_tiles(path)
     if isinstance(normal_map, np.ndarray):
         _BY_ID[ident] = (normal_map, _TILED[path])
