@@ -13,9 +13,16 @@ Per distance (``prefilter.glints.render.measurement_scene(d, lights="point")``, 
   samples' texel coordinates) and what an explicit map of that area would take (float32
   normals; the ``glints`` compressed pyramid at the exemplar's bytes per texel).
 
+* ``--code-bits 0 8 16``: the cache file's factor codes (``WANG_SETTINGS["code_bits"]``, each
+  its own cache file, baked once): per value the file size, the FLIP of the index-map frame
+  against ``glints-direct`` on the assembled map and against the first value's frame, and the
+  NDF image relative L2 (``wang_ndf.ndf_image``, hashed tiling) of ``--footprints`` footprints
+  of the frame in the per-tile regime (at sigma_p quantiles), against the first value's and
+  against the direct P-NDF (``wang.pndf_image_implicit`` at the bake's roughness).
+
 Run: ``.venv/bin/python benchmarks/study_glints_wang_render.py [--repeats 3]
-[--distances 0.5 2 8] [--set key=value ...]`` (``--set`` overrides ``WANG_SETTINGS``, values
-as JSON). One JSON line per distance on stdout.
+[--distances 0.5 2 8] [--set key=value ...] [--code-bits 0 8 16] [--no-times]`` (``--set``
+overrides ``WANG_SETTINGS``, values as JSON). One JSON line per distance on stdout.
 """
 
 from __future__ import annotations
@@ -51,6 +58,8 @@ def main(argv=None):
     ap.add_argument("--distances", type=float, nargs="+", default=[0.5, 2.0, 8.0])
     ap.add_argument("--set", nargs="*", default=[], metavar="KEY=VALUE")
     ap.add_argument("--no-times", action="store_true")
+    ap.add_argument("--code-bits", type=int, nargs="*", default=[])
+    ap.add_argument("--footprints", type=int, default=6)
     args = ap.parse_args(argv)
     wang = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.set)}
     if wang:
@@ -97,6 +106,8 @@ def main(argv=None):
                                                                    img["direct"]).mean),
                    mean_ratio_hashed=float(img["wang"].mean() / img["direct"].mean()),
                    flip_glints_vs_direct=float(flip(img["glints"], img["direct"]).mean))
+        if args.code_bits:
+            row["codes"] = _codes_study(sc, nm, idx, b_idx, gh, args.code_bits, args.footprints)
         if not args.no_times:
             wall = {m: [] for m in ("glints-wang", "glints", "glints-direct")}
             cpu = {m: [] for m in wall}
@@ -111,6 +122,48 @@ def main(argv=None):
                        min_wall_ratio_glints_over_wang=min(wall["glints"])
                        / min(wall["glints-wang"]))
         print(json.dumps(row), flush=True)
+
+
+def _codes_study(sc, nm, idx, b_idx, gh, code_bits, n_fp):
+    """The ``--code-bits`` comparison of one frame (module docstring)."""
+    from prefilter.glints import wang_render
+    from prefilter.glints.render import footprints
+    from prefilter.glints.wang import pndf_image_implicit
+    from prefilter.glints.wang_ndf import ndf_image
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.metrics import flip
+
+    out, ref = {}, None
+    for b in code_bits:
+        over = {"code_bits": b}
+        wn = wang_render.baked_tiles(nm, over)
+        st = wang_render.wang_settings(over)
+        st["tile"] = wang_render.tile_size(st["tile"], nm.shape[:2])
+        frame = wang_render.render_wang(sc, RenderSettings(), index=idx, wang=over)
+        c, sp = footprints(gh, nm.shape[:2])
+        inside = np.flatnonzero((sp >= wn.min_sigma) & (sp < wn.wide_sigma))
+        q = np.linspace(0.05, 0.95, n_fp)
+        pick = inside[np.argsort(sp[inside])][(q * (inside.size - 1)).astype(int)] \
+            if inside.size else np.zeros(0, int)
+        imgs = [ndf_image(wn, c[k], sp[k]) for k in pick]
+        r = dict(file_mb=wang_render.cache_path(nm, st).stat().st_size / 1e6,
+                 flip_vs_direct_assembled=float(flip(frame, b_idx).mean),
+                 sigma_p=[round(float(sp[k]), 2) for k in pick])
+        if ref is None:
+            ref = dict(frame=frame, imgs=imgs, wn=wn)
+            r["ndf_rel_l2_vs_direct"] = [
+                _rel(i, pndf_image_implicit(wn.wang, c[k], sp[k], wn.resolution, wn.support,
+                                            wn.intrinsic_roughness))
+                for i, k in zip(imgs, pick)]
+        else:
+            r["flip_vs_first"] = float(flip(frame, ref["frame"]).mean)
+            r["ndf_rel_l2_vs_first"] = [_rel(i, j) for i, j in zip(imgs, ref["imgs"])]
+        out[str(b)] = r
+    return out
+
+
+def _rel(a, b):
+    return float(np.linalg.norm(a - b) / max(np.linalg.norm(b), 1e-300))
 
 
 if __name__ == "__main__":

@@ -2,6 +2,8 @@
 pyramids against the per-footprint one; the method on an explicit periodic tile index map
 against ``glints-direct`` on the assembled normal map (near / mid / far footprints); errors."""
 
+import json
+
 import numpy as np
 import pytest
 from maps import sinusoid
@@ -248,6 +250,21 @@ def test_errors(tmp_path, monkeypatch):
         baked_tiles(sinusoid(8, 0.2, 0.2, 8, 8), {"tile": 5})
     assert tile_size(32, (8, 12)) == 8 and tile_size(32, (3, 3)) == 4
     assert tile_size(32, (128, 128)) == 32
+
+
+def test_cache_path_is_the_baked_file(tmp_path, monkeypatch):
+    """cache_path names the file baked_tiles writes (the exemplar validated once, the tile size
+    capped), an 8-bit version-2 file by default, decoded at load."""
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path))
+    monkeypatch.delenv("PREFILTER_GLINTS_WANG_SETTINGS", raising=False)
+    nm = sinusoid(8, 0.2, 0.2, 8, 8).astype(np.float32)
+    over = {"ndf_res": 8, "rank": 2, "block": 4, "n_iter_max": 3, "tile": 32}
+    wn = baked_tiles(nm, over)
+    assert [p.name for p in tmp_path.glob("wang-*.npz")] == [cache_path(nm, over).name]
+    with np.load(cache_path(nm, over)) as z:
+        header = json.loads(str(z["header"]))
+    assert header["version"] == 2 and header["settings"]["code_bits"] == 8
+    assert wn.wang.size == 8 and wn.block == 4 and wn.images[0][2].dtype == np.float32
 
 
 @pytest.mark.slow

@@ -115,14 +115,21 @@ def tile_size(tile: int, shape) -> int:
 
 
 def cache_path(normal_map, settings: dict | None = None):
-    """Path of the cached per-tile pyramids of an exemplar under ``settings``."""
-    from prefilter.glints.render import cache_dir
-
+    """Path of the cached per-tile pyramids of an exemplar under ``settings`` (the file
+    :func:`baked_tiles` reads or writes)."""
     nm = as_normal_map(normal_map)
     st = wang_settings(settings)
-    digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
+    st["tile"] = tile_size(st["tile"], nm.shape[:2])
+    return _cache_path(nm, st)
+
+
+def _cache_path(nm: np.ndarray, st: dict):
+    """:func:`cache_path` of a validated exemplar ``nm`` and complete settings ``st`` (hashed
+    as they are: validating ``nm`` again may change its last bits)."""
+    from prefilter.glints.render import cache_dir
     from prefilter.glints.wang_store import VERSION
 
+    digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     # the store's format version in the key: a file of another layout is never looked up
     key = hashlib.sha1(json.dumps(dict(st, store_version=VERSION), sort_keys=True)
                        .encode()).hexdigest()[:12]
@@ -146,7 +153,7 @@ def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = Fa
         return hit[1]
     nm = as_normal_map(normal_map)
     st["tile"] = tile_size(st["tile"], nm.shape[:2])
-    path = cache_path(nm, st)
+    path = _cache_path(nm, st)
     if path not in _TILED:
         if not path.exists():
             path.parent.mkdir(parents=True, exist_ok=True)
