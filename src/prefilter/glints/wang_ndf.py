@@ -136,7 +136,9 @@ class TiledNDF:
 
     @property
     def nbytes(self) -> int:
-        """Bytes stored: tiles, per-tile pyramids and the mean image (no per-area data)."""
+        """Bytes in memory: tiles, per-tile pyramids (float32 images or CP triples), the mean
+        and per-tile images (no per-area data). A ``wang_store`` version-2 file of compressed
+        pyramids is smaller (integer factor codes); loading decodes it to the same arrays."""
         levels = sum(a.nbytes if isinstance(a, np.ndarray) else sum(f.nbytes for f in a)
                      for a in self.images)
         return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
@@ -179,6 +181,8 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     rank, block : if ``rank`` is given, each (tile, level) is compressed like a bake cell
         (``cp.nn_cp_batch`` of one ``(B, B, n_l^2)`` tensor per angular block position, all
         groups at ``rank``; all-zero groups dropped); ``n_iter_max``, ``seed``: of the fits.
+        The same factors as :func:`compress_tiles` of the uncompressed result, with a lower
+        memory peak: each level is compressed and dropped once the next one is filtered.
     progress : a progress bar per tile (and per compressed level) on stderr.
     """
     T = wt.size
@@ -194,6 +198,12 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     if not uniform >= wide:
         raise PrefilterError(f"uniform_tiles: expected a footprint std in tiles >= wide_tiles = "
                              f"{wide}, got {uniform_tiles!r}")
+    if rank is not None:  # before the bake, not after minutes of it
+        rank = as_positive_int(rank, "rank")
+        block = as_positive_int(block, "block")
+        n_iter_max = as_positive_int(n_iter_max, "n_iter_max")
+        if R % block:
+            raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {block}")
     L = 1
     while st0 * 2.0 ** (L - 1) < wide * T:
         L += 1
@@ -205,8 +215,10 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     P = o + st0 * math.ceil((T + _margin(sig[0]) + st0) / st0)
     s_el, J_el = tile_elements(wt)
     dep = dependent_texels(wt)
-    images = [np.empty((16, k1[lv] - k0[lv] + 1, k1[lv] - k0[lv] + 1, R, R), np.float32)
-              for lv in range(L)]
+    def crop(lv):
+        return np.empty((16, k1[lv] - k0[lv] + 1, k1[lv] - k0[lv] + 1, R, R), np.float32)
+
+    level = crop(0)
     tile_means = np.empty((16, R, R))
     g = (np.arange(k0[0], k1[0] + 1) * st0 + 0.5) + o
     cen = np.stack(np.meshgrid(g, g), axis=-1)
@@ -217,17 +229,33 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
         cj = np.zeros((P, P, 2, 2))
         cs[o:o + T, o:o + T] = np.where(dep[..., None], _AWAY, s_el[t])
         cj[o:o + T, o:o + T] = J_el[t]
-        images[0][t] = pndf_image(None, cen, sig[0], R, S, sr, elements_=(cs, cj))
-        for lv in range(1, L):
-            images[lv][t] = _filter_crop(images[lv - 1][t], k0[lv - 1], k0[lv], k1[lv],
-                                         sig[0] / st0)
+        level[t] = pndf_image(None, cen, sig[0], R, S, sr, elements_=(cs, cj))
         # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
         tile_means[t] = pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
                                    elements_=(s_el[t], J_el[t]))
-    wn = TiledNDF(wt, tuple(images), tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
+    # level by level (per tile the same filtering): with ``rank``, level l is compressed and
+    # dropped once level l + 1 is filtered from it, so at most two levels' images are held
+    done, errs = [], []
+    for lv in tqdm(range(1, L + 1), desc="levels", disable=not progress or rank is None):
+        nxt = None
+        if lv < L:
+            nxt = crop(lv)
+            for t in range(16):
+                nxt[t] = _filter_crop(level[t], k0[lv - 1], k0[lv], k1[lv], sig[0] / st0)
+        if rank is None:
+            done.append(level)
+        else:
+            n, tensors = level.shape[1], _level_tensors(level, block)
+            level = None  # the images are freed: the fits need only the tensors
+            packed, err = _compress_tensors(tensors, 16, n, rank, block, n_iter_max,
+                                            seed + lv - 1)
+            del tensors
+            done.append(packed)
+            errs.append(err)
+        level = nxt
+    wn = TiledNDF(wt, tuple(done), tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
                   sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
-    return wn if rank is None else compress_tiles(wn, rank, block, n_iter_max=n_iter_max,
-                                                  seed=seed, progress=progress)
+    return wn if rank is None else replace(wn, block=block, cp_error=tuple(errs))
 
 
 def _filter_crop(crop, a0, b0, b1, sigma_over_stride):
@@ -273,16 +301,39 @@ def compress_tiles(wn: TiledNDF, rank: int, block: int = 8, *, n_iter_max: int =
 def _compress(x, rank, B, n_iter_max, seed):
     """CP triple ``(A, Bf, C)`` (:class:`TiledNDF`) of one level ``x (16, n, n, R, R)`` and its
     relative L2 error."""
+    if x.shape[-1] % B:
+        raise PrefilterError(f"block: expected a divisor of ndf_res {x.shape[-1]}, got {B}")
+    return _compress_tensors(_level_tensors(x, B), x.shape[0], x.shape[1], rank, B, n_iter_max,
+                             seed)
+
+
+def _level_tensors(x, B):
+    """The ``(B, B, n^2)`` tensors ``(16 nb^2, B, B, n^2)`` float64 of one level
+    ``x (16, n, n, R, R)``, one per (tile, angular block)."""
     from prefilter.glints import cp as cpmod
 
     n_t, n, R = x.shape[0], x.shape[1], x.shape[-1]
-    if R % B:
-        raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {B}")
     nb = R // B
-    K = n * n
-    blocks = cpmod.cut_blocks(x.reshape(n_t, K, R, R), B)  # (16, K, nb, nb, B, B)
+    blocks = cpmod.cut_blocks(x.reshape(n_t, n * n, R, R), B)  # (16, K, nb, nb, B, B)
     tensors = np.ascontiguousarray(blocks.transpose(0, 2, 3, 4, 5, 1), dtype=np.float64)
-    tensors = tensors.reshape(n_t * nb * nb, B, B, K)
+    return tensors.reshape(n_t * nb * nb, B, B, n * n)
+
+
+def _compress_tensors(tensors, n_t, n, rank, B, n_iter_max, seed):
+    """:func:`_compress` of the level's :func:`_level_tensors` (``n_t`` tiles, ``n^2``
+    centres)."""
+    from prefilter.glints.cp import single_threaded_blas
+
+    # small products: a multi-threaded BLAS spent 100x longer waking threads on a busy machine
+    with single_threaded_blas():
+        return _fit_level(tensors, n_t, n, rank, B, n_iter_max, seed)
+
+
+def _fit_level(tensors, n_t, n, rank, B, n_iter_max, seed):
+    from prefilter.glints import cp as cpmod
+
+    nb = math.isqrt(tensors.shape[0] // n_t)
+    K = n * n
     live = np.flatnonzero(tensors.max(axis=(1, 2, 3)) > 0.0)
     A = np.zeros((n_t * nb * nb, rank, B), np.float32)
     Bf = np.zeros_like(A)
