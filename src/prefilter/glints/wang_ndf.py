@@ -308,15 +308,30 @@ def _compress(x, rank, B, n_iter_max, seed):
 
 
 def _level_tensors(x, B):
-    """The ``(B, B, n^2)`` tensors ``(16 nb^2, B, B, n^2)`` float64 of one level
-    ``x (16, n, n, R, R)``, one per (tile, angular block)."""
+    """The ``(B, B, n^2)`` tensors ``(16 nb^2, B, B, n^2)`` float32 of one level
+    ``x (16, n, n, R, R)``, one per (tile, angular block). The fits read them as float64
+    (exact), so float64 copies would only double the bake's memory peak."""
     from prefilter.glints import cp as cpmod
 
     n_t, n, R = x.shape[0], x.shape[1], x.shape[-1]
     nb = R // B
     blocks = cpmod.cut_blocks(x.reshape(n_t, n * n, R, R), B)  # (16, K, nb, nb, B, B)
-    tensors = np.ascontiguousarray(blocks.transpose(0, 2, 3, 4, 5, 1), dtype=np.float64)
+    tensors = np.ascontiguousarray(blocks.transpose(0, 2, 3, 4, 5, 1), dtype=np.float32)
     return tensors.reshape(n_t * nb * nb, B, B, n * n)
+
+
+def _sum_squares(x) -> float:
+    """``np.einsum("...,...->", y, y)`` of ``y = x.astype(np.float64)``, bit for bit, without
+    the float64 copy. einsum adds its partial sums one buffer (``np.getbufsize()`` items) at a
+    time; the same chunks summed in the same order give the same float (tested), so the CP
+    errors did not change when the tensors became float32."""
+    flat = np.ascontiguousarray(x).reshape(-1)
+    step = np.getbufsize()
+    acc = 0.0
+    for i in range(0, flat.size, step):
+        c = flat[i:i + step].astype(np.float64)
+        acc += float(np.einsum("i,i->", c, c))
+    return acc
 
 
 def _compress_tensors(tensors, n_t, n, rank, B, n_iter_max, seed):
@@ -343,13 +358,12 @@ def _fit_level(tensors, n_t, n, rank, B, n_iter_max, seed):
     for g, (a, b, c, _) in zip(live, fits):
         A[g], Bf[g], C[g] = a.T, b.T, c
         d = cpmod.reconstruct(A[g].T.astype(np.float64), Bf[g].T.astype(np.float64),
-                              C[g].astype(np.float64)) - tensors[g]
+                              C[g].astype(np.float64)) - tensors[g].astype(np.float64)
         err2 += float(np.einsum("ijk,ijk->", d, d))
     C = C.reshape(n_t, nb * nb, n, n, rank).transpose(0, 2, 3, 1, 4)
     packed = (A.reshape(n_t, nb * nb, rank, B), Bf.reshape(n_t, nb * nb, rank, B),
               np.ascontiguousarray(C))
-    return packed, math.sqrt(err2 / max(float(np.einsum("gijk,gijk->", tensors, tensors)),
-                                        1e-300))
+    return packed, math.sqrt(err2 / max(_sum_squares(tensors), 1e-300))
 
 
 # ---------------------------------------------------------------------------------------------
