@@ -275,7 +275,7 @@ def test_compressed_index_map_against_direct(tmp_path, monkeypatch):
     regime from 2.5, shares from 16) against glints-direct on the assembled map. Measured FLIP
     0.047 / 0.071 / 0.032, mean ratios within 0.4 %; the hashed tiling: 0.41; storage 17.5 MB.
     With wide_tiles 0.5 (shares from 8): 0.047 / 0.073 / 0.022, uncompressed 0.013 / 0.022 /
-    0.022 (14.6 / 199 MB). Those are float32 factors (code_bits 0; 16: the same to 1e-4); with
+    0.022 (14.6 / 199 MB). Those are float32 factors (code_bits 0; 16: within 1.2e-4); with
     the default 8-bit file: 0.055 / 0.065 / 0.029 (one run each). ~35-60 s."""
     from maps import gaussian_heightfield
 
