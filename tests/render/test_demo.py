@@ -18,6 +18,7 @@ SECTIONS = (
     "LEADR: point light on height-mapped surfaces",
     "Colour-map filtering: cases a-d",
     "Glints (part 1): NDF images of footprints",
+    "Glints (part 2): rendered frames, compressed vs direct",
     "Real-time viewer: WebGL2 against Python",
     "Summary",
 )
@@ -26,12 +27,14 @@ TINY = DemoSettings(width=48, height=30, reference_spp=4, flicker_frames=2, tabl
                     table_samples=2000, distances=(1.0, 16.0), section_width=40,
                     section_height=24, section_spp=4, colormap_size=16, colormap_nref=4,
                     leadr_size=32, leadr_blocks=(8,), leadr_shifts=1, leadr_rays=8,
-                    glints_map=32, glints_ndf_res=16, glints_rank=4,
+                    glints_map=32, glints_ndf_res=16, glints_rank=4, glints_render_map=16,
+                    glints_render_size=(16, 12), glints_render_distances=(2.0,),
                     methods=("ltc", "ltc-multiscale", "leadr-point"), multiscale_maps=("flakes",),
                     colormap_configs=(("plane", 70.0, 1500.0, "far"),), viewer=False)
 
 
-def test_quick_demo_writes_every_section_with_existing_images(tmp_path):
+def test_quick_demo_writes_every_section_with_existing_images(tmp_path, monkeypatch):
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path / "glints_cache"))
     lines = []
     index = run_demo(tmp_path / "demo", quick=True, settings=TINY, log=lines.append)
     page = index.read_text(encoding="utf-8")
@@ -51,6 +54,8 @@ def test_quick_demo_writes_every_section_with_existing_images(tmp_path):
     # a point-light-only method in the area-light showcase is listed as skipped, not a crash
     showcase = page.split(f">{SECTIONS[1]}</h2>")[1].split(f">{SECTIONS[2]}</h2>")[0]
     assert "<code>leadr-point</code>" in showcase and "ltc-multiscale" in showcase
+    glints = page.split(f">{SECTIONS[7]}</h2>")[1].split(f">{SECTIONS[8]}</h2>")[0]
+    assert "glints-direct" in glints and "speed-up" in glints
 
 
 def test_a_failing_section_leaves_a_note_and_the_rest_continues(tmp_path):

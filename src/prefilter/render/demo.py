@@ -50,7 +50,9 @@ class DemoSettings:
     method sections; ``colormap_*``: image side and reference grid (``n x n`` per pixel) of the
     colour-map scenes; ``leadr_*``: height-field size, footprint sizes (texels), shifts and rays
     per texel side of the per-footprint LEADR table; ``glints_*``: normal-map side, NDF image
-    resolution and CP rank of the glints bake; ``viewer_*``: screenshot size, pixel-match image
+    resolution and CP rank of the glints bake; ``glints_render_*``: normal-map side, frame size
+    and camera distances of the rendered glints frames (the renderer's own bake settings,
+    :data:`prefilter.glints.render.BAKE_SETTINGS`); ``viewer_*``: screenshot size, pixel-match image
     size, and whether the viewer section runs the browser at all. ``methods`` (showcase;
     ``None``: every registered method but :data:`SHOWCASE_EXCLUDE`), ``multiscale_maps`` and
     ``colormap_configs`` restrict the scenes (for tests: each HDR-FLIP evaluation costs most of
@@ -76,6 +78,9 @@ class DemoSettings:
     glints_map: int = 64
     glints_ndf_res: int = 32
     glints_rank: int = 16
+    glints_render_map: int = 128
+    glints_render_size: tuple[int, int] = (64, 48)
+    glints_render_distances: tuple[float, ...] = (0.5, 2.0, 8.0)
     viewer: bool = True
     viewer_size: tuple[int, int] = (384, 288)
     viewer_match_size: tuple[int, int] = (96, 72)
@@ -88,7 +93,8 @@ class DemoSettings:
         return cls(width=128, height=80, reference_spp=16, flicker_frames=4, table_configs=100,
                    table_samples=10_000, section_width=96, section_height=60, section_spp=16,
                    colormap_size=32, colormap_nref=12, leadr_size=64, leadr_blocks=(16,),
-                   leadr_shifts=2, leadr_rays=16, glints_rank=8, viewer_size=(256, 192),
+                   leadr_shifts=2, leadr_rays=16, glints_rank=8, glints_render_map=64,
+                   viewer_size=(256, 192),
                    viewer_match_size=(64, 48))
 
 
@@ -499,6 +505,48 @@ def _glints_section(report, settings: DemoSettings, seed: int, log) -> None:
                      "interpolation and compression. Images share the direct image's maximum.")
 
 
+def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> None:
+    from prefilter.glints.render import cache_dir, footprints, measurement_scene
+    from prefilter.render.camera import gbuffer_at
+    from prefilter.render.pipeline import render
+    from prefilter.render.scene import load_scene
+
+    size = settings.glints_render_map
+    w, h = settings.glints_render_size
+    rows = []
+    for d in settings.glints_render_distances:
+        sc = load_scene(measurement_scene(d, "flakes", size, width=w, height=h))
+        t0 = time.perf_counter()
+        render(sc, "glints", seed=seed)  # the bake (disk cache) and compilation, not timed below
+        t_first = time.perf_counter() - t0
+        if t_first > 5.0:
+            log(f"glints: first frame (bake or cache load, compilation) {t_first:.1f} s; "
+                f"pyramids cached in {cache_dir()}")
+        images, times = {}, {}
+        for m in ("glints", "glints-direct"):
+            t0 = time.perf_counter()
+            images[m] = render(sc, m, seed=seed)
+            times[m] = time.perf_counter() - t0
+        cmp = report.add_comparison(f"distance {d:g}", images["glints-direct"],
+                                    {"glints": images["glints"]}, scale=4,
+                                    reference_name="glints-direct")[0]
+        xy = np.stack(np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5), -1)
+        g = gbuffer_at(sc, xy).reshape(-1)
+        _, sp = footprints(g.select(g.hit), (size, size))
+        rows.append([f"{d:g}", float(np.median(sp)), times["glints"], times["glints-direct"],
+                     times["glints-direct"] / times["glints"], cmp["flip"],
+                     float(images["glints"].mean() / max(images["glints-direct"].mean(),
+                                                         1e-300))])
+    report.add_table(
+        ["distance", "median footprint std (texels)", "glints (s)", "glints-direct (s)",
+         "speed-up", "FLIP glints vs direct", "mean radiance ratio"], rows,
+        caption="One frame each at 1 spp, measured now (wall clock, this machine). `glints` "
+        "queries the CP-compressed footprint pyramid (constant cost per pixel); `glints-direct` "
+        "sums every texel under the footprint, so its cost grows with the footprint's area. "
+        "The full acceptance matrix (plane and sphere, four maps, point, quad and environment "
+        "lights) is `benchmarks/study_glints_scenes.py` (docs/glints-part2.md).")
+
+
 def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
     import os
 
@@ -626,6 +674,14 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "Position-normal NDFs of Gaussian pixel footprints on a small built-in normal map: the "
         "direct evaluation against the compressed pyramid's constant-time query.",
         lambda r: _glints_section(r, settings, seed, log), log)
+    _section(
+        report, status, "Glints (part 2): rendered frames, compressed vs direct",
+        f"The issue #9 measurement plane (a {settings.glints_render_map}^2 flakes normal map, "
+        "metallic, one point light) from three distances, camera and light scaled together so "
+        "only the footprint changes: `glints` (the compressed P-NDF of each pixel footprint, "
+        "paper eq. 1) against `glints-direct` (the exact P-NDF summed over the footprint's "
+        "texels). Their FLIP difference is the compression error alone.",
+        lambda r: _glints_render_section(r, settings, seed, log), log)
     _section(
         report, status, "Real-time viewer: WebGL2 against Python",
         "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "

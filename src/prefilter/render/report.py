@@ -124,12 +124,14 @@ class Report:
         return self
 
     def add_comparison(self, label: str, reference, methods: dict, *, hdr: bool = True,
-                       scale: int = 1, eps: float = 1e-2) -> list[dict]:
+                       scale: int = 1, eps: float = 1e-2,
+                       reference_name: str = "reference") -> list[dict]:
         """Reference and methods side by side, then their FLIP heat maps; returns the metrics.
 
         ``reference`` and each ``methods[name]`` are linear RGB ``(H, W, 3)`` (sRGB in [0, 1]
-        with ``hdr=False``). Returns one dict per method (``method``, ``rmse``, ``relmse``,
-        ``flip``) for the caller's table, so rows from several comparisons share one table.
+        with ``hdr=False``); ``reference_name`` captions the reference image. Returns one dict
+        per method (``method``, ``rmse``, ``relmse``, ``flip``) for the caller's table, so rows
+        from several comparisons share one table.
         """
         from prefilter.render.metrics import flip, flip_heatmap, relmse, rmse
 
@@ -141,7 +143,7 @@ class Report:
             rows.append({"method": str(name), "rmse": rmse(image, reference),
                          "relmse": relmse(image, reference, eps=eps), "flip": f.mean})
             maps.append((f"{name}: FLIP {f.mean:.4f}", flip_heatmap(f.error_map)))
-        self.add_image_row(label, [("reference", reference)]
+        self.add_image_row(label, [(str(reference_name), reference)]
                            + [(str(n), im) for n, im in methods.items()], scale=scale)
         self.add_image_row(f"{label}: FLIP error (magma, 0 to 1)", maps, scale=scale)
         return rows
