@@ -16,11 +16,13 @@ summary (stored MB, relative L2 error, largest group rank), per cell FLIP (HDR, 
 stops) and the "leak": pixels where ``glints > 0`` and ``glints-direct == 0`` and their largest
 value relative to the ``glints-direct`` frame maximum.
 
-``"lossless": true`` in a setting (not a bake key) stores every group as its exact non-negative
-CP (:func:`exact_cp`, ranks up to 192 here), patched into the bake for that setting only: error
-left = the codes' rounding, so its FLIP is what the query (pyramid resampling, bilinear NDF
-lookup, blank blocks) costs without compression error. Bakes go to ``$PREFILTER_GLINTS_CACHE``
-(``/lossless`` below it for those); set it to a scratch directory.
+``"exact_from_level": L`` in a setting (not a bake key) stores every group of pyramid levels
+``>= L`` as its exact non-negative CP (:func:`exact_cp`; ranks up to 192 on this map), patched
+into the bake for that setting only (the levels below are fitted by the bake's CP under its
+budget as usual). ``L = 0`` is lossless up to the codes' rounding: its FLIP is what the query
+(pyramid resampling, bilinear NDF lookup, blank blocks) costs without compression error. Bakes
+go to ``$PREFILTER_GLINTS_CACHE`` (``/exact-from-L`` below it for those); set it to a scratch
+directory.
 """
 
 from __future__ import annotations
@@ -48,7 +50,9 @@ DEFAULT_SETTINGS = {
     "b96 16-bit": {"rank": 96, "code_bits": 16},
     "b48 16-bit tol 0": {"code_bits": 16, "tol": 0.0},
     "b96 16-bit tol 0": {"rank": 96, "code_bits": 16, "tol": 0.0},
-    "lossless 16-bit": {"code_bits": 16, "lossless": True},
+    "b96 16-bit tol 0 max_rank 128": {"rank": 96, "code_bits": 16, "tol": 0.0, "max_rank": 128},
+    "lossless 16-bit": {"code_bits": 16, "exact_from_level": 0},
+    "b48 16-bit tol 0, levels >= 2 exact": {"code_bits": 16, "tol": 0.0, "exact_from_level": 2},
 }
 
 
@@ -81,25 +85,34 @@ def exact_cp(T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return a, b, c
 
 
+#: a rank no allocation gives: marks the groups :func:`exact_levels_bake` stores exactly
+_EXACT = 100_000
+
+
 @contextlib.contextmanager
-def lossless_bake():
-    """Inside: :func:`prefilter.glints.bake.bake` stores every group as :func:`exact_cp` (pass 1
-    cut to one iteration, its fit unused; every group sent to pass 2, which returns the exact
-    form)."""
+def exact_levels_bake(level: int):
+    """Inside: :func:`prefilter.glints.bake.bake` stores the groups of pyramid levels ``>=
+    level`` as :func:`exact_cp` (their budget split skipped, pass 2 returns the exact form), the
+    others as usual under the budget."""
     import prefilter.glints.bake as bk
     from prefilter.glints import cp as cpmod
 
     nn_cp_batch, split_budget = cpmod.nn_cp_batch, bk.split_budget
 
-    def exact_batch(tensors, rank, *, init=None, **kw):
-        if init is None:
-            return nn_cp_batch(tensors, rank, **dict(kw, n_iter_max=1))
-        return [cpmod._normalised(*exact_cp(np.asarray(t, np.float64)), t) for t in tensors]
+    def batch(tensors, rank, *, init=None, **kw):
+        if init is not None and rank == _EXACT:
+            return [cpmod._normalised(*exact_cp(np.asarray(t, np.float64)), t) for t in tensors]
+        return nn_cp_batch(tensors, rank, init=init, **kw)
 
-    def everyone(err2, unit, group_level, rank, base, candidates, level_rank="global"):
-        return np.full(len(unit), base + 1, np.int64)
+    def split(err2, unit, group_level, rank, base, candidates, level_rank="global"):
+        out = np.full(len(unit), _EXACT, np.int64)
+        fit = group_level < level
+        if fit.any():
+            out[fit] = split_budget(err2[fit], unit[fit], group_level[fit], rank, base, candidates,
+                                    level_rank)
+        return out
 
-    cpmod.nn_cp_batch, bk.split_budget = exact_batch, everyone
+    cpmod.nn_cp_batch, bk.split_budget = batch, split
     try:
         yield
     finally:
@@ -156,16 +169,16 @@ def run_setting(label: str, setting: dict, frames: dict) -> dict:
     from prefilter.render.metrics import flip
     from prefilter.render.pipeline import render
 
-    bake = {k: v for k, v in setting.items() if k != "lossless"}
-    lossless = bool(setting.get("lossless", False))
+    bake = {k: v for k, v in setting.items() if k != "exact_from_level"}
+    exact = setting.get("exact_from_level")
     saved = dict(gr.BAKE_SETTINGS), gr.environment_radiance, os.environ.get(
         "PREFILTER_GLINTS_CACHE")
     with contextlib.ExitStack() as stack:
         gr._SURFACES.clear()
         gr._BY_ID.clear()
-        if lossless:
-            stack.enter_context(lossless_bake())
-            os.environ["PREFILTER_GLINTS_CACHE"] = str(gr.cache_dir() / "lossless")
+        if exact is not None:
+            stack.enter_context(exact_levels_bake(int(exact)))
+            os.environ["PREFILTER_GLINTS_CACHE"] = str(gr.cache_dir() / f"exact-from-{exact}")
         stack.callback(gr._SURFACES.clear)
         stack.callback(gr._BY_ID.clear)
         gr.BAKE_SETTINGS.update(bake)
