@@ -38,7 +38,7 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: those of ``glints`` (:data:`prefilter.glints.render.BAKE_SETTINGS`, whole disk of half
 #: vectors); ``ndf_res`` 256 (pixel 0.78 intrinsic stds, as ``glints``): at 128 the FLIP against
 #: ``glints-direct`` on the assembled map was 0.127 instead of 0.074 at mid distance; the cost
-#: is the bake (3.2 GB uncompressed level images in memory, ~9 min on the shared machine) and
+#: is the bake (4.1 GiB peak RSS, ~9-12 min on the shared machine) and
 #: 232 MB of storage at ``rank`` 16 with ``block`` 16 (stored-image error 2.5 / 1.7 / 1.0 % per
 #: level on the flakes map; docs/glints-wang.md, "Rendering"). ``bilinear``: NDF values
 #: interpolated between pixel centres, the pyramids baked with
