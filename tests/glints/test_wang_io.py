@@ -344,8 +344,28 @@ def test_cli_bake_glints_wang(tmp_path):
     back = load_tiles(out)
     assert back.wang.size == 8 and back.block == 8 and back.images[0][0].shape[2] == 2
     summary = json.loads(res.output.strip().splitlines()[-1])
-    assert summary["tiles"] == 16 and summary["stored_bytes"] == back.nbytes
-    assert summary["file_bytes"] == out.stat().st_size
+    assert summary["tiles"] == 16 and summary["memory_bytes"] == back.nbytes
+    assert summary["file_bytes"] == out.stat().st_size and summary["code_bits"] == 8
+    # --code-bits 16 / 0: the same pyramids stored wider (version 2) or as float32 (version 1)
+    def recon(w):  # the level-0 contribution images from the CP triple
+        A, Bf, C = w.images[0]
+        return np.einsum("tgry,tgrx,tijgr->tijgyx", A, Bf, C)
+
+    sizes, images = {}, {"8": recon(back)}
+    for bits in ("16", "0"):
+        o = tmp_path / f"w{bits}.npz"
+        r = CliRunner().invoke(cli, ["bake", "glints-wang", str(tmp_path / "n.npy"), "-o", str(o),
+                                     "--tile", "8", "--band", "2", "--rank", "2", "--ndf-res",
+                                     "16", "--block", "8", "--iters", "5", "--seed", "4",
+                                     "--code-bits", bits, "--quiet"])
+        assert r.exit_code == 0, r.output
+        assert json.loads(r.output.strip().splitlines()[-1])["code_bits"] == int(bits)
+        sizes[bits] = o.stat().st_size
+        images[bits] = recon(load_tiles(o))
+    top = images["0"].max()
+    np.testing.assert_allclose(images["16"], images["0"], rtol=0, atol=1e-4 * top)  # 9e-6 seen
+    np.testing.assert_allclose(images["8"], images["0"], rtol=0, atol=1e-2 * top)  # 2.4e-3 seen
+    assert out.stat().st_size < sizes["16"] < sizes["0"]
     # the same command, same seed: the same tiles and pyramids
     res2 = CliRunner().invoke(cli, ["bake", "glints-wang", str(tmp_path / "n.npy"), "-o",
                                     str(tmp_path / "w2.npz"), "--tile", "8", "--band", "2",

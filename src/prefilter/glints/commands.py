@@ -145,11 +145,14 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
               help="Footprint std (in tiles) from which the tile-type shares replace the pyramids.")
 @click.option("--uniform-tiles", default=8.0, show_default=True,
               help="Footprint std (in tiles) from which the expected tiling is used.")
+@click.option("--code-bits", default="8", show_default=True, type=click.Choice(["0", "8", "16"]),
+              help="Bits per stored CP factor code (file version 2); 0 stores float32 factors "
+                   "(version 1). Uncompressed pyramids (--rank 0) are always float32.")
 @shared_options(iters=100,
                 seed=(0, "Seeds the tile synthesis (patches, hashing seed) and the CP fits."),
                 quiet=False)
 def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support, roughness,
-                     stride0, wide_tiles, uniform_tiles, iters, seed, quiet):
+                     stride0, wide_tiles, uniform_tiles, code_bits, iters, seed, quiet):
     """Synthesise 16 Wang tiles from NORMAL_MAP and precompute their per-tile NDF pyramids
     (glints paper, sec. 5.5; docs/glints-wang.md).
 
@@ -171,10 +174,11 @@ def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support,
                     stride0=stride0, wide_tiles=wide_tiles, uniform_tiles=uniform_tiles,
                     rank=rank or None, block=block, n_iter_max=iters, seed=seed,
                     progress=not quiet)
-    save_tiles(wn, out)
+    save_tiles(wn, out, code_bits=int(code_bits))
     summary = dict(tiles=16, tile=wt.size, levels=wn.n_levels,
                    crops=[wn.crop(lv) for lv in range(wn.n_levels)],
-                   rank=rank, block=wn.block, stored_bytes=wn.nbytes,
+                   rank=rank, block=wn.block, code_bits=int(code_bits) if wn.block else 0,
+                   memory_bytes=wn.nbytes,
                    file_bytes=os.path.getsize(out), cp_error=list(wn.cp_error),
                    seconds=time.perf_counter() - t0)
     click.echo(f"16 tiles of {wt.size}^2 texels, {wn.n_levels} levels (centres per axis "
