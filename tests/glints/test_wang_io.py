@@ -169,14 +169,15 @@ def test_bake_compressed_level_by_level_equals_compress_tiles(wn, wc, tmp_path):
 
 
 @pytest.mark.parametrize("shape", [(3, 8, 8, 361), (1, 4, 4, 10), (5, 16, 16, 169)])
-def test_sum_squares_equals_einsum_of_the_float64_copy(shape):
-    """The bake's CP error denominator from float32 tensors, chunk by chunk, is bit for bit the
-    einsum of their float64 copy (what the bake computed before it kept float32 tensors)."""
+def test_sum_squares_of_float32_tensors_in_float64(shape):
+    """The bake's CP error denominator, summed chunk by chunk from float32 tensors, is the sum of
+    squares of their float64 copy (to rounding: the chunks change the order of additions)."""
     from prefilter.glints.wang_ndf import _sum_squares
 
     x = np.random.default_rng(1).random(shape).astype(np.float32)
     x64 = x.astype(np.float64)
-    assert _sum_squares(x) == float(np.einsum("gijk,gijk->", x64, x64))
+    assert _sum_squares(x) == pytest.approx(float(np.einsum("gijk,gijk->", x64, x64)),
+                                            rel=1e-12)
 
 
 def _saved_bytes(w, path, bits):
