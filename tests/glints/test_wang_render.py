@@ -232,11 +232,12 @@ def test_errors(tmp_path, monkeypatch):
     with pytest.raises(PrefilterError, match=r"settings.code_bits: expected one of \(0, 8, 16\), "
                                              "got 12"):
         wang_settings({"code_bits": 12})
-    for lights in ("quad", "environment"):
-        sc = load_scene(grender.measurement_scene(1.0, size=8, width=4, height=3, lights=lights))
-        with pytest.raises(PrefilterError, match=r"lights\[0\]: method 'glints-wang' expected "
-                                                 "point or directional"):
-            render(sc, "glints-wang")
+    sc = grender.measurement_scene(1.0, size=8, width=4, height=3, lights="quad")
+    sc["lights"][0]["texture"] = {"procedural": "noise", "size": 4}
+    with pytest.raises(PrefilterError, match=r"lights\[0\]: method 'glints-wang' expected "
+                                             "untextured quad, point, directional or environment "
+                                             "lights, got a textured quad"):
+        render(load_scene(sc), "glints-wang")
     sc = grender.measurement_scene(1.0, size=8, width=4, height=3)
     del sc["objects"][0]["material"]["normal_map"]
     with pytest.raises(PrefilterError, match="normal_map: method 'glints-wang' expected a normal"):
@@ -311,3 +312,100 @@ def test_directional_and_point_lights_add_up(tmp_path, monkeypatch):
     assert imgs["sun"].max() > 0 and np.all(np.isfinite(imgs["both"]))
     np.testing.assert_allclose(imgs["point"], imgs["sun"], rtol=1e-4, atol=1e-6)
     np.testing.assert_allclose(imgs["both"], imgs["point"] + imgs["sun"], rtol=1e-5, atol=1e-6)
+
+
+# -- quad and environment lights --------------------------------------------------------------
+
+#: Flat exemplar (every normal (0, 0, 1)): the footprint NDF is the intrinsic Gaussian lobe
+#: whatever the footprint, so glints-wang and glints-direct integrate the same smooth lobe.
+FLAT_SR = 0.1
+FLAT_WANG = dict(tile=8, band=2.0, ndf_res=32, support=1.0, intrinsic_roughness=FLAT_SR, rank=0)
+
+
+@pytest.fixture(scope="module")
+def flat(tmp_path_factory):
+    """``scene(d, lights, width, height)`` on a 16^2 flat exemplar (Wang tiles of 8, R = 32
+    uncompressed; glints-direct at the same intrinsic roughness), private glints cache."""
+    d = tmp_path_factory.mktemp("flat")
+    np.save(d / "flat.npy", encode_normals(np.broadcast_to([0.0, 0.0, 1.0], (16, 16, 3)).copy()))
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("PREFILTER_GLINTS_CACHE", str(d))
+        mp.delenv("PREFILTER_GLINTS_WANG_SETTINGS", raising=False)
+        mp.setitem(grender.BAKE_SETTINGS, "intrinsic_roughness", FLAT_SR)
+
+        def scene(dist, lights, width=16, height=12):
+            sc = grender.measurement_scene(dist, size=16, width=width, height=height,
+                                           lights=lights)
+            sc["objects"][0]["material"]["normal_map"] = str(d / "flat.npy")
+            sc["objects"][0]["material"]["base_color"] = [0.05, 0.1, 0.0]
+            return load_scene(sc)
+
+        yield scene
+
+
+def _rel_pixels(a, b):
+    return float(np.abs(a - b).mean() / b.mean())
+
+
+def test_environment_same_draws_as_direct(flat):
+    """Environment light, flat exemplar: for the same seed glints-wang draws glints-direct's SG
+    light samples (the glints uniforms layout), so the frames agree pixel by pixel up to the NDF
+    lookup (measured mean |diff| / mean 0.0027 / 0.0091 near / far at spp 2: the direct regime
+    is exact, the pyramids bilinear), while another seed differs by the Monte Carlo noise
+    (0.68)."""
+    for dist in (0.5, 2.0):
+        sc = flat(dist, "environment")
+        a = render_wang(sc, RenderSettings(seed=3), wang=FLAT_WANG)
+        b = render(sc, "glints-direct", seed=3)
+        other = render(sc, "glints-direct", seed=4)
+        same, diff = _rel_pixels(a, b), _rel_pixels(a, other)
+        print(dist, same, diff, a.mean() / b.mean())
+        assert a.max() > 0 and np.all(np.isfinite(a))
+        assert same < 0.03 and diff > 0.3
+        assert abs(a.mean() / b.mean() - 1.0) < 0.01
+
+
+def test_quad_light_mean_matches_direct(flat):
+    """Quad light, flat exemplar: glints-wang's light sampling and glints-direct's MIS estimate
+    the same integral. Frame means over independent seeds (wang 0-5, direct 100-105) agree
+    within 4 standard errors measured here (measured: |z| < 0.02, standard error 0.85 % of the
+    mean with 8 seeds at spp 2), near (direct regime) and far (pyramids)."""
+    for dist in (0.5, 2.0):
+        sc = flat(dist, "quad")
+        a = np.array([render_wang(sc, RenderSettings(seed=s), wang=FLAT_WANG).mean()
+                      for s in range(6)])
+        b = np.array([render(sc, "glints-direct", seed=100 + s).mean() for s in range(6)])
+        se = np.sqrt(a.var(ddof=1) / len(a) + b.var(ddof=1) / len(b))
+        print(dist, a.mean(), b.mean(), se)
+        assert 0 < se < 0.03 * b.mean()
+        assert abs(a.mean() - b.mean()) < 4 * se
+
+
+def test_lights_deterministic(flat):
+    """Point, quad and environment lights together: the same seed gives the same bytes, another
+    seed another frame; a bare shade_wang call without the uniforms is an error."""
+    from prefilter.glints.wang_render import QUAD_SAMPLES, quad_uniforms, shade_wang
+    from prefilter.render.camera import gbuffer_at
+
+    spec = flat(1.0, "quad", 8, 6).to_dict()
+    spec["lights"] += (grender.measurement_scene(1.0, lights="environment")["lights"]
+                       + grender.measurement_scene(1.0)["lights"])
+    sc = load_scene(spec)
+    a, b, c = (render_wang(sc, RenderSettings(seed=s, spp=2), wang=FLAT_WANG) for s in (5, 5, 6))
+    assert a.tobytes() == b.tobytes() and a.tobytes() != c.tobytes()
+    assert a.dtype == np.float32 and np.all(np.isfinite(a)) and a.min() >= 0
+    xy = np.stack(np.meshgrid(np.arange(8) + 0.5, np.arange(6) + 0.5), -1)
+    g = gbuffer_at(sc, xy).reshape(-1)
+    g = g.select(g.hit)
+    with pytest.raises(PrefilterError, match="u: expected uniforms for the quad"):
+        shade_wang(sc, g, settings=FLAT_WANG)
+    with pytest.raises(PrefilterError, match=r"u: expected uniforms of shape \(48, >= 68\)"):
+        shade_wang(sc, g, settings=FLAT_WANG, u=np.zeros((len(g.uv), 3)))
+    # the first QUAD_MIS light samples are glints-direct's (uniforms 0-1 of each pair)
+    u = np.random.default_rng(0).random((5, 44))
+    q = quad_uniforms(u, 0)
+    assert q.shape == (5, QUAD_SAMPLES, 2)
+    np.testing.assert_array_equal(q[:, :4], u.reshape(5, 4, 11)[:, :, :2])
+    np.testing.assert_array_equal(q[:, 4:8], u.reshape(5, 4, 11)[:, :, 2:4])
+    with pytest.raises(PrefilterError, match="n: expected 1 to 20 light samples, got 21"):
+        quad_uniforms(u, 0, 21)

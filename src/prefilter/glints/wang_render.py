@@ -185,35 +185,120 @@ def _bake_roughness(st: dict) -> float:
 
 
 def check_lights(scene, name: str = "glints-wang") -> None:
-    """Point and directional lights only: anything else is a :class:`PrefilterError` naming the
-    method."""
+    """Point, directional, untextured quad and environment lights: a textured quad is a
+    :class:`PrefilterError` naming the method."""
     for i, light in enumerate(scene.lights):
-        if light.type not in ("point", "directional"):
-            raise PrefilterError(f"lights[{i}]: method {name!r} expected point or directional "
-                                 f"lights, got a {light.type} light (quad and environment lights "
-                                 "are not implemented for glints-wang)")
+        if getattr(light, "texture", None) is not None:
+            raise PrefilterError(f"lights[{i}]: method {name!r} expected untextured quad, point, "
+                                 "directional or environment lights, got a textured quad")
 
 
-def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = None,
+#: Quad lights: light samples per shading sample, uniform on the light's area (no MIS: the
+#: tiling's NDF sampler is per footprint in NumPy). 8: as many NDF evaluations as
+#: ``glints-direct``'s MIS (``QUAD_MIS`` light and as many BRDF samples). At most
+#: ``QUAD_MIS * (_U_PAIR // 2)`` (:func:`quad_uniforms`).
+QUAD_SAMPLES = 8
+
+
+def quad_uniforms(u, qi: int, n: int = QUAD_SAMPLES) -> np.ndarray:
+    """Light-sample uniforms ``(N, n, 2)`` of quad ``qi`` from the ``glints`` uniforms layout
+    ``u (N, k)`` (:func:`prefilter.glints.render.random_dims`: ``QUAD_MIS`` pairs of ``_U_PAIR``
+    per quad): sample ``j`` reads pair ``j % QUAD_MIS``'s uniforms ``2 (j // QUAD_MIS)`` and the
+    next, so the first ``QUAD_MIS`` are ``glints-direct``'s light samples."""
+    from prefilter.glints.render import _U_PAIR, QUAD_MIS
+
+    if not 0 < n <= QUAD_MIS * (_U_PAIR // 2):
+        raise PrefilterError(f"n: expected 1 to {QUAD_MIS * (_U_PAIR // 2)} light samples, "
+                             f"got {n}")
+    blk = u[:, qi * QUAD_MIS * _U_PAIR:(qi + 1) * QUAD_MIS * _U_PAIR]
+    blk = blk.reshape(len(u), QUAD_MIS, _U_PAIR)
+    j = np.arange(n)
+    o = 2 * (j // QUAD_MIS)
+    return np.stack([blk[:, j % QUAD_MIS, o], blk[:, j % QUAD_MIS, o + 1]], -1)
+
+
+def _quad_samples(ql, position, frame, uq):
+    """Light samples of quad ``ql``: local unit directions ``(n, N, 3)`` and the weights
+    ``L / (n pdf)`` ``(n, N, 3)`` (0 where the sample is not seen from the front) of the
+    light-sampling estimator; ``uq (N, n, 2)`` uniforms, ``frame`` ``(t, b, n)`` world."""
+    from prefilter.render.lights import quad_light_sample
+    from prefilter.sphere.sampling import to_local
+
+    N, n = uq.shape[:2]
+    pos = np.tile(position, (n, 1))
+    w, pdf = quad_light_sample(ql, pos, uq.transpose(1, 0, 2).reshape(n * N, 2))
+    wi = to_local(w, *(np.tile(x, (n, 1)) for x in frame))
+    wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
+    ok = pdf > 0
+    wgt = np.where(ok, 1.0 / (n * np.where(ok, pdf, 1.0)), 0.0)
+    L = np.asarray(ql.radiance, dtype=np.float64)
+    return wi.reshape(n, N, 3), wgt.reshape(n, N, 1) * L
+
+
+def _environment_samples(light, frame, u):
+    """SG light samples of an environment light (those of
+    :func:`prefilter.glints.envlight.shade_sg` with ``u``): local directions ``(n, N, 3)`` and
+    the weights ``L(wi) / (n pdf)`` ``(n, N, 3)``; ``u (N, 3 n)``."""
+    from prefilter.glints.envlight import sample_sg, sg_eval
+    from prefilter.glints.render import environment_sgs
+
+    try:
+        mu, lam, p = environment_sgs(light)
+    except PrefilterError as exc:
+        raise PrefilterError(f"{light.image.where}: {exc}") from None
+    t, b, n = frame
+    pl = np.stack([p @ t.T, p @ b.T, p @ n.T], -1).transpose(1, 0, 2)  # (N, K, 3)
+    ns = u.shape[1] // 3
+    wis, wgts = [], []
+    for j in range(ns):
+        wi, pdf = sample_sg(mu, lam, pl, u[:, 3 * j:3 * j + 3])
+        ok = pdf > 0
+        wis.append(wi)
+        wgts.append(sg_eval(wi, mu, lam, pl)
+                    * np.where(ok, 1.0 / (ns * np.where(ok, pdf, 1.0)), 0.0)[:, None])
+    return np.stack(wis), np.stack(wgts)
+
+
+def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | None = None,
                progress: bool = False) -> np.ndarray:
-    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point and directional lights.
+    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's lights.
 
-    ``index``: an explicit ``(ny, nx)`` tile index map (periodic, tile ``(0, 0)`` at texel
-    ``(0, 0)``) instead of the hashing; ``settings``: overrides of :data:`WANG_SETTINGS`.
+    Point and directional lights: the BRDF at the light direction. Untextured quads: light
+    sampling (:data:`QUAD_SAMPLES` per sample, :func:`quad_uniforms`), diffuse by Lambert's
+    polygon formula. Environment lights: the SG light samples of ``glints-direct``
+    (``ENV_SAMPLES``, :func:`prefilter.glints.render.environment_radiance` unprefiltered).
+    ``D`` of every sample of every light of an object: one :func:`ndf_points` call.
+    ``u (N, random_dims(scene))``: the ``glints`` uniforms layout (needed with quad or
+    environment lights). ``index``: an explicit ``(ny, nx)`` tile index map (periodic, tile
+    ``(0, 0)`` at texel ``(0, 0)``) instead of the hashing; ``settings``: overrides of
+    :data:`WANG_SETTINGS`.
     """
     from prefilter.glints.brdf import brdf_cos_from_ndf, half
-    from prefilter.glints.render import footprints
+    # _U_PAIR is private in render.py: the uniforms layout shared with glints-direct
+    from prefilter.glints.render import _U_PAIR, ENV_SAMPLES, QUAD_MIS, footprints, random_dims
+    from prefilter.ltc import clamped_cosine_integral
     from prefilter.render.shading import point_incoming, shading_frames
     from prefilter.sphere.sampling import to_local
 
     check_lights(scene)
     st = wang_settings(settings)
     lights = scene.light_set()
+    env = [lt for lt in scene.lights if lt.type == "environment"]
+    nq = len(lights.quads)
     t, b, n, wo = shading_frames(g)
     incoming = point_incoming(lights, g.position)
     out = np.zeros((len(wo), 3))
-    if not incoming:
+    if not (incoming or nq or env):
         return out
+    k_u = random_dims(scene)
+    if nq or env:
+        if u is None:
+            raise PrefilterError("u: expected uniforms for the quad and environment lights' "
+                                 "samples, got None")
+        u = np.asarray(u, dtype=np.float64)
+        if u.ndim != 2 or u.shape[0] != len(wo) or u.shape[1] < k_u:
+            raise PrefilterError(f"u: expected uniforms of shape ({len(wo)}, >= {k_u}), got "
+                                 f"{u.shape}")
     for k in np.unique(g.object_id):
         m = g.object_id == k
         mat = scene.objects[int(k)].material
@@ -223,19 +308,47 @@ def shade_wang(scene, g, *, spp: int = 1, index=None, settings: dict | None = No
         nm = mat.normal_map.load()
         wn = baked_tiles(nm, settings, progress=progress)
         c, sp = footprints(g.select(m), nm.shape[:2], spp)
-        # every light's half vector of every sample in one batched query: (n_lights, N_k)
-        wi = np.stack([to_local(w[m], t[m], b[m], n[m]) for w, _ in incoming])
-        wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
+        frame = (t[m], b[m], n[m])
+        base = np.asarray(mat.base_color, dtype=np.float64)
+        # every light sample of the object: directions wi (S, N_k, 3) in the local frame,
+        # weights (S, N_k, 3) (irradiance, or radiance over pdf and sample count), and whether
+        # its Lambert term comes from the sample (quads: the exact polygon integral instead)
+        wis, wgts, lamb = [], [], []
+        for w, e in incoming:
+            wi = to_local(w[m], *frame)
+            wis.append(wi / np.linalg.norm(wi, axis=-1, keepdims=True))
+            wgts.append(e[m])
+            lamb.append(True)
+        for qi, ql in enumerate(lights.quads):
+            if np.any(base > 0):
+                corners = np.stack([to_local(v - g.position[m], *frame) for v in ql.vertices], 1)
+                out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
+            wi, wgt = _quad_samples(ql, g.position[m], frame, quad_uniforms(u[m], qi))
+            wis += list(wi)
+            wgts += list(wgt)
+            lamb += [False] * len(wi)
+        for j, light in enumerate(env):
+            o = nq * QUAD_MIS * _U_PAIR + j * 3 * ENV_SAMPLES
+            wi, wgt = _environment_samples(light, frame, u[m][:, o:o + 3 * ENV_SAMPLES])
+            wis += list(wi)
+            wgts += list(wgt)
+            lamb += [True] * len(wi)
+        wi = np.stack(wis)
         wok = np.broadcast_to(wo[m], wi.shape)
         h = half(wok, wi)
-        D = ndf_points(wn, c, sp, h[..., :2], index=index, bilinear=st["bilinear"],
-                       point_roughness=st["intrinsic_roughness"])
+        # only the samples that can reflect are queried (env: ~half below the horizon)
+        act = (wi[..., 2] > 0) & (h[..., 2] > 0) & (wok[..., 2] > 0)
+        D = np.zeros(wi.shape[:2])
+        if np.any(act):
+            D[act] = ndf_points(wn, np.broadcast_to(c, wi.shape[:2] + (2,))[act],
+                                np.broadcast_to(sp, wi.shape[:2])[act], h[act][:, :2],
+                                index=index, bilinear=st["bilinear"],
+                                point_roughness=st["intrinsic_roughness"])
         f0 = np.asarray(mat.f0, dtype=np.float64)
         spec = brdf_cos_from_ndf(wok, wi, h, D, f0)
-        diff = (np.asarray(mat.base_color, dtype=np.float64) / np.pi
-                * np.maximum(wi[..., 2], 0.0)[..., None])
-        for j, (_, e) in enumerate(incoming):
-            out[m] += (spec[j] + diff[j]) * e[m]
+        diff = base / np.pi * np.maximum(wi[..., 2], 0.0)[..., None]
+        for j in range(len(wi)):
+            out[m] += (spec[j] + diff[j] if lamb[j] else spec[j]) * wgts[j]
     return out
 
 
@@ -243,19 +356,24 @@ def render_wang(scene, settings, *, index=None, wang: dict | None = None) -> np.
     """Linear radiance ``(H, W, 3)`` float32 of ``scene`` by ``glints-wang`` (module docstring).
 
     ``index``: explicit periodic tile index map (see :func:`shade_wang`); ``wang``: overrides
-    of :data:`WANG_SETTINGS`. The registered method is this with the defaults."""
+    of :data:`WANG_SETTINGS`. The uniforms per sample are those of ``glints`` /
+    ``glints-direct`` (:func:`prefilter.glints.render.random_dims`, same rows and seed): the
+    same light samples. The registered method is this with the defaults."""
+    from prefilter.glints.render import random_dims
     from prefilter.render.pipeline import render_samples
 
     check_lights(scene)
     wang_settings(wang)
     spp = settings.spp
-    return render_samples(scene, settings,
-                          lambda g, u: shade_wang(scene, g, spp=spp, index=index, settings=wang,
-                                                  progress=settings.progress),
-                          random_dims=0, stratified=spp > 1, desc="glints-wang")
+    img = render_samples(scene, settings,
+                         lambda g, u: shade_wang(scene, g, spp=spp, u=u, index=index,
+                                                 settings=wang, progress=settings.progress),
+                         random_dims=random_dims(scene), stratified=spp > 1, desc="glints-wang")
+    return img.astype(np.float32)
 
 
 def render_glints_wang(scene, settings) -> np.ndarray:
     """The ``glints-wang`` method: glint BRDF with the footprint NDF of the implicit Wang
-    tiling of the material's normal map (point and directional lights)."""
+    tiling of the material's normal map (point, directional, untextured quad and environment
+    lights)."""
     return render_wang(scene, settings)
