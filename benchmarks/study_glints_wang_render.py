@@ -20,9 +20,22 @@ Per distance (``prefilter.glints.render.measurement_scene(d, lights="point")``, 
   of the frame in the per-tile regime (at sigma_p quantiles), against the first value's and
   against the direct P-NDF (``wang.pndf_image_implicit`` at the bake's roughness).
 
+* ``--lights quad environment`` (default ``point``, the rows above): the measurement scene with
+  that light. Per distance: FLIP of ``glints-wang`` on the periodic index map against
+  ``glints-direct`` on the assembled map **with the same seed** (the same uniforms: for the
+  environment the same SG light samples, so the FLIP is the tiling and compression error
+  without Monte Carlo noise; for the quad the first ``QUAD_MIS`` light samples are shared, the
+  estimators differ: light sampling vs MIS), also with HDR-FLIP's top exposure capped at
+  ``--stop-exposure`` stops (FLIP's own start exposure; default 12); the noise floor: FLIP of
+  ``glints-wang`` seed 0 vs seed 1 (index map); frame times of ``glints-wang`` (hashed) and
+  ``glints`` on the exemplar scene (``--repeats``, interleaved) and of the one
+  ``glints-direct`` render on the assembled map (its cost depends on the footprints, the same
+  as on the exemplar).
+
 Run: ``.venv/bin/python benchmarks/study_glints_wang_render.py [--repeats 3]
-[--distances 0.5 2 8] [--set key=value ...] [--code-bits 0 8 16] [--no-times]`` (``--set``
-overrides ``WANG_SETTINGS``, values as JSON). One JSON line per distance on stdout.
+[--distances 0.5 2 8] [--set key=value ...] [--code-bits 0 8 16] [--no-times]
+[--lights point quad environment] [--stop-exposure 12]`` (``--set`` overrides
+``WANG_SETTINGS``, values as JSON). One JSON line per (lights, distance) on stdout.
 """
 
 from __future__ import annotations
@@ -44,14 +57,6 @@ def _timed(fn):
 
 def main(argv=None):
     from prefilter.glints import wang_render
-    from prefilter.glints.render import baked_surface, footprints, measurement_scene
-    from prefilter.glints.wang import assemble, periodic_index_map
-    from prefilter.render.camera import gbuffer_at
-    from prefilter.render.methods import RenderSettings
-    from prefilter.render.metrics import flip
-    from prefilter.render.pipeline import render
-    from prefilter.render.scene import load_scene
-    from prefilter.texture.normalmap import encode_normals
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=3)
@@ -60,68 +65,143 @@ def main(argv=None):
     ap.add_argument("--no-times", action="store_true")
     ap.add_argument("--code-bits", type=int, nargs="*", default=[])
     ap.add_argument("--footprints", type=int, default=6)
+    ap.add_argument("--lights", nargs="+", default=["point"],
+                    choices=["point", "quad", "environment"])
+    ap.add_argument("--stop-exposure", type=float, default=12.0)
     args = ap.parse_args(argv)
     wang = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.set)}
     if wang:
         wang_render.WANG_SETTINGS.update(wang)  # the registered method uses the module defaults
     tmp = Path(tempfile.mkdtemp())
-    for d in args.distances:
-        sc = load_scene(measurement_scene(d, lights="point"))
-        nm = sc.objects[0].material.normal_map.load()
-        size = nm.shape[0]
-        (wn, t_bake, _) = _timed(lambda: wang_render.baked_tiles(nm))
-        T = wn.wang.size
-        ny = size // T
-        idx = periodic_index_map(ny, ny, rng=0)  # a valid tiling across the wrap
-        big = assemble(wn.wang, idx)
-        np.save(tmp / "assembled.npy", encode_normals(big))
-        spec = measurement_scene(d, lights="point")
-        spec["objects"][0]["material"]["normal_map"] = str(tmp / "assembled.npy")
-        sa = load_scene(spec)
-        row = dict(distance=d, tile=T, settings=wang_render.wang_settings(wang),
-                   bake_or_load_s=round(t_bake, 2), nbytes_mb=wn.nbytes / 1e6,
-                   cp_error=list(wn.cp_error))
-        xy = np.stack(np.meshgrid(np.arange(sc.camera.width) + 0.5,
-                                  np.arange(sc.camera.height) + 0.5), -1)
-        g = gbuffer_at(sc, xy).reshape(-1)
-        gh = g.select(g.hit)
-        c, sp = footprints(gh, (size, size))
-        ext = c.max(0) - c.min(0)
-        # the glints pyramid of the exemplar, per texel: what an explicit map of the frame's
-        # area would take in that format
-        gm_mb = baked_surface(nm).gm.compressed_bytes / 1e6
-        row.update(sigma_p_median=float(np.median(sp)),
-                   frame_texels=float(np.prod(ext)), frame_tiles=float(np.prod(ext) / T**2),
-                   explicit_normals_mb=float(np.prod(ext)) * 3 * 4 / 1e6,
-                   glints_map_mb=gm_mb,
-                   explicit_glints_map_mb=gm_mb * float(np.prod(ext)) / size**2)
-        # FLIP on the assembled map (same surface) and the hashed tiling (another surface)
-        a_idx = wang_render.render_wang(sc, RenderSettings(), index=idx)
-        img = {"wang": render(sc, "glints-wang"), "glints": render(sc, "glints"),
-               "direct": render(sc, "glints-direct")}
-        b_idx = render(sa, "glints-direct")
-        row.update(flip_wang_index_vs_direct_assembled=float(flip(a_idx, b_idx).mean),
-                   mean_ratio_index=float(a_idx.mean() / b_idx.mean()),
-                   flip_wang_hashed_vs_direct_exemplar=float(flip(img["wang"],
-                                                                   img["direct"]).mean),
-                   mean_ratio_hashed=float(img["wang"].mean() / img["direct"].mean()),
-                   flip_glints_vs_direct=float(flip(img["glints"], img["direct"]).mean))
-        if args.code_bits:
-            row["codes"] = _codes_study(sc, nm, idx, b_idx, gh, args.code_bits, args.footprints)
-        if not args.no_times:
-            wall = {m: [] for m in ("glints-wang", "glints", "glints-direct")}
-            cpu = {m: [] for m in wall}
-            for _ in range(args.repeats):
-                for m in wall:
-                    _, w, cp = _timed(lambda: render(sc, m))
-                    wall[m].append(round(w, 3))
-                    cpu[m].append(round(cp, 3))
-            row.update(wall_s=wall, cpu_s=cpu,
-                       min_wall_ratio_direct_over_wang=min(wall["glints-direct"])
-                       / min(wall["glints-wang"]),
-                       min_wall_ratio_glints_over_wang=min(wall["glints"])
-                       / min(wall["glints-wang"]))
-        print(json.dumps(row), flush=True)
+    for kind in args.lights:
+        for d in args.distances:
+            if kind == "point":
+                _point_row(args, wang, tmp, d)
+            else:
+                _lights_row(args, wang, tmp, d, kind)
+
+
+def _assembled(d, kind, tmp):
+    """The exemplar scene, its ``TiledNDF`` (and bake / load time), the periodic index map and
+    the scene on the assembled map."""
+    from prefilter.glints import wang_render
+    from prefilter.glints.render import measurement_scene
+    from prefilter.glints.wang import assemble, periodic_index_map
+    from prefilter.render.scene import load_scene
+    from prefilter.texture.normalmap import encode_normals
+
+    sc = load_scene(measurement_scene(d, lights=kind))
+    nm = sc.objects[0].material.normal_map.load()
+    (wn, t_bake, _) = _timed(lambda: wang_render.baked_tiles(nm))
+    ny = nm.shape[0] // wn.wang.size
+    idx = periodic_index_map(ny, ny, rng=0)  # a valid tiling across the wrap
+    np.save(tmp / "assembled.npy", encode_normals(assemble(wn.wang, idx)))
+    spec = measurement_scene(d, lights=kind)
+    spec["objects"][0]["material"]["normal_map"] = str(tmp / "assembled.npy")
+    return sc, nm, wn, t_bake, idx, load_scene(spec)
+
+
+def _flips(test, ref, stop):
+    """HDR-FLIP, and with the top exposure capped at ``stop`` stops (FLIP's own start)."""
+    from prefilter.render.metrics import flip
+
+    fl = flip(test, ref)
+    top = fl.settings["stop_exposure"]
+    fc = flip(test, ref, start_exposure=fl.settings["start_exposure"],
+              stop_exposure=min(stop, top))
+    return float(fl.mean), float(fc.mean), float(top)
+
+
+def _lights_row(args, wang, tmp, d, kind):
+    """One ``--lights quad|environment`` row (module docstring)."""
+    from prefilter.glints import wang_render
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.pipeline import render
+
+    sc, nm, wn, t_bake, idx, sa = _assembled(d, kind, tmp)
+    row = dict(lights=kind, distance=d, tile=wn.wang.size,
+               settings=wang_render.wang_settings(wang), bake_or_load_s=round(t_bake, 2))
+    a0 = wang_render.render_wang(sc, RenderSettings(seed=0), index=idx)
+    a1 = wang_render.render_wang(sc, RenderSettings(seed=1), index=idx)
+    b0, t_direct, c_direct = _timed(lambda: render(sa, "glints-direct", seed=0))
+    f, fc, top = _flips(a0, b0, args.stop_exposure)
+    nf, nfc, _ = _flips(a1, a0, args.stop_exposure)
+    row.update(flip_wang_index_vs_direct_assembled=f, flip_capped=fc, stop_exposure_auto=top,
+               mean_ratio_index=float(a0.mean() / b0.mean()),
+               flip_wang_seed1_vs_seed0=nf, flip_capped_seed1_vs_seed0=nfc,
+               black_fraction=float(np.mean(b0.max(-1) < 1e-3 * b0.max())),
+               direct_assembled_s=round(t_direct, 3), direct_assembled_cpu_s=round(c_direct, 3))
+    if not args.no_times:
+        render(sc, "glints-wang")  # warm-up (compilation)
+        render(sc, "glints")
+        wall = {m: [] for m in ("glints-wang", "glints")}
+        cpu = {m: [] for m in wall}
+        for _ in range(args.repeats):
+            for m in wall:
+                _, w, cp = _timed(lambda: render(sc, m))
+                wall[m].append(round(w, 3))
+                cpu[m].append(round(cp, 3))
+        row.update(wall_s=wall, cpu_s=cpu,
+                   direct_over_wang=t_direct / min(wall["glints-wang"]),
+                   glints_over_wang=min(wall["glints"]) / min(wall["glints-wang"]))
+    print(json.dumps(row), flush=True)
+
+
+def _point_row(args, wang, tmp, d):
+    """One point-light row (module docstring)."""
+    from prefilter.glints import wang_render
+    from prefilter.glints.render import baked_surface, footprints
+    from prefilter.render.camera import gbuffer_at
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.metrics import flip
+    from prefilter.render.pipeline import render
+
+    sc, nm, wn, t_bake, idx, sa = _assembled(d, "point", tmp)
+    size, T = nm.shape[0], wn.wang.size
+    row = dict(lights="point", distance=d, tile=T, settings=wang_render.wang_settings(wang),
+               bake_or_load_s=round(t_bake, 2), nbytes_mb=wn.nbytes / 1e6,
+               cp_error=list(wn.cp_error))
+    xy = np.stack(np.meshgrid(np.arange(sc.camera.width) + 0.5,
+                              np.arange(sc.camera.height) + 0.5), -1)
+    g = gbuffer_at(sc, xy).reshape(-1)
+    gh = g.select(g.hit)
+    c, sp = footprints(gh, (size, size))
+    ext = c.max(0) - c.min(0)
+    # the glints pyramid of the exemplar, per texel: what an explicit map of the frame's
+    # area would take in that format
+    gm_mb = baked_surface(nm).gm.compressed_bytes / 1e6
+    row.update(sigma_p_median=float(np.median(sp)),
+               frame_texels=float(np.prod(ext)), frame_tiles=float(np.prod(ext) / T**2),
+               explicit_normals_mb=float(np.prod(ext)) * 3 * 4 / 1e6,
+               glints_map_mb=gm_mb,
+               explicit_glints_map_mb=gm_mb * float(np.prod(ext)) / size**2)
+    # FLIP on the assembled map (same surface) and the hashed tiling (another surface)
+    a_idx = wang_render.render_wang(sc, RenderSettings(), index=idx)
+    img = {"wang": render(sc, "glints-wang"), "glints": render(sc, "glints"),
+           "direct": render(sc, "glints-direct")}
+    b_idx = render(sa, "glints-direct")
+    row.update(flip_wang_index_vs_direct_assembled=float(flip(a_idx, b_idx).mean),
+               mean_ratio_index=float(a_idx.mean() / b_idx.mean()),
+               flip_wang_hashed_vs_direct_exemplar=float(flip(img["wang"],
+                                                               img["direct"]).mean),
+               mean_ratio_hashed=float(img["wang"].mean() / img["direct"].mean()),
+               flip_glints_vs_direct=float(flip(img["glints"], img["direct"]).mean))
+    if args.code_bits:
+        row["codes"] = _codes_study(sc, nm, idx, b_idx, gh, args.code_bits, args.footprints)
+    if not args.no_times:
+        wall = {m: [] for m in ("glints-wang", "glints", "glints-direct")}
+        cpu = {m: [] for m in wall}
+        for _ in range(args.repeats):
+            for m in wall:
+                _, w, cp = _timed(lambda: render(sc, m))
+                wall[m].append(round(w, 3))
+                cpu[m].append(round(cp, 3))
+        row.update(wall_s=wall, cpu_s=cpu,
+                   min_wall_ratio_direct_over_wang=min(wall["glints-direct"])
+                   / min(wall["glints-wang"]),
+                   min_wall_ratio_glints_over_wang=min(wall["glints"])
+                   / min(wall["glints-wang"]))
+    print(json.dumps(row), flush=True)
 
 
 def _codes_study(sc, nm, idx, b_idx, gh, code_bits, n_fp):

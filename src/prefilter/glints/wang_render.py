@@ -18,7 +18,18 @@ Point and directional lights: the glint BRDF ``F G D / (4 wo_z)`` (paper eq. 1) 
 footprint NDF of the tiling at the half vector (:func:`prefilter.glints.wang_ndf.ndf_points`:
 direct P-NDF below ``min_sigma``, per-tile pyramids, tile-type shares, expected tiling), one
 batched Numba query for all samples and lights of an object. Diffuse: Lambert with
-``base_color``. Quad and environment lights are rejected (not implemented).
+``base_color``.
+
+Environment lights: ``glints-direct``'s unprefiltered SG estimator
+(:func:`prefilter.glints.render.environment_radiance` with ``prefilter=False``: the fit
+:func:`prefilter.glints.render.environment_sgs`, ``ENV_SAMPLES`` light samples per shading
+sample drawn with :func:`prefilter.glints.envlight.sample_sg`) from the same uniforms
+(:func:`prefilter.glints.render.random_dims` layout, same rows and seed): for a seed both methods
+draw the same directions, so they differ only by the NDF. Untextured quad lights: light
+sampling only (:data:`QUAD_SAMPLES` uniform points on the light's area; no MIS, noisy for sharp
+glints), diffuse by Lambert's polygon formula. The NDF at the half vectors of every sample of
+every light of an object comes from one :func:`prefilter.glints.wang_ndf.ndf_points` call.
+Textured quads are rejected.
 """
 
 from __future__ import annotations
