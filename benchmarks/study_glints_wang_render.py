@@ -27,14 +27,18 @@ Per distance (``prefilter.glints.render.measurement_scene(d, lights="point")``, 
   without Monte Carlo noise; for the quad the first ``QUAD_MIS`` light samples are shared, the
   estimators differ: light sampling vs MIS), also with HDR-FLIP's top exposure capped at
   ``--stop-exposure`` stops (FLIP's own start exposure; default 12); the noise floor: FLIP of
-  ``glints-wang`` seed 0 vs seed 1 (index map); frame times of ``glints-wang`` (hashed) and
+  ``glints-wang`` seed 0 vs seed 1 (index map; ``--direct-floor``: also ``glints-direct``'s,
+  assembled map); frame times of ``glints-wang`` (hashed) and
   ``glints`` on the exemplar scene (``--repeats``, interleaved) and of the one
   ``glints-direct`` render on the assembled map (its cost depends on the footprints, the same
-  as on the exemplar).
+  as on the exemplar). ``--mean-seeds K``: frame means over seeds ``0..K-1`` (``glints-direct``:
+  ``1000..``, independent) (ratio,
+  difference in standard errors, relative std of one frame's mean).
 
 Run: ``.venv/bin/python benchmarks/study_glints_wang_render.py [--repeats 3]
 [--distances 0.5 2 8] [--set key=value ...] [--code-bits 0 8 16] [--no-times]
-[--lights point quad environment] [--stop-exposure 12]`` (``--set`` overrides
+[--lights point quad environment] [--stop-exposure 12] [--direct-floor]
+[--mean-seeds K]`` (``--set`` overrides
 ``WANG_SETTINGS``, values as JSON). One JSON line per (lights, distance) on stdout.
 """
 
@@ -68,6 +72,8 @@ def main(argv=None):
     ap.add_argument("--lights", nargs="+", default=["point"],
                     choices=["point", "quad", "environment"])
     ap.add_argument("--stop-exposure", type=float, default=12.0)
+    ap.add_argument("--direct-floor", action="store_true")
+    ap.add_argument("--mean-seeds", type=int, default=0)
     args = ap.parse_args(argv)
     wang = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.set)}
     if wang:
@@ -131,6 +137,23 @@ def _lights_row(args, wang, tmp, d, kind):
                flip_wang_seed1_vs_seed0=nf, flip_capped_seed1_vs_seed0=nfc,
                black_fraction=float(np.mean(b0.max(-1) < 1e-3 * b0.max())),
                direct_assembled_s=round(t_direct, 3), direct_assembled_cpu_s=round(c_direct, 3))
+    if args.direct_floor:
+        b1 = render(sa, "glints-direct", seed=1)
+        row.update(zip(("flip_direct_seed1_vs_seed0", "flip_capped_direct_seed1_vs_seed0"),
+                       _flips(b1, b0, args.stop_exposure)[:2]))
+    if args.mean_seeds:
+        # frame means over seeds of both: the estimators' agreement beyond one frame. Seeds
+        # 1000.. for glints-direct: independent of glints-wang's (shared light samples would
+        # correlate them and the standard error below assumes independence)
+        ma = [float(wang_render.render_wang(sc, RenderSettings(seed=k), index=idx).mean())
+              for k in range(args.mean_seeds)]
+        mb = [float(render(sa, "glints-direct", seed=1000 + k).mean())
+              for k in range(args.mean_seeds)]
+        se = np.sqrt(np.var(ma, ddof=1) / len(ma) + np.var(mb, ddof=1) / len(mb))
+        row.update(mean_seeds=args.mean_seeds, mean_ratio_seeds=float(np.mean(ma) / np.mean(mb)),
+                   mean_diff_over_se=float((np.mean(ma) - np.mean(mb)) / se),
+                   frame_mean_rel_std_wang=float(np.std(ma, ddof=1) / np.mean(ma)),
+                   frame_mean_rel_std_direct=float(np.std(mb, ddof=1) / np.mean(mb)))
     if not args.no_times:
         render(sc, "glints-wang")  # warm-up (compilation)
         render(sc, "glints")
