@@ -411,3 +411,5 @@ def test_lights_deterministic(flat):
     np.testing.assert_array_equal(q[:, 4:8], u.reshape(5, 4, 11)[:, :, 2:4])
     with pytest.raises(PrefilterError, match="n: expected 1 to 20 light samples, got 21"):
         quad_uniforms(u, 0, 21)
+    with pytest.raises(PrefilterError, match=r"u: expected uniforms of shape \(N, >= 88\)"):
+        quad_uniforms(u, 1)

@@ -221,8 +221,11 @@ def quad_uniforms(u, qi: int, n: int = QUAD_SAMPLES) -> np.ndarray:
     if not 0 < n <= QUAD_MIS * (_U_PAIR // 2):
         raise PrefilterError(f"n: expected 1 to {QUAD_MIS * (_U_PAIR // 2)} light samples, "
                              f"got {n}")
-    blk = u[:, qi * QUAD_MIS * _U_PAIR:(qi + 1) * QUAD_MIS * _U_PAIR]
-    blk = blk.reshape(len(u), QUAD_MIS, _U_PAIR)
+    u = np.asarray(u, dtype=np.float64)
+    need = (qi + 1) * QUAD_MIS * _U_PAIR
+    if u.ndim != 2 or u.shape[1] < need:
+        raise PrefilterError(f"u: expected uniforms of shape (N, >= {need}), got {u.shape}")
+    blk = u[:, need - QUAD_MIS * _U_PAIR:need].reshape(len(u), QUAD_MIS, _U_PAIR)
     j = np.arange(n)
     o = 2 * (j // QUAD_MIS)
     return np.stack([blk[:, j % QUAD_MIS, o], blk[:, j % QUAD_MIS, o + 1]], -1)
