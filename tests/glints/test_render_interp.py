@@ -199,3 +199,16 @@ def test_render_bake_keeps_dim_ndf_blocks(tmp_path, monkeypatch):
         mg, mw = gb.sum(axis=(2, 4))[dim], wb.sum(axis=(2, 4))[dim]
         assert mg.sum() / mw.sum() == pytest.approx(1.0, abs=total), lo
         assert np.median(mg / mw) == pytest.approx(1.0, abs=0.05), lo
+
+
+def test_direct_surfaces_of_one_map_at_two_roughnesses_are_distinct():
+    """``baked_surface(direct=True)`` keeps one surface per (map, intrinsic roughness): the
+    in-memory cache once keyed it by the map alone and returned the first roughness' surface."""
+    import prefilter.glints.render as gr
+    from prefilter.texture.procedural import normal_map
+
+    nm = normal_map("flakes", size=16, seed=3)
+    a = gr.baked_surface(nm, direct=True, settings={"intrinsic_roughness": 0.02})
+    b = gr.baked_surface(nm, direct=True, settings={"intrinsic_roughness": 0.03})
+    assert (a.intrinsic_roughness, b.intrinsic_roughness) == (0.02, 0.03)
+    assert gr.baked_surface(nm, direct=True, settings={"intrinsic_roughness": 0.02}) is a

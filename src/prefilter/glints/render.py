@@ -122,7 +122,8 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
         st["intrinsic_roughness"] = bilinear_bake_roughness(sr, st["support"], st["ndf_res"])
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     key = hashlib.sha1(json.dumps(st, sort_keys=True).encode()).hexdigest()[:12]
-    mem = (digest, "direct" if direct else key, INTERP, BILINEAR)
+    # the direct surface is the normal map and the model's roughness (no bake): key it by both
+    mem = (digest, f"direct-{sr!r}" if direct else key, INTERP, BILINEAR)
     if mem not in _SURFACES:
         if direct:
             _SURFACES[mem] = surface(None, nm, intrinsic_roughness=st["intrinsic_roughness"])
