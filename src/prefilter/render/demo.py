@@ -165,7 +165,7 @@ MULTISCALE_METHODS = ("ltc", "ltc-multiscale", "ltc-multiscale-paper")
 #: showcase; the glints section compares them with ``glints``), and ``glints`` itself, whose
 #: pyramid bake for the showcase's 256^2 normal map adds ~6 minutes to a fresh demo (the glint
 #: look is not what the showcase's area-light comparison is about), and ``glints-wang`` (its
-#: per-tile bake takes ~9 minutes; point lights only).
+#: per-tile bake takes ~9 minutes).
 SHOWCASE_EXCLUDE = ("reference", "glints", "glints-direct", "glints-reference", "glints-wang")
 
 
