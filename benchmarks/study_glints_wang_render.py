@@ -59,6 +59,21 @@ def _timed(fn):
     return out, time.perf_counter() - w, time.process_time() - c
 
 
+def _repeat_times(sc, methods, repeats):
+    """Wall and CPU seconds ``{method: [t, ...]}`` of ``repeats`` frames of each method,
+    interleaved (one frame of each per round)."""
+    from prefilter.render.pipeline import render
+
+    wall = {m: [] for m in methods}
+    cpu = {m: [] for m in methods}
+    for _ in range(repeats):
+        for m in methods:
+            _, w, cp = _timed(lambda: render(sc, m))
+            wall[m].append(round(w, 3))
+            cpu[m].append(round(cp, 3))
+    return wall, cpu
+
+
 def main(argv=None):
     from prefilter.glints import wang_render
 
@@ -157,13 +172,7 @@ def _lights_row(args, wang, tmp, d, kind):
     if not args.no_times:
         render(sc, "glints-wang")  # warm-up (compilation)
         render(sc, "glints")
-        wall = {m: [] for m in ("glints-wang", "glints")}
-        cpu = {m: [] for m in wall}
-        for _ in range(args.repeats):
-            for m in wall:
-                _, w, cp = _timed(lambda: render(sc, m))
-                wall[m].append(round(w, 3))
-                cpu[m].append(round(cp, 3))
+        wall, cpu = _repeat_times(sc, ("glints-wang", "glints"), args.repeats)
         row.update(wall_s=wall, cpu_s=cpu,
                    direct_over_wang=t_direct / min(wall["glints-wang"]),
                    glints_over_wang=min(wall["glints"]) / min(wall["glints-wang"]))
@@ -212,13 +221,7 @@ def _point_row(args, wang, tmp, d):
     if args.code_bits:
         row["codes"] = _codes_study(sc, nm, idx, b_idx, gh, args.code_bits, args.footprints)
     if not args.no_times:
-        wall = {m: [] for m in ("glints-wang", "glints", "glints-direct")}
-        cpu = {m: [] for m in wall}
-        for _ in range(args.repeats):
-            for m in wall:
-                _, w, cp = _timed(lambda: render(sc, m))
-                wall[m].append(round(w, 3))
-                cpu[m].append(round(cp, 3))
+        wall, cpu = _repeat_times(sc, ("glints-wang", "glints", "glints-direct"), args.repeats)
         row.update(wall_s=wall, cpu_s=cpu,
                    min_wall_ratio_direct_over_wang=min(wall["glints-direct"])
                    / min(wall["glints-wang"]),

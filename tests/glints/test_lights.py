@@ -12,7 +12,7 @@ from prefilter.glints import load
 from prefilter.glints.bake import bake
 from prefilter.glints.brdf import glint_brdf_cos, surface
 from prefilter.glints.envlight import equirect_directions, fibonacci_axes, fit_sg, shade_sg
-from prefilter.glints.render import _U_PAIR, QUAD_MIS, quad_mis, quad_mis_unfused, quad_range
+from prefilter.glints.render import U_PAIR, QUAD_MIS, quad_mis, quad_mis_unfused, quad_range
 from prefilter.render.lights import QuadLight, sample_quad_area
 
 NM = sinusoid(64, ax=0.25, ay=0.2, px=16, py=8)
@@ -151,7 +151,7 @@ def test_quad_mis_matches_monte_carlo(surf, sp, size):
     light = facing_quad(wo, size, 2.5)
     mc, err = mc_quad(surf, c, sp, wo[None], light, 50000, rng)
     M = 1500
-    u = rng.random((M, QUAD_MIS * _U_PAIR))
+    u = rng.random((M, QUAD_MIS * U_PAIR))
     frame = tuple(np.tile(EYE[k], (M, 1)) for k in range(3))
     est = quad_mis(surf, np.repeat(c, M, 0), np.full(M, sp), np.repeat(wo[None], M, 0),
                    np.zeros((M, 3)), frame, light, 1.0, u)[:, 0]
@@ -185,7 +185,7 @@ def test_quad_mis_fused_equals_unfused(surf, trunc):
     c = rng.uniform(-10, 74, (N, 2))
     wo = np.stack([_wo(t) for t in rng.uniform(0.0, 0.9, N)])
     light = facing_quad(_wo(0.4), 0.4, 2.0)
-    u = rng.random((N, QUAD_MIS * _U_PAIR))
+    u = rng.random((N, QUAD_MIS * U_PAIR))
     a, b = _mis_pair(surf, c, sp, wo, light, u, trunc)
     assert np.count_nonzero(b[:, 0]) > N // 2  # most estimates see the light
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=0)
@@ -271,7 +271,7 @@ def test_quad_mis_fused_direct_surface():
     c = rng.uniform(0, 64, (N, 2))
     wo = np.stack([_wo(t) for t in rng.uniform(0.0, 0.9, N)])
     light = facing_quad(_wo(0.4), 0.4, 2.0)
-    u = rng.random((N, QUAD_MIS * _U_PAIR))
+    u = rng.random((N, QUAD_MIS * U_PAIR))
     for trunc in (4.0, None):
         a, b = _mis_pair(surf, c, sp, wo, light, u, trunc)
         assert np.count_nonzero(b[:, 0]) > N // 2

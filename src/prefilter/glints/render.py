@@ -154,7 +154,7 @@ def footprints(g, shape, spp: int = 1):
 #: shading sample; uniforms per pair: 2 (light) + up to 9 (hierarchical NDF sampler, blocks up
 #: to 64; 7 for the default 16).
 QUAD_MIS = 4
-_U_PAIR = 11
+U_PAIR = 11
 #: Range-query path of quad lights: the light is split into ``QUAD_SUB^2`` patches (then
 #: ``(2 QUAD_SUB)^2`` where those are too large); each patch's
 #: half-vector region must have a bounding box narrower than ``RANGE_MAX`` in ``s`` (the BRDF's
@@ -338,7 +338,7 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     from prefilter.render.lights import quad_light_pdf, quad_light_sample
 
     N = len(wo)
-    P = u.shape[1] // _U_PAIR
+    P = u.shape[1] // U_PAIR
     L = np.asarray(light.radiance, dtype=np.float64)
     if P == 0:
         return np.zeros((N, 3)) * L
@@ -351,7 +351,7 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     t, b, n = (np.tile(x, (P, 1)) for x in frame)
     pos = np.tile(position, (P, 1))
     woP = np.tile(wo, (P, 1))
-    uu = u[:, :P * _U_PAIR].reshape(N, P, _U_PAIR)
+    uu = u[:, :P * U_PAIR].reshape(N, P, U_PAIR)
     # light samples and their half vectors
     w, pl = quad_light_sample(light, pos, uu[:, :, :2].transpose(1, 0, 2).reshape(P * N, 2))
     wl = as_directions(to_local(w, t, b, n), "wi")
@@ -505,11 +505,11 @@ def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, l
 
     t, b, n = frame
     N = len(wo)
-    n_pairs = u.shape[1] // _U_PAIR
+    n_pairs = u.shape[1] // U_PAIR
     L = np.asarray(light.radiance, dtype=np.float64)
     out = np.zeros((N, 3))
     for j in range(n_pairs):
-        uj = u[:, j * _U_PAIR:(j + 1) * _U_PAIR]
+        uj = u[:, j * U_PAIR:(j + 1) * U_PAIR]
         # light sample
         wl, pl = quad_light_sample(light, position, uj[:, :2])
         wl_loc = to_local(wl, t, b, n)
@@ -590,13 +590,13 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
                     done[r[d4]] = True
             rest = ~done
             if np.any(rest):
-                uq = u[m][:, qi * QUAD_MIS * _U_PAIR:(qi + 1) * QUAD_MIS * _U_PAIR]
+                uq = u[m][:, qi * QUAD_MIS * U_PAIR:(qi + 1) * QUAD_MIS * U_PAIR]
                 val[rest] = quad_mis(surf, c[rest], sp[rest], wo[m][rest],
                                      g.position[m][rest], tuple(f[rest] for f in frame), ql,
                                      f0, uq[rest], fallback_truncation=trunc)
             out[m] += val
         if env:
-            ue = None if u is None else u[m][:, nq * QUAD_MIS * _U_PAIR:]
+            ue = None if u is None else u[m][:, nq * QUAD_MIS * U_PAIR:]
             out[m] += environment_radiance(env, surf, c, sp, wo[m], frame, f0, base, ue,
                                            prefilter=(mode == "compressed"),
                                            fallback_truncation=trunc)
@@ -626,6 +626,18 @@ def environment_sgs(light):
     return mu * light.scale, lam, p
 
 
+def environment_lobes(light, frame):
+    """The SG fit of an environment light (:func:`environment_sgs`): sharpnesses ``mu (K,)``,
+    amplitudes ``lam (K, 3)`` and lobe axes in each sample's local frame ``(N, K, 3)`` for the
+    world frames ``frame = (t, b, n)``, each ``(N, 3)``."""
+    try:
+        mu, lam, p = environment_sgs(light)
+    except PrefilterError as exc:
+        raise PrefilterError(f"{light.image.where}: {exc}") from None
+    t, b, n = frame
+    return mu, lam, np.stack([p @ t.T, p @ b.T, p @ n.T], -1).transpose(1, 0, 2)
+
+
 def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
                          prefilter: bool, fallback_truncation: float | None = None) -> np.ndarray:
     """Radiance ``(N, 3)`` (specular and Lambert) from environment lights by SG sampling
@@ -633,14 +645,9 @@ def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
     range-prefiltered over the lobe's compact epsilon-support when ``prefilter`` (sec. 5.4)."""
     from prefilter.glints.envlight import shade_sg
 
-    t, b, n = frame
     out = np.zeros((len(wo), 3))
     for j, light in enumerate(env):
-        try:
-            mu, lam, p = environment_sgs(light)
-        except PrefilterError as exc:
-            raise PrefilterError(f"{light.image.where}: {exc}") from None
-        pl = np.stack([p @ t.T, p @ b.T, p @ n.T], -1).transpose(1, 0, 2)  # (N, K, 3)
+        mu, lam, pl = environment_lobes(light, frame)
         uj = None if u is None else u[:, j * 3 * ENV_SAMPLES:(j + 1) * 3 * ENV_SAMPLES]
         if uj is not None and uj.shape[1] < 3 * ENV_SAMPLES:
             uj = None
@@ -654,10 +661,12 @@ def random_dims(scene) -> int:
     """Uniforms per shading sample the glints methods need (quad MIS, environment samples)."""
     lights = scene.light_set()
     n_env = sum(lt.type == "environment" for lt in scene.lights)
-    return len(lights.quads) * QUAD_MIS * _U_PAIR + n_env * ENV_SAMPLES * 3
+    return len(lights.quads) * QUAD_MIS * U_PAIR + n_env * ENV_SAMPLES * 3
 
 
-def _check_lights(scene, name):
+def check_lights(scene, name):
+    """Untextured quad, point, directional and environment lights: a textured quad is a
+    :class:`PrefilterError` naming the method ``name`` (the glints methods and ``glints-wang``)."""
     for i, light in enumerate(scene.lights):
         if getattr(light, "texture", None) is not None:
             raise PrefilterError(f"lights[{i}]: method {name!r} expected untextured quad, point, "
@@ -667,7 +676,7 @@ def _check_lights(scene, name):
 def _render(scene, settings, mode, name):
     from prefilter.render.pipeline import render_samples
 
-    _check_lights(scene, name)
+    check_lights(scene, name)
     spp = settings.spp
     k = random_dims(scene)
     return render_samples(scene, settings,
@@ -694,7 +703,7 @@ def render_glints_reference(scene, settings) -> np.ndarray:
     from prefilter.render.camera import gbuffer_at
     from prefilter.render.pipeline import row_rng
 
-    _check_lights(scene, "glints-reference")
+    check_lights(scene, "glints-reference")
     cam = scene.camera
     h, w, s = cam.height, cam.width, settings.spp
     k = random_dims(scene)

@@ -197,35 +197,34 @@ def _bake_roughness(st: dict) -> float:
 
 def check_lights(scene, name: str = "glints-wang") -> None:
     """Point, directional, untextured quad and environment lights: a textured quad is a
-    :class:`PrefilterError` naming the method."""
-    for i, light in enumerate(scene.lights):
-        if getattr(light, "texture", None) is not None:
-            raise PrefilterError(f"lights[{i}]: method {name!r} expected untextured quad, point, "
-                                 "directional or environment lights, got a textured quad")
+    :class:`PrefilterError` naming the method (:func:`prefilter.glints.render.check_lights`)."""
+    from prefilter.glints.render import check_lights as check
+
+    check(scene, name)
 
 
 #: Quad lights: light samples per shading sample, uniform on the light's area (no MIS: the
 #: tiling's NDF sampler is per footprint in NumPy). 8: as many NDF evaluations as
 #: ``glints-direct``'s MIS (``QUAD_MIS`` light and as many BRDF samples). At most
-#: ``QUAD_MIS * (_U_PAIR // 2)`` (:func:`quad_uniforms`).
+#: ``QUAD_MIS * (U_PAIR // 2)`` (:func:`quad_uniforms`).
 QUAD_SAMPLES = 8
 
 
 def quad_uniforms(u, qi: int, n: int = QUAD_SAMPLES) -> np.ndarray:
     """Light-sample uniforms ``(N, n, 2)`` of quad ``qi`` from the ``glints`` uniforms layout
-    ``u (N, k)`` (:func:`prefilter.glints.render.random_dims`: ``QUAD_MIS`` pairs of ``_U_PAIR``
+    ``u (N, k)`` (:func:`prefilter.glints.render.random_dims`: ``QUAD_MIS`` pairs of ``U_PAIR``
     per quad): sample ``j`` reads pair ``j % QUAD_MIS``'s uniforms ``2 (j // QUAD_MIS)`` and the
     next, so the first ``QUAD_MIS`` are ``glints-direct``'s light samples."""
-    from prefilter.glints.render import _U_PAIR, QUAD_MIS
+    from prefilter.glints.render import U_PAIR, QUAD_MIS
 
-    if not 0 < n <= QUAD_MIS * (_U_PAIR // 2):
-        raise PrefilterError(f"n: expected 1 to {QUAD_MIS * (_U_PAIR // 2)} light samples, "
+    if not 0 < n <= QUAD_MIS * (U_PAIR // 2):
+        raise PrefilterError(f"n: expected 1 to {QUAD_MIS * (U_PAIR // 2)} light samples, "
                              f"got {n}")
     u = np.asarray(u, dtype=np.float64)
-    need = (qi + 1) * QUAD_MIS * _U_PAIR
+    need = (qi + 1) * QUAD_MIS * U_PAIR
     if u.ndim != 2 or u.shape[1] < need:
         raise PrefilterError(f"u: expected uniforms of shape (N, >= {need}), got {u.shape}")
-    blk = u[:, need - QUAD_MIS * _U_PAIR:need].reshape(len(u), QUAD_MIS, _U_PAIR)
+    blk = u[:, need - QUAD_MIS * U_PAIR:need].reshape(len(u), QUAD_MIS, U_PAIR)
     j = np.arange(n)
     o = 2 * (j // QUAD_MIS)
     return np.stack([blk[:, j % QUAD_MIS, o], blk[:, j % QUAD_MIS, o + 1]], -1)
@@ -254,14 +253,9 @@ def _environment_samples(light, frame, u):
     :func:`prefilter.glints.envlight.shade_sg` with ``u``): local directions ``(n, N, 3)`` and
     the weights ``L(wi) / (n pdf)`` ``(n, N, 3)``; ``u (N, 3 n)``."""
     from prefilter.glints.envlight import sample_sg, sg_eval
-    from prefilter.glints.render import environment_sgs
+    from prefilter.glints.render import environment_lobes
 
-    try:
-        mu, lam, p = environment_sgs(light)
-    except PrefilterError as exc:
-        raise PrefilterError(f"{light.image.where}: {exc}") from None
-    t, b, n = frame
-    pl = np.stack([p @ t.T, p @ b.T, p @ n.T], -1).transpose(1, 0, 2)  # (N, K, 3)
+    mu, lam, pl = environment_lobes(light, frame)
     ns = u.shape[1] // 3
     wis, wgts = [], []
     for j in range(ns):
@@ -288,8 +282,7 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
     :data:`WANG_SETTINGS`.
     """
     from prefilter.glints.brdf import brdf_cos_from_ndf, half
-    # _U_PAIR is private in render.py: the uniforms layout shared with glints-direct
-    from prefilter.glints.render import _U_PAIR, ENV_SAMPLES, QUAD_MIS, footprints, random_dims
+    from prefilter.glints.render import U_PAIR, ENV_SAMPLES, QUAD_MIS, footprints, random_dims
     from prefilter.ltc import clamped_cosine_integral
     from prefilter.render.shading import point_incoming, shading_frames
     from prefilter.sphere.sampling import to_local
@@ -342,7 +335,7 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
             wgts += list(wgt)
             lamb += [False] * len(wi)
         for j, light in enumerate(env):
-            o = nq * QUAD_MIS * _U_PAIR + j * 3 * ENV_SAMPLES
+            o = nq * QUAD_MIS * U_PAIR + j * 3 * ENV_SAMPLES
             wi, wgt = _environment_samples(light, frame, u[m][:, o:o + 3 * ENV_SAMPLES])
             wis += list(wi)
             wgts += list(wgt)
