@@ -11,8 +11,9 @@ from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints import pndf_image
 from prefilter.glints.bake import bake
 from prefilter.glints.query import block_means, point, range_mean
-from prefilter.glints.store import (ARRAYS, block_index_from_mask, decode, decode_v2,
-                                    encode, encode_v2, load, pack_mask, save)
+from prefilter.glints.store import (ARRAYS, PREFIX_MAX, block_index_from_mask, decode,
+                                    decode_v2, encode, encode_v2, factor_codes, load, pack_mask,
+                                    save)
 
 R, S, BLK = 32, 0.4, 8
 
@@ -189,7 +190,9 @@ def test_8bit_encoding_error_is_rounding(bits):
     """decode(encode(.)) of groups of different ranks (one empty) == the factors up to the
     rounding bounds of ``q = 2^bits - 1`` steps: ``|c' - c| <= m_c / 2q``; for ``a``
     (renormalised after rounding, ``q_i = q a_i / m + d_i``, ``|d_i| <= 1/2``):
-    ``|a' - a| <= (m / q) (1/2 + a B / 2) / (1 - B m / 2q)``."""
+    ``|a' - a| <= (1 / k) (1/2 + a B / 2) / (1 - B / 2k)`` with ``k = q / m`` steps per unit,
+    or ``k = PREFIX_MAX - B / 2`` where that would let the row's codes sum past ``PREFIX_MAX``
+    (16-bit codes: store.factor_codes)."""
     rng = np.random.default_rng(4)
     Bs, ranks, ks = 8, [3, 0, 5, 1], [4, 2, 7, 3]
     groups = []
@@ -208,8 +211,8 @@ def test_8bit_encoding_error_is_rounding(bits):
     for g, (a, b, c) in enumerate(groups):
         r = ranks[g]
         for f, P in ((a, A), (b, Bp)):
-            m = f.max(axis=1, keepdims=True)
-            bound = m / q * (0.5 + 0.5 * Bs * f) / (1 - Bs * m / (2 * q))
+            k = np.minimum(q / f.max(axis=1, keepdims=True), PREFIX_MAX - Bs // 2)
+            bound = (0.5 + 0.5 * Bs * f) / (k - Bs / 2)
             # float32 prefix sums add ~1e-7 (more than 16-bit codes' own rounding)
             assert np.all(np.abs(np.diff(P[g, :r].astype(np.float64), axis=1) - f)
                           <= bound + (1e-6 if bits == 8 else 2e-7))
@@ -343,6 +346,32 @@ def baked16(tmp_path_factory, baked):
     return nm, out, summary, load(out)
 
 
+@pytest.fixture(scope="module")
+def baked16c8(tmp_path_factory, baked):
+    """The map of ``baked`` with 16-bit ``a``, ``b`` and 8-bit ``c`` codes."""
+    nm = baked[0]
+    out = tmp_path_factory.mktemp("gl16c8") / "map.npz"
+    summary = bake(nm, out, rank=16, ndf_res=R, block=BLK, support=S, cell=16, converge=0.0,
+                   n_iter_max=300, tol=1e-7, progress=False, code_bits=16, c_bits=8)
+    return nm, out, summary, load(out)
+
+
+def test_16bit_factors_8bit_c_bake(baked, baked16, baked16c8):
+    """``code_bits=16, c_bits=8``: uint16 ``a``, ``b``, uint8 ``c`` (recorded in the settings),
+    ``c`` as many bytes as the 8-bit bake's (about: the budget moves a few groups), and an error
+    between the 16-bit and the 8-bit bakes'."""
+    _, _, s8, _ = baked
+    _, _, s16, _ = baked16
+    _, _, sh, gh = baked16c8
+    st = gh.header["settings"]
+    assert (st["code_bits"], st["c_bits"]) == (16, 8)
+    assert gh.codes["a"].dtype == gh.codes["b"].dtype == np.uint16
+    assert gh.codes["c"].dtype == np.uint8
+    assert 0.9 <= sh["bytes"]["c"] / s8["bytes"]["c"] <= 1.1
+    assert 1.8 <= sh["bytes"]["a"] / s8["bytes"]["a"] <= 2.2
+    assert s16["rel_l2_error"] * 0.99 <= sh["rel_l2_error"] <= s8["rel_l2_error"] * 1.01
+
+
 def test_16bit_codes_bake(baked, baked16):
     """``code_bits=16``: uint16 codes recorded in the settings, about the same ranks (the
     budget is per rank; only the 4 scale bytes per rank do not double, which moves a few
@@ -357,11 +386,71 @@ def test_16bit_codes_bake(baked, baked16):
     assert s16["rel_l2_error"] <= s8["rel_l2_error"] * 1.01
 
 
+def test_16bit_codes_keep_uint16_prefix_sums(baked16):
+    """16-bit ``a`` / ``b`` rows are scaled to code sums <= PREFIX_MAX (not to 65535 at their
+    maximum), so the packed prefix sums are uint16; the codes still resolve each row to a step
+    of at most 1 / (PREFIX_MAX - B / 2) of its sum."""
+    from prefilter.glints.query import packed
+
+    _, _, _, gm = baked16
+    for k in ("a", "b"):
+        sums = gm.codes[k].sum(axis=1, dtype=np.int64)
+        assert sums.max() <= PREFIX_MAX and sums[sums > 0].min() >= PREFIX_MAX - BLK
+    pa, pb = packed(gm)[:2]
+    assert pa.dtype == pb.dtype == np.uint16
+
+
+def test_factor_codes_by_maximum_unless_the_sum_overflows():
+    """8-bit rows of 16 values keep 255 steps of their maximum (sums <= 4080: unchanged bytes);
+    16-bit rows sum to at most PREFIX_MAX; a one-pixel row is capped too; zero rows stay zero."""
+    rng = np.random.default_rng(3)
+    f = rng.random((50, 16)) ** 6
+    f /= f.sum(axis=1, keepdims=True)
+    f[0] = 0.0
+    f[1] = np.eye(16)[3]
+    c8 = factor_codes(f, 255)
+    np.testing.assert_array_equal(c8, np.rint(255 * f / np.maximum(f.max(1, keepdims=True),
+                                                                     1e-300)))
+    c16 = factor_codes(f, 65535)
+    assert c16.sum(axis=1).max() <= PREFIX_MAX and np.all(c16[0] == 0)
+    assert c16[1, 3] == PREFIX_MAX - 8 and c16.max() <= 65535
+    err = np.abs(c16[2:] / c16[2:].sum(axis=1, keepdims=True) - f[2:])
+    assert np.all(err <= (0.5 + 8 * f[2:]) / (PREFIX_MAX - 16))  # the bound of the test above
+
+
+def test_16bit_files_with_uint32_prefix_sums_still_query(baked16, tmp_path):
+    """Files written before the code-sum cap (each row 65535 steps of its maximum: sums past
+    uint16) load with uint32 prefix sums and query the same NDF up to the codes' rounding."""
+    from prefilter._io import read_npz, save_npz_atomic
+    from prefilter.glints.query import packed
+
+    _, path, _, gm = baked16
+    data = {k: v for k, v in read_npz(path, "glints map").items() if k != "__meta__"}
+    for k in ("a", "b"):
+        f = data[k].astype(np.float64)
+        m = np.maximum(f.max(axis=1, keepdims=True), 1.0)
+        data[k] = np.rint(65535 * f / m).astype(np.uint16)
+    old = tmp_path / "old16.npz"
+    save_npz_atomic(old, format_name="prefilter-glints", format_version=3, **data)
+    gm_old = load(old)
+    assert packed(gm_old)[0].dtype == np.uint32
+    rng = np.random.default_rng(8)
+    c = rng.uniform(0, 32, (200, 2))
+    sp = rng.uniform(0.5, 12, 200)
+    s = rng.uniform(-S, S, (200, 2))
+    want = point(gm, c, sp, s)
+    np.testing.assert_allclose(point(gm_old, c, sp, s), want, rtol=1e-3, atol=1e-5 * want.max())
+
+
 def test_bake_code_bits_errors(tmp_path):
     with pytest.raises(PrefilterError, match="code_bits: expected one of"):
         bake(sinusoid(16), tmp_path / "x.npz", code_bits=12, progress=False)
     with pytest.raises(PrefilterError, match="code_bits: expected one of"):
         encode([], 4)
+    with pytest.raises(PrefilterError, match="c_bits: expected one of"):
+        encode([], 16, 12)
+    with pytest.raises(PrefilterError, match="c_bits: expected one of"):
+        bake(sinusoid(16), tmp_path / "x.npz", c_bits=4, progress=False)
 
 
 def test_loader_rejects_mixed_code_dtypes(baked16, tmp_path):
@@ -372,13 +461,14 @@ def test_loader_rejects_mixed_code_dtypes(baked16, tmp_path):
     data["a"] = data["a"].astype(np.uint8)
     bad = tmp_path / "mixed.npz"
     save_npz_atomic(bad, format_name="prefilter-glints", format_version=3, **data)
-    with pytest.raises(TableFileError, match="a: expected a 2-D uint16 array, got uint8"):
+    with pytest.raises(TableFileError, match="b: expected a 2-D uint8 array, got uint16"):
         load(bad)
 
 
-@pytest.mark.parametrize("bits", [8, 16])
+@pytest.mark.parametrize("bits", [8, 16, "16/8"])
 @pytest.mark.parametrize("prefetch", [False, True])
-def test_queries_are_the_stored_codes_evaluated_in_float64(baked, baked16, prefetch, bits):
+def test_queries_are_the_stored_codes_evaluated_in_float64(baked, baked16, baked16c8, prefetch,
+                                                          bits):
     """The kernels compute on the 8- or 16-bit codes: point values at pixel centres and range
     means of random fractional rectangles of single images == the float64 images rebuilt from
     the codes (1e-6 relative: the float32 per-component scale), with or without the prefetch
@@ -386,7 +476,7 @@ def test_queries_are_the_stored_codes_evaluated_in_float64(baked, baked16, prefe
     from prefilter.glints import _qkernels as qk
     from prefilter.glints.query import kernel_args
 
-    _, _, _, gm = baked if bits == 8 else baked16
+    _, _, _, gm = {8: baked, 16: baked16, "16/8": baked16c8}[bits]
     rng = np.random.default_rng(7)
     images = rng.choice(gm.pyramid.n_images, 6, replace=False)
     ref = _images_from_codes(gm, images)

@@ -132,7 +132,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
          levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
          ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
-         code_bits: int = 8) -> dict:
+         code_bits: int = 8, c_bits: int | None = None) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -160,6 +160,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     ``code_bits``: 8 (default) or 16 bits per stored factor value (:func:`store.encode`). The
     budget ``rank`` keeps its meaning (the bytes per rank double, so the file about doubles);
     16 bits remove the rounding that shows in the NDF tails (docs/glints-part2.md, session 7).
+    ``c_bits``: bits of the per-image factor ``c`` (default ``code_bits``); 16-bit ``a``, ``b``
+    with 8-bit ``c`` are as accurate as all-16-bit codes on the brushed map's scenes and as fast
+    to query as 8-bit ones (docs/glints-part2.md, session 9).
     """
     from tqdm import tqdm
 
@@ -177,7 +180,10 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     ft = as_ndf_truncation(footprint_truncation, "footprint_truncation")
     if code_bits not in CODE_BITS:
         raise PrefilterError(f"code_bits: expected one of {CODE_BITS}, got {code_bits!r}")
-    code_bytes = code_bits // 8
+    c_bits = code_bits if c_bits is None else c_bits
+    if c_bits not in CODE_BITS:
+        raise PrefilterError(f"c_bits: expected one of {CODE_BITS}, got {c_bits!r}")
+    code_bytes, c_bytes = code_bits // 8, c_bits // 8
     cell = as_positive_int(cell, "cell")
     pyr = plan(H, W, stride0, sigma0, max_levels)
     if cell % pyr.stride0 or H % cell or W % cell:
@@ -193,7 +199,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     base = max(1, rank // 2)
     candidates = sorted({min(max_rank, max(base, round(base * f))) for f in RANK_STEPS}
                         | {max_rank})
-    # per rank: a, b (codes), c_scale (float32); + code_bytes per block (c)
+    # per rank: a, b (codes), c_scale (float32); + c_bytes per block (c)
     unit_bytes_group = 2 * B * code_bytes + 4
     settings = dict(rank=rank, ndf_res=R, block=B, support=S, intrinsic_roughness=sr,
                     stride0=pyr.stride0, sigma0=pyr.sigma0, cell=cell, converge=converge,
@@ -206,6 +212,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["footprint_truncation"] = ft
     if code_bits != 8:
         settings["code_bits"] = code_bits
+    if c_bits != code_bits:
+        settings["c_bits"] = c_bits
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
@@ -325,7 +333,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         groups = [(fits[g][0].T, fits[g][1].T, fits[g][2]) if r_cell[g] else
                   (np.zeros((0, B)), np.zeros((0, B)), np.zeros((rows[g + 1] - rows[g], 0)))
                   for g in range(nb * nb)]
-        enc = encode(groups, code_bits)
+        enc = encode(groups, code_bits, c_bits)
         A_, B_, C_ = decode(**enc, group_rows=rows)
         a_s, b_s = np.diff(A_.astype(np.float64), axis=2), np.diff(B_.astype(np.float64), axis=2)
         err2_g = np.zeros(nb * nb)
@@ -358,7 +366,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
             err2_all.append(p1["err2_g"])
             counts.append(np.diff(p1["rows"]))
         counts = np.concatenate(counts)
-        unit = np.where(counts > 0, code_bytes * counts + unit_bytes_group, 0.0)
+        unit = np.where(counts > 0, c_bytes * counts + unit_bytes_group, 0.0)
         group_level = np.repeat([m[0][0] for m in members], nb * nb)
         ranks_ = split_budget(np.concatenate(err2_all), unit, group_level, rank, base,
                               candidates, level_rank)
@@ -404,7 +412,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                    ranks=enc["ranks"].astype(np.int32),
                    codes=dict(enc, group_rows=np.concatenate(group_rows)))
     live = enc["ranks"] > 0
-    unit = code_bytes * np.diff(np.concatenate(group_rows)) + unit_bytes_group
+    unit = c_bytes * np.diff(np.concatenate(group_rows)) + unit_bytes_group
     e2g = np.concatenate(err2_groups)
     top = np.sort(e2g)[::-1]
     summary = dict(

@@ -77,9 +77,15 @@ PIXEL_SIGMA = 0.5
 #: tails beyond 4 stds show: plane brushed mid / far 0.101 / 0.097 -> 0.078 / 0.079 (6 / 6;
 #: element cut alone 0.100 / 0.081), no cell of the point matrix worse by more than 0.001; bake
 #: time ~2x, storage +0.1-3.5 % (docs/glints-part2.md, session 6).
+#: ``code_bits`` 16 / ``c_bits`` 8: 16-bit ``a``, ``b`` factors, 8-bit per-image ``c``. The
+#: 8-bit ``a``, ``b`` rounding (with the CP's early stop, now fixed in :mod:`cp`) was the
+#: brushed plane's point-light miss: mid / far 0.078 / 0.079 -> 0.038 / 0.050; 8-bit ``c``
+#: changes no cell by more than 0.0005 and keeps the range queries as fast as all-8-bit codes
+#: (all-16-bit ones were 1.4x slower). Storage +x % (docs/glints-part2.md, session 9).
 BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
-                     blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0)
+                     blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
+                     code_bits=16, c_bits=8)
 #: How ``glints`` evaluates compressed footprints (:func:`prefilter.glints.brdf.surface`):
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid

@@ -24,7 +24,12 @@ largest rank; the queries compute on the 8-bit codes and never decode them):
   of entries, in 255 steps of ``c_scale (sum(ranks),)`` float32 (the component's maximum over the
   group's rows).
 * ``a``, ``b``, ``c`` may instead all be uint16 (65535 steps; ``bake(code_bits=16)``): the
-  number of steps is the dtype's maximum (:func:`code_levels`), nothing else changes.
+  number of steps is the dtype's maximum (:func:`code_levels`); ``c`` may keep uint8 codes while
+  ``a``, ``b`` are uint16 (``bake(code_bits=16, c_bits=8)``, the renderer's setting: the 8-bit
+  rounding that matters is that of ``a``, ``b``). Since session 9 the encoder
+  caps each ``a`` / ``b`` row's code sum at 65535 (:func:`factor_codes`; the loader's
+  renormalisation makes the scale free), so the queries' prefix sums fit uint16; files
+  written before that load as they are (uint32 prefix sums).
 * ``block_mask (N, ceil(nb^2 / 8))`` uint8: packed bits, set for kept blocks (row-major
   ``[bi, bj]``). The rows of ``C`` are ordered by group, then by image, so ``block_index`` and the
   group offsets follow from the mask and ``image_cell`` (:func:`block_index_from_mask`).
@@ -171,28 +176,55 @@ def encode_v2(a: np.ndarray, b: np.ndarray, c: np.ndarray, group_rows: np.ndarra
                 c_scale=scale, group_rows=rows)
 
 
-def encode(groups: list, code_bits: int = 8) -> dict:
+#: Largest code sum of an ``a`` / ``b`` row: the queries' integer prefix sums of the codes are
+#: then exact in uint16 (:func:`prefilter.glints.query.packed`).
+PREFIX_MAX = int(np.iinfo(np.uint16).max)
+
+
+def factor_codes(f: np.ndarray, Q: int) -> np.ndarray:
+    """Codes ``(R, B)`` float64 (integers in ``[0, Q]``) of non-negative factor rows ``f (R, B)``:
+    ``Q`` steps of each row's maximum, unless the row's codes would then sum past
+    :data:`PREFIX_MAX`; such rows (16-bit codes: all but one-pixel rows) are scaled to a sum of
+    at most ``PREFIX_MAX`` instead, a step of ``1 / 65527`` of the row's sum for ``B = 16`` rather
+    than ``1 / 65535`` of its maximum. Why: uint32 prefix sums made the environment's range
+    queries 1.5x slower than uint16 ones (docs/glints-part2.md, session 9)."""
+    f = np.asarray(f, np.float64)
+    if not f.size:
+        return np.zeros(f.shape)
+    m = f.max(axis=1, keepdims=True)
+    s = f.sum(axis=1, keepdims=True)
+    by_max = np.divide(Q * f, m, out=np.zeros(f.shape), where=m > 0)
+    # rounding adds at most 1/2 per entry: keep ceil(B / 2) steps of headroom
+    cap = PREFIX_MAX - -(-f.shape[1] // 2)
+    over = (Q * s > cap * m)[:, 0]
+    by_max[over] = f[over] * (cap / s[over])
+    return np.rint(by_max)
+
+
+def encode(groups: list, code_bits: int = 8, c_bits: int | None = None) -> dict:
     """Version-3 factor arrays (``ranks``, ``a``, ``b``, ``c``, ``c_scale``) of groups given as
     ``(a (r_g, B), b (r_g, B), c (K_g, r_g))`` non-negative float factors (``a``, ``b`` rows
     summing to 1 or zero); concatenating the arrays of consecutive runs of groups gives those of
-    the whole run. ``code_bits`` (8 or 16): ``a``, ``b``, ``c`` as uint8 or uint16 codes."""
-    if code_bits not in _CODE_DTYPES:
-        raise PrefilterError(f"code_bits: expected one of {CODE_BITS}, got {code_bits!r}")
-    dt = _CODE_DTYPES[code_bits]
-    Q = code_levels(dt)
+    the whole run. ``code_bits`` (8 or 16): ``a``, ``b`` as uint8 or uint16 codes; ``c_bits``:
+    those of ``c`` (default ``code_bits``)."""
+    c_bits = code_bits if c_bits is None else c_bits
+    for name, bits in (("code_bits", code_bits), ("c_bits", c_bits)):
+        if bits not in _CODE_DTYPES:
+            raise PrefilterError(f"{name}: expected one of {CODE_BITS}, got {bits!r}")
+    dt, dc = _CODE_DTYPES[code_bits], _CODE_DTYPES[c_bits]
+    Q, Qc = code_levels(dt), code_levels(dc)
     ranks, qa, qb, qc, sc = [], [], [], [], []
     for a, b, c in groups:
         ranks.append(a.shape[0])
         for f, out in ((a, qa), (b, qb)):
-            m = f.max(axis=1, keepdims=True) if f.size else np.zeros((f.shape[0], 1))
-            out.append(np.rint(np.divide(Q * f, m, out=np.zeros(f.shape), where=m > 0)))
+            out.append(factor_codes(f, Q))
         m = c.max(axis=0) if c.shape[0] else np.zeros(c.shape[1])
-        qc.append(np.rint(np.divide(Q * c, m, out=np.zeros(c.shape), where=m > 0)).ravel())
+        qc.append(np.rint(np.divide(Qc * c, m, out=np.zeros(c.shape), where=m > 0)).ravel())
         sc.append(m)
     B = groups[0][0].shape[1] if groups else 0
     cat = (lambda xs, shape: np.concatenate(xs) if xs else np.zeros(shape))
     return dict(ranks=np.array(ranks, np.uint16), a=cat(qa, (0, B)).astype(dt),
-                b=cat(qb, (0, B)).astype(dt), c=cat(qc, (0,)).astype(dt),
+                b=cat(qb, (0, B)).astype(dt), c=cat(qc, (0,)).astype(dc),
                 c_scale=cat(sc, (0,)).astype(np.float32))
 
 
@@ -397,10 +429,11 @@ def _decode_checked(path, data) -> dict:
 def _decode_checked_v3(path, data, header) -> dict:
     """Validate the version-3 arrays (dtypes, shapes, counts, values) and decode them."""
     arrs = {k: data[k] for k in ARRAYS_V3}
-    # the factor codes: all uint8 or all uint16 (code_bits 8 / 16)
-    code = arrs["c"].dtype if arrs["c"].dtype in (np.uint8, np.uint16) else np.dtype(np.uint8)
+    # the factor codes: a, b both uint8 or both uint16 (code_bits), c either (c_bits)
+    code = arrs["a"].dtype if arrs["a"].dtype in (np.uint8, np.uint16) else np.dtype(np.uint8)
+    ccode = arrs["c"].dtype if arrs["c"].dtype in (np.uint8, np.uint16) else np.dtype(np.uint8)
     for name, dtype, ndim in (("ranks", np.uint16, 1), ("a", code, 2), ("b", code, 2),
-                              ("c", code, 1), ("c_scale", np.float32, 1),
+                              ("c", ccode, 1), ("c_scale", np.float32, 1),
                               ("block_mask", np.uint8, 2), ("image_cell", np.int32, 1)):
         arr = arrs[name]
         if arr.dtype != dtype or arr.ndim != ndim:
