@@ -16,13 +16,13 @@ summary (stored MB, relative L2 error, largest group rank), per cell FLIP (HDR, 
 stops) and the "leak": pixels where ``glints > 0`` and ``glints-direct == 0`` and their largest
 value relative to the ``glints-direct`` frame maximum.
 
-``"exact_from_level": L`` in a setting (not a bake key) stores every group of pyramid levels
-``>= L`` as its exact non-negative CP (:func:`exact_cp`; ranks up to 192 on this map), patched
-into the bake for that setting only (the levels below are fitted by the bake's CP under its
-budget as usual). ``L = 0`` is lossless up to the codes' rounding: its FLIP is what the query
-(pyramid resampling, bilinear NDF lookup, blank blocks) costs without compression error. Bakes
-go to ``$PREFILTER_GLINTS_CACHE`` (``/exact-from-L`` below it for those); set it to a scratch
-directory.
+``"exact_from_level": L`` (a bake key since session 9) stores every group of pyramid levels
+``>= L`` as its exact non-negative CP (:func:`prefilter.glints.cp.exact_cp`; ranks up to 192 on
+this map). ``L = 0`` is lossless up to the codes' rounding: its FLIP is what the query (pyramid
+resampling, bilinear NDF lookup, blank blocks) costs without compression error. (Session 8's
+rows were made with a patch that split the budget over the fitted groups only; the bake option
+gives the fitted groups the ranks they get without it.) Bakes go to
+``$PREFILTER_GLINTS_CACHE``; set it to a scratch directory.
 """
 
 from __future__ import annotations
@@ -30,7 +30,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -54,69 +53,6 @@ DEFAULT_SETTINGS = {
     "lossless 16-bit": {"code_bits": 16, "exact_from_level": 0},
     "b48 16-bit tol 0, levels >= 2 exact": {"code_bits": 16, "tol": 0.0, "exact_from_level": 2},
 }
-
-
-def exact_cp(T: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Exact non-negative CP ``a (I, r)``, ``b (J, r)`` (columns summing to 1), ``c (K, r)`` of
-    ``T (I, J, K) >= 0``: one rank-one term per non-zero fibre of the smallest of its three fibre
-    sets (``T = sum_ij e_i (x) e_j (x) T[i, j, :]`` and the two other orders), so
-    ``r <= min(I J, I K, J K)``: the non-negative CP rank of a group never exceeds ``B^2``."""
-    I, J, K = T.shape
-    nz = [T.any(axis=2), T.any(axis=1), T.any(axis=0)]  # (I, J), (I, K), (J, K)
-    form = int(np.argmin([m.sum() for m in nz]))
-    idx = np.nonzero(nz[form])
-    r = len(idx[0])
-    a, b, c = np.zeros((I, r)), np.zeros((J, r)), np.zeros((K, r))
-    cols = np.arange(r)
-    if form == 0:
-        a[idx[0], cols] = 1.0
-        b[idx[1], cols] = 1.0
-        c[:] = T[idx[0], idx[1], :].T
-        return a, b, c
-    fib = T[idx[0], :, idx[1]] if form == 1 else T[:, idx[0], idx[1]].T  # (r, J) or (r, I)
-    s = fib.sum(axis=1)
-    if form == 1:
-        a[idx[0], cols] = 1.0
-        b[:] = (fib / s[:, None]).T
-    else:
-        a[:] = (fib / s[:, None]).T
-        b[idx[0], cols] = 1.0
-    c[idx[1], cols] = s
-    return a, b, c
-
-
-#: a rank no allocation gives: marks the groups :func:`exact_levels_bake` stores exactly
-_EXACT = 100_000
-
-
-@contextlib.contextmanager
-def exact_levels_bake(level: int):
-    """Inside: :func:`prefilter.glints.bake.bake` stores the groups of pyramid levels ``>=
-    level`` as :func:`exact_cp` (their budget split skipped, pass 2 returns the exact form), the
-    others as usual under the budget."""
-    import prefilter.glints.bake as bk
-    from prefilter.glints import cp as cpmod
-
-    nn_cp_batch, split_budget = cpmod.nn_cp_batch, bk.split_budget
-
-    def batch(tensors, rank, *, init=None, **kw):
-        if init is not None and rank == _EXACT:
-            return [cpmod._normalised(*exact_cp(np.asarray(t, np.float64)), t) for t in tensors]
-        return nn_cp_batch(tensors, rank, init=init, **kw)
-
-    def split(err2, unit, group_level, rank, base, candidates, level_rank="global"):
-        out = np.full(len(unit), _EXACT, np.int64)
-        fit = group_level < level
-        if fit.any():
-            out[fit] = split_budget(err2[fit], unit[fit], group_level[fit], rank, base, candidates,
-                                    level_rank)
-        return out
-
-    cpmod.nn_cp_batch, bk.split_budget = batch, split
-    try:
-        yield
-    finally:
-        cpmod.nn_cp_batch, bk.split_budget = nn_cp_batch, split_budget
 
 
 def _scene(cell):
@@ -169,19 +105,13 @@ def run_setting(label: str, setting: dict, frames: dict) -> dict:
     from prefilter.render.metrics import flip
     from prefilter.render.pipeline import render
 
-    bake = {k: v for k, v in setting.items() if k != "exact_from_level"}
-    exact = setting.get("exact_from_level")
-    saved = dict(gr.BAKE_SETTINGS), gr.environment_radiance, os.environ.get(
-        "PREFILTER_GLINTS_CACHE")
+    saved = dict(gr.BAKE_SETTINGS), gr.environment_radiance
     with contextlib.ExitStack() as stack:
         gr._SURFACES.clear()
         gr._BY_ID.clear()
-        if exact is not None:
-            stack.enter_context(exact_levels_bake(int(exact)))
-            os.environ["PREFILTER_GLINTS_CACHE"] = str(gr.cache_dir() / f"exact-from-{exact}")
         stack.callback(gr._SURFACES.clear)
         stack.callback(gr._BY_ID.clear)
-        gr.BAKE_SETTINGS.update(bake)
+        gr.BAKE_SETTINGS.update(setting)
         cache = gr.cache_dir()
         before = set(cache.glob("*.npz"))
         row = dict(label=label, setting=setting)
@@ -214,10 +144,6 @@ def run_setting(label: str, setting: dict, frames: dict) -> dict:
             gr.BAKE_SETTINGS.clear()
             gr.BAKE_SETTINGS.update(saved[0])
             gr.environment_radiance = saved[1]
-            if saved[2] is None:
-                os.environ.pop("PREFILTER_GLINTS_CACHE", None)
-            else:
-                os.environ["PREFILTER_GLINTS_CACHE"] = saved[2]
     return row
 
 

@@ -157,3 +157,24 @@ def test_split_budget_per_level_and_uniform():
     assert max(means_glob) - min(means_glob) > 0.3 * rank
     assert min(means_per) > 0.85 * rank
     np.testing.assert_array_equal(split_budget(e, u, level, rank, base, cand, "uniform"), rank)
+
+
+@pytest.mark.parametrize("shape", [(4, 4, 30), (4, 5, 2), (3, 8, 8)])
+def test_exact_cp_reconstructs_and_bounds_the_rank(shape):
+    """cp.exact_cp: reconstruction == the tensor (float rounding), a / b columns sum to 1, rank
+    <= min(IJ, IK, JK) and no larger than the number of non-zero fibres; sparse tensors (most
+    fibres zero) get fewer terms; an all-zero tensor gives rank 0."""
+    from prefilter.glints.cp import exact_cp, reconstruct
+
+    rng = np.random.default_rng(11)
+    I, J, K = shape
+    T = rng.random(shape) * (rng.random(shape) < 0.3)
+    a, b, c, err = exact_cp(T)
+    r = a.shape[1]
+    assert r <= min(I * J, I * K, J * K)
+    assert r == min((T.any(axis=2)).sum(), (T.any(axis=1)).sum(), (T.any(axis=0)).sum())
+    np.testing.assert_allclose(reconstruct(a, b, c), T, atol=1e-14)
+    assert err < 1e-14 and np.all(a >= 0) and np.all(b >= 0) and np.all(c >= 0)
+    np.testing.assert_allclose(a.sum(axis=0), 1.0)
+    np.testing.assert_allclose(b.sum(axis=0), 1.0)
+    assert exact_cp(np.zeros(shape))[0].shape == (I, 0)

@@ -372,6 +372,25 @@ def test_16bit_factors_8bit_c_bake(baked, baked16, baked16c8):
     assert s16["rel_l2_error"] * 0.99 <= sh["rel_l2_error"] <= s8["rel_l2_error"] * 1.01
 
 
+def test_exact_from_level_stores_upper_levels_exactly(baked, tmp_path):
+    """``exact_from_level=1``: every level >= 1 group is its exact CP (errors at the 16-bit
+    codes' rounding), level 0 fitted with the ranks it gets without the option (the same
+    error), more bytes, and the setting is recorded."""
+    nm = baked[0]
+    kw = dict(rank=16, ndf_res=R, block=BLK, support=S, cell=16, converge=0.0, n_iter_max=300,
+              tol=1e-7, progress=False, code_bits=16)
+    s0 = bake(nm, tmp_path / "fit.npz", **kw)
+    s1 = bake(nm, tmp_path / "exact.npz", exact_from_level=1, **kw)
+    assert load(tmp_path / "exact.npz").header["settings"]["exact_from_level"] == 1
+    e0, e1 = s0["rel_l2_error_per_level"], s1["rel_l2_error_per_level"]
+    assert len(e1) >= 3 and e1[0] == pytest.approx(e0[0], rel=1e-6)
+    # exact up to a few 16-bit code steps (1.5e-5); the fits of levels 1, 2 err 5-100x more
+    assert max(e1[1:]) < 5e-5 and e1[1] < e0[1] / 5 and e1[2] < e0[2] / 5
+    assert s1["compressed_bytes"] > s0["compressed_bytes"]
+    with pytest.raises(PrefilterError, match="exact_from_level"):
+        bake(nm, tmp_path / "x.npz", exact_from_level=-1, **kw)
+
+
 def test_16bit_codes_bake(baked, baked16):
     """``code_bits=16``: uint16 codes recorded in the settings, about the same ranks (the
     budget is per rank; only the 4 scale bytes per rank do not double, which moves a few

@@ -58,6 +58,8 @@ RANK_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
 #: how the rank budget is split (``bake(level_rank=...)``): over the whole map, per pyramid
 #: level, or not at all (every group at ``rank``)
 LEVEL_RANK = ("global", "level", "uniform")
+#: allocation marker of the groups stored exactly (``bake(exact_from_level=...)``)
+EXACT = -1
 
 
 def _memmap(path, shape):
@@ -132,7 +134,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
          levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
          ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
-         code_bits: int = 8, c_bits: int | None = None) -> dict:
+         code_bits: int = 8, c_bits: int | None = None,
+         exact_from_level: int | None = None) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -163,6 +166,13 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     ``c_bits``: bits of the per-image factor ``c`` (default ``code_bits``); 16-bit ``a``, ``b``
     with 8-bit ``c`` are as accurate as all-16-bit codes on the brushed map's scenes and as fast
     to query as 8-bit ones (docs/glints-part2.md, session 9).
+
+    ``exact_from_level``: the groups of pyramid levels ``>=`` this are stored as their exact
+    non-negative CP (:func:`prefilter.glints.cp.exact_cp`: ranks up to ``B^2``, beyond
+    ``max_rank``) instead of a fit; the other groups get the ranks they get without the option
+    (the budget is split over all groups as usual, then the exact ones replace theirs). The
+    levels above the finest few hold few images, so this costs little storage and removes the
+    compression error that far footprints see.
     """
     from tqdm import tqdm
 
@@ -184,6 +194,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     if c_bits not in CODE_BITS:
         raise PrefilterError(f"c_bits: expected one of {CODE_BITS}, got {c_bits!r}")
     code_bytes, c_bytes = code_bits // 8, c_bits // 8
+    if exact_from_level is not None:
+        exact_from_level = as_positive_int(exact_from_level, "exact_from_level", lo=0)
     cell = as_positive_int(cell, "cell")
     pyr = plan(H, W, stride0, sigma0, max_levels)
     if cell % pyr.stride0 or H % cell or W % cell:
@@ -214,6 +226,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["code_bits"] = code_bits
     if c_bits != code_bits:
         settings["c_bits"] = c_bits
+    if exact_from_level is not None:
+        settings["exact_from_level"] = exact_from_level
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
@@ -325,7 +339,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         first = {g: (p1["a"][g].T.astype(np.float64), p1["b"][g].T.astype(np.float64),
                      p1["c"][rows[g]:rows[g + 1]].astype(np.float64)) for g in range(nb * nb)}
         fits = dict(first)
-        for r in sorted(set(r_cell.tolist()) - {0, base}):
+        for g in np.flatnonzero(r_cell == EXACT):
+            fits[g] = cpmod.exact_cp(tensors[g])[:3]
+        for r in sorted(set(r_cell.tolist()) - {0, base, EXACT}):
             gs = [g for g in range(nb * nb) if r_cell[g] == r]
             out = cpmod.nn_cp_batch([tensors[g] for g in gs], int(r), n_iter_max=n_iter_max,
                                     tol=tol, seed=seed + cid, init=[first[g] for g in gs])
@@ -370,6 +386,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         group_level = np.repeat([m[0][0] for m in members], nb * nb)
         ranks_ = split_budget(np.concatenate(err2_all), unit, group_level, rank, base,
                               candidates, level_rank)
+        if exact_from_level is not None:
+            # the fitted groups keep the ranks they get without the option
+            ranks_[group_level >= exact_from_level] = EXACT
         ck.save(ALLOC_CHUNK, ranks=np.where(counts > 0, ranks_, 0).astype(np.int64))
     alloc = ck.load(ALLOC_CHUNK)["ranks"]
     run(refit_cell, range(n_cells), "CP refit")

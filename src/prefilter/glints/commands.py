@@ -100,10 +100,13 @@ def shared_options(**defaults):
 @click.option("--c-bits", default=None, type=click.Choice(["8", "16"]),
               help="Bits of the per-image factor c (default: --code-bits); the renderer bakes "
                    "--code-bits 16 --c-bits 8.")
+@click.option("--exact-from-level", default=None, type=click.IntRange(min=0),
+              help="Store the groups of pyramid levels >= this exactly (no CP fit; outside the "
+                   "rank budget).")
 @shared_options(iters=50, seed=0, quiet=False)
 def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
                 stride0, sigma0, cell, converge, ndf_truncation, footprint_truncation,
-                code_bits, c_bits, iters, seed, quiet):
+                code_bits, c_bits, exact_from_level, iters, seed, quiet):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
@@ -117,7 +120,8 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
                    converge=converge, n_iter_max=iters, seed=seed, progress=not quiet,
                    max_rank=max_rank, level_rank=level_rank, ndf_truncation=ndf_truncation,
                    footprint_truncation=footprint_truncation, code_bits=int(code_bits),
-                   c_bits=None if c_bits is None else int(c_bits))
+                   c_bits=None if c_bits is None else int(c_bits),
+                   exact_from_level=exact_from_level)
     s = summary
     click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
     click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "

@@ -309,6 +309,40 @@ def _normalised(a, b, c, T):
     return a, b, c, err
 
 
+def exact_cp(tensor: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Exact non-negative CP ``a (I, r)``, ``b (J, r)`` (columns summing to 1), ``c (K, r)`` and
+    its error (0 up to rounding) of ``tensor (I, J, K) >= 0``: one rank-one term per non-zero
+    fibre of the smallest of its three fibre sets (``T = sum_ij e_i (x) e_j (x) T[i, j, :]``
+    and the two other orders), so ``r <= min(I J, I K, J K)``: a group's non-negative CP rank
+    never exceeds ``B^2`` (nor ``B K``). Used for the pyramid levels a bake stores exactly
+    (``bake(exact_from_level=...)``)."""
+    T = np.asarray(tensor, dtype=np.float64)
+    if T.ndim != 3 or np.any(T < 0) or not np.all(np.isfinite(T)):
+        raise PrefilterError("tensor: expected a finite non-negative (I, J, K) array")
+    I, J, K = T.shape
+    nz = [T.any(axis=2), T.any(axis=1), T.any(axis=0)]  # (I, J), (I, K), (J, K)
+    form = int(np.argmin([m.sum() for m in nz]))
+    idx = np.nonzero(nz[form])
+    r = len(idx[0])
+    a, b, c = np.zeros((I, r)), np.zeros((J, r)), np.zeros((K, r))
+    cols = np.arange(r)
+    if form == 0:
+        a[idx[0], cols] = 1.0
+        b[idx[1], cols] = 1.0
+        c[:] = T[idx[0], idx[1], :].T
+    else:
+        fib = T[idx[0], :, idx[1]] if form == 1 else T[:, idx[0], idx[1]].T  # (r, J) / (r, I)
+        s = fib.sum(axis=1)
+        if form == 1:
+            a[idx[0], cols] = 1.0
+            b[:] = (fib / s[:, None]).T
+        else:
+            a[:] = (fib / s[:, None]).T
+            b[idx[0], cols] = 1.0
+        c[idx[1], cols] = s
+    return _normalised(a, b, c, T)
+
+
 def reconstruct(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     """``T_hat (I, J, K) = sum_r a_r (x) b_r (x) c_r``."""
     return (_khatri_rao(a, b) @ c.T).reshape(a.shape[0], b.shape[0], c.shape[0])
