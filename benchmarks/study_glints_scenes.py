@@ -48,6 +48,7 @@ noise between them); rows carry ``same_estimator``.
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 import time
 from pathlib import Path
@@ -109,9 +110,34 @@ def error_by_luminance(error_map, test, reference) -> dict:
     return out
 
 
+def _direct_frame(sc_dict: dict, sc, cache: Path | None) -> tuple[np.ndarray, float]:
+    """``glints-direct`` frame of a scene and its wall seconds; with ``cache`` (``--direct-cache``)
+    kept there under the SHA-1 of the scene (the frame does not depend on the bake: re-runs of
+    the matrix with other bake settings skip it; delete the folder when glints-direct
+    changes)."""
+    from prefilter.render.pipeline import render
+
+    f = None
+    if cache is not None:
+        key = hashlib.sha1(json.dumps(sc_dict, sort_keys=True).encode()).hexdigest()[:16]
+        f = cache / f"direct-{key}.npz"
+        if f.exists():
+            with np.load(f) as d:
+                return d["img"], float(d["t"])
+    t0 = time.perf_counter()
+    img = render(sc, "glints-direct")
+    t = time.perf_counter() - t0
+    if f is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+        tmp = f.with_suffix(".tmp.npz")
+        np.savez(tmp, img=img, t=t)
+        tmp.replace(f)
+    return img, t
+
+
 def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False,
          converged: int = 0, stop_exposure: float | None = None,
-         by_luminance: bool = False) -> dict:
+         by_luminance: bool = False, direct_cache: Path | None = None) -> dict:
     """One matrix cell. ``floor``: also ``glints-direct`` with another seed, and FLIP between
     its two images: the Monte Carlo noise floor of a comparison against a 1-spp MIS / SG-sampled
     ``glints-direct`` (quad and environment lights; 0 for point lights). ``converged``: also
@@ -123,13 +149,14 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
     from prefilter.render.pipeline import render
     from prefilter.render.scene import load_scene
 
-    sc = load_scene(scene(shape, DISTANCES[dist_name], kind, lights))
+    sd = scene(shape, DISTANCES[dist_name], kind, lights)
+    sc = load_scene(sd)
     render(sc, "glints")  # bake (disk cache) and compile outside the timing
     img, t = {}, {}
-    for m in ("glints", "glints-direct"):
-        t0 = time.perf_counter()
-        img[m] = render(sc, m)
-        t[m] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    img["glints"] = render(sc, "glints")
+    t["glints"] = time.perf_counter() - t0
+    img["glints-direct"], t["glints-direct"] = _direct_frame(sd, sc, direct_cache)
     mean_d = float(img["glints-direct"].mean())
     sp, hit = coverage(sc)
     extra = {}
@@ -361,6 +388,9 @@ def main():
                          "samples as glints-direct: FLIP = compression error alone)")
     ap.add_argument("--no-direct", action="store_true",
                     help="--reference: skip the 1-spp glints-direct frame (costly far away)")
+    ap.add_argument("--direct-cache", default=None,
+                    help="folder keeping the glints-direct frames between runs (they do not "
+                         "depend on the bake settings)")
     a = ap.parse_args()
     if a.bake:
         from prefilter.glints.render import BAKE_SETTINGS
@@ -392,7 +422,8 @@ def main():
                         r = reference_cell(shape, dn, kind, lights, a.seeds, not a.no_direct)
                     else:
                         r = cell(shape, dn, kind, lights, a.floor, a.converged,
-                                 a.stop_exposure, a.by_luminance)
+                                 a.stop_exposure, a.by_luminance,
+                                 Path(a.direct_cache) if a.direct_cache else None)
                         if a.bake:
                             r["bake"] = json.loads(a.bake)
                         if a.same_estimator:

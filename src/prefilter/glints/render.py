@@ -79,13 +79,15 @@ PIXEL_SIGMA = 0.5
 #: time ~2x, storage +0.1-3.5 % (docs/glints-part2.md, session 6).
 #: ``code_bits`` 16 / ``c_bits`` 8: 16-bit ``a``, ``b`` factors, 8-bit per-image ``c``. The
 #: 8-bit ``a``, ``b`` rounding (with the CP's early stop, now fixed in :mod:`cp`) was the
-#: brushed plane's point-light miss: mid / far 0.078 / 0.079 -> 0.038 / 0.050; 8-bit ``c``
-#: changes no cell by more than 0.0005 and keeps the range queries as fast as all-8-bit codes
-#: (all-16-bit ones were 1.4x slower). Storage +x % (docs/glints-part2.md, session 9).
+#: brushed plane's point-light miss: mid / far 0.078 / 0.079 -> 0.040 / 0.050; 8-bit ``c``
+#: changes no brushed cell by more than 0.0005 and keeps the range queries as fast as
+#: all-8-bit codes (all-16-bit ones: 1.4x slower kernel). ``exact_from_level`` 2: levels >= 2
+#: stored exactly, far 0.050 -> 0.028. Brushed map 2.91 -> 3.99 -> 4.88 MB; environment mid /
+#: far frames ~1.2x / 1.3x slower, max/min unchanged (docs/glints-part2.md, session 9).
 BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
-                     code_bits=16, c_bits=8)
+                     code_bits=16, c_bits=8, exact_from_level=2)
 #: How ``glints`` evaluates compressed footprints (:func:`prefilter.glints.brdf.surface`):
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid
