@@ -63,7 +63,8 @@ VERSION = 3
 Q = 255  # levels of the 8-bit factors
 #: bits of the stored factor codes :func:`encode` can write (uint8 or uint16 arrays)
 CODE_BITS = (8, 16)
-_CODE_DTYPES = {8: np.uint8, 16: np.uint16}
+#: their array dtypes (shared with the Wang tiles file, :mod:`prefilter.glints.wang_store`)
+CODE_DTYPES = {8: np.uint8, 16: np.uint16}
 
 
 def code_levels(dtype) -> int:
@@ -209,9 +210,9 @@ def encode(groups: list, code_bits: int = 8, c_bits: int | None = None) -> dict:
     those of ``c`` (default ``code_bits``)."""
     c_bits = code_bits if c_bits is None else c_bits
     for name, bits in (("code_bits", code_bits), ("c_bits", c_bits)):
-        if bits not in _CODE_DTYPES:
+        if bits not in CODE_DTYPES:
             raise PrefilterError(f"{name}: expected one of {CODE_BITS}, got {bits!r}")
-    dt, dc = _CODE_DTYPES[code_bits], _CODE_DTYPES[c_bits]
+    dt, dc = CODE_DTYPES[code_bits], CODE_DTYPES[c_bits]
     Q, Qc = code_levels(dt), code_levels(dc)
     ranks, qa, qb, qc, sc = [], [], [], [], []
     for a, b, c in groups:

@@ -52,6 +52,7 @@ from prefilter._io import (META_KEY, decode_json_object, read_npz, save_npz_atom
                           verify_npz)
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints.pndf import as_intrinsic_roughness, as_support
+from prefilter.glints.store import CODE_DTYPES, code_levels
 from prefilter.glints.wang import WangTiles
 from prefilter.glints.wang_ndf import TiledNDF, dependent_texels
 
@@ -60,17 +61,16 @@ VERSION = 2
 WHAT = "Wang tiles file"
 #: ``code_bits`` of :func:`save_tiles`: 0 = float32 factors (version 1), 8 / 16 = codes
 CODE_BITS = (0, 8, 16)
-_CODE_DTYPES = {8: np.uint8, 16: np.uint16}
 
 
 def encode_level(A: np.ndarray, Bf: np.ndarray, C: np.ndarray, code_bits: int = 8) -> dict:
     """Version-2 arrays ``mask``, ``a``, ``b``, ``c``, ``c_scale`` (module docstring) of one
     compressed level: ``A``, ``Bf (16, nb^2, rank, B)``, ``C (16, n, n, nb^2, rank)``
     non-negative (the CP triple of :class:`TiledNDF`); codes of ``code_bits`` (8 or 16) bits."""
-    if code_bits not in _CODE_DTYPES:
+    if code_bits not in CODE_DTYPES:
         raise PrefilterError(f"code_bits: expected 8 or 16, got {code_bits!r}")
-    dt = _CODE_DTYPES[code_bits]
-    Q = float(np.iinfo(dt).max)
+    dt = CODE_DTYPES[code_bits]
+    Q = float(code_levels(dt))
 
     def codes(f, m):  # f / m in Q steps, 0 where the component is 0
         return np.rint(np.divide(Q * f, m, out=np.zeros(f.shape), where=m > 0)).astype(dt)
@@ -90,7 +90,7 @@ def decode_level(mask, a, b, c, c_scale, crop: int, n_groups: int):
     """Float32 CP triple ``A``, ``Bf (16, nb^2, rank, B)``, ``C (16, n, n, nb^2, rank)``
     (``n = crop``, ``nb^2 = n_groups``) of one level's version-2 arrays (module docstring)."""
     rank, B = a.shape[1], a.shape[2]
-    inv = np.float32(1.0 / np.iinfo(c.dtype).max)
+    inv = np.float32(1.0 / code_levels(c.dtype))
     kept = np.unpackbits(mask, count=16 * crop * crop * n_groups).astype(bool)
     kept = kept.reshape(16, crop, crop, n_groups)
     live = kept.any(axis=(1, 2))
@@ -213,7 +213,7 @@ def _settings(path, header) -> dict:
     if not B and (out["rank"] or out["cp_error"]):
         _fail(path, "header.settings: expected rank 0 and no cp_error when block is 0")
     if v2:
-        if out["code_bits"] not in _CODE_DTYPES or not B:
+        if out["code_bits"] not in CODE_DTYPES or not B:
             _fail(path, f"header.settings.code_bits: expected 8 or 16 with block > 0 "
                         f"(version 2), got {out['code_bits']} with block {B}")
         if len(out["crops"]) != L or min(out["crops"]) < 1:
@@ -233,7 +233,7 @@ def _expected(st) -> dict:
     if not v2:
         out["mean"] = ("<f8", (R, R))
     nb2 = (R // B) ** 2 if B else 0
-    code = np.dtype(_CODE_DTYPES[st["code_bits"]]).str if v2 else None
+    code = np.dtype(CODE_DTYPES[st["code_bits"]]).str if v2 else None
     for lv in range(len(st["k0"])):
         if v2:
             n = st["crops"][lv]
