@@ -100,3 +100,24 @@ def test_prefiltering_reduces_noise(surf):
     assert out[True][0] < 0.92 * out[False][0], out
     assert abs(out[False][1] - 1) < 0.03, out
     assert abs(out[True][1] - 1) < 0.12, out
+
+
+def test_sg_light_samples_are_shade_sg_samples():
+    """envlight.sg_light_samples == sample_sg + sg_eval / (n pdf) per sample (its lobes are
+    validated once instead of twice per sample); invalid lobes raise the same error."""
+    from prefilter.glints.envlight import sg_light_samples
+
+    rng = np.random.default_rng(5)
+    mu = rng.random((3, 3))
+    lam = np.array([2.0, 30.0, 300.0])
+    p = rng.normal(size=(3, 3))
+    u = rng.random((50, 12))
+    wi, wgt = sg_light_samples(mu, lam, p, u)
+    assert wi.shape == wgt.shape == (4, 50, 3)
+    for j in range(4):
+        w, pdf = sample_sg(mu, lam, p, u[:, 3 * j:3 * j + 3])
+        np.testing.assert_allclose(wi[j], w, rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(wgt[j], sg_eval(w, mu, lam, p) / (4 * pdf)[:, None],
+                                   rtol=1e-12)
+    with pytest.raises(PrefilterError, match="sharpness > 0"):
+        sg_light_samples(mu, -lam, p, u)

@@ -88,6 +88,24 @@ def sample_sg(mu, lam, p, u) -> tuple[np.ndarray, np.ndarray]:
     return _sample_sg(*as_lobes(mu, lam, p), u)
 
 
+def sg_light_samples(mu, lam, p, u) -> tuple[np.ndarray, np.ndarray]:
+    """``n`` light samples per point from the lobe mixture, as :func:`shade_sg` draws them:
+    directions ``(n, N, 3)`` and weights ``L(wi) / (n pdf)`` ``(n, N, 3)`` (0 where the pdf is
+    0); ``u (N, 3 n)``: sample ``j`` uses columns ``3 j .. 3 j + 2``. The lobes are validated
+    once for all ``n`` samples."""
+    mu, lam, p = as_lobes(mu, lam, p)
+    u = np.asarray(u, dtype=np.float64)
+    ns = u.shape[1] // 3
+    wis, wgts = [], []
+    for j in range(ns):
+        wi, pdf = _sample_sg(mu, lam, p, u[:, 3 * j:3 * j + 3])
+        ok = pdf > 0
+        wis.append(wi)
+        wgts.append(_sg_eval(wi, mu, lam, p)
+                    * np.where(ok, 1.0 / (ns * np.where(ok, pdf, 1.0)), 0.0)[:, None])
+    return np.stack(wis), np.stack(wgts)
+
+
 def _lobe_probabilities(wgt) -> np.ndarray:
     """Lobe selection probabilities proportional to ``wgt (K,)``; uniform for a black
     environment (every lobe contributes zero, any choice is exact)."""

@@ -252,19 +252,10 @@ def _environment_samples(light, frame, u):
     """SG light samples of an environment light (those of
     :func:`prefilter.glints.envlight.shade_sg` with ``u``): local directions ``(n, N, 3)`` and
     the weights ``L(wi) / (n pdf)`` ``(n, N, 3)``; ``u (N, 3 n)``."""
-    from prefilter.glints.envlight import sample_sg, sg_eval
+    from prefilter.glints.envlight import sg_light_samples
     from prefilter.glints.render import environment_lobes
 
-    mu, lam, pl = environment_lobes(light, frame)
-    ns = u.shape[1] // 3
-    wis, wgts = [], []
-    for j in range(ns):
-        wi, pdf = sample_sg(mu, lam, pl, u[:, 3 * j:3 * j + 3])
-        ok = pdf > 0
-        wis.append(wi)
-        wgts.append(sg_eval(wi, mu, lam, pl)
-                    * np.where(ok, 1.0 / (ns * np.where(ok, pdf, 1.0)), 0.0)[:, None])
-    return np.stack(wis), np.stack(wgts)
+    return sg_light_samples(*environment_lobes(light, frame), u)
 
 
 def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | None = None,
