@@ -654,10 +654,12 @@ def _multi_case(gm, rng, n=300, k=5, interp="resample"):
     return idx, w, ctr - half, ctr + half
 
 
-@pytest.mark.parametrize("interp", ["resample", "trilinear"])
-def test_range_multi_equals_range_weighted_per_rectangle(baked, interp):
+@pytest.mark.parametrize("interp,bits", [("resample", 8), ("trilinear", 8), ("resample", "16/8"),
+                                         ("resample", 16)])
+def test_range_multi_equals_range_weighted_per_rectangle(request, interp, bits):
     """One blend and K rectangles per footprint == :func:`range_weighted` of each rectangle:
-    rtol 1e-5 on the 8-bit maps (float32 sums; measured <= 3e-7), 1e-6 on the float maps
+    rtol 1e-5 on the code maps (8-bit ``c``: float32 sums of uint16 prefix sums, the 16/8
+    render default included; measured <= 3e-7; 16-bit ``c``: float64), 1e-6 on the float maps
     (float64; measured <= 4e-7, the former kernel's rounding: against the float64 images
     rebuilt from the same float32 prefix sums it is off by up to 5e-8, range_multi by 2e-14);
     the former path (``RANGE_SHARED = False``) exactly."""
@@ -665,7 +667,7 @@ def test_range_multi_equals_range_weighted_per_rectangle(baked, interp):
 
     from prefilter.glints import query as gq
 
-    _, _, _, gm0 = baked
+    _, _, _, gm0 = request.getfixturevalue({8: "baked", "16/8": "baked16c8", 16: "baked16"}[bits])
     B = gm0.block
     rng = np.random.default_rng(11)
     # blocks missing from some images (dropped by the bake where an image's block is empty)

@@ -331,8 +331,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         return cid
 
     def refit_cell(cid):
-        """Pass 2: the groups given a larger rank, warm-started from pass 1; 8-bit encoding; the
-        error measured on what the loader decodes."""
+        """Pass 2: the groups given a larger rank, warm-started from pass 1, and those stored
+        exactly; encoding; the error measured on what the loader decodes."""
         _, _, _, tensors, _ = cell_tensors(cid)
         p1 = ck.load(CELL_CHUNK + cid)
         rows, r_cell = p1["rows"], alloc[cid * nb * nb:(cid + 1) * nb * nb]
