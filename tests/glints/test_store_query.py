@@ -299,10 +299,14 @@ def test_cli_bake(tmp_path):
                                            "--rank", "4", "--ndf-res", "16", "--block", "8",
                                            "--cell", "8", "--iters", "10", "--quiet",
                                            "--code-bits", "16", "--ndf-truncation", "6",
-                                           "--footprint-truncation", "5"])
+                                           "--footprint-truncation", "5", "--c-bits", "8",
+                                           "--exact-from-level", "1"])
     assert res.exit_code == 0, res.output
-    st = load(tmp_path / "p.npz").header["settings"]
+    gm = load(tmp_path / "p.npz")
+    st = gm.header["settings"]
     assert (st["code_bits"], st["ndf_truncation"], st["footprint_truncation"]) == (16, 6.0, 5.0)
+    assert (st["c_bits"], st["exact_from_level"]) == (8, 1)
+    assert gm.codes["a"].dtype == np.uint16 and gm.codes["c"].dtype == np.uint8
 
 
 def _images_from_codes(gm, images):
