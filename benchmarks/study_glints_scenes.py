@@ -79,14 +79,10 @@ def scene(shape: str, distance: float, kind: str, lights: str) -> dict:
 def coverage(sc, size: int = 128):
     """Median footprint std (texels) over the hit pixels (the render's own footprint) and the
     ``(H, W)`` mask of pixels whose centre hits the object."""
-    from prefilter.glints.render import footprints
-    from prefilter.render.camera import gbuffer_at
+    from prefilter.glints.render import pixel_footprints
 
-    xy = np.stack(np.meshgrid(np.arange(sc.camera.width) + 0.5,
-                              np.arange(sc.camera.height) + 0.5), -1)
-    g = gbuffer_at(sc, xy).reshape(-1)
-    _, sp = footprints(g.select(g.hit), (size, size))
-    return float(np.median(sp)), g.hit.reshape(sc.camera.height, sc.camera.width)
+    _, sp, hit = pixel_footprints(sc, (size, size))
+    return float(np.median(sp)), hit
 
 
 #: relative-luminance bin edges of :func:`error_by_luminance`

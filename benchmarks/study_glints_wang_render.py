@@ -182,8 +182,7 @@ def _lights_row(args, wang, tmp, d, kind):
 def _point_row(args, wang, tmp, d):
     """One point-light row (module docstring)."""
     from prefilter.glints import wang_render
-    from prefilter.glints.render import baked_surface, footprints
-    from prefilter.render.camera import gbuffer_at
+    from prefilter.glints.render import baked_surface, pixel_footprints
     from prefilter.render.methods import RenderSettings
     from prefilter.render.metrics import flip
     from prefilter.render.pipeline import render
@@ -193,11 +192,7 @@ def _point_row(args, wang, tmp, d):
     row = dict(lights="point", distance=d, tile=T, settings=wang_render.wang_settings(wang),
                bake_or_load_s=round(t_bake, 2), nbytes_mb=wn.nbytes / 1e6,
                cp_error=list(wn.cp_error))
-    xy = np.stack(np.meshgrid(np.arange(sc.camera.width) + 0.5,
-                              np.arange(sc.camera.height) + 0.5), -1)
-    g = gbuffer_at(sc, xy).reshape(-1)
-    gh = g.select(g.hit)
-    c, sp = footprints(gh, (size, size))
+    c, sp, _ = pixel_footprints(sc, (size, size))
     ext = c.max(0) - c.min(0)
     # the glints pyramid of the exemplar, per texel: what an explicit map of the frame's
     # area would take in that format
@@ -219,7 +214,7 @@ def _point_row(args, wang, tmp, d):
                mean_ratio_hashed=float(img["wang"].mean() / img["direct"].mean()),
                flip_glints_vs_direct=float(flip(img["glints"], img["direct"]).mean))
     if args.code_bits:
-        row["codes"] = _codes_study(sc, nm, idx, b_idx, gh, args.code_bits, args.footprints)
+        row["codes"] = _codes_study(sc, nm, idx, b_idx, c, sp, args.code_bits, args.footprints)
     if not args.no_times:
         wall, cpu = _repeat_times(sc, ("glints-wang", "glints", "glints-direct"), args.repeats)
         row.update(wall_s=wall, cpu_s=cpu,
@@ -230,10 +225,10 @@ def _point_row(args, wang, tmp, d):
     print(json.dumps(row), flush=True)
 
 
-def _codes_study(sc, nm, idx, b_idx, gh, code_bits, n_fp):
-    """The ``--code-bits`` comparison of one frame (module docstring)."""
+def _codes_study(sc, nm, idx, b_idx, c, sp, code_bits, n_fp):
+    """The ``--code-bits`` comparison of one frame (module docstring); ``c``, ``sp``: the
+    frame's pixel footprints."""
     from prefilter.glints import wang_render
-    from prefilter.glints.render import footprints
     from prefilter.glints.wang import pndf_image_implicit
     from prefilter.glints.wang_ndf import ndf_image
     from prefilter.render.methods import RenderSettings
@@ -248,7 +243,6 @@ def _codes_study(sc, nm, idx, b_idx, gh, code_bits, n_fp):
         st = wang_render.wang_settings(over)
         st["tile"] = wang_render.tile_size(st["tile"], nm.shape[:2])
         frame = wang_render.render_wang(sc, RenderSettings(), index=idx, wang=over)
-        c, sp = footprints(gh, nm.shape[:2])
         inside = np.flatnonzero((sp >= wn.min_sigma) & (sp < wn.wide_sigma))
         q = np.linspace(0.05, 0.95, n_fp)
         pick = inside[np.argsort(sp[inside])][(q * (inside.size - 1)).astype(int)] \

@@ -158,6 +158,19 @@ def footprints(g, shape, spp: int = 1):
     return center, PIXEL_SIGMA * np.sqrt(det / spp)
 
 
+def pixel_footprints(scene, shape):
+    """Footprints (:func:`footprints`: centres ``(n, 2)``, stds ``(n,)`` in texels of a ``shape``
+    map) of the ``n`` pixel centres of ``scene``'s camera that hit an object, and the ``(H, W)``
+    hit mask; ``scene``: a loaded :class:`prefilter.render.scene.Scene`."""
+    from prefilter.render.camera import gbuffer_at
+
+    cam = scene.camera
+    xy = np.stack(np.meshgrid(np.arange(cam.width) + 0.5, np.arange(cam.height) + 0.5), -1)
+    g = gbuffer_at(scene, xy).reshape(-1)
+    c, sp = footprints(g.select(g.hit), shape)
+    return c, sp, g.hit.reshape(cam.height, cam.width)
+
+
 #: Quad lights: each MIS estimate takes ``QUAD_MIS`` light samples and as many BRDF samples per
 #: shading sample; uniforms per pair: 2 (light) + up to 9 (hierarchical NDF sampler, blocks up
 #: to 64; 7 for the default 16).
@@ -822,12 +835,7 @@ def measure(distances=(0.5, 2.0, 8.0), kind: str = "flakes", size: int = 128,
                 best = min(best, time.perf_counter() - t0)
             t[m] = best
         img["ref"] = render(sc, "glints-reference", spp=ref_spp)
-        from prefilter.render.camera import gbuffer_at
-
-        xy = np.stack(np.meshgrid(np.arange(sc.camera.width) + 0.5,
-                                  np.arange(sc.camera.height) + 0.5), -1)
-        g = gbuffer_at(sc, xy).reshape(-1)
-        _, sp = footprints(g.select(g.hit), (size, size))
+        _, sp, _ = pixel_footprints(sc, (size, size))
         rows.append(dict(distance=d, sigma_p_median=float(np.median(sp)),
                          t_glints=t["glints"], t_direct=t["glints-direct"],
                          speedup=t["glints-direct"] / t["glints"],

@@ -506,8 +506,7 @@ def _glints_section(report, settings: DemoSettings, seed: int, log) -> None:
 
 
 def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> None:
-    from prefilter.glints.render import cache_dir, footprints, measurement_scene
-    from prefilter.render.camera import gbuffer_at
+    from prefilter.glints.render import cache_dir, measurement_scene, pixel_footprints
     from prefilter.render.pipeline import render
     from prefilter.render.scene import load_scene
 
@@ -530,9 +529,7 @@ def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> No
         cmp = report.add_comparison(f"distance {d:g}", images["glints-direct"],
                                     {"glints": images["glints"]}, scale=4,
                                     reference_name="glints-direct")[0]
-        xy = np.stack(np.meshgrid(np.arange(w) + 0.5, np.arange(h) + 0.5), -1)
-        g = gbuffer_at(sc, xy).reshape(-1)
-        _, sp = footprints(g.select(g.hit), (size, size))
+        _, sp, _ = pixel_footprints(sc, (size, size))
         rows.append([f"{d:g}", float(np.median(sp)), times["glints"], times["glints-direct"],
                      times["glints-direct"] / times["glints"], cmp["flip"],
                      float(images["glints"].mean() / max(images["glints-direct"].mean(),
