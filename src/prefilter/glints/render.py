@@ -81,9 +81,10 @@ PIXEL_SIGMA = 0.5
 #: 8-bit ``a``, ``b`` rounding (with the CP's early stop, now fixed in :mod:`cp`) was the
 #: brushed plane's point-light miss: mid / far 0.078 / 0.079 -> 0.040 / 0.050; 8-bit ``c``
 #: changes no brushed cell by more than 0.0005 and keeps the range queries as fast as
-#: all-8-bit codes (all-16-bit ones: 1.4x slower kernel). ``exact_from_level`` 2: levels >= 2
-#: stored exactly, far 0.050 -> 0.028. Brushed map 2.91 -> 3.99 -> 4.88 MB; environment mid /
-#: far frames ~1.2x / 1.3x slower, max/min unchanged (docs/glints-part2.md, session 9).
+#: all-8-bit codes (all-16-bit ones: 1.5x slower kernel, bench_glints_codes.py).
+#: ``exact_from_level`` 2: levels >= 2 stored exactly, far 0.050 -> 0.028. Brushed map 2.91 ->
+#: 3.99 -> 4.88 MB; environment mid / far frames ~1.2x / 1.4x slower, max/min within 1.5
+#: (docs/glints-part2.md, session 9).
 BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
