@@ -260,6 +260,24 @@ def test_bake_resumes_from_parts(tmp_path):
     assert not parts.exists()
 
 
+def test_bake_parts_keyed_by_fit_version(tmp_path, monkeypatch):
+    """Checkpoints record the CP fit's version: parts fitted by another version are discarded,
+    not resumed from."""
+    from prefilter.glints import cp as cpmod
+
+    nm = sinusoid(16, px=16, py=8)
+    kw = dict(rank=2, ndf_res=16, block=8, support=S, cell=8, n_iter_max=3, progress=False,
+              keep_parts=True)
+    out = tmp_path / "a.npz"
+    bake(nm, out, **kw)
+    meta = tmp_path / "a.npz.parts" / "settings.json"
+    assert json.loads(meta.read_text())["cp_fit"] == cpmod.FIT_VERSION
+    monkeypatch.setattr(cpmod, "FIT_VERSION", cpmod.FIT_VERSION + 1)
+    out.unlink()
+    bake(nm, out, **kw)
+    assert json.loads(meta.read_text())["cp_fit"] == cpmod.FIT_VERSION
+
+
 def test_bake_rank_errors(tmp_path):
     nm = sinusoid(16, px=16, py=8)
     with pytest.raises(PrefilterError, match="max_rank"):

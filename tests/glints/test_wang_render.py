@@ -268,6 +268,20 @@ def test_cache_path_is_the_baked_file(tmp_path, monkeypatch):
     assert wn.wang.size == 8 and wn.block == 4 and wn.images[0][2].dtype == np.float32
 
 
+def test_cache_keys_record_the_fit_version(tmp_path, monkeypatch):
+    """The render and Wang-tile cache keys change with the CP fit's version (files fitted by an
+    older fit are not reused)."""
+    from prefilter.glints import cp as cpmod
+
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path))
+    nm = sinusoid(8, 0.2, 0.2, 8, 8)
+    st = dict(grender.BAKE_SETTINGS)
+    before = grender.settings_key(st), cache_path(nm)
+    monkeypatch.setattr(cpmod, "FIT_VERSION", cpmod.FIT_VERSION + 1)
+    after = grender.settings_key(st), cache_path(nm)
+    assert before[0] != after[0] and before[1] != after[1]
+
+
 @pytest.mark.slow
 def test_compressed_index_map_against_direct(tmp_path, monkeypatch):
     """CP-compressed per-tile pyramids (rank 16, blocks 16), T = 16 on a 64^2 Gaussian

@@ -229,7 +229,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     if exact_from_level is not None:
         settings["exact_from_level"] = exact_from_level
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
-    ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W]))
+    # the fit's version too: parts fitted by another version of the CP are not resumed from
+    ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], cp_fit=cpmod.FIT_VERSION))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
                 "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation")
                                       if k in settings)

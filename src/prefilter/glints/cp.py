@@ -29,6 +29,12 @@ from prefilter._numba import FASTMATH
 from prefilter._validate import as_positive_int
 from prefilter.errors import PrefilterError
 
+#: Version of the fit's results: bumped whenever a change to :func:`nn_cp` (or what the bake does
+#: with it) changes the factors it returns for the same inputs. The render and Wang-tile caches and
+#: the bake's checkpoints key on it, so files fitted by an older version are never reused
+#: (1: absolute stop test, sessions 1-8; 2: relative stop test ``prev - err < tol err``).
+FIT_VERSION = 2
+
 
 def _openblas():
     libs = glob.glob(os.path.join(os.path.dirname(np.__file__), "..", "numpy.libs", "*openblas*"))

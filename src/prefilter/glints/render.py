@@ -23,7 +23,8 @@ footprint divided by the sample count").
 * ``glints``: the compressed NDF (:func:`prefilter.glints.brdf.glint_ndf`: point query, trilinear
   over the pyramid, direct P-NDF below the finest level). The normal map is baked on first use
   with :data:`BAKE_SETTINGS` and cached on disk (``$PREFILTER_GLINTS_CACHE`` or
-  ``~/.cache/prefilter/glints``) under the SHA-1 of the normals and the settings.
+  ``~/.cache/prefilter/glints``) under the SHA-1 of the normals, the settings and the CP fit's
+  version (:data:`prefilter.glints.cp.FIT_VERSION`).
 * ``glints-direct``: the direct P-NDF of Yan et al. 2016 for every footprint (cost ~ its area).
 * ``glints-reference``: supersampling of the footprint with the full-resolution normal map and the
   intrinsic roughness: ``spp`` sub-pixel positions drawn from the same pixel Gaussian, each shaded
@@ -49,6 +50,7 @@ from tqdm import tqdm
 from prefilter.errors import PrefilterError
 from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, bilinear_bake_roughness,
                                    glint_brdf_cos, glint_ndf, surface)
+from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
 from prefilter.render.shading import point_incoming, shading_frames
 from prefilter.sphere.sampling import to_local, to_world
@@ -130,7 +132,7 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
         # the bilinear lookup adds (h/2)^2 to the NDF's variance: bake that much sharper
         st["intrinsic_roughness"] = bilinear_bake_roughness(sr, st["support"], st["ndf_res"])
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
-    key = hashlib.sha1(json.dumps(st, sort_keys=True).encode()).hexdigest()[:12]
+    key = settings_key(st)
     # the direct surface is the normal map and the model's roughness (no bake): key it by both
     mem = (digest, f"direct-{sr!r}" if direct else key, INTERP, BILINEAR)
     if mem not in _SURFACES:
@@ -147,6 +149,14 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
     if isinstance(normal_map, np.ndarray):
         _BY_ID[ident] = (normal_map, _SURFACES[mem])
     return _SURFACES[mem]
+
+
+def settings_key(settings: dict) -> str:
+    """The cache key (12 hex digits) of complete bake ``settings``: their JSON and the CP fit's
+    version (:data:`prefilter.glints.cp.FIT_VERSION`), so files fitted before a change to the
+    fit are not reused."""
+    return hashlib.sha1(json.dumps(dict(settings, cp_fit=cpmod.FIT_VERSION), sort_keys=True)
+                        .encode()).hexdigest()[:12]
 
 
 def footprints(g, shape, spp: int = 1):

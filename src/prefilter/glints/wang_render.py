@@ -140,11 +140,14 @@ def _cache_path(nm: np.ndarray, st: dict):
     """:func:`cache_path` of a validated exemplar ``nm`` and complete settings ``st`` (hashed
     as they are: validating ``nm`` again may change its last bits)."""
     from prefilter.glints.render import cache_dir
+    from prefilter.glints import cp
     from prefilter.glints.wang_store import VERSION
 
     digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
-    # the store's format version in the key: a file of another layout is never looked up
-    key = hashlib.sha1(json.dumps(dict(st, store_version=VERSION), sort_keys=True)
+    # the store's format version and the CP fit's in the key: a file of another layout, or fitted
+    # before a change to the fit, is never looked up
+    key = hashlib.sha1(json.dumps(dict(st, store_version=VERSION, cp_fit=cp.FIT_VERSION),
+                                  sort_keys=True)
                        .encode()).hexdigest()[:12]
     return cache_dir() / f"wang-{digest[:20]}-{key}.npz"
 
