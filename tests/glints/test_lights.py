@@ -400,6 +400,19 @@ def test_render_quad_mis_fused_equals_unfused(small_render, monkeypatch, distanc
     assert a.max() > 0 and ad.max() > 0
 
 
+def test_uniform_columns_tile_the_layout():
+    """Each light's uniform columns are disjoint and together are the random_dims columns."""
+    from prefilter.glints.render import ENV_SAMPLES, uniform_columns
+
+    nq, ne = 2, 3
+    cols = [uniform_columns(nq, "quad", i) for i in range(nq)]
+    cols += [uniform_columns(nq, "environment", j) for j in range(ne)]
+    idx = np.concatenate([np.arange(c.start, c.stop) for c in cols])
+    assert idx.tolist() == list(range(nq * QUAD_MIS * U_PAIR + ne * 3 * ENV_SAMPLES))
+    with pytest.raises(PrefilterError, match="kind: expected 'quad' or 'environment'"):
+        uniform_columns(1, "point", 0)
+
+
 def test_render_rejects_textured_quads(small_render):
     from prefilter.render.pipeline import render
 

@@ -622,16 +622,16 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
                     done[r[d4]] = True
             rest = ~done
             if np.any(rest):
-                uq = u[m][:, qi * QUAD_MIS * U_PAIR:(qi + 1) * QUAD_MIS * U_PAIR]
+                uq = u[m][:, uniform_columns(nq, "quad", qi)]
                 val[rest] = quad_mis(surf, c[rest], sp[rest], wo[m][rest],
                                      g.position[m][rest], tuple(f[rest] for f in frame), ql,
                                      f0, uq[rest], fallback_truncation=trunc)
             out[m] += val
         if env:
-            ue = None if u is None else u[m][:, nq * QUAD_MIS * U_PAIR:]
-            out[m] += environment_radiance(env, surf, c, sp, wo[m], frame, f0, base, ue,
+            out[m] += environment_radiance(env, surf, c, sp, wo[m], frame, f0, base,
+                                           None if u is None else u[m],
                                            prefilter=(mode == "compressed"),
-                                           fallback_truncation=trunc)
+                                           fallback_truncation=trunc, n_quads=nq)
     return out
 
 
@@ -671,16 +671,19 @@ def environment_lobes(light, frame):
 
 
 def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
-                         prefilter: bool, fallback_truncation: float | None = None) -> np.ndarray:
+                         prefilter: bool, fallback_truncation: float | None = None,
+                         n_quads: int = 0) -> np.ndarray:
     """Radiance ``(N, 3)`` (specular and Lambert) from environment lights by SG sampling
     (:func:`prefilter.glints.envlight.shade_sg`, ``ENV_SAMPLES`` per shading sample); the NDF is
-    range-prefiltered over the lobe's compact epsilon-support when ``prefilter`` (sec. 5.4)."""
+    range-prefiltered over the lobe's compact epsilon-support when ``prefilter`` (sec. 5.4).
+    ``u``: the shading samples' uniforms (:func:`uniform_columns` with ``n_quads`` quad lights;
+    None or too few columns: drawn from a fixed seed)."""
     from prefilter.glints.envlight import shade_sg
 
     out = np.zeros((len(wo), 3))
     for j, light in enumerate(env):
         mu, lam, pl = environment_lobes(light, frame)
-        uj = None if u is None else u[:, j * 3 * ENV_SAMPLES:(j + 1) * 3 * ENV_SAMPLES]
+        uj = None if u is None else u[:, uniform_columns(n_quads, "environment", j)]
         if uj is not None and uj.shape[1] < 3 * ENV_SAMPLES:
             uj = None
         out += shade_sg(surf, center, sigma_p, wo, mu, lam, pl, f0, n_samples=ENV_SAMPLES,
@@ -690,10 +693,24 @@ def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
 
 
 def random_dims(scene) -> int:
-    """Uniforms per shading sample the glints methods need (quad MIS, environment samples)."""
-    lights = scene.light_set()
+    """Uniforms per shading sample the glints methods need (quad MIS, environment samples): the
+    columns of :func:`uniform_columns` for every light."""
     n_env = sum(lt.type == "environment" for lt in scene.lights)
-    return len(lights.quads) * QUAD_MIS * U_PAIR + n_env * ENV_SAMPLES * 3
+    return uniform_columns(len(scene.light_set().quads), "environment", n_env).start
+
+
+def uniform_columns(n_quads: int, kind: str, i: int) -> slice:
+    """The columns of light ``i`` of ``kind`` (``"quad"`` or ``"environment"``) in the uniforms
+    of one shading sample (the layout :func:`random_dims` counts, shared by ``glints``,
+    ``glints-direct`` and ``glints-wang`` so that one seed gives them the same light samples):
+    ``QUAD_MIS`` pairs of ``U_PAIR`` per quad light, then ``3 ENV_SAMPLES`` per environment
+    light; ``n_quads``: the scene's quad lights."""
+    quads = n_quads * QUAD_MIS * U_PAIR
+    if kind == "quad":
+        return slice(i * QUAD_MIS * U_PAIR, (i + 1) * QUAD_MIS * U_PAIR)
+    if kind == "environment":
+        return slice(quads + i * 3 * ENV_SAMPLES, quads + (i + 1) * 3 * ENV_SAMPLES)
+    raise PrefilterError(f"kind: expected 'quad' or 'environment', got {kind!r}")
 
 
 def check_lights(scene, name):

@@ -218,16 +218,16 @@ def quad_uniforms(u, qi: int, n: int = QUAD_SAMPLES) -> np.ndarray:
     ``u (N, k)`` (:func:`prefilter.glints.render.random_dims`: ``QUAD_MIS`` pairs of ``U_PAIR``
     per quad): sample ``j`` reads pair ``j % QUAD_MIS``'s uniforms ``2 (j // QUAD_MIS)`` and the
     next, so the first ``QUAD_MIS`` are ``glints-direct``'s light samples."""
-    from prefilter.glints.render import U_PAIR, QUAD_MIS
+    from prefilter.glints.render import QUAD_MIS, U_PAIR, uniform_columns
 
     if not 0 < n <= QUAD_MIS * (U_PAIR // 2):
         raise PrefilterError(f"n: expected 1 to {QUAD_MIS * (U_PAIR // 2)} light samples, "
                              f"got {n}")
     u = np.asarray(u, dtype=np.float64)
-    need = (qi + 1) * QUAD_MIS * U_PAIR
-    if u.ndim != 2 or u.shape[1] < need:
-        raise PrefilterError(f"u: expected uniforms of shape (N, >= {need}), got {u.shape}")
-    blk = u[:, need - QUAD_MIS * U_PAIR:need].reshape(len(u), QUAD_MIS, U_PAIR)
+    cols = uniform_columns(qi + 1, "quad", qi)
+    if u.ndim != 2 or u.shape[1] < cols.stop:
+        raise PrefilterError(f"u: expected uniforms of shape (N, >= {cols.stop}), got {u.shape}")
+    blk = u[:, cols].reshape(len(u), QUAD_MIS, U_PAIR)
     j = np.arange(n)
     o = 2 * (j // QUAD_MIS)
     return np.stack([blk[:, j % QUAD_MIS, o], blk[:, j % QUAD_MIS, o + 1]], -1)
@@ -276,7 +276,7 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
     :data:`WANG_SETTINGS`.
     """
     from prefilter.glints.brdf import brdf_cos_from_ndf, half
-    from prefilter.glints.render import U_PAIR, ENV_SAMPLES, QUAD_MIS, footprints, random_dims
+    from prefilter.glints.render import footprints, random_dims, uniform_columns
     from prefilter.ltc import clamped_cosine_integral
     from prefilter.render.shading import point_incoming, shading_frames
     from prefilter.sphere.sampling import to_local
@@ -329,8 +329,8 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
             wgts += list(wgt)
             lamb += [False] * len(wi)
         for j, light in enumerate(env):
-            o = nq * QUAD_MIS * U_PAIR + j * 3 * ENV_SAMPLES
-            wi, wgt = _environment_samples(light, frame, u[m][:, o:o + 3 * ENV_SAMPLES])
+            cols = uniform_columns(nq, "environment", j)
+            wi, wgt = _environment_samples(light, frame, u[m][:, cols])
             wis += list(wi)
             wgts += list(wgt)
             lamb += [True] * len(wi)
