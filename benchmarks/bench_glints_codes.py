@@ -1,4 +1,4 @@
-"""Environment range queries vs the factor code widths (docs/glints-part2.md, session 9).
+"""Environment range queries vs the factor code widths (docs/glints-part2-log.md, session 9).
 
     python benchmarks/bench_glints_codes.py [--kind flakes] [--distance 2.0] [--repeat 7]
 

@@ -162,10 +162,10 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
 
     ``code_bits``: 8 (default) or 16 bits per stored factor value (:func:`store.encode`). The
     budget ``rank`` keeps its meaning (the bytes per rank double, so the file about doubles);
-    16 bits remove the rounding that shows in the NDF tails (docs/glints-part2.md, session 7).
+    16 bits remove the rounding that shows in the NDF tails (docs/glints-part2-log.md, session 7).
     ``c_bits``: bits of the per-image factor ``c`` (default ``code_bits``); 16-bit ``a``, ``b``
     with 8-bit ``c`` are as accurate as all-16-bit codes on the brushed map's scenes and as fast
-    to query as 8-bit ones (docs/glints-part2.md, session 9).
+    to query as 8-bit ones (docs/glints-part2-log.md, session 9).
 
     ``exact_from_level``: the groups of pyramid levels ``>=`` this are stored as their exact
     non-negative CP (:func:`prefilter.glints.cp.exact_cp`: ranks up to ``B^2``, beyond

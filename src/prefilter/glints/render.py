@@ -33,7 +33,7 @@ footprint divided by the sample count").
   integral with the view and light directions of each sub-pixel position; ``glints-direct``
   evaluates that integral in closed form up to the isotropic approximation of the footprint, the
   linearisation of ``uv`` across the pixel and the half vector taken at the pixel centre (it moves
-  by about the intrinsic roughness per half pixel: docs/glints-part2.md, "Against
+  by about the intrinsic roughness per half pixel: docs/glints-part2-log.md, "Against
   ``glints-reference``").
 """
 
@@ -72,13 +72,13 @@ PIXEL_SIGMA = 0.5
 #: bright flat-surface peak (and dim flakes next to bright ones), which the point light sees at
 #: mid/far distance: FLIP vs glints-direct 0.081 on the scratches plane at mid; the uncompressed
 #: pyramid with the same blocks dropped gives 0.080, with 1e-5 / 1e-6 0.018 / 0.015 (rendered
-#: with 1e-6: 0.017; docs/glints-part2.md). Cost: 1.2-1.9x the kept blocks and bytes (flakes
+#: with 1e-6: 0.017; docs/glints-part2-log.md). Cost: 1.2-1.9x the kept blocks and bytes (flakes
 #: 11.0 -> 17.5 MB, scratches 13.3 -> 21.6 MB), frame time +5 % at mid.
 #: ``ndf_truncation`` / ``footprint_truncation`` (6 / 6, the bake's default 4 / 4): HDR-FLIP of
 #: the mostly black brushed plane frames exposes up to +24 stops, where the element and footprint
 #: tails beyond 4 stds show: plane brushed mid / far 0.101 / 0.097 -> 0.078 / 0.079 (6 / 6;
 #: element cut alone 0.100 / 0.081), no cell of the point matrix worse by more than 0.001; bake
-#: time ~2x, storage +0.1-3.5 % (docs/glints-part2.md, session 6).
+#: time ~2x, storage +0.1-3.5 % (docs/glints-part2-log.md, session 6).
 #: ``code_bits`` 16 / ``c_bits`` 8: 16-bit ``a``, ``b`` factors, 8-bit per-image ``c``. The
 #: 8-bit ``a``, ``b`` rounding (with the CP's early stop, now fixed in :mod:`cp`) was the
 #: brushed plane's point-light miss: mid / far 0.078 / 0.079 -> 0.040 / 0.050; 8-bit ``c``
@@ -86,7 +86,7 @@ PIXEL_SIGMA = 0.5
 #: all-8-bit codes (all-16-bit ones: 1.5x slower kernel, bench_glints_codes.py).
 #: ``exact_from_level`` 2: levels >= 2 stored exactly, far 0.050 -> 0.028. Brushed map 2.91 ->
 #: 3.99 -> 4.88 MB; environment mid / far frames ~1.2x / 1.4x slower, max/min within 1.5
-#: (docs/glints-part2.md, session 9).
+#: (docs/glints-part2-log.md, session 9).
 BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
@@ -95,7 +95,7 @@ BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid
 #: samples: FLIP vs glints-direct 0.065 / 0.212 / 0.090 instead of 0.039 / 0.103 / 0.059 on the
-#: measurement scene (docs/glints-part2.md).
+#: measurement scene (docs/glints-part2-log.md).
 INTERP = "resample"
 BILINEAR = True
 _SURFACES: dict = {}
@@ -194,14 +194,14 @@ U_PAIR = 11
 #: mean is over a rectangle of the patch's area, :data:`QUAD_RECT`; the guard is against
 #: degenerate patches: with bounding boxes it was 0.5, which sent the 8 % of the plane's mid
 #: pixels with patches filled 0.40-0.5 to Monte Carlo; with equal-area rectangles those cost
-#: FLIP 0.027 -> 0.028 vs the reference on the range pixels, docs/glints-part2.md, session 5).
+#: FLIP 0.027 -> 0.028 vs the reference on the range pixels, docs/glints-part2-log.md, session 5).
 QUAD_SUB = 2
 RANGE_MAX = 0.08
 #: Pyramid weights of the quad lights' range queries: Gaussian resampling, the point queries'
 #: footprint (:data:`INTERP`). The trilinear blend (8 images of the wrong sizes and places) was
 #: the systematic error of the range path (issue #9): plane flakes mid, range pixels vs the
 #: deterministic reference FLIP 0.143 trilinear, 0.042 resampled (both with bounding boxes;
-#: docs/glints-part2.md, session 5). The weights are computed once per pixel and shared by its
+#: docs/glints-part2-log.md, session 5). The weights are computed once per pixel and shared by its
 #: patches.
 QUAD_INTERP = "resample"
 #: Pyramid weights of the environment lights' range queries (:mod:`prefilter.glints.envlight`):
