@@ -169,6 +169,7 @@ def test_render_bake_keeps_dim_ndf_blocks(tmp_path, monkeypatch):
 
     monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path))
     monkeypatch.setitem(gr.BAKE_SETTINGS, "ndf_res", 64)
+    monkeypatch.setitem(gr.BAKE_SETTINGS, "block", 16)  # 16 blocks per image, as measured
     monkeypatch.setitem(gr.BAKE_SETTINGS, "intrinsic_roughness", 0.02)
     monkeypatch.setitem(gr.BAKE_SETTINGS, "rank", 16)
     monkeypatch.setattr(gr, "_SURFACES", {})

@@ -57,9 +57,10 @@ from prefilter.sphere.sampling import to_local, to_world
 
 PIXEL_SIGMA = 0.5
 #: Bake settings of the render cache. The intrinsic roughness is twice Yan et al.'s 0.005 so that
-#: the NDF pixels (pitch 1/128) resolve the intrinsic lobe: with 0.005 a pixel is 1.6 std wide
-#: and the pixel averages differ from the direct P-NDF's point values at every sharp glint.
-#: The images cover the whole disk of projected half vectors (support 1, 256 pixels at the same
+#: the NDF pixels (pitch 1/128 at 256^2, 1/256 now) resolve the intrinsic lobe: with 0.005 a 1/128
+#: pixel is 1.6 std wide and the pixel averages differ from the direct P-NDF's point values at
+#: every sharp glint.
+#: The images cover the whole disk of projected half vectors (support 1, 256 pixels at that
 #: pitch): with support 0.5 every half vector tilted more than 27 degrees per axis had a zero NDF
 #: (a fifth of the pixels of the measurement scene, FLIP 0.36 -> 0.21 at mid distance).
 #: ``intrinsic_roughness`` is the model's (direct P-NDF, fallback, reference); with the bilinear
@@ -84,13 +85,19 @@ PIXEL_SIGMA = 0.5
 #: brushed plane's point-light miss: mid / far 0.078 / 0.079 -> 0.040 / 0.050; 8-bit ``c``
 #: changes no brushed cell by more than 0.0005 and keeps the range queries as fast as
 #: all-8-bit codes (all-16-bit ones: 1.5x slower kernel, bench_glints_codes.py).
-#: ``exact_from_level`` 2: levels >= 2 stored exactly, far 0.050 -> 0.028. Brushed map 2.91 ->
-#: 3.99 -> 4.88 MB; environment mid / far frames ~1.2x / 1.4x slower, max/min within 1.5
-#: (docs/glints-part2-log.md, session 9).
-BAKE_SETTINGS = dict(rank=48, ndf_res=256, block=16, support=1.0, stride0=4,
+#: ``exact_from_level``: levels >= L stored exactly (session 9, 256^2 images: L = 2, brushed
+#: point far 0.050 -> 0.028; docs/glints-part2-log.md, session 9).
+#: ``ndf_res`` 512 with ``block`` 32 (session 10; was 256 / 16) and ``exact_from_level`` 3: the
+#: environment's brushed plane cells were at the 256^2 images' resolution floor (compression
+#: alone 0.053 / 0.050 -> 0.029 / 0.021). 32-pixel blocks keep the blocks a range query spans
+#: (and the frame time) at the 256 / 16 layout's: 512 / 16 made environment frames 2x slower;
+#: exact levels >= 2 at this block size reach ranks 1024 (flakes 105 MB, environment max/min
+#: 1.9), >= 3 ranks 384-1024 on few groups. Storage brushed 4.88 -> 7.87 MB, flakes 36.6 ->
+#: 61.7 MB (the uncompressed pyramid is 4x larger); bake ~2.3x longer (docs/glints-part2.md).
+BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
-                     code_bits=16, c_bits=8, exact_from_level=2)
+                     code_bits=16, c_bits=8, exact_from_level=3)
 #: How ``glints`` evaluates compressed footprints (:func:`prefilter.glints.brdf.surface`):
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid
