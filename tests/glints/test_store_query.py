@@ -719,7 +719,7 @@ def test_range_multi_equals_range_weighted_per_rectangle(request, interp, bits):
                                       np.where(act, got, 0.0))
         # serial and parallel kernels alike, up to the float32 sums' rounding: they are separate
         # compilations and fastmath lets LLVM reassociate those sums differently (seen once in a
-        # full run, session 10: 1.3e-7 relative); float64 (rtol 1e-6 above) agreed exactly
+        # full test run, session 10: 1.3e-7 relative on the 8-bit map; not reproduced alone)
         big = np.repeat(np.arange(n), 120 // k * 300 // n + 1)
         got_p = gq.range_multi(m, idx[big], w[big], lo[big], hi[big])
         assert got_p.size >= gq.SERIAL_BELOW
