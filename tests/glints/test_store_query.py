@@ -392,6 +392,14 @@ def test_16bit_factors_8bit_c_bake(baked, baked16, baked16c8):
     assert 0.9 <= sh["bytes"]["c"] / s8["bytes"]["c"] <= 1.1
     assert 1.8 <= sh["bytes"]["a"] / s8["bytes"]["a"] <= 2.2
     assert s16["rel_l2_error"] * 0.99 <= sh["rel_l2_error"] <= s8["rel_l2_error"] * 1.01
+    # the fit's own error (before the codes' rounding): below the stored one, by little with
+    # 16-bit codes, by more with 8-bit c codes
+    for s in (s8, s16, sh):
+        assert 0 < s["rel_l2_error_fit"] <= s["rel_l2_error"] * (1 + 1e-9)
+    # measured: 8-bit 1.76e-3 stored / 1.36e-4 fit, 16-bit 1.375e-4 / 1.361e-4, 16/8 9.4e-4 /
+    # 1.41e-4
+    rounding = [s["rel_l2_error"] - s["rel_l2_error_fit"] for s in (s16, sh, s8)]
+    assert rounding[0] < 0.1 * rounding[1] and rounding[1] < rounding[2]
 
 
 def test_exact_from_level_stores_upper_levels_exactly(baked, tmp_path):
