@@ -240,7 +240,7 @@ def test_render_glints_vs_direct(small_bakes):
     direct = render(sc, "glints-direct")
     assert comp.mean() == pytest.approx(direct.mean(), rel=0.1)
     # per pixel: the trilinear blend of pyramid NDFs (~10 % relative L2 off the pyramid samples,
-    # docs/glints-part2.md) moves sparse glints a little; the images stay strongly correlated
+    # docs/glints-part2-log.md) moves sparse glints a little; the images stay strongly correlated
     assert np.corrcoef(comp.ravel(), direct.ravel())[0, 1] > 0.9
 
 
