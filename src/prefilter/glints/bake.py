@@ -29,7 +29,6 @@ blocks dominated and the upper levels had ~10 % error). Measurements in docs/gli
 from __future__ import annotations
 
 import functools
-import hashlib
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -44,7 +43,7 @@ from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
                                    as_ndf_truncation, as_normal_map, as_support, elements,
-                                   pndf_image)
+                                   map_digest, pndf_image)
 from prefilter.glints.pyramid import level_difference, next_level, plan
 from prefilter.glints.store import CODE_BITS, GlintsMap, decode, encode, pack_mask, save
 
@@ -228,7 +227,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["c_bits"] = c_bits
     if exact_from_level is not None:
         settings["exact_from_level"] = exact_from_level
-    digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
+    digest = map_digest(nm)
     # the fit's version too: parts fitted by another version of the CP are not resumed from
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], cp_fit=cpmod.FIT_VERSION))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",

@@ -28,7 +28,6 @@ material model).
 
 from __future__ import annotations
 
-import hashlib
 import math
 import weakref
 from dataclasses import dataclass
@@ -39,7 +38,7 @@ from prefilter._numba import njit_inline, njit_parallel, prange, serial
 from prefilter._validate import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, texel_window,
-                                   as_normal_map, element_moments, elements, pndf)
+                                   as_normal_map, element_moments, elements, map_digest, pndf)
 from prefilter.glints._qkernels import _rect_mass
 from prefilter.glints._simd import exp_neg, fdiv
 from prefilter.glints.query import point_flat
@@ -113,7 +112,7 @@ def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
         nm = as_normal_map(normal_map)
         el = elements(nm)
         if gm is not None and check:
-            digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
+            digest = map_digest(nm)
             baked = gm.header.get("map_sha1")
             if baked is not None and baked != digest:
                 raise PrefilterError("normal_map: expected the normal map the glints map was baked "

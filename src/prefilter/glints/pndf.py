@@ -31,6 +31,7 @@ acceleration structure, so the cost is proportional to the texels under the foot
 
 from __future__ import annotations
 
+import hashlib
 import math
 
 import numpy as np
@@ -111,6 +112,13 @@ def as_ndf_truncation(ndf_truncation, name: str = "ndf_truncation") -> float:
 
 # ---------------------------------------------------------------------------------------------
 # elements
+
+
+def map_digest(normal_map: np.ndarray) -> str:
+    """SHA-1 (hex) of a validated normal map's float64 values: what a bake records
+    (``map_sha1``), what :func:`prefilter.glints.brdf.surface` checks and what the render and
+    Wang-tile caches are keyed by."""
+    return hashlib.sha1(np.ascontiguousarray(normal_map, dtype=np.float64).tobytes()).hexdigest()
 
 
 def elements(normal_map) -> tuple[np.ndarray, np.ndarray]:

@@ -51,7 +51,7 @@ from prefilter.errors import PrefilterError
 from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, bilinear_bake_roughness,
                                    glint_brdf_cos, glint_ndf, surface)
 from prefilter.glints import cp as cpmod
-from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
+from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map, map_digest
 from prefilter.render.shading import point_incoming, shading_frames
 from prefilter.sphere.sampling import to_local, to_world
 
@@ -138,7 +138,7 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
     if BILINEAR and not direct:
         # the bilinear lookup adds (h/2)^2 to the NDF's variance: bake that much sharper
         st["intrinsic_roughness"] = bilinear_bake_roughness(sr, st["support"], st["ndf_res"])
-    digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
+    digest = map_digest(nm)
     key = settings_key(st)
     # the direct surface is the normal map and the model's roughness (no bake): key it by both
     mem = (digest, f"direct-{sr!r}" if direct else key, INTERP, BILINEAR)

@@ -34,14 +34,13 @@ Textured quads are rejected.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 
 import numpy as np
 
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map
+from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map, map_digest
 from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 
 #: Tiles and bake of the render cache. ``tile`` 32 (the CLI's default), or the exemplar's size
@@ -139,17 +138,13 @@ def cache_path(normal_map, settings: dict | None = None):
 def _cache_path(nm: np.ndarray, st: dict):
     """:func:`cache_path` of a validated exemplar ``nm`` and complete settings ``st`` (hashed
     as they are: validating ``nm`` again may change its last bits)."""
-    from prefilter.glints.render import cache_dir
-    from prefilter.glints import cp
+    from prefilter.glints.render import cache_dir, settings_key
     from prefilter.glints.wang_store import VERSION
 
-    digest = hashlib.sha1(np.ascontiguousarray(nm, dtype=np.float64).tobytes()).hexdigest()
-    # the store's format version and the CP fit's in the key: a file of another layout, or fitted
-    # before a change to the fit, is never looked up
-    key = hashlib.sha1(json.dumps(dict(st, store_version=VERSION, cp_fit=cp.FIT_VERSION),
-                                  sort_keys=True)
-                       .encode()).hexdigest()[:12]
-    return cache_dir() / f"wang-{digest[:20]}-{key}.npz"
+    # the store's format version in the key (and, by settings_key, the CP fit's): a file of
+    # another layout, or fitted before a change to the fit, is never looked up
+    key = settings_key(dict(st, store_version=VERSION))
+    return cache_dir() / f"wang-{map_digest(nm)[:20]}-{key}.npz"
 
 
 def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = False) -> TiledNDF:
