@@ -134,7 +134,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
          ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
          code_bits: int = 8, c_bits: int | None = None,
-         exact_from_level: int | None = None) -> dict:
+         exact_from_level: int | None = None, exact_cell: int | None = None) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -168,10 +168,16 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
 
     ``exact_from_level``: the groups of pyramid levels ``>=`` this are stored as their exact
     non-negative CP (:func:`prefilter.glints.cp.exact_cp`: ranks up to ``B^2``, beyond
-    ``max_rank``) instead of a fit; the other groups get the ranks they get without the option
-    (the budget is split over all groups as usual, then the exact ones replace theirs). The
+    ``max_rank``) instead of a fit, outside the budget (``rank`` is then the mean rank per byte
+    of the fitted groups; before session 11 the exact groups took part in the split). The
     levels above the finest few hold few images, so this costs little storage and removes the
     compression error that far footprints see.
+
+    ``exact_cell``: footprint centres per side of the cells of those exact levels (default: as
+    at the other levels, ``cell / stride0``). A group's exact rank is at most the number of its
+    non-zero pixels, rows or columns over its ``K`` images (``min(B^2, B K)``), and a query reads
+    all of it: ``exact_cell=1`` (one image per group) bounds it by ``B`` instead of ``B^2``, at
+    the cost of ``a``, ``b`` factors per image instead of per cell.
     """
     from tqdm import tqdm
 
@@ -195,6 +201,11 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     code_bytes, c_bytes = code_bits // 8, c_bits // 8
     if exact_from_level is not None:
         exact_from_level = as_positive_int(exact_from_level, "exact_from_level", lo=0)
+    if exact_cell is not None:
+        if exact_from_level is None:
+            raise PrefilterError("exact_cell: only with exact_from_level (the cells of the "
+                                 "levels stored exactly)")
+        exact_cell = as_positive_int(exact_cell, "exact_cell")
     cell = as_positive_int(cell, "cell")
     pyr = plan(H, W, stride0, sigma0, max_levels)
     if cell % pyr.stride0 or H % cell or W % cell:
@@ -227,6 +238,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["c_bits"] = c_bits
     if exact_from_level is not None:
         settings["exact_from_level"] = exact_from_level
+    if exact_cell is not None:
+        settings["exact_cell"] = exact_cell
     digest = map_digest(nm)
     # the fit's version too: parts fitted by another version of the CP are not resumed from
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], cp_fit=cpmod.FIT_VERSION))
@@ -274,9 +287,10 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     # (k = cell / stride0, i.e. cell * 2^l texels at level l), so every group holds blocks of
     # footprints of the same size and about the same number of them at every level; a level's fit
     # is not dominated by the sharper, higher-energy blocks of the levels below it.
-    k_side = cell // pyr.stride0
     members = []  # (level, iy, ix) per cell
     for lv in range(pyr.n_levels):
+        exact_lv = exact_from_level is not None and lv >= exact_from_level
+        k_side = exact_cell if exact_lv and exact_cell is not None else cell // pyr.stride0
         ny, nx = pyr.shape(lv)
         ncy, ncx = max(1, ny // k_side), max(1, nx // k_side)
         iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
@@ -305,21 +319,27 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                 tensors.append(np.ascontiguousarray(blocks[keep, bi, bj].transpose(1, 2, 0)))
         return imgs, blocks, blank, tensors, where
 
+    def is_exact(cid):
+        return exact_from_level is not None and members[cid][0][0] >= exact_from_level
+
     def fit_cell(cid):
-        """Pass 1: every group of the cell at rank ``base``; its error drives the allocation."""
+        """Pass 1: every fitted group of the cell at rank ``base``; its error drives the
+        allocation (the groups stored exactly are not fitted)."""
         imgs, blocks, blank, tensors, where = cell_tensors(cid)
         live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
-        res = dict(zip(live, cpmod.nn_cp_batch([tensors[g] for g in live], base,
-                                               n_iter_max=n_iter_max, tol=tol, seed=seed + cid)))
+        fit = [] if is_exact(cid) else live
+        res = dict(zip(fit, cpmod.nn_cp_batch([tensors[g] for g in fit], base,
+                                              n_iter_max=n_iter_max, tol=tol, seed=seed + cid)))
         rows = np.concatenate([[0], np.cumsum([len(w) for w in where])]).astype(np.int64)
         local = np.full(blank.shape, -1, np.int32)
         a = np.zeros((nb * nb, base, B), np.float32)
         b = np.zeros_like(a)
         c = np.zeros((rows[-1], base), np.float32)
         err2_g = np.zeros(nb * nb)
-        for g, (ag, bg, cg, e) in res.items():
+        for g in live:
             bi, bj = divmod(g, nb)
             local[where[g], bi, bj] = rows[g] + np.arange(len(where[g]), dtype=np.int32)
+        for g, (ag, bg, cg, e) in res.items():
             a[g], b[g], c[rows[g]:rows[g + 1]] = ag.T, bg.T, cg
             err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g])
         mass = imgs.sum(axis=(1, 2)) * (2 * S / R) ** 2
@@ -390,11 +410,14 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         counts = np.concatenate(counts)
         unit = np.where(counts > 0, c_bytes * counts + unit_bytes_group, 0.0)
         group_level = np.repeat([m[0][0] for m in members], nb * nb)
-        ranks_ = split_budget(np.concatenate(err2_all), unit, group_level, rank, base,
-                              candidates, level_rank)
-        if exact_from_level is not None:
-            # the fitted groups keep the ranks they get without the option
-            ranks_[group_level >= exact_from_level] = EXACT
+        # the budget is the fitted groups' (the exact ones were not fitted: no error to weigh)
+        fitted = (group_level < exact_from_level if exact_from_level is not None
+                  else np.ones(len(unit), bool))
+        ranks_ = np.full(len(unit), EXACT, np.int64)
+        if fitted.any():
+            ranks_[fitted] = split_budget(np.concatenate(err2_all)[fitted], unit[fitted],
+                                          group_level[fitted], rank, base, candidates,
+                                          level_rank)
         ck.save(ALLOC_CHUNK, ranks=np.where(counts > 0, ranks_, 0).astype(np.int64))
     alloc = ck.load(ALLOC_CHUNK)["ranks"]
     run(refit_cell, range(n_cells), "CP refit")

@@ -103,10 +103,14 @@ def shared_options(**defaults):
 @click.option("--exact-from-level", default=None, type=click.IntRange(min=0),
               help="Store the groups of pyramid levels >= this exactly (no CP fit; outside the "
                    "rank budget).")
+@click.option("--exact-cell", default=None, type=click.IntRange(min=1),
+              help="Footprint centres per side of the cells of those exact levels [default: "
+                   "cell / stride0]; 1 makes every image a group (exact ranks <= block instead "
+                   "of block^2: faster queries).")
 @shared_options(iters=50, seed=0, quiet=False)
 def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
                 stride0, sigma0, cell, converge, ndf_truncation, footprint_truncation,
-                code_bits, c_bits, exact_from_level, iters, seed, quiet):
+                code_bits, c_bits, exact_from_level, exact_cell, iters, seed, quiet):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
@@ -121,7 +125,7 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
                    max_rank=max_rank, level_rank=level_rank, ndf_truncation=ndf_truncation,
                    footprint_truncation=footprint_truncation, code_bits=int(code_bits),
                    c_bits=None if c_bits is None else int(c_bits),
-                   exact_from_level=exact_from_level)
+                   exact_from_level=exact_from_level, exact_cell=exact_cell)
     s = summary
     click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
     click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "
