@@ -38,6 +38,12 @@ bake into other files). ``--by-luminance`` adds the share of each cell's FLIP er
 pixel's luminance relative to the frame maximum (:func:`error_by_luminance`): on a mostly black
 frame HDR-FLIP's automatic exposure range reaches +24 stops and the tails count.
 
+``--lossless``: also ``glints`` on the map stored without compression error
+(:data:`LOSSLESS`: every group its exact non-negative CP, 16-bit codes; 0.1-0.8 GB per map) and
+FLIP of ``glints`` against it (the compression error alone: the same pyramid, resampling and NDF
+pixels) and of it against ``glints-direct`` (what the tabulated pyramid costs without any
+compression); rows carry ``flip_lossless`` and ``flip_lossless_direct`` (frame, object pixels).
+
 ``--same-estimator`` (environment lights): ``glints`` shades with the unprefiltered SG estimator
 (point NDF queries) instead of the epsilon-prefiltered one. Its light samples depend only on the
 uniforms, not on the NDF, so with the same seed both methods evaluate their NDFs at the same half
@@ -58,6 +64,10 @@ import numpy as np
 KINDS = ("gaussian", "brushed", "flakes", "scratches")
 DISTANCES = {"near": 0.5, "mid": 2.0, "far": 8.0}
 TARGET = 0.05
+#: render bake settings that store the pyramid without compression error (``--lossless``): no
+#: group fitted, every one its exact non-negative CP; 16-bit ``c`` codes (8-bit ones round the
+#: NDF tails)
+LOSSLESS = {"exact_from_level": 0, "c_bits": 16, "exact_cell": None}
 #: map repeats per unit length of the measurement plane (``uv_scale / size = 160 d / 40 d``)
 DENSITY = 4.0
 
@@ -133,7 +143,8 @@ def _direct_frame(sc_dict: dict, sc, cache: Path | None) -> tuple[np.ndarray, fl
 
 def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False,
          converged: int = 0, stop_exposure: float | None = None,
-         by_luminance: bool = False, direct_cache: Path | None = None) -> dict:
+         by_luminance: bool = False, direct_cache: Path | None = None,
+         lossless: bool = False) -> dict:
     """One matrix cell. ``floor``: also ``glints-direct`` with another seed, and FLIP between
     its two images: the Monte Carlo noise floor of a comparison against a 1-spp MIS / SG-sampled
     ``glints-direct`` (quad and environment lights; 0 for point lights). ``converged``: also
@@ -172,6 +183,20 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
                   stop_exposure=min(stop_exposure, fl.settings["stop_exposure"]))
         extra.update(stop_exposure=stop_exposure, flip_capped=float(fc.mean),
                      flip_capped_object=float(fc.error_map[hit].mean()))
+    if lossless:
+        from prefilter.glints.render import BAKE_SETTINGS
+
+        saved = dict(BAKE_SETTINGS)
+        BAKE_SETTINGS.update(LOSSLESS)
+        if BAKE_SETTINGS["exact_cell"] is None:
+            del BAKE_SETTINGS["exact_cell"]
+        try:
+            ll = render(sc, "glints")
+        finally:
+            BAKE_SETTINGS.clear()
+            BAKE_SETTINGS.update(saved)
+        extra.update(flip_lossless=_flip_pair(img["glints"], ll, hit),
+                     flip_lossless_direct=_flip_pair(ll, img["glints-direct"], hit))
     if by_luminance:
         extra.update(stop_exposure_auto=fl.settings["stop_exposure"],
                      by_luminance=error_by_luminance(fl.error_map, img["glints"],
@@ -324,6 +349,28 @@ def table(rows: list[dict]) -> str:
     return "\n".join(out)
 
 
+def table_lossless(rows: list[dict]) -> str:
+    """Markdown: per cell with ``--lossless`` data, FLIP (object pixels in brackets where the
+    background shows) of ``glints`` vs ``glints-direct``, vs the lossless map, and of the
+    lossless map vs ``glints-direct``."""
+    rs = [r for r in rows if r.get("mode") != "reference" and "flip_lossless" in r]
+    if not rs:
+        return ""
+
+    def pair(r, key):
+        v = r[key]
+        return f"{v[0]:.3f} ({v[1]:.3f})" if r["object_pixels"] < 0.999 else f"{v[0]:.3f}"
+
+    out = ["| lights | shape | map | d | glints vs direct | glints vs lossless (compression) | "
+           "lossless vs direct |", "|---|---|---|---|---|---|---|"]
+    for r in rs:
+        fl = (f"{r['flip']:.3f} ({r['flip_object']:.3f})" if r["object_pixels"] < 0.999
+              else f"{r['flip']:.3f}")
+        out.append(f"| {r['lights']} | {r['shape']} | {r['map']} | {r['distance']} | {fl} | "
+                   f"{pair(r, 'flip_lossless')} | {pair(r, 'flip_lossless_direct')} |")
+    return "\n".join(out)
+
+
 def table_exposure(rows: list[dict]) -> str:
     """Markdown: per cell with ``--stop-exposure`` / ``--by-luminance`` data, FLIP at FLIP's own
     exposure range, capped, and the error share by relative luminance."""
@@ -384,6 +431,9 @@ def main():
                          "samples as glints-direct: FLIP = compression error alone)")
     ap.add_argument("--no-direct", action="store_true",
                     help="--reference: skip the 1-spp glints-direct frame (costly far away)")
+    ap.add_argument("--lossless", action="store_true",
+                    help="also glints on the map stored exactly: FLIP of glints against it "
+                         "(compression alone) and of it against glints-direct")
     ap.add_argument("--direct-cache", default=None,
                     help="folder keeping the glints-direct frames between runs (they do not "
                          "depend on the bake settings)")
@@ -419,7 +469,8 @@ def main():
                     else:
                         r = cell(shape, dn, kind, lights, a.floor, a.converged,
                                  a.stop_exposure, a.by_luminance,
-                                 Path(a.direct_cache) if a.direct_cache else None)
+                                 Path(a.direct_cache) if a.direct_cache else None,
+                                 a.lossless)
                         if a.bake:
                             r["bake"] = json.loads(a.bake)
                         if a.same_estimator:
@@ -432,9 +483,9 @@ def main():
     if a.reference:
         return
     rows = [r for r in rows if r.get("mode") != "reference"]
-    extra = table_exposure(rows)
-    if extra:
-        print(extra)
+    for extra in (table_exposure(rows), table_lossless(rows)):
+        if extra:
+            print(extra)
     bad = [r for r in rows if worst(r) > TARGET]
     print(f"cells over FLIP {TARGET}: {len(bad)} of {len(rows)}")
 

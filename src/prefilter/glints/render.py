@@ -94,10 +94,14 @@ PIXEL_SIGMA = 0.5
 #: exact levels >= 2 at this block size reach ranks 1024 (flakes 105 MB, environment max/min
 #: 1.9), >= 3 ranks 384-1024 on few groups. Storage brushed 4.88 -> 7.87 MB, flakes 36.6 ->
 #: 61.7 MB (the uncompressed pyramid is 4x larger); bake ~2.3x longer (docs/glints-part2.md).
+#: ``exact_cell`` 1 (session 11): every image of the exact levels is its own group, so their
+#: exact ranks are at most 32 instead of up to 1024 (a query reads the whole rank): far
+#: environment frames 108 -> 86 ms (max/min 1.33 -> 1.21), flakes 61.7 -> 71.5 MB, brushed
+#: 7.9 -> 9.4 MB (the ``a``, ``b`` factors per image instead of per cell of 64 images).
 BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
-                     code_bits=16, c_bits=8, exact_from_level=3)
+                     code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1)
 #: How ``glints`` evaluates compressed footprints (:func:`prefilter.glints.brdf.surface`):
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid
