@@ -95,9 +95,11 @@ PIXEL_SIGMA = 0.5
 #: 1.9), >= 3 ranks 384-1024 on few groups. Storage brushed 4.88 -> 7.87 MB, flakes 36.6 ->
 #: 61.7 MB (the uncompressed pyramid is 4x larger); bake ~2.3x longer (docs/glints-part2.md).
 #: ``exact_cell`` 1 (session 11): every image of the exact levels is its own group, so their
-#: exact ranks are at most 32 instead of up to 1024 (a query reads the whole rank): far
-#: environment frames 108 -> 86 ms (max/min 1.33 -> 1.21), flakes 61.7 -> 71.5 MB, brushed
-#: 7.9 -> 9.4 MB (the ``a``, ``b`` factors per image instead of per cell of 64 images).
+#: exact ranks are at most 32 instead of up to 1024 (a query reads the whole rank): far frames
+#: environment 107-109 -> 93-94 ms, point 13 -> 11 ms (max/min 1.30 -> 1.13, 1.20 -> 1.11;
+#: ``bench_glints.py --frames --cpu --runs 2 --baseline``). The exact groups no longer take part
+#: in the rank budget: flakes 61.7 -> 57.9 MB, gaussian 24.6 -> 23.0 MB, level-0 relative L2
+#: error +1 % / +6 % (docs/glints-part2-log.md, session 11).
 BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
