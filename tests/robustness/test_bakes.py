@@ -62,6 +62,12 @@ BAKES = {
     "glints": Bake(lambda i, o: ["glints", "procedural:gaussian:64:1", "--ndf-res", "16",
                                  "--block", "8", "--rank", "4", "--cell", "16", "--iters", "20",
                                  "-o", str(o)], "glints.npz", True, (0.0, 0.8)),
+    # the render bake's layout: 16-bit a, b, 8-bit c, upper levels exact, one image per group
+    "glints-exact": Bake(lambda i, o: ["glints", "procedural:gaussian:64:1", "--ndf-res", "16",
+                                       "--block", "8", "--rank", "4", "--cell", "16",
+                                       "--iters", "20", "--code-bits", "16", "--c-bits", "8",
+                                       "--exact-from-level", "1", "--exact-cell", "1",
+                                       "-o", str(o)], "glints.npz", True, (0.0, 0.8)),
     "colormap": Bake(lambda i, o: ["colormap", str(_colormap_input(i)), "--sigma-max", "0.2",
                                    "--size", "1024", "-o", str(o)], "table.exr", True,
                      (0.0, 0.4)),
@@ -192,7 +198,7 @@ def _check(kind, seed, references, tmp_path):
         assert res["outputs"][name] == data, f"{kind}: {name} differs from the uninterrupted bake"
 
 
-@pytest.mark.parametrize("kind", ["ltc-iso", "glints"])
+@pytest.mark.parametrize("kind", ["ltc-iso", "glints", "glints-exact"])
 def test_kill_restart_fast(kind, references, tmp_path):
     _check(kind, 0, references, tmp_path)
 

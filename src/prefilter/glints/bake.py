@@ -332,9 +332,10 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                                               n_iter_max=n_iter_max, tol=tol, seed=seed + cid)))
         rows = np.concatenate([[0], np.cumsum([len(w) for w in where])]).astype(np.int64)
         local = np.full(blank.shape, -1, np.int32)
-        a = np.zeros((nb * nb, base, B), np.float32)
+        width = 0 if is_exact(cid) else base  # no factors to keep for the exact groups
+        a = np.zeros((nb * nb, width, B), np.float32)
         b = np.zeros_like(a)
-        c = np.zeros((rows[-1], base), np.float32)
+        c = np.zeros((rows[-1], width), np.float32)
         err2_g = np.zeros(nb * nb)
         for g in live:
             bi, bj = divmod(g, nb)
