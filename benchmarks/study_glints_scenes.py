@@ -14,7 +14,8 @@ place under the same lights, textured at the plane's density (4 map repeats per 
 ``uv_scale`` rounded to whole repeats so the ``phi`` seam is continuous). Maps: the four
 procedural glint maps, 128^2 (baked once into the render cache, ~1 min each). One cell = one
 frame per method at 64x48, 1 spp; FLIP (HDR, :func:`prefilter.render.metrics.flip`) with
-``glints-direct`` as the reference, since ``glints``' only intended error is its compression.
+``glints-direct`` as the reference: ``glints`` differs from it by its compression and by the
+tabulated pyramid itself (resampling, NDF pixels; ``--lossless`` separates the two).
 Wall times are single frames on a shared machine: indicative only. Quad and environment lights:
 ``glints-direct`` is a 1-spp Monte Carlo estimate (MIS, SG sampling) while ``glints`` mostly uses
 noise-free range queries, so their FLIP includes the estimator's noise; ``--floor`` measures it
@@ -47,8 +48,8 @@ compression); rows carry ``flip_lossless`` and ``flip_lossless_direct`` (frame, 
 ``--same-estimator`` (environment lights): ``glints`` shades with the unprefiltered SG estimator
 (point NDF queries) instead of the epsilon-prefiltered one. Its light samples depend only on the
 uniforms, not on the NDF, so with the same seed both methods evaluate their NDFs at the same half
-vectors and the FLIP between the two frames is the compression error alone (no Monte Carlo
-noise between them); rows carry ``same_estimator``.
+vectors and the FLIP between the two frames is the NDF's error alone (compression and
+pyramid, no Monte Carlo noise between them); rows carry ``same_estimator``.
 """
 
 from __future__ import annotations
@@ -428,7 +429,7 @@ def main():
     ap.add_argument("--seeds", type=int, default=16, help="--reference: glints seeds averaged")
     ap.add_argument("--same-estimator", action="store_true",
                     help="environment: glints with the unprefiltered SG estimator (same light "
-                         "samples as glints-direct: FLIP = compression error alone)")
+                         "samples as glints-direct: FLIP = the NDF's error alone)")
     ap.add_argument("--no-direct", action="store_true",
                     help="--reference: skip the 1-spp glints-direct frame (costly far away)")
     ap.add_argument("--lossless", action="store_true",
@@ -448,7 +449,12 @@ def main():
         _unprefiltered_environment()
     fmt = table_reference if a.reference else table
     if a.table:
-        print(fmt([json.loads(x) for x in Path(a.table).read_text().splitlines() if x]))
+        rows = [json.loads(x) for x in Path(a.table).read_text().splitlines() if x]
+        print(fmt(rows))
+        if not a.reference:
+            for extra in (table_exposure(rows), table_lossless(rows)):
+                if extra:
+                    print(extra)
         return
     out = Path(a.out)
     done = set()
