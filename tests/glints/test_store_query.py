@@ -9,7 +9,7 @@ from maps import sinusoid
 
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints import pndf_image
-from prefilter.glints.bake import bake
+from prefilter.glints.bake import EXACT_BUDGET_RULE, bake
 from prefilter.glints.query import block_means, point, range_mean
 from prefilter.glints.store import (ARRAYS, PREFIX_MAX, block_index_from_mask, decode,
                                     decode_v2, encode, encode_v2, factor_codes, load, pack_mask,
@@ -276,6 +276,11 @@ def test_bake_parts_keyed_by_fit_version(tmp_path, monkeypatch):
     out.unlink()
     bake(nm, out, **kw)
     assert json.loads(meta.read_text())["cp_fit"] == cpmod.FIT_VERSION
+    assert "exact_budget" not in json.loads(meta.read_text())
+    # with exact levels the parts also record the budget rule (session 11 changed it)
+    out.unlink()
+    bake(nm, out, exact_from_level=1, **kw)
+    assert json.loads(meta.read_text())["exact_budget"] == EXACT_BUDGET_RULE
 
 
 def test_bake_rank_errors(tmp_path):

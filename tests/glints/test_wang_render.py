@@ -282,6 +282,22 @@ def test_cache_keys_record_the_fit_version(tmp_path, monkeypatch):
     assert before[0] != after[0] and before[1] != after[1]
 
 
+def test_render_key_records_the_exact_budget_rule(tmp_path, monkeypatch):
+    """Bake settings with exact levels key on the budget rule (session 11 changed it); the
+    Wang-tile key (no exact levels) does not."""
+    from prefilter.glints import bake as gbake
+
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path))
+    nm = sinusoid(8, 0.2, 0.2, 8, 8)
+    st = dict(grender.BAKE_SETTINGS)
+    assert st.get("exact_from_level") is not None
+    no_exact = {k: v for k, v in st.items() if k not in ("exact_from_level", "exact_cell")}
+    before = grender.settings_key(st), grender.settings_key(no_exact), cache_path(nm)
+    monkeypatch.setattr(gbake, "EXACT_BUDGET_RULE", gbake.EXACT_BUDGET_RULE - 1)
+    after = grender.settings_key(st), grender.settings_key(no_exact), cache_path(nm)
+    assert before[0] != after[0] and before[1:] == after[1:]
+
+
 @pytest.mark.slow
 def test_compressed_index_map_against_direct(tmp_path, monkeypatch):
     """CP-compressed per-tile pyramids (rank 16, blocks 16), T = 16 on a 64^2 Gaussian

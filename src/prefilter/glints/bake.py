@@ -59,6 +59,18 @@ RANK_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
 LEVEL_RANK = ("global", "level", "uniform")
 #: allocation marker of the groups stored exactly (``bake(exact_from_level=...)``)
 EXACT = -1
+#: How a bake with exact levels spends the rank budget (1: over all groups, the exact ones then
+#: replacing theirs; 2, session 11: over the fitted groups only). Bakes with exact levels key
+#: their checkpoints, and the render cache its files, on it (:func:`budget_rule`).
+EXACT_BUDGET_RULE = 2
+
+
+def budget_rule(settings: dict) -> dict:
+    """``{"exact_budget": EXACT_BUDGET_RULE}`` for bake settings with exact levels, else ``{}``:
+    the entry that keeps files and parts made under another budget rule from being reused."""
+    if settings.get("exact_from_level") is None:
+        return {}
+    return {"exact_budget": EXACT_BUDGET_RULE}
 
 
 def _memmap(path, shape):
@@ -242,7 +254,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["exact_cell"] = exact_cell
     digest = map_digest(nm)
     # the fit's version too: parts fitted by another version of the CP are not resumed from
-    ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], cp_fit=cpmod.FIT_VERSION))
+    ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], cp_fit=cpmod.FIT_VERSION,
+                               **budget_rule(settings)))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
                 "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation")
                                       if k in settings)
