@@ -23,8 +23,9 @@ footprint divided by the sample count").
 * ``glints``: the compressed NDF (:func:`prefilter.glints.brdf.glint_ndf`: point query, trilinear
   over the pyramid, direct P-NDF below the finest level). The normal map is baked on first use
   with :data:`BAKE_SETTINGS` and cached on disk (``$PREFILTER_GLINTS_CACHE`` or
-  ``~/.cache/prefilter/glints``) under the SHA-1 of the normals, the settings and the CP fit's
-  version (:data:`prefilter.glints.cp.FIT_VERSION`).
+  ``~/.cache/prefilter/glints``) under the SHA-1 of the normals, the settings, the CP fit's
+  version (:data:`prefilter.glints.cp.FIT_VERSION`) and the bake's budget rule
+  (:data:`prefilter.glints.bake.EXACT_BUDGET_RULE`, settings with exact levels).
 * ``glints-direct``: the direct P-NDF of Yan et al. 2016 for every footprint (cost ~ its area).
 * ``glints-reference``: supersampling of the footprint with the full-resolution normal map and the
   intrinsic roughness: ``spp`` sub-pixel positions drawn from the same pixel Gaussian, each shaded
