@@ -145,10 +145,10 @@ def _checkpoints(parts: Path) -> int:
 def kill_restart(kind: str, seed: int, root: Path) -> dict:
     """One trial: start, SIGKILL at a seeded random point, rerun to completion.
 
-    If the bake finishes before the kill (a loaded machine is unpredictable), the attempt is
-    discarded and repeated with half the delay, up to 4 times. Returns the outputs and what
-    happened: ``killed`` (the process died of SIGKILL), ``parts`` (checkpoints on disk at the
-    kill), ``attempts``.
+    If the bake finishes before the kill (a loaded machine is unpredictable; also a chunked bake
+    killed after it removed its parts, while exiting), the attempt is discarded and repeated
+    with half the delay, up to 4 times. Returns the outputs and what happened: ``killed`` (the
+    process died of SIGKILL mid-bake), ``parts`` (checkpoints it left), ``attempts``.
     """
     import shutil
 
@@ -172,14 +172,16 @@ def kill_restart(kind: str, seed: int, root: Path) -> dict:
                     assert time.monotonic() < deadline, "no checkpoint appeared"
                     time.sleep(0.01)
             time.sleep(delay)
-            n_parts = _checkpoints(parts)
             proc.send_signal(signal.SIGKILL)
         finally:
             proc.wait(timeout=TIMEOUT)
-        if proc.returncode == -signal.SIGKILL:
+        n_parts = _checkpoints(parts)  # what the killed process left
+        # a chunked bake killed after removing its parts had finished (it was exiting): that
+        # kill interrupted nothing
+        killed = proc.returncode == -signal.SIGKILL and (n_parts > 0 or not bake.chunked)
+        if killed:
             break
         scale *= 0.5
-    killed = proc.returncode == -signal.SIGKILL
     _run(cmd, root)
     return {"outputs": _outputs(work), "killed": killed, "parts": n_parts,
             "leftover_parts": parts.exists(), "attempts": attempt}
