@@ -439,7 +439,6 @@ def test_exact_from_level_stores_upper_levels_exactly(baked, tmp_path):
         bake(nm, tmp_path / "x.npz", exact_from_level=-1, **kw)
 
 
-
 def test_exact_cell_one_image_per_group(baked, tmp_path):
     """``exact_cell=1``: the exact levels' groups hold one image each, so their ranks are at most
     ``B`` (the non-zero rows or columns of one block) instead of up to ``B^2``; the stored NDF is
@@ -476,6 +475,7 @@ def test_exact_cell_one_image_per_group(baked, tmp_path):
         bake(nm, tmp_path / "x.npz", **dict(kw, exact_from_level=None), exact_cell=1)
     with pytest.raises(PrefilterError, match="exact_cell"):
         bake(nm, tmp_path / "x.npz", exact_cell=0, **kw)
+
 
 def test_16bit_codes_bake(baked, baked16):
     """``code_bits=16``: uint16 codes recorded in the settings, about the same ranks (the

@@ -61,16 +61,19 @@ LEVEL_RANK = ("global", "level", "uniform")
 EXACT = -1
 #: How a bake with exact levels spends the rank budget (1: over all groups, the exact ones then
 #: replacing theirs; 2, session 11: over the fitted groups only). Bakes with exact levels key
-#: their checkpoints, and the render cache its files, on it (:func:`budget_rule`).
+#: their checkpoints, and the render cache its files, on it (:func:`code_versions`).
 EXACT_BUDGET_RULE = 2
 
 
-def budget_rule(settings: dict) -> dict:
-    """``{"exact_budget": EXACT_BUDGET_RULE}`` for bake settings with exact levels, else ``{}``:
-    the entry that keeps files and parts made under another budget rule from being reused."""
-    if settings.get("exact_from_level") is None:
-        return {}
-    return {"exact_budget": EXACT_BUDGET_RULE}
+def code_versions(settings: dict) -> dict:
+    """The versions of the code a bake with ``settings`` depends on beyond the settings
+    themselves: the CP fit's (``cp_fit``, :data:`prefilter.glints.cp.FIT_VERSION`) and, with exact
+    levels, the budget rule's (``exact_budget``). The bake's checkpoints and the render and
+    Wang-tile caches key on them, so parts and files made by other code are not reused."""
+    out = {"cp_fit": cpmod.FIT_VERSION}
+    if settings.get("exact_from_level") is not None:
+        out["exact_budget"] = EXACT_BUDGET_RULE
+    return out
 
 
 def _memmap(path, shape):
@@ -253,9 +256,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     if exact_cell is not None:
         settings["exact_cell"] = exact_cell
     digest = map_digest(nm)
-    # the fit's version too: parts fitted by another version of the CP are not resumed from
-    ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], cp_fit=cpmod.FIT_VERSION,
-                               **budget_rule(settings)))
+    # parts made by another version of the fit or budget rule are not resumed from
+    ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], **code_versions(settings)))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
                 "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation")
                                       if k in settings)
@@ -300,10 +302,13 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     # (k = cell / stride0, i.e. cell * 2^l texels at level l), so every group holds blocks of
     # footprints of the same size and about the same number of them at every level; a level's fit
     # is not dominated by the sharper, higher-energy blocks of the levels below it.
+    def exact_level(lv):
+        return exact_from_level is not None and lv >= exact_from_level
+
     members = []  # (level, iy, ix) per cell
     for lv in range(pyr.n_levels):
-        exact_lv = exact_from_level is not None and lv >= exact_from_level
-        k_side = exact_cell if exact_lv and exact_cell is not None else cell // pyr.stride0
+        k_side = (exact_cell if exact_level(lv) and exact_cell is not None
+                  else cell // pyr.stride0)
         ny, nx = pyr.shape(lv)
         ncy, ncx = max(1, ny // k_side), max(1, nx // k_side)
         iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
@@ -332,20 +337,18 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                 tensors.append(np.ascontiguousarray(blocks[keep, bi, bj].transpose(1, 2, 0)))
         return imgs, blocks, blank, tensors, where
 
-    def is_exact(cid):
-        return exact_from_level is not None and members[cid][0][0] >= exact_from_level
-
     def fit_cell(cid):
         """Pass 1: every fitted group of the cell at rank ``base``; its error drives the
         allocation (the groups stored exactly are not fitted)."""
         imgs, blocks, blank, tensors, where = cell_tensors(cid)
         live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
-        fit = [] if is_exact(cid) else live
+        exact = exact_level(members[cid][0][0])
+        fit = [] if exact else live
         res = dict(zip(fit, cpmod.nn_cp_batch([tensors[g] for g in fit], base,
                                               n_iter_max=n_iter_max, tol=tol, seed=seed + cid)))
         rows = np.concatenate([[0], np.cumsum([len(w) for w in where])]).astype(np.int64)
         local = np.full(blank.shape, -1, np.int32)
-        width = 0 if is_exact(cid) else base  # no factors to keep for the exact groups
+        width = 0 if exact else base  # no factors to keep for the exact groups
         a = np.zeros((nb * nb, width, B), np.float32)
         b = np.zeros_like(a)
         c = np.zeros((rows[-1], width), np.float32)

@@ -51,8 +51,7 @@ from tqdm import tqdm
 from prefilter.errors import PrefilterError
 from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, bilinear_bake_roughness,
                                    glint_brdf_cos, glint_ndf, surface)
-from prefilter.glints import cp as cpmod
-from prefilter.glints.bake import budget_rule
+from prefilter.glints.bake import code_versions
 from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map, map_digest
 from prefilter.render.shading import point_incoming, shading_frames
 from prefilter.sphere.sampling import to_local, to_world
@@ -167,12 +166,10 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
 
 
 def settings_key(settings: dict) -> str:
-    """The cache key (12 hex digits) of complete bake ``settings``: their JSON, the CP fit's
-    version (:data:`prefilter.glints.cp.FIT_VERSION`) and, with exact levels, the budget rule
-    (:func:`prefilter.glints.bake.budget_rule`), so files made before a change to either are not
-    reused."""
-    return hashlib.sha1(json.dumps(dict(settings, cp_fit=cpmod.FIT_VERSION,
-                                        **budget_rule(settings)), sort_keys=True)
+    """The cache key (12 hex digits) of complete bake ``settings``: their JSON and the code
+    versions they depend on (:func:`prefilter.glints.bake.code_versions`: the CP fit's and, with
+    exact levels, the budget rule's), so files made before a change to either are not reused."""
+    return hashlib.sha1(json.dumps(dict(settings, **code_versions(settings)), sort_keys=True)
                         .encode()).hexdigest()[:12]
 
 
