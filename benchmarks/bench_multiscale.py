@@ -240,7 +240,7 @@ def main() -> None:
         rows = study(table, args.maps.split(","), spp=args.spp,
                      variants=args.variants.split(",") if args.variants else None)
         if args.out:
-            from prefilter._io import save_json_atomic
+            from prefilter.fileio import save_json_atomic
 
             save_json_atomic(args.out, rows)
         return
@@ -249,7 +249,7 @@ def main() -> None:
         rows = acceptance(table, args.quick)
         summary(rows)
         if args.out:
-            from prefilter._io import save_json_atomic
+            from prefilter.fileio import save_json_atomic
 
             save_json_atomic(args.out, rows)
 

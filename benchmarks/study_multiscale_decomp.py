@@ -303,7 +303,7 @@ def main() -> None:
     else:
         print_tables(rows, methods)
     if args.out:
-        from prefilter._io import save_json_atomic
+        from prefilter.fileio import save_json_atomic
 
         save_json_atomic(args.out, rows)
 

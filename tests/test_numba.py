@@ -11,7 +11,7 @@ import numba
 import numpy as np
 import pytest
 
-from prefilter._numba import SERIAL_BELOW, njit_parallel, njit_serial, prange, serial
+from prefilter.jit import SERIAL_BELOW, njit_parallel, njit_serial, prange, serial
 
 
 @njit_serial
@@ -66,7 +66,7 @@ def _write(path, text):
 
 
 def test_source_fingerprint_follows_kernel_sources_only(tmp_path):
-    from prefilter._numba import source_fingerprint
+    from prefilter.jit import source_fingerprint
 
     _write(tmp_path / "a" / "kern.py", "from x import njit_inline\n")
     _write(tmp_path / "b" / "plain.py", "x = 1\n")
@@ -81,26 +81,26 @@ def test_source_fingerprint_follows_kernel_sources_only(tmp_path):
 
 
 def test_cache_dir_environment(monkeypatch, tmp_path):
-    from prefilter import _numba
+    from prefilter import jit
 
     monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
     monkeypatch.setenv("PREFILTER_NUMBA_CACHE", str(tmp_path))
-    d = _numba.cache_dir()
+    d = jit.cache_dir()
     assert d.parent == tmp_path
-    assert d.name == _numba.source_fingerprint(Path(_numba.__file__).parent)
+    assert d.name == jit.source_fingerprint(Path(jit.__file__).parent)
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "user"))
-    assert _numba.cache_dir() is None
+    assert jit.cache_dir() is None
 
 
 def test_kernels_cache_under_the_fingerprint_directory():
     import os
 
-    from prefilter import _numba
+    from prefilter import jit
 
     if os.environ.get("NUMBA_CACHE_DIR"):
         pytest.skip("NUMBA_CACHE_DIR set by the user: Numba's own rule applies")
     d = Path(numba.config.CACHE_DIR)
-    assert d.name == _numba.source_fingerprint(Path(_numba.__file__).parent)
+    assert d.name == jit.source_fingerprint(Path(jit.__file__).parent)
     from prefilter.ltc import polygon  # noqa: F401  (a module with kernels)
 
     kernels = [v for v in vars(polygon).values() if hasattr(v, "_cache")]
@@ -113,7 +113,7 @@ def test_prune_deletes_only_old_siblings(tmp_path):
     import os
     import time
 
-    from prefilter._numba import CACHE_MAX_AGE_DAYS, _prune
+    from prefilter.jit import CACHE_MAX_AGE_DAYS, _prune
 
     cur, old, recent = tmp_path / "cur", tmp_path / "old", tmp_path / "recent"
     for d in (cur, old, recent):

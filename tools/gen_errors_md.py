@@ -149,8 +149,8 @@ NOTES = {  # hand-written notes for specific patterns (substring of the rendered
 }
 
 MODULE_TITLES = OrderedDict([
-    ("_validate.py", "Shared validators (prefilter._validate): used by every module"),
-    ("_io.py", "Baked files (prefilter._io): .npz tables and maps with checksums"),
+    ("validation.py", "Shared validators (prefilter.validation): used by every module"),
+    ("fileio.py", "Baked files (prefilter.fileio): .npz tables and maps with checksums"),
 ])
 
 
@@ -189,8 +189,8 @@ def generate() -> str:
                     rel = str(path.relative_to(ROOT))
                     rows.append((rel, node.lineno, name, render(node.args[0])))
     groups = OrderedDict()
-    for rel, line, cls, msg in sorted(rows, key=lambda r: (r[0] != "_validate.py",
-                                                           r[0] != "_io.py", r[0], r[1])):
+    for rel, line, cls, msg in sorted(rows, key=lambda r: (r[0] != "validation.py",
+                                                           r[0] != "fileio.py", r[0], r[1])):
         if rel == "errors.py":
             continue
         seen = groups.setdefault(rel, OrderedDict())

@@ -4,7 +4,7 @@ from fractions import Fraction
 
 import numpy as np
 
-from prefilter._numba import njit_serial
+from prefilter.jit import njit_serial
 from prefilter.glints._simd import exp_neg, fdiv, fma
 
 

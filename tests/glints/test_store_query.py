@@ -526,7 +526,7 @@ def test_factor_codes_by_maximum_unless_the_sum_overflows():
 def test_16bit_files_with_uint32_prefix_sums_still_query(baked16, tmp_path):
     """Files written before the code-sum cap (each row 65535 steps of its maximum: sums past
     uint16) load with uint32 prefix sums and query the same NDF up to the codes' rounding."""
-    from prefilter._io import read_npz, save_npz_atomic
+    from prefilter.fileio import read_npz, save_npz_atomic
     from prefilter.glints.query import packed
 
     _, path, _, gm = baked16
@@ -559,7 +559,7 @@ def test_bake_code_bits_errors(tmp_path):
 
 
 def test_loader_rejects_mixed_code_dtypes(baked16, tmp_path):
-    from prefilter._io import read_npz, save_npz_atomic
+    from prefilter.fileio import read_npz, save_npz_atomic
 
     _, path, _, _ = baked16
     data = {k: v for k, v in read_npz(path, "glints map").items() if k != "__meta__"}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from maps import sinusoid
 
-from prefilter._io import META_KEY
+from prefilter.fileio import META_KEY
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints.wang import index_map, synthesize
 from prefilter.glints.wang_ndf import (bake_tiles, compress_tiles, ndf, ndf_image, ndf_points,

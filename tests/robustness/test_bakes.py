@@ -230,7 +230,7 @@ def test_bake_if_missing_waits_for_a_running_bake(tmp_path):
     out = tmp_path / "g.npz"
     holder = subprocess.Popen(
         [sys.executable, "-c",
-         "import sys, time; from pathlib import Path; from prefilter._io import exclusive_lock\n"
+         "import sys, time; from pathlib import Path; from prefilter.fileio import exclusive_lock\n"
          "with exclusive_lock(sys.argv[1] + '.lock'):\n"
          "    print('locked', flush=True); time.sleep(1.0); Path(sys.argv[1]).write_bytes(b'x')",
          str(out)], stdout=subprocess.PIPE, text=True)
@@ -281,7 +281,7 @@ def test_checkpoint_per_chunk_and_resume(tmp_path):
 def test_atomic_write_leaves_target_intact(tmp_path):
     """A writer that dies inside ``atomic_path`` leaves the previous file untouched and no
     temporary file once the bake's checkpoints are cleared."""
-    from prefilter._io import Checkpoints, atomic_path, save_npz_atomic
+    from prefilter.fileio import Checkpoints, atomic_path, save_npz_atomic
 
     out = tmp_path / "t.npz"
     save_npz_atomic(out, a=np.arange(3))

@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from prefilter._io import META_KEY, save_npz_atomic
+from prefilter.fileio import META_KEY, save_npz_atomic
 from prefilter.errors import PrefilterError
 
 N_FLIPS = 48
@@ -272,7 +272,7 @@ def _edit_json(fn: Callable[[dict], None], *, resign: bool = True):
     can catch the change."""
 
     def corrupt(p: Path) -> None:
-        from prefilter._io import json_digest
+        from prefilter.fileio import json_digest
 
         info = json.loads(p.read_text())
         old = info.pop("meta_sha256", None)

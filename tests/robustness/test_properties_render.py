@@ -1,5 +1,5 @@
 """Property-based tests of the renderer's building blocks (issue 10) and regression tests of the
-boundary defects the fuzzing found in glints, leadr.envmap and _validate.
+boundary defects the fuzzing found in glints, leadr.envmap and validation.
 
 Each regression test failed before its fix: a bare NumPy error, NaN output, an IndexError or a
 RuntimeWarning instead of a :class:`PrefilterError` naming the parameter.
@@ -12,7 +12,7 @@ import pytest
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
-from prefilter._validate import as_directions, as_float_array
+from prefilter.validation import as_directions, as_float_array
 from prefilter.errors import PrefilterError
 from prefilter.leadr.envmap import EnvMap, sh9_irradiance, sh9_project
 from prefilter.render.lights import QuadLight, quad_light_pdf, quad_light_sample
@@ -141,7 +141,7 @@ def test_sh9_irradiance_of_a_directional_light_is_non_negative(d, n):
         assert e[0] == pytest.approx(17.0 / 16.0, rel=1e-5)
 
 
-# -- _validate ---------------------------------------------------------------------------------
+# -- validation ---------------------------------------------------------------------------------
 
 
 @settings(max_examples=N)

@@ -1,4 +1,4 @@
-"""Property-based tests of the shared input checks (prefilter._validate), used at every public
+"""Property-based tests of the shared input checks (prefilter.validation), used at every public
 boundary: what passes is returned unchanged as float64, everything else is a PrefilterError
 naming the parameter."""
 
@@ -8,7 +8,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from prefilter._validate import (
+from prefilter.validation import (
     as_directions,
     as_float_array,
     as_positive_int,

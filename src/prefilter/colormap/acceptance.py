@@ -350,7 +350,7 @@ def main(argv=None) -> None:  # pragma: no cover - a long run
     rows = run_acceptance(size, n_ref)
     print(format_rows(rows))
     if len(args) > 2:
-        from prefilter._io import save_json_atomic
+        from prefilter.fileio import save_json_atomic
 
         save_json_atomic(args[2], rows)
 

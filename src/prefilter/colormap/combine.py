@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array, broadcast_batch
+from prefilter.validation import as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 
 __all__ = ["combine_linear", "combine_product"]

@@ -38,7 +38,7 @@ def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigm
     computes each row on its own), so the table is bit-identical to it."""
     import numpy as np
 
-    from prefilter._io import Checkpoints, array_digest
+    from prefilter.fileio import Checkpoints, array_digest
     from prefilter.colormap.table import ColormapTable, prefilter_rows, prefilter_table
 
     # two rows validate the arguments and resample the map exactly as the full table does
@@ -84,7 +84,7 @@ def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear,
     import hashlib
     from pathlib import Path
 
-    from prefilter._io import atomic_path
+    from prefilter.fileio import atomic_path
     from prefilter.colormap.glsl import glsl_snippet
 
     c = load_colormap_image(colormap, srgb=not linear)

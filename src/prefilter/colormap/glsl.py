@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
 
 __all__ = ["GLSL_WRAP", "glsl_lookup_twin", "glsl_snippet", "glsl_texture_twin"]

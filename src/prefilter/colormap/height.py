@@ -21,7 +21,7 @@ from typing import NamedTuple
 import numpy as np
 from scipy.special import erfc, erfcx, log_ndtr
 
-from prefilter._validate import (
+from prefilter.validation import (
     as_directions,
     as_float_array,
     as_positive_int,

@@ -16,8 +16,8 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter.jit import njit_parallel, njit_serial, prange
+from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.texture.mip import MipChain
 

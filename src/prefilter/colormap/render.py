@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter.validation import as_float_array
 from prefilter.colormap.kernels import PackedChain, shade_height, shade_noise, shade_texture
 from prefilter.colormap.table import EDGES, ColormapTable, prefilter_table
 from prefilter.colormap.texture import NoiseStd

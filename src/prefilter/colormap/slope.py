@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import erfcx
 
-from prefilter._validate import (
+from prefilter.validation import (
     as_float_array,
     as_positive_int,
     as_upper_directions,

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from scipy.special import ndtr
 
-from prefilter._validate import as_float_array, as_positive_int, broadcast_batch
+from prefilter.validation import as_float_array, as_positive_int, broadcast_batch
 from prefilter.errors import PrefilterError, TableFileError
 
 __all__ = ["EDGES", "ColormapTable", "as_colormap", "gaussian_operator", "lookup",
@@ -283,7 +283,7 @@ class ColormapTable:
         plus ``meta``, ``table_file``, ``sha256``, the digest of the stored pixels as
         :func:`prefilter.texture.read_image` returns them, and ``meta_sha256``, the digest of all
         other fields), each atomically, the sidecar last."""
-        from prefilter._io import array_digest, json_digest, save_json_atomic
+        from prefilter.fileio import array_digest, json_digest, save_json_atomic
         from prefilter.texture.io import read_image, write_image
 
         path = Path(path)
@@ -301,7 +301,7 @@ class ColormapTable:
         """Read a table written by :meth:`save` (or ``prefilter bake colormap``) and its JSON
         sidecar; every field, the image shape and the checksum (when present) are verified and
         a failure raises :class:`~prefilter.errors.TableFileError` naming the file and field."""
-        from prefilter._io import array_digest, json_digest
+        from prefilter.fileio import array_digest, json_digest
         from prefilter.texture.io import read_image
 
         path = Path(path)

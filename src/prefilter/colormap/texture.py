@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter.validation import as_float_array
 from prefilter.colormap.table import as_table
 from prefilter.errors import PrefilterError
 from prefilter.texture.mip import (

@@ -32,7 +32,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic, overload
 
-from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange
+from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange
 
 #: Queries ahead of the one being computed whose ``block_index`` entries (``_AHEAD_INDEX``) and
 #: factor rows (``_AHEAD_ROWS``) the point and range kernels prefetch. A random query stream over

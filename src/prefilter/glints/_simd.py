@@ -19,7 +19,7 @@ from numba import types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
-from prefilter._numba import njit_inline
+from prefilter.jit import njit_inline
 
 
 @intrinsic

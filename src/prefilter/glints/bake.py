@@ -1,6 +1,6 @@
 """Bake a normal map into a compressed NDF pyramid (glints paper, secs. 4.1-4.2).
 
-Stages, each resumable through :class:`prefilter._io.Checkpoints` (``<out>.parts/``):
+Stages, each resumable through :class:`prefilter.fileio.Checkpoints` (``<out>.parts/``):
 
 1. level 0 NDF images by the direct P-NDF, one row of spatial cells per chunk, into a float32
    memory-mapped array;
@@ -37,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import Checkpoints, exclusive_lock
-from prefilter._validate import as_positive_int
+from prefilter.fileio import Checkpoints, exclusive_lock
+from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,

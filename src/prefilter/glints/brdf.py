@@ -34,8 +34,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._numba import njit_inline, njit_parallel, prange, serial
-from prefilter._validate import as_directions, as_float_array, broadcast_batch
+from prefilter.jit import njit_inline, njit_parallel, prange, serial
+from prefilter.validation import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, texel_window,
                                    as_normal_map, element_moments, elements, map_digest, pndf)

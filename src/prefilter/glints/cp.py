@@ -25,8 +25,8 @@ import os
 import numba
 import numpy as np
 
-from prefilter._numba import FASTMATH
-from prefilter._validate import as_positive_int
+from prefilter.jit import FASTMATH
+from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 
 #: Version of the fit's results: bumped whenever a change to :func:`nn_cp` (or what the bake does

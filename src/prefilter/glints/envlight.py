@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_rng
+from prefilter.validation import as_float_array, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.glints.brdf import as_surface, glint_ndf, schlick, vcavity_g2
 from prefilter.glints.query import range_multi, weights

@@ -36,8 +36,8 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange
-from prefilter._validate import (
+from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange
+from prefilter.validation import (
     as_float_array,
     as_positive_int,
     as_upper_directions,

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, prange
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter.jit import njit_parallel, prange
+from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 
 

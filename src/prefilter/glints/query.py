@@ -22,8 +22,8 @@ import weakref
 
 import numpy as np
 
-from prefilter._numba import serial
-from prefilter._validate import as_float_array, broadcast_batch
+from prefilter.jit import serial
+from prefilter.validation import as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import (bilinear_kernel, point_kernel, range_kernel,
                                        range_multi_kernel, resample_point_kernel)

@@ -28,8 +28,8 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_inline, njit_parallel, prange, serial
-from prefilter._validate import as_float_array
+from prefilter.jit import njit_inline, njit_parallel, prange, serial
+from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
 # public kernels of pndf.py, under the short local names the kernels below use
 from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, element_moments as _element,

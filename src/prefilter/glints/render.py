@@ -377,7 +377,7 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
     per-direction version walked a near footprint's texels ~16 times (the NDF for the BRDF and
     again for the density, the sampler twice and the exact P-NDF for the draw's density).
     """
-    from prefilter._validate import as_directions, as_float_array
+    from prefilter.validation import as_directions, as_float_array
     from prefilter.glints.brdf import brdf_cos_from_ndf, half, direct_mis_fits, direct_mis_k
     from prefilter.glints.pndf import TRUNCATION
     from prefilter.glints.sample import half_from_s

@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange, serial
-from prefilter._validate import as_directions, as_float_array, as_rng, broadcast_batch
+from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange, serial
+from prefilter.validation import as_directions, as_float_array, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _quad_masses, _rect_mass
 from prefilter.glints.pndf import element_moments, texel_window

@@ -53,7 +53,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._io import (META_KEY, decode_json_object, read_npz, save_npz_atomic,
+from prefilter.fileio import (META_KEY, decode_json_object, read_npz, save_npz_atomic,
                           verify_npz)
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints.pyramid import Pyramid
@@ -305,7 +305,7 @@ def decode_v2(a, b, c, c_scale, group_rows) -> tuple[np.ndarray, np.ndarray, np.
 
 def save(path: str | os.PathLike, gm: GlintsMap, encoded: dict | None = None) -> None:
     """Write ``gm`` atomically (uncompressed ``np.savez``: deterministic bytes, mmap-able) with
-    the ``__meta__`` checksum entry of :func:`prefilter._io.save_npz_atomic`.
+    the ``__meta__`` checksum entry of :func:`prefilter.fileio.save_npz_atomic`.
 
     ``encoded``: the version-3 arrays of :func:`encode` (the block mask is taken from
     ``gm.block_index``), or the version-2 arrays of :func:`encode_v2`; without them the file is

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_positive_int, as_rng
+from prefilter.validation import as_float_array, as_positive_int, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_normal_map,
                                    as_sigma_p, pndf, pndf_image)

@@ -32,8 +32,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange, serial
-from prefilter._validate import as_float_array, as_positive_int, as_rng, broadcast_batch
+from prefilter.jit import njit_parallel, njit_serial, prange, serial
+from prefilter.validation import as_float_array, as_positive_int, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
                                    as_sigma_p, as_support, element_split, line_nodes, normal_cdf,

@@ -151,7 +151,7 @@ def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = Fa
     """The :class:`TiledNDF` of an exemplar: synthesised and baked once (disk cache), then kept
     in memory. Several processes share the cache: the first bakes under the lock, the others
     wait for it and load its file."""
-    from prefilter._io import exclusive_lock
+    from prefilter.fileio import exclusive_lock
     from prefilter.glints.wang import synthesize
     from prefilter.glints.wang_ndf import bake_tiles
     from prefilter.glints.wang_store import load_tiles, save_tiles

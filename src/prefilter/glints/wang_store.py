@@ -1,7 +1,7 @@
 """On-disk format of per-tile Wang pyramids (:class:`~prefilter.glints.wang_ndf.TiledNDF`).
 
 One uncompressed ``.npz`` (``np.savez``: deterministic bytes), written atomically with the
-package's ``__meta__`` checksum entry (:func:`prefilter._io.save_npz_atomic`: SHA-256 over the
+package's ``__meta__`` checksum entry (:func:`prefilter.fileio.save_npz_atomic`: SHA-256 over the
 names, dtypes, shapes and bytes of all other arrays, plus format name and version). Arrays:
 
 * ``header``: a JSON object string ``{"format": FORMAT, "version": VERSION, "tile": T,
@@ -48,7 +48,7 @@ import os
 
 import numpy as np
 
-from prefilter._io import (META_KEY, decode_json_object, read_npz, save_npz_atomic,
+from prefilter.fileio import (META_KEY, decode_json_object, read_npz, save_npz_atomic,
                           verify_npz)
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints.pndf import as_intrinsic_roughness, as_support

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange
-from prefilter._validate import as_directions, as_float_array, as_positive_int
+from prefilter.jit import njit_parallel, njit_serial, prange
+from prefilter.validation import as_directions, as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.microfacet import Beckmann
 

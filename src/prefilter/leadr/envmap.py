@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_directions, as_float_array, as_positive_int, broadcast_batch
+from prefilter.validation import as_directions, as_float_array, as_positive_int, broadcast_batch
 from prefilter.errors import PrefilterError
 
 #: World (y up) -> lat-long map coordinates of scene environment lights (rows: map x, y, z).

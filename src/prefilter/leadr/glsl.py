@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from prefilter._io import atomic_path
+from prefilter.fileio import atomic_path
 
 __all__ = ["ERFC_COEFFS", "export_all", "glsl_source"]
 

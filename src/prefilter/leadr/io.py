@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import array_digest, atomic_path, json_digest, save_json_atomic
+from prefilter.fileio import array_digest, atomic_path, json_digest, save_json_atomic
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.leadr.maps import CHANNELS, LeadrMaps
 from prefilter.texture.io import read_exr_channels, write_exr_channels

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter.jit import njit_parallel, njit_serial, prange
 
 
 @njit_serial

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._validate import as_float_array, broadcast_batch
+from prefilter.validation import as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.texture.mip import MipChain
 

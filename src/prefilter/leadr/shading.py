@@ -15,7 +15,7 @@ from functools import lru_cache
 import numpy as np
 from scipy import optimize
 
-from prefilter._validate import (
+from prefilter.validation import (
     as_directions,
     as_float_array,
     as_positive_int,

@@ -54,7 +54,7 @@ def bake_ltc_iso(res, seed, n_fit, processes, out, objective, power, quiet):
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def validate(configs, samples, seed, table_path, json_out, quiet):
     """Compare the LTC table's quad-light integrals with Monte Carlo references."""
-    from prefilter._io import save_json_atomic
+    from prefilter.fileio import save_json_atomic
     from prefilter.ltc.table import GGXTable
     from prefilter.ltc.validate import format_statistics, run_acceptance
 

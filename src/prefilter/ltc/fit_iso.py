@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
-from prefilter._io import Checkpoints, save_npz_atomic
-from prefilter._validate import as_positive_int, as_roughness
+from prefilter.fileio import Checkpoints, save_npz_atomic
+from prefilter.validation import as_positive_int, as_roughness
 from prefilter.errors import PrefilterError
 from prefilter.microfacet import GGX, reflect
 from prefilter.sphere.sampling import cosine_hemisphere

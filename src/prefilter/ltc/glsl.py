@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import atomic_path, save_json_atomic
+from prefilter.fileio import atomic_path, save_json_atomic
 from prefilter.errors import PrefilterError
 
 __all__ = ["GLSL", "export_all", "glsl_source", "glsl_twin", "texture_layout", "texture_params"]

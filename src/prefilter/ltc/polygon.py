@@ -29,8 +29,8 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_inline, njit_parallel, njit_serial, prange, serial
-from prefilter._validate import as_float_array
+from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange, serial
+from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
 
 __all__ = ["clamped_cosine_integral", "polygon_integral", "polygon_integral_minv"]

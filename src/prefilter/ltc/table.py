@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import (META_KEY, expect_array, expect_json_object, expect_table_header,
+from prefilter.fileio import (META_KEY, expect_array, expect_json_object, expect_table_header,
                            read_npz, verify_npz)
-from prefilter._validate import (as_float_array, as_roughness, as_unit_interval,
+from prefilter.validation import (as_float_array, as_roughness, as_unit_interval,
                                  as_upper_directions, broadcast_batch)
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.ltc.fit_iso import TABLE_VERSION, default_table_path
@@ -76,7 +76,7 @@ class GGXTable:
         Expected ``.npz`` arrays: ``version`` (int, == 1), ``axis_t`` (T,), ``axis_r`` (R,),
         ``M`` (T, R, 3, 3), ``magnitude`` (T, R), ``fresnel`` (T, R), ``settings`` (JSON string);
         optional ``fit_error`` (T, R); ``__meta__`` (JSON with the SHA-256 of the arrays, see
-        :mod:`prefilter._io`; verified when present). Raises
+        :mod:`prefilter.fileio`; verified when present). Raises
         :class:`~prefilter.errors.TableFileError` naming the file and field when the file is
         missing, unreadable, corrupt (checksum), of another version, or has wrong shapes, dtypes
         or non-finite values.

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_positive_int, as_rng, as_upper_directions
+from prefilter.validation import as_float_array, as_positive_int, as_rng, as_upper_directions
 from prefilter.errors import PrefilterError
 from prefilter.ltc.polygon import clip_to_horizon  # noqa: F401  (re-exported for callers)
 from prefilter.microfacet import reflect

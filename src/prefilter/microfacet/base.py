@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import (
+from prefilter.validation import (
     as_directions,
     as_float_array,
     as_positive_int,
     as_rng,
     as_upper_directions,
 )
+from prefilter.lobe import Lobe, sample_weight
 
 
 def reflect(wo: np.ndarray, m: np.ndarray) -> np.ndarray:
@@ -38,8 +39,12 @@ def half_vector(wo: np.ndarray, wi: np.ndarray) -> np.ndarray:
 _MAX_PROPOSALS = 1e9
 
 
-class MicrofacetModel:
-    """Base class: Smith masking, the cosine-weighted BRDF, exact lobe sampling, albedo."""
+class MicrofacetModel(Lobe):
+    """Base class: Smith masking, the cosine-weighted BRDF, exact lobe sampling, albedo.
+
+    As a :class:`~prefilter.lobe.Lobe`, it samples by reflecting visible normals
+    (:meth:`sample`, density :meth:`pdf_reflect`).
+    """
 
     #: Number of quadrature nodes per axis used by :meth:`albedo`.
     albedo_nodes: int = 64
@@ -134,6 +139,18 @@ class MicrofacetModel:
         dot = np.sum(wo * h, axis=-1)
         safe = dot > 1e-12
         return np.where(safe, self.pdf_vndf(wo, h) / (4.0 * np.where(safe, dot, 1.0)), 0.0)
+
+    def pdf(self, wo, wi) -> np.ndarray:
+        """Lobe interface: the density of :meth:`sample`, :meth:`pdf_reflect`."""
+        return self.pdf_reflect(wo, wi)
+
+    def sample(self, wo, u) -> tuple[np.ndarray, np.ndarray]:
+        """Lobe interface: ``wi = reflect(wo, m)`` with ``m`` from :meth:`sample_vndf` (Heitz
+        2018), and its weight ``eval / pdf`` (``G2 / G1`` for centred models; 0 below the
+        horizon). ``wo (..., 3)``, ``u (..., 2)``."""
+        wi = reflect(wo, self.sample_vndf(wo, u))
+        wi = wi / np.linalg.norm(wi, axis=-1, keepdims=True)
+        return wi, sample_weight(self.eval(wo, wi), self.pdf_reflect(wo, wi))
 
     def sample_lobe(self, wo, n: int, rng) -> np.ndarray:
         """``n`` exact samples ``(n, 3)`` of the normalised cosine-weighted lobe ``eval(wo, .)``.

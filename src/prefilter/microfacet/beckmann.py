@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import special
 
-from prefilter._validate import as_directions, as_float_array, as_roughness, as_uniform
+from prefilter.validation import as_directions, as_float_array, as_roughness, as_uniform
 from prefilter.errors import PrefilterError
 from prefilter.microfacet.base import MicrofacetModel
 

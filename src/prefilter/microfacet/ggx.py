@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_directions, as_roughness, as_uniform
+from prefilter.validation import as_directions, as_roughness, as_uniform
 from prefilter.microfacet.base import MicrofacetModel
 
 

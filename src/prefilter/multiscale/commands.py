@@ -57,7 +57,7 @@ def multiscale_fit(n_grid, samples, seed, out):
     """Verify eq. 5 and refit eq. 7 of multi-scale LTC (Tao et al. 2021) by Monte Carlo."""
     rep = fit_report(n_grid, samples, seed)
     if out:
-        from prefilter._io import save_json_atomic
+        from prefilter.fileio import save_json_atomic
 
         save_json_atomic(out, rep)
     click.echo(json.dumps(rep, indent=1))

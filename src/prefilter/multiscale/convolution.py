@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_directions, as_float_array, as_positive_int, as_rng
+from prefilter.validation import as_directions, as_float_array, as_positive_int, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.multiscale.meso import _alpha_from_r, _mrl
 from prefilter.sphere.sampling import cosine_hemisphere, frame_from_normal, to_world

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import atomic_path
+from prefilter.fileio import atomic_path
 
 __all__ = ["ALPHA_MESO_WIDTH", "GLSL", "alpha_meso_nodes", "alpha_meso_twin", "export_all",
            "footprint_bias", "footprint_taps", "glsl_source"]

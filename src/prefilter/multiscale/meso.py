@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 
 __all__ = ["PAPER_EQ5", "alpha_meso", "alpha_meso_exact", "mean_resultant_length"]

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_positive_int
+from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.multiscale.convolution import _alpha_total
 from prefilter.multiscale.meso import _alpha_from_r, _mrl, _paper_eq5, R_COSINE

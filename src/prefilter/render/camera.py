@@ -24,7 +24,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
 
 __all__ = ["Camera", "GBuffer", "Rays", "gbuffer", "gbuffer_at", "generate_rays", "intersect",

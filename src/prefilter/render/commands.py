@@ -84,7 +84,7 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
 
     EXR/.npy inputs are linear (HDR-FLIP); PNG inputs are sRGB (LDR-FLIP).
     """
-    from prefilter._io import save_json_atomic
+    from prefilter.fileio import save_json_atomic
     from prefilter.render.metrics import flip_heatmap
     from prefilter.render.report import save_png
 
@@ -127,17 +127,21 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
 @click.option("--table", "table_path", type=click.Path(exists=True, dir_okay=False,
                                                        path_type=Path),
               help="LTC table file (default: the shipped table).")
+@click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
+              help="A variant setting of the method (repeatable), e.g. footprint=paper for "
+                   "ltc-multiscale; `prefilter methods` lists them.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path | None,
-           jitter: tuple[float, float], table_path: Path | None, quiet: bool) -> None:
+           jitter: tuple[float, float], table_path: Path | None, params: tuple[str, ...],
+           quiet: bool) -> None:
     """Render SCENE (JSON, see docs/scenes.md) with a shading method to an EXR image."""
     import time
 
-    from prefilter.render.methods import get_method
+    from prefilter.render.methods import check_params
     from prefilter.render.pipeline import render as render_image
     from prefilter.texture.io import write_image
 
-    get_method(method)  # fail on a bad name before loading the scene and table
+    params = check_params(method, params)  # fail on bad input before loading scene and table
     table = None
     if table_path is not None:
         from prefilter.ltc.table import GGXTable
@@ -145,7 +149,7 @@ def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path |
         table = GGXTable.load(table_path)
     t0 = time.perf_counter()
     image = render_image(scene, method, spp=spp, seed=seed, jitter=jitter, progress=not quiet,
-                         table=table)
+                         table=table, params=params)
     seconds = time.perf_counter() - t0
     write_image(out, image)
     click.echo(f"{method}: {image.shape[1]}x{image.shape[0]}, {spp} spp, {seconds:.2f} s -> {out}")

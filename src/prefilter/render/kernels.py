@@ -16,7 +16,7 @@ import weakref
 
 import numpy as np
 
-from prefilter._numba import (  # noqa: F401
+from prefilter.jit import (  # noqa: F401
     SERIAL_BELOW, njit_inline, njit_parallel, njit_serial, prange, serial)
 from prefilter.ltc.polygon import _DET_RTOL2, _INV_2PI, _clipped_edge_sum
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter._validate import as_float_array
+from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
 
 __all__ = ["LightTexture", "TexturedQuad", "light_texture_lookup_point", "shade_textured_quads",

@@ -15,7 +15,7 @@ module to be imported before use.
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable
 
 from prefilter.errors import PrefilterError
@@ -40,6 +40,9 @@ class RenderSettings:
         Upper bound on shading samples processed at once (memory).
     table : object or None
         The LTC table to use (``None``: the shipped :class:`prefilter.ltc.table.GGXTable`).
+    params : dict of str to str
+        The method's variant settings (``--param key=value``), checked against the choices the
+        method registered (:func:`register`); a method reads them with :meth:`param`.
     """
 
     spp: int = 1
@@ -48,6 +51,11 @@ class RenderSettings:
     progress: bool = False
     chunk_samples: int = 1 << 18
     table: object | None = None
+    params: dict = field(default_factory=dict)
+
+    def param(self, key: str, default: str) -> str:
+        """The value of variant setting ``key`` (``default`` when not given)."""
+        return self.params.get(key, default)
 
 
 Method = Callable[..., object]
@@ -109,9 +117,15 @@ _DESCRIPTIONS: dict[str, str] = {
 }
 
 
-def register(name: str, target: Method | str | None = None, *, description: str = ""):
+#: Variant settings each method accepts: name -> {key: (allowed values, first = default)}.
+_PARAMS: dict[str, dict[str, tuple[str, ...]]] = {}
+
+
+def register(name: str, target: Method | str | None = None, *, description: str = "",
+             params: dict[str, tuple[str, ...]] | None = None):
     """Register a method under ``name``: a callable, a ``"module:attr"`` string, or (no target)
-    a decorator. Re-registering a name replaces it."""
+    a decorator. ``params`` lists the variant settings it accepts, each with its allowed values
+    (the first is the default). Re-registering a name replaces it."""
     if not isinstance(name, str) or not name:
         raise PrefilterError(f"method name: expected a non-empty string, got {name!r}")
 
@@ -122,6 +136,8 @@ def register(name: str, target: Method | str | None = None, *, description: str 
         _REGISTRY[name] = fn
         if description:
             _DESCRIPTIONS[name] = description
+        if params is not None:
+            _PARAMS[name] = {k: tuple(v) for k, v in params.items()}
         return fn
 
     return _add if target is None else _add(target)
@@ -134,6 +150,39 @@ def available() -> list[str]:
 
 def describe(name: str) -> str:
     return _DESCRIPTIONS.get(name, "")
+
+
+def method_params(name: str) -> dict[str, tuple[str, ...]]:
+    """The variant settings of method ``name``: ``{key: allowed values}``, the first the default."""
+    get_method(name)
+    return dict(_PARAMS.get(name, {}))
+
+
+def check_params(name: str, params) -> dict[str, str]:
+    """``params`` (a dict, or ``"key=value"`` strings) checked against method ``name``'s settings;
+    returns a dict of strings."""
+    if params is None:
+        return {}
+    if not isinstance(params, dict):
+        pairs = {}
+        for item in params:
+            key, sep, value = str(item).partition("=")
+            if not sep or not key:
+                raise PrefilterError(f"param: expected key=value, got {item!r}")
+            pairs[key] = value
+        params = pairs
+    allowed = method_params(name)
+    out = {}
+    for key, value in params.items():
+        if key not in allowed:
+            known = ", ".join(sorted(allowed)) or "none"
+            raise PrefilterError(
+                f"param {key!r}: method {name!r} takes {known}, got {key}={value!r}")
+        if str(value) not in allowed[key]:
+            raise PrefilterError(
+                f"param {key}: expected one of {', '.join(allowed[key])}, got {value!r}")
+        out[key] = str(value)
+    return out
 
 
 def get_method(name: str) -> Method:

@@ -18,7 +18,7 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 
 #: Rec. 709 / sRGB luminance weights for linear RGB.

@@ -26,17 +26,18 @@ from dataclasses import replace
 import numpy as np
 from tqdm import tqdm
 
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.render.camera import gbuffer_at
-from prefilter.render.methods import RenderSettings, get_method
+from prefilter.render.methods import RenderSettings, check_params, get_method
 from prefilter.render.scene import Scene, load_scene
 from prefilter.render.shading import shade_ltc, shading_frame, two_sided_frame
 from prefilter.texture.procedural import slopes_to_normals
 
 
 def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0.0, 0.0),
-           progress: bool = False, table=None, chunk_samples: int = 1 << 18) -> np.ndarray:
+           progress: bool = False, table=None, chunk_samples: int = 1 << 18,
+           params=None) -> np.ndarray:
     """Render ``scene`` (a :class:`Scene`, a JSON path or a dict) with the named method.
 
     Parameters
@@ -54,6 +55,9 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
     table : GGXTable or None
         LTC table for LTC-based methods (default: the shipped one); any object with a
         ``lookup`` method (a table-like object) is passed through.
+    params : dict or None
+        The method's variant settings (:func:`prefilter.render.methods.method_params`), e.g.
+        ``{"footprint": "paper"}`` for ``ltc-multiscale``.
 
     Returns
     -------
@@ -73,7 +77,7 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
     settings = RenderSettings(spp=as_positive_int(spp, "spp"), seed=int(seed),
                               jitter=(float(j[0]), float(j[1])), progress=bool(progress),
                               chunk_samples=as_positive_int(chunk_samples, "chunk_samples"),
-                              table=table)
+                              table=table, params=check_params(method, params))
     image = get_method(method)(scene, settings)
     return np.asarray(image, dtype=np.float32)
 

@@ -26,7 +26,7 @@ import math
 
 import numpy as np
 
-from prefilter._numba import njit_parallel, njit_serial, prange
+from prefilter.jit import njit_parallel, njit_serial, prange
 
 from prefilter.microfacet import GGX, reflect
 from prefilter.render.lights import (

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import atomic_path
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter.fileio import atomic_path
+from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.render.metrics import to_srgb8
 

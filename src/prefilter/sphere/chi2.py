@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 from scipy import stats
 
-from prefilter._validate import as_directions, as_float_array, as_positive_int
+from prefilter.validation import as_directions, as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.sphere.sampling import frame_from_normal, to_local, to_world
 

@@ -21,8 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import array_digest, atomic_path
-from prefilter._numba import njit_serial
+from prefilter.fileio import array_digest, atomic_path
+from prefilter.jit import njit_serial
 from prefilter.errors import PrefilterError
 
 __all__ = ["read_image", "write_image", "srgb_to_linear", "linear_to_srgb", "IMAGE_SUFFIXES"]
@@ -205,7 +205,7 @@ def _write_png(path: Path, a: np.ndarray, bits: int) -> None:
 _EXR_LAYOUTS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
 
-#: Custom EXR header attribute holding :func:`prefilter._io.array_digest` of the channels.
+#: Custom EXR header attribute holding :func:`prefilter.fileio.array_digest` of the channels.
 EXR_CHECKSUM = "prefilter_sha256"
 
 

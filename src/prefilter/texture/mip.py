@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_positive_int
+from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 
 __all__ = ["MipChain", "footprint_axes", "lod_from_footprint", "moment_chain", "moments_to_stats"]

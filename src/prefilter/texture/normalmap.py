@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_directions, as_float_array
+from prefilter.validation import as_directions, as_float_array
 from prefilter.errors import PrefilterError
 
 __all__ = ["CONVENTIONS", "decode_normals", "encode_normals"]

@@ -23,7 +23,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_positive_int, as_rng
+from prefilter.validation import as_float_array, as_positive_int, as_rng
 from prefilter.errors import PrefilterError
 
 __all__ = [

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import atomic_path, save_json_atomic
+from prefilter.fileio import atomic_path, save_json_atomic
 from prefilter.errors import PrefilterError
 
 __all__ = ["BUILTIN_MAPS", "MAX_OBJECTS", "MAX_QUADS", "METHODS", "default_scene",

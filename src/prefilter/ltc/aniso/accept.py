@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_rng
+from prefilter.validation import as_rng
 from prefilter.ltc.polygon import clip_to_horizon
 from prefilter.ltc.validate import (
     error_statistics,
@@ -137,7 +137,7 @@ def quad_references(wo, alpha_x: float, alpha_y: float, quads, n_lobe: int, n_li
     quads: ``n_lobe`` lobe samples shared by all quads, ``n_light`` area samples per quad (two
     triangles chosen by area). ``wo (3,)``, ``quads (K, 4, 3)`` planar and convex.
     """
-    from prefilter._validate import as_float_array, as_positive_int, as_upper_directions
+    from prefilter.validation import as_float_array, as_positive_int, as_upper_directions
 
     wo = as_upper_directions(wo, "wo")
     quads = as_float_array(quads, "quads", ndim_min=3, last_dim=3)
@@ -220,7 +220,7 @@ def fit_quad_ltc(quads, reference, magnitude: float, M0, *, loss: str = "l2",
     """
     from scipy.optimize import least_squares
 
-    from prefilter._validate import as_float_array
+    from prefilter.validation import as_float_array
 
     if loss not in QUAD_LOSSES:
         raise PrefilterError(f"loss: expected one of {sorted(QUAD_LOSSES)}, got {loss!r}")

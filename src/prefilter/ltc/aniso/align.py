@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter._validate import as_positive_int
+from prefilter.validation import as_positive_int
 from prefilter.ltc.ltc import as_ltc_matrix
 from prefilter.sphere.sampling import cosine_hemisphere
 

@@ -17,8 +17,8 @@ from typing import Callable
 
 import numpy as np
 
-from prefilter._io import Checkpoints
-from prefilter._validate import as_positive_int
+from prefilter.fileio import Checkpoints
+from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.ltc.aniso.align import align
 from prefilter.ltc.aniso.fit import (

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import atomic_path, save_json_atomic, save_npz_atomic
+from prefilter.fileio import atomic_path, save_json_atomic, save_npz_atomic
 from prefilter.errors import PrefilterError
 
 _CHANNELS = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]

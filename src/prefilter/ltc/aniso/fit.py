@@ -29,7 +29,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from prefilter._validate import as_float_array, as_roughness, as_rng, as_upper_directions
+from prefilter.validation import as_float_array, as_roughness, as_rng, as_upper_directions
 from prefilter.errors import PrefilterError
 from prefilter.microfacet import GGX, reflect
 

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter._io import (META_KEY, expect_array, expect_json_object, expect_table_header,
+from prefilter.fileio import (META_KEY, expect_array, expect_json_object, expect_table_header,
                            read_npz, save_npz_atomic, verify_npz)
-from prefilter._validate import as_roughness, as_upper_directions
+from prefilter.validation import as_roughness, as_upper_directions
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.ltc.aniso import symmetry
 
@@ -98,7 +98,7 @@ class AnisoGGXTable:
         ``.npz`` arrays: ``version`` (== 1), ``axis_theta`` (T,), ``axis_phi`` (F,),
         ``axis_alpha`` (A,), ``axis_ratio`` (R,), ``M`` (T, F, A, R, 3, 3), ``magnitude`` and
         ``fresnel`` (T, F, A, R), ``settings`` (JSON string); optional ``diag_*`` arrays;
-        ``__meta__`` (format, version and SHA-256 of the arrays, :mod:`prefilter._io`; verified
+        ``__meta__`` (format, version and SHA-256 of the arrays, :mod:`prefilter.fileio`; verified
         when present). Raises :class:`~prefilter.errors.TableFileError` naming the file and
         field for missing, corrupt (checksum), unknown-version or malformed files.
         """
