@@ -38,16 +38,3 @@ __all__ = [
     "mean_resultant_length",
     "sample_ltc_iso",
 ]
-
-from prefilter.render.methods import register as _register  # noqa: E402
-
-_register("ltc-multiscale", "prefilter.multiscale.render:render_multiscale",
-          description="multi-scale LTC (Tao et al. 2021): roughness from the length of the "
-                      "footprint's averaged normal, exact eq. 4 inverse and refitted eq. 7")
-_register("ltc-multiscale-paper", "prefilter.multiscale.render:render_multiscale_paper",
-          description="multi-scale LTC with the paper's published eqs. 5 and 7")
-_register("ltc-multiscale-mrl", "prefilter.multiscale.render:render_multiscale_mrl",
-          description="multi-scale LTC combining scales by mean resultant length (closed form)")
-_register("ltc-multiscale-aniso", "prefilter.multiscale.aniso:render_multiscale_aniso",
-          description="multi-scale LTC, anisotropic: LEAN slope moments of the normal map plus "
-                      "micro roughness, anisotropic LTC table in the covariance's principal frame")

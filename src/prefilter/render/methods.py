@@ -1,5 +1,9 @@
 """The registry of shading methods: name -> ``callable(scene, settings) -> (H, W, 3) image``.
 
+Every built-in method is listed once, here, as a ``"module:attribute"`` string with its
+description and variant settings: :mod:`prefilter.render` reaches the method packages only
+through these strings, imported on first use.
+
 A method receives the loaded :class:`~prefilter.render.scene.Scene` and a
 :class:`RenderSettings` and returns linear radiance ``(H, W, 3)`` float32. Built-in methods are
 registered lazily as ``"module:attribute"`` strings (importing a method's module only when it is
@@ -87,8 +91,11 @@ _DESCRIPTIONS: dict[str, str] = {
            "level (the naive method)",
     "reference": "ground truth: stratified supersampling, full-resolution textures, MIS Monte "
                  "Carlo of the true GGX BRDF",
-    "ltc-multiscale": "multi-scale LTC: meso roughness from the mean resultant length of the "
-                      "unnormalised mip-averaged normal, convolved with micro roughness (our fit)",
+    "ltc-multiscale": "multi-scale LTC (Tao et al. 2021): roughness from the length of the "
+                      "footprint's averaged normal, exact eq. 4 inverse and refitted eq. 7",
+    "ltc-multiscale-aniso": "multi-scale LTC, anisotropic: LEAN slope moments of the normal map "
+                            "plus micro roughness, anisotropic LTC table in the covariance's "
+                            "principal frame",
     "ltc-multiscale-paper": "multi-scale LTC with the paper's fitted eqs. 5 and 7",
     "ltc-multiscale-mrl": "multi-scale LTC with the closed-form product of mean resultant lengths",
     "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2; "
@@ -102,7 +109,8 @@ _DESCRIPTIONS: dict[str, str] = {
     "leadr-irradiance": "LEADR diffuse layer: exact irradiance map (FFT) of environment and "
                         "directional lights",
     "leadr-irradiance-naive": "naive counterpart of leadr-irradiance",
-    "ltc-aniso": "area lights by the anisotropic GGX LTC table (alpha_x, alpha_y, tangent frame)",
+    "ltc-aniso": "area lights by the anisotropic LTC table (alpha_x, alpha_y in the tangent "
+                 "frame), textures at the footprint's mip level",
     "colormap-filtered": "colour-map filtering (Heitz et al. 2013): the filtered colour term of a "
                          "texture / noise / height colour map (scene extras.colormap), unlit",
     "colormap-naive": "naive counterpart of colormap-filtered: C(mean), times V_bar for heights",

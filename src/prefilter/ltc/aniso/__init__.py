@@ -6,9 +6,3 @@ GLSL (:mod:`.export`), acceptance (:mod:`.accept`). See ``docs/ltc-aniso.md``.""
 from prefilter.ltc.aniso.table import AnisoGGXTable
 
 __all__ = ["AnisoGGXTable"]
-
-from prefilter.render.methods import register as _register  # noqa: E402
-
-_register("ltc-aniso", "prefilter.ltc.aniso.render:render_ltc_aniso",
-          description="area lights by the anisotropic LTC table (alpha_x, alpha_y in the "
-                      "tangent frame), textures at the footprint's mip level")
