@@ -74,13 +74,15 @@ def record(out: Path) -> None:
     (out / "errors.json").write_text(json.dumps(errors, indent=1))
 
 
-def compare(out: Path, renames: dict[str, tuple[str, dict]]) -> int:
+def compare(out: Path, renames: dict[str, tuple[str, dict]], methods=None) -> int:
     images = dict(np.load(out / "images.npz"))
     errors = json.loads((out / "errors.json").read_text())
     worst = 0.0
     bad = 0
     for key in sorted(set(images) | set(errors)):
         method, name = key.split("|")
+        if methods and method not in methods:
+            continue
         new, params = renames.get(method, (method, {}))
         path = out / "scenes" / f"{name}.json"
         try:
@@ -108,6 +110,7 @@ def main(argv=None) -> int:
     ap.add_argument("mode", choices=("record", "compare"))
     ap.add_argument("dir", type=Path)
     ap.add_argument("--rename", action="append", default=[], metavar="OLD=NEW[?k=v&...]")
+    ap.add_argument("--methods", default="", help="comma-separated methods to compare (default all)")
     a = ap.parse_args(argv)
     if a.mode == "record":
         record(a.dir)
@@ -117,7 +120,7 @@ def main(argv=None) -> int:
         old, new = r.split("=", 1)
         name, _, q = new.partition("?")
         renames[old] = (name, dict(kv.split("=", 1) for kv in q.split("&") if kv))
-    return compare(a.dir, renames)
+    return compare(a.dir, renames, [m for m in a.methods.split(",") if m])
 
 
 if __name__ == "__main__":
