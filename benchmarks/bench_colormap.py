@@ -22,7 +22,7 @@ import time
 import numba
 import numpy as np
 
-from prefilter.colormap.acceptance import build_data, scene_dict
+from prefilter.studies.colormap import build_data, scene_dict
 from prefilter.colormap.kernels import PackedChain, shade_height, shade_noise, shade_texture
 from prefilter.colormap.slope import filter_slope
 from prefilter.colormap.texture import footprint_stats

@@ -10,9 +10,9 @@ wall time per shading point (NumPy path, best of 3). ``paper5`` is the supplemen
 (spacing 0.9); other rows use the derived spacing of ``gaussian_grid``.
 
 The same table with more cases (diffuse at every sigma) and per-N timings of the compiled
-specular kernel: ``--convergence`` (:func:`prefilter.leadr.acceptance.convergence`).
+specular kernel: ``--convergence`` (:func:`prefilter.studies.leadr.convergence`).
 
-Acceptance (``--acceptance``): :mod:`prefilter.leadr.acceptance` (LEADR, normal-mapped reference
+Acceptance (``--acceptance``): :mod:`prefilter.studies.leadr` (LEADR, normal-mapped reference
 and naive mip-mapped normal mapping vs the displaced height field, 16 to 64 texels per pixel);
 ``--acceptance-env`` the same under the procedural environment (add ``--no-shadowing`` for a
 reference without self-shadowing, the model of the simplified algorithms; ``--surfaces``,
@@ -21,17 +21,17 @@ side and MIS samples per hit, e.g. ``--surfaces 'iso 0.1' --shadings diffuse --k
 for a 16x reference); the diffuse rows are also printed against naive shading with the same
 irradiance representation (``acceptance.env_diffuse_table``).
 
-Point-light images (``--image-point``, ~30-50 min): :func:`prefilter.leadr.acceptance.image_point`,
+Point-light images (``--image-point``, ~30-50 min): :func:`prefilter.studies.leadr.image_point`,
 planes and spheres, iso / anisotropic height fields, specular and diffuse, 4 and 16 texels per
 pixel, RMSE / FLIP / flicker of LEADR, the normal-mapped reference and naive normal mapping vs the
 ray-traced displaced surface (``--quick``: one surface, the plane only). ``--flicker-floor``
 (~15 min): the far rows' flickers with the reference's own sampling-error floor
-(:func:`prefilter.leadr.acceptance.flicker_table`). ``--flicker-source 'iso 0.25, sphere; ...'
+(:func:`prefilter.studies.leadr.flicker_table`). ``--flicker-source 'iso 0.25, sphere; ...'
 --tpp 16``: flicker against the displaced and the normal-mapped references
-(:func:`prefilter.leadr.acceptance.flicker_source_table`).
+(:func:`prefilter.studies.leadr.flicker_source_table`).
 
 Specular diagnosis (``--spec-diagnosis --blocks 16,32``, ~15 min per block on a loaded machine):
-:func:`prefilter.leadr.acceptance.specular_diagnosis`, why sigma 0.5 specular misses 0.5x naive
+:func:`prefilter.studies.leadr.specular_diagnosis`, why sigma 0.5 specular misses 0.5x naive
 (reference noise, grid N, LOD bias, parallax, the footprint's non-Gaussian slope histogram).
 
 Render methods (``--render``): wall time of ``leadr-env``, ``leadr-env-simplified``,
@@ -184,7 +184,7 @@ if __name__ == "__main__":
                     help="the far-field table under environment light")
     ap.add_argument("--no-shadowing", action="store_true")
     ap.add_argument("--convergence", action="store_true",
-                    help="N x N vs N = 128 (prefilter.leadr.acceptance.convergence)")
+                    help="N x N vs N = 128 (prefilter.studies.leadr.convergence)")
     ap.add_argument("--render", action="store_true", help="render-method frame times")
     ap.add_argument("--image-point", action="store_true",
                     help="point-light image rows, planes and spheres (acceptance.image_point)")
@@ -215,13 +215,13 @@ if __name__ == "__main__":
                     help="with --acceptance-env: MIS samples per reference hit")
     a = ap.parse_args()
     if a.spec_diagnosis:
-        from prefilter.leadr.acceptance import diagnosis_table, specular_diagnosis
+        from prefilter.studies.leadr import diagnosis_table, specular_diagnosis
 
         print(diagnosis_table(specular_diagnosis(
             a.surfaces or "iso 0.5", blocks=tuple(int(b) for b in a.blocks.split(",")),
             log=lambda row: None)))
     elif a.flicker_source:
-        from prefilter.leadr.acceptance import POINT_SURFACES, flicker_source_table, image_point
+        from prefilter.studies.leadr import POINT_SURFACES, flicker_source_table, image_point
 
         # 'flat': a nearly flat height map, every method's flicker is then macro geometry only
         known = dict(POINT_SURFACES, flat=dict(procedural="gaussian", rms_slope=1e-3))
@@ -232,12 +232,12 @@ if __name__ == "__main__":
                                 texels_per_pixel=(a.tpp,), log=lambda row: None)
         print(flicker_source_table(rows))
     elif a.flicker_floor:
-        from prefilter.leadr.acceptance import flicker_table, image_point
+        from prefilter.studies.leadr import flicker_table, image_point
 
         print(flicker_table(image_point(texels_per_pixel=(16.0,), noise_floor=True,
                                         log=lambda row: None)))
     elif a.image_point:
-        from prefilter.leadr.acceptance import POINT_SURFACES, image_point, point_table
+        from prefilter.studies.leadr import POINT_SURFACES, image_point, point_table
 
         kw = dict(surfaces={"iso 0.25": POINT_SURFACES["iso 0.25"]},
                   shapes=("plane",)) if a.quick else {}
@@ -245,7 +245,7 @@ if __name__ == "__main__":
     elif a.render:
         render_times()
     elif a.acceptance_env:
-        from prefilter.leadr.acceptance import SURFACES, env_diffuse_table, env_table, run_env
+        from prefilter.studies.leadr import SURFACES, env_diffuse_table, env_table, run_env
 
         surf = None if a.surfaces is None else {
             k.strip(): SURFACES[k.strip()] for k in a.surfaces.split(";")}
@@ -257,11 +257,11 @@ if __name__ == "__main__":
             print()
             print(env_diffuse_table(rows))
     elif a.convergence:
-        from prefilter.leadr.acceptance import convergence as conv, convergence_table
+        from prefilter.studies.leadr import convergence as conv, convergence_table
 
         print(convergence_table(conv(points=a.points or 1000, log=lambda row: None)))
     elif a.acceptance:
-        from prefilter.leadr.acceptance import run, table
+        from prefilter.studies.leadr import run, table
 
         print(table(run(log=lambda row: None)))
     elif a.throughput:

@@ -12,7 +12,7 @@ is printed. No assertions.
 
     .venv/bin/python benchmarks/bench_ltc_aniso.py [--bake] [--accept 2000] [-n 200000]
 
-``--accept N`` runs the accuracy acceptance (:func:`prefilter.ltc.aniso.accept.run_acceptance`,
+``--accept N`` runs the accuracy acceptance (:func:`prefilter.studies.ltc_aniso.run_acceptance`,
 50 000 MC samples per configuration; JSON in /tmp/ltc_aniso_acceptance.json).
 """
 
@@ -87,7 +87,7 @@ def main() -> None:
     if args.accept:
         import json
 
-        from prefilter.ltc.aniso.accept import format_statistics, run_acceptance
+        from prefilter.studies.ltc_aniso import format_statistics, run_acceptance
 
         res = run_acceptance(aniso, args.accept, 50_000, 0,
                              iso_table=iso if iso_kind == "shipped" else None, progress=True)

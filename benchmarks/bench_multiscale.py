@@ -34,7 +34,7 @@ import numpy as np
 
 import prefilter.multiscale  # noqa: F401  (registers the ltc-multiscale methods)
 from prefilter.ltc.table import GGXTable
-from prefilter.render.demo import showcase_scene
+from prefilter.report.demo import showcase_scene
 from prefilter.render.metrics import flicker, flip, jitter_offsets, rmse
 from prefilter.render.pipeline import render
 

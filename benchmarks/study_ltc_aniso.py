@@ -6,7 +6,7 @@
         [--repolish K OUT.npz] [--quad-polish OUT.npz] shipped path/to/table.npz ...
 
 ``shipped`` is the package table. **acceptance**: exactly the configurations and references of
-``prefilter.ltc.aniso.accept.run_acceptance`` (seed 0: ``n`` anisotropic configurations, then
+``prefilter.studies.ltc_aniso.run_acceptance`` (seed 0: ``n`` anisotropic configurations, then
 ``n / 2`` isotropic ones), computed once and shared by all tables (``--cache`` keeps them
 between runs). **lobe quads**: ``--lobe`` configurations drawn the same way (seed 5) with quads
 centred on a direction reflected about a visible normal of the lobe, as highlights are (what the
@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from prefilter.ltc import AnisoGGXTable
-from prefilter.ltc.aniso.accept import (estimates, format_statistics, random_aniso_configurations,
-                                        references, statistics)
+from prefilter.studies.ltc_aniso import (estimates, format_statistics, random_aniso_configurations,
+                                         references, statistics)
 from prefilter.ltc.fit_iso import _quads_around
 from prefilter.microfacet import GGX, reflect
 

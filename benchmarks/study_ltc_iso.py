@@ -78,7 +78,7 @@ def evaluate(table, cfg) -> dict:
 def demo_bias(specs, spp: int = 256) -> dict:
     """Mean of `ltc` (or `ltc-aniso`) on the flat showcase plane at alpha 0.3 against
     `reference` with `spp` samples per pixel."""
-    from prefilter.render.demo import showcase_scene
+    from prefilter.report.demo import showcase_scene
     from prefilter.render.pipeline import render
 
     scene = showcase_scene(1.0, 96, 60, alpha=0.3)

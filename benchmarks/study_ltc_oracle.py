@@ -4,10 +4,10 @@ anisotropic table's error comes from (docs/ltc-aniso.md, "What limits the p90").
     .venv/bin/python benchmarks/study_ltc_oracle.py [--aniso 300] [--iso 200] [--train 192]
         [--test 48] [--seed 0] [--save results.npz] [--load results.npz] [--table FILE]
 
-Configurations: a seeded subset of the acceptance's own (``accept.run_acceptance``, seed 0: the
+Configurations: a seeded subset of the acceptance's own (``ltc_aniso.run_acceptance``, seed 0: the
 2000 anisotropic ones and the 1000 isotropic ones). Per configuration, ``--train`` training
 quads and ``--test`` separate test quads drawn like the acceptance's (20 % straddling the
-horizon), with vectorised MIS references (``accept.quad_references``; 4096 lobe + 1024 area
+horizon), with vectorised MIS references (``quadfit.quad_references``; 4096 lobe + 1024 area
 samples for training quads, 16384 + 4096 for test quads, i.e. ~1-2 % noise on test quads).
 Models, all scored on the test quads by the acceptance's relative error (references >= 1e-3):
 
@@ -16,7 +16,7 @@ Models, all scored on the test quads by the acceptance's relative error (referen
 * ``entry fit``: the bake's own fit (``bake.fit_entries``: SW + L1 polish) at the exact (wo,
   alpha_x, alpha_y), exact magnitude: the table without interpolation;
 * ``oracle l1`` / ``oracle l2``: the LTC and magnitude scale that minimise the acceptance metric
-  itself on the training quads (``accept.fit_quad_ltc``, 9 parameters, started from the table's
+  itself on the training quads (``quadfit.fit_quad_ltc``, 9 parameters, started from the table's
   and the entry fit's matrices, the better kept), evaluated on the test quads: the best any
   table with one LTC per entry can do on this protocol;
 * ``iso table`` (isotropic set only): the shipped 64 x 64 isotropic table.
@@ -33,13 +33,13 @@ import time
 import numpy as np
 
 from prefilter.ltc import AnisoGGXTable, GGXTable
-from prefilter.ltc.aniso.accept import (acceptance_quads, fit_quad_ltc, quad_references,
-                                        random_aniso_configurations)
 from prefilter.ltc.aniso.fit import lobe_moments
+from prefilter.ltc.aniso.quadfit import acceptance_quads, fit_quad_ltc, quad_references
 from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
 from prefilter.ltc.validate import ALPHA_BINS, FRACTION_BINS, THETA_BINS_DEG
+from prefilter.studies.ltc_aniso import random_aniso_configurations
 
-RATIO_BINS = ALPHA_BINS  # 0.05-0.1 / 0.1-0.2 / 0.2-0.4 / 0.4-0.7 / 0.7-1, as accept.statistics
+RATIO_BINS = ALPHA_BINS  # 0.05-0.1 / 0.1-0.2 / 0.2-0.4 / 0.4-0.7 / 0.7-1, as ltc_aniso.statistics
 THRESHOLD = 1e-3
 
 

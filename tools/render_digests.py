@@ -24,7 +24,7 @@ W, H = 48, 32
 
 
 def _scenes() -> dict[str, dict]:
-    from prefilter.render.demo import leadr_scene, showcase_scene
+    from prefilter.report.demo import leadr_scene, showcase_scene
     from prefilter.ltc.aniso.demo import demo_scene
     from prefilter.glints.render import measurement_scene
 

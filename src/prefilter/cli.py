@@ -52,7 +52,7 @@ BAKE_COMMANDS = {
 TOP_COMMANDS = {
     "render": "prefilter.render.commands:render",
     "compare": "prefilter.render.commands:compare",
-    "demo": "prefilter.render.demo:demo",
+    "demo": "prefilter.report.demo:demo",
     "validate": "prefilter.ltc.commands:validate",
     "multiscale-fit": "prefilter.multiscale.commands:multiscale_fit",
     "view": "prefilter.viewer.commands:view",

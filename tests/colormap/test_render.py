@@ -4,7 +4,7 @@ supersampled reference."""
 import numpy as np
 import pytest
 
-from prefilter.colormap.acceptance import scene_dict
+from prefilter.studies.colormap import scene_dict
 from prefilter.colormap.height import filter_height_footprint, smith_lambda_direction
 from prefilter.colormap.render import (
     colormap_driver,

@@ -162,7 +162,7 @@ def test_compiled_shadowed_kernel_equals_the_numpy_algorithm_1():
 def test_diffuse_shadowing_matches_the_exact_shadowed_irradiance():
     # SH diffuse + correction vs Algorithm 3 with the level-0 quadrature of the paper's
     # Algorithm 2 irradiance (G2 / G1 per light direction), relative to the shadowed radiance.
-    from prefilter.leadr.acceptance import diffuse_exact
+    from prefilter.studies.leadr import diffuse_exact
     from prefilter.leadr.envmap import EnvMap, procedural_env
     from prefilter.leadr.shading import diffuse_shadowing
 

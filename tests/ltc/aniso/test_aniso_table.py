@@ -7,7 +7,7 @@ import pytest
 
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.ltc import AnisoGGXTable
-from prefilter.ltc.aniso.accept import (
+from prefilter.studies.ltc_aniso import (
     estimates,
     random_aniso_configurations,
     references,
@@ -106,7 +106,7 @@ def test_accuracy_acceptance(table):
     (34.5 % measured, see docs/ltc-aniso.md): asserted at the measured level to catch regressions.
     Isotropic configurations: within 1 percentage point of the isotropic table."""
     from prefilter.ltc import GGXTable
-    from prefilter.ltc.aniso.accept import run_acceptance
+    from prefilter.studies.ltc_aniso import run_acceptance
 
     try:
         iso = GGXTable.load()

@@ -231,7 +231,7 @@ class QuadPolishSettings:
     #: objective on them (sharp lobes light few quads and overfit).
     lobe_samples: int = 2048
     light_samples: int = 512
-    #: Objective of :func:`~prefilter.ltc.aniso.accept.fit_quad_ltc` ("l1" or "l2").
+    #: Objective of :func:`~prefilter.ltc.aniso.quadfit.fit_quad_ltc` ("l1" or "l2").
     loss: str = "l1"
     #: Seed of the quads and references (never 0, the acceptance's seed).
     seed: int = 1
@@ -253,7 +253,7 @@ def _objective(err, loss):
 
 
 def _polish_job(args):
-    from prefilter.ltc.aniso.accept import fit_quad_ltc, quad_references
+    from prefilter.ltc.aniso.quadfit import fit_quad_ltc, quad_references
     from prefilter.ltc.polygon import polygon_integral
 
     wo, ax, ay, mag, M0, quads, valid, idx, qs = args
@@ -283,13 +283,13 @@ def quad_polish(table: AnisoGGXTable, qs: QuadPolishSettings = QuadPolishSetting
                 progress: bool = True) -> AnisoGGXTable:
     """Refit every entry of ``table`` on the acceptance metric, then re-align and apply eq. 16.
 
-    Per entry, :func:`~prefilter.ltc.aniso.accept.fit_quad_ltc` (magnitude fixed) started from
+    Per entry, :func:`~prefilter.ltc.aniso.quadfit.fit_quad_ltc` (magnitude fixed) started from
     the stored matrix, on quads shared by all entries (``qs.n_quads`` and their mirror images)
-    with MC references (:func:`~prefilter.ltc.aniso.accept.quad_references`); the refit is kept
+    with MC references (:func:`~prefilter.ltc.aniso.quadfit.quad_references`); the refit is kept
     only where it is better on as many validation quads. Magnitude and Fresnel are unchanged;
     ``diagnostics["quad_polished"]`` marks the refitted entries.
     """
-    from prefilter.ltc.aniso.accept import QUAD_LOSSES, acceptance_quads
+    from prefilter.ltc.aniso.quadfit import QUAD_LOSSES, acceptance_quads
 
     if qs.loss not in QUAD_LOSSES or qs.seed == 0:
         raise PrefilterError(f"quad polish: expected loss in {sorted(QUAD_LOSSES)} and a seed "

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from prefilter.leadr import point_light
-from prefilter.leadr.acceptance import POINT_SURFACES, image_point
+from prefilter.studies.leadr import POINT_SURFACES, image_point
 from prefilter.leadr.displaced import (cell_moments, displaced_point_radiance,
                                        normal_mapped_point_radiance, trace_points)
 from prefilter.leadr.render import footprint_moments

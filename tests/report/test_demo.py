@@ -7,8 +7,8 @@ import re
 import numpy as np
 import pytest
 
-from prefilter.render.demo import DemoSettings, _section, _viewer_section, run_demo
-from prefilter.render.report import Report
+from prefilter.report.demo import DemoSettings, _section, _viewer_section, run_demo
+from prefilter.report.report import Report
 
 SECTIONS = (
     "Isotropic GGX LTC table vs Monte Carlo",

@@ -1,123 +1,19 @@
-"""Acceptance of the anisotropic table: quad-light integrals against Monte Carlo references.
+"""Quad-light integrals as a fitting objective: the LTC of one lobe fitted to the relative error
+of its polygon integrals over many quads (the metric of ``ltc validate``), and the vectorised
+Monte Carlo references it is fitted to.
 
-Reuses :mod:`prefilter.ltc.validate` (random quads incl. horizon-straddling ones, horizon
-clipping, the MIS reference estimator and the error statistics); only the roughness draw differs:
-``alpha_x`` and ``alpha_y`` independent (or equal, for the comparison with the isotropic table).
+:func:`~prefilter.ltc.aniso.bake.quad_polish` refits every table entry with them.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from prefilter.validation import as_rng
-from prefilter.ltc.polygon import clip_to_horizon
-from prefilter.ltc.validate import (
-    error_statistics,
-    random_configurations,
-    random_quads,
-    reference_quad_integral,
-)
 from prefilter.errors import PrefilterError
+from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+from prefilter.ltc.validate import random_quads
 from prefilter.microfacet import GGX, reflect
-
-
-def random_aniso_configurations(n: int, seed, *, theta_deg=(0.0, 85.0), alpha=(0.05, 1.0),
-                                straddle_fraction: float = 0.2, isotropic: bool = False) -> dict:
-    """:func:`~prefilter.ltc.validate.random_configurations` with a second roughness.
-
-    Returns a dict with ``wo`` (n, 3), ``alpha_x``, ``alpha_y`` (n,), ``quad`` (n, 4, 3) and
-    ``straddle`` (n,); ``alpha_y`` is drawn uniformly in ``alpha`` (``= alpha_x`` if
-    ``isotropic``).
-    """
-    rng = as_rng(seed, "seed")
-    cfg = random_configurations(n, rng, theta_deg=theta_deg, alpha=alpha,
-                                straddle_fraction=straddle_fraction)
-    ax = cfg.pop("alpha")
-    ay = ax.copy() if isotropic else rng.uniform(*alpha, n)
-    return {**cfg, "alpha_x": ax, "alpha_y": ay}
-
-
-def references(cfg: dict, n_samples: int, seed, *, progress: bool = False):
-    """MC references ``(n,)`` and standard errors ``(n,)`` of ``GGX(ax, ay).eval`` over quads."""
-    rng = as_rng(seed, "seed")
-    n = len(cfg["wo"])
-    ref, se = np.zeros(n), np.zeros(n)
-    it = range(n)
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(it, desc="MC references", unit="config")
-    for i in it:
-        ref[i], se[i] = reference_quad_integral(GGX(cfg["alpha_x"][i], cfg["alpha_y"][i]),
-                                                cfg["wo"][i], cfg["quad"][i], n_samples, rng)
-    return ref, se
-
-
-def estimates(table, cfg: dict) -> np.ndarray:
-    """``magnitude * polygon_integral(M, clipped quad)`` from ``table.lookup`` -> ``(n,)``."""
-    from prefilter.ltc.polygon import polygon_integral
-
-    M, mag, _ = table.lookup(cfg["wo"], cfg["alpha_x"], cfg["alpha_y"])
-    return mag * polygon_integral(M, clip_to_horizon(cfg["quad"]))
-
-
-def statistics(est, ref, cfg: dict) -> dict:
-    """:func:`~prefilter.ltc.validate.error_statistics` binned by view angle, by the larger
-    roughness (``by_alpha``) and by the anisotropy ratio ``min / max`` (``by_ratio``)."""
-    theta = np.arccos(np.clip(cfg["wo"][:, 2], -1, 1))
-    ax, ay = cfg["alpha_x"], cfg["alpha_y"]
-    amax = np.maximum(ax, ay)
-    stats = error_statistics(est, ref, theta, amax)
-    stats["by_ratio"] = error_statistics(est, ref, theta, np.minimum(ax, ay) / amax)["by_alpha"]
-    return stats
-
-
-def format_statistics(stats: dict, title: str = "") -> str:
-    """Plain-text summary of :func:`statistics`."""
-
-    def pct(x):
-        return "   -  " if x is None else f"{100 * x:5.2f}%"
-
-    lines = [f"{title}relative error over {stats['count']} configurations: median "
-             f"{pct(stats['median'])}, p90 {pct(stats['p90'])}, mean {pct(stats['mean'])} "
-             f"(excluded, reference < {stats['threshold']:g}: {stats['excluded']})"]
-    for key, label in (("by_theta", "view angle (deg)"), ("by_alpha", "max roughness"),
-                       ("by_ratio", "ratio min/max")):
-        lines.append(f"  {label:18s} count  median     p90")
-        for b in stats[key]:
-            lines.append(f"    {b['lo']:5.2f}-{b['hi']:5.2f}    {b['count']:6d}  "
-                         f"{pct(b['median'])}  {pct(b['p90'])}")
-    return "\n".join(lines)
-
-
-def run_acceptance(table, n_configs: int = 2000, n_samples: int = 50_000, seed=0, *,
-                   iso_table=None, progress: bool = False) -> dict:
-    """Issue 4's accuracy acceptance; returns ``{"aniso": stats, "isotropic": {...}}``.
-
-    ``aniso``: ``n_configs`` configurations with independent roughnesses. ``isotropic``
-    (``n_configs // 2`` configurations with ``alpha_x = alpha_y``, same references for both
-    tables): statistics of this table and, if given, of the isotropic ``iso_table``.
-    """
-    cfg = random_aniso_configurations(n_configs, seed)
-    ref, _ = references(cfg, n_samples, np.random.default_rng([seed, 1]), progress=progress)
-    out = {"aniso": statistics(estimates(table, cfg), ref, cfg)}
-    icfg = random_aniso_configurations(n_configs // 2, np.random.default_rng([seed, 2]),
-                                       isotropic=True)
-    iref, _ = references(icfg, n_samples, np.random.default_rng([seed, 3]), progress=progress)
-    iso = {"aniso_table": statistics(estimates(table, icfg), iref, icfg)}
-    if iso_table is not None:
-        from prefilter.ltc.polygon import polygon_integral
-
-        M, mag, _ = iso_table.lookup(icfg["wo"], np.clip(icfg["alpha_x"], iso_table.alpha_min, 1))
-        est = mag * polygon_integral(M, clip_to_horizon(icfg["quad"]))
-        iso["iso_table"] = statistics(est, iref, icfg)
-    out["isotropic"] = iso
-    return out
-
-
-# --------------------------------------------------------------------------------------------
-# The acceptance metric as a fitting objective: the one-LTC-per-entry floor ("oracle")
-# --------------------------------------------------------------------------------------------
+from prefilter.validation import as_rng
 
 
 def acceptance_quads(k: int, rng, straddle_fraction: float = 0.2) -> np.ndarray:
@@ -189,8 +85,6 @@ QUAD_LOSSES = {"l2": ("linear", 1.0), "l1": ("soft_l1", 0.01)}
 
 
 def _quad_estimates(x, clipped, magnitude):
-    from prefilter.ltc.polygon import polygon_integral
-
     M = np.append(x[:8], 1.0).reshape(3, 3)
     scale = np.exp(x[8]) if len(x) > 8 else 1.0
     return magnitude * scale * polygon_integral(M, clipped)

@@ -1,4 +1,4 @@
-"""Acceptance scenes for colour-map filtering (issue 7): a plane and a sphere carrying a colour map
+"""Acceptance scenes for colour-map filtering: a plane and a sphere carrying a colour map
 driven by (a) tabulated noise, (b) procedural noise, (c) microsurface heights, (d) microsurface
 slopes, rendered by the filtered method, the naive ``C(mean)`` and a 32 x 32 jittered supersampled
 reference of the unfiltered function.
@@ -341,7 +341,7 @@ def format_rows(rows) -> str:
 
 
 def main(argv=None) -> None:  # pragma: no cover - a long run
-    """``python -m prefilter.colormap.acceptance [SIZE] [N_REF] [OUT.json]``."""
+    """``python -m prefilter.studies.colormap [SIZE] [N_REF] [OUT.json]``."""
     import sys
 
     args = sys.argv[1:] if argv is None else argv

@@ -1,10 +1,10 @@
-"""The vectorised quad-light references of the acceptance (``accept.quad_references``)."""
+"""The vectorised quad-light references of the acceptance (``quadfit.quad_references``)."""
 
 import numpy as np
 import pytest
 
 from prefilter.errors import PrefilterError
-from prefilter.ltc.aniso.accept import acceptance_quads, quad_references
+from prefilter.ltc.aniso.quadfit import acceptance_quads, quad_references
 from prefilter.ltc.validate import reference_quad_integral
 from prefilter.microfacet import GGX
 

@@ -1,9 +1,9 @@
-"""Issue 7's acceptance criteria on the plane / sphere scenes (small and full versions)."""
+"""The acceptance criteria of colour-map filtering on the plane / sphere scenes (small and full)."""
 
 import numpy as np
 import pytest
 
-from prefilter.colormap.acceptance import CONFIGS, run_acceptance
+from prefilter.studies.colormap import CONFIGS, run_acceptance
 
 FAR_LIMIT = {"tabulated": 0.25, "procedural": 0.25, "height": 0.5, "slope": 0.5}
 

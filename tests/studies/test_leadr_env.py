@@ -4,7 +4,7 @@ non-centred Beckmann microsurface; slow: the far-field table and the grid conver
 import numpy as np
 import pytest
 
-from prefilter.leadr.acceptance import (CONVERGENCE_CASES, SURFACES, convergence,
+from prefilter.studies.leadr import (CONVERGENCE_CASES, SURFACES, convergence,
                                         diffuse_exact, env_specular_shadowed, run_env)
 from prefilter.leadr.envmap import EnvMap, procedural_env, sh9_project, texel_directions
 from prefilter.leadr.shading import diffuse_sh, env_specular
@@ -106,7 +106,7 @@ def test_grid_convergence_claims():
 
 @pytest.mark.slow
 def test_image_level_specular_leadr_beats_naive():
-    from prefilter.leadr.acceptance import image_env
+    from prefilter.studies.leadr import image_env
 
     rows = image_env(sigma=0.25, texels_per_pixel=(16.0,), width=24, height=16, sub=4, spp=8,
                      log=lambda r: None)

@@ -182,18 +182,17 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
     (``n_grid^2`` grid; diffuse: order-2 SH irradiance), plus ``leadr shadowed`` (the paper's
     non-simplified Algorithms 1 / 2+3 with ``G2 / G1`` per sample; diffuse with the exact
     irradiance), ``leadr-env`` (what the render method computes: compiled Algorithm 1 with
-    ``G2 / G1``, 9 x 9 or, since session 5, 17 x 17 for footprints with a slope std >= 0.35
-    (:func:`~prefilter.leadr.render.env_specular_adaptive`); diffuse since session 5: the
-    irradiance map (:class:`~prefilter.leadr.envmap.IrradianceMap`) on the 5 x 5 grid plus
+    ``G2 / G1``, 9 x 9, or 17 x 17 for footprints with a slope std >= 0.35
+    (:func:`~prefilter.leadr.render.env_specular_adaptive`); diffuse: the irradiance map
+    (:class:`~prefilter.leadr.envmap.IrradianceMap`) on the 5 x 5 grid plus
     :func:`~prefilter.leadr.shading.diffuse_shadowing`), and for diffuse ``leadr-env SH`` (the
-    session-4 ``leadr-env``: order-2 SH instead of the map), ``leadr exact E``
-    (Simplified Algorithm 3 with the exact
-    irradiance instead of SH), ``naive SH`` (SH irradiance at the naive normal, what
-    ``leadr-irradiance-naive`` rendered until session 4) and ``naive E map`` (the irradiance
-    map at the naive normal, what it renders now; ``naive`` is Monte Carlo of the exact
-    environment at that normal). ``err``: relative RMSE of the luminance over views and
-    shifts; ``bias``: mean signed error, relative; ``flicker``: std over the shifts of
-    ``method - reference``, relative, averaged over views (includes the reference's MC noise).
+    same with order-2 SH instead of the map), ``leadr exact E`` (Simplified Algorithm 3 with the
+    exact irradiance instead of SH), ``naive SH`` (SH irradiance at the naive normal) and
+    ``naive E map`` (the irradiance map at the naive normal, what ``leadr-irradiance-naive``
+    renders; ``naive`` is Monte Carlo of the exact environment at that normal). ``err``:
+    relative RMSE of the luminance over views and shifts; ``bias``: mean signed error, relative;
+    ``flicker``: std over the shifts of ``method - reference``, relative, averaged over views
+    (includes the reference's MC noise).
     """
     from prefilter.leadr import render as lr
     from prefilter.leadr.shading import diffuse_shadowing
@@ -242,7 +241,7 @@ def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, 
                                 diffuse_exact(env, wo, mu, cov, n_grid, shadowing=True) @ LUM))
                             lv = diffuse_sh(sh, wo, mu, cov, n_grid)
                             # the render method's diffuse: the irradiance map on its 5 x 5
-                            # grid + the compiled shadowing correction (session 4: SH)
+                            # grid + the compiled shadowing correction
                             dg = lr.DIFFUSE_GRID
                             corr = diffuse_shadowing(env, wo, mu, cov, dg)
                             vals["leadr-env"].append(float(np.maximum(
@@ -541,7 +540,7 @@ def env_table(rows) -> str:
 
 def env_diffuse_table(rows) -> str:
     """Markdown table of :func:`run_env`'s diffuse rows: ``leadr-env`` (irradiance map) and its
-    session-4 SH variant against naive with the same representation: Monte Carlo of the exact
+    order-2 SH variant against naive with the same representation: Monte Carlo of the exact
     environment (``naive``), the irradiance map (``naive E map``), order-2 SH (``naive SH``);
     signed biases and flickers (std over the shifts, includes the reference's noise)."""
     out = ["| surface | texels/pixel | leadr-env | leadr-env SH | LEADR + shadowing 9x9 | naive | "

@@ -36,7 +36,7 @@ from prefilter.errors import PrefilterError
 
 
 #: (shape, view angle from the normal (deg), texels per world unit, label): near and far on a
-#: grazing plane and on a sphere (a subset of ``prefilter.colormap.acceptance.CONFIGS``).
+#: grazing plane and on a sphere (a subset of ``prefilter.studies.colormap.CONFIGS``).
 COLORMAP_CONFIGS = (("plane", 70.0, 40.0, "near"), ("plane", 70.0, 1500.0, "far"),
                     ("sphere", 0.0, 10.0, "near"), ("sphere", 0.0, 900.0, "far"))
 
@@ -325,7 +325,7 @@ def _showcase_section(report, settings: DemoSettings, seed: int, log) -> None:
 
 
 def _distance_plot(x, curves):
-    from prefilter.render.report import line_plot
+    from prefilter.report.report import line_plot
 
     return line_plot(x, curves, xlabel="camera distance (x)", ylabel="mean FLIP vs reference",
                      logx=True)
@@ -385,7 +385,7 @@ def leadr_scene(width: int, height: int) -> dict:
 
 
 def _leadr_section(report, settings: DemoSettings, seed: int, log) -> None:
-    from prefilter.leadr import acceptance
+    from prefilter.studies import leadr as acceptance
 
     scene = leadr_scene(settings.section_width, settings.section_height)
     try:
@@ -423,7 +423,7 @@ _CASE_NAMES = {"tabulated": "(a) tabulated noise", "procedural": "(b) procedural
 
 
 def _colormap_section(report, settings: DemoSettings, seed: int, log) -> None:
-    from prefilter.colormap import acceptance as cm
+    from prefilter.studies import colormap as cm
     from prefilter.render.metrics import flip
     from prefilter.render.scene import load_scene
 
@@ -612,7 +612,7 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
     ``settings`` overrides the sizes (default: :class:`DemoSettings`, or ``.quick()`` with
     ``quick``). Sections that fail leave a note in the report; the demo itself does not fail.
     """
-    from prefilter.render.report import Report
+    from prefilter.report.report import Report
 
     if settings is None:
         settings = DemoSettings.quick() if quick else DemoSettings()
@@ -673,7 +673,7 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         lambda r: _glints_section(r, settings, seed, log), log)
     _section(
         report, status, "Glints (part 2): rendered frames, compressed vs direct",
-        f"The issue #9 measurement plane (a {settings.glints_render_map}^2 flakes normal map, "
+        f"The glints measurement plane (a {settings.glints_render_map}^2 flakes normal map, "
         "metallic, one point light) from three distances, camera and light scaled together so "
         "only the footprint changes: `glints` (the compressed P-NDF of each pixel footprint, "
         "paper eq. 1) against `glints-direct` (the exact P-NDF summed over the footprint's "

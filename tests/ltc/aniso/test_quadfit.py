@@ -1,11 +1,11 @@
-"""The acceptance-metric fit (``accept.fit_quad_ltc``), i.e. the oracle of
+"""The acceptance-metric fit (``quadfit.fit_quad_ltc``), i.e. the oracle of
 ``benchmarks/study_ltc_oracle.py``: it must beat the shipped table on the quads it is fitted to."""
 
 import numpy as np
 import pytest
 
 from prefilter.errors import PrefilterError
-from prefilter.ltc.aniso.accept import acceptance_quads, fit_quad_ltc, quad_references
+from prefilter.ltc.aniso.quadfit import acceptance_quads, fit_quad_ltc, quad_references
 from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
 
 
