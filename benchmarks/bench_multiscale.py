@@ -36,7 +36,7 @@ import prefilter.multiscale  # noqa: F401  (registers the ltc-multiscale methods
 from prefilter.ltc.table import GGXTable
 from prefilter.render.demo import showcase_scene
 from prefilter.render.metrics import flicker, flip, jitter_offsets, rmse
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 
 METHODS = ("ltc", "ltc-multiscale", "ltc-multiscale-paper")
 #: The three built-in normal maps: isotropic Gaussian bumps, brushed, a structured (flakes) one.

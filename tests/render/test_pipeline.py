@@ -9,7 +9,7 @@ import pytest
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.render import load_scene
 from prefilter.render.methods import available, get_method, register
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 
 # A GGX plane (y up) under a quad light facing the camera side (corners counter-clockwise seen
 # from +z), seen from above at an angle. Small, so a test renders it in well under a second.
@@ -236,10 +236,10 @@ def _textured_scene():
 def test_fused_ltc_method_matches_the_numpy_stages(monkeypatch):
     # The fused kernel against the NumPy G-buffer, MipChain.lookup_footprint and the NumPy
     # shader through the generic row driver (same sample positions, same shading model).
-    import prefilter.render.pipeline as pl
+    import prefilter.render.driver as pl
+    from prefilter.ltc.shading import shade_ltc_numpy
     from prefilter.render.camera import _intersect_numpy, rays_at
     from prefilter.render.methods import RenderSettings
-    from prefilter.render.shading import _shade_ltc_numpy
 
     table = _table()
     s = _textured_scene()
@@ -247,9 +247,9 @@ def test_fused_ltc_method_matches_the_numpy_stages(monkeypatch):
 
     def shade(g, _u):
         a = pl.surface_attributes(s, g, filtered=True)
-        return _shade_ltc_numpy(g.position, a["t"], a["b"], a["n"], g.view,
-                                np.sqrt(a["alpha_x"] * a["alpha_y"]), a["base_color"], a["f0"],
-                                lights, table)
+        return shade_ltc_numpy(g.position, a["t"], a["b"], a["n"], g.view,
+                               np.sqrt(a["alpha_x"] * a["alpha_y"]), a["base_color"], a["f0"],
+                               lights, table)
 
     for spp, jitter in ((1, (0.0, 0.0)), (1, (0.3, -0.2)), (4, (0.0, 0.0))):
         got = render(s, "ltc", spp=spp, jitter=jitter, seed=2, table=table, chunk_samples=500)

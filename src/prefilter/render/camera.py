@@ -323,7 +323,7 @@ def intersect(scene, rays: Rays) -> GBuffer:
     return _finish(out, shape)
 
 
-def _camera_params(cam: Camera) -> np.ndarray:
+def camera_params(cam: Camera) -> np.ndarray:
     r, u, f = cam.basis()
     th = np.tan(np.radians(cam.fov) / 2.0)
     return np.concatenate([np.asarray(cam.origin, float), r, u, f,
@@ -338,7 +338,7 @@ def _gbuffer_camera(scene, cam: Camera, xy: np.ndarray) -> GBuffer:
     types, params = pack_objects(scene.objects)
     out = _empty_gbuffer(shape)
     kernel = serial(gbuffer_camera_kernel, len(out["hit"]))
-    kernel(_camera_params(cam), np.ascontiguousarray(xy).reshape(-1, 2), types, params,
+    kernel(camera_params(cam), np.ascontiguousarray(xy).reshape(-1, 2), types, params,
            *(out[k] for k in _ORDER))
     return _finish(out, shape)
 

@@ -138,18 +138,13 @@ def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path |
     import time
 
     from prefilter.render.methods import check_params
-    from prefilter.render.pipeline import render as render_image
+    from prefilter.render.driver import render as render_image
     from prefilter.texture.io import write_image
 
-    params = check_params(method, params)  # fail on bad input before loading scene and table
-    table = None
-    if table_path is not None:
-        from prefilter.ltc.table import GGXTable
-
-        table = GGXTable.load(table_path)
+    params = check_params(method, params)  # fail on bad input before loading the scene
     t0 = time.perf_counter()
     image = render_image(scene, method, spp=spp, seed=seed, jitter=jitter, progress=not quiet,
-                         table=table, params=params)
+                         table=table_path, params=params)
     seconds = time.perf_counter() - t0
     write_image(out, image)
     click.echo(f"{method}: {image.shape[1]}x{image.shape[0]}, {spp} spp, {seconds:.2f} s -> {out}")
