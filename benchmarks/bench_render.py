@@ -21,12 +21,12 @@ import time
 
 import numpy as np
 
-import prefilter.render.pipeline as pipeline
+import prefilter.render.driver as pipeline
+from prefilter.ltc.shading import shade_ltc, shade_ltc_numpy
 from prefilter.render import gbuffer, load_scene
 from prefilter.render.camera import _intersect_numpy, generate_rays, rays_at
+from prefilter.render.driver import render, surface_attributes
 from prefilter.render.methods import RenderSettings
-from prefilter.render.pipeline import render, surface_attributes
-from prefilter.render.shading import _shade_ltc_numpy, shade_ltc
 
 
 def scene(width: int, height: int, normal_map: bool = True) -> dict:
@@ -80,9 +80,9 @@ def render_ltc_old(s, table):
 
     def shade(g, _u):
         a = surface_attributes(s, g, filtered=True)
-        return _shade_ltc_numpy(g.position, a["t"], a["b"], a["n"], g.view,
-                                np.sqrt(a["alpha_x"] * a["alpha_y"]), a["base_color"], a["f0"],
-                                lights, table)
+        return shade_ltc_numpy(g.position, a["t"], a["b"], a["n"], g.view,
+                               np.sqrt(a["alpha_x"] * a["alpha_y"]), a["base_color"], a["f0"],
+                               lights, table)
 
     with numpy_stages():
         return pipeline.render_samples(s, settings, shade, stratified=False)
@@ -121,7 +121,7 @@ def bench_throughput() -> None:
         shade_ltc(*args)
         n = len(g.hit)
         line(f"ltc shader alone ({n} points)", n, best_of_cpu(lambda: shade_ltc(*args)),
-             best_of_cpu(lambda: _shade_ltc_numpy(*args)))
+             best_of_cpu(lambda: shade_ltc_numpy(*args)))
         render(s, "ltc", table=table)
         line("ltc end to end, 512x512", npix,
              best_of_cpu(lambda: render(s, "ltc", table=table)),
