@@ -7,7 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from prefilter.ltc.shading import scaled_inverse, shade_ltc, shade_ltc_numpy
+from ltc_numpy import shade_ltc_numpy
+
+from prefilter.ltc.shading import scaled_inverse, shade_ltc
 from prefilter.render.lights import LightSet, QuadLight
 
 
@@ -46,14 +48,14 @@ def test_ltc_diffuse_is_the_rectangle_form_factor_in_a_rotated_frame():
     if light.normal @ n > 0:  # make it face the point
         light = QuadLight(np.array(corners[::-1]), [1.0, 2.0, 3.0])
     base = np.array([[0.5, 0.25, 1.0]])
-    out = shade_ltc(p0[None], t[None], b[None], n[None], n[None], np.array([0.5]), base,
-                    np.zeros((1, 3)), LightSet(quads=(light,)), _NoSpecular())
+    out = shade_ltc_numpy(p0[None], t[None], b[None], n[None], n[None], np.array([0.5]), base,
+                          np.zeros((1, 3)), LightSet(quads=(light,)), _NoSpecular())
     want = base[0] * [1, 2, 3] * _rect_form_factor(a_, b_, c_)
     assert np.allclose(out[0], want, rtol=1e-9)
     # Seen from behind the light nothing arrives (one-sided).
-    back = shade_ltc((p0 + 2 * c_ * n)[None], t[None], b[None], (-n)[None], (-n)[None],
-                     np.array([0.5]), base, np.zeros((1, 3)), LightSet(quads=(light,)),
-                     _NoSpecular())
+    back = shade_ltc_numpy((p0 + 2 * c_ * n)[None], t[None], b[None], (-n)[None], (-n)[None],
+                           np.array([0.5]), base, np.zeros((1, 3)), LightSet(quads=(light,)),
+                           _NoSpecular())
     assert np.all(back == 0)
 
 

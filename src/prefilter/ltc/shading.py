@@ -3,8 +3,8 @@ transformed cosines (Heitz et al. 2016, eqs. 10-11), point and directional light
 model (:mod:`prefilter.render.shading`).
 
 :func:`shade_ltc` integrates quad lights in one fused Numba kernel per shading point
-(:func:`prefilter.ltc.kernels.ltc_quads_kernel`); table-like objects without the table's arrays
-take the NumPy path (:func:`shade_ltc_numpy`, which the tests check the kernel against).
+(:func:`prefilter.ltc.kernels.ltc_quads_kernel`; its NumPy twin is a check in
+``tests/ltc/ltc_numpy.py``).
 """
 
 from __future__ import annotations
@@ -12,12 +12,11 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter.errors import PrefilterError
-from prefilter.ltc.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
 from prefilter.ltc.table import schlick_scale
 from prefilter.render.lights import LightSet
-from prefilter.render.shading import VIEW_Z_MIN, local_view, quad_local, shade_delta_lights
+from prefilter.render.shading import VIEW_Z_MIN, local_view, shade_delta_lights
 
-__all__ = ["scaled_inverse", "shade_ltc", "shade_ltc_numpy", "spec_scale"]
+__all__ = ["TABLE_ARRAYS", "scaled_inverse", "shade_ltc", "spec_scale"]
 
 #: The arrays of a :class:`prefilter.ltc.table.GGXTable` the compiled shaders read.
 TABLE_ARRAYS = ("axis_t", "axis_r", "M", "magnitude", "fresnel")
@@ -79,8 +78,8 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
     if not lights.quads:
         return out
     if not all(hasattr(table, k) for k in TABLE_ARRAYS):
-        # a table-like object without the GGXTable arrays (test stand-ins): the NumPy path
-        return shade_ltc_numpy(position, ts, bs, ns, view, alpha, base_color, f0, lights, table)
+        raise PrefilterError(f"table: expected an isotropic LTC table with the arrays "
+                             f"{', '.join(TABLE_ARRAYS)}, got {type(table).__name__}")
     n = len(position)
 
     def c3(a):
@@ -106,32 +105,4 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
         k = int(np.flatnonzero(status)[0])
         raise PrefilterError(f"M_inv: expected invertible matrices, got a singular LTC matrix "
                              f"at shading point {k}")
-    return out
-
-
-def shade_ltc_numpy(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
-                    lights: LightSet, table) -> np.ndarray:
-    """NumPy implementation of :func:`shade_ltc` (cross-checks the fused kernel in the tests)."""
-    position = np.asarray(position, dtype=np.float64)
-    ts, bs, ns = (np.asarray(a, dtype=np.float64) for a in (frame_t, frame_b, frame_n))
-    alpha = np.asarray(alpha, dtype=np.float64)
-    base_color = np.asarray(base_color, dtype=np.float64)
-    f0 = np.asarray(f0, dtype=np.float64)
-    wo = local_view(view, ts, bs, ns)
-    out = shade_delta_lights(position, ts, bs, ns, wo, alpha, alpha, base_color, f0, lights)
-    if not lights.quads:
-        return out
-    # Roughness below the table's range uses its smoothest row (documented in docs/reference.md).
-    M, magnitude, fresnel = table.lookup(wo, np.clip(alpha, table.alpha_min, 1.0))
-    M_inv = scaled_inverse(M)
-    spec = spec_scale(f0, magnitude, fresnel)
-    for ql in lights.quads:
-        P = quad_local(ql, position, ts, bs, ns)
-        front = (position - ql.vertices[0]) @ ql.normal > 0.0
-        e_d = clamped_cosine_integral(P)
-        # The light is cut at the shading horizon before the LTC transform: the kernel clips
-        # M^-1 P in the cosine's space, which would keep the lobe's mass below the surface.
-        e_s = polygon_integral_minv(M_inv, clip_to_horizon(P))
-        rad = base_color * e_d[:, None] + spec * e_s[:, None]
-        out += np.where(front[:, None], rad, 0.0) * ql.radiance
     return out
