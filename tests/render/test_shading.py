@@ -7,13 +7,12 @@ or the Monte Carlo reference estimator checked against quadrature in test_refere
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
-from prefilter.render.lights import DirectionalLight, LightSet, PointLight, QuadLight
 from prefilter.render.camera import GBuffer
 from prefilter.render.driver import shading_frame, two_sided_frame
 from prefilter.render.shading import (brdf_cos, local_view, point_incoming, shade_delta_lights,
                                       shading_frames)
+from prefilter.render.lights import DirectionalLight, LightSet, PointLight
 
 
 def _ggx_by_hand(wo, wi, ax, ay, f0):

@@ -19,9 +19,9 @@ With quad lights only (and the isotropic footprint) the method runs the ``ltc`` 
 Numba pass (:func:`prefilter.ltc.render.render_ltc_fused`) with this method's normal-map read
 (:func:`normal_read`) and roughness rows (:func:`multiscale_roughness`,
 :mod:`prefilter.multiscale.kernels`): the same formulas, ``alpha_meso`` interpolated in the same
-table as :func:`prefilter.multiscale.alpha_meso`. :func:`multiscale_attributes` and the NumPy shader remain the
-general path (point, directional or textured lights, the anisotropic footprint) and the
-reference the fused path is tested against.
+table as :func:`prefilter.multiscale.alpha_meso`. :func:`multiscale_attributes` and the NumPy
+shader remain the general path (point, directional or textured lights, the anisotropic
+footprint) and the reference the fused path is tested against.
 """
 
 from __future__ import annotations
@@ -34,10 +34,10 @@ from prefilter.ltc.render import render_ltc_fused
 from prefilter.ltc.table import as_table
 from prefilter.render.driver import (footprint_lookup, render_samples, shading_frame,
                                      surface_attributes)
-from prefilter.render.lighttex import split_lights
-from prefilter.validation import as_positive_int
 from prefilter.multiscale.convolution import _alpha_total
 from prefilter.multiscale.meso import R_COSINE, _alpha_from_r, _mrl, _paper_eq5
+from prefilter.render.lighttex import split_lights
+from prefilter.validation import as_positive_int
 
 __all__ = ["FOOTPRINTS", "LOD_BIAS", "LOD_BIAS_START", "MESO_TABLE_SIZE", "TAPS", "TAPS_BELOW",
            "TAPS_RATIO", "footprint_read", "meso_table", "multiscale_attributes",
