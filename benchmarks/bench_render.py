@@ -17,13 +17,18 @@ from __future__ import annotations
 
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
 from prefilter.ltc.shading import shade_ltc
 from prefilter.render import gbuffer, load_scene
-from prefilter.render.camera import _intersect_numpy, generate_rays
+from prefilter.render.camera import generate_rays
 from prefilter.render.driver import render, surface_attributes
+
+# the NumPy twin the tests check the kernels against
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "render"))
+from gbuffer_numpy import intersect_numpy  # noqa: E402
 
 
 def scene(width: int, height: int, normal_map: bool = True) -> dict:
@@ -71,7 +76,7 @@ def bench_throughput() -> None:
     npix = 512 * 512
     gbuffer(s)  # warm-up (and JIT)
     new = best_of_cpu(lambda: gbuffer(s))
-    old = best_of_cpu(lambda: _intersect_numpy(s, generate_rays(s.camera)))
+    old = best_of_cpu(lambda: intersect_numpy(s, generate_rays(s.camera)))
     line("primary rays + G-buffer, 512x512 plane", npix, new, old)
 
     try:

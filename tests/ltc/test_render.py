@@ -50,7 +50,9 @@ def test_fused_ltc_method_matches_the_numpy_stages(monkeypatch):
     # The fused kernel against the NumPy G-buffer, MipChain.lookup_footprint and the NumPy
     # shader through the generic row driver (same sample positions, same shading model).
     import prefilter.render.driver as pl
-    from prefilter.render.camera import _intersect_numpy, rays_at
+    from gbuffer_numpy import intersect_numpy
+
+    from prefilter.render.camera import rays_at
     from prefilter.render.methods import RenderSettings
 
     table = _table()
@@ -68,11 +70,11 @@ def test_fused_ltc_method_matches_the_numpy_stages(monkeypatch):
         settings = RenderSettings(spp=spp, seed=2, jitter=jitter, progress=False,
                                   chunk_samples=1 << 18, table=table)
         with monkeypatch.context() as m:
-            m.setattr(pl, "gbuffer_at", lambda sc, xy: _intersect_numpy(sc, rays_at(sc.camera,
+            m.setattr(pl, "gbuffer_at", lambda sc, xy: intersect_numpy(sc, rays_at(sc.camera,
                                                                                     xy)))
             m.setattr(pl, "footprint_lookup", lambda ch, uv, dudv: ch.lookup_footprint(uv, dudv))
             want = pl.render_samples(s, settings, shade, stratified=spp > 1)
-        g = _intersect_numpy(s, rays_at(s.camera, np.stack(np.meshgrid(
+        g = intersect_numpy(s, rays_at(s.camera, np.stack(np.meshgrid(
             np.arange(40) + 0.5, np.arange(30) + 0.5), -1)))
         assert np.all(np.bincount(g.object_id[g.hit], minlength=3) > 10)  # all on screen
         back = np.sum(g.view * g.normal, -1) < 0

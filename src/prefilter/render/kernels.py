@@ -3,8 +3,8 @@ lookups, and the surface of one sample (:func:`surface_sample`: ray, hit, the fo
 reads, shading frame and material) that fused shading kernels (``prefilter.ltc.kernels``) build on.
 
 Each kernel writes every output element from exactly one loop iteration (no parallel reductions),
-so results do not depend on the thread count. The NumPy implementation of the ray cast stays in
-:mod:`prefilter.render.camera` (``_intersect_numpy``) as a cross-check for the tests.
+so results do not depend on the thread count. The NumPy twin of the ray cast is a check in
+``tests/render/gbuffer_numpy.py``.
 """
 
 from __future__ import annotations
