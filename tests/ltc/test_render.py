@@ -97,3 +97,17 @@ def test_ltc_image_does_not_depend_on_the_thread_count():
     finally:
         numba.set_num_threads(before)
     assert a.tobytes() == b.tobytes()
+
+
+def test_table_file_is_loaded_by_the_method(tmp_path):
+    # RenderSettings.table may be a path: the ltc method loads it (render/ knows no LTC table)
+    from prefilter.ltc.fit_iso import default_table_path
+    from prefilter.ltc.table import as_table
+
+    table = _table()
+    s = _textured_scene()
+    path = default_table_path()
+    assert isinstance(as_table(str(path)), type(table))
+    np.testing.assert_array_equal(render(s, "ltc", table=str(path)), render(s, "ltc", table=table))
+    np.testing.assert_array_equal(render(s, "ltc-multiscale", table=path),
+                                  render(s, "ltc-multiscale", table=table))
