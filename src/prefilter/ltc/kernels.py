@@ -5,8 +5,8 @@ lights; methods that only change the roughness compose the same parts with their
 ``prefilter.multiscale.kernels`` does).
 
 Each kernel writes every output element from exactly one loop iteration (no parallel reductions),
-so results do not depend on the thread count. The NumPy shader
-(:func:`prefilter.ltc.shading.shade_ltc_numpy`) is the cross-check of the tests.
+so results do not depend on the thread count. Their NumPy twin is a check in
+``tests/ltc/ltc_numpy.py``.
 """
 
 from __future__ import annotations
