@@ -1,16 +1,22 @@
 """Primary-ray + G-buffer throughput (Mpixel/s) for a 1024 x 1024 view of a plane and a sphere.
 
 Prints the best of 3 runs per scene for the Numba path (``gbuffer``) and the NumPy path it
-replaced (``_intersect_numpy`` of ``generate_rays``, kept as the tests' cross-check), plus the
+replaced (``intersect_numpy`` of ``generate_rays``, the tests' check), plus the
 process CPU time of the Numba path; no assertions (the machine is shared and noisy).
 """
 
 from __future__ import annotations
 
+import sys
 import time
+from pathlib import Path
 
 from prefilter.render import gbuffer, load_scene
-from prefilter.render.camera import _intersect_numpy, generate_rays
+from prefilter.render.camera import generate_rays
+
+# the NumPy twin the tests check the kernels against
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "render"))
+from gbuffer_numpy import intersect_numpy  # noqa: E402
 
 SIZE = 1024
 CAMERA = {"origin": [0, 1.5, 4], "target": [0, 0, 0], "fov": 45, "width": SIZE, "height": SIZE}
@@ -35,7 +41,7 @@ def main() -> None:
         old = float("inf")
         for _ in range(2):
             t0 = time.perf_counter()
-            _intersect_numpy(scene, generate_rays(scene.camera))
+            intersect_numpy(scene, generate_rays(scene.camera))
             old = min(old, time.perf_counter() - t0)
         mpix = SIZE * SIZE / best / 1e6
         print(f"{name:13s} {SIZE}x{SIZE}: new {best * 1e3:6.1f} ms  {mpix:5.2f} Mpixel/s "

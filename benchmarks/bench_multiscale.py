@@ -36,9 +36,18 @@ import prefilter.multiscale  # noqa: F401  (registers the ltc-multiscale methods
 from prefilter.ltc.table import GGXTable
 from prefilter.report.demo import showcase_scene
 from prefilter.render.metrics import flicker, flip, jitter_offsets, rmse
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 
 METHODS = ("ltc", "ltc-multiscale", "ltc-multiscale-paper")
+#: Labels of method variants: label -> (registered method, its params).
+VARIANTS = {"ltc-multiscale-paper": ("ltc-multiscale", {"footprint": "paper"})}
+
+
+def render_method(sc, label: str, **kw) -> np.ndarray:
+    """:func:`render` of a method name or a :data:`VARIANTS` label."""
+    name, params = VARIANTS.get(label, (label, None))
+    return render(sc, name, params=params, **kw)
+
 #: The three built-in normal maps: isotropic Gaussian bumps, brushed, a structured (flakes) one.
 MAPS = {
     "gaussian": {"rms_slope": 0.25, "corr_length": 3},
@@ -71,7 +80,7 @@ def bench_cost(table, width: int = 384, height: int = 240) -> None:
 
     sc = scene(4.0, width, height, 0.03, "gaussian")
     loaded = load_scene(sc)
-    runs = {m: (lambda m=m: render(loaded, m, table=table))
+    runs = {m: (lambda m=m: render_method(loaded, m, table=table))
             for m in ("ltc", "ltc-multiscale", "ltc-multiscale-paper", "ltc-multiscale-aniso")}
     # ltc-multiscale without its anisotropic taps (the footprint before they became the default)
     runs["ms-notaps"] = lambda: render_multiscale(loaded, RenderSettings(table=table), taps=0)
@@ -119,9 +128,10 @@ def acceptance(table, quick: bool, seed: int = 0) -> list[dict]:
                        "t_ref": t_ref}
                 jit = jitter_offsets(8)
                 for m in METHODS:
-                    img = render(sc, m, table=table)
+                    img = render_method(sc, m, table=table)
                     e = rmse(img, ref)
-                    frames = np.stack([render(sc, m, table=table, jitter=tuple(j)) for j in jit])
+                    frames = np.stack([render_method(sc, m, table=table, jitter=tuple(j))
+                                       for j in jit])
                     row[m] = {"rmse": e, "rmse_debiased": float(np.sqrt(max(e * e - noise**2,
                                                                                0.0))),
                               "flip": flip(ref, img).mean, "flicker": flicker(frames)}
@@ -137,7 +147,7 @@ def _variant(name: str, **kw):
 
     def run(sc, table, jitter=(0.0, 0.0)):
         if not kw:
-            return render(sc, name, table=table, jitter=jitter)
+            return render_method(sc, name, table=table, jitter=jitter)
         mod = __import__("prefilter.multiscale." + ("aniso" if "aniso" in name else "render"),
                          fromlist=["x"])
         fn = mod.render_multiscale_aniso if "aniso" in name else mod.render_multiscale

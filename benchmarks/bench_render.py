@@ -1,8 +1,8 @@
 """Renderer throughput and the reference's convergence (``make bench``; no assertions).
 
-Prints, each for the Numba path ("new") and the NumPy path it replaced ("old", kept as the
-tests' cross-check), in the same run:
-* primary-ray + G-buffer throughput (Mpixel/s) for a 512 x 512 view of a plane;
+Prints, in the same run:
+* primary-ray + G-buffer throughput (Mpixel/s) for a 512 x 512 view of a plane, for the Numba
+  kernel ("new") and the NumPy implementation the tests check it against ("old");
 * ``ltc`` shading throughput (Mpixel/s, one quad light): the shader alone over flat arrays, and the
   whole ``ltc`` method (G-buffer + mip lookups + shading) on a normal-mapped plane;
   wall time (best of 3) and the CPU time of the process (less sensitive to other jobs' load);
@@ -15,18 +15,20 @@ Thread count follows NUMBA_NUM_THREADS (the polygon kernel); NumPy parts are sin
 
 from __future__ import annotations
 
-import contextlib
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-import prefilter.render.pipeline as pipeline
+from prefilter.ltc.shading import shade_ltc
 from prefilter.render import gbuffer, load_scene
-from prefilter.render.camera import _intersect_numpy, generate_rays, rays_at
-from prefilter.render.methods import RenderSettings
-from prefilter.render.pipeline import render, surface_attributes
-from prefilter.render.shading import _shade_ltc_numpy, shade_ltc
+from prefilter.render.camera import generate_rays
+from prefilter.render.driver import render, surface_attributes
+
+# the NumPy twin the tests check the kernels against
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "render"))
+from gbuffer_numpy import intersect_numpy  # noqa: E402
 
 
 def scene(width: int, height: int, normal_map: bool = True) -> dict:
@@ -60,34 +62,6 @@ def best_of_cpu(fn, repeats: int = 3) -> tuple[float, float]:
     return min(walls), min(cpus)
 
 
-@contextlib.contextmanager
-def numpy_stages():
-    """The pre-Numba G-buffer and footprint lookups inside the row driver (the "old" path)."""
-    saved = pipeline.gbuffer_at, pipeline.footprint_lookup
-    pipeline.gbuffer_at = lambda sc, xy: _intersect_numpy(sc, rays_at(sc.camera, xy))
-    pipeline.footprint_lookup = lambda chain, uv, dudv: chain.lookup_footprint(uv, dudv)
-    try:
-        yield
-    finally:
-        pipeline.gbuffer_at, pipeline.footprint_lookup = saved
-
-
-def render_ltc_old(s, table):
-    """The ``ltc`` method through the NumPy stages (same image as ``render(s, "ltc")``)."""
-    lights = s.light_set()
-    settings = RenderSettings(spp=1, seed=0, jitter=(0.0, 0.0), progress=False,
-                              chunk_samples=1 << 18, table=table)
-
-    def shade(g, _u):
-        a = surface_attributes(s, g, filtered=True)
-        return _shade_ltc_numpy(g.position, a["t"], a["b"], a["n"], g.view,
-                                np.sqrt(a["alpha_x"] * a["alpha_y"]), a["base_color"], a["f0"],
-                                lights, table)
-
-    with numpy_stages():
-        return pipeline.render_samples(s, settings, shade, stratified=False)
-
-
 def line(what: str, n: int, new, old=None) -> None:
     t, c = new
     msg = f"{what:38s} new {n / t / 1e6:6.3f} Mpixel/s ({t * 1e3:6.1f} ms, cpu {c * 1e3:6.1f} ms)"
@@ -102,7 +76,7 @@ def bench_throughput() -> None:
     npix = 512 * 512
     gbuffer(s)  # warm-up (and JIT)
     new = best_of_cpu(lambda: gbuffer(s))
-    old = best_of_cpu(lambda: _intersect_numpy(s, generate_rays(s.camera)))
+    old = best_of_cpu(lambda: intersect_numpy(s, generate_rays(s.camera)))
     line("primary rays + G-buffer, 512x512 plane", npix, new, old)
 
     try:
@@ -120,12 +94,9 @@ def bench_throughput() -> None:
                 a["base_color"], a["f0"], s.light_set(), table)
         shade_ltc(*args)
         n = len(g.hit)
-        line(f"ltc shader alone ({n} points)", n, best_of_cpu(lambda: shade_ltc(*args)),
-             best_of_cpu(lambda: _shade_ltc_numpy(*args)))
+        line(f"ltc shader alone ({n} points)", n, best_of_cpu(lambda: shade_ltc(*args)))
         render(s, "ltc", table=table)
-        line("ltc end to end, 512x512", npix,
-             best_of_cpu(lambda: render(s, "ltc", table=table)),
-             best_of_cpu(lambda: render_ltc_old(s, table), repeats=2))
+        line("ltc end to end, 512x512", npix, best_of_cpu(lambda: render(s, "ltc", table=table)))
 
     s2 = load_scene(scene(128, 128))
     spp = 16

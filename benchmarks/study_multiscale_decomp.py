@@ -40,7 +40,7 @@ import prefilter.multiscale  # noqa: E402,F401  (registers the ltc-multiscale me
 from bench_multiscale import scene  # noqa: E402
 from prefilter.ltc.table import GGXTable  # noqa: E402
 from prefilter.render.metrics import flicker, jitter_offsets, rmse  # noqa: E402
-from prefilter.render.pipeline import render  # noqa: E402
+from prefilter.render.driver import render  # noqa: E402
 
 DISTANCES = {"near": 1.0, "mid": 4.0, "far": 16.0}  # texels per pixel
 
@@ -50,16 +50,16 @@ def render_ss(sc, table, spp: int, jitter=(0.0, 0.0)) -> np.ndarray:
     sub-pixel positions: the fused ``ltc`` kernel with the normal-map footprint scaled to nothing
     (``lod = log2(max(0 * major, 1)) = 0``), which equals ``surface_attributes(filtered=False)``
     + ``shade_ltc`` (checked to 4e-16 on the far Gaussian scene)."""
+    from prefilter.ltc.render import render_ltc_fused
     from prefilter.render import kernels as kn
     from prefilter.render.methods import RenderSettings
-    from prefilter.render.pipeline import _render_ltc_fused
     from prefilter.render.scene import Scene, load_scene
 
     s = sc if isinstance(sc, Scene) else load_scene(sc)
-    rows, tab = kn.plain_roughness(len(s.objects))
-    rows[:, kn.RGH_NSCALE] = 0.0
+    read = kn.plain_read(len(s.objects))
+    read[:, kn.READ_SCALE] = 0.0
     st = RenderSettings(spp=spp, table=table, jitter=tuple(float(x) for x in jitter))
-    img = _render_ltc_fused(s, st, s.light_set(), table, (rows, tab))
+    img = render_ltc_fused(s, st, s.light_set(), table, read)
     return np.asarray(img, np.float32)
 
 
@@ -103,7 +103,8 @@ METHODS = {
                                                              taps_normalize=True),
     "ms+taps-all8": lambda sc, t, j=(0.0, 0.0): _ms_footprint(sc, t, j, taps=8,
                                                               taps_below=np.inf),
-    "paper": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc-multiscale-paper", table=t, jitter=j),
+    "paper": lambda sc, t, j=(0.0, 0.0): render(sc, "ltc-multiscale", table=t, jitter=j,
+                                                  params={"footprint": "paper"}),
 }
 
 
@@ -183,17 +184,18 @@ def _methods_into(row, sc, table, ref, ss, noise, jit, methods, extra, t0) -> di
 def render_ms_scaled(sc, table, s: float) -> np.ndarray:
     """``ltc-multiscale`` (registered footprint) with ``alpha_meso`` scaled by ``s`` (its table
     times ``s``): how much meso-scale broadening the images want."""
+    from prefilter.ltc.render import render_ltc_fused
+    from prefilter.multiscale.kernels import multiscale_samples_kernel
     from prefilter.multiscale.render import (LOD_BIAS, LOD_BIAS_START, TAPS, TAPS_BELOW,
-                                             TAPS_RATIO, multiscale_roughness)
+                                             TAPS_RATIO, multiscale_roughness, normal_read)
     from prefilter.render.methods import RenderSettings
-    from prefilter.render.pipeline import _render_ltc_fused
     from prefilter.render.scene import load_scene
 
     sl = load_scene(sc)
-    rows, tab = multiscale_roughness(sl.objects, "exact", "fit", LOD_BIAS, LOD_BIAS_START, TAPS,
-                                     TAPS_BELOW, TAPS_RATIO)
-    img = _render_ltc_fused(sl, RenderSettings(table=table), sl.light_set(), table,
-                            (rows, tab * s))
+    read = normal_read(sl.objects, LOD_BIAS, LOD_BIAS_START, TAPS, TAPS_BELOW, TAPS_RATIO)
+    rows, tab = multiscale_roughness(sl.objects, "exact", "fit")
+    img = render_ltc_fused(sl, RenderSettings(table=table), sl.light_set(), table, read,
+                           multiscale_samples_kernel, (rows, tab * s))
     return np.asarray(img, np.float32)
 
 

@@ -16,7 +16,7 @@ from prefilter.multiscale.aniso import (GGX_PER_BECKMANN, aniso_attributes, prin
                                         slope_moments_chain)
 from prefilter.render import gbuffer, load_scene
 from prefilter.render.methods import available
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 
 
 

@@ -1,4 +1,4 @@
-"""The ``ltc-multiscale`` methods in the fused Numba shader.
+"""The ``ltc-multiscale`` method's variants in the fused Numba shader.
 
 References: the exact inverse of eq. 4 (bisection, ``alpha_meso_exact``), the NumPy functions
 ``alpha_meso`` / ``alpha_total`` of every variant, and the NumPy render path
@@ -18,19 +18,20 @@ from prefilter.errors import PrefilterError
 from prefilter.ltc.table import GGXTable
 from prefilter.multiscale import (alpha_meso, alpha_meso_exact, alpha_total,
                                   mean_resultant_length)
-from prefilter.multiscale.render import (LOD_BIAS, LOD_BIAS_START, TAPS, TAPS_BELOW,
+import prefilter.multiscale.render as msr
+from prefilter.ltc.shading import shade_ltc
+from prefilter.multiscale.kernels import _interp_uniform, multiscale_alpha
+from prefilter.multiscale.render import (FOOTPRINTS, LOD_BIAS, LOD_BIAS_START, TAPS, TAPS_BELOW,
                                          TAPS_RATIO, meso_table, multiscale_attributes,
                                          multiscale_roughness)
 from prefilter.multiscale.render import render_multiscale, taps_lookup
 from prefilter.render import gbuffer, load_scene
-from prefilter.render.kernels import _interp_uniform, _multiscale_alpha
+from prefilter.render.driver import render, render_samples
 from prefilter.render.methods import RenderSettings
-from prefilter.render.pipeline import render, render_samples
-from prefilter.render.shading import shade_ltc
 from prefilter.texture.mip import MipChain, footprint_axes
 
-VARIANTS = {"ltc-multiscale": ("exact", "fit"), "ltc-multiscale-paper": ("paper", "paper"),
-            "ltc-multiscale-mrl": ("exact", "mrl")}
+#: ``footprint`` variant -> (alpha_meso variant, alpha_total variant)
+VARIANTS = {name: v[:2] for name, v in FOOTPRINTS.items()}
 
 
 def _kernel_alpha_meso(r):
@@ -62,7 +63,7 @@ def test_kernel_alpha_total_matches_the_numpy_variant(meso, total):
     for a_mi in (0.0, 0.01, 0.03, 0.3, 0.9):
         obj = SimpleNamespace(material=SimpleNamespace(alpha_x=a_mi, alpha_y=a_mi))
         rows, tab = multiscale_roughness([obj], meso, total)
-        got = np.array([_multiscale_alpha(rows[0], x, tab) for x in r])
+        got = np.array([multiscale_alpha(rows[0], x, tab) for x in r])
         want = alpha_total(a_mi, alpha_meso(np.minimum(r, 1.0), meso), total)
         tol = 1e-9
         if total == "mrl":
@@ -131,19 +132,17 @@ def _no_numpy_driver(*_a, **_k):
 
 @pytest.mark.parametrize("name", list(VARIANTS))
 def test_fused_images_match_the_numpy_path(name, monkeypatch):
-    import prefilter.render.pipeline as pl
-
     meso, total = VARIANTS[name]
-    # the registered ltc-multiscale reads the normal map with its ramped LOD bias and its
-    # anisotropic taps (TAPS_BELOW and TAPS_RATIO are multiscale_attributes' defaults too)
-    bias = (LOD_BIAS, LOD_BIAS_START, TAPS) if name == "ltc-multiscale" else (0.0, None, 0)
+    # the default variant reads the normal map with its ramped LOD bias and its anisotropic
+    # taps (TAPS_BELOW and TAPS_RATIO are multiscale_attributes' defaults too)
+    bias = (LOD_BIAS, LOD_BIAS_START, TAPS) if name == "fit" else (0.0, None, 0)
     table = _table()
     sc = load_scene(_scene())
     for spp, jitter in ((1, (0.0, 0.0)), (2, (0.3, -0.2))):
         with monkeypatch.context() as m:
-            m.setattr(pl, "render_samples", _no_numpy_driver)
-            got = render(sc, name, spp=spp, jitter=jitter, seed=2, table=table,
-                         chunk_samples=700)
+            m.setattr(msr, "render_samples", _no_numpy_driver)
+            got = render(sc, "ltc-multiscale", spp=spp, jitter=jitter, seed=2, table=table,
+                         chunk_samples=700, params={"footprint": name})
         want = _numpy_path(sc, RenderSettings(spp=spp, seed=2, jitter=jitter, table=table),
                            meso, total, *bias)
         assert np.count_nonzero(want.sum(-1)) > 0.5 * want.shape[0] * want.shape[1]
@@ -272,15 +271,13 @@ def _numpy_path_kw(sc, settings, **kw):
 @pytest.mark.parametrize("bias,normalize", [((2.0, 2.0), False), ((0.0, None), False),
                                             ((1.0, None), False), ((2.0, 2.0), True)])
 def test_fused_taps_match_the_numpy_twin(bias, normalize, monkeypatch):
-    import prefilter.render.pipeline as pl
-
     table = _table()
     sc = load_scene(_scene())
     st = RenderSettings(table=table, spp=2, jitter=(0.3, -0.2), seed=2)
     kw = {"lod_bias": bias[0], "lod_bias_start": bias[1], "taps": 4, "taps_below": 6.0,
           "taps_normalize": normalize}
     with monkeypatch.context() as m:
-        m.setattr(pl, "render_samples", lambda *_a, **_k: (_ for _ in ()).throw(
+        m.setattr(msr, "render_samples", lambda *_a, **_k: (_ for _ in ()).throw(
             AssertionError("the generic row driver ran: the fused path was not taken")))
         got = render_multiscale(sc, st, **kw)
     want = _numpy_path_kw(sc, st, **kw)

@@ -13,8 +13,8 @@ import pytest
 from prefilter.errors import PrefilterError
 from prefilter.ltc.ltc import LTC
 from prefilter.ltc.polygon import polygon_integral
-from prefilter.render.lighttex import (LightTexture, TexturedQuad, light_texture_lookup_point,
-                                       texture_uv)
+from prefilter.ltc.lighttex import light_texture_lookup_point
+from prefilter.render.lighttex import LightTexture, TexturedQuad, texture_uv
 
 # a 2 x 1 rectangle 1 above the shading point, counter-clockwise seen from below
 QUAD = np.array([[-1.2, -0.4, 1.0], [0.8, -0.4, 1.0], [0.8, 0.6, 1.0], [-1.2, 0.6, 1.0]])[::-1]
@@ -134,7 +134,7 @@ def _light_scene(tmp_path, texture) -> dict:
 def test_multiscale_renders_a_constant_textured_light_like_a_dimmer_one(tmp_path):
     import prefilter.multiscale  # noqa: F401
     from prefilter.render import load_scene
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     tex = load_scene(_light_scene(tmp_path, np.full((8, 8, 3), 0.5)), base_dir=tmp_path)
     plain = load_scene(_light_scene(tmp_path, None), base_dir=tmp_path)

@@ -16,7 +16,7 @@ from prefilter.multiscale import alpha_meso_exact, alpha_total
 from prefilter.multiscale.render import multiscale_attributes
 from prefilter.render import gbuffer, load_scene
 from prefilter.render.methods import available
-from prefilter.render.pipeline import render, surface_attributes
+from prefilter.render.driver import render, surface_attributes
 
 
 def _toy_table() -> GGXTable:
@@ -53,8 +53,12 @@ def _checker(theta: float, size: int = 64) -> np.ndarray:
     return n
 
 
-def test_methods_are_registered():
-    assert {"ltc-multiscale", "ltc-multiscale-paper", "ltc-multiscale-mrl"} <= set(available())
+def test_method_is_registered_with_its_variants():
+    from prefilter.render.methods import method_params
+
+    assert "ltc-multiscale" in available()
+    assert method_params("ltc-multiscale") == {"footprint": ("fit", "paper", "mrl")}
+    assert not {"ltc-multiscale-paper", "ltc-multiscale-mrl"} & set(available())
 
 
 def test_far_checkerboard_gives_the_closed_form_length(tmp_path):
@@ -146,8 +150,8 @@ def test_study_supersampled_ltc_is_the_full_resolution_shader(tmp_path):
     from study_multiscale_decomp import render_ss
 
     from prefilter.render.methods import RenderSettings
-    from prefilter.render.pipeline import render_samples
-    from prefilter.render.shading import shade_ltc
+    from prefilter.ltc.shading import shade_ltc
+    from prefilter.render.driver import render_samples
 
     rng = np.random.default_rng(3)
     n = rng.normal(size=(32, 32, 3)) * [0.3, 0.3, 0.0] + [0.0, 0.0, 1.0]

@@ -137,7 +137,7 @@ def _assert_same_gbuffer(g, want):
 
 
 def test_numba_gbuffer_matches_the_numpy_path_on_random_scenes():
-    from prefilter.render.camera import _intersect_numpy
+    from gbuffer_numpy import intersect_numpy
 
     rng = np.random.default_rng(7)
     for trial in range(4):
@@ -151,7 +151,7 @@ def test_numba_gbuffer_matches_the_numpy_path_on_random_scenes():
         s = _scene(_cam(rng.normal(size=3) * 0.3 + [0, 0, 5], (0, 0, 0), fov=70.0, w=40, h=30),
                    objects)
         xy = rng.uniform([-5, -5], [45, 35], (500, 2))  # also off-image positions
-        want = _intersect_numpy(s, rays_at(s.camera, xy))
+        want = intersect_numpy(s, rays_at(s.camera, xy))
         assert want.hit.sum() > 40 and (~want.hit).sum() > 10
         _assert_same_gbuffer(gbuffer_at(s, xy), want)
         # and the kernel for given rays, with per-ray origins (not only the camera's)
@@ -159,7 +159,7 @@ def test_numba_gbuffer_matches_the_numpy_path_on_random_scenes():
         shifted = type(r)(r.origin + rng.normal(size=(500, 3)) * 0.2, r.direction, r.ddx, r.ddy)
         from prefilter.render.camera import intersect
 
-        _assert_same_gbuffer(intersect(s, shifted), _intersect_numpy(s, shifted))
+        _assert_same_gbuffer(intersect(s, shifted), intersect_numpy(s, shifted))
 
 
 def test_gbuffer_does_not_depend_on_the_thread_count():

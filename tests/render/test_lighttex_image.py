@@ -20,7 +20,7 @@ from prefilter.ltc.table import GGXTable
 from prefilter.multiscale.render import LOD_BIAS, LOD_BIAS_START, multiscale_attributes
 from prefilter.render import gbuffer, load_scene
 from prefilter.render.lighttex import split_lights
-from prefilter.render.pipeline import render, surface_attributes
+from prefilter.render.driver import render, surface_attributes
 from prefilter.render.shading import local_view
 
 

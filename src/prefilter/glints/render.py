@@ -665,7 +665,7 @@ def environment_sgs(light):
     its ``scale`` (:func:`prefilter.glints.envlight.fit_sg`; cached per image)."""
     from prefilter.glints.envlight import fit_sg
 
-    key = light.image._key()
+    key = light.image.cache_key()
     if key not in _SG_FITS:
         _SG_FITS[key] = fit_sg(light.image.load(), ENV_LOBES)
     mu, lam, p = _SG_FITS[key]

@@ -613,49 +613,6 @@ def refine_entry(wo, alpha, M, magnitude, settings: ProbeSettings) -> dict:
 _NM_PROBE = {"xatol": 1e-4, "fatol": 1e-6, "maxiter": 800}
 
 
-def probe_refit_study(n_configs: int = 200, settings: ProbeSettings | None = None, *,
-                      n_samples: int = 20_000, table=None) -> dict:
-    """Quad-light errors of the table vs. the probe refit at each configuration's exact entry.
-
-    The first ``n_configs`` acceptance configurations (``validate.random_configurations``, seed 0)
-    are evaluated with ``table.lookup`` (default: the shipped table) and with
-    :func:`refine_entry` started from the table's matrix at the configuration's exact view angle
-    and roughness (probes from ``settings.seed``, never the acceptance seed). References:
-    ``validate.reference_quad_integral`` with ``n_samples`` samples (seed 123).
-
-    Returns dict with ``table`` and ``refined`` (``validate.error_statistics`` of each) and the
-    mean probe objective before and after the refit (``objective_start``, ``objective_end``).
-    """
-    from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
-    from prefilter.ltc.table import GGXTable
-    from prefilter.ltc.validate import (
-        error_statistics,
-        random_configurations,
-        reference_quad_integral,
-    )
-
-    settings = settings or ProbeSettings()
-    table = table or GGXTable.load()
-    cfg = random_configurations(as_positive_int(n_configs, "n_configs"), 0)
-    rng = np.random.default_rng(123)
-    rows = []
-    for wo, alpha, quad in zip(cfg["wo"], cfg["alpha"], cfg["quad"]):
-        phi = np.arctan2(wo[1], wo[0])
-        c, s = np.cos(phi), np.sin(phi)
-        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        q = clip_to_horizon(quad @ R)  # the view's azimuthal frame
-        M0, n, _ = table.lookup_canonical(wo[2], alpha)
-        n = float(n)
-        fit = refine_entry(view_from_t(np.sqrt(1.0 - wo[2])), alpha, M0, n, settings)
-        ref, _ = reference_quad_integral(GGX(alpha), wo, quad, n_samples, rng)
-        rows.append((np.arccos(wo[2]), alpha, n, ref, n * polygon_integral(M0, q),
-                     n * polygon_integral(fit["M"], q), fit["error_start"], fit["error"]))
-    th, a, n, ref, e0, e1, o0, o1 = np.array(rows).T
-    return {"table": error_statistics(e0, ref, th, a, albedo=n),
-            "refined": error_statistics(e1, ref, th, a, albedo=n),
-            "objective_start": float(o0.mean()), "objective_end": float(o1.mean())}
-
-
 # --------------------------------------------------------------------------------------------
 # Quad-light objective: a batched Levenberg-Marquardt refit of whole rows
 # --------------------------------------------------------------------------------------------

@@ -13,7 +13,7 @@ is the table's bilinear interpolation in table space on every GPU, as
 :meth:`prefilter.ltc.table.GGXTable.lookup` computes it (hardware filters quantise their weights).
 :data:`GLSL` also holds the clipped polygon integral (eq. 11 with horizon clipping, the streaming
 form of :func:`prefilter.ltc.polygon._clipped_edge_sum`) and the quad-light shading of
-:func:`prefilter.render.shading.shade_ltc`, in float32.
+:func:`prefilter.ltc.shading.shade_ltc`, in float32.
 """
 
 from __future__ import annotations
@@ -154,7 +154,7 @@ void ltcClipHorizon(vec3 P[5], out vec3 C[5]) {{
 
 // Radiance of one quad light (corners Q, emission normal qn, radiance L) at position pos with
 // shading frame (t, b, n): base E(P) + spec E(M^-1 P), the light cut at the shading horizon
-// before the LTC transform (prefilter.render.shading.shade_ltc); one-sided lights.
+// before the LTC transform (prefilter.ltc.shading.shade_ltc); one-sided lights.
 vec3 ltcQuad(vec3 Q[4], vec3 qn, vec3 L, vec3 pos, vec3 t, vec3 b, vec3 n, mat3 Minv,
              vec3 base, vec3 spec) {{
     if (dot(pos - Q[0], qn) <= 0.0) return vec3(0.0);

@@ -174,3 +174,14 @@ class GGXTable:
         Rz[..., 2, 2] = 1.0
         M = Rz @ M @ np.swapaxes(Rz, -1, -2)
         return M, self._bilinear(self.magnitude, ft, fr), self._bilinear(self.fresnel, ft, fr)
+
+
+def as_table(table):
+    """The table a render method uses for ``RenderSettings.table``: ``None`` -> the shipped
+    :class:`GGXTable`, a path (``str`` or ``PathLike``) -> :meth:`GGXTable.load` of it, anything
+    else (a table or table-like object with ``lookup``) as it is."""
+    if table is None:
+        return GGXTable.load()
+    if isinstance(table, (str, os.PathLike)):
+        return GGXTable.load(table)
+    return table

@@ -42,10 +42,9 @@ NZ_MIN = 0.05
 
 @functools.lru_cache(maxsize=16)
 def _slope_chain(key):
-    from prefilter.render.scene import _load_texture
+    from prefilter.render.scene import load_texture
 
-    n = _load_texture(*key)
-    return slope_moments_chain(n)
+    return slope_moments_chain(load_texture(*key))
 
 
 def slope_moments_chain(normals):
@@ -84,25 +83,19 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
     ``lod_bias`` scales the footprint by ``2^lod_bias``.
     """
     from prefilter.multiscale.convolution import _alpha_total
-    from prefilter.multiscale.render import _lookup
-    from prefilter.render.shading import shading_frame, two_sided_frame
+    from prefilter.multiscale.render import footprint_read
+    from prefilter.render.driver import shading_frame, surface_attributes
 
     if combine not in COMBINE:
         from prefilter.errors import PrefilterError
 
         raise PrefilterError(f"combine: expected one of {COMBINE}, got {combine!r}")
-    n_samples = g.hit.size
-    ts, bs, ns = (np.zeros((n_samples, 3)) for _ in range(3))
-    ax, ay = np.zeros(n_samples), np.zeros(n_samples)
-    base, f0 = np.zeros((n_samples, 3)), np.zeros((n_samples, 3))
-    gt, gb, gn = two_sided_frame(g)
-    for k in np.unique(g.object_id):
-        m = g.object_id == k
-        cnt = int(m.sum())
-        mat = scene.objects[int(k)].material
+
+    def surface(mat, uv, dudv, gt, gb, gn):
+        cnt = len(uv)
         chain = None
         if mat.normal_map is not None:
-            chain = _slope_chain(mat.normal_map._key())
+            chain = _slope_chain(mat.normal_map.cache_key())
         elif mat.height_map is not None:
             chain = mat.height_map.mip()
         mx = np.full(cnt, 0.5 * mat.alpha_x ** 2)
@@ -111,8 +104,8 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
             mean = np.zeros((cnt, 2))
             cov_meso = np.zeros((cnt, 2, 2))
         else:
-            mom = _lookup(chain, g.uv[m], g.dudv[m] * 2.0 ** lod_bias, anisotropic_footprint,
-                          max_aniso)
+            mom = footprint_read(chain, uv, dudv * 2.0 ** lod_bias, anisotropic_footprint,
+                                 max_aniso)
             mean = mom[:, :2]
             cxx = np.maximum(mom[:, 2] - mean[:, 0] ** 2, 0.0)
             cyy = np.maximum(mom[:, 3] - mean[:, 1] ** 2, 0.0)
@@ -131,22 +124,17 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
                                    "fit") for li in (l1, l2))
         # rotate the geometric tangent frame to the principal axes, then tilt it to the mean normal
         c, s = e[:, 0:1], e[:, 1:2]
-        t_rot = c * gt[m] + s * gb[m]
-        b_rot = -s * gt[m] + c * gb[m]
+        t_rot = c * gt + s * gb
+        b_rot = -s * gt + c * gb
         nts_geo = np.stack([-mean[:, 0], -mean[:, 1], np.ones(cnt)], -1)
         # the same normal in the rotated (t_rot, b_rot, n) frame
         nts = np.stack([c[:, 0] * nts_geo[:, 0] + s[:, 0] * nts_geo[:, 1],
                         -s[:, 0] * nts_geo[:, 0] + c[:, 0] * nts_geo[:, 1], nts_geo[:, 2]], -1)
-        ts[m], bs[m], ns[m] = shading_frame(t_rot, b_rot, gn[m], nts)
-        ax[m], ay[m] = np.minimum(a1, 1.0), np.minimum(a2, 1.0)
-        col = np.broadcast_to(mat.base_color, (cnt, 3))
-        if mat.color_map is not None:
-            cm = _lookup(mat.color_map.mip(), g.uv[m], g.dudv[m], False, 8)
-            col = col * (cm[:, :3] if cm.shape[1] >= 3 else cm[:, :1])
-        base[m] = col
-        f0[m] = mat.f0
-    return {"t": ts, "b": bs, "n": ns, "alpha_x": ax, "alpha_y": ay, "base_color": base,
-            "f0": f0}
+        t, b, n = shading_frame(t_rot, b_rot, gn, nts)
+        return {"t": t, "b": b, "n": n, "alpha_x": np.minimum(a1, 1.0),
+                "alpha_y": np.minimum(a2, 1.0)}
+
+    return surface_attributes(scene, g, surface=surface)
 
 
 def render_multiscale_aniso(scene, settings, *, combine: str = "lean",
@@ -155,8 +143,8 @@ def render_multiscale_aniso(scene, settings, *, combine: str = "lean",
     """The ``ltc-multiscale-aniso`` method (see the module docstring)."""
     from prefilter.ltc.aniso.render import shade_ltc_aniso
     from prefilter.ltc.aniso.table import AnisoGGXTable
+    from prefilter.render.driver import render_samples
     from prefilter.render.lighttex import split_lights
-    from prefilter.render.pipeline import render_samples
 
     lights, textured = split_lights(scene, "ltc-multiscale-aniso")
     table = settings.table if isinstance(settings.table, AnisoGGXTable) else _aniso_table()
@@ -165,31 +153,11 @@ def render_multiscale_aniso(scene, settings, *, combine: str = "lean",
         a = aniso_attributes(scene, g, combine=combine,
                              anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
                              lod_bias=lod_bias)
-        out = shade_ltc_aniso(g.position, a["t"], a["b"], a["n"], g.view, a["alpha_x"],
-                              a["alpha_y"], a["base_color"], a["f0"], lights, table)
-        if textured:
-            out += _textured(g, a, textured, table)
-        return out
+        return shade_ltc_aniso(g.position, a["t"], a["b"], a["n"], g.view, a["alpha_x"],
+                               a["alpha_y"], a["base_color"], a["f0"], lights, table, textured)
 
     return render_samples(scene, settings, shade, stratified=settings.spp > 1,
                           desc="ltc-multiscale-aniso")
-
-
-def _textured(g, a, textured, table) -> np.ndarray:
-    # the same lookup as shade_ltc_aniso, then the prefiltered light texture (Heitz et al. 2016)
-    from prefilter.render.lighttex import shade_textured_quads
-    from prefilter.render.shading import local_view, scaled_inverse
-
-    wo = local_view(g.view, a["t"], a["b"], a["n"])
-    wo_t = wo.copy()
-    wo_t[:, 2] = np.maximum(wo_t[:, 2], 1e-4)
-    wo_t /= np.linalg.norm(wo_t, axis=-1, keepdims=True)
-    M, magnitude, fresnel = table.lookup(wo_t, np.clip(a["alpha_x"], 1e-4, 1),
-                                         np.clip(a["alpha_y"], 1e-4, 1))
-    spec = np.where((wo[:, 2] > 0)[:, None],
-                    a["f0"] * (magnitude - fresnel)[:, None] + fresnel[:, None], 0.0)
-    return shade_textured_quads(g.position, a["t"], a["b"], a["n"], wo, scaled_inverse(M), spec,
-                                a["base_color"], textured)
 
 
 @functools.lru_cache(maxsize=1)

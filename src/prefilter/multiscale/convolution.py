@@ -176,17 +176,28 @@ def convolution_grid(alpha_micro, alpha_meso, n: int = 1 << 16, seed=0) -> dict:
     return {"alpha_micro": ami, "alpha_meso": ame, **out}
 
 
-def polynomial_paper_form(alpha_micro, alpha_meso, coeffs=PAPER_EQ7) -> np.ndarray:
-    """Eq. 7's form ``c0 a_mi^2 + c1 a_mi + c2 a_me + c3 a_mi a_me`` (Tao et al. 2021)."""
-    c0, c1, c2, c3 = coeffs
-    a, b = np.asarray(alpha_micro, float), np.asarray(alpha_meso, float)
+def eq7_paper_form(a, b, c0, c1, c2, c3):
+    """Tao et al. 2021, eq. 7's form ``c0 a^2 + c1 a + c2 b + c3 a b`` (plain arithmetic: arrays,
+    or scalars in the compiled shader, :mod:`prefilter.multiscale.kernels`)."""
     return c0 * a * a + c1 * a + c2 * b + c3 * a * b
 
 
-def _ours(a, b, coeffs) -> np.ndarray:
-    c0, c1, c2, c3 = coeffs
-    p, q = a + b, a * b
+def eq7_fit_form(a, b, c0, c1, c2, c3):
+    """Our form of ``alpha_total`` (module docstring, ``"fit"``): ``sqrt(a^2 + b^2 + a b (c0 +
+    c1 p + c2 p^2 + c3 q))``, ``p = a + b``, ``q = a b`` (plain arithmetic, as
+    :func:`eq7_paper_form`)."""
+    p = a + b
+    q = a * b
     return np.sqrt(np.maximum(a * a + b * b + q * (c0 + p * (c1 + c2 * p) + c3 * q), 0.0))
+
+
+def polynomial_paper_form(alpha_micro, alpha_meso, coeffs=PAPER_EQ7) -> np.ndarray:
+    """Eq. 7's form ``c0 a_mi^2 + c1 a_mi + c2 a_me + c3 a_mi a_me`` (Tao et al. 2021)."""
+    return eq7_paper_form(np.asarray(alpha_micro, float), np.asarray(alpha_meso, float), *coeffs)
+
+
+def _ours(a, b, coeffs) -> np.ndarray:
+    return eq7_fit_form(a, b, *coeffs)
 
 
 def _design_ours(a, b) -> np.ndarray:

@@ -4,15 +4,21 @@ Per shading sample: the normal map's *unnormalised* average over the pixel footp
 level chosen by the footprint, trilinear) -> its length ``r`` -> ``alpha_meso(r)`` (eq. 4
 inverted) -> ``alpha_total(alpha_micro, alpha_meso)`` (eqs. 6-7) -> the isotropic LTC table at
 ``alpha_total`` with the renormalised mean normal as shading normal. Everything else (lights,
-diffuse, Fresnel, the view clamp) is :func:`prefilter.render.shading.shade_ltc`, so the only
+diffuse, Fresnel, the view clamp) is :func:`prefilter.ltc.shading.shade_ltc`, so the only
 difference from the ``ltc`` method is the roughness.
 
 Height-mapped materials carry slope moments, not normals; they are shaded as by ``ltc``
 (``alpha_meso = 0``).
 
-With quad lights only (and the isotropic footprint) the methods run the ``ltc`` method's fused
-Numba kernel (:func:`prefilter.render.pipeline._render_ltc_fused`) with per-material roughness
-rows (:func:`multiscale_roughness`): the same arithmetic, ``alpha_meso`` interpolated in the same
+Variants (``params={"footprint": ...}``, :data:`FOOTPRINTS`): ``"fit"`` (default) the exact
+inverse of eq. 4, our refit of eq. 7 and our footprint read (:data:`LOD_BIAS`, :data:`TAPS`);
+``"paper"`` the paper's eqs. 5 and 7 as published on the isotropic mip level; ``"mrl"`` the exact
+inverse of eq. 4 and mean-resultant-length matching on the isotropic mip level.
+
+With quad lights only (and the isotropic footprint) the method runs the ``ltc`` method's fused
+Numba pass (:func:`prefilter.ltc.render.render_ltc_fused`) with this method's normal-map read
+(:func:`normal_read`) and roughness rows (:func:`multiscale_roughness`,
+:mod:`prefilter.multiscale.kernels`): the same formulas, ``alpha_meso`` interpolated in the same
 table as :func:`prefilter.multiscale.alpha_meso`. :func:`multiscale_attributes` and the NumPy
 shader remain the general path (point, directional or textured lights, the anisotropic
 footprint) and the reference the fused path is tested against.
@@ -22,14 +28,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
+from prefilter.ltc.lighttex import shade_ltc_textured
+from prefilter.ltc.render import render_ltc_fused
+from prefilter.ltc.table import as_table
+from prefilter.render.driver import (footprint_lookup, render_samples, shading_frame,
+                                     surface_attributes)
 from prefilter.multiscale.convolution import _alpha_total
-from prefilter.multiscale.meso import _alpha_from_r, _mrl, _paper_eq5, R_COSINE
+from prefilter.multiscale.meso import R_COSINE, _alpha_from_r, _mrl, _paper_eq5
+from prefilter.render.lighttex import split_lights
+from prefilter.validation import as_positive_int
 
-__all__ = ["LOD_BIAS", "LOD_BIAS_START", "MESO_TABLE_SIZE", "meso_table", "multiscale_attributes",
-           "multiscale_roughness", "render_multiscale", "render_multiscale_mrl",
-           "render_multiscale_paper", "taps_lookup", "TAPS", "TAPS_BELOW", "TAPS_RATIO"]
+__all__ = ["FOOTPRINTS", "LOD_BIAS", "LOD_BIAS_START", "MESO_TABLE_SIZE", "TAPS", "TAPS_BELOW",
+           "TAPS_RATIO", "footprint_read", "meso_table", "multiscale_attributes",
+           "multiscale_roughness", "normal_read", "render_multiscale", "taps_lookup"]
+
+#: The ``footprint`` variants of the method: ``(meso, total, our footprint read)`` per name
+#: (:func:`prefilter.multiscale.alpha_meso` and :func:`prefilter.multiscale.alpha_total`
+#: variants; the read of :data:`LOD_BIAS` / :data:`TAPS` or the paper's isotropic mip level).
+FOOTPRINTS = {"fit": ("exact", "fit", True), "paper": ("paper", "paper", False),
+              "mrl": ("exact", "mrl", False)}
 
 #: Nodes of the compiled shader's ``alpha_meso`` table, uniform in ``x = sqrt(3 (1 - r))``
 #: (the nodes of :func:`prefilter.multiscale.alpha_meso`'s own interpolant, so the fused path
@@ -42,7 +60,7 @@ _MESO_TAB = None
 def meso_table() -> np.ndarray:
     """``alpha_meso`` (exact inverse of Tao et al. 2021 eq. 4) at ``x = linspace(0, 1,
     MESO_TABLE_SIZE)``, ``r = 1 - x^2 / 3``: the table the compiled shader interpolates
-    linearly in ``x`` (:func:`prefilter.render.kernels._multiscale_alpha`)."""
+    linearly in ``x`` (:func:`prefilter.multiscale.kernels.multiscale_alpha`)."""
     global _MESO_TAB
     if _MESO_TAB is None:
         from prefilter.multiscale.meso import alpha_meso
@@ -53,18 +71,13 @@ def meso_table() -> np.ndarray:
     return _MESO_TAB
 
 
-def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
-                         lod_bias: float = 0.0, lod_bias_start=None, taps: int = 0,
-                         taps_below: float = 4.0, taps_ratio: float = 1.5,
-                         taps_normalize: bool = False):
-    """Per-material roughness rows for the fused shader
-    (:func:`prefilter.render.kernels.ltc_samples_kernel`): ``(rows (K, RGH_WIDTH), meso_tab)``,
-    or ``None`` for a combination it does not implement (mean-resultant-length matching needs
-    the exact inverse). ``lod_bias`` / ``lod_bias_start`` / ``taps`` / ``taps_below`` /
-    ``taps_ratio`` / ``taps_normalize``: see :func:`multiscale_attributes`."""
+def multiscale_roughness(objects, meso: str = "exact", total: str = "fit"):
+    """Per-material roughness rows of the compiled shader
+    (:func:`prefilter.multiscale.kernels.multiscale_samples_kernel`): ``(rows (K, RGH_WIDTH),
+    meso_tab)``, or ``None`` for a combination it does not implement (mean-resultant-length
+    matching needs the exact inverse)."""
+    from prefilter.multiscale import kernels as kn
     from prefilter.multiscale.convolution import FIT_COEFFS, PAPER_EQ7
-    from prefilter.multiscale.meso import PAPER_EQ5
-    from prefilter.render import kernels as kn
 
     modes = {"fit": kn.ROUGH_FIT, "paper": kn.ROUGH_EQ7, "mrl": kn.ROUGH_MRL}
     if total not in modes or meso not in ("exact", "paper") or (total == "mrl"
@@ -80,19 +93,30 @@ def multiscale_roughness(objects, meso: str = "exact", total: str = "fit",
         row[kn.RGH_ALPHA] = a
         row[kn.RGH_COEF:kn.RGH_COEF + 4] = FIT_COEFFS if total == "fit" else PAPER_EQ7
         row[kn.RGH_MRL] = float(_mrl(np.array(a)))
-        row[kn.RGH_EQ5:kn.RGH_EQ5 + 9] = (*PAPER_EQ5[0], *PAPER_EQ5[1])
-        ramp = lod_bias_start is not None
-        if ramp and lod_bias_start < 0:
-            return None  # the kernel adds the ramped bias in LOD: exact for start >= 0 only
-        row[kn.RGH_NSCALE] = 1.0 if ramp else 2.0 ** lod_bias
-        row[kn.RGH_BIAS] = lod_bias
-        row[kn.RGH_RAMP] = ramp
-        row[kn.RGH_START] = float(lod_bias_start) if ramp else 0.0
-        row[kn.RGH_TAPS] = taps
-        row[kn.RGH_TAPS_BELOW] = taps_below
-        row[kn.RGH_TAPS_RATIO] = taps_ratio
-        row[kn.RGH_TAPS_NORM] = bool(taps_normalize)
     return rows, meso_table()
+
+
+def normal_read(objects, lod_bias: float = 0.0, lod_bias_start=None, taps: int = 0,
+                taps_below: float = 4.0, taps_ratio: float = 1.5,
+                taps_normalize: bool = False):
+    """The fused shader's normal-map read per material ``(K, READ_WIDTH)``
+    (:func:`prefilter.render.kernels.surface_sample`), or ``None`` for settings it does not
+    implement; the arguments as :func:`multiscale_attributes`."""
+    from prefilter.render import kernels as kn
+
+    ramp = lod_bias_start is not None
+    if ramp and lod_bias_start < 0:
+        return None  # the kernel adds the ramped bias in LOD: exact for start >= 0 only
+    read = np.zeros((len(objects), kn.READ_WIDTH))
+    read[:, kn.READ_SCALE] = 1.0 if ramp else 2.0 ** lod_bias
+    read[:, kn.READ_BIAS] = lod_bias
+    read[:, kn.READ_RAMP] = ramp
+    read[:, kn.READ_START] = float(lod_bias_start) if ramp else 0.0
+    read[:, kn.READ_TAPS] = taps
+    read[:, kn.READ_TAPS_BELOW] = taps_below
+    read[:, kn.READ_TAPS_RATIO] = taps_ratio
+    read[:, kn.READ_TAPS_NORM] = bool(taps_normalize)
+    return read
 
 
 def _taps_args(taps, below, ratio) -> tuple[int, float, float]:
@@ -128,12 +152,12 @@ def _alpha_meso_fast(r: np.ndarray, variant: str) -> np.ndarray:
     return _alpha_from_r(r)
 
 
-def _lookup(chain, uv, dudv, anisotropic: bool, max_aniso: int) -> np.ndarray:
-    # the isotropic lookup by the pipeline's compiled kernel (same result as the NumPy path)
+def footprint_read(chain, uv, dudv, anisotropic: bool, max_aniso: int = 8) -> np.ndarray:
+    """The footprint's average ``(N, C)`` of a mip chain: one isotropic trilinear tap (the
+    driver's compiled :func:`prefilter.render.driver.footprint_lookup`) or, ``anisotropic``,
+    up to ``max_aniso`` taps along the major axis (``MipChain.lookup_footprint``)."""
     if anisotropic:
         return chain.lookup_footprint(uv, dudv, anisotropic=True, max_aniso=max_aniso)
-    from prefilter.render.pipeline import footprint_lookup
-
     return footprint_lookup(chain, uv, dudv)
 
 
@@ -215,7 +239,7 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
                           taps_ratio: float = 1.5, taps_normalize: bool = False) -> dict:
     """Shading frame, material and multi-scale roughness per hit sample of a flat G-buffer.
 
-    As :func:`prefilter.render.pipeline.surface_attributes` with ``filtered=True``, plus ``r``
+    As :func:`prefilter.render.driver.surface_attributes` with ``filtered=True``, plus ``r``
     (N,), the length of the footprint's averaged normal (1 without a normal map), and
     ``alpha`` (N,), the isotropic ``alpha_total`` to shade with. ``meso``: ``alpha_meso`` variant
     (``"exact"`` or ``"paper"``, eq. 5); ``total``: ``alpha_total`` variant (``"fit"``,
@@ -240,68 +264,48 @@ def multiscale_attributes(scene, g, *, meso: str = "exact", total: str = "fit",
     """
     box_taps = as_positive_int(box_taps, "box_taps", lo=0)
     taps, taps_below, taps_ratio = _taps_args(taps, taps_below, taps_ratio)
-    from prefilter.render.shading import shading_frame, two_sided_frame
-    from prefilter.texture.procedural import slopes_to_normals
 
-    n_samples = g.hit.size
-    ts, bs, ns = (np.zeros((n_samples, 3)) for _ in range(3))
-    r = np.ones(n_samples)
-    alpha_micro = np.zeros(n_samples)
-    base = np.zeros((n_samples, 3))
-    f0 = np.zeros((n_samples, 3))
-    gt, gb, gn = two_sided_frame(g)
-    for k in np.unique(g.object_id):
-        m = g.object_id == k
-        mat = scene.objects[int(k)].material
-        nts = None
-        if mat.normal_map is not None:
-            chain = mat.normal_map.mip()
-            if box_taps:
-                nts = _box_lookup(chain, g.uv[m], g.dudv[m], box_taps)
-            elif taps and not anisotropic_footprint:
-                nts = taps_lookup(chain, g.uv[m], g.dudv[m], taps, taps_below, taps_ratio,
-                                  lod_bias, lod_bias_start, taps_normalize)
-            else:
-                scale = _bias_scale(g.dudv[m], chain.levels[0].shape[:2], lod_bias,
-                                    lod_bias_start)
-                nts = _lookup(chain, g.uv[m], g.dudv[m] * scale, anisotropic_footprint,
-                              max_aniso)
-            r[m] = np.minimum(np.sqrt(np.einsum("ij,ij->i", nts, nts)), 1.0)
-        elif mat.height_map is not None:
-            nts = slopes_to_normals(mat.height_map.mip().lookup_footprint(g.uv[m],
-                                                                          g.dudv[m])[:, :2])
-        ts[m], bs[m], ns[m] = shading_frame(gt[m], gb[m], gn[m], nts)
-        alpha_micro[m] = np.sqrt(mat.alpha_x * mat.alpha_y)
-        c = np.broadcast_to(mat.base_color, (int(m.sum()), 3))
-        if mat.color_map is not None:
-            cm = _lookup(mat.color_map.mip(), g.uv[m], g.dudv[m], False, 8)
-            c = c * (cm[:, :3] if cm.shape[1] >= 3 else cm[:, :1])
-        base[m] = c
-        f0[m] = mat.f0
-    alpha = _alpha_total(np.minimum(alpha_micro, 1.0), _alpha_meso_fast(r, meso), total)
-    return {"t": ts, "b": bs, "n": ns, "r": r, "alpha_micro": alpha_micro, "alpha": alpha,
-            "base_color": base, "f0": f0}
+    def surface(mat, uv, dudv, t, b, n):
+        if mat.normal_map is None:
+            return {"r": 1.0}  # height maps carry slopes, not normals: flat at this scale
+        chain = mat.normal_map.mip()
+        if box_taps:
+            nts = _box_lookup(chain, uv, dudv, box_taps)
+        elif taps and not anisotropic_footprint:
+            nts = taps_lookup(chain, uv, dudv, taps, taps_below, taps_ratio, lod_bias,
+                              lod_bias_start, taps_normalize)
+        else:
+            scale = _bias_scale(dudv, chain.levels[0].shape[:2], lod_bias, lod_bias_start)
+            nts = footprint_read(chain, uv, dudv * scale, anisotropic_footprint, max_aniso)
+        r = np.minimum(np.sqrt(np.einsum("ij,ij->i", nts, nts)), 1.0)
+        return {**dict(zip("tbn", shading_frame(t, b, n, nts))), "r": r}
+
+    a = surface_attributes(scene, g, surface=surface)
+    a["alpha_micro"] = np.sqrt(a["alpha_x"] * a["alpha_y"])
+    a["alpha"] = _alpha_total(np.minimum(a["alpha_micro"], 1.0), _alpha_meso_fast(a["r"], meso),
+                              total)
+    return a
 
 
-def _render(scene, settings, meso: str, total: str, name: str, **footprint) -> np.ndarray:
-    from prefilter.ltc.table import GGXTable
-    from prefilter.render.lighttex import shade_ltc_textured, split_lights
-    from prefilter.render.pipeline import _render_ltc_fused, render_samples
-
+def _render(scene, settings, meso: str, total: str, **footprint) -> np.ndarray:
+    name = "ltc-multiscale"
     # textured quad lights: prefiltered light texture lookup (Heitz et al. 2016, section 5.3)
     lights, textured = split_lights(scene, name)
-    table = settings.table if settings.table is not None else GGXTable.load()
+    table = as_table(settings.table)
     if not (lights.points or lights.directionals or textured
             or footprint.get("anisotropic_footprint") or footprint.get("box_taps")):
         # quad lights only: the ``ltc`` method's fused kernel with this roughness
-        rough = multiscale_roughness(scene.objects, meso, total, footprint.get("lod_bias", 0.0),
-                                     footprint.get("lod_bias_start"),
-                                     *_taps_args(footprint.get("taps", 0),
-                                                 footprint.get("taps_below", 4.0),
-                                                 footprint.get("taps_ratio", 1.5)),
-                                     footprint.get("taps_normalize", False))
-        if rough is not None:
-            image = _render_ltc_fused(scene, settings, lights, table, rough, desc=name)
+        read = normal_read(scene.objects, footprint.get("lod_bias", 0.0),
+                           footprint.get("lod_bias_start"),
+                           *_taps_args(footprint.get("taps", 0), footprint.get("taps_below", 4.0),
+                                       footprint.get("taps_ratio", 1.5)),
+                           footprint.get("taps_normalize", False))
+        rough = multiscale_roughness(scene.objects, meso, total)
+        if read is not None and rough is not None:
+            from prefilter.multiscale.kernels import multiscale_samples_kernel
+
+            image = render_ltc_fused(scene, settings, lights, table, read,
+                                     multiscale_samples_kernel, rough, desc=name)
             if image is not None:
                 return image
 
@@ -332,26 +336,25 @@ def render_multiscale(scene, settings, *, anisotropic_footprint: bool = False,
                       lod_bias_start=LOD_BIAS_START, box_taps: int = 0,
                       taps: int = TAPS, taps_below: float = TAPS_BELOW,
                       taps_ratio: float = TAPS_RATIO, taps_normalize: bool = False) -> np.ndarray:
-    """The ``ltc-multiscale`` method: exact inverse of eq. 4 and our refit of eq. 7.
+    """The ``ltc-multiscale`` method; ``settings.param("footprint")`` picks the variant
+    (:data:`FOOTPRINTS`, module docstring).
 
     ``anisotropic_footprint`` / ``max_aniso`` / ``lod_bias`` / ``lod_bias_start`` /
-    ``box_taps`` / ``taps`` / ``taps_below`` / ``taps_ratio`` / ``taps_normalize``: see
-    :func:`multiscale_attributes`; the default footprint is :data:`LOD_BIAS` levels coarser at most,
-    ramping in from :data:`LOD_BIAS_START`, with :data:`TAPS` anisotropic taps below
-    :data:`TAPS_BELOW` texels (``lod_bias=0, taps=0`` is the paper's isotropic mip level; all
-    measured in ``docs/multiscale.md``)."""
-    return _render(scene, settings, "exact", "fit", "ltc-multiscale",
+    ``box_taps`` / ``taps`` / ``taps_below`` / ``taps_ratio`` / ``taps_normalize``: the footprint
+    read of the ``"fit"`` variant, see :func:`multiscale_attributes`; the default is
+    :data:`LOD_BIAS` levels coarser at most, ramping in from :data:`LOD_BIAS_START`, with
+    :data:`TAPS` anisotropic taps below :data:`TAPS_BELOW` texels (``lod_bias=0, taps=0`` is the
+    paper's isotropic mip level; all measured in ``docs/multiscale.md``). The ``"paper"`` and
+    ``"mrl"`` variants read the paper's isotropic mip level."""
+    variant = settings.param("footprint", "fit")
+    if variant not in FOOTPRINTS:
+        raise PrefilterError(f"footprint: expected one of {', '.join(FOOTPRINTS)}, got "
+                             f"{variant!r}")
+    meso, total, ours = FOOTPRINTS[variant]
+    if not ours:
+        return _render(scene, settings, meso, total)
+    return _render(scene, settings, meso, total,
                    anisotropic_footprint=anisotropic_footprint, max_aniso=max_aniso,
                    lod_bias=lod_bias, lod_bias_start=lod_bias_start, box_taps=box_taps,
                    taps=taps, taps_below=taps_below, taps_ratio=taps_ratio,
                    taps_normalize=taps_normalize)
-
-
-def render_multiscale_paper(scene, settings) -> np.ndarray:
-    """The ``ltc-multiscale-paper`` method: the paper's eqs. 5 and 7 as published."""
-    return _render(scene, settings, "paper", "paper", "ltc-multiscale-paper")
-
-
-def render_multiscale_mrl(scene, settings) -> np.ndarray:
-    """``ltc-multiscale-mrl``: exact inverse of eq. 4 and mean-resultant-length matching."""
-    return _render(scene, settings, "exact", "mrl", "ltc-multiscale-mrl")

@@ -2,7 +2,7 @@
 
 ``load_scene`` reads a JSON scene (``docs/scenes.md``); ``gbuffer`` traces primary rays and returns
 per-pixel (or per-sub-sample) positions, frames, UVs and UV footprints; methods shade them;
-``render(scene, method)`` is the scene -> image entry point (:mod:`prefilter.render.pipeline`).
+``render(scene, method)`` is the scene -> image entry point (:mod:`prefilter.render.driver`).
 """
 
 from prefilter.render.camera import (
@@ -16,7 +16,7 @@ from prefilter.render.camera import (
     pixel_positions,
     rays_at,
 )
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 from prefilter.render.scene import Material, Plane, Scene, Sphere, TextureRef, load_scene
 
 __all__ = [

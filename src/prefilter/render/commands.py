@@ -113,8 +113,8 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
 @click.command("render")
 @click.argument("scene", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--method", default="ltc", show_default=True,
-              help="Shading method (see `prefilter.render.methods.available()`: ltc, reference, "
-                   "and those later issues register).")
+              help="Shading method: a name of `prefilter.render.methods.available()` (ltc, "
+                   "reference, ltc-multiscale, ...).")
 @click.option("--spp", type=int, default=1, show_default=True, help="Samples per pixel.")
 @click.option("--seed", type=int, default=0, show_default=True,
               help="Seed of all random numbers (same seed -> same image bytes).")
@@ -129,7 +129,7 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
               help="LTC table file (default: the shipped table).")
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
               help="A variant setting of the method (repeatable), e.g. footprint=paper for "
-                   "ltc-multiscale; `prefilter methods` lists them.")
+                   "ltc-multiscale; `prefilter.render.methods.method_params(name)` lists them.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path | None,
            jitter: tuple[float, float], table_path: Path | None, params: tuple[str, ...],
@@ -138,18 +138,13 @@ def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path |
     import time
 
     from prefilter.render.methods import check_params
-    from prefilter.render.pipeline import render as render_image
+    from prefilter.render.driver import render as render_image
     from prefilter.texture.io import write_image
 
-    params = check_params(method, params)  # fail on bad input before loading scene and table
-    table = None
-    if table_path is not None:
-        from prefilter.ltc.table import GGXTable
-
-        table = GGXTable.load(table_path)
+    params = check_params(method, params)  # fail on bad input before loading the scene
     t0 = time.perf_counter()
     image = render_image(scene, method, spp=spp, seed=seed, jitter=jitter, progress=not quiet,
-                         table=table, params=params)
+                         table=table_path, params=params)
     seconds = time.perf_counter() - t0
     write_image(out, image)
     click.echo(f"{method}: {image.shape[1]}x{image.shape[0]}, {spp} spp, {seconds:.2f} s -> {out}")

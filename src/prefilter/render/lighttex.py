@@ -1,21 +1,11 @@
-"""Textured quad lights for LTC shading: the prefiltered light texture lookup (Heitz et al. 2016,
-section 5.3 "Textured lights").
+"""Textured quad lights: a parallelogram quad whose radiance is scaled by an image.
 
-The integral of an LTC lobe ``D`` times a textured radiance ``L`` over the light polygon ``P`` is
-split as ``integral_P D L ~= E(M^-1 P) * L_avg``: the untextured polygon integral times the
-``D``-weighted average of the texture over the polygon. ``L_avg`` is approximated by one lookup in
-a prefiltered texture: in the lobe's cosine space (``M^-1`` applied to the polygon) the cosine is
-centred on ``z``, so the lookup point is the orthogonal projection of the origin onto the
-transformed light plane, and the filter width grows with the distance ``d`` of that plane:
-a clamped cosine seen on a plane at distance ``d`` has irradiance density
-``d^2 / (d^2 + rho^2)^2``, half of it within ``rho = d``; the Gaussian with the same half-mass
-radius has ``sigma = d / sqrt(2 ln 2) = 0.85 d``.
-
-Prefiltering (our choice): level ``l >= 1`` is the *normalised* Gaussian convolution of the
+:class:`TexturedQuad` is the light; :class:`LightTexture` holds its image and a prefiltered
+pyramid for methods that read it averaged under a lobe (the LTC methods,
+:mod:`prefilter.ltc.lighttex`). Level ``l >= 1`` is the *normalised* Gaussian convolution of the
 texture restricted to the light, ``G * (L 1_P) / G * 1_P`` with ``sigma_l = 2^(l-1)`` texels, so a
-wide lobe near an edge averages only texels that emit (the paper pads the texture with a blurred
-border instead). Lookups outside the light clamp to its edge; ``lod`` interpolates linearly between
-levels, texels bilinearly.
+wide filter near an edge averages only texels that emit. Lookups outside the light clamp to its
+edge; ``lod`` interpolates linearly between levels, texels bilinearly.
 
 Texture coordinates of a quad light ``v0..v3`` (a parallelogram): ``p = v0 + u (v1 - v0) +
 v (v3 - v0)``; ``u`` along image columns, ``v`` along rows (as :class:`prefilter.texture.MipChain`).
@@ -30,11 +20,7 @@ import numpy as np
 from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
 
-__all__ = ["LightTexture", "TexturedQuad", "light_texture_lookup_point", "shade_textured_quads",
-           "split_lights", "texture_uv"]
-
-#: Gaussian sigma per plane distance of the clamped cosine's footprint (same half-mass radius).
-SIGMA_PER_DISTANCE = 1.0 / np.sqrt(2.0 * np.log(2.0))
+__all__ = ["LightTexture", "TexturedQuad", "split_lights", "texture_uv"]
 
 
 class LightTexture:
@@ -146,29 +132,6 @@ def texture_uv(vertices, points) -> np.ndarray:
     return np.stack([(g22 * r1 - g12 * r2) / det, (g11 * r2 - g12 * r1) / det], -1)
 
 
-def light_texture_lookup_point(M_inv, P) -> tuple[np.ndarray, np.ndarray]:
-    """Where and how wide to read the light texture for an LTC lobe (Heitz et al. 2016, 5.3).
-
-    Parameters
-    ----------
-    M_inv : (N, 3, 3) the lobe's inverse matrix (any positive scale).
-    P : (N, 4, 3) the light's corners in the shading frame (unclipped).
-
-    Returns
-    -------
-    uv : (N, 2) texture coordinates of the orthogonal projection of the origin onto the light
-        plane in cosine space; ``width`` : (N,) the Gaussian sigma in units of ``sqrt(area)``
-        of the transformed light (``0.85 d / sqrt(A)``).
-    """
-    Q = np.matmul(P, np.swapaxes(M_inv, -1, -2))
-    nrm = np.cross(Q[:, 1] - Q[:, 0], Q[:, 3] - Q[:, 0])
-    a2 = np.maximum(np.sum(nrm * nrm, -1), 1e-300)
-    h = np.sum(nrm * Q[:, 0], -1)
-    foot = (h / a2)[:, None] * nrm
-    d = np.abs(h) / np.sqrt(a2)
-    return texture_uv(Q, foot), SIGMA_PER_DISTANCE * d / a2 ** 0.25
-
-
 def split_lights(scene, method: str):
     """``(LightSet, textured)``: the scene's untextured lights and its textured quads as
     :class:`TexturedQuad`; environment lights are rejected with a message naming ``method``."""
@@ -199,58 +162,7 @@ _CACHE: dict = {}
 
 
 def _light_texture(ref) -> LightTexture:
-    key = ref._key()
+    key = ref.cache_key()
     if key not in _CACHE:
         _CACHE[key] = LightTexture(ref.load())
     return _CACHE[key]
-
-
-def _rgb(x: np.ndarray) -> np.ndarray:
-    return x if x.shape[1] == 3 else np.broadcast_to(x[:, :1], (x.shape[0], 3))
-
-
-def shade_textured_quads(position, ts, bs, ns, wo, M_inv, spec_scale, base_color,
-                         quads) -> np.ndarray:
-    """Radiance ``(N, 3)`` from textured quads: diffuse ``base_color E(P) T(uv_d)`` plus specular
-    ``spec_scale E(M^-1 P) T(uv_s)`` (Heitz et al. 2016, section 5.3).
-
-    ``wo`` (N, 3) is the local view (unused but for the front test's symmetry with
-    :func:`prefilter.render.shading.shade_ltc`); ``M_inv`` (N, 3, 3) from the LTC table,
-    ``spec_scale`` (N, 3) the Fresnel-weighted magnitude.
-    """
-    from prefilter.ltc.polygon import (clamped_cosine_integral, clip_to_horizon,
-                                       polygon_integral_minv)
-    from prefilter.render.shading import quad_local
-
-    out = np.zeros((len(position), 3))
-    eye = np.broadcast_to(np.eye(3), M_inv.shape)
-    for ql in quads:
-        P = quad_local(ql, position, ts, bs, ns)
-        front = (position - ql.vertices[0]) @ ql.normal > 0.0
-        h, w = ql.texture.shape[:2]
-        texels = np.sqrt(h * w)
-        uv_d, wd = light_texture_lookup_point(eye, P)
-        uv_s, wsp = light_texture_lookup_point(M_inv, P)
-        t_d = _rgb(ql.texture.lookup(uv_d, wd * texels))
-        t_s = _rgb(ql.texture.lookup(uv_s, wsp * texels))
-        e_d = clamped_cosine_integral(P)
-        e_s = polygon_integral_minv(M_inv, clip_to_horizon(P))
-        rad = base_color * (e_d[:, None] * t_d) + spec_scale * (e_s[:, None] * t_s)
-        out += np.where(front[:, None], rad, 0.0) * ql.radiance
-    return out
-
-
-def shade_ltc_textured(position, ts, bs, ns, view, alpha, base_color, f0, lights, textured,
-                       table) -> np.ndarray:
-    """:func:`prefilter.render.shading.shade_ltc` for ``lights`` plus the textured quads
-    ``textured`` with the same isotropic table lookup."""
-    from prefilter.render.shading import local_view, scaled_inverse, shade_ltc
-
-    out = shade_ltc(position, ts, bs, ns, view, alpha, base_color, f0, lights, table)
-    if not textured:
-        return out
-    wo = local_view(view, ts, bs, ns)
-    M, magnitude, fresnel = table.lookup(wo, np.clip(alpha, table.alpha_min, 1.0))
-    spec_scale = f0 * (magnitude - fresnel)[:, None] + fresnel[:, None]
-    return out + shade_textured_quads(position, ts, bs, ns, wo, scaled_inverse(M), spec_scale,
-                                      base_color, textured)

@@ -42,8 +42,9 @@ class RenderSettings:
         Show a progress bar (tqdm) when the render takes more than about a second.
     chunk_samples : int
         Upper bound on shading samples processed at once (memory).
-    table : object or None
-        The LTC table to use (``None``: the shipped :class:`prefilter.ltc.table.GGXTable`).
+    table : str, Path, object or None
+        The LTC table to use: a table file (loaded by the LTC methods), a table object, or
+        ``None`` (the shipped :class:`prefilter.ltc.table.GGXTable`).
     params : dict of str to str
         The method's variant settings (``--param key=value``), checked against the choices the
         method registered (:func:`register`); a method reads them with :meth:`param`.
@@ -65,11 +66,9 @@ class RenderSettings:
 Method = Callable[..., object]
 
 _REGISTRY: dict[str, Method | str] = {
-    "ltc": "prefilter.render.pipeline:render_ltc",
+    "ltc": "prefilter.ltc.render:render_ltc",
     "reference": "prefilter.render.reference:render_reference",
     "ltc-multiscale": "prefilter.multiscale.render:render_multiscale",
-    "ltc-multiscale-paper": "prefilter.multiscale.render:render_multiscale_paper",
-    "ltc-multiscale-mrl": "prefilter.multiscale.render:render_multiscale_mrl",
     "ltc-multiscale-aniso": "prefilter.multiscale.aniso:render_multiscale_aniso",
     "leadr-point": "prefilter.leadr.render:render_leadr_point",
     "leadr-env": "prefilter.leadr.render:render_leadr_env",
@@ -92,12 +91,13 @@ _DESCRIPTIONS: dict[str, str] = {
     "reference": "ground truth: stratified supersampling, full-resolution textures, MIS Monte "
                  "Carlo of the true GGX BRDF",
     "ltc-multiscale": "multi-scale LTC (Tao et al. 2021): roughness from the length of the "
-                      "footprint's averaged normal, exact eq. 4 inverse and refitted eq. 7",
+                      "footprint's averaged normal; footprint=fit: exact eq. 4 inverse, refitted "
+                      "eq. 7, biased LOD and anisotropic taps; paper: the paper's eqs. 5 and 7 "
+                      "on the isotropic mip level; mrl: exact eq. 4 inverse and the product of "
+                      "mean resultant lengths",
     "ltc-multiscale-aniso": "multi-scale LTC, anisotropic: LEAN slope moments of the normal map "
                             "plus micro roughness, anisotropic LTC table in the covariance's "
                             "principal frame",
-    "ltc-multiscale-paper": "multi-scale LTC with the paper's fitted eqs. 5 and 7",
-    "ltc-multiscale-mrl": "multi-scale LTC with the closed-form product of mean resultant lengths",
     "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2; "
                    "box-filtered moments, G2/G1 diffuse)",
     "leadr-env": "LEADR under environment (+ point/directional) light: Algorithm 1 specular "
@@ -126,7 +126,9 @@ _DESCRIPTIONS: dict[str, str] = {
 
 
 #: Variant settings each method accepts: name -> {key: (allowed values, first = default)}.
-_PARAMS: dict[str, dict[str, tuple[str, ...]]] = {}
+_PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
+    "ltc-multiscale": {"footprint": ("fit", "paper", "mrl")},
+}
 
 
 def register(name: str, target: Method | str | None = None, *, description: str = "",

@@ -133,7 +133,9 @@ class TextureRef:
     srgb: bool = False
     scale: float = 1.0
 
-    def _key(self):
+    def cache_key(self) -> tuple:
+        """What identifies the texture's data (spec or file and its mtime, decoding options):
+        the arguments of :func:`load_texture`, a key for caches of data derived from it."""
         key = json.dumps(self.spec, sort_keys=True) if self.path is None else None
         mtime = self.path.stat().st_mtime_ns if self.path is not None and self.path.exists() else 0
         return (self.role, key, str(self.path) if self.path else None, mtime, self.convention,
@@ -147,7 +149,7 @@ class TextureRef:
         units, scaled by ``scale``); other roles: linear values ``(H, W, C)``.
         """
         try:
-            return _load_texture(*self._key())
+            return load_texture(*self.cache_key())
         except PrefilterError as exc:
             raise PrefilterError(f"{self.where}: {exc}") from None
 
@@ -155,13 +157,15 @@ class TextureRef:
         """A cached :class:`prefilter.texture.MipChain` of :meth:`load` (normal maps:
         unnormalised averages; height maps: the moments chain of the slopes)."""
         try:
-            return _load_mip(*self._key())
+            return _load_mip(*self.cache_key())
         except PrefilterError as exc:
             raise PrefilterError(f"{self.where}: {exc}") from None
 
 
 @functools.lru_cache(maxsize=64)
-def _load_texture(role, key, path, mtime, convention, srgb, scale):
+def load_texture(role, key, path, mtime, convention, srgb, scale):
+    """The data of the texture whose :meth:`TextureRef.cache_key` is the arguments (cached; see
+    :meth:`TextureRef.load`)."""
     from prefilter import texture as tx
     from prefilter.texture.procedural import noise_texture
 
@@ -202,7 +206,7 @@ def _radiometric(a, role: str):
 def _load_mip(*key):
     from prefilter.texture import MipChain, moment_chain
 
-    data = _load_texture(*key)
+    data = load_texture(*key)
     return moment_chain(data.slopes) if key[0] == "height_map" else MipChain(data)
 
 

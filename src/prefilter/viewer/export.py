@@ -231,7 +231,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
     atlas, maps, map_index, seen, colors, heights = _Atlas(), [], {}, {}, {}, {}
 
     def add_map(name: str, ref: TextureRef) -> int:
-        key = ref._key()
+        key = ref.cache_key()
         if key in seen:
             maps[seen[key]]["names"].append(name)
             return seen[key]
@@ -255,7 +255,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
         elif m.height_map is not None:
             map_index[i] = add_map(f"scene: objects[{i}] (height)", m.height_map)
         if m.height_map is not None:
-            key = m.height_map._key()
+            key = m.height_map.cache_key()
             j = seen[key] if key in seen else add_map(f"scene: objects[{i}] (height)",
                                                       m.height_map)
             heights[i] = maps[j]["slopes"]

@@ -5,7 +5,7 @@ import pytest
 
 from prefilter.ltc.aniso.demo import demo_scene
 from prefilter.render.methods import available
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 
 
 def test_registered():

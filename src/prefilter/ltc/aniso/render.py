@@ -1,10 +1,10 @@
 """The ``ltc-aniso`` render method: quad lights integrated with the anisotropic LTC table.
 
-Same pipeline as the ``ltc`` method (:func:`prefilter.render.pipeline.render_ltc`) with the
+Same pipeline as the ``ltc`` method (:func:`prefilter.ltc.render.render_ltc`) with the
 lookup of :class:`~prefilter.ltc.aniso.table.AnisoGGXTable` in the shading frame (x = tangent),
 so ``alpha_x`` and ``alpha_y`` are used as they are (``ltc`` uses their geometric mean).
 Textured quad lights get the prefiltered light-texture lookup of the ``ltc`` method
-(:func:`prefilter.render.lighttex.shade_textured_quads`, Heitz et al. 2016, section 5.3) with
+(:func:`prefilter.ltc.lighttex.shade_textured_quads`, Heitz et al. 2016, section 5.3) with
 this lobe's ``M^-1``.
 """
 
@@ -12,7 +12,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from prefilter.ltc.lighttex import shade_textured_quads
 from prefilter.ltc.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
+from prefilter.ltc.shading import scaled_inverse, spec_scale
+from prefilter.render.driver import render_samples, surface_attributes
+from prefilter.render.lighttex import split_lights
+from prefilter.render.shading import local_view, quad_local, shade_delta_lights
 
 
 def shade_ltc_aniso(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y, base_color, f0,
@@ -24,9 +29,6 @@ def shade_ltc_aniso(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
     ``textured``: :class:`~prefilter.render.lighttex.TexturedQuad` lights, each polygon integral
     times the light texture averaged under the lobe (Heitz et al. 2016, section 5.3).
     """
-    from prefilter.render.lighttex import shade_textured_quads
-    from prefilter.render.shading import local_view, quad_local, scaled_inverse, shade_delta_lights
-
     position = np.asarray(position, dtype=np.float64)
     ts, bs, ns = (np.asarray(a, dtype=np.float64) for a in (frame_t, frame_b, frame_n))
     ax, ay = np.asarray(alpha_x, float), np.asarray(alpha_y, float)
@@ -42,7 +44,7 @@ def shade_ltc_aniso(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
     M, magnitude, fresnel = table.lookup(wo_t, np.clip(ax, 1e-4, 1), np.clip(ay, 1e-4, 1))
     M_inv = scaled_inverse(M)
     spec = np.where((wo[:, 2] > 0)[:, None],
-                    f0 * (magnitude - fresnel)[:, None] + fresnel[:, None], 0.0)
+                    spec_scale(f0, magnitude, fresnel), 0.0)
     for ql in lights.quads:
         P = quad_local(ql, position, ts, bs, ns)
         front = (position - ql.vertices[0]) @ ql.normal > 0.0
@@ -57,14 +59,12 @@ def shade_ltc_aniso(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
 def render_ltc_aniso(scene, settings) -> np.ndarray:
     """The ``ltc-aniso`` method (registered in :mod:`prefilter.ltc.aniso`)."""
     from prefilter.ltc.aniso.table import AnisoGGXTable
-    from prefilter.render.lighttex import split_lights
-    from prefilter.render.pipeline import render_samples, surface_attributes
 
     lights, textured = split_lights(scene, "ltc-aniso")
     table = settings.table if isinstance(settings.table, AnisoGGXTable) else AnisoGGXTable.load()
 
     def shade(g, _u):
-        a = surface_attributes(scene, g, filtered=True)
+        a = surface_attributes(scene, g)
         return shade_ltc_aniso(g.position, a["t"], a["b"], a["n"], g.view, a["alpha_x"],
                                a["alpha_y"], a["base_color"], a["f0"], lights, table, textured)
 
