@@ -2,7 +2,7 @@
 
 A guard for changes that must not change images (re-layering, moving kernels)::
 
-    python tools/render_digests.py record DIR     # before the change: DIR/scenes/*.json, images.npz
+    python tools/render_digests.py record DIR     # before: DIR/scenes/*.json, images.npz
     python tools/render_digests.py compare DIR    # after it: relative RMSE per method and scene
 
 ``record`` writes the scenes as JSON files, so ``compare`` only needs :func:`prefilter.render.render`
@@ -110,7 +110,8 @@ def main(argv=None) -> int:
     ap.add_argument("mode", choices=("record", "compare"))
     ap.add_argument("dir", type=Path)
     ap.add_argument("--rename", action="append", default=[], metavar="OLD=NEW[?k=v&...]")
-    ap.add_argument("--methods", default="", help="comma-separated methods to compare (default all)")
+    ap.add_argument("--methods", default="",
+                    help="comma-separated methods to compare (default all)")
     a = ap.parse_args(argv)
     if a.mode == "record":
         record(a.dir)

@@ -117,7 +117,7 @@ def test_same_bytes_three_runs(name, tmp_path):
 
 def test_seed_changes_the_monte_carlo_render(tmp_path):
     """The comparison above can fail: another seed gives other bytes for a random render."""
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     scene = dict(SCENE, camera=dict(SCENE["camera"], width=8, height=6))
     a = render(scene, "reference", spp=2, seed=1, progress=False)

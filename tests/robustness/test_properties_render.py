@@ -168,7 +168,7 @@ def test_as_float_array_of_huge_integers():
 def test_render_is_exported_from_the_package():
     import prefilter.render as pr
     from prefilter.render import render
-    from prefilter.render.pipeline import render as render_pipeline
+    from prefilter.render.driver import render as render_pipeline
 
     assert render is render_pipeline and "render" in pr.__all__
 

@@ -94,7 +94,7 @@ def test_page_renders_leadr_point_with_box_filter_and_shadowing(browser):
     shading and the unshadowed diffuse each differ from the Python image by > 5x that (so a page
     missing either would fail)."""
     from prefilter.leadr import render as lr
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.viewer import pixel_match
     from prefilter.viewer.match import scene
 

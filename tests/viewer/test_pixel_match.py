@@ -8,7 +8,7 @@ fails the bound there."""
 import numpy as np
 import pytest
 
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 from prefilter.viewer import METHODS, pixel_match
 from prefilter.viewer.match import scene
 
@@ -54,7 +54,7 @@ def test_leadr_differs_from_naive_by_more_than_the_tolerance():
     without the footprint's slope covariance) differ by far more than 1 %."""
     from prefilter.leadr.render import shade_leadr_delta
     from prefilter.render.methods import RenderSettings
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.driver import render_samples
     from prefilter.render.scene import load_scene
 
     sc = load_scene(scene("leadr", 96, 72))

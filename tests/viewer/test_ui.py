@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 from prefilter.viewer import METHODS, default_scene, export_scene, frame_time, screenshots, serve
 from prefilter.viewer.browser import open_viewer, render_linear
 

@@ -6,7 +6,7 @@ import copy
 import numpy as np
 import pytest
 
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 from prefilter.viewer import BUILTIN_MAPS, default_scene, export_scene, serve
 from prefilter.viewer.browser import open_viewer, render_linear
 

@@ -15,7 +15,7 @@ import numpy as np
 from prefilter.errors import PrefilterError
 from prefilter.jit import serial
 from prefilter.ltc.lighttex import shade_ltc_textured
-from prefilter.ltc.shading import TABLE_ARRAYS, shade_ltc
+from prefilter.ltc.shading import TABLE_ARRAYS
 from prefilter.ltc.table import as_table
 from prefilter.render.camera import camera_params
 from prefilter.render.driver import render_positions, render_samples, surface_attributes

@@ -86,7 +86,7 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
     """
     from prefilter.fileio import save_json_atomic
     from prefilter.render.metrics import flip_heatmap
-    from prefilter.report.report import save_png
+    from prefilter.texture.io import save_png
 
     result = compare_images(test, reference, eps=eps)
     flip_map = result.pop("flip_map")

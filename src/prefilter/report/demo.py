@@ -157,7 +157,7 @@ MULTISCALE_MAPS = {
     "flakes": {"procedural": "flakes", "size": 256, "seed": 1, "rms_slope": 0.25,
                "flake_size": 4},
 }
-MULTISCALE_METHODS = ("ltc", "ltc-multiscale", "ltc-multiscale-paper")
+MULTISCALE_METHODS = ("ltc", "ltc-multiscale", "ltc-multiscale footprint=paper")
 
 
 #: Registered methods the showcase leaves out: ground-truth evaluators, whose cost grows with the
@@ -203,8 +203,9 @@ def _section(report, status: list, title: str, intro: str, body, log) -> None:
 def _compare(report, label: str, scene, methods, *, spp: int, seed: int, log,
              scale: int = 2) -> list[list]:
     """Render ``scene`` by ``reference`` and ``methods``; comparison rows + FLIP maps in the
-    report; returns table rows ``[label, method, RMSE, relMSE, FLIP, time]`` (skips failures)."""
-    from prefilter.render.pipeline import render
+    report; returns table rows ``[label, method, RMSE, relMSE, FLIP, time]`` (skips failures).
+    A method is a registered name, optionally followed by ``key=value`` variant settings."""
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     # load once: textures and their mip chains are built on first use and then shared
@@ -216,7 +217,8 @@ def _compare(report, label: str, scene, methods, *, spp: int, seed: int, log,
     for m in methods:
         try:
             t0 = time.perf_counter()
-            images[m] = render(scene, m, spp=1, seed=seed)
+            name, *params = m.split()
+            images[m] = render(scene, name, spp=1, seed=seed, params=params or None)
             times[m] = time.perf_counter() - t0
         except Exception as exc:  # noqa: BLE001
             _note_failure(report, f"method {m} on {label}", exc, log)
@@ -261,7 +263,7 @@ def _table_section(report, settings: DemoSettings, seed: int, log) -> list[dict]
 
 def _render_all(settings: DemoSettings, methods: list[str], seed: int, log):
     from prefilter.render.metrics import flicker, jitter_offsets
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     results = []
@@ -342,8 +344,6 @@ def _aniso_section(report, settings: DemoSettings, seed: int, log) -> None:
 
 
 def _multiscale_section(report, settings: DemoSettings, seed: int, log) -> None:
-    import prefilter.multiscale  # noqa: F401  (registers the ltc-multiscale methods)
-
     # texels per pixel of the showcase camera ~ distance * 160 / height
     k = 160.0 / settings.section_height
     rows = []
@@ -507,7 +507,7 @@ def _glints_section(report, settings: DemoSettings, seed: int, log) -> None:
 
 def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> None:
     from prefilter.glints.render import cache_dir, measurement_scene, pixel_footprints
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     size = settings.glints_render_map
@@ -648,7 +648,7 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "The showcase plane with the built-in brushed and flakes normal maps, micro roughness "
         "0.03, camera at ~1 and ~16 texels per pixel. `ltc`: mip-averaged normal, micro "
         "roughness only; `ltc-multiscale`: roughness from the length of the averaged normal "
-        "(exact eq. 4 inverse, refitted eq. 7); `-paper`: the paper's eqs. 5 and 7. "
+        "(exact eq. 4 inverse, refitted eq. 7); `footprint=paper`: the paper's eqs. 5 and 7. "
         f"Reference: {settings.section_spp} spp, full-resolution normals.",
         lambda r: _multiscale_section(r, settings, seed, log), log)
     _section(

@@ -25,6 +25,7 @@ from prefilter.fileio import atomic_path
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.render.metrics import to_srgb8
+from prefilter.texture.io import png_bytes
 
 IMAGE_SUFFIXES = {".png", ".jpg", ".jpeg", ".gif", ".svg", ".webp"}
 
@@ -252,26 +253,6 @@ class Report:
         if not np.issubdtype(a.dtype, np.number) or np.issubdtype(a.dtype, np.complexfloating):
             raise PrefilterError(f"{name}: expected a real image array, got dtype {a.dtype}")
         return to_srgb8(as_float_array(a, name), exposure=self.exposure, method=self.tonemap)
-
-
-def png_bytes(rgb8) -> bytes:
-    """Deterministic PNG encoding of an sRGB ``uint8 (H, W, 3)`` image."""
-    from PIL import Image
-
-    buf = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(rgb8, dtype=np.uint8), mode="RGB").save(buf, format="PNG")
-    return buf.getvalue()
-
-
-def save_png(path: str | os.PathLike, rgb8) -> Path:
-    """Write an sRGB ``uint8 (H, W, 3)`` image as PNG, atomically."""
-    a = np.asarray(rgb8)
-    if a.dtype != np.uint8 or a.ndim != 3 or a.shape[-1] != 3:
-        raise PrefilterError(f"rgb8: expected a uint8 image (H, W, 3), got {a.dtype} {a.shape}")
-    path = Path(path)
-    with atomic_path(path, suffix=".png") as tmp:
-        tmp.write_bytes(png_bytes(a))
-    return path
 
 
 def line_plot(x, series: dict, *, xlabel: str, ylabel: str, title: str | None = None,

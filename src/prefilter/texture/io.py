@@ -336,3 +336,25 @@ def write_image(path: str | os.PathLike, image, *, bits: int = 8, srgb: bool = F
             with open(tmp, "wb") as fh:
                 np.save(fh, a)
     return path
+
+
+def png_bytes(rgb8) -> bytes:
+    """Deterministic PNG encoding of an sRGB ``uint8 (H, W, 3)`` image."""
+    import io
+
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(rgb8, dtype=np.uint8), mode="RGB").save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def save_png(path: str | os.PathLike, rgb8) -> Path:
+    """Write an sRGB ``uint8 (H, W, 3)`` image as PNG, atomically."""
+    a = np.asarray(rgb8)
+    if a.dtype != np.uint8 or a.ndim != 3 or a.shape[-1] != 3:
+        raise PrefilterError(f"rgb8: expected a uint8 image (H, W, 3), got {a.dtype} {a.shape}")
+    path = Path(path)
+    with atomic_path(path, suffix=".png") as tmp:
+        tmp.write_bytes(png_bytes(a))
+    return path

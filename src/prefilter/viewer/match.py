@@ -192,7 +192,7 @@ def pixel_match(scenes=SCENES, methods=METHODS, precisions=("f32", "f16"), *, wi
     ``max_abs`` the largest absolute difference, ``max_rel`` it over the largest radiance.
     ``driver``: a WebDriver to reuse (default: a fresh headless Chromium).
     """
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.viewer.browser import open_viewer, render_linear
 
     dicts = {s: scene(s, width, height) for s in scenes}

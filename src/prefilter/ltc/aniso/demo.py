@@ -37,7 +37,7 @@ def run_demo(out_dir=None, *, width: int = 200, height: int = 150, ref_spp: int 
              seed: int = 0) -> dict:
     """Render the three methods and compare; returns ``{method: {"rmse", "flip"}}``."""
     from prefilter.render.metrics import flip, rmse
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     scene = load_scene(demo_scene(width, height))

@@ -1,5 +1,5 @@
 // The viewer's shader: the Python renderer's `ltc`, `ltc-multiscale`, `ltc-aniso` and
-// `ltc-multiscale-aniso` and `leadr-point` methods per pixel (prefilter.render.pipeline, camera,
+// `ltc-multiscale-aniso` and `leadr-point` methods per pixel (prefilter.render.driver, camera,
 // shading; prefilter.multiscale.render / aniso; prefilter.ltc.aniso.render;
 // prefilter.leadr.render), in float32. Included after ltc_iso.glsl, ltc_aniso.glsl,
 // multiscale.glsl and leadr.glsl (the exported snippets).
@@ -46,7 +46,7 @@ out vec4 fragColor;
 const float PI = 3.14159265358979;
 const float VIEW_Z_MIN = 1e-3;           // prefilter.render.shading.VIEW_Z_MIN
 
-// -- G-buffer (prefilter.render.kernels._trace) ----------------------------------------------
+// -- G-buffer (prefilter.render.kernels.camera_trace) ----------------------------------------------
 
 struct Hit { int id; float dist; vec3 p, n, t, b; vec2 uv; vec4 dudv; };  // dudv = (du/dx, du/dy, dv/dx, dv/dy)
 
