@@ -43,10 +43,11 @@ def shade_ltc_numpy(position, frame_t, frame_b, frame_n, view, alpha, base_color
 
 
 def polygon_integral_numpy(M_inv, vertices, two_sided: bool = False) -> np.ndarray:
-    """NumPy twin of :func:`prefilter.ltc.polygon.polygon_integral_minv`: explicit
-    Sutherland-Hodgman (each input edge offers two output slots, valid or not), then the edge
-    sum over consecutive valid slots. Same conventions as :func:`polygon_integral_minv`; no input validation. Component arrays
-    ``(B, n)`` rather than ``np.cross`` on ``(..., 3)``, which is several times slower."""
+    """NumPy twin of :func:`prefilter.ltc.polygon.polygon_integral_minv`: explicit Sutherland-
+    Hodgman (each input edge offers two output slots, valid or not), then the edge sum over
+    consecutive valid slots. Same conventions as :func:`polygon_integral_minv`; no input
+    validation. Component arrays ``(B, n)`` rather than ``np.cross`` on ``(..., 3)``, which is
+    several times slower."""
     M_inv = np.asarray(M_inv, np.float64)
     V = np.asarray(vertices, np.float64)
     n = V.shape[-2]
