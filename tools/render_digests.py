@@ -8,7 +8,8 @@ A guard for changes that must not change images (re-layering, moving kernels)::
 ``record`` writes the scenes as JSON files, so ``compare`` only needs
 :func:`prefilter.render.render` and the scene format. A method that cannot render a scene (wrong
 light type, ...) is recorded with its error message; ``compare`` reports methods whose success
-or failure changed. ``--rename OLD=NEW[?k=v&k=v]`` maps a method name of the record to a name (and parameters) of today's registry.
+or failure changed. ``--rename OLD=NEW[?k=v&k=v]`` maps a method name of the record to a name
+(and parameters) of today's registry.
 """
 
 from __future__ import annotations
