@@ -9,7 +9,8 @@ import pytest
 from PIL import Image
 
 from prefilter.errors import PrefilterError
-from prefilter.report.report import Report, line_plot, png_bytes, save_png
+from prefilter.report.report import Report, line_plot
+from prefilter.texture.io import png_bytes, save_png
 
 VOID = {"meta", "img", "br", "hr", "link", "input"}
 
