@@ -8,8 +8,29 @@ from __future__ import annotations
 
 import numpy as np
 
+from prefilter.jit import njit_inline
 from prefilter.validation import as_directions, as_roughness, as_uniform
 from prefilter.microfacet.base import MicrofacetModel
+
+
+def ggx_d_formula(ax, ay, x, y, z):
+    """GGX NDF ``1 / (pi ax ay (x^2/ax^2 + y^2/ay^2 + z^2)^2)`` of a unit normal ``(x, y, z)``
+    with ``z > 0`` (the caller masks ``z <= 0``) (Heitz 2014, eq. 85)."""
+    t = (x / ax) ** 2 + (y / ay) ** 2 + z * z
+    return 1.0 / (np.pi * ax * ay * t * t)
+
+
+def ggx_lambda_formula(ax, ay, x, y, z):
+    """Smith ``Lambda(w) = (-1 + sqrt(1 + (ax^2 x^2 + ay^2 y^2) / z^2)) / 2`` (Heitz 2014,
+    eq. 86), written as ``a2 / (1 + sqrt(1 + a2)) / 2`` to avoid cancellation near normal
+    incidence; ``z^2`` is floored at 1e-300 (grazing directions give a large finite value)."""
+    a2 = ((ax * x) ** 2 + (ay * y) ** 2) / np.maximum(z * z, 1e-300)
+    return a2 / (1.0 + np.sqrt(1.0 + a2)) / 2.0
+
+
+#: :func:`ggx_d_formula` and :func:`ggx_lambda_formula` compiled for kernels (scalars).
+ggx_d_jit = njit_inline(ggx_d_formula)
+ggx_lambda_jit = njit_inline(ggx_lambda_formula)
 
 
 class GGX(MicrofacetModel):
@@ -35,9 +56,8 @@ class GGX(MicrofacetModel):
     def D(self, m) -> np.ndarray:
         """GGX NDF ``1 / (pi ax ay (mx^2/ax^2 + my^2/ay^2 + mz^2)^2)``, 0 for ``mz <= 0``."""
         m = as_directions(m, "m")
-        ax, ay = self.alpha_x, self.alpha_y
-        t = (m[..., 0] / ax) ** 2 + (m[..., 1] / ay) ** 2 + m[..., 2] ** 2
-        return np.where(m[..., 2] > 0.0, 1.0 / (np.pi * ax * ay * t * t), 0.0)
+        d = ggx_d_formula(self.alpha_x, self.alpha_y, m[..., 0], m[..., 1], m[..., 2])
+        return np.where(m[..., 2] > 0.0, d, 0.0)
 
     def smith_lambda(self, w) -> np.ndarray:
         """Smith ``Lambda(w) = (-1 + sqrt(1 + (ax^2 wx^2 + ay^2 wy^2) / wz^2)) / 2``.
@@ -46,9 +66,7 @@ class GGX(MicrofacetModel):
         near normal incidence. Evaluated with ``|wz|`` (the horizon test lives in ``G1``/``G2``).
         """
         w = as_directions(w, "w", normalize=False)  # scale invariant: no need to renormalise
-        wz2 = np.maximum(w[..., 2] ** 2, 1e-300)
-        a2 = ((self.alpha_x * w[..., 0]) ** 2 + (self.alpha_y * w[..., 1]) ** 2) / wz2
-        return a2 / (1.0 + np.sqrt(1.0 + a2)) / 2.0
+        return ggx_lambda_formula(self.alpha_x, self.alpha_y, w[..., 0], w[..., 1], w[..., 2])
 
     def sample_vndf(self, wo, u) -> np.ndarray:
         """Visible normals ``m (..., 3)`` for views ``wo (..., 3)`` and uniforms ``u (..., 2)``.
