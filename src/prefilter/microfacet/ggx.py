@@ -33,6 +33,37 @@ ggx_d_jit = njit_inline(ggx_d_formula)
 ggx_lambda_jit = njit_inline(ggx_lambda_formula)
 
 
+@njit_inline
+def ggx_sample_vndf_jit(ax, ay, wox, woy, woz, u1, u2):
+    """:meth:`GGX.sample_vndf` for one view ``(wox, woy, woz)`` in kernels: the visible normal
+    ``(mx, my, mz)`` for uniforms ``u1, u2`` (Heitz 2018, listing 1; the same steps and
+    guards as the array method)."""
+    vx, vy, vz = ax * wox, ay * woy, woz
+    vn = np.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx / vn, vy / vn, vz / vn
+    lensq = vx * vx + vy * vy
+    if lensq > 1e-14:
+        inv = 1.0 / np.sqrt(lensq)
+        t1x, t1y, t1z = -vy * inv, vx * inv, 0.0
+    else:
+        t1x, t1y, t1z = 1.0, 0.0, 0.0
+    t2x = vy * t1z - vz * t1y
+    t2y = vz * t1x - vx * t1z
+    t2z = vx * t1y - vy * t1x
+    r = np.sqrt(u1)
+    phi = 2.0 * np.pi * u2
+    p1 = r * np.cos(phi)
+    p2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vz)
+    p2 = (1.0 - s) * np.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    p3 = np.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    mx = ax * (p1 * t1x + p2 * t2x + p3 * vx)
+    my = ay * (p1 * t1y + p2 * t2y + p3 * vy)
+    mz = max(1e-12, p1 * t1z + p2 * t2z + p3 * vz)
+    mn = np.sqrt(mx * mx + my * my + mz * mz)
+    return mx / mn, my / mn, mz / mn
+
+
 class GGX(MicrofacetModel):
     """Anisotropic GGX with roughness ``alpha_x`` (tangent) and ``alpha_y`` (bitangent).
 
