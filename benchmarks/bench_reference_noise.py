@@ -9,14 +9,15 @@ plane normal-mapped. For each, in the same run:
 * the old estimator (below, kept only as this comparison's baseline: stratified sub-pixel
   positions, one independent uniform MIS light/BRDF pair per position, 5 uniforms per pair) at
   ``--spp`` samples per pixel, timed (best of 2);
-* the new ``reference`` at the largest power-of-two sample count whose time does not exceed
-  the old one's;
+* the new ``reference`` at powers of two, then at the sample count whose time matches the old
+  one's (within 2 %);
 * relative MSE of each (:func:`prefilter.render.metrics.relmse`), the equal-time ratio
   ``relMSE_old / relMSE_new`` and the efficiency ratio ``relMSE_old t_old / (relMSE_new t_new)``;
 * bias check: both estimators at ``--bias-spp`` (4096) samples per pixel, the ratio of their image
-  means per channel (should be 1 within 0.1 %).
+  means per channel (should be 1 within 0.1 %), on a smaller image of the same view.
 
-Usage: ``python benchmarks/bench_reference_noise.py [--size 64x48] [--spp 64] [--truth 16384]``.
+Usage: ``python benchmarks/bench_reference_noise.py [--size 48x32] [--spp 64] [--truth 8192]
+[--bias-spp 4096] [--bias-size 32x24]``.
 """
 
 from __future__ import annotations
@@ -290,12 +291,14 @@ def new(scene, spp, seed):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--size", default="64x48")
+    ap.add_argument("--size", default="48x32")
+    ap.add_argument("--bias-size", default="32x24")
     ap.add_argument("--spp", type=int, default=64, help="the old estimator's samples per pixel")
-    ap.add_argument("--truth", type=int, default=16384, help="ground-truth pairs per pixel")
+    ap.add_argument("--truth", type=int, default=8192, help="ground-truth pairs per pixel")
     ap.add_argument("--bias-spp", type=int, default=4096)
     args = ap.parse_args()
     w, h = (int(v) for v in args.size.split("x"))
+    bw, bh = (int(v) for v in args.bias_size.split("x"))
     print(f"reference noise at equal time: {w}x{h}, one quad light, old at {args.spp} spp, "
           f"truth {args.truth} pairs/pixel")
     for name, sc in scenes(w, h).items():
@@ -309,27 +312,39 @@ def main() -> None:
         old, t_old = timed(lambda: render_old(scene, args.spp, 1))
         e_old = relmse(old, truth)
         rows = []
-        spp = 1
+        spp = 4
         while True:
             img, t = timed(lambda: new(scene, spp, 1))
             rows.append((spp, t, relmse(img, truth)))
             if t > t_old or spp >= args.truth // 4:
                 break
             spp *= 2
-        fit = [r for r in rows if r[1] <= t_old] or rows[:1]
-        spp_new, t_new, e_new = fit[-1]
+        # the sample count whose time matches the old estimator's (time ~ linear in spp),
+        # a multiple of 4 (whole runs of pairs), then shrunk until it is not slower
+        below = [r for r in rows if r[1] <= t_old] or rows[:1]
+        s0, t0 = below[-1][:2]
+        spp_eq = max(4, int(s0 * t_old / t0) // 4 * 4)
+        while True:
+            img, t_new = timed(lambda: new(scene, spp_eq, 1))
+            if t_new <= t_old * 1.02 or spp_eq <= 4:
+                break
+            spp_eq = max(4, int(spp_eq * t_old / t_new * 0.97) // 4 * 4)
+        spp_new, e_new = spp_eq, relmse(img, truth)
         print(f"  {name}:")
         print(f"    old  {args.spp:6d} spp  {t_old:6.3f} s  relMSE {e_old:.3e}")
         for s, t, e in rows:
             print(f"    new  {s:6d} spp  {t:6.3f} s  relMSE {e:.3e}")
         print(f"    truth's own relMSE (floor under the new estimator's): {floor:.1e}")
+        print(f"    new  {spp_new:6d} spp  {t_new:6.3f} s  relMSE {e_new:.3e}  (equal time)")
         print(f"    equal-time relMSE ratio (old / new at {spp_new} spp, "
-              f"{t_new:.3f} s <= {t_old:.3f} s): {e_old / e_new:.1f}x; efficiency "
+              f"{t_new:.3f} s vs {t_old:.3f} s): {e_old / e_new:.1f}x; efficiency "
               f"(relMSE x time) ratio {e_old * t_old / (e_new * t_new):.1f}x")
-        a = render_old(scene, args.bias_spp, 7)
-        b = new(scene, args.bias_spp, 7)
+        # bias: both at bias_spp on a smaller image of the same view (the old one is slow)
+        small = load_scene(scenes(bw, bh)[name])
+        a = render_old(small, args.bias_spp, 7)
+        b = new(small, args.bias_spp, 7)
         ratio = b.reshape(-1, 3).mean(0) / a.reshape(-1, 3).mean(0)
-        print(f"    mean ratio new / old at {args.bias_spp} spp: "
+        print(f"    mean ratio new / old at {args.bias_spp} spp ({bw}x{bh}): "
               + " ".join(f"{r:.5f}" for r in ratio)
               + f"  (max deviation {np.max(np.abs(ratio - 1)) * 100:.3f} %)")
 

@@ -101,12 +101,14 @@ def owen_sobol_kernel(base, m, pixels, key, n, out):
     for p in prange(pixels.shape[0]):
         s = hash32(key ^ hash32(pixels[p]))
         shuffle = hash32(s + 0x68E31DA4)
+        seeds = np.empty(dims, np.int64)
+        for d in range(dims):
+            seeds[d] = hash32(s + 0x9E3779B9 * (d + 1))
         for j in range(n):
             # the low m bits of a nested scramble of j < 2^m: a permutation of [0, 2^m)
             k = owen_scramble32(j, shuffle) & mask
             for d in range(dims):
-                seed_d = hash32(s + 0x9E3779B9 * (d + 1))
-                out[p, j, d] = owen_scramble32(base[k, d], seed_d) * (1.0 / 4294967296.0)
+                out[p, j, d] = owen_scramble32(base[k, d], seeds[d]) * (1.0 / 4294967296.0)
 
 
 def owen_sobol(pixels, n: int, dims: int, seed: int, block: int) -> np.ndarray:
@@ -211,6 +213,8 @@ class MaterialLobe(Lobe):
 def mis_weight(p_s, p_other, heuristic: str):
     """MIS weight divided by the sampling density: ``1 / (p_s + p_o)`` (balance) or
     ``p_s / (p_s^2 + p_o^2)`` (power); 0 where ``p_s = 0``."""
+    if heuristic not in HEURISTICS:
+        raise ValueError(f"heuristic: expected one of {HEURISTICS}, got {heuristic!r}")
     if heuristic == "balance":
         den = p_s + p_other
         num = np.ones_like(p_s)
@@ -310,11 +314,12 @@ def _mis_over(p_s, p_o, power):
 
 @njit_parallel
 def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, u, power,
-                        out, hit):
+                        keep, acc, out, hit):
     """:func:`mis_quad` for :class:`MaterialLobe` over ``K`` sample pairs per shading point.
 
-    ``u (N, K, 4)``; writes ``out[i, k, s]`` (rgb) and ``hit[i, k, s]`` (point on the light)
-    for the light (``s = 0``) and lobe (``s = 1``) samples of pair ``k``.
+    ``u (N, K, 4)``; writes ``acc[i]`` (rgb), the sum of all terms of point ``i``, and with
+    ``keep`` also ``out[i, k, s]`` (rgb) and ``hit[i, k, s]`` (point on the light) for the
+    light (``s = 0``) and lobe (``s = 1``) samples of pair ``k``.
     """
     n = pos.shape[0]
     npairs = u.shape[1]
@@ -341,10 +346,13 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
         tot = s + dsum
         p_spec = min(max(s / tot, 0.05), 1.0) if tot > 0.0 else 0.5
         px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
+        for k in range(3):
+            acc[i, k] = 0.0
         for j in range(npairs):
-            for q in range(2):
-                for k in range(3):
-                    out[i, j, q, k] = 0.0
+            if keep:
+                for q in range(2):
+                    for k in range(3):
+                        out[i, j, q, k] = 0.0
             # -- light sample: uniform on the area (sample_quad_area) --
             u0 = u[i, j, 0]
             if u0 < p1:
@@ -360,7 +368,8 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
             lx = verts[0, 0] + b1 * (verts[c_i, 0] - verts[0, 0]) + b2 * (verts[b_i, 0] - verts[0, 0])
             ly = verts[0, 1] + b1 * (verts[c_i, 1] - verts[0, 1]) + b2 * (verts[b_i, 1] - verts[0, 1])
             lz = verts[0, 2] + b1 * (verts[c_i, 2] - verts[0, 2]) + b2 * (verts[b_i, 2] - verts[0, 2])
-            hit[i, j, 0, 0], hit[i, j, 0, 1], hit[i, j, 0, 2] = lx, ly, lz
+            if keep:
+                hit[i, j, 0, 0], hit[i, j, 0, 1], hit[i, j, 0, 2] = lx, ly, lz
             dx, dy, dz = lx - px, ly - py, lz - pz
             dist2 = dx * dx + dy * dy + dz * dz
             dist = np.sqrt(dist2)
@@ -378,9 +387,12 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
                                             p_spec, f)
                     w = _mis_over(pl, pb, power)
                     for k in range(3):
-                        out[i, j, 0, k] = f[k] * w
+                        acc[i, k] += f[k] * w
+                        if keep:
+                            out[i, j, 0, k] = f[k] * w
             # -- lobe sample: GGX visible normal reflected, or cosine (sample_brdf) --
-            hit[i, j, 1, 0], hit[i, j, 1, 1], hit[i, j, 1, 2] = px, py, pz
+            if keep:
+                hit[i, j, 1, 0], hit[i, j, 1, 1], hit[i, j, 1, 2] = px, py, pz
             ua = u[i, j, 2]
             if ua < p_spec:
                 ua = min(ua / p_spec, 1.0 - 2.0**-53)
@@ -411,13 +423,16 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
                         if cr < 0.0:
                             inside = False
                     if inside:
-                        hit[i, j, 1, 0], hit[i, j, 1, 1], hit[i, j, 1, 2] = hx, hy, hz
+                        if keep:
+                            hit[i, j, 1, 0], hit[i, j, 1, 1], hit[i, j, 1, 2] = hx, hy, hz
                         plb = t * t / (area * cos_l)
                         pb = _material_eval_pdf(wox, woy, woz, bx, by, bz, axi, ayi, base[i],
                                                 f0[i], p_spec, f)
                         w = _mis_over(pb, plb, power)
                         for k in range(3):
-                            out[i, j, 1, k] = f[k] * w
+                            acc[i, k] += f[k] * w
+                            if keep:
+                                out[i, j, 1, k] = f[k] * w
 
 
 @njit_inline
@@ -437,21 +452,26 @@ def _cosine_hemisphere(u1, u2):
 
 
 def material_mis(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, u, *,
-                 heuristic: str = "balance"):
+                 heuristic: str = "balance", keep: bool = True):
     """:func:`mis_quad` of :class:`MaterialLobe` by :func:`material_mis_kernel` for ``K``
-    sample pairs per point: ``u (N, K, 4)`` -> ``terms (N, K, 2, 3)``, ``points (N, K, 2, 3)``
-    (same numbers as :func:`mis_quad` to rounding)."""
+    sample pairs per point: ``u (N, K, 4)`` -> ``total (N, 3)`` (the sum of all terms) and,
+    with ``keep``, ``terms (N, K, 2, 3)``, ``points (N, K, 2, 3)`` (same numbers as
+    :func:`mis_quad` to rounding; ``None`` without ``keep``)."""
+    if heuristic not in HEURISTICS:
+        raise ValueError(f"heuristic: expected one of {HEURISTICS}, got {heuristic!r}")
     n, k = u.shape[0], u.shape[1]
 
     def c(a, shape):
         return np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=np.float64), shape))
 
-    terms = np.empty((n, k, 2, 3))
-    points = np.empty((n, k, 2, 3))
+    total = np.empty((n, 3))
+    shape = (n, k, 2, 3) if keep else (1, 1, 2, 3)
+    terms = np.empty(shape)
+    points = np.empty(shape)
     serial(material_mis_kernel, n * k)(
         c(position, (n, 3)), c(ts, (n, 3)), c(bs, (n, 3)), c(ns, (n, 3)), c(wo, (n, 3)),
         c(alpha_x, (n,)), c(alpha_y, (n,)), c(base_color, (n, 3)), c(f0, (n, 3)),
         np.ascontiguousarray(light.vertices, dtype=np.float64),
         np.ascontiguousarray(light.normal, dtype=np.float64), float(light.area),
-        c(u, (n, k, DIMS_PER_QUAD)), heuristic == "power", terms, points)
-    return terms, points
+        c(u, (n, k, DIMS_PER_QUAD)), heuristic == "power", keep, total, terms, points)
+    return (total, terms, points) if keep else (total, None, None)

@@ -87,9 +87,13 @@ def estimate_quad_fast(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_c
     u = np.asarray(u, dtype=np.float64)
     if u.ndim == 2:
         u = u[:, None]
-    terms, points = material_mis(_geometry(light), position, ts, bs, ns, wo, alpha_x, alpha_y,
-                                 base_color, f0, u, heuristic=heuristic)
-    return _combine(light, terms, points)
+    textured = getattr(light, "texture", None) is not None
+    total, terms, points = material_mis(_geometry(light), position, ts, bs, ns, wo, alpha_x,
+                                        alpha_y, base_color, f0, u, heuristic=heuristic,
+                                        keep=textured)
+    if textured:
+        return _combine(light, terms, points)
+    return total * (light.radiance / u.shape[1])
 
 
 def _combine(light, terms, points) -> np.ndarray:
@@ -172,7 +176,8 @@ def pairs_per_position(spp: int, pairs: int = PAIRS_PER_POSITION) -> int:
 POSITION_BLOCK = 0
 
 
-def render_reference(scene, settings, *, pairs: int | None = None) -> np.ndarray:
+def render_reference(scene, settings, *, pairs: int | None = None,
+                     heuristic: str = "balance") -> np.ndarray:
     """The ``reference`` method: ground truth for ``scene`` at ``settings.spp`` samples per pixel.
 
     Per pixel ``spp / K`` sub-pixel positions (whole pixel footprint), level-0 bilinear textures,
@@ -213,7 +218,8 @@ def render_reference(scene, settings, *, pairs: int | None = None) -> np.ndarray
                 a = surface_attributes(scene, gh, filtered=False)
                 rad[g.hit] = shade_reference(gh.position, a["t"], a["b"], a["n"], gh.view,
                                              a["alpha_x"], a["alpha_y"], a["base_color"],
-                                             a["f0"], lights, u[g.hit], textured=textured)
+                                             a["f0"], lights, u[g.hit], textured=textured,
+                                             heuristic=heuristic)
             rad = rad.reshape(len(rows), w, npos, 3)
             image[r0:r0 + len(rows)] = rad.mean(axis=2)
             bar.update(len(rows))
