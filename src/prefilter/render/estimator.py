@@ -259,7 +259,8 @@ def mis_quad(lobe: Lobe, light, position, ts, bs, ns, wo, u, *, heuristic: str =
     wb = to_world(wb_loc, ts, bs, ns)
     plb = quad_light_pdf(light, position, wb)
     f_b = np.asarray(lobe.eval(wo, wb_loc))
-    w_b = mis_weight(lobe.pdf(wo, wb_loc), plb, heuristic)
+    # a lobe ray that misses the light carries no radiance
+    w_b = np.where(plb > 0.0, mis_weight(lobe.pdf(wo, wb_loc), plb, heuristic), 0.0)
     if f_l.ndim > 1:
         w_l, w_b = w_l[:, None], w_b[:, None]
     terms = np.stack([f_l * w_l, f_b * w_b], axis=1)
