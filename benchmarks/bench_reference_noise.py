@@ -252,8 +252,8 @@ def render_old(scene, spp: int, seed: int) -> np.ndarray:
         wo = local_view(g.view, ts, bs, ns)
         out = shade_delta_lights(g.position, ts, bs, ns, wo, a["alpha_x"], a["alpha_y"],
                                  a["base_color"], a["f0"], lights)
-        uq = u.reshape(n, q, OLD_DIMS_PER_QUAD)
         for k, ql in enumerate(lights.quads):
+            uq = u.reshape(n, q, OLD_DIMS_PER_QUAD)
             res = np.empty((n, 2, 3))
             hit = np.empty((n, 2, 3))
             old_quad_kernel(g.position, ts, bs, ns, wo, a["alpha_x"], a["alpha_y"],

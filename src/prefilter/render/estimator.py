@@ -12,7 +12,8 @@ for the material lobe of the renderer (:class:`MaterialLobe`) in Numba, tested e
 Sample points (:func:`owen_sobol`): the first ``2^m`` points of the Sobol sequence (Joe and Kuo
 direction numbers, :class:`scipy.stats.qmc.Sobol`), their order shuffled and their coordinates
 nested-uniform (Owen) scrambled per pixel with the hash of Laine and Karras as in Burley 2020
-("Practical hash-based Owen scrambling", JCGT 9(4), listings 1-3). Each point stays uniform on
+("Practical hash-based Owen scrambling", JCGT 9(4), listings 1-3; the hash of
+Vegdahl 2021). Each point stays uniform on
 ``[0, 1)^d`` (the estimator is unbiased) while each pixel's set keeps the Sobol stratification
 (errors fall faster than ``n^-1/2`` for integrands of bounded variation). Every sample block
 (sub-pixel position; light and lobe of one quad light) uses the first Sobol dimensions with its
@@ -82,13 +83,15 @@ def reverse32(x):
 @njit_inline
 def owen_scramble32(x, seed):
     """Nested uniform scramble of a 32-bit fixed-point number: bit ``k`` is flipped by a hash of
-    the bits above it (Burley 2020, listing 3, Laine-Karras permutation of the reversed bits)."""
+    the bits above it (Burley 2020, listing 3: a Laine-Karras-style permutation of the reversed
+    bits, with the constants of Vegdahl 2021, "Building a better LK hash", whose low bits are
+    uniform enough that pixel means of sharp features show no bias at 1024 points)."""
     x = reverse32(x)
+    x ^= (x * 0x3D20ADEA) & 0xFFFFFFFF
     x = (x + seed) & 0xFFFFFFFF
-    x ^= (x * 0x6C50B47C) & 0xFFFFFFFF
-    x ^= (x * 0xB82F1E52) & 0xFFFFFFFF
-    x ^= (x * 0xC7AFE638) & 0xFFFFFFFF
-    x ^= (x * 0x8D22F6E6) & 0xFFFFFFFF
+    x = (x * ((seed >> 16) | 1)) & 0xFFFFFFFF
+    x ^= (x * 0x05526C56) & 0xFFFFFFFF
+    x ^= (x * 0x53A22864) & 0xFFFFFFFF
     return reverse32(x)
 
 

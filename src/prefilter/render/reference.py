@@ -191,7 +191,8 @@ def render_reference(scene, settings, *, pairs: int | None = None,
     lights, textured = split_lights(scene, "reference")
     nq = len(lights.quads) + len(textured)
     spp = settings.spp
-    k = pairs_per_position(spp) if pairs is None else int(pairs)
+    # without quad lights there is nothing to pair: every sample is a sub-pixel position
+    k = (pairs_per_position(spp) if nq else 1) if pairs is None else int(pairs)
     npos = -(-spp // k)
     cam = scene.camera
     h, w = cam.height, cam.width
