@@ -30,10 +30,10 @@ import numpy as np
 from prefilter.jit import njit_inline, njit_parallel, prange, serial
 from prefilter.lobe import Lobe, sample_weight
 from prefilter.microfacet import GGX, reflect
-from prefilter.microfacet.fresnel import schlick_jit
+from prefilter.microfacet.fresnel import schlick, schlick_jit
 from prefilter.microfacet.ggx import ggx_d_jit, ggx_lambda_jit, ggx_sample_vndf_jit
 from prefilter.render.lights import quad_light_pdf, quad_light_sample, sample_quad_area
-from prefilter.render.shading import brdf_cos, schlick
+from prefilter.render.shading import brdf_cos
 from prefilter.sphere.sampling import cosine_hemisphere, to_local, to_world
 
 #: Uniforms per quad light per sample: light point (2) and lobe direction (2).
@@ -147,7 +147,7 @@ def specular_probability(wo, base_color, f0) -> np.ndarray:
     Proportional to a rough estimate of each lobe's reflectance (Fresnel at the view vs the
     diffuse albedo); any value in (0, 1] keeps the estimator unbiased, this one lowers variance.
     """
-    s = np.mean(schlick(f0, wo[:, 2]), axis=-1)
+    s = np.mean(schlick(f0, wo[:, 2, None]), axis=-1)
     d = np.mean(base_color, axis=-1)
     tot = s + d
     return np.where(tot > 0.0, np.clip(s / np.where(tot > 0, tot, 1.0), 0.05, 1.0), 0.5)
