@@ -6,33 +6,18 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from prefilter.lobe import Lobe, sample_weight
 from prefilter.microfacet import GGX
 from prefilter.render.estimator import (
+    Lambert,
     MaterialLobe,
     material_mis,
     mis_quad,
     owen_sobol,
 )
 from prefilter.render.lights import QuadLight
-from prefilter.sphere.sampling import cosine_hemisphere
 
 # A 1 x 0.6 rectangle at height 1.2, shifted sideways, emitting downwards.
 RECT = np.array([[0.2, -0.3, 1.2], [0.2, 0.3, 1.2], [1.2, 0.3, 1.2], [1.2, -0.3, 1.2]])
-
-
-class Lambert(Lobe):
-    """``max(0, wi_z) / pi``, cosine sampled: the lobe with a closed-form polygon integral."""
-
-    def eval(self, wo, wi):
-        return np.maximum(wi[..., 2], 0.0) / np.pi
-
-    def pdf(self, wo, wi):
-        return np.maximum(wi[..., 2], 0.0) / np.pi
-
-    def sample(self, wo, u):
-        wi = cosine_hemisphere(u)
-        return wi, sample_weight(self.eval(wo, wi), self.pdf(wo, wi))
 
 
 def lambert_form_factor(vertices) -> float:

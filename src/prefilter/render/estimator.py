@@ -210,6 +210,27 @@ class MaterialLobe(Lobe):
         return wi, sample_weight(self.eval(wo, wi), self.pdf(wo, wi))
 
 
+class Lambert(Lobe):
+    """A Lambertian lobe ``rho max(0, wi_z) / pi``, cosine sampled (weight ``rho``); ``rho``
+    scalar or ``(N,)``."""
+
+    def __init__(self, rho=1.0):
+        self.rho = rho
+
+    def eval(self, wo, wi) -> np.ndarray:
+        return self.rho * np.maximum(np.asarray(wi)[..., 2], 0.0) / np.pi
+
+    def pdf(self, wo, wi) -> np.ndarray:
+        return np.maximum(np.asarray(wi)[..., 2], 0.0) / np.pi
+
+    def sample(self, wo, u):
+        wi = cosine_hemisphere(u)
+        return wi, sample_weight(self.eval(wo, wi), self.pdf(wo, wi))
+
+    def albedo(self, wo) -> np.ndarray:
+        return np.broadcast_to(np.asarray(self.rho, dtype=np.float64), np.shape(wo)[:-1])
+
+
 # ------------------------------------------------------------------------ the MIS estimator
 
 
@@ -228,8 +249,46 @@ def mis_weight(p_s, p_other, heuristic: str):
     return np.where(ok, num / np.where(ok, den, 1.0), 0.0)
 
 
+def mis_directions(lobe: Lobe, wo, wl, p_light, light_pdf_at, u_lobe, *,
+                   heuristic: str = "balance"):
+    """The two terms of one-sample-per-strategy MIS for any light, before its radiance.
+
+    Parameters
+    ----------
+    lobe : Lobe
+        Batched over ``N`` points (``eval (N,)`` or ``(N, C)``).
+    wo : (N, 3)
+        Views in the shading frame.
+    wl : (N, 3)
+        The light strategy's sampled directions (shading frame), with densities
+        ``p_light (N,)`` (0 where the light does not emit).
+    light_pdf_at : callable((N, 3) shading-frame directions) -> (N,)
+        The light strategy's density at the lobe's samples.
+    u_lobe : (N, 2)
+        Uniforms of the lobe samples.
+
+    Returns
+    -------
+    t_light : (N,) or (N, C)
+        ``f(wl) w_light(wl) / p_light(wl)``: times the radiance from ``wl``, the light term.
+    wb : (N, 3)
+        The lobe's sampled directions.
+    t_lobe : (N,) or (N, C)
+        ``f(wb) w_lobe(wb) / p_lobe(wb)``, 0 where ``light_pdf_at(wb) = 0`` (no emission).
+    """
+    f_l = np.asarray(lobe.eval(wo, wl))
+    w_l = mis_weight(p_light, lobe.pdf(wo, wl), heuristic)
+    wb, _ = lobe.sample(wo, u_lobe)
+    p_lb = light_pdf_at(wb)
+    f_b = np.asarray(lobe.eval(wo, wb))
+    w_b = np.where(p_lb > 0.0, mis_weight(lobe.pdf(wo, wb), p_lb, heuristic), 0.0)
+    if f_l.ndim > 1:
+        w_l, w_b = w_l[:, None], w_b[:, None]
+    return f_l * w_l, wb, f_b * w_b
+
+
 def mis_quad(lobe: Lobe, light, position, ts, bs, ns, wo, u, *, heuristic: str = "balance"):
-    """One-sample-per-strategy MIS estimate of the light one quad reflects through ``lobe``.
+    """:func:`mis_directions` for a quad light sampled uniformly on its area.
 
     Parameters
     ----------
@@ -256,21 +315,15 @@ def mis_quad(lobe: Lobe, light, position, ts, bs, ns, wo, u, *, heuristic: str =
     wl, pl = quad_light_sample(light, position, u[:, 0:2])
     wl_loc = to_local(wl, ts, bs, ns)
     wl_loc /= np.linalg.norm(wl_loc, axis=-1, keepdims=True)
-    f_l = np.asarray(lobe.eval(wo, wl_loc))
-    w_l = mis_weight(pl, lobe.pdf(wo, wl_loc), heuristic)
-    wb_loc, _ = lobe.sample(wo, u[:, 2:4])
-    wb = to_world(wb_loc, ts, bs, ns)
-    plb = quad_light_pdf(light, position, wb)
-    f_b = np.asarray(lobe.eval(wo, wb_loc))
-    # a lobe ray that misses the light carries no radiance
-    w_b = np.where(plb > 0.0, mis_weight(lobe.pdf(wo, wb_loc), plb, heuristic), 0.0)
-    if f_l.ndim > 1:
-        w_l, w_b = w_l[:, None], w_b[:, None]
-    terms = np.stack([f_l * w_l, f_b * w_b], axis=1)
+    t_l, wb_loc, t_b = mis_directions(
+        lobe, wo, wl_loc, pl, lambda w: quad_light_pdf(light, position, to_world(w, ts, bs, ns)),
+        u[:, 2:4], heuristic=heuristic)
+    terms = np.stack([t_l, t_b], axis=1)
     # the point the light sample drew (same uniforms, same warp) and the lobe ray's hit
+    wb = to_world(wb_loc, ts, bs, ns)
     n = light.normal
     cos_l = -(wb @ n)
-    hit = plb > 0.0
+    hit = quad_light_pdf(light, position, wb) > 0.0
     t = np.where(hit, ((light.vertices[0] - position) @ n) / np.where(hit, -cos_l, 1.0), 0.0)
     points = np.stack([sample_quad_area(light.vertices, u[:, 0:2]),
                        position + t[:, None] * wb], axis=1)
