@@ -106,7 +106,7 @@ def test_directional_light_on_a_plane_matches_closed_form():
 
 def test_reference_noise_falls_as_inverse_square_root():
     # Two independent renders differ by sqrt(2) times the error of one; the slope of log RMSE vs
-    # log spp must be about -1/2.
+    # log spp must be -1/2 (Monte Carlo) or steeper (the reference's scrambled Sobol points).
     s = _scene()
     spps = [2, 8, 32]
     rmse = []
@@ -115,7 +115,7 @@ def test_reference_noise_falls_as_inverse_square_root():
         b = render(s, "reference", spp=n, seed=11)
         rmse.append(np.sqrt(np.mean((a - b) ** 2) / 2))
     slope = np.polyfit(np.log(spps), np.log(rmse), 1)[0]
-    assert -0.62 < slope < -0.38, (rmse, slope)
+    assert -1.5 < slope < -0.38, (rmse, slope)
 
 
 @pytest.mark.slow
@@ -125,7 +125,7 @@ def test_reference_converges_to_high_spp_image():
     spps = [4, 16, 64, 256]
     rmse = [np.sqrt(np.mean((render(s, "reference", spp=n, seed=1) - truth) ** 2)) for n in spps]
     slope = np.polyfit(np.log(spps), np.log(rmse), 1)[0]
-    assert -0.6 < slope < -0.4, (rmse, slope)
+    assert -1.5 < slope < -0.4, (rmse, slope)  # -1/2 or steeper (scrambled Sobol points)
 
 
 def test_ltc_agrees_with_reference_on_a_flat_plane():

@@ -18,13 +18,8 @@ from prefilter.render.lights import (
     quad_light_sample,
     sample_quad_area,
 )
-from prefilter.render.reference import (
-    estimate_quad,
-    pdf_brdf,
-    sample_brdf,
-    shade_reference,
-    stratified_offsets,
-)
+from prefilter.render.estimator import pdf_brdf, sample_brdf
+from prefilter.render.reference import estimate_quad, shade_reference, stratified_offsets
 from prefilter.render.shading import brdf_cos, local_view
 from prefilter.sphere.sampling import uniform_sphere
 
@@ -60,7 +55,7 @@ def _quadrature(light, wo, ax, ay, base, f0, panels=48, order=8):
 
 def _mis(light, wo, ax, ay, base, f0, n, seed):
     t, b, nn = _frame(n)
-    u = np.random.default_rng(seed).random((n, 5))
+    u = np.random.default_rng(seed).random((n, 4))
     est = estimate_quad(light, np.zeros((n, 3)), t, b, nn, np.tile(wo, (n, 1)), np.full(n, ax),
                         np.full(n, ay), np.tile(base, (n, 1)), np.tile(f0, (n, 1)), u)
     return est.mean(0), est.std(0) / np.sqrt(n)
@@ -125,7 +120,7 @@ def test_brdf_pdf_integrates_to_one(theta):
         est = pdf_brdf(wot, w, np.full(n, ax), np.full(n, ay), np.full(n, 0.7)) * 4 * np.pi
         assert abs(est.mean() - 1.0) < 5 * est.std() / np.sqrt(n)
     # And the sampler lands where its density says: mean of 1/pdf over its samples = 4 pi.
-    wi = sample_brdf(wot, np.random.default_rng(6).random((n, 3)), np.full(n, 0.4),
+    wi = sample_brdf(wot, np.random.default_rng(6).random((n, 2)), np.full(n, 0.4),
                      np.full(n, 0.4), np.full(n, 0.7))
     p = pdf_brdf(wot, wi, np.full(n, 0.4), np.full(n, 0.4), np.full(n, 0.7))
     assert np.all(p > 0)
@@ -186,7 +181,7 @@ def test_white_furnace_box(theta, ax, ay):
     wo = np.array([np.sin(t) * 0.6, np.sin(t) * 0.8, np.cos(t)])
     n = 100_000
     tt, bb, nn = _frame(n)
-    u = np.random.default_rng(9).random((n, len(lights.quads), 5))
+    u = np.random.default_rng(9).random((n, len(lights.quads), 4))
     base = np.tile([0.5, 0.0, 0.0], (n, 1))
     f0 = np.tile([1.0, 1.0, 0.0], (n, 1))
     est = shade_reference(np.zeros((n, 3)), tt, bb, nn, np.tile(wo, (n, 1)), np.full(n, ax),
@@ -209,7 +204,7 @@ def test_mis_error_falls_as_inverse_square_root():
     for n in (16, 256):
         trials = 400
         t, b, nn = _frame(n * trials)
-        u = rng.random((n * trials, 5))
+        u = rng.random((n * trials, 4))
         est = estimate_quad(light, np.zeros((n * trials, 3)), t, b, nn,
                             np.tile(wo, (n * trials, 1)),
                             np.full(n * trials, 0.3), np.full(n * trials, 0.3),
@@ -245,8 +240,8 @@ def test_shade_reference_deterministic():
     t, b, nn = _frame(n)
     args = (np.zeros((n, 3)), t, b, nn, np.tile([0, 0, 1.0], (n, 1)), np.full(n, 0.3),
             np.full(n, 0.3), np.full((n, 3), 0.5), np.full((n, 3), 0.04), lights)
-    a = shade_reference(*args, np.random.default_rng(12).random((n, 1, 5)))
-    b2 = shade_reference(*args, np.random.default_rng(12).random((n, 1, 5)))
+    a = shade_reference(*args, np.random.default_rng(12).random((n, 1, 4)))
+    b2 = shade_reference(*args, np.random.default_rng(12).random((n, 1, 4)))
     assert a.tobytes() == b2.tobytes()
 
 
@@ -262,7 +257,7 @@ def test_numba_kernel_matches_numpy_estimator():
     wo[:, 2] = np.abs(wo[:, 2]) + 0.02
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
     args = (pos, t, b, nn, wo, rng.uniform(0.01, 1, n), rng.uniform(0.01, 1, n),
-            rng.random((n, 3)), rng.random((n, 3)), rng.random((n, 5)))
+            rng.random((n, 3)), rng.random((n, 3)), rng.random((n, 4)))
     light = QuadLight(RECT, [1.0, 2.0, 3.0])
     a = estimate_quad(light, *args)
     k = estimate_quad_fast(light, *args)

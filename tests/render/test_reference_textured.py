@@ -72,7 +72,7 @@ def test_constant_texture_equals_scaled_untextured_light():
     c = np.array([0.3, 0.7, 1.5])
     light = TexturedQuad(RECT, RADIANCE, LightTexture(np.broadcast_to(c, (3, 5, 3))))
     n = 200_000
-    u = np.random.default_rng(1).random((n, 5))
+    u = np.random.default_rng(1).random((n, 4))
     est = estimate_quad_fast(light, *_args(n, WO, 0.3, 0.3, BASE, F0), u)
     ref = _quadrature(RECT, RADIANCE * c, WO, 0.3, 0.3, BASE, F0)
     m, se = est.mean(0), est.std(0) / np.sqrt(n)
@@ -94,7 +94,7 @@ def test_two_colour_texture_is_the_sum_of_two_half_quads(axis, theta, ax, ay):
     t, phi = np.radians(theta), np.radians(30.0)  # off both symmetry planes of the light
     wo = np.array([-np.sin(t) * np.cos(phi), -np.sin(t) * np.sin(phi), np.cos(t)])
     n = 200_000
-    u = np.random.default_rng(2).random((n, 5))
+    u = np.random.default_rng(2).random((n, 4))
     est = estimate_quad_fast(light, *_args(n, wo, ax, ay, BASE, F0), u)
     # texture u runs along v1 - v0, v along v3 - v0
     v0, v1, v2, v3 = RECT
@@ -123,7 +123,7 @@ def test_kernel_matches_numpy_estimator_with_texture():
     wo /= np.linalg.norm(wo, axis=-1, keepdims=True)
     args = (rng.normal(size=(n, 3)) * 0.4, q[:, :, 0], q[:, :, 1], q[:, :, 2], wo,
             rng.uniform(0.01, 1, n), rng.uniform(0.01, 1, n), rng.random((n, 3)),
-            rng.random((n, 3)), rng.random((n, 5)))
+            rng.random((n, 3)), rng.random((n, 4)))
     light = TexturedQuad(RECT, RADIANCE, LightTexture(rng.random((7, 9, 3))))
     a = estimate_quad(light, *args)
     k = estimate_quad_fast(light, *args)
@@ -136,7 +136,7 @@ def test_shade_reference_takes_textured_quads_after_the_plain_ones():
     c = 0.25
     light = QuadLight(RECT, RADIANCE)
     tq = TexturedQuad(RECT, RADIANCE, LightTexture(np.full((2, 2), c)))  # one channel
-    u = np.random.default_rng(4).random((n, 2, 5))
+    u = np.random.default_rng(4).random((n, 2, 4))
     args = _args(n, WO, 0.3, 0.3, BASE, F0)
     both = shade_reference(*args, LightSet(quads=(light,)), u, textured=(tq,))
     one = shade_reference(*args, LightSet(quads=(light,)), u[:, :1])

@@ -256,47 +256,45 @@ def _frames(n):
 def _env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, visible=None,
                    rot=None):
     """MIS estimates ``(P, C)`` of ``integral L(wi) f(wo, wi) <n, wi> V(p, wi) dwi`` at points with
-    unit normals ``n (P, 3)`` seen from ``wo (3,)`` or ``(P, 3)``: ``spp / 2`` micro-BRDF samples
-    (Beckmann VNDF or cosine) and ``spp / 2`` environment samples, balance heuristic.
+    unit normals ``n (P, 3)`` seen from ``wo (3,)`` or ``(P, 3)``: ``spp / 2`` pairs of a micro-BRDF
+    sample (Beckmann VNDF or cosine) and an environment sample, balance heuristic
+    (:func:`prefilter.render.estimator.mis_directions`), from a scrambled Sobol set per point
+    (:func:`prefilter.render.estimator.owen_sobol`, seeded by ``rng``).
     ``visible(idx, wi) -> bool`` tests shadow rays of point ``idx`` (``None``: no shadowing);
     ``rot (3, 3)`` maps local directions to the map's coordinates (``None``: identity)."""
+    from prefilter.render.estimator import Lambert, mis_directions, owen_sobol
+
     p = len(n)
     half = max(1, spp // 2)
     t, b = _frames(n)
-    loc = lambda w, q: np.stack([np.sum(w * t[q], -1), np.sum(w * b[q], -1),  # noqa: E731
-                                 np.sum(w * n[q], -1)], -1)
     idx = np.repeat(np.arange(p), half)
-    lo = loc(np.broadcast_to(wo, (p, 3))[idx], idx)
-    model = Beckmann.isotropic(np.sqrt(2.0) * sigma_b) if specular else None
-    # BRDF samples, in each point's micro frame.
-    u = rng.random((idx.size, 2))
-    if specular:
-        m = model.sample_vndf(np.where(lo[:, 2:] > 1e-9, lo, [0.0, 0.0, 1.0]), u)
-        li_b = 2.0 * np.sum(lo * m, -1, keepdims=True) * m - lo
-    else:
-        r, ph = np.sqrt(u[:, 0]), 2.0 * np.pi * u[:, 1]
-        li_b = np.stack([r * np.cos(ph), r * np.sin(ph), np.sqrt(np.maximum(1 - u[:, 0], 0))], -1)
-    wi_b = li_b[:, :1] * t[idx] + li_b[:, 1:2] * b[idx] + li_b[:, 2:] * n[idx]
-    wi_e, _ = sampler.sample(rng.random((idx.size, 3)))
+    tq, bq, nq = t[idx], b[idx], n[idx]
+
+    def loc(w):
+        return np.stack([np.sum(w * tq, -1), np.sum(w * bq, -1), np.sum(w * nq, -1)], -1)
+
+    def world(li):
+        return li[:, :1] * tq + li[:, 1:2] * bq + li[:, 2:] * nq
+
+    def to_map(w):
+        return w if rot is None else w @ rot.T
+
+    lo = loc(np.broadcast_to(wo, (p, 3))[idx])
+    seen = lo[:, 2] > 1e-9
+    lo = np.where(seen[:, None], lo, [0.0, 0.0, 1.0])  # views below a micro normal: no light
+    lobe = Beckmann.isotropic(np.sqrt(2.0) * sigma_b) if specular else Lambert(albedo)
+    # each point's pairs: a scrambled Sobol set over (lobe 2, environment 3) dimensions
+    u = owen_sobol(np.arange(p), half, 5, int(rng.integers(1 << 32)), 0).reshape(-1, 5)
+    u_b = u[:, :2]
+    wi_e, _ = sampler.sample(u[:, 2:])
+    p_e = sampler.pdf(wi_e)
     if rot is not None:
         wi_e = wi_e @ rot  # map -> local (rot is orthogonal)
-    li_e = loc(wi_e, idx)
+    t_e, li_b, t_b = mis_directions(lobe, lo, loc(wi_e), p_e,
+                                    lambda li: sampler.pdf(to_map(world(li))), u_b)
     all_idx = np.concatenate([idx, idx])
-    wi = np.concatenate([wi_b, wi_e])
-    li = np.concatenate([li_b, li_e])
-    lo2 = np.concatenate([lo, lo])
-    wmap = wi if rot is None else wi @ rot.T
-    ok = (lo2[:, 2] > 1e-9) & (li[:, 2] > 1e-9)
-    f = np.zeros(len(wi))
-    pb = np.zeros(len(wi))
-    if specular:
-        f[ok] = model.eval(lo2[ok], li[ok])
-        pb[ok] = model.pdf_reflect(lo2[ok], li[ok])
-    else:
-        f[ok] = albedo / np.pi * li[ok, 2]
-        pb[ok] = li[ok, 2] / np.pi
-    pdf = pb + sampler.pdf(wmap)
-    val = np.where(ok, f / np.where(pdf > 0, pdf, 1.0), 0.0)
+    wi = np.concatenate([world(li_b), wi_e])
+    val = np.concatenate([t_b, t_e]) * np.concatenate([seen, seen])
     if visible is not None:
         cand = val > 0
         vis = np.zeros(len(wi), bool)
@@ -304,7 +302,7 @@ def _env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, vis
         val = val * vis
     rad = np.zeros((len(wi), env.levels[0].shape[2]))
     nz = val > 0
-    rad[nz] = env.lookup(wmap[nz], 0.0) * val[nz, None]
+    rad[nz] = env.lookup(to_map(wi[nz]), 0.0) * val[nz, None]
     out = np.zeros((p, rad.shape[1]))
     np.add.at(out, all_idx, rad)
     return out / half

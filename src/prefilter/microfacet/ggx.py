@@ -8,8 +8,60 @@ from __future__ import annotations
 
 import numpy as np
 
+from prefilter.jit import njit_inline
 from prefilter.validation import as_directions, as_roughness, as_uniform
 from prefilter.microfacet.base import MicrofacetModel
+
+
+def ggx_d_formula(ax, ay, x, y, z):
+    """GGX NDF ``1 / (pi ax ay (x^2/ax^2 + y^2/ay^2 + z^2)^2)`` of a unit normal ``(x, y, z)``
+    with ``z > 0`` (the caller masks ``z <= 0``) (Heitz 2014, eq. 85)."""
+    t = (x / ax) ** 2 + (y / ay) ** 2 + z * z
+    return 1.0 / (np.pi * ax * ay * t * t)
+
+
+def ggx_lambda_formula(ax, ay, x, y, z):
+    """Smith ``Lambda(w) = (-1 + sqrt(1 + (ax^2 x^2 + ay^2 y^2) / z^2)) / 2`` (Heitz 2014,
+    eq. 86), written as ``a2 / (1 + sqrt(1 + a2)) / 2`` to avoid cancellation near normal
+    incidence; ``z^2`` is floored at 1e-300 (grazing directions give a large finite value)."""
+    a2 = ((ax * x) ** 2 + (ay * y) ** 2) / np.maximum(z * z, 1e-300)
+    return a2 / (1.0 + np.sqrt(1.0 + a2)) / 2.0
+
+
+#: :func:`ggx_d_formula` and :func:`ggx_lambda_formula` compiled for kernels (scalars).
+ggx_d_jit = njit_inline(ggx_d_formula)
+ggx_lambda_jit = njit_inline(ggx_lambda_formula)
+
+
+@njit_inline
+def ggx_sample_vndf_jit(ax, ay, wox, woy, woz, u1, u2):
+    """:meth:`GGX.sample_vndf` for one view ``(wox, woy, woz)`` in kernels: the visible normal
+    ``(mx, my, mz)`` for uniforms ``u1, u2`` (Heitz 2018, listing 1; the same steps and
+    guards as the array method)."""
+    vx, vy, vz = ax * wox, ay * woy, woz
+    vn = np.sqrt(vx * vx + vy * vy + vz * vz)
+    vx, vy, vz = vx / vn, vy / vn, vz / vn
+    lensq = vx * vx + vy * vy
+    if lensq > 1e-14:
+        inv = 1.0 / np.sqrt(lensq)
+        t1x, t1y, t1z = -vy * inv, vx * inv, 0.0
+    else:
+        t1x, t1y, t1z = 1.0, 0.0, 0.0
+    t2x = vy * t1z - vz * t1y
+    t2y = vz * t1x - vx * t1z
+    t2z = vx * t1y - vy * t1x
+    r = np.sqrt(u1)
+    phi = 2.0 * np.pi * u2
+    p1 = r * np.cos(phi)
+    p2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + vz)
+    p2 = (1.0 - s) * np.sqrt(max(0.0, 1.0 - p1 * p1)) + s * p2
+    p3 = np.sqrt(max(0.0, 1.0 - p1 * p1 - p2 * p2))
+    mx = ax * (p1 * t1x + p2 * t2x + p3 * vx)
+    my = ay * (p1 * t1y + p2 * t2y + p3 * vy)
+    mz = max(1e-12, p1 * t1z + p2 * t2z + p3 * vz)
+    mn = np.sqrt(mx * mx + my * my + mz * mz)
+    return mx / mn, my / mn, mz / mn
 
 
 class GGX(MicrofacetModel):
@@ -35,9 +87,8 @@ class GGX(MicrofacetModel):
     def D(self, m) -> np.ndarray:
         """GGX NDF ``1 / (pi ax ay (mx^2/ax^2 + my^2/ay^2 + mz^2)^2)``, 0 for ``mz <= 0``."""
         m = as_directions(m, "m")
-        ax, ay = self.alpha_x, self.alpha_y
-        t = (m[..., 0] / ax) ** 2 + (m[..., 1] / ay) ** 2 + m[..., 2] ** 2
-        return np.where(m[..., 2] > 0.0, 1.0 / (np.pi * ax * ay * t * t), 0.0)
+        d = ggx_d_formula(self.alpha_x, self.alpha_y, m[..., 0], m[..., 1], m[..., 2])
+        return np.where(m[..., 2] > 0.0, d, 0.0)
 
     def smith_lambda(self, w) -> np.ndarray:
         """Smith ``Lambda(w) = (-1 + sqrt(1 + (ax^2 wx^2 + ay^2 wy^2) / wz^2)) / 2``.
@@ -46,9 +97,7 @@ class GGX(MicrofacetModel):
         near normal incidence. Evaluated with ``|wz|`` (the horizon test lives in ``G1``/``G2``).
         """
         w = as_directions(w, "w", normalize=False)  # scale invariant: no need to renormalise
-        wz2 = np.maximum(w[..., 2] ** 2, 1e-300)
-        a2 = ((self.alpha_x * w[..., 0]) ** 2 + (self.alpha_y * w[..., 1]) ** 2) / wz2
-        return a2 / (1.0 + np.sqrt(1.0 + a2)) / 2.0
+        return ggx_lambda_formula(self.alpha_x, self.alpha_y, w[..., 0], w[..., 1], w[..., 2])
 
     def sample_vndf(self, wo, u) -> np.ndarray:
         """Visible normals ``m (..., 3)`` for views ``wo (..., 3)`` and uniforms ``u (..., 2)``.
