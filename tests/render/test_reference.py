@@ -19,7 +19,8 @@ from prefilter.render.lights import (
     sample_quad_area,
 )
 from prefilter.render.estimator import pdf_brdf, sample_brdf
-from prefilter.render.reference import estimate_quad, shade_reference, stratified_offsets
+from prefilter.render.driver import stratified_offsets
+from prefilter.render.reference import estimate_quad, shade_reference
 from prefilter.render.shading import brdf_cos, local_view
 from prefilter.sphere.sampling import uniform_sphere
 

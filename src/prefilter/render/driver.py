@@ -159,7 +159,8 @@ def chunk_positions(settings: RenderSettings, rows, w: int, stratified: bool,
 
 
 def render_positions(scene: Scene, settings: RenderSettings, radiance, *, random_dims: int = 0,
-                     stratified: bool = True, desc: str = "render") -> np.ndarray:
+                     stratified: bool = True, desc: str = "render", positions=None,
+                     per_pixel: int | None = None) -> np.ndarray:
     """Drive a method over row chunks: sub-pixel positions in, per-pixel mean radiance out.
 
     Parameters
@@ -173,20 +174,27 @@ def render_positions(scene: Scene, settings: RenderSettings, radiance, *, random
     stratified : bool
         ``True``: ``spp`` stratified random positions per pixel (:func:`stratified_offsets`);
         ``False`` with ``spp == 1``: the pixel centre.
+    positions : callable(rows, W) -> (xy (len(rows), W, S, 2), u) or None
+        Replaces :func:`chunk_positions` (e.g. low-discrepancy points); its ``u`` is passed to
+        ``radiance`` as is. ``per_pixel`` is then its ``S`` (default ``spp``).
 
     Returns
     -------
     numpy.ndarray, shape (H, W, 3), float64
     """
     cam = scene.camera
-    h, w, s = cam.height, cam.width, settings.spp
+    h, w = cam.height, cam.width
+    s = settings.spp if per_pixel is None else int(per_pixel)
     rows_per_chunk = max(1, settings.chunk_samples // (w * s))
     image = np.zeros((h, w, 3))
     with tqdm(total=h, desc=desc, unit="row", delay=1.0, leave=False,
               disable=not settings.progress) as bar:
         for r0 in range(0, h, rows_per_chunk):
             rows = range(r0, min(h, r0 + rows_per_chunk))
-            xy, us = chunk_positions(settings, rows, w, stratified, random_dims)
+            if positions is None:
+                xy, us = chunk_positions(settings, rows, w, stratified, random_dims)
+            else:
+                xy, us = positions(rows, w)
             rad = radiance(xy.reshape(-1, 2), us).reshape(len(rows), w, s, 3)
             # the mean of one sample is that sample: skip the reduction
             image[r0:r0 + len(rows)] = rad[:, :, 0] if s == 1 else rad.mean(axis=2)

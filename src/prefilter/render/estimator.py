@@ -422,9 +422,12 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
             su = np.sqrt(u0)
             b1 = u[i, j, 1] * su
             b2 = su - b1
-            lx = verts[0, 0] + b1 * (verts[c_i, 0] - verts[0, 0]) + b2 * (verts[b_i, 0] - verts[0, 0])
-            ly = verts[0, 1] + b1 * (verts[c_i, 1] - verts[0, 1]) + b2 * (verts[b_i, 1] - verts[0, 1])
-            lz = verts[0, 2] + b1 * (verts[c_i, 2] - verts[0, 2]) + b2 * (verts[b_i, 2] - verts[0, 2])
+            lx = (verts[0, 0] + b1 * (verts[c_i, 0] - verts[0, 0])
+                  + b2 * (verts[b_i, 0] - verts[0, 0]))
+            ly = (verts[0, 1] + b1 * (verts[c_i, 1] - verts[0, 1])
+                  + b2 * (verts[b_i, 1] - verts[0, 1]))
+            lz = (verts[0, 2] + b1 * (verts[c_i, 2] - verts[0, 2])
+                  + b2 * (verts[b_i, 2] - verts[0, 2]))
             if keep:
                 hit[i, j, 0, 0], hit[i, j, 0, 1], hit[i, j, 0, 2] = lx, ly, lz
             dx, dy, dz = lx - px, ly - py, lz - pz

@@ -26,9 +26,9 @@ or thread count.
 from __future__ import annotations
 
 import numpy as np
-from tqdm import tqdm
 
 from prefilter.render.camera import gbuffer_at
+from prefilter.render.driver import render_positions, surface_attributes, with_settings
 from prefilter.render.estimator import (
     DIMS_PER_QUAD,
     MaterialLobe,
@@ -145,22 +145,6 @@ def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
     return out
 
 
-def stratified_offsets(spp: int, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Sub-pixel offsets ``(n, spp, 2)`` in ``[0, 1)^2``, stratified per pixel.
-
-    A jittered ``k x k`` grid when ``spp = k^2``, otherwise Latin-hypercube (N-rooks) samples
-    (each axis split into ``spp`` strata, one sample per stratum, y strata shuffled).
-    """
-    k = int(round(np.sqrt(spp)))
-    if k * k == spp:
-        i = np.arange(spp)
-        base = np.stack([i % k, i // k], axis=-1).astype(np.float64)
-        return (base[None] + rng.random((n, spp, 2))) / k
-    sx = np.broadcast_to(np.arange(spp, dtype=np.float64), (n, spp))
-    sy = rng.permuted(np.broadcast_to(np.arange(spp, dtype=np.float64), (n, spp)), axis=1)
-    return (np.stack([sx, sy], axis=-1) + rng.random((n, spp, 2))) / spp
-
-
 def pairs_per_position(spp: int, pairs: int = PAIRS_PER_POSITION) -> int:
     """Light/BRDF pairs shaded per sub-pixel position for ``spp`` pairs per pixel: ``pairs``
     (a power of two) once there are at least 16 positions left, fewer below, so small sample
@@ -186,7 +170,6 @@ def render_reference(scene, settings, *, pairs: int | None = None,
     linear radiance; deterministic for a given ``settings.seed``.
     """
     from prefilter.render.lighttex import split_lights
-    from prefilter.render.pipeline import surface_attributes
 
     lights, textured = split_lights(scene, "reference")
     nq = len(lights.quads) + len(textured)
@@ -194,34 +177,34 @@ def render_reference(scene, settings, *, pairs: int | None = None,
     # without quad lights there is nothing to pair: every sample is a sub-pixel position
     k = (pairs_per_position(spp) if nq else 1) if pairs is None else int(pairs)
     npos = -(-spp // k)
-    cam = scene.camera
-    h, w = cam.height, cam.width
-    rows_per_chunk = max(1, settings.chunk_samples // (w * npos * k))
-    image = np.zeros((h, w, 3))
-    with tqdm(total=h, desc="reference", unit="row", delay=1.0, leave=False,
-              disable=not settings.progress) as bar:
-        for r0 in range(0, h, rows_per_chunk):
-            rows = np.arange(r0, min(h, r0 + rows_per_chunk))
-            pixels = (rows[:, None] * w + np.arange(w)[None, :]).reshape(-1)
-            xy = owen_sobol(pixels, npos, 2, settings.seed, POSITION_BLOCK)
-            xy = xy.reshape(len(rows), w, npos, 2) + np.asarray(settings.jitter)
-            xy[..., 0] += np.arange(w, dtype=np.float64)[None, :, None]
-            xy[..., 1] += rows.astype(np.float64)[:, None, None]
-            g = gbuffer_at(scene, xy).reshape(-1)
-            rad = np.zeros((g.hit.size, 3))
-            if np.any(g.hit):
-                # pair j of position i is point i K + j of the pixel's set: aligned runs of K
-                u = np.stack([owen_sobol(pixels, npos * k, DIMS_PER_QUAD, settings.seed,
-                                         POSITION_BLOCK + 1 + q)
-                              .reshape(-1, k, DIMS_PER_QUAD)
-                              for q in range(nq)], axis=1) if nq else np.zeros((g.hit.size, 0))
-                gh = g.select(g.hit)
-                a = surface_attributes(scene, gh, filtered=False)
-                rad[g.hit] = shade_reference(gh.position, a["t"], a["b"], a["n"], gh.view,
-                                             a["alpha_x"], a["alpha_y"], a["base_color"],
-                                             a["f0"], lights, u[g.hit], textured=textured,
-                                             heuristic=heuristic)
-            rad = rad.reshape(len(rows), w, npos, 3)
-            image[r0:r0 + len(rows)] = rad.mean(axis=2)
-            bar.update(len(rows))
-    return image
+    # leave room for the K pairs of every position in a chunk
+    settings = with_settings(settings, chunk_samples=max(1, settings.chunk_samples // k))
+
+    def positions(rows, w):
+        """Owen-scrambled Sobol sub-pixel positions of the chunk and its pixel indices."""
+        rows = np.asarray(rows)
+        pixels = (rows[:, None] * w + np.arange(w)[None, :]).reshape(-1)
+        xy = owen_sobol(pixels, npos, 2, settings.seed, POSITION_BLOCK)
+        xy = xy.reshape(len(rows), w, npos, 2) + np.asarray(settings.jitter)
+        xy[..., 0] += np.arange(w, dtype=np.float64)[None, :, None]
+        xy[..., 1] += rows.astype(np.float64)[:, None, None]
+        return xy, pixels
+
+    def radiance(xy, pixels):
+        g = gbuffer_at(scene, xy)
+        rad = np.zeros((g.hit.size, 3))
+        if np.any(g.hit):
+            # pair j of position i is point i K + j of the pixel's set: aligned runs of K
+            u = np.stack([owen_sobol(pixels, npos * k, DIMS_PER_QUAD, settings.seed,
+                                     POSITION_BLOCK + 1 + q).reshape(-1, k, DIMS_PER_QUAD)
+                          for q in range(nq)], axis=1) if nq else np.zeros((g.hit.size, 0))
+            gh = g.select(g.hit)
+            a = surface_attributes(scene, gh, filtered=False)
+            rad[g.hit] = shade_reference(gh.position, a["t"], a["b"], a["n"], gh.view,
+                                         a["alpha_x"], a["alpha_y"], a["base_color"], a["f0"],
+                                         lights, u[g.hit], textured=textured,
+                                         heuristic=heuristic)
+        return rad
+
+    return render_positions(scene, settings, radiance, desc="reference", positions=positions,
+                            per_pixel=npos)
