@@ -15,6 +15,7 @@ import math
 import numpy as np
 
 from prefilter.jit import njit_parallel, njit_serial, prange
+from prefilter.microfacet.fresnel import schlick_jit
 
 
 @njit_serial
@@ -130,8 +131,7 @@ def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h,
             _lookup(flat, offsets, shapes, gx, gy, gz, lod, rad)
             fr = 1.0
             if use_f0:
-                c = min(max(dot, 0.0), 1.0)
-                fr = f0[q] + (1.0 - f0[q]) * (1.0 - c) ** 5
+                fr = schlick_jit(f0[q], min(max(dot, 0.0), 1.0))
             ws = wt * proj
             den += ws
             if shadowing and k < n * n:

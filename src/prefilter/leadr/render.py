@@ -39,9 +39,9 @@ from prefilter.leadr.envmap import (ENV_FROM_WORLD, IrradianceMap, env_from_imag
                                     latlong_resample, sh9_project)
 from prefilter.leadr.maps import shading_stats
 from prefilter.leadr.shading import (diffuse_directional, diffuse_irradiance, diffuse_sh,
-                                     diffuse_shadowing, env_specular, grid_normals, point_light,
-                                     schlick)
+                                     diffuse_shadowing, env_specular, grid_normals, point_light)
 from prefilter.microfacet import beckmann_lambda
+from prefilter.microfacet.fresnel import schlick
 from prefilter.render.shading import point_incoming, shading_frames
 
 DIFFUSE_GRID = 5
@@ -315,9 +315,7 @@ def env_specular_shadowed(env, wo, mean, cov, n: int = ENV_GRID, *, f0=None, to_
         wgt = area * g
         if f0 is not None:
             f = np.asarray(f0, np.float64).reshape(-1, nc)[sl]
-            fr = f[:, None, :] + (1.0 - f[:, None, :]) * (
-                1.0 - np.clip(dot, 0.0, 1.0))[..., None] ** 5
-            rad = rad * fr
+            rad = rad * schlick(f[:, None, :], dot[..., None])
         den = area.sum(axis=1)
         ok = den > 1e-300
         out[sl] = np.einsum("pk,pkc->pc", wgt, rad) / np.where(ok, den, 1.0)[:, None]

@@ -23,6 +23,7 @@ from prefilter.validation import (
     broadcast_batch,
 )
 from prefilter.errors import PrefilterError
+from prefilter.microfacet import fresnel
 from prefilter.microfacet.beckmann import beckmann_lambda, smith_lambda_walter
 
 #: Bias of the artificial micronormal towards the view, and its weight (supplemental 3.7).
@@ -63,10 +64,9 @@ def _lambda(w, mu, sxx, syy, sxy, fit: str):
 
 
 def schlick(f0, cos_theta) -> np.ndarray:
-    """Schlick's Fresnel ``f0 + (1 - f0) (1 - cos)^5`` (Schlick 1994 eq. 24)."""
-    f0 = as_unit_interval(f0, "f0")
-    c = np.clip(as_float_array(cos_theta, "cos_theta"), 0.0, 1.0)
-    return f0 + (1.0 - f0) * (1.0 - c) ** 5
+    """:func:`prefilter.microfacet.fresnel.schlick` with checked inputs (``f0`` in ``[0, 1]``,
+    finite cosines): the public entry point of the package."""
+    return fresnel.schlick(as_unit_interval(f0, "f0"), as_float_array(cos_theta, "cos_theta"))
 
 
 # -- point and directional lights (supplemental 3.3) -------------------------------------------
@@ -120,7 +120,7 @@ def point_light(wo, wi, mean_slope, slope_cov, *, f0=None, shadowing: bool = Tru
     ok = up & (area > 0) & np.isfinite(lam)
     val = d / (4.0 * np.where(ok, area, 1.0) * (1.0 + np.where(ok, lam, 0.0)))
     if f0 is not None:
-        val = val * schlick(f0, np.sum(h * wi, axis=-1))
+        val = val * fresnel.schlick(f0, np.sum(h * wi, axis=-1))
     return np.where(ok, val, 0.0)
 
 
@@ -258,7 +258,7 @@ def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
         jac = 4.0 * np.abs(dot) * np.abs(m[..., 2]) ** 3
         rad = radiance_fn(m, wi, jac, cell[:, None], tw)
         if f0 is not None:
-            rad = rad * schlick(f0[sl, None], dot)[..., None]
+            rad = rad * fresnel.schlick(f0[sl, None], dot)[..., None]
         ws = w * proj
         num = np.einsum("pk,pkc->pc", ws, rad)
         den = ws.sum(axis=1)
