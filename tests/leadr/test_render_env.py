@@ -7,9 +7,10 @@ from prefilter.errors import PrefilterError
 from prefilter.leadr.render import (render_leadr_env, render_leadr_irradiance,
                                     render_leadr_irradiance_naive)
 from prefilter.render import gbuffer, load_scene
-from prefilter.render.methods import RenderSettings
+from prefilter.render.methods import RenderSettings, describe, get_method, method_params
 
 ROWS = 64
+SIMPLIFIED = RenderSettings(params={"algorithm": "simplified"})
 
 
 def doc_direction(u, v):
@@ -69,17 +70,17 @@ def test_diffuse_irradiance_of_a_linear_environment(tmp_path):
 
 
 def test_constant_environment_is_reproduced_by_rough_height_maps(tmp_path):
-    # Simplified Algorithms 1 and 3 (leadr-env-simplified) normalise by the projected-area sum:
-    # a constant environment L
-    # gives f0 L + rho L exactly, whatever the roughness, view or footprint (grazing included).
+    # Simplified Algorithms 1 and 3 (leadr-env with algorithm=simplified) normalise by the
+    # projected-area sum: a constant environment L gives f0 L + rho L exactly, whatever the
+    # roughness, view or footprint (grazing included).
     mat = {"alpha": 0.3, "f0": 1.0, "base_color": 0.25,
            "height_map": {"procedural": "gaussian", "size": 64, "rms_slope": 0.6, "scale": 1.0}}
-    from prefilter.leadr.render import _render_env, render_leadr_env_simplified
+    from prefilter.leadr.render import _render_env
 
     s = scene(tmp_path, mat, image=np.full((16, 32, 3), 2.0), origin=[0.0, 0.3, 3.0])
     g = gbuffer(s)
     naive = lambda sc, st: _render_env(sc, st, False, "naive", shadowing=False)  # noqa: E731
-    for render in (render_leadr_env_simplified, naive):
+    for render in (lambda sc, st: render_leadr_env(sc, SIMPLIFIED), naive):
         img = render(s, RenderSettings())
         np.testing.assert_allclose(img[g.hit], 2.0 * 1.25, rtol=2e-3)
         assert np.all(img[~g.hit] == 0)
@@ -183,18 +184,26 @@ def test_diffuse_shadowing_matches_the_exact_shadowed_irradiance():
 
 
 def test_shadowed_method_render(tmp_path):
-    from prefilter.leadr.render import render_leadr_env_shadowed, render_leadr_env_simplified
-
-    # smooth surface: no shadowing, same image as the simplified method (direction map, rgb f0)
+    # smooth surface: no shadowing, same image as the simplified algorithms (direction map,
+    # rgb f0)
     s = scene(tmp_path, {"alpha": 0.002, "f0": [0.9, 0.5, 0.2], "base_color": 0.1})
-    np.testing.assert_allclose(render_leadr_env_shadowed(s, RenderSettings()),
-                               render_leadr_env_simplified(s, RenderSettings()), rtol=1e-3,
-                               atol=1e-4)
+    np.testing.assert_allclose(render_leadr_env(s, RenderSettings()),
+                               render_leadr_env(s, SIMPLIFIED), rtol=1e-3, atol=1e-4)
     # rough height map under a constant sky: never brighter than the unshadowed 1, finite
     mat = {"alpha": 0.3, "f0": 1.0, "base_color": 0.0,
            "height_map": {"procedural": "gaussian", "size": 64, "rms_slope": 0.6, "scale": 1.0}}
     s = scene(tmp_path, mat, image=np.ones((16, 32, 3)), origin=[0.0, 0.3, 3.0])
     g = gbuffer(s)
-    img = render_leadr_env_shadowed(s, RenderSettings())
+    img = render_leadr_env(s, RenderSettings())
     assert np.all(np.isfinite(img)) and np.all(img[g.hit] <= 1.0 + 1e-9)
     assert img[g.hit].min() < 0.9
+
+
+def test_algorithm_is_a_setting_of_the_registered_methods():
+    for name in ("leadr-env", "leadr-env-naive", "leadr-irradiance", "leadr-irradiance-naive"):
+        assert method_params(name) == {"algorithm": ("full", "simplified")}
+        assert describe(name)
+    assert get_method("leadr-env") is render_leadr_env
+    for gone in ("leadr-env-shadowed", "leadr-env-simplified"):
+        with pytest.raises(PrefilterError, match="method"):
+            get_method(gone)

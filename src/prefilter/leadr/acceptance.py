@@ -623,7 +623,8 @@ def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48
             settings = RenderSettings()
             if specular:
                 methods = {"leadr": lr.render_leadr_env,
-                           "leadr simplified": lr.render_leadr_env_simplified,
+                           "leadr simplified": lambda sc, st: lr.render_leadr_env(
+                               sc, RenderSettings(params={"algorithm": "simplified"})),
                            "naive": lr.render_leadr_env_naive}
             else:
                 methods = {"leadr": lr.render_leadr_irradiance,

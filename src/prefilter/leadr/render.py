@@ -1,7 +1,6 @@
 """LEADR render methods: ``leadr-point`` (point and directional lights), ``leadr-env``
-(environment + point/directional lights), ``leadr-irradiance`` (diffuse microfacets, SH
-irradiance), ``leadr-env-simplified`` (the supplemental's simplified algorithms, no
-self-shadowing), and the naive counterparts ``leadr-env-naive`` / ``leadr-irradiance-naive``.
+(environment + point/directional lights), ``leadr-irradiance`` (the diffuse layer), and the naive
+counterparts ``leadr-env-naive`` / ``leadr-irradiance-naive``.
 
 Per G-buffer sample: the slope moments of the material's height map over the pixel footprint
 (:func:`footprint_moments`: a box filter of the renderer's moment mip chain) give the mean slope
@@ -9,23 +8,22 @@ and covariance (:func:`prefilter.leadr.maps.shading_stats`); the micro roughness
 Beckmann slope variance ``alpha^2 / 2`` per axis (GGX alpha taken as the Beckmann alpha).
 Shading is in the *geometric* frame: the mesonormal is carried by the mean slope.
 
-Self-shadowing is on by default (the displaced reference has it and it lowers the error,
-docs/leadr.md): specular under point/directional lights by the closed form of supplemental 3.3
-with ``G2``; under the environment by Algorithm 1 with ``G2 / G1`` per grid sample (compiled,
-:func:`prefilter.leadr.shading.env_specular` with ``shadowing``); diffuse by Algorithm 3 with
+Self-shadowing (the displaced reference has it, docs/leadr.md): specular under
+point/directional lights by the closed form of supplemental 3.3 with ``G2``; under the
+environment by Algorithm 1 with ``G2 / G1`` per grid sample
+(:func:`prefilter.leadr.shading.env_specular` with ``shadowing``); diffuse by Algorithm 3 with
 ``E(m) = <m, wl> G2 / G1`` per delta light and, for the environment, the exact irradiance
 (:class:`prefilter.leadr.envmap.IrradianceMap`, looked up per grid normal) plus
-:func:`prefilter.leadr.shading.diffuse_shadowing`; ``leadr-env-simplified`` keeps the
-supplemental's order-2 SH irradiance (Simplified Algorithm 2). Schlick Fresnel
-per grid sample is linear in ``f0``, so rgb ``f0`` costs two scalar passes (``f0 = 1`` and
-``f0 = 0``) blended per channel. ``leadr-irradiance`` renders the diffuse layer only
-(``base_color``). The environment orientation is
+:func:`prefilter.leadr.shading.diffuse_shadowing`. The ``algorithm=simplified`` setting
+(:data:`ALGORITHMS`) selects the supplemental's Simplified Algorithms 1-3 instead (masking only,
+order-2 SH irradiance). Schlick Fresnel per grid sample is linear in ``f0``, so rgb ``f0`` costs
+two scalar passes (``f0 = 1`` and ``f0 = 0``) blended per channel. ``leadr-irradiance`` renders
+the diffuse layer only (``base_color``). The environment orientation is
 :data:`prefilter.leadr.envmap.ENV_FROM_WORLD` (``docs/leadr.md``).
 
-The ``-naive`` variants are naive mip-mapped normal mapping under the same integrators (and the
-same irradiance map): the mean
-slope of the footprint (the mip-averaged height-map normal) with the micro roughness only, i.e.
-without the meso-scale slope covariance.
+The ``-naive`` methods are naive mip-mapped normal mapping under the same integrators (and the
+same irradiance map): the mean slope of the footprint (the mip-averaged height-map normal) with
+the micro roughness only, i.e. without the meso-scale slope covariance.
 """
 
 from __future__ import annotations
@@ -51,20 +49,17 @@ ENV_GRID = 9
 #: Footprints whose largest slope std (meso + micro) is at least :data:`ROUGH_SIGMA` use a
 #: ``ENV_GRID_ROUGH`` grid: against the N = 128 grid 9 x 9 is 5.5% off at std 0.5 and 16% for an
 #: anisotropic (0.5, 0.1) lobe, 17 x 17 1.3% / 3.7% (docs/leadr.md convergence table; the
-#: supplemental: specular needs more samples above 0.25). Far field, sigma 0.5, 32 texels per
-#: pixel: 10.4% -> 7.8% error vs the displaced surface (0.57 -> 0.42x naive).
+#: supplemental: specular needs more samples above 0.25).
 ENV_GRID_ROUGH = 17
 ROUGH_SIGMA = 0.35
 #: Moment lookups box-filter the pixel footprint: up to ``FOOTPRINT_TAPS^2`` trilinear taps
 #: spread over the footprint parallelogram (one per ~2 x 2 texels), each at the LOD of its share.
 #: Moments are linear, so this is a box filter over the pixel's own texels; a single trilinear
 #: tap blends a square of the major axis' size aligned to the mip grid, whose statistics flicker
-#: as the camera moves (docs/leadr.md, point-light image rows: flicker 0.67x -> 0.48x naive for
-#: diffuse at 16 texels per pixel). 1: one isotropic trilinear tap.
+#: as the camera moves (docs/leadr.md, point-light image rows). 1: one isotropic trilinear tap.
 FOOTPRINT_TAPS = 8
-#: ``leadr-point`` shades like the other ``leadr-*`` methods: box-filtered moments
-#: (:data:`FOOTPRINT_TAPS`) and ``G2 / G1`` diffuse; the WebGL viewer reproduces it
-#: (``prefilter.viewer``'s ``footprintBox()`` and the exported ``leadr.glsl``).
+#: ``leadr-point``'s moment filter (the WebGL viewer's ``footprintBox()`` and the exported
+#: ``leadr.glsl`` reproduce it).
 POINT_FOOTPRINT_TAPS = FOOTPRINT_TAPS
 #: ``leadr-point``'s diffuse is Algorithm 3 for one light with ``G2 / G1`` (self-shadowing).
 POINT_SHADOWING = True
@@ -403,39 +398,40 @@ def _render_irradiance(scene, settings, meso: bool, name: str,
                           stratified=settings.spp > 1, desc=name)
 
 
+#: The ``algorithm`` setting of the environment methods: ``full``, the paper's Algorithms 1-3
+#: (self-shadowing ``G2 / G1`` in every layer, exact irradiance map); ``simplified``, the
+#: supplemental's Simplified Algorithms 1-3 (masking only, order-2 SH irradiance).
+ALGORITHMS = {"full": {"shadowing": True, "irradiance_map": True},
+              "simplified": {"shadowing": False, "irradiance_map": False}}
+
+
+def _algorithm(settings) -> dict:
+    return ALGORITHMS[settings.param("algorithm", "full")]
+
+
 def render_leadr_env(scene, settings) -> np.ndarray:
-    """The ``leadr-env`` method (environment, point and directional lights; self-shadowing in
-    every layer: Algorithms 1-3 of the paper)."""
-    return _render_env(scene, settings, True, "leadr-env")
-
-
-def render_leadr_env_shadowed(scene, settings) -> np.ndarray:
-    """``leadr-env-shadowed``: the same as ``leadr-env`` since self-shadowing became the default
-    (kept so that existing scripts and scenes keep working)."""
-    return _render_env(scene, settings, True, "leadr-env-shadowed")
-
-
-def render_leadr_env_simplified(scene, settings) -> np.ndarray:
-    """``leadr-env-simplified``: the supplemental's Simplified Algorithms 1-3 (masking only, no
-    self-shadowing; order-2 SH irradiance) for every layer and light."""
-    return _render_env(scene, settings, True, "leadr-env-simplified", shadowing=False,
-                       irradiance_map=False)
+    """The ``leadr-env`` method (environment, point and directional lights): Algorithms 1-3 of
+    the paper, or with ``algorithm=simplified`` the supplemental's simplified ones
+    (:data:`ALGORITHMS`)."""
+    return _render_env(scene, settings, True, "leadr-env", **_algorithm(settings))
 
 
 def render_leadr_env_naive(scene, settings) -> np.ndarray:
     """``leadr-env-naive``: as ``leadr-env`` with the mip-averaged normal and micro roughness."""
-    return _render_env(scene, settings, False, "leadr-env-naive")
+    return _render_env(scene, settings, False, "leadr-env-naive", **_algorithm(settings))
 
 
 def render_leadr_irradiance(scene, settings) -> np.ndarray:
     """The ``leadr-irradiance`` method (diffuse layer; environment by its irradiance map,
-    point, directional lights; with self-shadowing)."""
-    return _render_irradiance(scene, settings, True, "leadr-irradiance")
+    point, directional lights; with self-shadowing; ``algorithm=simplified``: SH irradiance, no
+    self-shadowing)."""
+    return _render_irradiance(scene, settings, True, "leadr-irradiance", **_algorithm(settings))
 
 
 def render_leadr_irradiance_naive(scene, settings) -> np.ndarray:
     """``leadr-irradiance-naive``: ``leadr-irradiance`` with the mip-averaged normal only."""
-    return _render_irradiance(scene, settings, False, "leadr-irradiance-naive")
+    return _render_irradiance(scene, settings, False, "leadr-irradiance-naive",
+                              **_algorithm(settings))
 
 
 def render_leadr_point(scene, settings) -> np.ndarray:
