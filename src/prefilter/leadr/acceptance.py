@@ -162,12 +162,8 @@ def diffuse_exact(env, wo, mean, cov, n, shadowing: bool = False) -> np.ndarray:
 
 def env_specular_shadowed(env, wo, mean, cov, n) -> np.ndarray:
     """The paper's Algorithm 1 *with* self-shadowing for one view ``wo (3,)`` and one footprint,
-    ``(C,)`` (:func:`prefilter.leadr.render.env_specular_shadowed`; the renderer's default
-    kernel drops shadowing, as the supplemental's simplified algorithm does)."""
-    from prefilter.leadr.render import env_specular_shadowed as batch
-
-    return batch(env, np.asarray(wo, np.float64)[None], np.asarray(mean, np.float64)[None],
-                 np.asarray(cov, np.float64)[None], n)[0]
+    ``(C,)`` (:func:`prefilter.leadr.shading.env_specular` with ``shadowing``)."""
+    return env_specular(env, wo, mean, cov, n, shadowing=True)
 
 
 def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, spp: int = 16,

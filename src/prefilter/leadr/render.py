@@ -37,8 +37,7 @@ from prefilter.leadr.envmap import (ENV_FROM_WORLD, IrradianceMap, env_from_imag
                                     latlong_resample, sh9_project)
 from prefilter.leadr.maps import shading_stats
 from prefilter.leadr.shading import (diffuse_directional, diffuse_irradiance, diffuse_sh,
-                                     diffuse_shadowing, env_specular, grid_normals, point_light)
-from prefilter.microfacet import beckmann_lambda
+                                     diffuse_shadowing, env_specular, point_light)
 from prefilter.microfacet.fresnel import schlick
 from prefilter.render.shading import point_incoming, shading_frames
 
@@ -89,25 +88,6 @@ def footprint_moments(chain, uv, dudv, max_taps: int | None = None) -> np.ndarra
     major = np.ascontiguousarray(footprint_axes(dudv, chain.shape[:2])[0], dtype=np.float64)
     out = np.empty((len(uv), flat.shape[1]))
     return box_moments_kernel(flat, offsets, shapes, uv, dudv, major, max_taps, out)
-
-
-def _footprint_moments_numpy(chain, uv, dudv, max_taps: int = FOOTPRINT_TAPS) -> np.ndarray:
-    """NumPy version of :func:`footprint_moments` (the compiled kernel is tested against it)."""
-    from prefilter.texture.mip import footprint_axes
-
-    h, w = chain.shape[:2]
-    major = footprint_axes(dudv, (h, w))[0]
-    taps = np.clip(np.ceil(major / 2.0), 1, max_taps).astype(np.int64)
-    out = np.empty((len(uv), chain.shape[2]))
-    for t in np.unique(taps):
-        m = taps == t
-        lod = np.log2(np.maximum(major[m] / t, 1.0))
-        o = (np.arange(t) + 0.5) / t - 0.5
-        ox, oy = np.meshgrid(o, o)
-        off = np.einsum("nab,kb->nka", dudv[m], np.stack([ox.ravel(), oy.ravel()], -1))
-        out[m] = chain.lookup(uv[m][:, None, :] + off,
-                              np.broadcast_to(lod[:, None], off.shape[:2])).mean(axis=1)
-    return out
 
 
 def _local(w, t, b, n):
@@ -253,72 +233,6 @@ def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
         out += diffuse_directional(wo, wl, mean, cov, diffuse_grid,
                                    shadowing=shadowing)[:, None] * e
     return base * out
-
-
-def _gauss_lambda(w, mu, cov):
-    """Smith ``Lambda`` of non-centred Gaussian slopes ``N(mu (P, 2), cov (P, 2, 2))`` for
-    directions ``w (P, K, 3)`` (LEADR supplemental 3.2); ``inf`` below the mean surface."""
-    d = w[..., 2] - mu[:, None, 0] * w[..., 0] - mu[:, None, 1] * w[..., 1]
-    s2 = (cov[:, None, 0, 0] * w[..., 0] ** 2 + 2.0 * cov[:, None, 0, 1] * w[..., 0] * w[..., 1]
-          + cov[:, None, 1, 1] * w[..., 1] ** 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.where(s2 > 0, d / np.sqrt(2.0 * np.maximum(s2, 0.0)),
-                     np.where(d > 0, np.inf, -np.inf))
-    return beckmann_lambda(a)
-
-
-def env_specular_shadowed(env, wo, mean, cov, n: int = ENV_GRID, *, f0=None, to_world=None,
-                          chunk: int = 4096) -> np.ndarray:
-    """Algorithm 1 of the paper *with* self-shadowing, ``(P, C)``: Simplified Algorithm 1 (same
-    grid, LOD per sample from the Jacobian) with each sample weighted by
-    ``G2 / G1 = (1 + Lambda(wo)) / (1 + Lambda(wo) + Lambda(wi))`` (0 for ``wi`` below the
-    geometric plane); the projected-area sum still
-    stands for ``(n_bar.g / n_bar.o) / (1 + Lambda(wo))`` (supplemental eq. 10).
-
-    ``wo (P, 3)``, ``mean (P, 2)``, ``cov (P, 2, 2)`` local; ``f0 (P, C)`` Schlick (``None``:
-    F = 1); ``to_world (P, 3, 3)`` local -> map coordinates. Points whose grid sees nothing
-    (backfacing mesonormal) fall back to the simplified kernel's artificial micronormal.
-    """
-    wo = np.asarray(wo, np.float64).reshape(-1, 3)
-    mean = np.asarray(mean, np.float64).reshape(-1, 2)
-    cov = np.asarray(cov, np.float64).reshape(-1, 2, 2)
-    p = len(wo)
-    nc = env.levels[0].shape[2]
-    out = np.empty((p, nc))
-    texel = env.texel_solid_angle
-    for s0 in range(0, p, chunk):
-        sl = slice(s0, min(p, s0 + chunk))
-        o, mu, c = wo[sl], mean[sl], cov[sl]
-        m, w, cell = grid_normals(mu, c, n)
-        dot = np.einsum("pkj,pj->pk", m, o)
-        area = w * np.maximum(dot, 0.0) / m[..., 2]
-        wi = 2.0 * dot[..., None] * m - o[:, None, :]
-        jac = 4.0 * np.abs(dot) * np.abs(m[..., 2]) ** 3
-        with np.errstate(divide="ignore"):
-            lod = 0.5 * np.log2(np.maximum(jac * cell[:, None], 1e-300) / texel)
-        look = wi if to_world is None else np.einsum("pij,pkj->pki", to_world[sl], wi)
-        rad = env.lookup(look, lod)
-        lam_o = _gauss_lambda(o[:, None, :], mu, c)[:, 0]
-        lam_i = _gauss_lambda(wi, mu, c)
-        # G2 / G1 as 1 / (1 + Lambda_i / (1 + Lambda_o)): 1 when the mesosurface faces away
-        # from the view (Lambda_o infinite; the result is then the simplified one, never black).
-        # Light from below the geometric plane is blocked by the height field itself (a shadow
-        # ray going down always hits it), as in the microfacet module's G2.
-        with np.errstate(invalid="ignore"):
-            g = 1.0 / (1.0 + lam_i / (1.0 + lam_o[:, None]))
-        g = np.where(np.isfinite(lam_i) & (wi[..., 2] > 0.0), g, 0.0)
-        wgt = area * g
-        if f0 is not None:
-            f = np.asarray(f0, np.float64).reshape(-1, nc)[sl]
-            rad = rad * schlick(f[:, None, :], dot[..., None])
-        den = area.sum(axis=1)
-        ok = den > 1e-300
-        out[sl] = np.einsum("pk,pkc->pc", wgt, rad) / np.where(ok, den, 1.0)[:, None]
-        if not np.all(ok):
-            bad = np.flatnonzero(~ok) + s0
-            out[bad] = env_specular(env, wo[bad], mean[bad], cov[bad], n,
-                                    to_world=None if to_world is None else to_world[bad])
-    return out
 
 
 def specular_grid_size(cov, n_grid: int = ENV_GRID, n_rough: int = ENV_GRID_ROUGH) -> np.ndarray:
