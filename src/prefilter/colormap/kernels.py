@@ -19,6 +19,7 @@ import numpy as np
 from prefilter.jit import njit_parallel, njit_serial, prange
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
+from prefilter.texture.fetch import bilinear_add, pack_levels, trilinear_add
 from prefilter.texture.mip import MipChain
 
 __all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
@@ -27,55 +28,14 @@ _EDGE_CODE = {"clamp": 0, "mirror": 1, "periodic": 2}
 
 
 class PackedChain:
-    """A :class:`MipChain` flattened for the kernels: ``data (total, C)``, per-level ``offset``,
-    ``height``, ``width``."""
+    """A :class:`MipChain` flattened for the kernels (:func:`prefilter.texture.fetch.pack_levels`):
+    ``data (total, C)``, per-level ``offsets``, ``heights``, ``widths``."""
 
     def __init__(self, chain: MipChain):
         if not isinstance(chain, MipChain):
             raise PrefilterError(f"chain: expected a MipChain, got {type(chain).__name__}")
         self.channels = chain.shape[2]
-        self.heights = np.array([lv.shape[0] for lv in chain.levels], np.int64)
-        self.widths = np.array([lv.shape[1] for lv in chain.levels], np.int64)
-        sizes = self.heights * self.widths
-        self.offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        self.data = np.ascontiguousarray(np.concatenate(
-            [lv.reshape(-1, self.channels) for lv in chain.levels]))
-
-
-@njit_serial
-def _bilerp(data, off, h, w, u, v, c, weight, out):  # pragma: no cover - compiled
-    x = u * w - 0.5
-    y = v * h - 0.5
-    x0 = math.floor(x)
-    y0 = math.floor(y)
-    fx = x - x0
-    fy = y - y0
-    j0 = int(x0) % w
-    i0 = int(y0) % h
-    j1 = (j0 + 1) % w
-    i1 = (i0 + 1) % h
-    w00 = (1 - fx) * (1 - fy) * weight
-    w01 = fx * (1 - fy) * weight
-    w10 = (1 - fx) * fy * weight
-    w11 = fx * fy * weight
-    for k in range(c):
-        out[k] += (w00 * data[off + i0 * w + j0, k] + w01 * data[off + i0 * w + j1, k]
-                   + w10 * data[off + i1 * w + j0, k] + w11 * data[off + i1 * w + j1, k])
-
-
-@njit_serial
-def _trilinear(data, offs, hs, ws, u, v, lod, c, weight, out):  # pragma: no cover - compiled
-    n = offs.shape[0]
-    if n == 1:
-        _bilerp(data, offs[0], hs[0], ws[0], u, v, c, weight, out)
-        return
-    lod = min(max(lod, 0.0), n - 1.0)
-    l0 = min(int(math.floor(lod)), n - 2)
-    t = lod - l0
-    if t < 1.0:  # skip a level of zero weight (magnified footprints read level 0 only)
-        _bilerp(data, offs[l0], hs[l0], ws[l0], u, v, c, weight * (1 - t), out)
-    if t > 0.0:
-        _bilerp(data, offs[l0 + 1], hs[l0 + 1], ws[l0 + 1], u, v, c, weight * t, out)
+        self.data, self.offsets, self.heights, self.widths = pack_levels(chain.levels)
 
 
 @njit_serial
@@ -136,16 +96,19 @@ def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, ou
     for i in range(taps):
         o = (i + 0.5) / taps - 0.5 if aniso else 0.0
         if not want:
-            _trilinear(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, out)
+            trilinear_add(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, False,
+                          out)
             continue
         # the trilinear lookup by hand, keeping the unweighted level-0 moments of the tap
         ivar[1] = 0.0
         ivar[2] = 0.0
-        _bilerp(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, ivar[1:3])
+        bilinear_add(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, False,
+                     ivar[1:3])
         out[0] += (1.0 - t) / taps * ivar[1]
         out[1] += (1.0 - t) / taps * ivar[2]
         if t > 0.0:
-            _bilerp(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, out)
+            bilinear_add(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, False,
+                         out)
         ivar[0] += (ivar[2] - ivar[1] * ivar[1]) / taps
     return lod, area_lod
 

@@ -73,21 +73,21 @@ def footprint_moments(chain, uv, dudv, max_taps: int | None = None) -> np.ndarra
     ``major`` the footprint's major axis in texels (:data:`FOOTPRINT_TAPS`), compiled
     (:func:`prefilter.leadr.kernels.box_moments_kernel`); objects without ``levels``
     (precomputed moments) answer ``lookup_footprint`` themselves."""
-    from prefilter.leadr.envmap import packed_levels
     from prefilter.leadr.kernels import box_moments_kernel
+    from prefilter.texture.fetch import pack_levels
     from prefilter.texture.mip import footprint_axes
 
     max_taps = FOOTPRINT_TAPS if max_taps is None else int(max_taps)
     if max_taps <= 1 or not hasattr(chain, "levels"):
         return chain.lookup_footprint(uv, dudv)
     if chain not in _PACKED:
-        _PACKED[chain] = packed_levels(chain)
-    flat, offsets, shapes = _PACKED[chain]
+        _PACKED[chain] = pack_levels(chain.levels)
+    flat, offsets, heights, widths = _PACKED[chain]
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     dudv = np.ascontiguousarray(dudv, dtype=np.float64)
     major = np.ascontiguousarray(footprint_axes(dudv, chain.shape[:2])[0], dtype=np.float64)
     out = np.empty((len(uv), flat.shape[1]))
-    return box_moments_kernel(flat, offsets, shapes, uv, dudv, major, max_taps, out)
+    return box_moments_kernel(flat, offsets, heights, widths, uv, dudv, major, max_taps, out)
 
 
 def _local(w, t, b, n):

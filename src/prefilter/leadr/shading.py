@@ -321,7 +321,6 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
 
 def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_world,
                            shadowing=False):
-    from prefilter.leadr.envmap import packed_levels
     from prefilter.leadr.kernels import env_specular_kernel
 
     wo = as_directions(wo, "wo")
@@ -338,9 +337,9 @@ def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_worl
     rot = b(np.eye(3) if to_world is None else to_world, (3, 3))
     f0a = b(np.asarray(0.0 if f0 is None else f0, np.float64), ())
     p, w, h = gaussian_grid(n, spacing)
-    flat, offsets, shapes = packed_levels(env)
+    flat, offsets, heights, widths = env.packed
     out = np.empty(flat_shape + (flat.shape[1],))
-    env_specular_kernel(flat, offsets, shapes, env.texel_solid_angle, b(wo, (3,)), b(mu, (2,)),
+    env_specular_kernel(flat, offsets, heights, widths, env.texel_solid_angle, b(wo, (3,)), b(mu, (2,)),
                         b(np.asarray(cov, np.float64), (2, 2)), rot, p, w, h, f0a, f0 is not None,
                         float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, shadowing, out)
     return out.reshape(shape + (flat.shape[1],))
