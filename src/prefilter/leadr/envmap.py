@@ -204,7 +204,7 @@ def sh9_irradiance(coeffs, n) -> np.ndarray:
     n = as_float_array(n, "n", ndim_min=1, last_dim=3)
     a = np.array([_A[0], _A[1], _A[1], _A[1], _A[2], _A[2], _A[2], _A[2], _A[2]])
     # Clamped at 0: the order-2 truncation rings below zero away from a strong light (one
-    # directional light: -0.040 at 122 deg vs 17/16 at 0), which made negative pixels.
+    # directional light: -0.040 at 122 deg vs 17/16 at 0), which would make negative pixels.
     return np.maximum(sh9_basis(n) @ (a[:, None] * c), 0.0)
 
 
