@@ -131,7 +131,7 @@ class EnvMap:
 
     @property
     def packed(self):
-        """The levels packed for the compiled lookups (:func:`prefilter.texture.fetch.pack_levels`)."""
+        """The levels packed for compiled lookups (:func:`prefilter.texture.fetch.pack_levels`)."""
         if self._packed is None:
             self._packed = pack_levels(self.levels)
         return self._packed

@@ -21,6 +21,42 @@ from prefilter.leadr.envmap import latlong_uv_jit
 from prefilter.microfacet.fresnel import schlick_jit
 from prefilter.texture.fetch import trilinear_add
 
+# -- formulas shared with the array code of prefilter.leadr.shading (arrays or scalars) --------
+
+
+def slope_cholesky(sxx, syy, sxy):
+    """``(sigma_x, sigma_y, r, sqrt(1 - r^2))`` of slope covariances ``[[sxx, sxy], [sxy, syy]]``:
+    the Cholesky factor that Simplified Algorithm 1's grid walks (supplemental 3.4)."""
+    sx = np.sqrt(sxx)
+    sy = np.sqrt(syy)
+    r = sxy / (sx * sy)
+    return sx, sy, r, np.sqrt(np.maximum(1.0 - r * r, 0.0))
+
+
+def grid_slope(mux, muy, sx, sy, r, rc, pj, pk):
+    """Slope of grid node ``(p_j, p_k)``: ``x = mu_x + p_j sigma_x``,
+    ``y = mu_y + (r p_j + sqrt(1 - r^2) p_k) sigma_y`` (Simplified Algorithm 1)."""
+    return mux + pj * sx, muy + (pj * r + pk * rc) * sy
+
+
+def micronormal(x, y):
+    """Unit normal ``(-x, -y, 1) / sqrt(x^2 + y^2 + 1)`` of slope ``(x, y)`` (supplemental
+    eq. 1)."""
+    inv = 1.0 / np.sqrt(x * x + y * y + 1.0)
+    return -x * inv, -y * inv, inv
+
+
+def smith_terms(wx, wy, wz, mux, muy, sxx, syy, sxy):
+    """``(w_z - mu.w_xy, w_xy^T Sigma w_xy)``: Smith's ``a = first / sqrt(2 second)`` for
+    non-centred Gaussian slopes (supplemental 3.2)."""
+    return wz - mux * wx - muy * wy, sxx * wx * wx + 2.0 * sxy * wx * wy + syy * wy * wy
+
+
+slope_cholesky_jit = njit_inline(slope_cholesky)
+grid_slope_jit = njit_inline(grid_slope)
+micronormal_jit = njit_inline(micronormal)
+smith_terms_jit = njit_inline(smith_terms)
+
 
 @njit_inline
 def _lookup(flat, offsets, heights, widths, wx, wy, wz, lod, out):  # pragma: no cover
@@ -35,8 +71,7 @@ def _lookup(flat, offsets, heights, widths, wx, wy, wz, lod, out):  # pragma: no
 def _lambda_a(wx, wy, wz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
     """Smith ``a = (w_z - mu.w_xy) / sqrt(2 w_xy^T Sigma w_xy)`` (supplemental 3.2), and
     ``Lambda(a)`` (``-1.0`` standing for +inf when ``a <= 0``: fastmath has no infinities)."""
-    d = wz - mx * wx - my * wy
-    s2 = sxx * wx * wx + 2.0 * sxy * wx * wy + syy * wy * wy
+    d, s2 = smith_terms_jit(wx, wy, wz, mx, my, sxx, syy, sxy)
     if d <= 0.0:
         return -1.0
     if s2 <= 0.0:
@@ -61,8 +96,9 @@ def _g2_over_g1(lam_o, lam_i, wiz):  # pragma: no cover - compiled
 
 
 @njit_parallel
-def env_specular_kernel(flat, offsets, heights, widths, texel, wo, mu, cov, rot, p, w, h, f0, use_f0,
-                        lod_bias, eps, w_art, shadowing, out):  # pragma: no cover - compiled
+def env_specular_kernel(flat, offsets, heights, widths, texel, wo, mu, cov, rot, p, w, h, f0,
+                        use_f0, lod_bias, eps, w_art, shadowing,
+                        out):  # pragma: no cover - compiled
     """``out (P, C)`` for views ``wo (P, 3)``, mean slopes ``(P, 2)``, covariances ``(P, 2, 2)``,
     local-to-world ``rot (P, 3, 3)``, 1D grid ``p, w`` of spacing ``h``, Schlick ``f0 (P,)``."""
     npts = wo.shape[0]
@@ -71,9 +107,7 @@ def env_specular_kernel(flat, offsets, heights, widths, texel, wo, mu, cov, rot,
     for q in prange(npts):
         ox, oy, oz = wo[q, 0], wo[q, 1], wo[q, 2]
         sxx, syy, sxy = cov[q, 0, 0], cov[q, 1, 1], cov[q, 0, 1]
-        sx, sy = math.sqrt(sxx), math.sqrt(syy)
-        r = sxy / (sx * sy)
-        r_ = math.sqrt(max(1.0 - r * r, 0.0))
+        sx, sy, r, r_ = slope_cholesky_jit(sxx, syy, sxy)
         cell = h * h * math.sqrt(sxx * syy - sxy * sxy)
         num = np.zeros(nc)
         rad = np.empty(nc)
@@ -82,10 +116,8 @@ def env_specular_kernel(flat, offsets, heights, widths, texel, wo, mu, cov, rot,
         for k in range(n * n + 1):
             if k < n * n:
                 j, i = k // n, k % n
-                x = mu[q, 0] + p[j] * sx
-                y = mu[q, 1] + (p[j] * r + p[i] * r_) * sy
-                inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
-                mx, my, mz = -x * inv, -y * inv, inv
+                x, y = grid_slope_jit(mu[q, 0], mu[q, 1], sx, sy, r, r_, p[j], p[i])
+                mx, my, mz = micronormal_jit(x, y)
                 wt = w[j] * w[i]
             else:
                 # Artificial micronormal (supplemental 3.7).
@@ -139,9 +171,7 @@ def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no 
     for q in prange(npts):
         ox, oy, oz = wo[q, 0], wo[q, 1], wo[q, 2]
         sxx, syy, sxy = cov[q, 0, 0], cov[q, 1, 1], cov[q, 0, 1]
-        sx, sy = math.sqrt(sxx), math.sqrt(syy)
-        r = sxy / (sx * sy)
-        r_ = math.sqrt(max(1.0 - r * r, 0.0))
+        sx, sy, r, r_ = slope_cholesky_jit(sxx, syy, sxy)
         lam_o = _lambda_a(ox, oy, oz, mu[q, 0], mu[q, 1], sxx, syy, sxy)
         # the grid's micronormals, their weights W S and the steepest slope |s|
         gm = np.empty((n * n, 3))
@@ -150,12 +180,11 @@ def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no 
         steep = 0.0
         for j in range(n):
             for i in range(n):
-                x = mu[q, 0] + p[j] * sx
-                y = mu[q, 1] + (p[j] * r + p[i] * r_) * sy
-                inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
+                x, y = grid_slope_jit(mu[q, 0], mu[q, 1], sx, sy, r, r_, p[j], p[i])
+                mx, my, mz = micronormal_jit(x, y)
                 k = j * n + i
-                gm[k, 0], gm[k, 1], gm[k, 2] = -x * inv, -y * inv, inv
-                gw[k] = w[j] * w[i] * max(-x * inv * ox - y * inv * oy + inv * oz, 0.0) / inv
+                gm[k, 0], gm[k, 1], gm[k, 2] = mx, my, mz
+                gw[k] = w[j] * w[i] * max(mx * ox + my * oy + mz * oz, 0.0) / mz
                 den += gw[k]
                 steep = max(steep, math.sqrt(x * x + y * y))
         num = np.zeros(nc)

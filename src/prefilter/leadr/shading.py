@@ -23,6 +23,9 @@ from prefilter.validation import (
     broadcast_batch,
 )
 from prefilter.errors import PrefilterError
+from prefilter.leadr.envmap import EnvMap, IrradianceMap, sh9_irradiance, texel_directions
+from prefilter.leadr.kernels import (diffuse_shadow_kernel, env_specular_kernel, grid_slope,
+                                     micronormal, slope_cholesky, smith_terms)
 from prefilter.microfacet import fresnel
 from prefilter.microfacet.beckmann import beckmann_lambda, smith_lambda_walter
 
@@ -55,9 +58,8 @@ def _stats(mean, cov):
 
 def _lambda(w, mu, sxx, syy, sxy, fit: str):
     """Smith ``Lambda(w)`` of non-centred Gaussian slopes (supplemental 3.2)."""
-    wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
-    d = wz - mu[..., 0] * wx - mu[..., 1] * wy
-    sig = np.sqrt(np.maximum(sxx * wx * wx + 2.0 * sxy * wx * wy + syy * wy * wy, 0.0))
+    d, s2 = smith_terms(w[..., 0], w[..., 1], w[..., 2], mu[..., 0], mu[..., 1], sxx, syy, sxy)
+    sig = np.sqrt(np.maximum(s2, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         a = np.where(sig > 0, d / (np.sqrt(2.0) * sig), np.where(d > 0, np.inf, -np.inf))
     return beckmann_lambda(a) if fit == "exact" else smith_lambda_walter(a)
@@ -176,13 +178,9 @@ def grid_normals(mean_slope, slope_cov, n: int, spacing: float | None = None):
     p, w, h = gaussian_grid(n, spacing)
     pj, pk = np.repeat(p, len(p)), np.tile(p, len(p))
     wgt = np.repeat(w, len(w)) * np.tile(w, len(w))
-    sx, sy = np.sqrt(sxx), np.sqrt(syy)
-    r = sxy / (sx * sy)
-    r_ = np.sqrt(np.maximum(1.0 - r * r, 0.0))
-    x = mu[..., 0, None] + pj * sx[..., None]
-    y = mu[..., 1, None] + (pj * r[..., None] + pk * r_[..., None]) * sy[..., None]
-    m = np.stack([-x, -y, np.ones_like(x)], -1)
-    m /= np.linalg.norm(m, axis=-1, keepdims=True)
+    sx, sy, r, r_ = (v[..., None] for v in slope_cholesky(sxx, syy, sxy))
+    x, y = grid_slope(mu[..., 0, None], mu[..., 1, None], sx, sy, r, r_, pj, pk)
+    m = np.stack(micronormal(x, y), -1)
     cell = h * h * np.sqrt(sxx * syy - sxy * sxy)
     return m, wgt, cell
 
@@ -295,8 +293,6 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     -------
     numpy.ndarray (..., C)
     """
-    from prefilter.leadr.envmap import EnvMap
-
     if not isinstance(env, EnvMap):
         raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
     n = as_positive_int(n, "n")
@@ -321,7 +317,6 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
 
 def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_world,
                            shadowing=False):
-    from prefilter.leadr.kernels import env_specular_kernel
 
     wo = as_directions(wo, "wo")
     mu, sxx, _, _ = _stats(mean, cov)
@@ -339,9 +334,10 @@ def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_worl
     p, w, h = gaussian_grid(n, spacing)
     flat, offsets, heights, widths = env.packed
     out = np.empty(flat_shape + (flat.shape[1],))
-    env_specular_kernel(flat, offsets, heights, widths, env.texel_solid_angle, b(wo, (3,)), b(mu, (2,)),
-                        b(np.asarray(cov, np.float64), (2, 2)), rot, p, w, h, f0a, f0 is not None,
-                        float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, shadowing, out)
+    env_specular_kernel(flat, offsets, heights, widths, env.texel_solid_angle, b(wo, (3,)),
+                        b(mu, (2,)), b(np.asarray(cov, np.float64), (2, 2)), rot, p, w, h, f0a,
+                        f0 is not None, float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT,
+                        shadowing, out)
     return out.reshape(shape + (flat.shape[1],))
 
 
@@ -352,8 +348,6 @@ def diffuse_sh(sh_coeffs, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None
     ``(1 / pi) sum W S_ E(m) / sum W S_`` with ``E`` from
     :func:`prefilter.leadr.envmap.sh9_irradiance`; ``(..., C)``. Without self-shadowing.
     """
-    from prefilter.leadr.envmap import sh9_irradiance
-
     n = as_positive_int(n, "n")
     c = as_float_array(sh_coeffs, "sh_coeffs", ndim_min=1)
     if c.shape[0] != 9 or c.ndim > 2:
@@ -371,8 +365,6 @@ def diffuse_irradiance(irradiance, wo, mean_slope, slope_cov, n: int = 5, *, spa
     Algorithm 3 with ``E(m)`` read from a :class:`prefilter.leadr.envmap.IrradianceMap` instead
     of order-2 SH (:func:`diffuse_sh`), ``(1 / pi) sum W S_ E(m) / sum W S_``; ``(..., C)``.
     Without self-shadowing (add :func:`diffuse_shadowing`)."""
-    from prefilter.leadr.envmap import IrradianceMap
-
     if not isinstance(irradiance, IrradianceMap):
         raise PrefilterError("irradiance: expected a prefilter.leadr.envmap.IrradianceMap, got "
                              f"{type(irradiance).__name__}")
@@ -420,9 +412,6 @@ def diffuse_shadowing(env, wo, mean_slope, slope_cov, n: int = 5, *, to_world=No
     horizon; ``None``: :data:`SHADOW_ROWS`, twice that for footprints smoother than
     :data:`SHADOW_FINE_SIGMA`); add it to :func:`diffuse_irradiance` or :func:`diffuse_sh`.
     Compiled (:func:`prefilter.leadr.kernels.diffuse_shadow_kernel`)."""
-    from prefilter.leadr.envmap import EnvMap, texel_directions
-    from prefilter.leadr.kernels import diffuse_shadow_kernel
-
     if not isinstance(env, EnvMap):
         raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
     n = as_positive_int(n, "n")
