@@ -16,13 +16,13 @@ import math
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, njit_serial, prange
+from prefilter.jit import njit_parallel, njit_serial, prange, serial
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.texture.fetch import bilinear_add, pack_levels, trilinear_add
 from prefilter.texture.mip import MipChain
 
-__all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
+__all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture", "table_lookup"]
 
 _EDGE_CODE = {"clamp": 0, "mirror": 1, "periodic": 2}
 
@@ -125,14 +125,21 @@ def _wrap(i, n, edge):  # pragma: no cover - compiled
 
 @njit_serial
 def _table(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - compiled
-    """Bilinear lookup of a ColormapTable (``sigma < 0``: row 0 only, the naive colour)."""
+    """Bilinear lookup of a ColormapTable (eq. 10; ``sigma <= 0``: row 0 only, the naive
+    colour)."""
     ns, n, c = table.shape
     x = (mean - lo) / (hi - lo) * n - 0.5
+    # bring x into a range whose floor fits an int64 (|mean| > 1e17 would wrap to the wrong
+    # edge): clamping saturates, mirror and periodic edges repeat with period 2n and n
+    if edge == 0:
+        x = min(max(x, -1.0), float(n))
+    else:
+        x = x % (2.0 * n if edge == 1 else float(n))
     x0 = math.floor(x)
     fx = x - x0
     i0 = _wrap(int(x0), n, edge)
     i1 = _wrap(int(x0) + 1, n, edge)
-    if sigma <= 0.0:
+    if sigma <= 0.0 or ns == 1 or smax == 0.0:
         for k in range(c):
             out[k] = table[0, i0, k] * (1 - fx) + table[0, i1, k] * fx
         return
@@ -143,6 +150,22 @@ def _table(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - c
         a = table[j0, i0, k] * (1 - fx) + table[j0, i1, k] * fx
         b = table[j0 + 1, i0, k] * (1 - fx) + table[j0 + 1, i1, k] * fx
         out[k] = a * (1 - fy) + b * fy
+
+
+@njit_parallel
+def _lookup_kernel(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - compiled
+    for p in prange(mean.shape[0]):
+        _table(table, lo, hi, smax, edge, mean[p], sigma[p], out[p])
+    return out
+
+
+def table_lookup(table, mean, sigma) -> np.ndarray:
+    """``(N, C)`` lookups of a :class:`~prefilter.colormap.table.ColormapTable` at ``mean (N,)``,
+    ``sigma (N,)`` (checked by the caller, :meth:`ColormapTable.lookup`)."""
+    mean = np.ascontiguousarray(mean, dtype=np.float64)
+    out = np.empty((mean.shape[0], table.table.shape[2]))
+    return serial(_lookup_kernel, mean.shape[0])(
+        *_table_args(table), mean, np.ascontiguousarray(sigma, dtype=np.float64), out)
 
 
 @njit_parallel

@@ -31,6 +31,7 @@ import numpy as np
 from scipy.special import ndtr
 
 from prefilter.validation import as_float_array, as_positive_int, broadcast_batch
+from prefilter.colormap.kernels import table_lookup
 from prefilter.errors import PrefilterError, TableFileError
 
 __all__ = ["EDGES", "ColormapTable", "as_colormap", "gaussian_operator", "lookup",
@@ -225,36 +226,10 @@ class ColormapTable:
         s = as_float_array(sigma, "sigma")
         if np.any(s < 0.0):
             raise PrefilterError(f"sigma: expected standard deviations >= 0, got min {s.min()!r}")
-        broadcast_batch(mean=m.shape, sigma=s.shape)
+        shape = broadcast_batch(mean=m.shape, sigma=s.shape)
         m, s = np.broadcast_arrays(m, s)
-        lo, hi = self.value_range
-        n, ns = self.n_mean, self.n_sigma
-        x = (m - lo) / (hi - lo) * n - 0.5
-        # bring x into a range whose floor fits an int64 (|mean| > 1e17 wrapped to the wrong
-        # edge): clamping saturates, mirror and periodic edges repeat with period 2n and n
-        if self.edge == "clamp":
-            x = np.clip(x, -1.0, float(n))
-        else:
-            x = np.mod(x, 2.0 * n if self.edge == "mirror" else float(n))
-        x0 = np.floor(x)
-        fx = (x - x0)[..., None]
-        i0 = x0.astype(np.int64)
-        i1 = i0 + 1
-        if self.edge == "clamp":
-            i0, i1 = np.clip(i0, 0, n - 1), np.clip(i1, 0, n - 1)
-        else:
-            i0, i1 = _extend_index(i0, n, self.edge), _extend_index(i1, n, self.edge)
-        if ns == 1 or self.sigma_max == 0.0:
-            y = np.zeros_like(s)
-        else:
-            y = np.clip(s / self.sigma_max, 0.0, 1.0) * (ns - 1)
-        j0 = np.minimum(np.floor(y).astype(np.int64), max(ns - 2, 0))
-        fy = (y - j0)[..., None]
-        j1 = np.minimum(j0 + 1, ns - 1)
-        t = self.table
-        row0 = t[j0, i0] * (1.0 - fx) + t[j0, i1] * fx
-        row1 = t[j1, i0] * (1.0 - fx) + t[j1, i1] * fx
-        return row0 * (1.0 - fy) + row1 * fy
+        out = table_lookup(self, m.reshape(-1), s.reshape(-1))
+        return out.reshape(shape + (out.shape[1],))
 
     def naive(self, mean) -> np.ndarray:
         """The naive filter ``C(mean)`` (row 0), shape ``(..., C)``."""
