@@ -135,15 +135,8 @@ def shade_leadr_delta(scene, g, lights, *, meso: bool = True, shadowing: bool = 
     light; ``shadowing`` multiplies it by ``G2 / G1``, :func:`shading.shadowing_ratio`)."""
     t, b, n, wo = shading_frames(g)
     mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips, taps=taps)
-    incoming = []
-    for pl in lights.points:
-        d = pl.position - g.position
-        d2 = np.maximum(np.sum(d * d, -1), 1e-300)
-        incoming.append((d / np.sqrt(d2)[:, None], pl.intensity / d2[:, None]))
-    for dl in lights.directionals:
-        incoming.append((np.broadcast_to(-dl.direction, g.position.shape), dl.irradiance))
     out = np.zeros((len(wo), 3))
-    for w, e in incoming:
+    for w, e in point_incoming(lights, g.position):
         wi = _local(w, t, b, n)
         wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
         h = wo + wi
@@ -276,21 +269,23 @@ def _diffuse_env(sh, irradiance, wo, mean, cov, n, rot):
     return diffuse_irradiance(irradiance, wo, mean, cov, n, to_world=rot)
 
 
-def _lights_without_quads(scene, method):
+def _environment_inputs(scene, method, irradiance_map: bool):
+    """Point/directional lights (quads rejected), the summed environment (or ``None``), its SH
+    coefficients and, if ``irradiance_map``, its :class:`IrradianceMap`."""
     if any(light.type == "quad" for light in scene.lights):
         raise PrefilterError(f"method {method!r}: quad lights are not supported; expected "
                              "environment, point and directional lights")
-    return scene.light_set()
+    env = scene_environment(scene)
+    sh = sh9_project(env) if env is not None else np.zeros((9, 3))
+    irr = IrradianceMap(env) if env is not None and irradiance_map else None
+    return scene.light_set(), env, sh, irr
 
 
 def _render_env(scene, settings, meso: bool, name: str, shadowing: bool = True,
                 irradiance_map: bool = True) -> np.ndarray:
     from prefilter.render.pipeline import render_samples
 
-    lights = _lights_without_quads(scene, name)
-    env = scene_environment(scene)
-    sh = sh9_project(env) if env is not None else np.zeros((9, 3))
-    irr = IrradianceMap(env) if env is not None and irradiance_map else None
+    lights, env, sh, irr = _environment_inputs(scene, name, irradiance_map)
     return render_samples(scene, settings,
                           lambda g, _u: shade_leadr_env(scene, g, env, sh, lights, meso=meso,
                                                         shadowing=shadowing, irradiance=irr),
@@ -301,10 +296,7 @@ def _render_irradiance(scene, settings, meso: bool, name: str,
                        shadowing: bool = True, irradiance_map: bool = True) -> np.ndarray:
     from prefilter.render.pipeline import render_samples
 
-    lights = _lights_without_quads(scene, name)
-    env = scene_environment(scene)
-    sh = sh9_project(env) if env is not None else np.zeros((9, 3))
-    irr = IrradianceMap(env) if env is not None and irradiance_map else None
+    lights, env, sh, irr = _environment_inputs(scene, name, irradiance_map)
     return render_samples(scene, settings,
                           lambda g, _u: shade_leadr_irradiance(scene, g, sh, lights, meso=meso,
                                                                env=env, shadowing=shadowing,
