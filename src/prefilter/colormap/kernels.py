@@ -16,16 +16,14 @@ import math
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, njit_serial, prange, serial
+from prefilter.colormap.table import kernel_args, lookup_one
+from prefilter.jit import njit_parallel, njit_serial, prange
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.texture.fetch import bilinear_add, pack_levels, trilinear_add
 from prefilter.texture.mip import MipChain
 
-__all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture", "table_lookup"]
-
-_EDGE_CODE = {"clamp": 0, "mirror": 1, "periodic": 2}
-
+__all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
 
 class PackedChain:
     """A :class:`MipChain` flattened for the kernels (:func:`prefilter.texture.fetch.pack_levels`):
@@ -113,61 +111,6 @@ def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, ou
     return lod, area_lod
 
 
-@njit_serial
-def _wrap(i, n, edge):  # pragma: no cover - compiled
-    if edge == 0:
-        return min(max(i, 0), n - 1)
-    if edge == 2:
-        return i % n
-    j = i % (2 * n)
-    return j if j < n else 2 * n - 1 - j
-
-
-@njit_serial
-def _table(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - compiled
-    """Bilinear lookup of a ColormapTable (eq. 10; ``sigma <= 0``: row 0 only, the naive
-    colour)."""
-    ns, n, c = table.shape
-    x = (mean - lo) / (hi - lo) * n - 0.5
-    # bring x into a range whose floor fits an int64 (|mean| > 1e17 would wrap to the wrong
-    # edge): clamping saturates, mirror and periodic edges repeat with period 2n and n
-    if edge == 0:
-        x = min(max(x, -1.0), float(n))
-    else:
-        x = x % (2.0 * n if edge == 1 else float(n))
-    x0 = math.floor(x)
-    fx = x - x0
-    i0 = _wrap(int(x0), n, edge)
-    i1 = _wrap(int(x0) + 1, n, edge)
-    if sigma <= 0.0 or ns == 1 or smax == 0.0:
-        for k in range(c):
-            out[k] = table[0, i0, k] * (1 - fx) + table[0, i1, k] * fx
-        return
-    y = min(sigma / smax, 1.0) * (ns - 1)
-    j0 = min(int(math.floor(y)), ns - 2)
-    fy = y - j0
-    for k in range(c):
-        a = table[j0, i0, k] * (1 - fx) + table[j0, i1, k] * fx
-        b = table[j0 + 1, i0, k] * (1 - fx) + table[j0 + 1, i1, k] * fx
-        out[k] = a * (1 - fy) + b * fy
-
-
-@njit_parallel
-def _lookup_kernel(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - compiled
-    for p in prange(mean.shape[0]):
-        _table(table, lo, hi, smax, edge, mean[p], sigma[p], out[p])
-    return out
-
-
-def table_lookup(table, mean, sigma) -> np.ndarray:
-    """``(N, C)`` lookups of a :class:`~prefilter.colormap.table.ColormapTable` at ``mean (N,)``,
-    ``sigma (N,)`` (checked by the caller, :meth:`ColormapTable.lookup`)."""
-    mean = np.ascontiguousarray(mean, dtype=np.float64)
-    out = np.empty((mean.shape[0], table.table.shape[2]))
-    return serial(_lookup_kernel, mean.shape[0])(
-        *_table_args(table), mean, np.ascontiguousarray(sigma, dtype=np.float64), out)
-
-
 @njit_parallel
 def _texture_kernel(data, offs, hs, ws, uv, dudv, table, lo, hi, smax, edge, filtered, aniso,
                     max_aniso, scratch, out):  # pragma: no cover - compiled
@@ -183,7 +126,7 @@ def _texture_kernel(data, offs, hs, ws, uv, dudv, table, lo, hi, smax, edge, fil
             if lod < 1.0:  # magnification correction (texture.footprint_stats)
                 var -= (1.0 - max(lod, 0.0)) * iv[0]
             sigma = math.sqrt(max(var, 0.0))
-        _table(table, lo, hi, smax, edge, m[0], sigma, out[p])
+        lookup_one(table, lo, hi, smax, edge, m[0], sigma, out[p])
 
 
 @njit_parallel
@@ -202,7 +145,7 @@ def _noise_kernel(data, offs, hs, ws, uv, dudv, std_var, table, lo, hi, smax, ed
             f = t - l0
             v = std_var[l0] * (1 - f) + std_var[min(l0 + 1, nl - 1)] * f
             sigma = math.sqrt(max(v, 0.0))
-        _table(table, lo, hi, smax, edge, m[0], sigma, out[p])
+        lookup_one(table, lo, hi, smax, edge, m[0], sigma, out[p])
 
 
 _INV_SQRT_2PI = 0.3989422804014327
@@ -334,7 +277,7 @@ def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kap
         lod, _ = _fetch(data, offs, hs, ws, uv[p, 0], uv[p, 1], dudv[p, 0, 0], dudv[p, 0, 1],
                         dudv[p, 1, 0], dudv[p, 1, 1], True, max_aniso, c, m, iv)
         if not filtered:
-            _table(table, lo, hi, smax, edge, m[0], -1.0, out[p])
+            lookup_one(table, lo, hi, smax, edge, m[0], -1.0, out[p])
             vb = (1.0 + lam_o) / (1.0 + lam_o + lam_i)
             for k in range(out.shape[1]):
                 out[p, k] *= vb
@@ -358,7 +301,7 @@ def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kap
         a = k1 * v * ir1
         mean = x + a * lz
         vv = max(v - a * a * lz * (z1 + lz), 0.0)
-        _table(table, lo, hi, smax, edge, mean * sigma_h, math.sqrt(vv) * sigma_h, out[p])
+        lookup_one(table, lo, hi, smax, edge, mean * sigma_h, math.sqrt(vv) * sigma_h, out[p])
         for k in range(out.shape[1]):
             out[p, k] *= vb
 
@@ -372,12 +315,6 @@ def _flat(uv, dudv):
         np.ascontiguousarray(j.reshape(-1, 2, 2))
 
 
-def _table_args(table):
-    lo, hi = table.value_range
-    return (np.ascontiguousarray(table.table), float(lo), float(hi), float(table.sigma_max),
-            _EDGE_CODE[table.edge])
-
-
 def shade_texture(table, chain: PackedChain, uv, dudv, *, filtered: bool = True,
                   anisotropic: bool = True, max_aniso: int = 8) -> np.ndarray:
     """Colour-mapped tabulated texture (section 4.2), ``(..., C)``.
@@ -389,7 +326,7 @@ def shade_texture(table, chain: PackedChain, uv, dudv, *, filtered: bool = True,
         raise PrefilterError("chain: the filtered method needs the two-channel moments chain")
     out = np.zeros((uvf.shape[0], table.table.shape[2]))
     _texture_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf,
-                    *_table_args(table), bool(filtered), bool(anisotropic),
+                    *kernel_args(table), bool(filtered), bool(anisotropic),
                     as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))
 
@@ -402,7 +339,7 @@ def shade_noise(table, chain: PackedChain, noise_std, uv, dudv, *, filtered: boo
     out = np.zeros((uvf.shape[0], table.table.shape[2]))
     _noise_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf,
                   np.ascontiguousarray(noise_std.variance, dtype=np.float64),
-                  *_table_args(table), bool(filtered), as_positive_int(max_aniso, "max_aniso"),
+                  *kernel_args(table), bool(filtered), as_positive_int(max_aniso, "max_aniso"),
                   np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))
 
@@ -425,6 +362,6 @@ def shade_height(table, chain: PackedChain, uv, dudv, wo, wi, slope_cov, sigma_h
     out = np.zeros((uvf.shape[0], table.table.shape[2]))
     _height_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf, wo, wi,
                    np.ascontiguousarray(cov), float(sigma_h), _PROBIT_T, np.asarray(kappa),
-                   np.asarray(dd), _LOG2_M, _HERMITE, *_table_args(table), bool(filtered),
+                   np.asarray(dd), _LOG2_M, _HERMITE, *kernel_args(table), bool(filtered),
                    as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))
