@@ -37,7 +37,8 @@ from prefilter.leadr.envmap import (ENV_FROM_WORLD, IrradianceMap, env_from_imag
                                     latlong_resample, sh9_project)
 from prefilter.leadr.maps import shading_stats
 from prefilter.leadr.shading import (diffuse_directional, diffuse_irradiance, diffuse_sh,
-                                     diffuse_shadowing, env_specular, point_light)
+                                     diffuse_shadowing, env_specular, largest_slope_variance,
+                                     point_light)
 from prefilter.microfacet.fresnel import schlick
 from prefilter.render.shading import point_incoming, shading_frames
 
@@ -231,10 +232,7 @@ def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
 def specular_grid_size(cov, n_grid: int = ENV_GRID, n_rough: int = ENV_GRID_ROUGH) -> np.ndarray:
     """Grid size per footprint ``(...)`` of slope covariances ``cov (..., 2, 2)``: ``n_rough``
     where the largest slope std is at least :data:`ROUGH_SIGMA`, else ``n_grid``."""
-    c = np.asarray(cov, np.float64)
-    sxx, syy, sxy = c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
-    big = 0.5 * (sxx + syy) + np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
-    return np.where(big >= ROUGH_SIGMA ** 2, n_rough, n_grid)
+    return np.where(largest_slope_variance(cov) >= ROUGH_SIGMA ** 2, n_rough, n_grid)
 
 
 def env_specular_adaptive(env, wo, mean, cov, *, f0=None, to_world=None, shadowing: bool = True,

@@ -212,6 +212,35 @@ def _as_rotation(to_world):
     return r
 
 
+def _batch(wo, mean, cov, to_world=None, f0=None):
+    """Checked inputs broadcast to their batch shape and flattened (contiguous float64):
+    ``(shape, wo (P, 3), mean (P, 2), cov (P, 2, 2), to_world (P, 3, 3) or None, f0 (P,) or
+    None)``."""
+    wo = as_directions(wo, "wo")
+    mu, sxx, _, _ = _stats(mean, cov)
+    to_world = _as_rotation(to_world)
+    f0 = None if f0 is None else as_unit_interval(f0, "f0")
+    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
+                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}),
+                            **({} if f0 is None else {"f0": f0.shape}))
+    p = (int(np.prod(shape, dtype=np.int64)),)
+
+    def flat(a, tail):
+        return np.ascontiguousarray(np.broadcast_to(a, shape + tail).reshape(p + tail),
+                                    dtype=np.float64)
+
+    return (shape, flat(wo, (3,)), flat(mu, (2,)), flat(cov, (2, 2)),
+            None if to_world is None else flat(to_world, (3, 3)),
+            None if f0 is None else flat(f0, ()))
+
+
+def largest_slope_variance(cov) -> np.ndarray:
+    """Largest eigenvalue ``(...)`` of slope covariances ``cov (..., 2, 2)``."""
+    c = np.asarray(cov, np.float64)
+    sxx, syy, sxy = c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
+    return 0.5 * (sxx + syy) + np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+
+
 def _reflect(wo, m):
     return 2.0 * np.sum(wo * m, axis=-1, keepdims=True) * m - wo
 
@@ -223,19 +252,7 @@ def _rotate(to_world, v):
 def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
     """``sum W S_ F L / sum W S_`` (Simplified Algorithms 1 and 3) with the artificial
     micronormal; ``radiance_fn(m, wi, J, cell, to_world) -> (..., K, C)``."""
-    wo = as_directions(wo, "wo")
-    mu, sxx, syy, sxy = _stats(mean, cov)
-    to_world = _as_rotation(to_world)
-    f0 = None if f0 is None else as_unit_interval(f0, "f0")
-    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
-                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}),
-                            **({} if f0 is None else {"f0": f0.shape}))
-    wo = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
-    mu = np.broadcast_to(mu, shape + (2,)).reshape(-1, 2)
-    cov = np.broadcast_to(np.asarray(cov, np.float64), shape + (2, 2)).reshape(-1, 2, 2)
-    if to_world is not None:
-        to_world = np.broadcast_to(to_world, shape + (3, 3)).reshape(-1, 3, 3)
-    f0 = None if f0 is None else np.broadcast_to(np.asarray(f0, np.float64), shape).reshape(-1)
+    shape, wo, mu, cov, to_world, f0 = _batch(wo, mean, cov, to_world, f0)
     k = n * n
     step = max(1, CHUNK // k)
     out = None
@@ -318,26 +335,15 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
 def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_world,
                            shadowing=False):
 
-    wo = as_directions(wo, "wo")
-    mu, sxx, _, _ = _stats(mean, cov)
-    to_world = _as_rotation(to_world)
-    f0 = None if f0 is None else as_unit_interval(f0, "f0")
-    lod_bias = float(as_float_array(lod_bias, "lod_bias"))
-    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
-                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}),
-                            **({} if f0 is None else {"f0": f0.shape}))
-    flat_shape = (int(np.prod(shape, dtype=np.int64)),)
-    b = lambda a, tail: np.ascontiguousarray(  # noqa: E731
-        np.broadcast_to(a, shape + tail).reshape(flat_shape + tail))
-    rot = b(np.eye(3) if to_world is None else to_world, (3, 3))
-    f0a = b(np.asarray(0.0 if f0 is None else f0, np.float64), ())
+    shape, wo, mu, cov, rot, f0a = _batch(wo, mean, cov, to_world, f0)
+    if rot is None:
+        rot = np.ascontiguousarray(np.broadcast_to(np.eye(3), (len(wo), 3, 3)))
     p, w, h = gaussian_grid(n, spacing)
     flat, offsets, heights, widths = env.packed
-    out = np.empty(flat_shape + (flat.shape[1],))
-    env_specular_kernel(flat, offsets, heights, widths, env.texel_solid_angle, b(wo, (3,)),
-                        b(mu, (2,)), b(np.asarray(cov, np.float64), (2, 2)), rot, p, w, h, f0a,
-                        f0 is not None, float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT,
-                        shadowing, out)
+    out = np.empty((len(wo), flat.shape[1]))
+    env_specular_kernel(flat, offsets, heights, widths, env.texel_solid_angle, wo, mu, cov, rot,
+                        p, w, h, np.zeros(len(wo)) if f0a is None else f0a, f0a is not None,
+                        float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, shadowing, out)
     return out.reshape(shape + (flat.shape[1],))
 
 
@@ -417,24 +423,17 @@ def diffuse_shadowing(env, wo, mean_slope, slope_cov, n: int = 5, *, to_world=No
     n = as_positive_int(n, "n")
     if rows is not None:
         rows = as_positive_int(rows, "rows")
-    wo = as_directions(wo, "wo")
-    mu, sxx, syy, sxy = _stats(mean_slope, slope_cov)
-    to_world = _as_rotation(to_world)
-    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
-                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}))
-    flat = (int(np.prod(shape, dtype=np.int64)),)
-    b = lambda a, tail: np.ascontiguousarray(  # noqa: E731
-        np.broadcast_to(a, shape + tail).reshape(flat + tail), dtype=np.float64)
+    shape, wo, mu, cov, rot, _ = _batch(wo, mean_slope, slope_cov, to_world)
+    if rot is None:
+        rot = np.broadcast_to(np.eye(3), (len(wo), 3, 3))
+    flat = (len(wo),)
     if rows is None:
-        # largest eigenvalue of the slope covariance
-        big = 0.5 * (sxx + syy) + np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
-        fine = b(big < SHADOW_FINE_SIGMA ** 2, ()) > 0
+        fine = largest_slope_variance(cov) < SHADOW_FINE_SIGMA ** 2
         groups = [(SHADOW_ROWS, ~fine), (2 * SHADOW_ROWS, fine)]
     else:
         groups = [(rows, np.ones(flat, bool))]
     p, w, _ = gaussian_grid(n)
-    args = (b(wo, (3,)), b(mu, (2,)), b(np.asarray(slope_cov, np.float64), (2, 2)),
-            b(np.eye(3) if to_world is None else to_world, (3, 3)))
+    args = (wo, mu, cov, rot)
     out = None
     for r, sel in groups:
         lev = next((a for a in env.levels if a.shape[0] <= r), env.levels[-1])
