@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from prefilter.jit import njit_inline, njit_parallel, prange
+from prefilter.jit import njit_inline, njit_parallel, prange, serial
 
 
 def pack_levels(levels) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -91,5 +91,6 @@ def trilinear(packed, uv, lod, *, clamp_v: bool = False) -> np.ndarray:
     uvf = np.ascontiguousarray(np.broadcast_to(uv, shape + (2,)).reshape(-1, 2))
     lodf = np.ascontiguousarray(np.broadcast_to(np.asarray(lod, np.float64), shape).reshape(-1))
     out = np.empty((uvf.shape[0], data.shape[1]))
-    trilinear_kernel(data, offsets, heights, widths, uvf, lodf, bool(clamp_v), out)
+    serial(trilinear_kernel, len(uvf))(data, offsets, heights, widths, uvf, lodf, bool(clamp_v),
+                                       out)
     return out.reshape(shape + (data.shape[1],))
