@@ -3,7 +3,9 @@
 The same computations as the NumPy path (:mod:`prefilter.colormap.texture`,
 :func:`prefilter.colormap.height.filter_height_footprint`), fused per pixel as a shader would run
 them: footprint axes, anisotropic trilinear fetches of a mip chain (as
-:meth:`prefilter.texture.mip.MipChain.lookup_footprint`), then one table lookup. Each method reads
+:meth:`prefilter.texture.mip.MipChain.lookup_footprint`, with :mod:`prefilter.texture.fetch`),
+then one table lookup (:func:`prefilter.colormap.table.lookup_one`, as
+:meth:`~prefilter.colormap.table.ColormapTable.lookup`). Each method reads
 only what it needs (naive: the one-channel mean mip and row 0 of the table; filtered: the moments
 mip and the 2D table), so their time ratio is the cost of filtering
 (``benchmarks/bench_colormap.py``).
@@ -24,6 +26,7 @@ from prefilter.texture.fetch import bilinear_add, pack_levels, trilinear_add
 from prefilter.texture.mip import MipChain
 
 __all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
+
 
 class PackedChain:
     """A :class:`MipChain` flattened for the kernels (:func:`prefilter.texture.fetch.pack_levels`):

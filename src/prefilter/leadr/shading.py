@@ -290,7 +290,7 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
                  shadowing: bool = False) -> np.ndarray:
     """Rough specular microfacets under an environment map: Simplified Algorithm 1, or with
     ``shadowing`` the paper's Algorithm 1 (each sample weighted by ``G2 / G1``, 0 below the
-    geometric plane; :func:`prefilter.leadr.render.env_specular_shadowed` is the NumPy path).
+    geometric plane; compiled only).
 
     Each grid micronormal reflects ``wo``; the radiance is read at the mip level whose texel solid
     angle matches the sample's: ``Omega = J * cell``, ``J = 4 |m.wo| |m.z|^3`` (supplemental eqs.
@@ -322,7 +322,7 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
                                       to_world, bool(shadowing))
     if shadowing:
         raise PrefilterError("backend: the NumPy path of env_specular has no shadowing; use "
-                             "backend='numba' or prefilter.leadr.render.env_specular_shadowed")
+                             "backend='numba'")
 
     def radiance(m, wi, jac, cell, tw):
         with np.errstate(divide="ignore"):
