@@ -11,8 +11,8 @@ of the table, the filtered one the moments mip and the 2D table. Single-threaded
 (``numba.set_num_threads(1)``), best of 7 runs of each, interleaved, after a warm-up call
 (compilation), timed twice: wall clock, then process CPU time (``time.process_time``), which on a
 shared, loaded machine leaves out the time the process waits for a core (wall-clock ratios there
-swing by +-0.1 from run to run). The ratio is the reportable number (issue 7 asks for <= 1.3
-for (a)-(c)). No assertions.
+swing by +-0.1 from run to run). The ratio is the reportable number (the target is <= 1.3 for
+(a)-(c)). No assertions.
 """
 
 from __future__ import annotations

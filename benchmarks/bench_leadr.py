@@ -34,7 +34,7 @@ Specular diagnosis (``--spec-diagnosis --blocks 16,32``, ~15 min per block on a 
 :func:`prefilter.studies.leadr.specular_diagnosis`, why sigma 0.5 specular misses 0.5x naive
 (reference noise, grid N, LOD bias, parallax, the footprint's non-Gaussian slope histogram).
 
-Render methods (``--render``): wall time of ``leadr-env``, ``leadr-env-simplified``,
+Render methods (``--render``): wall time of ``leadr-env`` (and ``algorithm=simplified``),
 ``leadr-irradiance`` and the naive methods on a 160 x 90 plane + sphere scene with a Gaussian
 height map under ``procedural_env(128)``.
 
@@ -143,8 +143,12 @@ def throughput(p: int = 1 << 16) -> None:
     print(f"\nIrradianceMap build (once per environment, 128 rows): {1e3 * t:.0f} ms")
 
 
-METHODS = ("leadr-env", "leadr-env-simplified", "leadr-env-naive", "leadr-irradiance",
-           "leadr-irradiance-naive")
+#: (label, method, variant settings)
+METHODS = (("leadr-env", "leadr-env", None),
+           ("leadr-env algorithm=simplified", "leadr-env", {"algorithm": "simplified"}),
+           ("leadr-env-naive", "leadr-env-naive", None),
+           ("leadr-irradiance", "leadr-irradiance", None),
+           ("leadr-irradiance-naive", "leadr-irradiance-naive", None))
 
 
 def render_times(width: int = 160, height: int = 90) -> None:
@@ -152,12 +156,7 @@ def render_times(width: int = 160, height: int = 90) -> None:
     from pathlib import Path
 
     from prefilter.render import load_scene
-    from prefilter.render.pipeline import render
-    from prefilter.render.methods import available, register
-
-    for name in METHODS:
-        if name not in available():  # until prefilter.render.methods lists them
-            register(name, "prefilter.leadr.render:render_" + name.replace("-", "_"))
+    from prefilter.render.driver import render
     tmp = Path(tempfile.mkdtemp())
     np.save(tmp / "sky.npy", procedural_env(128))
     mat = {"alpha": 0.1, "f0": 0.04, "base_color": [0.3, 0.25, 0.2],
@@ -170,9 +169,9 @@ def render_times(width: int = 160, height: int = 90) -> None:
                      "uv_scale": [8, 4], "material": mat}],
         "lights": [{"type": "environment", "image": "sky.npy"}]}, base_dir=tmp)
     print("| method | ms per frame | Mpixel / s |\n|---|---|---|")
-    for method in METHODS:
-        _, t = _timed(lambda: render(scene, method), reps=2)
-        print(f"| {method} | {1e3 * t:.0f} | {width * height / t / 1e6:.3f} |", flush=True)
+    for label, method, params in METHODS:
+        _, t = _timed(lambda: render(scene, method, params=params), reps=2)
+        print(f"| {label} | {1e3 * t:.0f} | {width * height / t / 1e6:.3f} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -29,10 +29,10 @@ import time
 import numpy as np
 
 from prefilter.jit import njit_parallel, njit_serial, prange
-from prefilter.render.demo import showcase_scene
+from prefilter.report.demo import showcase_scene
 from prefilter.render.metrics import relmse
 from prefilter.render.methods import RenderSettings
-from prefilter.render.pipeline import render, render_samples, surface_attributes
+from prefilter.render.driver import render, render_samples, surface_attributes
 from prefilter.render.scene import load_scene
 from prefilter.render.shading import local_view, shade_delta_lights
 

@@ -1,4 +1,4 @@
-"""`prefilter bake colormap`, the GLSL snippet and its Python twin."""
+"""`prefilter bake colormap`."""
 
 import json
 
@@ -9,36 +9,7 @@ from scipy.integrate import quad
 from scipy.stats import norm
 
 from prefilter.cli import cli
-from prefilter.colormap import prefilter_table
-from prefilter.colormap.glsl import glsl_lookup_twin, glsl_snippet, glsl_texture_twin
 from prefilter.texture.io import read_image, write_image
-
-
-@pytest.mark.parametrize("edge", ["clamp", "mirror", "periodic"])
-def test_glsl_twin_matches_lookup(edge):
-    rng = np.random.default_rng(7)
-    t = prefilter_table(rng.random((64, 3)), (-1.0, 3.0), 0.8, size=64, n_sigma=33, edge=edge)
-    m = rng.uniform(-3.0, 5.0, 2000) if edge != "clamp" else rng.uniform(-1.5, 3.5, 2000)
-    s = rng.uniform(0.0, 1.0, 2000)  # includes sigma > sigma_max (clamped by both)
-    got = glsl_lookup_twin(t.table.astype(np.float32), t.metadata(), m, s)
-    np.testing.assert_allclose(got, t.lookup(m, s), atol=2e-5)
-
-
-def test_gl_wrap_modes_follow_the_specification():
-    img = np.arange(4.0)[None, :, None]  # one row: texels 0 1 2 3
-    u = (np.array([-2.0, -1.0, 4.0, 5.0]) + 0.5) / 4  # texel centres outside [0, 4)
-    np.testing.assert_allclose(glsl_texture_twin(img, u, 0.5, "GL_REPEAT")[:, 0], [2, 3, 0, 1])
-    np.testing.assert_allclose(glsl_texture_twin(img, u, 0.5, "GL_MIRRORED_REPEAT")[:, 0],
-                               [1, 0, 3, 2])
-    np.testing.assert_allclose(glsl_texture_twin(img, u, 0.5, "GL_CLAMP_TO_EDGE")[:, 0],
-                               [0, 0, 3, 3])
-
-
-def test_snippet_carries_the_table_layout():
-    t = prefilter_table(np.zeros((8, 3)), (-2.0, 5.0), 0.75, size=8, edge="mirror")
-    code = glsl_snippet(t.metadata())
-    assert "GL_MIRRORED_REPEAT" in code and "vec2(-2.0, 5.0)" in code and "0.75" in code
-    assert code.count("{") == code.count("}")
 
 
 def test_bake_command_writes_table_and_metadata(tmp_path):
@@ -79,17 +50,3 @@ def test_bake_command_rejects_bad_input(tmp_path):
     res = CliRunner().invoke(cli, ["bake", "colormap", str(src), "--sigma-max", "-1",
                                    "-o", str(tmp_path / "t.exr")])
     assert res.exit_code != 0 and "sigma_max" in str(res.exception) + res.output
-
-
-def test_glsl_snippet_writes_float_literals_for_whole_numbers():
-    # GLSL ES 3.00 has no implicit int -> float conversion: `const float x = 2;` does not compile
-    import re
-
-    from prefilter.colormap.glsl import glsl_snippet
-
-    src = glsl_snippet({"value_range": [0, 4], "edge": "mirror", "sigma_max": 2, "n_sigma": 64})
-    for line in src.splitlines():
-        if line.startswith("const float") or line.startswith("const vec"):
-            for number in re.findall(r"(?<![\w.])-?\d+(?:\.\d*)?(?:e-?\d+)?(?![\w.])",
-                                     line.split("=", 1)[1]):
-                assert "." in number or "e" in number, (line, number)

@@ -113,13 +113,11 @@ def test_missing_driver_raises():
 
 
 def test_driver_from_scene_extras():
-    # the scene format's extras.colormap (a stand-in object until Scene carries extras)
-    from types import SimpleNamespace
-
-    scene = _scene(40.0, size=6)
+    # the scene format's extras.colormap
     spec = {"driver": "texture", "texture": TEX, "colors": COLORS, "range": [-4, 4],
             "sigma_max": 1.5}
-    holder = SimpleNamespace(camera=scene.camera, objects=scene.objects, lights=scene.lights,
-                             extras={"colormap": spec})
-    np.testing.assert_array_equal(render_colormap_filtered(holder, RenderSettings()),
+    scene = _scene(40.0, size=6)
+    with_extras = load_scene({**scene_dict("plane", 60.0, 40.0 * 256 / 64, 6, 6),
+                              "extras": {"colormap": spec}})
+    np.testing.assert_array_equal(render_colormap_filtered(with_extras, RenderSettings()),
                                   render_colormap_filtered(scene, RenderSettings(), spec))

@@ -156,9 +156,9 @@ def test_render_diffuse_uses_the_exact_irradiance(tmp_path):
 
 @pytest.mark.slow
 def test_far_field_diffuse_at_low_roughness_beats_naive():
-    # Issue #6 far-field bar at sigma 0.1 (docs/leadr.md, session 5): against a low-noise
-    # displaced reference (64^2 rays x 64 MIS samples), leadr-env's diffuse layer is <= 0.5x
-    # naive normal mapping with exact irradiance; with order-2 SH it was not (1.6-1.9x).
+    # The far-field bar at sigma 0.1 (docs/leadr.md): against a low-noise displaced reference
+    # (64^2 rays x 64 MIS samples), leadr-env's diffuse layer is <= 0.5x naive normal mapping
+    # with exact irradiance; with order-2 SH it is not (1.6-1.9x).
     from prefilter.studies.leadr import SURFACES, run_env
 
     rows = run_env(blocks=(32,), shifts=2, k=64, spp=64, shadings=("diffuse",),

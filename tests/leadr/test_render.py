@@ -1,4 +1,4 @@
-"""The leadr-point render method on small scenes."""
+"""The leadr-point render method on small scenes; the compiled box filter of the moments."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,9 @@ import pytest
 from prefilter.errors import PrefilterError
 from prefilter.render import gbuffer, load_scene
 from prefilter.render.methods import RenderSettings
-from prefilter.leadr.render import render_leadr_point
+from prefilter.leadr.render import FOOTPRINT_TAPS, footprint_moments, render_leadr_point
+from prefilter.texture import MipChain
+from prefilter.texture.mip import footprint_axes
 
 LIGHT = np.array([0.3, -1.0, -0.2]) / np.linalg.norm([0.3, -1.0, -0.2])
 SCENE = {
@@ -44,3 +46,29 @@ def test_quad_lights_are_rejected():
                               [[-1, 1, -1], [1, 1, -1], [1, 2, -1], [-1, 2, -1]]}]}
     with pytest.raises(PrefilterError, match="leadr-point"):
         render_leadr_point(load_scene(d), RenderSettings())
+
+
+def box_filter_numpy(chain, uv, dudv, max_taps: int = FOOTPRINT_TAPS) -> np.ndarray:
+    """:func:`footprint_moments` in NumPy: ``T x T`` trilinear taps of ``MipChain.lookup``."""
+    major = footprint_axes(dudv, chain.shape[:2])[0]
+    taps = np.clip(np.ceil(major / 2.0), 1, max_taps).astype(np.int64)
+    out = np.empty((len(uv), chain.shape[2]))
+    for t in np.unique(taps):
+        m = taps == t
+        lod = np.log2(np.maximum(major[m] / t, 1.0))
+        o = (np.arange(t) + 0.5) / t - 0.5
+        ox, oy = np.meshgrid(o, o)
+        off = np.einsum("nab,kb->nka", dudv[m], np.stack([ox.ravel(), oy.ravel()], -1))
+        out[m] = chain.lookup(uv[m][:, None, :] + off,
+                              np.broadcast_to(lod[:, None], off.shape[:2])).mean(axis=1)
+    return out
+
+
+def test_compiled_box_filter_equals_the_numpy_one():
+    rng = np.random.default_rng(5)
+    chain = MipChain(rng.random((128, 64, 5)))  # non-square, wrapped uv, tiny to wide footprints
+    uv = rng.uniform(-2.0, 3.0, (3000, 2))
+    dudv = rng.normal(scale=0.1, size=(3000, 2, 2))
+    dudv[:100] *= 1e-4
+    np.testing.assert_allclose(footprint_moments(chain, uv, dudv),
+                               box_filter_numpy(chain, uv, dudv), rtol=0, atol=1e-12)

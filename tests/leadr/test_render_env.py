@@ -6,10 +6,13 @@ import pytest
 from prefilter.errors import PrefilterError
 from prefilter.leadr.render import (render_leadr_env, render_leadr_irradiance,
                                     render_leadr_irradiance_naive)
+from prefilter.leadr.shading import env_specular, grid_normals, shadowing_ratio
+from prefilter.microfacet.fresnel import schlick
 from prefilter.render import gbuffer, load_scene
-from prefilter.render.methods import RenderSettings
+from prefilter.render.methods import RenderSettings, describe, get_method, method_params
 
 ROWS = 64
+SIMPLIFIED = RenderSettings(params={"algorithm": "simplified"})
 
 
 def doc_direction(u, v):
@@ -69,17 +72,17 @@ def test_diffuse_irradiance_of_a_linear_environment(tmp_path):
 
 
 def test_constant_environment_is_reproduced_by_rough_height_maps(tmp_path):
-    # Simplified Algorithms 1 and 3 (leadr-env-simplified) normalise by the projected-area sum:
-    # a constant environment L
-    # gives f0 L + rho L exactly, whatever the roughness, view or footprint (grazing included).
+    # Simplified Algorithms 1 and 3 (leadr-env with algorithm=simplified) normalise by the
+    # projected-area sum: a constant environment L gives f0 L + rho L exactly, whatever the
+    # roughness, view or footprint (grazing included).
     mat = {"alpha": 0.3, "f0": 1.0, "base_color": 0.25,
            "height_map": {"procedural": "gaussian", "size": 64, "rms_slope": 0.6, "scale": 1.0}}
-    from prefilter.leadr.render import _render_env, render_leadr_env_simplified
+    from prefilter.leadr.render import _render_env
 
     s = scene(tmp_path, mat, image=np.full((16, 32, 3), 2.0), origin=[0.0, 0.3, 3.0])
     g = gbuffer(s)
     naive = lambda sc, st: _render_env(sc, st, False, "naive", shadowing=False)  # noqa: E731
-    for render in (render_leadr_env_simplified, naive):
+    for render in (lambda sc, st: render_leadr_env(sc, SIMPLIFIED), naive):
         img = render(s, RenderSettings())
         np.testing.assert_allclose(img[g.hit], 2.0 * 1.25, rtol=2e-3)
         assert np.all(img[~g.hit] == 0)
@@ -116,11 +119,31 @@ def test_quads_rejected_and_deterministic(tmp_path):
         render_leadr_env(load_scene(d, base_dir=tmp_path), RenderSettings())
 
 
+def algorithm_1_numpy(env, wo, mean, cov, n, *, f0=None) -> np.ndarray:
+    """Algorithm 1 with self-shadowing in NumPy, ``(P, C)`` (the compiled kernel is tested
+    against it): Simplified Algorithm 1's grid and per-sample LOD, each sample weighted by
+    ``G2 / G1`` (0 below the geometric plane); the projected-area sum stands for
+    ``(n_bar.g / n_bar.o) / (1 + Lambda(wo))`` (supplemental eq. 10). No artificial micronormal:
+    ``wo``, ``mean`` must give a grid that sees something."""
+    m, w, cell = grid_normals(mean, cov, n)
+    dot = np.einsum("pkj,pj->pk", m, wo)
+    area = w * np.maximum(dot, 0.0) / m[..., 2]
+    wi = 2.0 * dot[..., None] * m - wo[:, None, :]
+    jac = 4.0 * np.abs(dot) * np.abs(m[..., 2]) ** 3
+    with np.errstate(divide="ignore"):
+        lod = 0.5 * np.log2(np.maximum(jac * cell[:, None], 1e-300) / env.texel_solid_angle)
+    rad = env.lookup(wi, lod)
+    if f0 is not None:
+        rad = rad * schlick(np.asarray(f0)[:, None, None], dot[..., None])
+    g = shadowing_ratio(np.broadcast_to(wo[:, None, :], wi.shape), wi, mean[:, None],
+                        np.asarray(cov)[:, None])
+    return np.einsum("pk,pkc->pc", area * g, rad) / area.sum(axis=1)[:, None]
+
+
 def test_shadowed_specular_under_constant_env_is_the_beckmann_albedo():
     # With L = 1 and F = 1, Algorithm 1 with shadowing is the VNDF expectation of G2 / G1, i.e.
     # the directional albedo of the non-centred Beckmann microsurface (its own quadrature).
     from prefilter.leadr.envmap import EnvMap
-    from prefilter.leadr.render import env_specular_shadowed
     from prefilter.microfacet import Beckmann
 
     rng = np.random.default_rng(4)
@@ -133,7 +156,7 @@ def test_shadowed_specular_under_constant_env_is_the_beckmann_albedo():
     r = rng.uniform(-0.5, 0.5, p)
     cov = np.stack([np.stack([sd[:, 0]**2, r * sd[:, 0] * sd[:, 1]], -1),
                     np.stack([r * sd[:, 0] * sd[:, 1], sd[:, 1]**2], -1)], -2)
-    got = env_specular_shadowed(EnvMap(np.ones((8, 16, 3))), wo, mu, cov, 33)[:, 0]
+    got = algorithm_1_numpy(EnvMap(np.ones((8, 16, 3))), wo, mu, cov, 33)[:, 0]
     want = [float(Beckmann(mu[i], cov[i]).albedo(wo[i])) for i in range(p)]
     np.testing.assert_allclose(got, want, rtol=0.01)
     assert min(want) < 0.97  # shadowing is visible in these configurations
@@ -141,8 +164,6 @@ def test_shadowed_specular_under_constant_env_is_the_beckmann_albedo():
 
 def test_compiled_shadowed_kernel_equals_the_numpy_algorithm_1():
     from prefilter.leadr.envmap import EnvMap, procedural_env
-    from prefilter.leadr.render import env_specular_shadowed
-    from prefilter.leadr.shading import env_specular
 
     env = EnvMap(procedural_env(32))
     rng = np.random.default_rng(7)
@@ -153,7 +174,7 @@ def test_compiled_shadowed_kernel_equals_the_numpy_algorithm_1():
     mu = rng.normal(scale=0.2, size=(p, 2))
     cov = np.broadcast_to([[0.09, 0.02], [0.02, 0.05]], (p, 2, 2))
     a = env_specular(env, wo, mu, cov, 9, shadowing=True)
-    b = env_specular_shadowed(env, wo, mu, cov, 9)
+    b = algorithm_1_numpy(env, wo, mu, cov, 9)
     # the compiled kernel keeps the artificial micronormal (weight 1e-5) in the sum
     np.testing.assert_allclose(a, b, rtol=2e-3, atol=1e-4 * b.max())
     assert np.mean(a) < 0.97 * np.mean(env_specular(env, wo, mu, cov, 9))
@@ -183,18 +204,26 @@ def test_diffuse_shadowing_matches_the_exact_shadowed_irradiance():
 
 
 def test_shadowed_method_render(tmp_path):
-    from prefilter.leadr.render import render_leadr_env_shadowed, render_leadr_env_simplified
-
-    # smooth surface: no shadowing, same image as the simplified method (direction map, rgb f0)
+    # smooth surface: no shadowing, same image as the simplified algorithms (direction map,
+    # rgb f0)
     s = scene(tmp_path, {"alpha": 0.002, "f0": [0.9, 0.5, 0.2], "base_color": 0.1})
-    np.testing.assert_allclose(render_leadr_env_shadowed(s, RenderSettings()),
-                               render_leadr_env_simplified(s, RenderSettings()), rtol=1e-3,
-                               atol=1e-4)
+    np.testing.assert_allclose(render_leadr_env(s, RenderSettings()),
+                               render_leadr_env(s, SIMPLIFIED), rtol=1e-3, atol=1e-4)
     # rough height map under a constant sky: never brighter than the unshadowed 1, finite
     mat = {"alpha": 0.3, "f0": 1.0, "base_color": 0.0,
            "height_map": {"procedural": "gaussian", "size": 64, "rms_slope": 0.6, "scale": 1.0}}
     s = scene(tmp_path, mat, image=np.ones((16, 32, 3)), origin=[0.0, 0.3, 3.0])
     g = gbuffer(s)
-    img = render_leadr_env_shadowed(s, RenderSettings())
+    img = render_leadr_env(s, RenderSettings())
     assert np.all(np.isfinite(img)) and np.all(img[g.hit] <= 1.0 + 1e-9)
     assert img[g.hit].min() < 0.9
+
+
+def test_algorithm_is_a_setting_of_the_registered_methods():
+    for name in ("leadr-env", "leadr-env-naive", "leadr-irradiance", "leadr-irradiance-naive"):
+        assert method_params(name) == {"algorithm": ("full", "simplified")}
+        assert describe(name)
+    assert get_method("leadr-env") is render_leadr_env
+    for gone in ("leadr-env-shadowed", "leadr-env-simplified"):
+        with pytest.raises(PrefilterError, match="method"):
+            get_method(gone)

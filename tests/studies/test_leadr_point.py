@@ -74,18 +74,6 @@ def test_footprint_moments_are_the_box_average_over_the_pixel():
     assert np.abs(taps - box).max() < 0.004 < np.abs(one - box).max()
 
 
-def test_compiled_box_filter_equals_the_numpy_one():
-    from prefilter.leadr.render import _footprint_moments_numpy
-
-    rng = np.random.default_rng(5)
-    chain = MipChain(rng.random((128, 64, 5)))  # non-square, wrapped uv, tiny to wide footprints
-    uv = rng.uniform(-2.0, 3.0, (3000, 2))
-    dudv = rng.normal(scale=0.1, size=(3000, 2, 2))
-    dudv[:100] *= 1e-4
-    np.testing.assert_allclose(footprint_moments(chain, uv, dudv),
-                               _footprint_moments_numpy(chain, uv, dudv), rtol=0, atol=1e-12)
-
-
 @pytest.fixture(scope="module")
 def tiny_rows():
     return image_point(surfaces={"iso 0.25": POINT_SURFACES["iso 0.25"]}, shapes=("plane",),

@@ -5,7 +5,7 @@ Textures and Surfaces"); see ``docs/colormap.md``.
 tabulated textures and procedural noise over footprints (section 4.2); ``height``: shadowing and
 the height filtering distribution (section 5.1, eqs. 13-18); ``slope``: the view-dependent slope
 filtering distribution and 2D slope tables (section 5.2); ``combine``: section 6; ``glsl``: the
-shader snippet and its Python twin; ``commands``: ``prefilter bake colormap``.
+shader snippet; ``commands``: ``prefilter bake colormap``.
 """
 
 from prefilter.colormap.combine import combine_linear, combine_product

@@ -1,19 +1,15 @@
-"""GLSL lookup snippet for baked colour-map tables, and its Python twin.
+"""GLSL lookup snippet for baked colour-map tables.
 
-The twin :func:`glsl_texture_twin` reproduces what the snippet asks of the GPU -- ``texture()`` on a
-``GL_LINEAR`` sampler with the wrap modes of the OpenGL 4.6 specification (section 8.14.2) -- on
-the float32 table as stored in the baked file, independently of
-:meth:`prefilter.colormap.table.ColormapTable.lookup`; the tests check the two agree.
+The snippet reads the baked table with one ``texture()`` call on a ``GL_LINEAR`` sampler (wrap
+mode of the mean axis: :data:`GLSL_WRAP`); ``tests/colormap/test_glsl.py`` emulates that call in
+float32 and checks it against :meth:`prefilter.colormap.table.ColormapTable.lookup`.
 """
 
 from __future__ import annotations
 
-import numpy as np
-
-from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
 
-__all__ = ["GLSL_WRAP", "glsl_lookup_twin", "glsl_snippet", "glsl_texture_twin"]
+__all__ = ["GLSL_WRAP", "glsl_snippet"]
 
 #: OpenGL wrap mode of the mean axis for each edge rule (the sigma axis is always clamped).
 GLSL_WRAP = {"clamp": "GL_CLAMP_TO_EDGE", "mirror": "GL_MIRRORED_REPEAT", "periodic": "GL_REPEAT"}
@@ -80,43 +76,3 @@ def glsl_snippet(metadata: dict, height_params=None) -> str:
     except (KeyError, TypeError, ValueError) as exc:
         raise PrefilterError(f"metadata: expected a colour-map table description, got {exc}") \
             from None
-
-
-def _wrap(i: np.ndarray, size: int, mode: str) -> np.ndarray:
-    """Texel index wrapping of OpenGL 4.6, section 8.14.2 (table 8.20)."""
-    if mode == "GL_REPEAT":
-        return np.mod(i, size)
-    if mode == "GL_MIRRORED_REPEAT":
-        a = np.mod(i, 2 * size) - size
-        return (size - 1) - np.where(a >= 0, a, -(1 + a))
-    if mode == "GL_CLAMP_TO_EDGE":
-        return np.clip(i, 0, size - 1)
-    raise PrefilterError(
-        f"wrap mode: expected one of {', '.join(GLSL_WRAP.values())}, got {mode!r}")
-
-
-def glsl_texture_twin(image, u, v, wrap_s: str, wrap_t: str = "GL_CLAMP_TO_EDGE") -> np.ndarray:
-    """``texture(sampler, vec2(u, v))`` of a ``GL_LINEAR`` 2D sampler on ``image (H, W, C)``
-    (row ``r`` at ``t = (r + 0.5) / H``), ``(..., C)``, evaluated in float32 as a GPU would."""
-    img = np.asarray(image, dtype=np.float32)
-    h, w = img.shape[:2]
-    x = np.asarray(u, dtype=np.float32) * np.float32(w) - np.float32(0.5)
-    y = np.asarray(v, dtype=np.float32) * np.float32(h) - np.float32(0.5)
-    x, y = np.broadcast_arrays(x, y)
-    i0, j0 = np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)
-    a, b = (x - np.floor(x))[..., None], (y - np.floor(y))[..., None]
-    c0, c1 = _wrap(i0, w, wrap_s), _wrap(i0 + 1, w, wrap_s)
-    r0, r1 = _wrap(j0, h, wrap_t), _wrap(j0 + 1, h, wrap_t)
-    return ((1 - a) * (1 - b) * img[r0, c0] + a * (1 - b) * img[r0, c1]
-            + (1 - a) * b * img[r1, c0] + a * b * img[r1, c1])
-
-
-def glsl_lookup_twin(image, metadata: dict, mean, sigma) -> np.ndarray:
-    """Python twin of the snippet's ``colormapFiltered(mean, sigma)``, shape ``(..., C)``."""
-    m = as_float_array(mean, "mean").astype(np.float32)
-    s = as_float_array(sigma, "sigma").astype(np.float32)
-    lo, hi = (np.float32(x) for x in metadata["value_range"])
-    smax, ns = np.float32(metadata["sigma_max"]), np.float32(metadata["n_sigma"])
-    u = (m - lo) / (hi - lo)
-    v = (np.clip(s / smax, 0, 1) * (ns - 1) + np.float32(0.5)) / ns
-    return glsl_texture_twin(image, u, v, GLSL_WRAP[metadata["edge"]])

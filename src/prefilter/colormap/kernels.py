@@ -3,7 +3,9 @@
 The same computations as the NumPy path (:mod:`prefilter.colormap.texture`,
 :func:`prefilter.colormap.height.filter_height_footprint`), fused per pixel as a shader would run
 them: footprint axes, anisotropic trilinear fetches of a mip chain (as
-:meth:`prefilter.texture.mip.MipChain.lookup_footprint`), then one table lookup. Each method reads
+:meth:`prefilter.texture.mip.MipChain.lookup_footprint`, with :mod:`prefilter.texture.fetch`),
+then one table lookup (:func:`prefilter.colormap.table.lookup_one`, as
+:meth:`~prefilter.colormap.table.ColormapTable.lookup`). Each method reads
 only what it needs (naive: the one-channel mean mip and row 0 of the table; filtered: the moments
 mip and the 2D table), so their time ratio is the cost of filtering
 (``benchmarks/bench_colormap.py``).
@@ -16,66 +18,25 @@ import math
 
 import numpy as np
 
+from prefilter.colormap.table import kernel_args, lookup_one
 from prefilter.jit import njit_parallel, njit_serial, prange
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
+from prefilter.texture.fetch import bilinear_add, pack_levels, trilinear_add
 from prefilter.texture.mip import MipChain
 
 __all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
 
-_EDGE_CODE = {"clamp": 0, "mirror": 1, "periodic": 2}
-
 
 class PackedChain:
-    """A :class:`MipChain` flattened for the kernels: ``data (total, C)``, per-level ``offset``,
-    ``height``, ``width``."""
+    """A :class:`MipChain` flattened for the kernels (:func:`prefilter.texture.fetch.pack_levels`):
+    ``data (total, C)``, per-level ``offsets``, ``heights``, ``widths``."""
 
     def __init__(self, chain: MipChain):
         if not isinstance(chain, MipChain):
             raise PrefilterError(f"chain: expected a MipChain, got {type(chain).__name__}")
         self.channels = chain.shape[2]
-        self.heights = np.array([lv.shape[0] for lv in chain.levels], np.int64)
-        self.widths = np.array([lv.shape[1] for lv in chain.levels], np.int64)
-        sizes = self.heights * self.widths
-        self.offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-        self.data = np.ascontiguousarray(np.concatenate(
-            [lv.reshape(-1, self.channels) for lv in chain.levels]))
-
-
-@njit_serial
-def _bilerp(data, off, h, w, u, v, c, weight, out):  # pragma: no cover - compiled
-    x = u * w - 0.5
-    y = v * h - 0.5
-    x0 = math.floor(x)
-    y0 = math.floor(y)
-    fx = x - x0
-    fy = y - y0
-    j0 = int(x0) % w
-    i0 = int(y0) % h
-    j1 = (j0 + 1) % w
-    i1 = (i0 + 1) % h
-    w00 = (1 - fx) * (1 - fy) * weight
-    w01 = fx * (1 - fy) * weight
-    w10 = (1 - fx) * fy * weight
-    w11 = fx * fy * weight
-    for k in range(c):
-        out[k] += (w00 * data[off + i0 * w + j0, k] + w01 * data[off + i0 * w + j1, k]
-                   + w10 * data[off + i1 * w + j0, k] + w11 * data[off + i1 * w + j1, k])
-
-
-@njit_serial
-def _trilinear(data, offs, hs, ws, u, v, lod, c, weight, out):  # pragma: no cover - compiled
-    n = offs.shape[0]
-    if n == 1:
-        _bilerp(data, offs[0], hs[0], ws[0], u, v, c, weight, out)
-        return
-    lod = min(max(lod, 0.0), n - 1.0)
-    l0 = min(int(math.floor(lod)), n - 2)
-    t = lod - l0
-    if t < 1.0:  # skip a level of zero weight (magnified footprints read level 0 only)
-        _bilerp(data, offs[l0], hs[l0], ws[l0], u, v, c, weight * (1 - t), out)
-    if t > 0.0:
-        _bilerp(data, offs[l0 + 1], hs[l0 + 1], ws[l0 + 1], u, v, c, weight * t, out)
+        self.data, self.offsets, self.heights, self.widths = pack_levels(chain.levels)
 
 
 @njit_serial
@@ -136,50 +97,21 @@ def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, ou
     for i in range(taps):
         o = (i + 0.5) / taps - 0.5 if aniso else 0.0
         if not want:
-            _trilinear(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, out)
+            trilinear_add(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, False,
+                          out)
             continue
         # the trilinear lookup by hand, keeping the unweighted level-0 moments of the tap
         ivar[1] = 0.0
         ivar[2] = 0.0
-        _bilerp(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, ivar[1:3])
+        bilinear_add(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, False,
+                     ivar[1:3])
         out[0] += (1.0 - t) / taps * ivar[1]
         out[1] += (1.0 - t) / taps * ivar[2]
         if t > 0.0:
-            _bilerp(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, out)
+            bilinear_add(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, False,
+                         out)
         ivar[0] += (ivar[2] - ivar[1] * ivar[1]) / taps
     return lod, area_lod
-
-
-@njit_serial
-def _wrap(i, n, edge):  # pragma: no cover - compiled
-    if edge == 0:
-        return min(max(i, 0), n - 1)
-    if edge == 2:
-        return i % n
-    j = i % (2 * n)
-    return j if j < n else 2 * n - 1 - j
-
-
-@njit_serial
-def _table(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - compiled
-    """Bilinear lookup of a ColormapTable (``sigma < 0``: row 0 only, the naive colour)."""
-    ns, n, c = table.shape
-    x = (mean - lo) / (hi - lo) * n - 0.5
-    x0 = math.floor(x)
-    fx = x - x0
-    i0 = _wrap(int(x0), n, edge)
-    i1 = _wrap(int(x0) + 1, n, edge)
-    if sigma <= 0.0:
-        for k in range(c):
-            out[k] = table[0, i0, k] * (1 - fx) + table[0, i1, k] * fx
-        return
-    y = min(sigma / smax, 1.0) * (ns - 1)
-    j0 = min(int(math.floor(y)), ns - 2)
-    fy = y - j0
-    for k in range(c):
-        a = table[j0, i0, k] * (1 - fx) + table[j0, i1, k] * fx
-        b = table[j0 + 1, i0, k] * (1 - fx) + table[j0 + 1, i1, k] * fx
-        out[k] = a * (1 - fy) + b * fy
 
 
 @njit_parallel
@@ -197,7 +129,7 @@ def _texture_kernel(data, offs, hs, ws, uv, dudv, table, lo, hi, smax, edge, fil
             if lod < 1.0:  # magnification correction (texture.footprint_stats)
                 var -= (1.0 - max(lod, 0.0)) * iv[0]
             sigma = math.sqrt(max(var, 0.0))
-        _table(table, lo, hi, smax, edge, m[0], sigma, out[p])
+        lookup_one(table, lo, hi, smax, edge, m[0], sigma, out[p])
 
 
 @njit_parallel
@@ -216,7 +148,7 @@ def _noise_kernel(data, offs, hs, ws, uv, dudv, std_var, table, lo, hi, smax, ed
             f = t - l0
             v = std_var[l0] * (1 - f) + std_var[min(l0 + 1, nl - 1)] * f
             sigma = math.sqrt(max(v, 0.0))
-        _table(table, lo, hi, smax, edge, m[0], sigma, out[p])
+        lookup_one(table, lo, hi, smax, edge, m[0], sigma, out[p])
 
 
 _INV_SQRT_2PI = 0.3989422804014327
@@ -348,7 +280,7 @@ def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kap
         lod, _ = _fetch(data, offs, hs, ws, uv[p, 0], uv[p, 1], dudv[p, 0, 0], dudv[p, 0, 1],
                         dudv[p, 1, 0], dudv[p, 1, 1], True, max_aniso, c, m, iv)
         if not filtered:
-            _table(table, lo, hi, smax, edge, m[0], -1.0, out[p])
+            lookup_one(table, lo, hi, smax, edge, m[0], -1.0, out[p])
             vb = (1.0 + lam_o) / (1.0 + lam_o + lam_i)
             for k in range(out.shape[1]):
                 out[p, k] *= vb
@@ -372,7 +304,7 @@ def _height_kernel(data, offs, hs, ws, uv, dudv, wo, wi, cov, sigma_h, grid, kap
         a = k1 * v * ir1
         mean = x + a * lz
         vv = max(v - a * a * lz * (z1 + lz), 0.0)
-        _table(table, lo, hi, smax, edge, mean * sigma_h, math.sqrt(vv) * sigma_h, out[p])
+        lookup_one(table, lo, hi, smax, edge, mean * sigma_h, math.sqrt(vv) * sigma_h, out[p])
         for k in range(out.shape[1]):
             out[p, k] *= vb
 
@@ -386,12 +318,6 @@ def _flat(uv, dudv):
         np.ascontiguousarray(j.reshape(-1, 2, 2))
 
 
-def _table_args(table):
-    lo, hi = table.value_range
-    return (np.ascontiguousarray(table.table), float(lo), float(hi), float(table.sigma_max),
-            _EDGE_CODE[table.edge])
-
-
 def shade_texture(table, chain: PackedChain, uv, dudv, *, filtered: bool = True,
                   anisotropic: bool = True, max_aniso: int = 8) -> np.ndarray:
     """Colour-mapped tabulated texture (section 4.2), ``(..., C)``.
@@ -403,7 +329,7 @@ def shade_texture(table, chain: PackedChain, uv, dudv, *, filtered: bool = True,
         raise PrefilterError("chain: the filtered method needs the two-channel moments chain")
     out = np.zeros((uvf.shape[0], table.table.shape[2]))
     _texture_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf,
-                    *_table_args(table), bool(filtered), bool(anisotropic),
+                    *kernel_args(table), bool(filtered), bool(anisotropic),
                     as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))
 
@@ -416,7 +342,7 @@ def shade_noise(table, chain: PackedChain, noise_std, uv, dudv, *, filtered: boo
     out = np.zeros((uvf.shape[0], table.table.shape[2]))
     _noise_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf,
                   np.ascontiguousarray(noise_std.variance, dtype=np.float64),
-                  *_table_args(table), bool(filtered), as_positive_int(max_aniso, "max_aniso"),
+                  *kernel_args(table), bool(filtered), as_positive_int(max_aniso, "max_aniso"),
                   np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))
 
@@ -439,6 +365,6 @@ def shade_height(table, chain: PackedChain, uv, dudv, wo, wi, slope_cov, sigma_h
     out = np.zeros((uvf.shape[0], table.table.shape[2]))
     _height_kernel(chain.data, chain.offsets, chain.heights, chain.widths, uvf, jf, wo, wi,
                    np.ascontiguousarray(cov), float(sigma_h), _PROBIT_T, np.asarray(kappa),
-                   np.asarray(dd), _LOG2_M, _HERMITE, *_table_args(table), bool(filtered),
+                   np.asarray(dd), _LOG2_M, _HERMITE, *kernel_args(table), bool(filtered),
                    as_positive_int(max_aniso, "max_aniso"), np.empty((uvf.shape[0], 5)), out)
     return out.reshape(shape + (out.shape[1],))

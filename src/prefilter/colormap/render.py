@@ -197,7 +197,7 @@ def _light(scene, d: ColormapDriver):
 
 
 def _shade(scene, settings, driver, filtered: bool) -> np.ndarray:
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.driver import render_samples
 
     d = _scene_driver(scene, driver)
     light = _light(scene, d)

@@ -24,6 +24,7 @@ approximation when ``sigma > 0``), ``sigma`` is clamped to ``[0, sigma_max]``.
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,6 +32,7 @@ import numpy as np
 from scipy.special import ndtr
 
 from prefilter.validation import as_float_array, as_positive_int, broadcast_batch
+from prefilter.jit import njit_parallel, njit_serial, prange, serial
 from prefilter.errors import PrefilterError, TableFileError
 
 __all__ = ["EDGES", "ColormapTable", "as_colormap", "gaussian_operator", "lookup",
@@ -170,6 +172,73 @@ def _resampling_operator(n: int, sigma: float, edge: str, n_out: int) -> np.ndar
     return op.T
 
 
+#: Edge rules as the kernels number them.
+EDGE_CODE = {"clamp": 0, "mirror": 1, "periodic": 2}
+
+
+@njit_serial
+def _edge_index(i, n, edge):  # pragma: no cover - compiled
+    if edge == 0:
+        return min(max(i, 0), n - 1)
+    if edge == 2:
+        return i % n
+    j = i % (2 * n)
+    return j if j < n else 2 * n - 1 - j
+
+
+@njit_serial
+def lookup_one(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - compiled
+    """``out (C,)``: bilinear lookup of a table ``(n_sigma, n_mean, C)`` (eq. 10; ``sigma <= 0``:
+    row 0 only, the naive colour); the arguments after ``table`` as :func:`kernel_args` gives
+    them. Called by :meth:`ColormapTable.lookup` and the shading kernels."""
+    ns, n, c = table.shape
+    x = (mean - lo) / (hi - lo) * n - 0.5
+    # bring x into a range whose floor fits an int64 (|mean| > 1e17 would wrap to the wrong
+    # edge): clamping saturates, mirror and periodic edges repeat with period 2n and n
+    if edge == 0:
+        x = min(max(x, -1.0), float(n))
+    else:
+        x = x % (2.0 * n if edge == 1 else float(n))
+    x0 = math.floor(x)
+    fx = x - x0
+    i0 = _edge_index(int(x0), n, edge)
+    i1 = _edge_index(int(x0) + 1, n, edge)
+    if sigma <= 0.0 or ns == 1 or smax == 0.0:
+        for k in range(c):
+            out[k] = table[0, i0, k] * (1 - fx) + table[0, i1, k] * fx
+        return
+    y = min(sigma / smax, 1.0) * (ns - 1)
+    j0 = min(int(math.floor(y)), ns - 2)
+    fy = y - j0
+    for k in range(c):
+        a = table[j0, i0, k] * (1 - fx) + table[j0, i1, k] * fx
+        b = table[j0 + 1, i0, k] * (1 - fx) + table[j0 + 1, i1, k] * fx
+        out[k] = a * (1 - fy) + b * fy
+
+
+@njit_parallel
+def _lookup_kernel(table, lo, hi, smax, edge, mean, sigma, out):  # pragma: no cover - compiled
+    for p in prange(mean.shape[0]):
+        lookup_one(table, lo, hi, smax, edge, mean[p], sigma[p], out[p])
+    return out
+
+
+def _lookup(table, mean, sigma) -> np.ndarray:
+    """``(N, C)`` lookups of a :class:`~prefilter.colormap.table.ColormapTable` at ``mean (N,)``,
+    ``sigma (N,)`` (checked by the caller, :meth:`ColormapTable.lookup`)."""
+    mean = np.ascontiguousarray(mean, dtype=np.float64)
+    out = np.empty((mean.shape[0], table.table.shape[2]))
+    return serial(_lookup_kernel, mean.shape[0])(
+        *kernel_args(table), mean, np.ascontiguousarray(sigma, dtype=np.float64), out)
+
+
+def kernel_args(table):
+    """``(table, lo, hi, sigma_max, edge code)`` of a :class:`ColormapTable` for the kernels."""
+    lo, hi = table.value_range
+    return (np.ascontiguousarray(table.table), float(lo), float(hi), float(table.sigma_max),
+            EDGE_CODE[table.edge])
+
+
 @dataclass(frozen=True)
 class ColormapTable:
     """A pre-convolved colour map ``T[j, i] = [C * N(0, sigma_j^2)](m_i)`` (eq. 10).
@@ -225,36 +294,10 @@ class ColormapTable:
         s = as_float_array(sigma, "sigma")
         if np.any(s < 0.0):
             raise PrefilterError(f"sigma: expected standard deviations >= 0, got min {s.min()!r}")
-        broadcast_batch(mean=m.shape, sigma=s.shape)
+        shape = broadcast_batch(mean=m.shape, sigma=s.shape)
         m, s = np.broadcast_arrays(m, s)
-        lo, hi = self.value_range
-        n, ns = self.n_mean, self.n_sigma
-        x = (m - lo) / (hi - lo) * n - 0.5
-        # bring x into a range whose floor fits an int64 (|mean| > 1e17 wrapped to the wrong
-        # edge): clamping saturates, mirror and periodic edges repeat with period 2n and n
-        if self.edge == "clamp":
-            x = np.clip(x, -1.0, float(n))
-        else:
-            x = np.mod(x, 2.0 * n if self.edge == "mirror" else float(n))
-        x0 = np.floor(x)
-        fx = (x - x0)[..., None]
-        i0 = x0.astype(np.int64)
-        i1 = i0 + 1
-        if self.edge == "clamp":
-            i0, i1 = np.clip(i0, 0, n - 1), np.clip(i1, 0, n - 1)
-        else:
-            i0, i1 = _extend_index(i0, n, self.edge), _extend_index(i1, n, self.edge)
-        if ns == 1 or self.sigma_max == 0.0:
-            y = np.zeros_like(s)
-        else:
-            y = np.clip(s / self.sigma_max, 0.0, 1.0) * (ns - 1)
-        j0 = np.minimum(np.floor(y).astype(np.int64), max(ns - 2, 0))
-        fy = (y - j0)[..., None]
-        j1 = np.minimum(j0 + 1, ns - 1)
-        t = self.table
-        row0 = t[j0, i0] * (1.0 - fx) + t[j0, i1] * fx
-        row1 = t[j1, i0] * (1.0 - fx) + t[j1, i1] * fx
-        return row0 * (1.0 - fy) + row1 * fy
+        out = _lookup(self, m.reshape(-1), s.reshape(-1))
+        return out.reshape(shape + (out.shape[1],))
 
     def naive(self, mean) -> np.ndarray:
         """The naive filter ``C(mean)`` (row 0), shape ``(..., C)``."""

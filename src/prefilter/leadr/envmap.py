@@ -18,19 +18,31 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.validation import as_directions, as_float_array, as_positive_int, broadcast_batch
 from prefilter.errors import PrefilterError
+from prefilter.jit import njit_inline
+from prefilter.texture.fetch import pack_levels, trilinear
+from prefilter.validation import as_directions, as_float_array, as_positive_int, broadcast_batch
 
 #: World (y up) -> lat-long map coordinates of scene environment lights (rows: map x, y, z).
 ENV_FROM_WORLD = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 
 
+def latlong_uv(x, y, z):
+    """``(u, v) = (phi / 2 pi, theta / pi)`` of directions ``(x, y, z)`` (arrays or scalars;
+    ``u`` in ``[0, 1)``)."""
+    theta = np.arccos(np.minimum(np.maximum(z, -1.0), 1.0))
+    phi = np.arctan2(y, x) % (2.0 * np.pi)
+    return phi / (2.0 * np.pi), theta / np.pi
+
+
+#: :func:`latlong_uv` compiled for kernels (scalars).
+latlong_uv_jit = njit_inline(latlong_uv)
+
+
 def direction_to_uv(w) -> np.ndarray:
     """Continuous texel coordinates ``(..., 2)`` = (column, row) / size in [0, 1)."""
     w = np.asarray(w, dtype=np.float64)
-    theta = np.arccos(np.clip(w[..., 2], -1.0, 1.0))
-    phi = np.arctan2(w[..., 1], w[..., 0]) % (2.0 * np.pi)
-    return np.stack([phi / (2.0 * np.pi), theta / np.pi], -1)
+    return np.stack(latlong_uv(w[..., 0], w[..., 1], w[..., 2]), -1)
 
 
 def texel_directions(h: int, w: int) -> tuple[np.ndarray, np.ndarray]:
@@ -49,17 +61,11 @@ def latlong_resample(image, rows: int) -> np.ndarray:
     texel centres (wrap in u, clamp in v); used to bring any equirectangular file to the
     power-of-two ``(H, 2H)`` shape of :class:`EnvMap`."""
     a = as_float_array(image, "image", ndim_min=3)
-    h, w = a.shape[:2]
     rows = as_positive_int(rows, "rows")
-    y = np.clip((np.arange(rows) + 0.5) / rows * h - 0.5, 0.0, h - 1.0)
-    x = (np.arange(2 * rows) + 0.5) / (2 * rows) * w - 0.5
-    y0 = np.minimum(np.floor(y).astype(np.int64), max(h - 2, 0))
-    x0 = np.floor(x).astype(np.int64)
-    fy, fx = (y - y0)[:, None, None], (x - x0)[None, :, None]
-    y1, x0, x1 = np.minimum(y0 + 1, h - 1), x0 % w, (x0 + 1) % w
-    top = a[y0][:, x0] * (1 - fx) + a[y0][:, x1] * fx
-    bot = a[y1][:, x0] * (1 - fx) + a[y1][:, x1] * fx
-    return top * (1 - fy) + bot * fy
+    v = (np.arange(rows) + 0.5) / rows
+    u = (np.arange(2 * rows) + 0.5) / (2 * rows)
+    uv = np.stack(np.broadcast_arrays(u[None, :], v[:, None]), -1)
+    return trilinear(pack_levels([a]), uv, 0.0, clamp_v=True)
 
 
 def env_from_image(image, scale: float = 1.0) -> EnvMap:
@@ -101,6 +107,7 @@ class EnvMap:
                 f"{a.shape}"
             )
         _, omega = texel_directions(h, w)
+        self._packed = None
         self.levels = [a]
         self.solid_angles = [omega]
         while a.shape[0] > 1:
@@ -122,20 +129,12 @@ class EnvMap:
         h = self.size
         return np.pi / h * 2.0 * np.sin(np.pi / (2 * h))
 
-    def _bilinear(self, level: int, uv: np.ndarray) -> np.ndarray:
-        tex = self.levels[level]
-        h, w = tex.shape[:2]
-        x = uv[..., 0] * w - 0.5
-        y = np.clip(uv[..., 1] * h - 0.5, 0.0, h - 1.0)
-        x0 = np.floor(x)
-        y0 = np.minimum(np.floor(y), max(h - 2, 0))
-        fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-        x0 = x0.astype(np.int64) % w
-        x1 = (x0 + 1) % w
-        y0 = y0.astype(np.int64)
-        y1 = np.minimum(y0 + 1, h - 1)
-        return ((tex[y0, x0] * (1 - fx) + tex[y0, x1] * fx) * (1 - fy)
-                + (tex[y1, x0] * (1 - fx) + tex[y1, x1] * fx) * fy)
+    @property
+    def packed(self):
+        """The levels packed for compiled lookups (:func:`prefilter.texture.fetch.pack_levels`)."""
+        if self._packed is None:
+            self._packed = pack_levels(self.levels)
+        return self._packed
 
     def lookup(self, w, lod=0.0) -> np.ndarray:
         """Trilinear radiance ``(..., C)`` in unit directions ``w (..., 3)`` at mip level ``lod``
@@ -148,21 +147,8 @@ class EnvMap:
         if np.any(np.isnan(lod)):
             raise PrefilterError("lod: expected mip levels (numbers or +-inf), got NaN")
         uv = direction_to_uv(w)
-        shape = broadcast_batch(w=uv.shape[:-1], lod=lod.shape)
-        uv = np.broadcast_to(uv, shape + (2,))
-        lod = np.clip(np.broadcast_to(lod, shape), 0.0, len(self.levels) - 1.0)
-        l0 = np.floor(lod).astype(np.int64)
-        t = (lod - l0)[..., None]
-        out = np.zeros(uv.shape[:-1] + (self.levels[0].shape[2],))
-        for lv in np.unique(l0):
-            sel = l0 == lv
-            c0 = self._bilinear(int(lv), uv[sel])
-            if lv + 1 < len(self.levels):
-                c1 = self._bilinear(int(lv) + 1, uv[sel])
-                out[sel] = c0 * (1 - t[sel]) + c1 * t[sel]
-            else:
-                out[sel] = c0
-        return out
+        broadcast_batch(w=uv.shape[:-1], lod=lod.shape)
+        return trilinear(self.packed, uv, lod, clamp_v=True)
 
 
 # -- order-2 spherical harmonics ---------------------------------------------------------------
@@ -218,7 +204,7 @@ def sh9_irradiance(coeffs, n) -> np.ndarray:
     n = as_float_array(n, "n", ndim_min=1, last_dim=3)
     a = np.array([_A[0], _A[1], _A[1], _A[1], _A[2], _A[2], _A[2], _A[2], _A[2]])
     # Clamped at 0: the order-2 truncation rings below zero away from a strong light (one
-    # directional light: -0.040 at 122 deg vs 17/16 at 0), which made negative pixels.
+    # directional light: -0.040 at 122 deg vs 17/16 at 0), which would make negative pixels.
     return np.maximum(sh9_basis(n) @ (a[:, None] * c), 0.0)
 
 
@@ -308,13 +294,3 @@ def procedural_env(size: int = 64) -> np.ndarray:
     phi = np.arctan2(d[..., 1], d[..., 0])
     stripes = ((np.abs(z) < 0.4) & (np.cos(12.0 * phi) > 0.6))[..., None] * 2.0
     return sky + ground + sun + stripes
-
-
-def packed_levels(env: EnvMap) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """All mip levels flattened into one ``(sum H_l W_l, C)`` array, with per-level row offsets
-    and shapes ``(L, 2)`` (for the compiled kernels)."""
-    shapes = np.array([lv.shape[:2] for lv in env.levels], dtype=np.int64)
-    sizes = shapes[:, 0] * shapes[:, 1]
-    offsets = np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
-    flat = np.ascontiguousarray(np.concatenate([lv.reshape(-1, lv.shape[2]) for lv in env.levels]))
-    return flat, offsets, shapes

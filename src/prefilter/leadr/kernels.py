@@ -1,11 +1,13 @@
-"""Compiled Algorithm 1 (environment specular), one shading point per iteration.
+"""Compiled Algorithm 1 (environment specular), one shading point per iteration, the diffuse
+shadowing correction and the box filter of the moment mips.
 
-Same arithmetic as :func:`prefilter.leadr.shading.env_specular` (tested equal to the NumPy path):
-grid micronormals, the artificial micronormal of supplemental 3.7, the per-sample LOD from the
-Jacobian, trilinear lat-long lookups (wrap in phi, clamp in theta) and Schlick Fresnel; with
-``shadowing`` each sample is weighted by ``G2 / G1`` (the paper's Algorithm 1, tested equal to
-:func:`prefilter.leadr.render.env_specular_shadowed`). :func:`diffuse_shadow_kernel`: the
-shadowing correction of the diffuse irradiance (Algorithm 2 minus Simplified Algorithm 2).
+:func:`env_specular_kernel` is :func:`prefilter.leadr.shading.env_specular`: grid micronormals,
+the artificial micronormal of supplemental 3.7, the per-sample LOD from the Jacobian, trilinear
+lat-long lookups (:mod:`prefilter.texture.fetch`, wrap in phi, clamp in theta) and Schlick
+Fresnel; with ``shadowing`` each sample is weighted by ``G2 / G1`` (the paper's Algorithm 1).
+:func:`diffuse_shadow_kernel`: the shadowing correction of the diffuse irradiance (Algorithm 2
+minus Simplified Algorithm 2). :func:`box_moments_kernel`:
+:func:`prefilter.leadr.render.footprint_moments`.
 """
 
 from __future__ import annotations
@@ -14,51 +16,62 @@ import math
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, njit_serial, prange
+from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange
+from prefilter.leadr.envmap import latlong_uv_jit
+from prefilter.microfacet.fresnel import schlick_jit
+from prefilter.texture.fetch import trilinear_add
+
+# -- formulas shared with the array code of prefilter.leadr.shading (arrays or scalars) --------
 
 
-@njit_serial
-def _bilinear(flat, offset, hh, ww, u, v, out, scale):  # pragma: no cover - compiled
-    x = u * ww - 0.5
-    y = min(max(v * hh - 0.5, 0.0), hh - 1.0)
-    x0 = math.floor(x)
-    y0 = min(math.floor(y), max(hh - 2, 0))
-    fx = x - x0
-    fy = y - y0
-    j0 = int(x0) % ww
-    j1 = (j0 + 1) % ww
-    i0 = int(y0)
-    i1 = min(i0 + 1, hh - 1)
-    for c in range(flat.shape[1]):
-        a = flat[offset + i0 * ww + j0, c] * (1 - fx) + flat[offset + i0 * ww + j1, c] * fx
-        b = flat[offset + i1 * ww + j0, c] * (1 - fx) + flat[offset + i1 * ww + j1, c] * fx
-        out[c] += scale * (a * (1 - fy) + b * fy)
+def slope_cholesky(sxx, syy, sxy):
+    """``(sigma_x, sigma_y, r, sqrt(1 - r^2))`` of slope covariances ``[[sxx, sxy], [sxy, syy]]``:
+    the Cholesky factor that Simplified Algorithm 1's grid walks (supplemental 3.4)."""
+    sx = np.sqrt(sxx)
+    sy = np.sqrt(syy)
+    r = sxy / (sx * sy)
+    return sx, sy, r, np.sqrt(np.maximum(1.0 - r * r, 0.0))
 
 
-@njit_serial
-def _lookup(flat, offsets, shapes, wx, wy, wz, lod, out):  # pragma: no cover - compiled
+def grid_slope(mux, muy, sx, sy, r, rc, pj, pk):
+    """Slope of grid node ``(p_j, p_k)``: ``x = mu_x + p_j sigma_x``,
+    ``y = mu_y + (r p_j + sqrt(1 - r^2) p_k) sigma_y`` (Simplified Algorithm 1)."""
+    return mux + pj * sx, muy + (pj * r + pk * rc) * sy
+
+
+def micronormal(x, y):
+    """Unit normal ``(-x, -y, 1) / sqrt(x^2 + y^2 + 1)`` of slope ``(x, y)`` (supplemental
+    eq. 1)."""
+    inv = 1.0 / np.sqrt(x * x + y * y + 1.0)
+    return -x * inv, -y * inv, inv
+
+
+def smith_terms(wx, wy, wz, mux, muy, sxx, syy, sxy):
+    """``(w_z - mu.w_xy, w_xy^T Sigma w_xy)``: Smith's ``a = first / sqrt(2 second)`` for
+    non-centred Gaussian slopes (supplemental 3.2)."""
+    return wz - mux * wx - muy * wy, sxx * wx * wx + 2.0 * sxy * wx * wy + syy * wy * wy
+
+
+slope_cholesky_jit = njit_inline(slope_cholesky)
+grid_slope_jit = njit_inline(grid_slope)
+micronormal_jit = njit_inline(micronormal)
+smith_terms_jit = njit_inline(smith_terms)
+
+
+@njit_inline
+def _lookup(flat, offsets, heights, widths, wx, wy, wz, lod, out):  # pragma: no cover
+    """``out`` = trilinear radiance of the lat-long chain in direction ``w`` at ``lod``."""
     for c in range(out.size):
         out[c] = 0.0
-    theta = math.acos(min(max(wz, -1.0), 1.0))
-    phi = math.atan2(wy, wx) % (2.0 * math.pi)
-    u = phi / (2.0 * math.pi)
-    v = theta / math.pi
-    nl = offsets.size
-    lod = min(max(lod, 0.0), nl - 1.0)
-    l0 = int(math.floor(lod))
-    t = lod - l0
-    w0 = 1.0 - t if l0 + 1 < nl else 1.0
-    _bilinear(flat, offsets[l0], shapes[l0, 0], shapes[l0, 1], u, v, out, w0)
-    if l0 + 1 < nl and t > 0.0:
-        _bilinear(flat, offsets[l0 + 1], shapes[l0 + 1, 0], shapes[l0 + 1, 1], u, v, out, t)
+    u, v = latlong_uv_jit(wx, wy, wz)
+    trilinear_add(flat, offsets, heights, widths, u, v, lod, out.size, 1.0, True, out)
 
 
 @njit_serial
 def _lambda_a(wx, wy, wz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
     """Smith ``a = (w_z - mu.w_xy) / sqrt(2 w_xy^T Sigma w_xy)`` (supplemental 3.2), and
     ``Lambda(a)`` (``-1.0`` standing for +inf when ``a <= 0``: fastmath has no infinities)."""
-    d = wz - mx * wx - my * wy
-    s2 = sxx * wx * wx + 2.0 * sxy * wx * wy + syy * wy * wy
+    d, s2 = smith_terms_jit(wx, wy, wz, mx, my, sxx, syy, sxy)
     if d <= 0.0:
         return -1.0
     if s2 <= 0.0:
@@ -83,8 +96,9 @@ def _g2_over_g1(lam_o, lam_i, wiz):  # pragma: no cover - compiled
 
 
 @njit_parallel
-def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h, f0, use_f0,
-                        lod_bias, eps, w_art, shadowing, out):  # pragma: no cover - compiled
+def env_specular_kernel(flat, offsets, heights, widths, texel, wo, mu, cov, rot, p, w, h, f0,
+                        use_f0, lod_bias, eps, w_art, shadowing,
+                        out):  # pragma: no cover - compiled
     """``out (P, C)`` for views ``wo (P, 3)``, mean slopes ``(P, 2)``, covariances ``(P, 2, 2)``,
     local-to-world ``rot (P, 3, 3)``, 1D grid ``p, w`` of spacing ``h``, Schlick ``f0 (P,)``."""
     npts = wo.shape[0]
@@ -93,9 +107,7 @@ def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h,
     for q in prange(npts):
         ox, oy, oz = wo[q, 0], wo[q, 1], wo[q, 2]
         sxx, syy, sxy = cov[q, 0, 0], cov[q, 1, 1], cov[q, 0, 1]
-        sx, sy = math.sqrt(sxx), math.sqrt(syy)
-        r = sxy / (sx * sy)
-        r_ = math.sqrt(max(1.0 - r * r, 0.0))
+        sx, sy, r, r_ = slope_cholesky_jit(sxx, syy, sxy)
         cell = h * h * math.sqrt(sxx * syy - sxy * sxy)
         num = np.zeros(nc)
         rad = np.empty(nc)
@@ -104,10 +116,8 @@ def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h,
         for k in range(n * n + 1):
             if k < n * n:
                 j, i = k // n, k % n
-                x = mu[q, 0] + p[j] * sx
-                y = mu[q, 1] + (p[j] * r + p[i] * r_) * sy
-                inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
-                mx, my, mz = -x * inv, -y * inv, inv
+                x, y = grid_slope_jit(mu[q, 0], mu[q, 1], sx, sy, r, r_, p[j], p[i])
+                mx, my, mz = micronormal_jit(x, y)
                 wt = w[j] * w[i]
             else:
                 # Artificial micronormal (supplemental 3.7).
@@ -127,11 +137,10 @@ def env_specular_kernel(flat, offsets, shapes, texel, wo, mu, cov, rot, p, w, h,
             gx = rot[q, 0, 0] * rx + rot[q, 0, 1] * ry + rot[q, 0, 2] * rz
             gy = rot[q, 1, 0] * rx + rot[q, 1, 1] * ry + rot[q, 1, 2] * rz
             gz = rot[q, 2, 0] * rx + rot[q, 2, 1] * ry + rot[q, 2, 2] * rz
-            _lookup(flat, offsets, shapes, gx, gy, gz, lod, rad)
+            _lookup(flat, offsets, heights, widths, gx, gy, gz, lod, rad)
             fr = 1.0
             if use_f0:
-                c = min(max(dot, 0.0), 1.0)
-                fr = f0[q] + (1.0 - f0[q]) * (1.0 - c) ** 5
+                fr = schlick_jit(f0[q], min(max(dot, 0.0), 1.0))
             ws = wt * proj
             den += ws
             if shadowing and k < n * n:
@@ -162,9 +171,7 @@ def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no 
     for q in prange(npts):
         ox, oy, oz = wo[q, 0], wo[q, 1], wo[q, 2]
         sxx, syy, sxy = cov[q, 0, 0], cov[q, 1, 1], cov[q, 0, 1]
-        sx, sy = math.sqrt(sxx), math.sqrt(syy)
-        r = sxy / (sx * sy)
-        r_ = math.sqrt(max(1.0 - r * r, 0.0))
+        sx, sy, r, r_ = slope_cholesky_jit(sxx, syy, sxy)
         lam_o = _lambda_a(ox, oy, oz, mu[q, 0], mu[q, 1], sxx, syy, sxy)
         # the grid's micronormals, their weights W S and the steepest slope |s|
         gm = np.empty((n * n, 3))
@@ -173,12 +180,11 @@ def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no 
         steep = 0.0
         for j in range(n):
             for i in range(n):
-                x = mu[q, 0] + p[j] * sx
-                y = mu[q, 1] + (p[j] * r + p[i] * r_) * sy
-                inv = 1.0 / math.sqrt(x * x + y * y + 1.0)
+                x, y = grid_slope_jit(mu[q, 0], mu[q, 1], sx, sy, r, r_, p[j], p[i])
+                mx, my, mz = micronormal_jit(x, y)
                 k = j * n + i
-                gm[k, 0], gm[k, 1], gm[k, 2] = -x * inv, -y * inv, inv
-                gw[k] = w[j] * w[i] * max(-x * inv * ox - y * inv * oy + inv * oz, 0.0) / inv
+                gm[k, 0], gm[k, 1], gm[k, 2] = mx, my, mz
+                gw[k] = w[j] * w[i] * max(mx * ox + my * oy + mz * oz, 0.0) / mz
                 den += gw[k]
                 steep = max(steep, math.sqrt(x * x + y * y))
         num = np.zeros(nc)
@@ -210,41 +216,18 @@ def diffuse_shadow_kernel(dirs, lw, wo, mu, cov, rot, p, w, out):  # pragma: no 
     return out
 
 
-@njit_serial
-def _bilinear_wrap(flat, offset, hh, ww, u, v, out, scale):  # pragma: no cover - compiled
-    """``out += scale * bilinear(level, u, v)``, periodic in both axes (``MipChain._bilinear``)."""
-    x = u * ww - 0.5
-    y = v * hh - 0.5
-    x0 = math.floor(x)
-    y0 = math.floor(y)
-    fx = x - x0
-    fy = y - y0
-    j0 = int(x0) % ww
-    i0 = int(y0) % hh
-    j1 = (j0 + 1) % ww
-    i1 = (i0 + 1) % hh
-    for c in range(flat.shape[1]):
-        a = flat[offset + i0 * ww + j0, c] * (1 - fx) + flat[offset + i0 * ww + j1, c] * fx
-        b = flat[offset + i1 * ww + j0, c] * (1 - fx) + flat[offset + i1 * ww + j1, c] * fx
-        out[c] += scale * (a * (1 - fy) + b * fy)
-
-
 @njit_parallel
-def box_moments_kernel(flat, offsets, shapes, uv, dudv, major, max_taps,
+def box_moments_kernel(flat, offsets, heights, widths, uv, dudv, major, max_taps,
                        out):  # pragma: no cover - compiled
     """``out (N, C)``: mean of ``T x T`` trilinear taps over each footprint parallelogram
     ``uv + dudv @ o``, ``T = clip(ceil(major / 2), 1, max_taps)``, each at
     ``lod = log2(max(major / T, 1))`` (:func:`prefilter.leadr.render.footprint_moments`)."""
     npts = uv.shape[0]
     nc = flat.shape[1]
-    nl = offsets.size
     for q in prange(npts):
         t = int(math.ceil(major[q] / 2.0))
         t = min(max(t, 1), max_taps)
         lod = math.log2(max(major[q] / t, 1.0))
-        lod = min(max(lod, 0.0), nl - 1.0)
-        l0 = min(int(math.floor(lod)), max(nl - 2, 0))
-        f = lod - l0 if nl > 1 else 0.0
         acc = np.zeros(nc)
         for i in range(t):
             oy = (i + 0.5) / t - 0.5
@@ -252,11 +235,7 @@ def box_moments_kernel(flat, offsets, shapes, uv, dudv, major, max_taps,
                 ox = (j + 0.5) / t - 0.5
                 u = uv[q, 0] + dudv[q, 0, 0] * ox + dudv[q, 0, 1] * oy
                 v = uv[q, 1] + dudv[q, 1, 0] * ox + dudv[q, 1, 1] * oy
-                _bilinear_wrap(flat, offsets[l0], shapes[l0, 0], shapes[l0, 1], u, v, acc,
-                               1.0 - f)
-                if nl > 1:
-                    _bilinear_wrap(flat, offsets[l0 + 1], shapes[l0 + 1, 0], shapes[l0 + 1, 1],
-                                   u, v, acc, f)
+                trilinear_add(flat, offsets, heights, widths, u, v, lod, nc, 1.0, False, acc)
         for c in range(nc):
             out[q, c] = acc[c] / (t * t)
     return out

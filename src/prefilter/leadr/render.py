@@ -1,7 +1,6 @@
 """LEADR render methods: ``leadr-point`` (point and directional lights), ``leadr-env``
-(environment + point/directional lights), ``leadr-irradiance`` (diffuse microfacets, SH
-irradiance), ``leadr-env-simplified`` (the supplemental's simplified algorithms, no
-self-shadowing), and the naive counterparts ``leadr-env-naive`` / ``leadr-irradiance-naive``.
+(environment + point/directional lights), ``leadr-irradiance`` (the diffuse layer), and the naive
+counterparts ``leadr-env-naive`` / ``leadr-irradiance-naive``.
 
 Per G-buffer sample: the slope moments of the material's height map over the pixel footprint
 (:func:`footprint_moments`: a box filter of the renderer's moment mip chain) give the mean slope
@@ -9,23 +8,22 @@ and covariance (:func:`prefilter.leadr.maps.shading_stats`); the micro roughness
 Beckmann slope variance ``alpha^2 / 2`` per axis (GGX alpha taken as the Beckmann alpha).
 Shading is in the *geometric* frame: the mesonormal is carried by the mean slope.
 
-Self-shadowing is on by default (the displaced reference has it and it lowers the error,
-docs/leadr.md): specular under point/directional lights by the closed form of supplemental 3.3
-with ``G2``; under the environment by Algorithm 1 with ``G2 / G1`` per grid sample (compiled,
-:func:`prefilter.leadr.shading.env_specular` with ``shadowing``); diffuse by Algorithm 3 with
+Self-shadowing (the displaced reference has it, docs/leadr.md): specular under
+point/directional lights by the closed form of supplemental 3.3 with ``G2``; under the
+environment by Algorithm 1 with ``G2 / G1`` per grid sample
+(:func:`prefilter.leadr.shading.env_specular` with ``shadowing``); diffuse by Algorithm 3 with
 ``E(m) = <m, wl> G2 / G1`` per delta light and, for the environment, the exact irradiance
 (:class:`prefilter.leadr.envmap.IrradianceMap`, looked up per grid normal) plus
-:func:`prefilter.leadr.shading.diffuse_shadowing`; ``leadr-env-simplified`` keeps the
-supplemental's order-2 SH irradiance (Simplified Algorithm 2). Schlick Fresnel
-per grid sample is linear in ``f0``, so rgb ``f0`` costs two scalar passes (``f0 = 1`` and
-``f0 = 0``) blended per channel. ``leadr-irradiance`` renders the diffuse layer only
-(``base_color``). The environment orientation is
+:func:`prefilter.leadr.shading.diffuse_shadowing`. The ``algorithm=simplified`` setting
+(:data:`ALGORITHMS`) selects the supplemental's Simplified Algorithms 1-3 instead (masking only,
+order-2 SH irradiance). Schlick Fresnel per grid sample is linear in ``f0``, so rgb ``f0`` costs
+two scalar passes (``f0 = 1`` and ``f0 = 0``) blended per channel. ``leadr-irradiance`` renders
+the diffuse layer only (``base_color``). The environment orientation is
 :data:`prefilter.leadr.envmap.ENV_FROM_WORLD` (``docs/leadr.md``).
 
-The ``-naive`` variants are naive mip-mapped normal mapping under the same integrators (and the
-same irradiance map): the mean
-slope of the footprint (the mip-averaged height-map normal) with the micro roughness only, i.e.
-without the meso-scale slope covariance.
+The ``-naive`` methods are naive mip-mapped normal mapping under the same integrators (and the
+same irradiance map): the mean slope of the footprint (the mip-averaged height-map normal) with
+the micro roughness only, i.e. without the meso-scale slope covariance.
 """
 
 from __future__ import annotations
@@ -39,9 +37,9 @@ from prefilter.leadr.envmap import (ENV_FROM_WORLD, IrradianceMap, env_from_imag
                                     latlong_resample, sh9_project)
 from prefilter.leadr.maps import shading_stats
 from prefilter.leadr.shading import (diffuse_directional, diffuse_irradiance, diffuse_sh,
-                                     diffuse_shadowing, env_specular, grid_normals, point_light,
-                                     schlick)
-from prefilter.microfacet import beckmann_lambda
+                                     diffuse_shadowing, env_specular, largest_slope_variance,
+                                     point_light)
+from prefilter.microfacet.fresnel import schlick
 from prefilter.render.shading import point_incoming, shading_frames
 
 DIFFUSE_GRID = 5
@@ -51,20 +49,17 @@ ENV_GRID = 9
 #: Footprints whose largest slope std (meso + micro) is at least :data:`ROUGH_SIGMA` use a
 #: ``ENV_GRID_ROUGH`` grid: against the N = 128 grid 9 x 9 is 5.5% off at std 0.5 and 16% for an
 #: anisotropic (0.5, 0.1) lobe, 17 x 17 1.3% / 3.7% (docs/leadr.md convergence table; the
-#: supplemental: specular needs more samples above 0.25). Far field, sigma 0.5, 32 texels per
-#: pixel: 10.4% -> 7.8% error vs the displaced surface (0.57 -> 0.42x naive).
+#: supplemental: specular needs more samples above 0.25).
 ENV_GRID_ROUGH = 17
 ROUGH_SIGMA = 0.35
 #: Moment lookups box-filter the pixel footprint: up to ``FOOTPRINT_TAPS^2`` trilinear taps
 #: spread over the footprint parallelogram (one per ~2 x 2 texels), each at the LOD of its share.
 #: Moments are linear, so this is a box filter over the pixel's own texels; a single trilinear
 #: tap blends a square of the major axis' size aligned to the mip grid, whose statistics flicker
-#: as the camera moves (docs/leadr.md, point-light image rows: flicker 0.67x -> 0.48x naive for
-#: diffuse at 16 texels per pixel). 1: one isotropic trilinear tap.
+#: as the camera moves (docs/leadr.md, point-light image rows). 1: one isotropic trilinear tap.
 FOOTPRINT_TAPS = 8
-#: ``leadr-point`` shades like the other ``leadr-*`` methods: box-filtered moments
-#: (:data:`FOOTPRINT_TAPS`) and ``G2 / G1`` diffuse; the WebGL viewer reproduces it
-#: (``prefilter.viewer``'s ``footprintBox()`` and the exported ``leadr.glsl``).
+#: ``leadr-point``'s moment filter (the WebGL viewer's ``footprintBox()`` and the exported
+#: ``leadr.glsl`` reproduce it).
 POINT_FOOTPRINT_TAPS = FOOTPRINT_TAPS
 #: ``leadr-point``'s diffuse is Algorithm 3 for one light with ``G2 / G1`` (self-shadowing).
 POINT_SHADOWING = True
@@ -79,40 +74,21 @@ def footprint_moments(chain, uv, dudv, max_taps: int | None = None) -> np.ndarra
     ``major`` the footprint's major axis in texels (:data:`FOOTPRINT_TAPS`), compiled
     (:func:`prefilter.leadr.kernels.box_moments_kernel`); objects without ``levels``
     (precomputed moments) answer ``lookup_footprint`` themselves."""
-    from prefilter.leadr.envmap import packed_levels
     from prefilter.leadr.kernels import box_moments_kernel
+    from prefilter.texture.fetch import pack_levels
     from prefilter.texture.mip import footprint_axes
 
     max_taps = FOOTPRINT_TAPS if max_taps is None else int(max_taps)
     if max_taps <= 1 or not hasattr(chain, "levels"):
         return chain.lookup_footprint(uv, dudv)
     if chain not in _PACKED:
-        _PACKED[chain] = packed_levels(chain)
-    flat, offsets, shapes = _PACKED[chain]
+        _PACKED[chain] = pack_levels(chain.levels)
+    flat, offsets, heights, widths = _PACKED[chain]
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     dudv = np.ascontiguousarray(dudv, dtype=np.float64)
     major = np.ascontiguousarray(footprint_axes(dudv, chain.shape[:2])[0], dtype=np.float64)
     out = np.empty((len(uv), flat.shape[1]))
-    return box_moments_kernel(flat, offsets, shapes, uv, dudv, major, max_taps, out)
-
-
-def _footprint_moments_numpy(chain, uv, dudv, max_taps: int = FOOTPRINT_TAPS) -> np.ndarray:
-    """NumPy version of :func:`footprint_moments` (the compiled kernel is tested against it)."""
-    from prefilter.texture.mip import footprint_axes
-
-    h, w = chain.shape[:2]
-    major = footprint_axes(dudv, (h, w))[0]
-    taps = np.clip(np.ceil(major / 2.0), 1, max_taps).astype(np.int64)
-    out = np.empty((len(uv), chain.shape[2]))
-    for t in np.unique(taps):
-        m = taps == t
-        lod = np.log2(np.maximum(major[m] / t, 1.0))
-        o = (np.arange(t) + 0.5) / t - 0.5
-        ox, oy = np.meshgrid(o, o)
-        off = np.einsum("nab,kb->nka", dudv[m], np.stack([ox.ravel(), oy.ravel()], -1))
-        out[m] = chain.lookup(uv[m][:, None, :] + off,
-                              np.broadcast_to(lod[:, None], off.shape[:2])).mean(axis=1)
-    return out
+    return box_moments_kernel(flat, offsets, heights, widths, uv, dudv, major, max_taps, out)
 
 
 def _local(w, t, b, n):
@@ -160,15 +136,8 @@ def shade_leadr_delta(scene, g, lights, *, meso: bool = True, shadowing: bool = 
     light; ``shadowing`` multiplies it by ``G2 / G1``, :func:`shading.shadowing_ratio`)."""
     t, b, n, wo = shading_frames(g)
     mean, cov, base, f0 = leadr_stats(scene, g, meso=meso, mips=mips, taps=taps)
-    incoming = []
-    for pl in lights.points:
-        d = pl.position - g.position
-        d2 = np.maximum(np.sum(d * d, -1), 1e-300)
-        incoming.append((d / np.sqrt(d2)[:, None], pl.intensity / d2[:, None]))
-    for dl in lights.directionals:
-        incoming.append((np.broadcast_to(-dl.direction, g.position.shape), dl.irradiance))
     out = np.zeros((len(wo), 3))
-    for w, e in incoming:
+    for w, e in point_incoming(lights, g.position):
         wi = _local(w, t, b, n)
         wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
         h = wo + wi
@@ -260,81 +229,10 @@ def shade_leadr_irradiance(scene, g, sh, lights, *, meso: bool = True,
     return base * out
 
 
-def _gauss_lambda(w, mu, cov):
-    """Smith ``Lambda`` of non-centred Gaussian slopes ``N(mu (P, 2), cov (P, 2, 2))`` for
-    directions ``w (P, K, 3)`` (LEADR supplemental 3.2); ``inf`` below the mean surface."""
-    d = w[..., 2] - mu[:, None, 0] * w[..., 0] - mu[:, None, 1] * w[..., 1]
-    s2 = (cov[:, None, 0, 0] * w[..., 0] ** 2 + 2.0 * cov[:, None, 0, 1] * w[..., 0] * w[..., 1]
-          + cov[:, None, 1, 1] * w[..., 1] ** 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.where(s2 > 0, d / np.sqrt(2.0 * np.maximum(s2, 0.0)),
-                     np.where(d > 0, np.inf, -np.inf))
-    return beckmann_lambda(a)
-
-
-def env_specular_shadowed(env, wo, mean, cov, n: int = ENV_GRID, *, f0=None, to_world=None,
-                          chunk: int = 4096) -> np.ndarray:
-    """Algorithm 1 of the paper *with* self-shadowing, ``(P, C)``: Simplified Algorithm 1 (same
-    grid, LOD per sample from the Jacobian) with each sample weighted by
-    ``G2 / G1 = (1 + Lambda(wo)) / (1 + Lambda(wo) + Lambda(wi))`` (0 for ``wi`` below the
-    geometric plane); the projected-area sum still
-    stands for ``(n_bar.g / n_bar.o) / (1 + Lambda(wo))`` (supplemental eq. 10).
-
-    ``wo (P, 3)``, ``mean (P, 2)``, ``cov (P, 2, 2)`` local; ``f0 (P, C)`` Schlick (``None``:
-    F = 1); ``to_world (P, 3, 3)`` local -> map coordinates. Points whose grid sees nothing
-    (backfacing mesonormal) fall back to the simplified kernel's artificial micronormal.
-    """
-    wo = np.asarray(wo, np.float64).reshape(-1, 3)
-    mean = np.asarray(mean, np.float64).reshape(-1, 2)
-    cov = np.asarray(cov, np.float64).reshape(-1, 2, 2)
-    p = len(wo)
-    nc = env.levels[0].shape[2]
-    out = np.empty((p, nc))
-    texel = env.texel_solid_angle
-    for s0 in range(0, p, chunk):
-        sl = slice(s0, min(p, s0 + chunk))
-        o, mu, c = wo[sl], mean[sl], cov[sl]
-        m, w, cell = grid_normals(mu, c, n)
-        dot = np.einsum("pkj,pj->pk", m, o)
-        area = w * np.maximum(dot, 0.0) / m[..., 2]
-        wi = 2.0 * dot[..., None] * m - o[:, None, :]
-        jac = 4.0 * np.abs(dot) * np.abs(m[..., 2]) ** 3
-        with np.errstate(divide="ignore"):
-            lod = 0.5 * np.log2(np.maximum(jac * cell[:, None], 1e-300) / texel)
-        look = wi if to_world is None else np.einsum("pij,pkj->pki", to_world[sl], wi)
-        rad = env.lookup(look, lod)
-        lam_o = _gauss_lambda(o[:, None, :], mu, c)[:, 0]
-        lam_i = _gauss_lambda(wi, mu, c)
-        # G2 / G1 as 1 / (1 + Lambda_i / (1 + Lambda_o)): 1 when the mesosurface faces away
-        # from the view (Lambda_o infinite; the result is then the simplified one, never black).
-        # Light from below the geometric plane is blocked by the height field itself (a shadow
-        # ray going down always hits it), as in the microfacet module's G2.
-        with np.errstate(invalid="ignore"):
-            g = 1.0 / (1.0 + lam_i / (1.0 + lam_o[:, None]))
-        g = np.where(np.isfinite(lam_i) & (wi[..., 2] > 0.0), g, 0.0)
-        wgt = area * g
-        if f0 is not None:
-            f = np.asarray(f0, np.float64).reshape(-1, nc)[sl]
-            fr = f[:, None, :] + (1.0 - f[:, None, :]) * (
-                1.0 - np.clip(dot, 0.0, 1.0))[..., None] ** 5
-            rad = rad * fr
-        den = area.sum(axis=1)
-        ok = den > 1e-300
-        out[sl] = np.einsum("pk,pkc->pc", wgt, rad) / np.where(ok, den, 1.0)[:, None]
-        if not np.all(ok):
-            bad = np.flatnonzero(~ok) + s0
-            out[bad] = env_specular(env, wo[bad], mean[bad], cov[bad], n,
-                                    to_world=None if to_world is None else to_world[bad])
-    return out
-
-
 def specular_grid_size(cov, n_grid: int = ENV_GRID, n_rough: int = ENV_GRID_ROUGH) -> np.ndarray:
     """Grid size per footprint ``(...)`` of slope covariances ``cov (..., 2, 2)``: ``n_rough``
     where the largest slope std is at least :data:`ROUGH_SIGMA`, else ``n_grid``."""
-    c = np.asarray(cov, np.float64)
-    sxx, syy, sxy = c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
-    big = 0.5 * (sxx + syy) + np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
-    return np.where(big >= ROUGH_SIGMA ** 2, n_rough, n_grid)
+    return np.where(largest_slope_variance(cov) >= ROUGH_SIGMA ** 2, n_rough, n_grid)
 
 
 def env_specular_adaptive(env, wo, mean, cov, *, f0=None, to_world=None, shadowing: bool = True,
@@ -369,21 +267,23 @@ def _diffuse_env(sh, irradiance, wo, mean, cov, n, rot):
     return diffuse_irradiance(irradiance, wo, mean, cov, n, to_world=rot)
 
 
-def _lights_without_quads(scene, method):
+def _environment_inputs(scene, method, irradiance_map: bool):
+    """Point/directional lights (quads rejected), the summed environment (or ``None``), its SH
+    coefficients and, if ``irradiance_map``, its :class:`IrradianceMap`."""
     if any(light.type == "quad" for light in scene.lights):
         raise PrefilterError(f"method {method!r}: quad lights are not supported; expected "
                              "environment, point and directional lights")
-    return scene.light_set()
+    env = scene_environment(scene)
+    sh = sh9_project(env) if env is not None else np.zeros((9, 3))
+    irr = IrradianceMap(env) if env is not None and irradiance_map else None
+    return scene.light_set(), env, sh, irr
 
 
 def _render_env(scene, settings, meso: bool, name: str, shadowing: bool = True,
                 irradiance_map: bool = True) -> np.ndarray:
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.driver import render_samples
 
-    lights = _lights_without_quads(scene, name)
-    env = scene_environment(scene)
-    sh = sh9_project(env) if env is not None else np.zeros((9, 3))
-    irr = IrradianceMap(env) if env is not None and irradiance_map else None
+    lights, env, sh, irr = _environment_inputs(scene, name, irradiance_map)
     return render_samples(scene, settings,
                           lambda g, _u: shade_leadr_env(scene, g, env, sh, lights, meso=meso,
                                                         shadowing=shadowing, irradiance=irr),
@@ -392,12 +292,9 @@ def _render_env(scene, settings, meso: bool, name: str, shadowing: bool = True,
 
 def _render_irradiance(scene, settings, meso: bool, name: str,
                        shadowing: bool = True, irradiance_map: bool = True) -> np.ndarray:
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.driver import render_samples
 
-    lights = _lights_without_quads(scene, name)
-    env = scene_environment(scene)
-    sh = sh9_project(env) if env is not None else np.zeros((9, 3))
-    irr = IrradianceMap(env) if env is not None and irradiance_map else None
+    lights, env, sh, irr = _environment_inputs(scene, name, irradiance_map)
     return render_samples(scene, settings,
                           lambda g, _u: shade_leadr_irradiance(scene, g, sh, lights, meso=meso,
                                                                env=env, shadowing=shadowing,
@@ -405,39 +302,40 @@ def _render_irradiance(scene, settings, meso: bool, name: str,
                           stratified=settings.spp > 1, desc=name)
 
 
+#: The ``algorithm`` setting of the environment methods: ``full``, the paper's Algorithms 1-3
+#: (self-shadowing ``G2 / G1`` in every layer, exact irradiance map); ``simplified``, the
+#: supplemental's Simplified Algorithms 1-3 (masking only, order-2 SH irradiance).
+ALGORITHMS = {"full": {"shadowing": True, "irradiance_map": True},
+              "simplified": {"shadowing": False, "irradiance_map": False}}
+
+
+def _algorithm(settings) -> dict:
+    return ALGORITHMS[settings.param("algorithm", "full")]
+
+
 def render_leadr_env(scene, settings) -> np.ndarray:
-    """The ``leadr-env`` method (environment, point and directional lights; self-shadowing in
-    every layer: Algorithms 1-3 of the paper)."""
-    return _render_env(scene, settings, True, "leadr-env")
-
-
-def render_leadr_env_shadowed(scene, settings) -> np.ndarray:
-    """``leadr-env-shadowed``: the same as ``leadr-env`` since self-shadowing became the default
-    (kept so that existing scripts and scenes keep working)."""
-    return _render_env(scene, settings, True, "leadr-env-shadowed")
-
-
-def render_leadr_env_simplified(scene, settings) -> np.ndarray:
-    """``leadr-env-simplified``: the supplemental's Simplified Algorithms 1-3 (masking only, no
-    self-shadowing; order-2 SH irradiance) for every layer and light."""
-    return _render_env(scene, settings, True, "leadr-env-simplified", shadowing=False,
-                       irradiance_map=False)
+    """The ``leadr-env`` method (environment, point and directional lights): Algorithms 1-3 of
+    the paper, or with ``algorithm=simplified`` the supplemental's simplified ones
+    (:data:`ALGORITHMS`)."""
+    return _render_env(scene, settings, True, "leadr-env", **_algorithm(settings))
 
 
 def render_leadr_env_naive(scene, settings) -> np.ndarray:
     """``leadr-env-naive``: as ``leadr-env`` with the mip-averaged normal and micro roughness."""
-    return _render_env(scene, settings, False, "leadr-env-naive")
+    return _render_env(scene, settings, False, "leadr-env-naive", **_algorithm(settings))
 
 
 def render_leadr_irradiance(scene, settings) -> np.ndarray:
     """The ``leadr-irradiance`` method (diffuse layer; environment by its irradiance map,
-    point, directional lights; with self-shadowing)."""
-    return _render_irradiance(scene, settings, True, "leadr-irradiance")
+    point, directional lights; with self-shadowing; ``algorithm=simplified``: SH irradiance, no
+    self-shadowing)."""
+    return _render_irradiance(scene, settings, True, "leadr-irradiance", **_algorithm(settings))
 
 
 def render_leadr_irradiance_naive(scene, settings) -> np.ndarray:
     """``leadr-irradiance-naive``: ``leadr-irradiance`` with the mip-averaged normal only."""
-    return _render_irradiance(scene, settings, False, "leadr-irradiance-naive")
+    return _render_irradiance(scene, settings, False, "leadr-irradiance-naive",
+                              **_algorithm(settings))
 
 
 def render_leadr_point(scene, settings) -> np.ndarray:
@@ -445,7 +343,7 @@ def render_leadr_point(scene, settings) -> np.ndarray:
     ``G2`` (supplemental 3.3), Algorithm 3 diffuse with ``G2 / G1`` per light, moments
     box-filtered over the pixel footprint (:data:`POINT_FOOTPRINT_TAPS`); the WebGL viewer
     renders the same (``leadr.glsl``)."""
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.driver import render_samples
 
     if any(light.type in ("quad", "environment") for light in scene.lights):
         raise PrefilterError("method 'leadr-point': expected only point and directional lights")

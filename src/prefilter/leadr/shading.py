@@ -23,6 +23,10 @@ from prefilter.validation import (
     broadcast_batch,
 )
 from prefilter.errors import PrefilterError
+from prefilter.leadr.envmap import EnvMap, IrradianceMap, sh9_irradiance, texel_directions
+from prefilter.leadr.kernels import (diffuse_shadow_kernel, env_specular_kernel, grid_slope,
+                                     micronormal, slope_cholesky, smith_terms)
+from prefilter.microfacet import fresnel
 from prefilter.microfacet.beckmann import beckmann_lambda, smith_lambda_walter
 
 #: Bias of the artificial micronormal towards the view, and its weight (supplemental 3.7).
@@ -54,19 +58,17 @@ def _stats(mean, cov):
 
 def _lambda(w, mu, sxx, syy, sxy, fit: str):
     """Smith ``Lambda(w)`` of non-centred Gaussian slopes (supplemental 3.2)."""
-    wx, wy, wz = w[..., 0], w[..., 1], w[..., 2]
-    d = wz - mu[..., 0] * wx - mu[..., 1] * wy
-    sig = np.sqrt(np.maximum(sxx * wx * wx + 2.0 * sxy * wx * wy + syy * wy * wy, 0.0))
+    d, s2 = smith_terms(w[..., 0], w[..., 1], w[..., 2], mu[..., 0], mu[..., 1], sxx, syy, sxy)
+    sig = np.sqrt(np.maximum(s2, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
         a = np.where(sig > 0, d / (np.sqrt(2.0) * sig), np.where(d > 0, np.inf, -np.inf))
     return beckmann_lambda(a) if fit == "exact" else smith_lambda_walter(a)
 
 
 def schlick(f0, cos_theta) -> np.ndarray:
-    """Schlick's Fresnel ``f0 + (1 - f0) (1 - cos)^5`` (Schlick 1994 eq. 24)."""
-    f0 = as_unit_interval(f0, "f0")
-    c = np.clip(as_float_array(cos_theta, "cos_theta"), 0.0, 1.0)
-    return f0 + (1.0 - f0) * (1.0 - c) ** 5
+    """:func:`prefilter.microfacet.fresnel.schlick` with checked inputs (``f0`` in ``[0, 1]``,
+    finite cosines): the public entry point of the package."""
+    return fresnel.schlick(as_unit_interval(f0, "f0"), as_float_array(cos_theta, "cos_theta"))
 
 
 # -- point and directional lights (supplemental 3.3) -------------------------------------------
@@ -120,7 +122,7 @@ def point_light(wo, wi, mean_slope, slope_cov, *, f0=None, shadowing: bool = Tru
     ok = up & (area > 0) & np.isfinite(lam)
     val = d / (4.0 * np.where(ok, area, 1.0) * (1.0 + np.where(ok, lam, 0.0)))
     if f0 is not None:
-        val = val * schlick(f0, np.sum(h * wi, axis=-1))
+        val = val * fresnel.schlick(f0, np.sum(h * wi, axis=-1))
     return np.where(ok, val, 0.0)
 
 
@@ -176,13 +178,9 @@ def grid_normals(mean_slope, slope_cov, n: int, spacing: float | None = None):
     p, w, h = gaussian_grid(n, spacing)
     pj, pk = np.repeat(p, len(p)), np.tile(p, len(p))
     wgt = np.repeat(w, len(w)) * np.tile(w, len(w))
-    sx, sy = np.sqrt(sxx), np.sqrt(syy)
-    r = sxy / (sx * sy)
-    r_ = np.sqrt(np.maximum(1.0 - r * r, 0.0))
-    x = mu[..., 0, None] + pj * sx[..., None]
-    y = mu[..., 1, None] + (pj * r[..., None] + pk * r_[..., None]) * sy[..., None]
-    m = np.stack([-x, -y, np.ones_like(x)], -1)
-    m /= np.linalg.norm(m, axis=-1, keepdims=True)
+    sx, sy, r, r_ = (v[..., None] for v in slope_cholesky(sxx, syy, sxy))
+    x, y = grid_slope(mu[..., 0, None], mu[..., 1, None], sx, sy, r, r_, pj, pk)
+    m = np.stack(micronormal(x, y), -1)
     cell = h * h * np.sqrt(sxx * syy - sxy * sxy)
     return m, wgt, cell
 
@@ -214,6 +212,35 @@ def _as_rotation(to_world):
     return r
 
 
+def _batch(wo, mean, cov, to_world=None, f0=None):
+    """Checked inputs broadcast to their batch shape and flattened (contiguous float64):
+    ``(shape, wo (P, 3), mean (P, 2), cov (P, 2, 2), to_world (P, 3, 3) or None, f0 (P,) or
+    None)``."""
+    wo = as_directions(wo, "wo")
+    mu, sxx, _, _ = _stats(mean, cov)
+    to_world = _as_rotation(to_world)
+    f0 = None if f0 is None else as_unit_interval(f0, "f0")
+    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
+                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}),
+                            **({} if f0 is None else {"f0": f0.shape}))
+    p = (int(np.prod(shape, dtype=np.int64)),)
+
+    def flat(a, tail):
+        return np.ascontiguousarray(np.broadcast_to(a, shape + tail).reshape(p + tail),
+                                    dtype=np.float64)
+
+    return (shape, flat(wo, (3,)), flat(mu, (2,)), flat(cov, (2, 2)),
+            None if to_world is None else flat(to_world, (3, 3)),
+            None if f0 is None else flat(f0, ()))
+
+
+def largest_slope_variance(cov) -> np.ndarray:
+    """Largest eigenvalue ``(...)`` of slope covariances ``cov (..., 2, 2)``."""
+    c = np.asarray(cov, np.float64)
+    sxx, syy, sxy = c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
+    return 0.5 * (sxx + syy) + np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
+
+
 def _reflect(wo, m):
     return 2.0 * np.sum(wo * m, axis=-1, keepdims=True) * m - wo
 
@@ -225,19 +252,7 @@ def _rotate(to_world, v):
 def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
     """``sum W S_ F L / sum W S_`` (Simplified Algorithms 1 and 3) with the artificial
     micronormal; ``radiance_fn(m, wi, J, cell, to_world) -> (..., K, C)``."""
-    wo = as_directions(wo, "wo")
-    mu, sxx, syy, sxy = _stats(mean, cov)
-    to_world = _as_rotation(to_world)
-    f0 = None if f0 is None else as_unit_interval(f0, "f0")
-    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
-                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}),
-                            **({} if f0 is None else {"f0": f0.shape}))
-    wo = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
-    mu = np.broadcast_to(mu, shape + (2,)).reshape(-1, 2)
-    cov = np.broadcast_to(np.asarray(cov, np.float64), shape + (2, 2)).reshape(-1, 2, 2)
-    if to_world is not None:
-        to_world = np.broadcast_to(to_world, shape + (3, 3)).reshape(-1, 3, 3)
-    f0 = None if f0 is None else np.broadcast_to(np.asarray(f0, np.float64), shape).reshape(-1)
+    shape, wo, mu, cov, to_world, f0 = _batch(wo, mean, cov, to_world, f0)
     k = n * n
     step = max(1, CHUNK // k)
     out = None
@@ -258,7 +273,7 @@ def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
         jac = 4.0 * np.abs(dot) * np.abs(m[..., 2]) ** 3
         rad = radiance_fn(m, wi, jac, cell[:, None], tw)
         if f0 is not None:
-            rad = rad * schlick(f0[sl, None], dot)[..., None]
+            rad = rad * fresnel.schlick(f0[sl, None], dot)[..., None]
         ws = w * proj
         num = np.einsum("pk,pkc->pc", ws, rad)
         den = ws.sum(axis=1)
@@ -275,7 +290,7 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
                  shadowing: bool = False) -> np.ndarray:
     """Rough specular microfacets under an environment map: Simplified Algorithm 1, or with
     ``shadowing`` the paper's Algorithm 1 (each sample weighted by ``G2 / G1``, 0 below the
-    geometric plane; :func:`prefilter.leadr.render.env_specular_shadowed` is the NumPy path).
+    geometric plane; compiled only).
 
     Each grid micronormal reflects ``wo``; the radiance is read at the mip level whose texel solid
     angle matches the sample's: ``Omega = J * cell``, ``J = 4 |m.wo| |m.z|^3`` (supplemental eqs.
@@ -295,8 +310,6 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     -------
     numpy.ndarray (..., C)
     """
-    from prefilter.leadr.envmap import EnvMap
-
     if not isinstance(env, EnvMap):
         raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
     n = as_positive_int(n, "n")
@@ -309,7 +322,7 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
                                       to_world, bool(shadowing))
     if shadowing:
         raise PrefilterError("backend: the NumPy path of env_specular has no shadowing; use "
-                             "backend='numba' or prefilter.leadr.render.env_specular_shadowed")
+                             "backend='numba'")
 
     def radiance(m, wi, jac, cell, tw):
         with np.errstate(divide="ignore"):
@@ -321,27 +334,15 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
 
 def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_world,
                            shadowing=False):
-    from prefilter.leadr.envmap import packed_levels
-    from prefilter.leadr.kernels import env_specular_kernel
 
-    wo = as_directions(wo, "wo")
-    mu, sxx, _, _ = _stats(mean, cov)
-    to_world = _as_rotation(to_world)
-    f0 = None if f0 is None else as_unit_interval(f0, "f0")
-    lod_bias = float(as_float_array(lod_bias, "lod_bias"))
-    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
-                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}),
-                            **({} if f0 is None else {"f0": f0.shape}))
-    flat_shape = (int(np.prod(shape, dtype=np.int64)),)
-    b = lambda a, tail: np.ascontiguousarray(  # noqa: E731
-        np.broadcast_to(a, shape + tail).reshape(flat_shape + tail))
-    rot = b(np.eye(3) if to_world is None else to_world, (3, 3))
-    f0a = b(np.asarray(0.0 if f0 is None else f0, np.float64), ())
+    shape, wo, mu, cov, rot, f0a = _batch(wo, mean, cov, to_world, f0)
+    if rot is None:
+        rot = np.ascontiguousarray(np.broadcast_to(np.eye(3), (len(wo), 3, 3)))
     p, w, h = gaussian_grid(n, spacing)
-    flat, offsets, shapes = packed_levels(env)
-    out = np.empty(flat_shape + (flat.shape[1],))
-    env_specular_kernel(flat, offsets, shapes, env.texel_solid_angle, b(wo, (3,)), b(mu, (2,)),
-                        b(np.asarray(cov, np.float64), (2, 2)), rot, p, w, h, f0a, f0 is not None,
+    flat, offsets, heights, widths = env.packed
+    out = np.empty((len(wo), flat.shape[1]))
+    env_specular_kernel(flat, offsets, heights, widths, env.texel_solid_angle, wo, mu, cov, rot,
+                        p, w, h, np.zeros(len(wo)) if f0a is None else f0a, f0a is not None,
                         float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, shadowing, out)
     return out.reshape(shape + (flat.shape[1],))
 
@@ -353,8 +354,6 @@ def diffuse_sh(sh_coeffs, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None
     ``(1 / pi) sum W S_ E(m) / sum W S_`` with ``E`` from
     :func:`prefilter.leadr.envmap.sh9_irradiance`; ``(..., C)``. Without self-shadowing.
     """
-    from prefilter.leadr.envmap import sh9_irradiance
-
     n = as_positive_int(n, "n")
     c = as_float_array(sh_coeffs, "sh_coeffs", ndim_min=1)
     if c.shape[0] != 9 or c.ndim > 2:
@@ -372,8 +371,6 @@ def diffuse_irradiance(irradiance, wo, mean_slope, slope_cov, n: int = 5, *, spa
     Algorithm 3 with ``E(m)`` read from a :class:`prefilter.leadr.envmap.IrradianceMap` instead
     of order-2 SH (:func:`diffuse_sh`), ``(1 / pi) sum W S_ E(m) / sum W S_``; ``(..., C)``.
     Without self-shadowing (add :func:`diffuse_shadowing`)."""
-    from prefilter.leadr.envmap import IrradianceMap
-
     if not isinstance(irradiance, IrradianceMap):
         raise PrefilterError("irradiance: expected a prefilter.leadr.envmap.IrradianceMap, got "
                              f"{type(irradiance).__name__}")
@@ -421,32 +418,22 @@ def diffuse_shadowing(env, wo, mean_slope, slope_cov, n: int = 5, *, to_world=No
     horizon; ``None``: :data:`SHADOW_ROWS`, twice that for footprints smoother than
     :data:`SHADOW_FINE_SIGMA`); add it to :func:`diffuse_irradiance` or :func:`diffuse_sh`.
     Compiled (:func:`prefilter.leadr.kernels.diffuse_shadow_kernel`)."""
-    from prefilter.leadr.envmap import EnvMap, texel_directions
-    from prefilter.leadr.kernels import diffuse_shadow_kernel
-
     if not isinstance(env, EnvMap):
         raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
     n = as_positive_int(n, "n")
     if rows is not None:
         rows = as_positive_int(rows, "rows")
-    wo = as_directions(wo, "wo")
-    mu, sxx, syy, sxy = _stats(mean_slope, slope_cov)
-    to_world = _as_rotation(to_world)
-    shape = broadcast_batch(wo=wo.shape[:-1], mean_slope=mu.shape[:-1], slope_cov=sxx.shape,
-                            **({} if to_world is None else {"to_world": to_world.shape[:-2]}))
-    flat = (int(np.prod(shape, dtype=np.int64)),)
-    b = lambda a, tail: np.ascontiguousarray(  # noqa: E731
-        np.broadcast_to(a, shape + tail).reshape(flat + tail), dtype=np.float64)
+    shape, wo, mu, cov, rot, _ = _batch(wo, mean_slope, slope_cov, to_world)
+    if rot is None:
+        rot = np.broadcast_to(np.eye(3), (len(wo), 3, 3))
+    flat = (len(wo),)
     if rows is None:
-        # largest eigenvalue of the slope covariance
-        big = 0.5 * (sxx + syy) + np.sqrt(0.25 * (sxx - syy) ** 2 + sxy * sxy)
-        fine = b(big < SHADOW_FINE_SIGMA ** 2, ()) > 0
+        fine = largest_slope_variance(cov) < SHADOW_FINE_SIGMA ** 2
         groups = [(SHADOW_ROWS, ~fine), (2 * SHADOW_ROWS, fine)]
     else:
         groups = [(rows, np.ones(flat, bool))]
     p, w, _ = gaussian_grid(n)
-    args = (b(wo, (3,)), b(mu, (2,)), b(np.asarray(slope_cov, np.float64), (2, 2)),
-            b(np.eye(3) if to_world is None else to_world, (3, 3)))
+    args = (wo, mu, cov, rot)
     out = None
     for r, sel in groups:
         lev = next((a for a in env.levels if a.shape[0] <= r), env.levels[-1])

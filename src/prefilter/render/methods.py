@@ -72,8 +72,6 @@ _REGISTRY: dict[str, Method | str] = {
     "ltc-multiscale-aniso": "prefilter.multiscale.aniso:render_multiscale_aniso",
     "leadr-point": "prefilter.leadr.render:render_leadr_point",
     "leadr-env": "prefilter.leadr.render:render_leadr_env",
-    "leadr-env-shadowed": "prefilter.leadr.render:render_leadr_env_shadowed",
-    "leadr-env-simplified": "prefilter.leadr.render:render_leadr_env_simplified",
     "leadr-env-naive": "prefilter.leadr.render:render_leadr_env_naive",
     "leadr-irradiance": "prefilter.leadr.render:render_leadr_irradiance",
     "leadr-irradiance-naive": "prefilter.leadr.render:render_leadr_irradiance_naive",
@@ -101,13 +99,13 @@ _DESCRIPTIONS: dict[str, str] = {
     "leadr-point": "LEADR mapping under point and directional lights (closed form, Smith G2; "
                    "box-filtered moments, G2/G1 diffuse)",
     "leadr-env": "LEADR under environment (+ point/directional) light: Algorithm 1 specular "
-                 "grid with self-shadowing (G2/G1), exact irradiance-map diffuse with shadowing",
-    "leadr-env-shadowed": "alias of leadr-env (self-shadowing is now its default)",
-    "leadr-env-simplified": "LEADR with the supplemental's simplified algorithms (masking only, "
-                            "no self-shadowing, order-2 SH irradiance)",
+                 "grid with self-shadowing (G2/G1), exact irradiance-map diffuse with shadowing; "
+                 "algorithm=simplified: the supplemental's simplified algorithms (masking only, "
+                 "order-2 SH irradiance)",
     "leadr-env-naive": "naive counterpart of leadr-env: mip-averaged normal, micro roughness only",
     "leadr-irradiance": "LEADR diffuse layer: exact irradiance map (FFT) of environment and "
-                        "directional lights",
+                        "directional lights, with self-shadowing; algorithm=simplified: order-2 "
+                        "SH irradiance, masking only",
     "leadr-irradiance-naive": "naive counterpart of leadr-irradiance",
     "ltc-aniso": "area lights by the anisotropic LTC table (alpha_x, alpha_y in the tangent "
                  "frame), textures at the footprint's mip level",
@@ -128,6 +126,10 @@ _DESCRIPTIONS: dict[str, str] = {
 #: Variant settings each method accepts: name -> {key: (allowed values, first = default)}.
 _PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
     "ltc-multiscale": {"footprint": ("fit", "paper", "mrl")},
+    "leadr-env": {"algorithm": ("full", "simplified")},
+    "leadr-env-naive": {"algorithm": ("full", "simplified")},
+    "leadr-irradiance": {"algorithm": ("full", "simplified")},
+    "leadr-irradiance-naive": {"algorithm": ("full", "simplified")},
 }
 
 

@@ -162,12 +162,8 @@ def diffuse_exact(env, wo, mean, cov, n, shadowing: bool = False) -> np.ndarray:
 
 def env_specular_shadowed(env, wo, mean, cov, n) -> np.ndarray:
     """The paper's Algorithm 1 *with* self-shadowing for one view ``wo (3,)`` and one footprint,
-    ``(C,)`` (:func:`prefilter.leadr.render.env_specular_shadowed`; the renderer's default
-    kernel drops shadowing, as the supplemental's simplified algorithm does)."""
-    from prefilter.leadr.render import env_specular_shadowed as batch
-
-    return batch(env, np.asarray(wo, np.float64)[None], np.asarray(mean, np.float64)[None],
-                 np.asarray(cov, np.float64)[None], n)[0]
+    ``(C,)`` (:func:`prefilter.leadr.shading.env_specular` with ``shadowing``)."""
+    return env_specular(env, wo, mean, cov, n, shadowing=True)
 
 
 def run_env(size: int = 256, blocks=(16, 32, 64), shifts: int = 4, k: int = 32, spp: int = 16,
@@ -568,7 +564,7 @@ def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48
               tex_size: int = 128, shadowing: bool = True, seed: int = 0,
               log=print) -> list[dict]:
     """Image-level comparison on a plane: the renderer's ``leadr-env`` (self-shadowing) /
-    ``leadr-env-simplified`` / ``leadr-env-naive`` (specular, f0 = 1) and ``leadr-irradiance``
+    ``leadr-env`` with ``algorithm=simplified`` / ``leadr-env-naive`` (specular, f0 = 1) and ``leadr-irradiance``
     / its simplified variant / ``-naive`` (diffuse)
     against the displaced plane rendered by :func:`prefilter.leadr.displaced.displaced_env_points`.
 
@@ -622,13 +618,13 @@ def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48
             settings = RenderSettings()
             if specular:
                 methods = {"leadr": lr.render_leadr_env,
-                           "leadr simplified": lr.render_leadr_env_simplified,
+                           "leadr simplified": lambda sc, st: lr.render_leadr_env(
+                               sc, RenderSettings(params={"algorithm": "simplified"})),
                            "naive": lr.render_leadr_env_naive}
             else:
                 methods = {"leadr": lr.render_leadr_irradiance,
-                           "leadr simplified": lambda sc, st: lr._render_irradiance(
-                               sc, st, True, "leadr-irradiance-simplified", shadowing=False,
-                               irradiance_map=False),
+                           "leadr simplified": lambda sc, st: lr.render_leadr_irradiance(
+                               sc, RenderSettings(params={"algorithm": "simplified"})),
                            "naive": lr.render_leadr_irradiance_naive}
             imgs = {m: np.asarray(f(scene, settings), np.float64) for m, f in methods.items()}
             # reference: sub x sub rays per pixel through the displaced plane

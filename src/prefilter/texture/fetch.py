@@ -1,0 +1,96 @@
+"""Bilinear and trilinear texel fetches of packed mip levels, for compiled kernels and the arrays.
+
+A chain of levels ``(H_l, W_l, C)`` is packed as one ``(sum H_l W_l, C)`` array with per-level
+row offsets, heights and widths (:func:`pack_levels`): texel ``(i, j)`` of level ``l`` is row
+``offsets[l] + i W_l + j``, its centre at ``u = (j + 0.5) / W_l``, ``v = (i + 0.5) / H_l``.
+``u`` wraps; ``v`` wraps too (periodic textures) or, with ``clamp_v``, is clamped to the first
+and last rows (lat-long maps, whose rows end at the poles).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from prefilter.jit import njit_inline, njit_parallel, prange, serial
+
+
+def pack_levels(levels) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """``(data (sum H_l W_l, C), offsets (L,), heights (L,), widths (L,))`` of levels
+    ``(H_l, W_l, C)``."""
+    heights = np.array([lv.shape[0] for lv in levels], np.int64)
+    widths = np.array([lv.shape[1] for lv in levels], np.int64)
+    offsets = np.concatenate([[0], np.cumsum(heights * widths)[:-1]]).astype(np.int64)
+    data = np.ascontiguousarray(
+        np.concatenate([np.asarray(lv, np.float64).reshape(-1, lv.shape[2]) for lv in levels]))
+    return data, offsets, heights, widths
+
+
+@njit_inline
+def bilinear_add(data, offset, h, w, u, v, nc, weight, clamp_v, out):  # pragma: no cover
+    """``out[:nc] += weight * bilinear(level, u, v)`` for the level at row ``offset`` of
+    ``data``, ``h x w`` texels."""
+    x = u * w - 0.5
+    x0 = math.floor(x)
+    fx = x - x0
+    j0 = int(x0) % w
+    j1 = (j0 + 1) % w
+    if clamp_v:
+        y = min(max(v * h - 0.5, 0.0), h - 1.0)
+        y0 = min(math.floor(y), max(h - 2, 0))
+        i0 = int(y0)
+        i1 = min(i0 + 1, h - 1)
+    else:
+        y = v * h - 0.5
+        y0 = math.floor(y)
+        i0 = int(y0) % h
+        i1 = (i0 + 1) % h
+    fy = y - y0
+    for c in range(nc):
+        a = data[offset + i0 * w + j0, c] * (1 - fx) + data[offset + i0 * w + j1, c] * fx
+        b = data[offset + i1 * w + j0, c] * (1 - fx) + data[offset + i1 * w + j1, c] * fx
+        out[c] += weight * (a * (1 - fy) + b * fy)
+
+
+@njit_inline
+def trilinear_add(data, offsets, heights, widths, u, v, lod, nc, weight, clamp_v,
+                  out):  # pragma: no cover
+    """``out[:nc] += weight * trilinear(u, v, lod)``: the two levels around ``lod`` (clamped
+    to the chain), blended linearly; a level of zero weight is not read."""
+    n = offsets.shape[0]
+    lod = min(max(lod, 0.0), n - 1.0)
+    l0 = min(int(math.floor(lod)), max(n - 2, 0))
+    t = lod - l0
+    if t < 1.0:
+        bilinear_add(data, offsets[l0], heights[l0], widths[l0], u, v, nc, weight * (1.0 - t),
+                     clamp_v, out)
+    if t > 0.0:
+        bilinear_add(data, offsets[l0 + 1], heights[l0 + 1], widths[l0 + 1], u, v, nc,
+                     weight * t, clamp_v, out)
+
+
+@njit_parallel
+def trilinear_kernel(data, offsets, heights, widths, uv, lod, clamp_v,
+                     out):  # pragma: no cover - compiled
+    """``out (N, C)``: :func:`trilinear_add` at ``uv (N, 2)``, ``lod (N,)``."""
+    for q in prange(uv.shape[0]):
+        for c in range(out.shape[1]):
+            out[q, c] = 0.0
+        trilinear_add(data, offsets, heights, widths, uv[q, 0], uv[q, 1], lod[q], out.shape[1],
+                      1.0, clamp_v, out[q])
+    return out
+
+
+def trilinear(packed, uv, lod, *, clamp_v: bool = False) -> np.ndarray:
+    """Trilinear lookups ``(..., C)`` of packed levels ``packed`` (:func:`pack_levels`) at
+    ``uv (..., 2)`` and ``lod (...)`` (broadcast together)."""
+    data, offsets, heights, widths = packed
+    uv = np.asarray(uv, np.float64)
+    shape = np.broadcast_shapes(uv.shape[:-1], np.shape(lod))
+    uvf = np.ascontiguousarray(np.broadcast_to(uv, shape + (2,)).reshape(-1, 2))
+    lodf = np.ascontiguousarray(np.broadcast_to(np.asarray(lod, np.float64), shape).reshape(-1))
+    out = np.empty((uvf.shape[0], data.shape[1]))
+    serial(trilinear_kernel, len(uvf))(data, offsets, heights, widths, uvf, lodf, bool(clamp_v),
+                                       out)
+    return out.reshape(shape + (data.shape[1],))
