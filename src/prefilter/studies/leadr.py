@@ -565,7 +565,8 @@ def image_env(sigma: float = 0.25, texels_per_pixel=(4.0, 16.0), width: int = 48
               log=print) -> list[dict]:
     """Image-level comparison on a plane: the renderer's ``leadr-env`` (self-shadowing) /
     ``leadr-env`` with ``algorithm=simplified`` / ``leadr-env-naive`` (specular, f0 = 1) and
-    ``leadr-irradiance`` / its simplified variant / ``-naive`` (diffuse) against the displaced plane rendered by :func:`prefilter.leadr.displaced.displaced_env_points`.
+    ``leadr-irradiance`` / its simplified variant / ``-naive`` (diffuse) against the displaced
+    plane rendered by :func:`prefilter.leadr.displaced.displaced_env_points`.
 
     The camera looks obliquely at a plane textured with a Gaussian height map (slope std
     ``sigma`` per axis, correlation length 4 texels) under ``procedural_env(64)`` placed by the
