@@ -4,7 +4,7 @@ Smith's masking against the geometry's own visibility (ray marching)."""
 import numpy as np
 
 from prefilter.leadr import point_light
-from prefilter.leadr.displaced import (_gradient, _march, cell_moments, displaced_radiance,
+from prefilter.leadr.displaced import (gradient, march, cell_moments, displaced_radiance,
                                        naive_radiance, normal_mapped_radiance)
 from prefilter.microfacet import Beckmann
 from prefilter.texture import height_map
@@ -19,7 +19,7 @@ def test_cell_moments_match_monte_carlo_over_the_bilinear_surface():
     rng = np.random.default_rng(0)
     h = rng.normal(size=(8, 8))
     x, y = rng.random(400_000) * 8, rng.random(400_000) * 8
-    s = _gradient(h, x, y)
+    s = gradient(h, x, y)
     mc = np.stack([s[:, 0], s[:, 1], s[:, 0] ** 2, s[:, 1] ** 2, s[:, 0] * s[:, 1]], -1).mean(0)
     exact = cell_moments(h).reshape(-1, 5).mean(0)
     np.testing.assert_allclose(exact, mc, atol=0.02 * np.abs(mc).max())
@@ -50,11 +50,11 @@ def test_smith_masking_equals_the_visible_fraction_of_a_gaussian_height_field():
     j1, i1 = (fx + 1) % 128, (fy + 1) % 128
     z = ((h[fy, fx] * (1 - tx) + h[fy, j1] * tx) * (1 - ty)
          + (h[i1, fx] * (1 - tx) + h[i1, j1] * tx) * ty)
-    s = _gradient(h, x, y)
+    s = gradient(h, x, y)
     for wz in (0.5, 0.25):
         wo = np.array([np.sqrt(1 - wz * wz), 0.0, wz])
         w = np.maximum(wo[2] - s @ wo[:2], 0.0)
-        t = _march(h, x + 1e-5 * wo[0], y + 1e-5 * wo[1], z + 1e-5 * wo[2], np.full(n, wo[0]),
+        t = march(h, x + 1e-5 * wo[0], y + 1e-5 * wo[1], z + 1e-5 * wo[2], np.full(n, wo[0]),
                    np.full(n, wo[1]), np.full(n, wo[2]), h.min() - 1, h.max(),
                    0.05 / np.hypot(wo[0], wo[2]), 100_000)
         visible = np.sum(w * ~np.isfinite(t)) / np.sum(w)

@@ -17,7 +17,7 @@ def _unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-def _normals(seed=0, k=300):
+def normals(seed=0, k=300):
     """Random normals plus the poles and normals within 1 degree of them (the lat-long grid's
     worst places)."""
     rng = np.random.default_rng(seed)
@@ -40,7 +40,7 @@ def test_linear_radiance_closed_form():
     a = np.array([0.3, -0.4, 0.5])
     d, _ = texel_directions(64, 128)
     irr = IrradianceMap(EnvMap((1.5 + d @ a)[..., None]))
-    n = _normals()
+    n = normals()
     expect = 1.5 * np.pi + 2.0 * np.pi / 3.0 * (n @ a)
     np.testing.assert_allclose(irr.lookup(n)[:, 0], expect, rtol=1e-3)
 
@@ -50,7 +50,7 @@ def test_sharp_environment_matches_quadrature_unlike_order_2_sh():
     # the map (128 source rows, 128 node rows) within 0.1 % of the 256-row quadrature.
     image = procedural_env(256)
     env = EnvMap(image)
-    n = _normals(1, 100)
+    n = normals(1, 100)
     quad = _quadrature(image, n) @ LUM
     err = np.abs(IrradianceMap(env).lookup(n) @ LUM - quad) / quad
     assert err.max() < 1e-3, err.max()
@@ -76,7 +76,7 @@ def test_uniform_cap_closed_form():
     cov = (inside * w).reshape(rows, ss, 2 * rows, ss).sum(axis=(1, 3)) / w.reshape(
         rows, ss, 2 * rows, ss).sum(axis=(1, 3))
     irr = IrradianceMap(EnvMap(cov[..., None]))
-    n = _normals(2, 2000)
+    n = normals(2, 2000)
     ok = np.arccos(np.clip(n @ s, -1, 1)) <= np.pi / 2 - alpha - 0.03
     assert ok.sum() > 500
     expect = np.pi * np.sin(alpha) ** 2 * (n[ok] @ s)

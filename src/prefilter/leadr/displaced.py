@@ -24,7 +24,7 @@ from prefilter.microfacet import Beckmann
 
 
 @njit_parallel
-def _march(h, ox, oy, oz, dx, dy, dz, hmin, hmax, step, max_steps):  # pragma: no cover
+def march(h, ox, oy, oz, dx, dy, dz, hmin, hmax, step, max_steps):  # pragma: no cover
     """Parameter ``t >= 0`` of the first hit of rays ``o + t d`` with the bilinear height field,
     ``inf`` if the ray leaves the slab ``[hmin, hmax]`` first (fixed steps, then bisection)."""
     n = ox.size
@@ -73,7 +73,7 @@ def _bilerp(h, x, y, ny, nx):  # pragma: no cover - compiled
             + (h[i1, j0] * (1 - tx) + h[i1, j1] * tx) * ty)
 
 
-def _gradient(h, x, y):
+def gradient(h, x, y):
     """Bilinear gradient ``(..., 2)`` at points ``x, y`` (periodic)."""
     ny, nx = h.shape
     fx, fy = np.floor(x), np.floor(y)
@@ -110,14 +110,14 @@ def block_moments(height, block: int) -> np.ndarray:
     return m.reshape(hh // block, block, ww // block, block, 5).mean(axis=(1, 3))
 
 
-def _block_points(i0: int, j0: int, block: int, k: int):
+def block_points(i0: int, j0: int, block: int, k: int):
     """``k x k`` stratified-centre points of the block whose first cell is ``(i0, j0)``."""
     u = (np.arange(k) + 0.5) / k * block
     y, x = np.meshgrid(i0 + u, j0 + u, indexing="ij")
     return x.ravel(), y.ravel()
 
 
-def _micro(wo, wi, n, sigma_b, albedo, specular):
+def micro(wo, wi, n, sigma_b, albedo, specular):
     """Cosine-weighted micro BRDF at unit normals ``n (N, 3)``: Lambert or isotropic centred
     Beckmann of slope std ``sigma_b`` around ``n`` (both directions expressed in n's frame)."""
     if not specular:
@@ -135,7 +135,8 @@ def _micro(wo, wi, n, sigma_b, albedo, specular):
     return val
 
 
-def _normals(s):
+def normals(s):
+    """Unit normals ``(..., 3)`` of slopes ``s (..., 2)``: ``normalize(-s_x, -s_y, 1)``."""
     n = np.concatenate([-s, np.ones(s.shape[:-1] + (1,))], -1)
     return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
@@ -151,7 +152,7 @@ def displaced_radiance(height, block: int, i0: int, j0: int, wo, wi, *, k: int =
     if wo[2] <= 0.05:
         raise PrefilterError(f"wo: expected a view above the mean plane (z > 0.05), got {wo}")
     k = as_positive_int(k, "k")
-    x, y = _block_points(i0, j0, block, k)
+    x, y = block_points(i0, j0, block, k)
     hmax, hmin = float(h.max()), float(h.min())
     # Start each ray above every height, on the line through the mean-plane point along wo.
     t_up = (hmax + 1e-6) / wo[2]
@@ -159,12 +160,12 @@ def displaced_radiance(height, block: int, i0: int, j0: int, wo, wi, *, k: int =
     d = -wo
     dn = step / max(np.hypot(d[0], d[1]), abs(d[2]))
     max_steps = int(4 * (h.shape[0] + h.shape[1]) / step) + 16
-    t = _march(h, ox, oy, oz, np.full(x.shape, d[0]), np.full(x.shape, d[1]),
+    t = march(h, ox, oy, oz, np.full(x.shape, d[0]), np.full(x.shape, d[1]),
                np.full(x.shape, d[2]), hmin, hmax + 1e-3, dn, max_steps)
     hit = np.isfinite(t)
     px, py, pz = ox + t * d[0], oy + t * d[1], oz + t * d[2]
-    n = _normals(_gradient(h, px, py))
-    val = _micro(wo, wi, n, sigma_b, albedo, specular)
+    n = normals(gradient(h, px, py))
+    val = micro(wo, wi, n, sigma_b, albedo, specular)
     if shadowing:
         lit = np.ones(x.shape, bool)
         cand = hit & (val > 0)
@@ -172,7 +173,7 @@ def displaced_radiance(height, block: int, i0: int, j0: int, wo, wi, *, k: int =
             eps = 1e-4
             sx, sy, sz = px[cand] + eps * wi[0], py[cand] + eps * wi[1], pz[cand] + eps * wi[2]
             dn_i = step / max(np.hypot(wi[0], wi[1]), abs(wi[2]))
-            ts = _march(h, sx, sy, sz, np.full(sx.shape, wi[0]), np.full(sx.shape, wi[1]),
+            ts = march(h, sx, sy, sz, np.full(sx.shape, wi[0]), np.full(sx.shape, wi[1]),
                         np.full(sx.shape, wi[2]), hmin - 1.0, hmax, dn_i, max_steps)
             lit[cand] = ~np.isfinite(ts)
         val = val * lit
@@ -185,9 +186,9 @@ def normal_mapped_radiance(height, block: int, i0: int, j0: int, wo, wi, *, k: i
     """The same block shaded by its normals on the flat mean plane (no masking or shadowing by
     the geometry), averaged uniformly over the block."""
     h = as_float_array(height, "height", ndim_min=2)
-    x, y = _block_points(i0, j0, block, k)
-    n = _normals(_gradient(h, x, y))
-    return float(np.mean(_micro(as_directions(wo, "wo"), as_directions(wi, "wi"), n, sigma_b,
+    x, y = block_points(i0, j0, block, k)
+    n = normals(gradient(h, x, y))
+    return float(np.mean(micro(as_directions(wo, "wo"), as_directions(wi, "wi"), n, sigma_b,
                                 albedo, specular)))
 
 
@@ -196,10 +197,10 @@ def naive_radiance(height, block: int, i0: int, j0: int, wo, wi, *, k: int = 64,
     """Naive mip-mapped normal mapping: one normal, the normalised block average of the normals,
     with the micro roughness only."""
     h = as_float_array(height, "height", ndim_min=2)
-    x, y = _block_points(i0, j0, block, k)
-    nbar = _normals(_gradient(h, x, y)).mean(axis=0)
+    x, y = block_points(i0, j0, block, k)
+    nbar = normals(gradient(h, x, y)).mean(axis=0)
     nbar /= np.linalg.norm(nbar)
-    return float(_micro(as_directions(wo, "wo"), as_directions(wi, "wi"), nbar[None], sigma_b,
+    return float(micro(as_directions(wo, "wo"), as_directions(wi, "wi"), nbar[None], sigma_b,
                         albedo, specular)[0])
 
 
@@ -253,7 +254,7 @@ def _frames(n):
     return t, np.cross(n, t)
 
 
-def _env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, visible=None,
+def env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, visible=None,
                    rot=None):
     """MIS estimates ``(P, C)`` of ``integral L(wi) f(wo, wi) <n, wi> V(p, wi) dwi`` at points with
     unit normals ``n (P, 3)`` seen from ``wo (3,)`` or ``(P, 3)``: ``spp / 2`` pairs of a micro-BRDF
@@ -340,24 +341,24 @@ def displaced_env_points(height, x, y, wo, env, *, rot=None, spp: int = 8,
     d = np.ascontiguousarray(-wo)
     dn = step / float(np.min(np.maximum(np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2]))))
     max_steps = int(4 * (h.shape[0] + h.shape[1]) / step) + 16
-    t = _march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
+    t = march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
                np.ascontiguousarray(d[:, 2]), hmin, hmax + 1e-3, dn, max_steps)
     hit = np.isfinite(t)
     px, py, pz = (ox + t * d[:, 0])[hit], (oy + t * d[:, 1])[hit], (oz + t * d[:, 2])[hit]
-    n = _normals(_gradient(h, px, py))
+    n = normals(gradient(h, px, py))
 
     def visible(q, wi):
         eps = 1e-4
         sx, sy, sz = px[q] + eps * wi[:, 0], py[q] + eps * wi[:, 1], pz[q] + eps * wi[:, 2]
         dn_i = step / np.maximum(np.hypot(wi[:, 0], wi[:, 1]), np.abs(wi[:, 2]))
         # one step length for all rays: the smallest (safe) one
-        ts = _march(h, sx, sy, sz, np.ascontiguousarray(wi[:, 0]),
+        ts = march(h, sx, sy, sz, np.ascontiguousarray(wi[:, 0]),
                     np.ascontiguousarray(wi[:, 1]), np.ascontiguousarray(wi[:, 2]),
                     hmin - 1.0, hmax, float(dn_i.min()), max_steps)
         return ~np.isfinite(ts)
 
     out = np.zeros((x.size, env.levels[0].shape[2]))
-    out[hit] = _env_estimates(env, EnvSampler(env), wo[hit], n, spp, rng, sigma_b, albedo,
+    out[hit] = env_estimates(env, EnvSampler(env), wo[hit], n, spp, rng, sigma_b, albedo,
                               specular, visible if shadowing else None,
                               None if rot is None else np.asarray(rot, np.float64))
     return out
@@ -379,7 +380,7 @@ def displaced_env_radiance(height, block: int, i0: int, j0: int, wo, env, *, k: 
     interreflections. Seeded: same inputs, same bytes.
     """
     k = as_positive_int(k, "k")
-    x, y = _block_points(i0, j0, block, k)
+    x, y = block_points(i0, j0, block, k)
     return displaced_env_points(height, x, y, wo, env, spp=spp, sigma_b=sigma_b, albedo=albedo,
                                 specular=specular, shadowing=shadowing, step=step,
                                 seed=seed).mean(axis=0)
@@ -391,9 +392,9 @@ def normal_mapped_env_radiance(height, block: int, i0: int, j0: int, wo, env, *,
     """The block's normals on the flat mean plane under ``env`` (no masking or shadowing by the
     geometry), same estimator as :func:`displaced_env_radiance`; ``(C,)``."""
     h = as_float_array(height, "height", ndim_min=2)
-    x, y = _block_points(i0, j0, block, k)
-    n = _normals(_gradient(h, x, y))
-    est = _env_estimates(env, EnvSampler(env), as_directions(wo, "wo"), n, spp,
+    x, y = block_points(i0, j0, block, k)
+    n = normals(gradient(h, x, y))
+    est = env_estimates(env, EnvSampler(env), as_directions(wo, "wo"), n, spp,
                          np.random.default_rng(seed), sigma_b, albedo, specular)
     return est.mean(axis=0)
 
@@ -404,10 +405,10 @@ def naive_env_radiance(height, block: int, i0: int, j0: int, wo, env, *, k: int 
     """Naive mip-mapped normal mapping under ``env``: the normalised block average of the normals
     with the micro BRDF only (``samples`` MIS samples); ``(C,)``."""
     h = as_float_array(height, "height", ndim_min=2)
-    x, y = _block_points(i0, j0, block, k)
-    nbar = _normals(_gradient(h, x, y)).mean(axis=0)
+    x, y = block_points(i0, j0, block, k)
+    nbar = normals(gradient(h, x, y)).mean(axis=0)
     nbar /= np.linalg.norm(nbar)
-    est = _env_estimates(env, EnvSampler(env), as_directions(wo, "wo"), nbar[None], samples,
+    est = env_estimates(env, EnvSampler(env), as_directions(wo, "wo"), nbar[None], samples,
                          np.random.default_rng(seed), sigma_b, albedo, specular)
     return est[0]
 
@@ -439,13 +440,13 @@ def trace_points(height, x, y, wo, wi=None, *, shadowing: bool = True, step: flo
     dn = step / float(np.min(np.maximum(np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])))) \
         if x.size else step
     max_steps = int(4 * (h.shape[0] + h.shape[1]) / step) + 16
-    t = _march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
+    t = march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
                np.ascontiguousarray(d[:, 2]), hmin, hmax + 1e-3, dn, max_steps)
     hit = np.isfinite(t)
     n = np.zeros((x.size, 3))
     px, py = ox[hit] + t[hit] * d[hit, 0], oy[hit] + t[hit] * d[hit, 1]
     pz = oz[hit] + t[hit] * d[hit, 2]
-    n[hit] = _normals(_gradient(h, px, py))
+    n[hit] = normals(gradient(h, px, py))
     lit = np.ones(x.size, bool)
     if wi is not None and shadowing:
         wi = np.broadcast_to(as_directions(wi, "wi"), (x.size, 3))[hit]
@@ -455,7 +456,7 @@ def trace_points(height, x, y, wo, wi=None, *, shadowing: bool = True, step: flo
             w = np.ascontiguousarray(wi[up])
             eps = 1e-4
             dn_i = step / np.maximum(np.hypot(w[:, 0], w[:, 1]), np.abs(w[:, 2]))
-            ts = _march(h, px[up] + eps * w[:, 0], py[up] + eps * w[:, 1], pz[up] + eps * w[:, 2],
+            ts = march(h, px[up] + eps * w[:, 0], py[up] + eps * w[:, 1], pz[up] + eps * w[:, 2],
                         np.ascontiguousarray(w[:, 0]), np.ascontiguousarray(w[:, 1]),
                         np.ascontiguousarray(w[:, 2]), hmin - 1.0, hmax, float(dn_i.min()),
                         max_steps)
@@ -476,7 +477,7 @@ def displaced_point_radiance(height, x, y, wo, wi, *, sigma_b: float = 0.1, albe
     wi = np.broadcast_to(as_directions(wi, "wi"), n.shape)
     out = np.zeros(len(n))
     if np.any(hit):
-        out[hit] = _micro(wo[hit], wi[hit], n[hit], sigma_b, albedo, specular) * lit[hit]
+        out[hit] = micro(wo[hit], wi[hit], n[hit], sigma_b, albedo, specular) * lit[hit]
     return out
 
 
@@ -487,7 +488,7 @@ def normal_mapped_point_radiance(height, x, y, wo, wi, *, sigma_b: float = 0.1,
     h = as_float_array(height, "height", ndim_min=2)
     x = np.asarray(x, np.float64).ravel()
     y = np.asarray(y, np.float64).ravel()
-    n = _normals(_gradient(h, x, y))
+    n = normals(gradient(h, x, y))
     wo = np.broadcast_to(as_directions(wo, "wo"), n.shape)
     wi = np.broadcast_to(as_directions(wi, "wi"), n.shape)
-    return _micro(wo, wi, n, sigma_b, albedo, specular)
+    return micro(wo, wi, n, sigma_b, albedo, specular)

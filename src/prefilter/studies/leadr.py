@@ -278,13 +278,13 @@ def area_env_radiance(height, block: int, wo, env, *, k: int = 96, spp: int = 64
     :func:`~prefilter.leadr.displaced.displaced_env_radiance` (MIS, shadow rays). The view-ray
     reference sees the cells its rays hit, shifted by up to ``h tan(theta_o)`` texels; this one
     sees the cells whose moments LEADR is given."""
-    from prefilter.leadr.displaced import (EnvSampler, _block_points, _env_estimates,
-                                           _gradient, _march, _normals)
+    from prefilter.leadr.displaced import (EnvSampler, block_points, env_estimates,
+                                           gradient, march, normals)
 
     h = np.ascontiguousarray(height, dtype=np.float64)
     wo = np.asarray(wo, np.float64)
     rng = np.random.default_rng(seed)
-    x, y = _block_points(0, 0, block, k)
+    x, y = block_points(0, 0, block, k)
     ny, nx = h.shape
     fx, fy = np.floor(x), np.floor(y)
     tx, ty = x - fx, y - fy
@@ -292,12 +292,12 @@ def area_env_radiance(height, block: int, wo, env, *, k: int = 96, spp: int = 64
     j1, i1 = (j0 + 1) % nx, (i0 + 1) % ny
     z = ((h[i0, j0] * (1 - tx) + h[i0, j1] * tx) * (1 - ty)
          + (h[i1, j0] * (1 - tx) + h[i1, j1] * tx) * ty)
-    n = _normals(_gradient(h, x, y))
+    n = normals(gradient(h, x, y))
     hmax, hmin = float(h.max()), float(h.min())
     max_steps = int(4 * (ny + nx) / step) + 16
     eps = 1e-4
     c = np.ones_like(x)
-    ts = _march(h, x + eps * wo[0], y + eps * wo[1], z + eps * wo[2], c * wo[0], c * wo[1],
+    ts = march(h, x + eps * wo[0], y + eps * wo[1], z + eps * wo[2], c * wo[0], c * wo[1],
                 c * wo[2], hmin - 1.0, hmax, step / max(np.hypot(wo[0], wo[1]), abs(wo[2])),
                 max_steps)
     vis = ~np.isfinite(ts) & (n @ wo > 0)
@@ -306,12 +306,12 @@ def area_env_radiance(height, block: int, wo, env, *, k: int = 96, spp: int = 64
 
     def visible(q, wi):
         dn = step / np.maximum(np.hypot(wi[:, 0], wi[:, 1]), np.abs(wi[:, 2]))
-        t2 = _march(h, px[q] + eps * wi[:, 0], py[q] + eps * wi[:, 1], pz[q] + eps * wi[:, 2],
+        t2 = march(h, px[q] + eps * wi[:, 0], py[q] + eps * wi[:, 1], pz[q] + eps * wi[:, 2],
                     np.ascontiguousarray(wi[:, 0]), np.ascontiguousarray(wi[:, 1]),
                     np.ascontiguousarray(wi[:, 2]), hmin - 1.0, hmax, float(dn.min()), max_steps)
         return ~np.isfinite(t2)
 
-    rad = _env_estimates(env, EnvSampler(env), np.broadcast_to(wo, (int(vis.sum()), 3)), n[vis],
+    rad = env_estimates(env, EnvSampler(env), np.broadcast_to(wo, (int(vis.sum()), 3)), n[vis],
                          spp, rng, sigma_b, 1.0, True, visible, None)
     return (wgt[vis, None] * rad).sum(axis=0) / x.size
 
@@ -334,10 +334,10 @@ def histogram_specular(env, height, block: int, wo, mean, cov, *, lam: str = "ga
     from the micro cell; ``G2 / G1`` from the footprint's Gaussian ``(mean, cov)`` (``lam =
     "gauss"``), from the histogram's own Smith ``Lambda`` (``"hist"``, 4096 slopes) or none
     (``"none"``: 0 below the plane only). Isolates what the Gaussian slope model costs."""
-    from prefilter.leadr.displaced import _block_points, _gradient
+    from prefilter.leadr.displaced import block_points, gradient
 
-    x, y = _block_points(0, 0, block, k)
-    s = _gradient(np.asarray(height, np.float64), x, y)
+    x, y = block_points(0, 0, block, k)
+    s = gradient(np.asarray(height, np.float64), x, y)
     pg, wg, hg = gaussian_grid(nb)
     ox, oy = np.meshgrid(pg, pg)
     off = np.stack([ox.ravel(), oy.ravel()], -1) * sigma_b
@@ -761,7 +761,7 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
     patterns, whose floor is ``flicker floor / sqrt 2``).
     """
     from prefilter.leadr import render as lr
-    from prefilter.leadr.displaced import _gradient, _micro, _normals, trace_points
+    from prefilter.leadr.displaced import gradient, micro, normals, trace_points
     from prefilter.render.camera import gbuffer_at
     from prefilter.render.metrics import flip
     from prefilter.texture import MipChain
@@ -810,7 +810,7 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                         y = gh.uv[:, 1] * tex_size
                         hit, nm, lit = trace_points(hmap, x[good], y[good], wo[good], wi[good])
                         e = light.intensity[0] / d2[good]
-                        nmap = _normals(_gradient(hmap, x[good], y[good]))
+                        nmap = normals(gradient(hmap, x[good], y[good]))
                         flat_ok = np.flatnonzero(ok.ravel())[good]
                         if box is None:
                             # the pixel's own moments: the box average over its rays' cells
@@ -826,9 +826,9 @@ def image_point(surfaces=None, shapes=("plane", "sphere"), texels_per_pixel=(4.0
                         for s in mats:
                             spec_ = s == "specular"
                             v = np.zeros(len(nm))
-                            v[hit] = _micro(wo[good][hit], wi[good][hit], nm[hit], sigma_b, 1.0,
+                            v[hit] = micro(wo[good][hit], wi[good][hit], nm[hit], sigma_b, 1.0,
                                             spec_) * lit[hit]
-                            nmv = _micro(wo[good], wi[good], nmap, sigma_b, 1.0, spec_)
+                            nmv = micro(wo[good], wi[good], nmap, sigma_b, 1.0, spec_)
                             img = np.zeros(ok.size)
                             img[flat_ok] = v * e
                             nmi = np.zeros(ok.size)
