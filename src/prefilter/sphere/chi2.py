@@ -85,6 +85,7 @@ def chi2_sphere(
     refine_tol: float = 0.05,
     max_in_empty: int = 10,
     max_cells: int = 16384,
+    above=None,
 ) -> Chi2Result:
     """Chi-square test of ``samples (n, 3)`` against the solid-angle density ``pdf(w (..., 3))``.
 
@@ -94,6 +95,10 @@ def chi2_sphere(
     until a split changes it by less than ``refine_tol`` standard deviations of its count
     (at most ``max_cells`` new cells per level, the worst first).
     More than ``max_in_empty`` samples in bins of zero density fail the test outright.
+    ``above``: a direction ``v (3,)``; the bins then cover only the cap's part with ``w.v > 0``
+    (each cell's quadrature spans exactly that arc) and the rest joins the outside bin, e.g.
+    ``(0, 0, 1)`` for a lobe tested on the upper hemisphere only, whose draws below the
+    horizon (weight 0, or failed draws) are counted but not binned.
     """
     samples = _as_samples(samples)
     n = samples.shape[0]
@@ -115,6 +120,11 @@ def chi2_sphere(
     cz = np.clip(loc[:, 2], -1.0, 1.0)
     ph = np.mod(np.arctan2(loc[:, 1], loc[:, 0]), 2 * np.pi)
     inside = cz >= cmin
+    p1_range = None
+    if above is not None:
+        v = _as_axis(above)
+        inside &= samples @ v > 0.0
+        p1_range = _arc_above(v @ axis, v @ t, v @ b)
     i = np.clip(((1.0 - cz[inside]) / (1.0 - cmin) * n_th).astype(int), 0, n_th - 1)
     j = np.clip((ph[inside] / (2 * np.pi) * n_ph).astype(int), 0, n_ph - 1)
     observed = np.zeros(n_th * n_ph + 1)
@@ -136,7 +146,31 @@ def chi2_sphere(
 
     return _binned_test(observed, cells, density, quad=quad, min_expected=min_expected,
                         max_refine=max_refine, refine_tol=refine_tol,
-                        max_in_empty=max_in_empty, max_cells=max_cells)
+                        max_in_empty=max_in_empty, max_cells=max_cells, p1_range=p1_range)
+
+
+def _arc_above(vz, vx, vy):
+    """``p1_range`` of the directions ``(sin cos p, sin sin p, c)`` with ``w.v > 0`` at each
+    ``c``, for ``v = (vx, vy, vz)`` in the cap frame: ``c vz + sin r cos(p - p0) > 0`` with
+    ``r = |(vx, vy)|``, an arc of azimuths around ``p0``, as two intervals of ``[0, 2 pi)``."""
+    r = float(np.hypot(vx, vy))
+    p0 = float(np.arctan2(vy, vx))
+    two_pi = 2.0 * np.pi
+
+    def p1_range(c):
+        sn = np.sqrt(np.maximum(0.0, 1.0 - c * c)) * r
+        pos = sn > 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.where(pos, -c * vz / np.where(pos, sn, 1.0), np.where(c * vz > 0.0, -2.0, 2.0))
+        half = np.arccos(np.clip(k, -1.0, 1.0))
+        full = k <= -1.0
+        lo = np.mod(p0 - half, two_pi)
+        hi = lo + 2.0 * half
+        zero = np.zeros_like(lo)
+        return [(np.where(full, 0.0, lo), np.where(full, two_pi, np.minimum(hi, two_pi))),
+                (zero, np.where(full, 0.0, np.maximum(hi - two_pi, 0.0)))]
+
+    return p1_range
 
 
 def _eval_pdf(pdf, w: np.ndarray) -> np.ndarray:
