@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from prefilter.errors import PrefilterError
 from prefilter.glints import surface
 from prefilter.glints.lobe import GlintLobe
 from prefilter.leadr.lobe import LeadrLobe
@@ -28,11 +29,11 @@ from prefilter.ltc.lobe import LTCLobe
 from prefilter.ltc.table import GGXTable
 from prefilter.microfacet import GGX, Beckmann, MicrofacetModel
 from prefilter.multiscale.lobe import MultiscaleLobe
-from prefilter.sphere import chi2_sphere, chi2_warped, lobe_cap, slope_warp, spherical_direction
+from prefilter.sphere import chi2_sphere, chi2_warped, lobe_cap, spherical_direction
 from prefilter.texture.procedural import normal_map
 
 sys.path.insert(0, str(Path(__file__).parent / "microfacet"))
-from mf_quad import sphere_integral  # noqa: E402
+from mf_quad import reflect_integral, reflect_warp, sphere_integral  # noqa: E402
 
 N_SAMPLES = 200_000
 
@@ -118,18 +119,6 @@ def _model(lobe):
     return lobe.model if isinstance(lobe, LeadrLobe) else None
 
 
-def _slope_bins(model, wo):
-    """Bins in the (whitened) slope space of the half vector, for the nominal parameters."""
-    if isinstance(model, GGX):
-        return slope_warp((0.0, 0.0), np.diag([float(model.alpha_x), float(model.alpha_y)]),
-                          wo=wo, reflect=True)
-    mu = model.mean_slope
-    above = None
-    if np.any(mu != 0.0):  # the lobe also vanishes below the mean surface
-        above = np.array([-mu[0], -mu[1], 1.0]) / np.sqrt(1.0 + mu @ mu)
-    return slope_warp(mu, np.linalg.cholesky(model.slope_cov), wo=wo, reflect=True, above=above)
-
-
 def draw(lobe: Lobe, wo, n, seed):
     u = np.random.default_rng(seed).random((n, lobe.n_uniforms))
     return lobe.sample(wo, u)
@@ -141,7 +130,7 @@ def chi2(lobe, wo, wi, pdf_lobe=None):
     density = lambda w: pdf_lobe.pdf(wo, w)  # noqa: E731
     model = _model(lobe)
     if model is not None:
-        return chi2_warped(wi, density, _slope_bins(model, wo))
+        return chi2_warped(wi, density, reflect_warp(model, wo))
     pilot = draw(lobe, wo, 20_000, 99)[0]
     axis, theta_max = lobe_cap(pilot[pilot[:, 2] > 0.0])
     # A glint pdf is a sum of narrow peaks: with its default depth the bins' adaptive
@@ -167,11 +156,14 @@ def check_lobe(lobe, wo, n, seed=3):
     assert res.passed(), res
     # (c) the pdf integrates to the fraction of draws it accounts for (1 unless draws fail)
     ok = wi[pdf > 0.0]
-    axis = ok.mean(axis=0)
-    axis /= np.linalg.norm(axis)
-    width = float(np.clip(np.median(np.arccos(np.clip(ok @ axis, -1, 1))), 0.01, 1.0))
-    mass = sphere_integral(lambda w: lobe.pdf(wo, w), axis=axis, width=width, n_polar=200,
-                           n_azimuth=512)
+    if _model(lobe) is not None:
+        mass = reflect_integral(lambda w: lobe.pdf(wo, w), _model(lobe), wo)
+    else:
+        axis = ok.mean(axis=0)
+        axis /= np.linalg.norm(axis)
+        width = float(np.clip(np.median(np.arccos(np.clip(ok @ axis, -1, 1))), 0.01, 1.0))
+        mass = sphere_integral(lambda w: lobe.pdf(wo, w), axis=axis, width=width, n_polar=200,
+                               n_azimuth=512)
     found = ok.shape[0] / n
     assert mass <= 1.0 + 1e-3
     assert abs(mass - found) <= 4.0 * np.sqrt(found * (1.0 - found) / n) + 1e-3, (mass, found)
@@ -219,8 +211,14 @@ def test_ltc_lobe_is_the_table_fit():
     from prefilter.ltc import LTC
 
     assert LTCLobe(0.3, table=table).eval(wo, wi) == pytest.approx(mag * LTC(M).eval(wi))
-    aniso = LTCLobe(0.3, 0.3, table=AnisoGGXTable.load())
+    aniso = LTCLobe(0.3, table=AnisoGGXTable.load())
     assert aniso.albedo(wo) == pytest.approx(mag, rel=0.02)
+    # views at or below the horizon: an empty lobe
+    below = np.array([0.6, 0.0, -0.8])
+    assert LTCLobe(0.3).eval(below, wi) == 0.0 and LTCLobe(0.3).pdf(below, wi) == 0.0
+    assert LTCLobe(0.3).sample(below, [0.3, 0.6])[1] == 0.0
+    with pytest.raises(PrefilterError, match="alpha_y"):
+        LTCLobe(0.3, 0.1)
 
 
 def test_multiscale_lobe_is_the_ltc_lobe_at_alpha_total():

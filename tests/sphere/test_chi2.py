@@ -13,6 +13,7 @@ from prefilter.sphere import (
     slope_warp,
     uniform_sphere,
     uniform_sphere_pdf,
+    warp_integral,
 )
 
 
@@ -146,3 +147,18 @@ def test_above_counts_lower_draws_outside():
     assert res.mass_in_cap == pytest.approx(0.5, abs=1e-6)
     wrong = chi2_sphere(w, cosine_hemisphere_pdf, above=(0, 0, 1.0))
     assert wrong.p_value < 1e-6
+
+
+def test_warp_integral_of_densities_is_one():
+    # the NDF's projected area and the visible normals of a grazing view over their domains
+    from prefilter.microfacet import Beckmann
+
+    model = Beckmann([0.2, -0.1], [[0.05, 0.02], [0.02, 0.01]])
+    wo = np.array([np.sin(1.3), 0.0, np.cos(1.3)])
+    scale = np.linalg.cholesky(model.slope_cov)
+    proj = warp_integral(lambda m: model.D(m) * m[..., 2], slope_warp(model.mean_slope, scale))
+    vis = warp_integral(lambda m: model.pdf_vndf(wo, m),
+                        slope_warp(model.mean_slope, scale, wo=wo))
+    assert proj == pytest.approx(1.0, abs=1e-9) and vis == pytest.approx(1.0, abs=1e-8)
+    with pytest.raises(PrefilterError, match="warp"):
+        warp_integral(lambda m: m[..., 2], "square")

@@ -15,6 +15,7 @@ import numpy as np
 from prefilter.lobe import Lobe
 from prefilter.ltc.ltc import LTC
 from prefilter.ltc.table import GGXTable, schlick_scale
+from prefilter.errors import PrefilterError
 from prefilter.validation import as_directions
 
 
@@ -22,13 +23,16 @@ class LTCLobe(Lobe):
     """LTC fit of GGX(``alpha_x``, ``alpha_y``) read from ``table`` (Fresnel 1, or ``f0``).
 
     ``table``: a :class:`~prefilter.ltc.table.GGXTable` (isotropic: ``alpha_y`` must be ``None``;
-    default: the shipped table) or an :class:`~prefilter.ltc.aniso.AnisoGGXTable`. Roughness
-    ``(...)`` broadcasts against the directions' batch; views at or below the horizon give an
-    empty lobe (eval, pdf and weights 0).
+    default: the shipped table) or an :class:`~prefilter.ltc.aniso.AnisoGGXTable` (``alpha_y``
+    defaults to ``alpha_x``). Roughness ``(...)`` broadcasts against the directions' batch;
+    views at or below the horizon give an empty lobe (eval, pdf and weights 0).
     """
 
     def __init__(self, alpha_x, alpha_y=None, *, table=None, f0=None):
         self.table = GGXTable.load() if table is None else table
+        if alpha_y is not None and isinstance(self.table, GGXTable):
+            raise PrefilterError("alpha_y: the isotropic table has one roughness; pass an "
+                                 "AnisoGGXTable as table for anisotropic GGX")
         self.alpha_x = np.asarray(alpha_x, dtype=np.float64)
         self.alpha_y = None if alpha_y is None else np.asarray(alpha_y, dtype=np.float64)
         self.f0 = f0
@@ -43,10 +47,11 @@ class LTCLobe(Lobe):
         seen = wo[..., 2] > 0.0
         # Views at or below the horizon look up the normal view and are masked out afterwards.
         wo = np.where(seen[..., None], wo, np.array([0.0, 0.0, 1.0]))
-        if self.alpha_y is None:
+        if isinstance(self.table, GGXTable):
             M, mag, fres = self.table.lookup(wo, self.alpha_x)
         else:
-            M, mag, fres = self.table.lookup(wo, self.alpha_x, self.alpha_y)
+            ay = self.alpha_x if self.alpha_y is None else self.alpha_y
+            M, mag, fres = self.table.lookup(wo, self.alpha_x, ay)
         scale = mag if self.f0 is None else schlick_scale(mag, fres, self.f0)
         return LTC(M), np.where(seen, scale, 0.0), seen
 
