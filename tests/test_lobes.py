@@ -217,7 +217,7 @@ def test_ltc_lobe_is_the_table_fit():
     below = np.array([0.6, 0.0, -0.8])
     assert LTCLobe(0.3).eval(below, wi) == 0.0 and LTCLobe(0.3).pdf(below, wi) == 0.0
     assert LTCLobe(0.3).sample(below, [0.3, 0.6])[1] == 0.0
-    with pytest.raises(PrefilterError, match="alpha_y"):
+    with pytest.raises(PrefilterError, match="AnisoGGXTable"):
         LTCLobe(0.3, 0.1)
 
 

@@ -31,8 +31,8 @@ class LTCLobe(Lobe):
     def __init__(self, alpha_x, alpha_y=None, *, table=None, f0=None):
         self.table = GGXTable.load() if table is None else table
         if alpha_y is not None and isinstance(self.table, GGXTable):
-            raise PrefilterError("alpha_y: the isotropic table has one roughness; pass an "
-                                 "AnisoGGXTable as table for anisotropic GGX")
+            raise PrefilterError("table: expected an AnisoGGXTable for an anisotropic lobe "
+                                 "(alpha_y given), got the isotropic GGXTable")
         self.alpha_x = np.asarray(alpha_x, dtype=np.float64)
         self.alpha_y = None if alpha_y is None else np.asarray(alpha_y, dtype=np.float64)
         self.f0 = f0
