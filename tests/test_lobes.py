@@ -104,7 +104,11 @@ SLOW_CASES = {
                               t) for a in (0.1, 0.6) for t in (0, 45, 89)},
     **{f"multiscale-{a}-{r}-{t}": (lambda a=a, r=r: MultiscaleLobe(a, r), None, t)
        for a in (0.05, 0.5) for r in (0.99, 0.8) for t in (20, 80)},
-    **{f"leadr-{k}-{t}": (lambda k=k: LeadrLobe.from_moments(m, 0.1), None, t)
+    **{f"beckmann-{a}-{r}-{mu}-{t}": (
+        lambda a=a, r=r, mu=mu: Beckmann.anisotropic(a, a * r, mu), None, t)
+       for a in (0.02, 0.3) for r in (1.0, 0.05) for mu in ((0.0, 0.0), (0.2, 0.3))
+       for t in (0, 45, 89)},
+    **{f"leadr-{k}-{t}": (lambda m=m: LeadrLobe.from_moments(m, 0.1), None, t)
        for k, m in enumerate(([0.1, -0.1, 0.05, 0.04, 0.0], [0.4, 0.0, 0.2, 0.01, 0.0]))
        for t in (0, 50, 85)},
     **{f"glint-{sp}-{t}": (lambda sp=sp: GlintLobe(_glint_surface(), (12.5, 50.5), sp), None, t)
@@ -199,7 +203,12 @@ def test_lobe_pdf_5_percent_off_is_rejected(case):
 @pytest.mark.parametrize("case", list(SLOW_CASES))
 def test_lobe_grid(case):
     make, _, theta = SLOW_CASES[case]
-    res = check_lobe(make(), view(theta, 110.0), 1_000_000, seed=13)
+    lobe = make()
+    wo = view(theta, 110.0)
+    if _model(lobe) is not None and float(_model(lobe).G1(wo)) == 0.0:
+        pytest.skip("view below the mean surface: empty lobe")
+    # glint pdfs cost ~10 us a point (a walk over the footprint's texels): fewer draws
+    res = check_lobe(lobe, wo, 200_000 if isinstance(lobe, GlintLobe) else 500_000, seed=13)
     print(f"{case}: p = {res.p_value:.3g} (dof {res.dof})")
 
 
@@ -254,4 +263,5 @@ def test_glint_lobe_failed_draws_weigh_nothing():
     wo = view(89.5)
     wi, weight = draw(lobe, wo, 20_000, 4)
     failed = lobe.pdf(wo, wi) == 0.0
+    assert failed.any()
     assert np.all(weight[failed] == 0.0) and np.all(wi[failed, 2] < 0.0)

@@ -1,4 +1,4 @@
-"""The LEADR lobe: a footprint's non-centred anisotropic Beckmann as a :class:`~prefilter.lobe.Lobe`.
+"""The LEADR lobe: a footprint's non-centred anisotropic Beckmann as a :class:`Lobe`.
 
 Dupuy et al. 2013 and its supplemental (3.1-3.3): micro-slopes ``N(mu, Sigma)`` from the
 footprint's LEADR moments; ``eval`` is :func:`~prefilter.leadr.shading.point_light` (the
