@@ -181,8 +181,7 @@ def check_lobe(lobe, wo, n, seed=3):
         axis = ok.mean(axis=0)
         axis /= np.linalg.norm(axis)
         width = float(np.clip(np.median(np.arccos(np.clip(ok @ axis, -1, 1))), 0.01, 1.0))
-        mass = sphere_integral(lambda w: lobe.pdf(wo, w), axis=axis, width=width, n_polar=200,
-                               n_azimuth=512)
+        mass = sphere_integral(lambda w: lobe.pdf(wo, w), axis=axis, width=width)
     found = ok.shape[0] / n
     assert mass <= 1.0 + 1e-3
     assert abs(mass - found) <= 4.0 * np.sqrt(found * (1.0 - found) / n) + 1e-3, (mass, found)
