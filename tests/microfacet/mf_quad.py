@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.sphere import frame_from_normal, to_world
+from prefilter.microfacet import GGX
+from prefilter.sphere import frame_from_normal, slope_warp, to_world, warp_integral
 
 
 def sphere_integral(f, axis=(0.0, 0.0, 1.0), width=0.3, n_polar=400, n_azimuth=1024):
@@ -84,3 +85,37 @@ def slope_jacobian_fd(s, h=1e-6):
     dx = (normal_from_slope(s + ex) - normal_from_slope(s - ex)) / (2 * h)
     dy = (normal_from_slope(s + ey) - normal_from_slope(s - ey)) / (2 * h)
     return np.linalg.norm(np.cross(dx, dy), axis=-1)
+
+
+def slope_frame(model):
+    """Mean slope ``(2,)`` and scale ``(2, 2)`` of ``model`` (GGX or Beckmann, scalar
+    parameters) for :func:`prefilter.sphere.slope_warp`: its NDF spread over the square."""
+    if isinstance(model, GGX):
+        return np.zeros(2), np.diag([float(model.alpha_x), float(model.alpha_y)])
+    return model.mean_slope, np.linalg.cholesky(model.slope_cov)
+
+
+def reflect_warp(model, wo):
+    """Chi-square bins for reflected visible normals of ``model`` seen from ``wo``: the
+    (whitened) slope space of the half vector, restricted to the upper hemisphere and, for a
+    tilted mean surface, to directions above it."""
+    mu, scale = slope_frame(model)
+    above = None
+    if np.any(mu != 0.0):  # the lobe also vanishes below the mean surface
+        above = np.array([-mu[0], -mu[1], 1.0]) / np.sqrt(1.0 + mu @ mu)
+    return slope_warp(mu, scale, wo=wo, reflect=True, above=above)
+
+
+def reflect_integral(f, model, wo):
+    """Integral of ``f(wi (..., 3))`` over the whole sphere for a lobe of reflected normals of
+    ``model`` seen from ``wo``: over half vectors ``h`` visible from ``wo`` (each ``wi`` is the
+    reflection of one), ``d(omega_i) = 4 (wo.h) d(omega_h)``, in the slope warp of ``model``."""
+    wo = np.asarray(wo, dtype=np.float64)
+
+    def over_h(h):
+        c = h @ wo
+        return f(2.0 * c[..., None] * h - wo) * 4.0 * np.maximum(c, 0.0)
+
+    # GGX's heavy tail reaches the square's edges, where the error falls only as the node
+    # spacing there: 32 nodes per cell keep it below 2e-4 (1e-3 with 8)
+    return warp_integral(over_h, slope_warp(*slope_frame(model), wo=wo), quad=32)

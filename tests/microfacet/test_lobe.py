@@ -3,11 +3,11 @@ Beckmann."""
 
 import numpy as np
 import pytest
-from mf_quad import direction
+from mf_quad import direction, reflect_warp
 
 from prefilter.errors import PrefilterError
 from prefilter.microfacet import GGX, Beckmann, reflect
-from prefilter.sphere import chi2_sphere, chi2_warped, lobe_cap, slope_warp
+from prefilter.sphere import chi2_sphere, chi2_warped, lobe_cap
 
 LOBE_FAST = [
     (GGX(0.02), 3),
@@ -25,23 +25,11 @@ LOBE_SLOW = (
 )
 
 
-def _lobe_warp(model, wo):
-    """Bins in the (whitened) slope space of the half vector, for the nominal parameters."""
-    if isinstance(model, GGX):
-        return slope_warp((0.0, 0.0), np.diag([float(model.alpha_x), float(model.alpha_y)]),
-                          wo=wo, reflect=True)
-    mu = model.mean_slope
-    above = None
-    if np.any(mu != 0.0):  # the lobe also vanishes below the mean surface
-        above = np.array([-mu[0], -mu[1], 1.0]) / np.sqrt(1.0 + mu @ mu)
-    return slope_warp(mu, np.linalg.cholesky(model.slope_cov), wo=wo, reflect=True, above=above)
-
-
 def _chi2_lobe(model, wo, n, seed, pdf_model=None):
     pdf_model = model if pdf_model is None else pdf_model
     wi = model.sample_lobe(wo, n, seed)
     alb = float(pdf_model.albedo(wo))
-    return chi2_warped(wi, lambda w: pdf_model.eval(wo, w) / alb, _lobe_warp(model, wo))
+    return chi2_warped(wi, lambda w: pdf_model.eval(wo, w) / alb, reflect_warp(model, wo))
 
 
 @pytest.mark.parametrize("case", range(len(LOBE_FAST)))

@@ -13,6 +13,7 @@ from prefilter.sphere import (
     slope_warp,
     uniform_sphere,
     uniform_sphere_pdf,
+    warp_integral,
 )
 
 
@@ -119,3 +120,45 @@ def test_chi2_warped_bad_input():
         slope_warp((0, 0), reflect=True)
     with pytest.raises(PrefilterError, match="spread"):
         slope_warp((0, 0), spread=0.0)
+
+
+@pytest.mark.parametrize("above", [(0.0, 0.0, 1.0), (0.6, -0.3, 0.5), (0.0, 0.0, -1.0)])
+def test_above_bins_only_the_half_space_exactly(above):
+    # Uniform directions: the half space w.v > 0 holds mass 1/2 whatever the cap, and its arcs
+    # are integrated exactly (a density jump there would otherwise need refinement).
+    w = uniform_sphere(np.random.default_rng(4).random((100_000, 2)))
+    axis, th = (0.3, 0.4, 0.8), 2.0
+    res = chi2_sphere(w, uniform_sphere_pdf, axis=axis, theta_max=th, above=above, max_refine=0)
+    cap = (1 - np.cos(th)) / 2
+    assert res.passed(), res
+    assert 0.0 < res.mass_in_cap < cap
+    full = chi2_sphere(w, uniform_sphere_pdf, theta_max=np.pi, above=above, max_refine=0)
+    assert full.mass_in_cap == pytest.approx(0.5, abs=1e-12)
+
+
+def test_above_counts_lower_draws_outside():
+    # Cosine draws half of them flipped below the horizon: tested on the upper hemisphere with
+    # half the cosine density the flipped ones fall in the outside bin, with its expected mass 1/2.
+    rng = np.random.default_rng(5)
+    w = cosine_hemisphere(rng.random((100_000, 2)))
+    w[::2, 2] *= -1.0
+    res = chi2_sphere(w, lambda d: 0.5 * cosine_hemisphere_pdf(d), above=(0, 0, 1.0))
+    assert res.passed(), res
+    assert res.mass_in_cap == pytest.approx(0.5, abs=1e-6)
+    wrong = chi2_sphere(w, cosine_hemisphere_pdf, above=(0, 0, 1.0))
+    assert wrong.p_value < 1e-6
+
+
+def test_warp_integral_of_densities_is_one():
+    # the NDF's projected area and the visible normals of a grazing view over their domains
+    from prefilter.microfacet import Beckmann
+
+    model = Beckmann([0.2, -0.1], [[0.05, 0.02], [0.02, 0.01]])
+    wo = np.array([np.sin(1.3), 0.0, np.cos(1.3)])
+    scale = np.linalg.cholesky(model.slope_cov)
+    proj = warp_integral(lambda m: model.D(m) * m[..., 2], slope_warp(model.mean_slope, scale))
+    vis = warp_integral(lambda m: model.pdf_vndf(wo, m),
+                        slope_warp(model.mean_slope, scale, wo=wo))
+    assert proj == pytest.approx(1.0, abs=1e-9) and vis == pytest.approx(1.0, abs=1e-8)
+    with pytest.raises(PrefilterError, match="warp"):
+        warp_integral(lambda m: m[..., 2], "square")

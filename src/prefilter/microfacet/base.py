@@ -144,12 +144,16 @@ class MicrofacetModel(Lobe):
         """Lobe interface: the density of :meth:`sample`, :meth:`pdf_reflect`."""
         return self.pdf_reflect(wo, wi)
 
-    def sample(self, wo, u) -> tuple[np.ndarray, np.ndarray]:
-        """Lobe interface: ``wi = reflect(wo, m)`` with ``m`` from :meth:`sample_vndf` (Heitz
-        2018), and its weight ``eval / pdf`` (``G2 / G1`` for centred models; 0 below the
-        horizon). ``wo (..., 3)``, ``u (..., 2)``."""
+    def sample_reflect(self, wo, u) -> np.ndarray:
+        """``wi = reflect(wo, m) (..., 3)`` with ``m`` from :meth:`sample_vndf` (Heitz 2018),
+        density :meth:`pdf_reflect`. ``wo (..., 3)``, ``u (..., 2)``."""
         wi = reflect(wo, self.sample_vndf(wo, u))
-        wi = wi / np.linalg.norm(wi, axis=-1, keepdims=True)
+        return wi / np.linalg.norm(wi, axis=-1, keepdims=True)
+
+    def sample(self, wo, u) -> tuple[np.ndarray, np.ndarray]:
+        """Lobe interface: :meth:`sample_reflect` and the weight ``eval / pdf`` (``G2 / G1``
+        for centred models; 0 below the horizon). ``wo (..., 3)``, ``u (..., 2)``."""
+        wi = self.sample_reflect(wo, u)
         return wi, sample_weight(self.eval(wo, wi), self.pdf_reflect(wo, wi))
 
     def sample_lobe(self, wo, n: int, rng) -> np.ndarray:

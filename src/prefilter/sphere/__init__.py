@@ -10,7 +10,8 @@ from prefilter.sphere.sampling import (
     uniform_sphere,
     uniform_sphere_pdf,
 )
-from prefilter.sphere.chi2 import Chi2Result, Warp, chi2_sphere, chi2_warped, lobe_cap, slope_warp
+from prefilter.sphere.chi2 import (Chi2Result, Warp, chi2_sphere, chi2_warped, lobe_cap, slope_warp,
+                                   warp_integral)
 
 __all__ = [
     "Chi2Result",
@@ -18,6 +19,7 @@ __all__ = [
     "chi2_warped",
     "slope_warp",
     "Warp",
+    "warp_integral",
     "lobe_cap",
     "cosine_hemisphere",
     "cosine_hemisphere_pdf",

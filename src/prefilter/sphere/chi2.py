@@ -85,6 +85,7 @@ def chi2_sphere(
     refine_tol: float = 0.05,
     max_in_empty: int = 10,
     max_cells: int = 16384,
+    above=None,
 ) -> Chi2Result:
     """Chi-square test of ``samples (n, 3)`` against the solid-angle density ``pdf(w (..., 3))``.
 
@@ -94,6 +95,10 @@ def chi2_sphere(
     until a split changes it by less than ``refine_tol`` standard deviations of its count
     (at most ``max_cells`` new cells per level, the worst first).
     More than ``max_in_empty`` samples in bins of zero density fail the test outright.
+    ``above``: a direction ``v (3,)``; the bins then cover only the cap's part with ``w.v > 0``
+    (each cell's quadrature spans exactly that arc) and the rest joins the outside bin, e.g.
+    ``(0, 0, 1)`` for a lobe tested on the upper hemisphere only, whose draws below the
+    horizon (weight 0, or failed draws) are counted but not binned.
     """
     samples = _as_samples(samples)
     n = samples.shape[0]
@@ -115,6 +120,11 @@ def chi2_sphere(
     cz = np.clip(loc[:, 2], -1.0, 1.0)
     ph = np.mod(np.arctan2(loc[:, 1], loc[:, 0]), 2 * np.pi)
     inside = cz >= cmin
+    p1_range = None
+    if above is not None:
+        v = _as_axis(above)
+        inside &= samples @ v > 0.0
+        p1_range = _arc_above(v @ axis, v @ t, v @ b)
     i = np.clip(((1.0 - cz[inside]) / (1.0 - cmin) * n_th).astype(int), 0, n_th - 1)
     j = np.clip((ph[inside] / (2 * np.pi) * n_ph).astype(int), 0, n_ph - 1)
     observed = np.zeros(n_th * n_ph + 1)
@@ -136,7 +146,31 @@ def chi2_sphere(
 
     return _binned_test(observed, cells, density, quad=quad, min_expected=min_expected,
                         max_refine=max_refine, refine_tol=refine_tol,
-                        max_in_empty=max_in_empty, max_cells=max_cells)
+                        max_in_empty=max_in_empty, max_cells=max_cells, p1_range=p1_range)
+
+
+def _arc_above(vz, vx, vy):
+    """``p1_range`` of the directions ``(sin cos p, sin sin p, c)`` with ``w.v > 0`` at each
+    ``c``, for ``v = (vx, vy, vz)`` in the cap frame: ``c vz + sin r cos(p - p0) > 0`` with
+    ``r = |(vx, vy)|``, an arc of azimuths around ``p0``, as two intervals of ``[0, 2 pi)``."""
+    r = float(np.hypot(vx, vy))
+    p0 = float(np.arctan2(vy, vx))
+    two_pi = 2.0 * np.pi
+
+    def p1_range(c):
+        sn = np.sqrt(np.maximum(0.0, 1.0 - c * c)) * r
+        pos = sn > 0.0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.where(pos, -c * vz / np.where(pos, sn, 1.0), np.where(c * vz > 0.0, -2.0, 2.0))
+        half = np.arccos(np.clip(k, -1.0, 1.0))
+        full = k <= -1.0
+        lo = np.mod(p0 - half, two_pi)
+        hi = lo + 2.0 * half
+        zero = np.zeros_like(lo)
+        return [(np.where(full, 0.0, lo), np.where(full, two_pi, np.minimum(hi, two_pi))),
+                (zero, np.where(full, 0.0, np.maximum(hi - two_pi, 0.0)))]
+
+    return p1_range
 
 
 def _eval_pdf(pdf, w: np.ndarray) -> np.ndarray:
@@ -146,6 +180,27 @@ def _eval_pdf(pdf, w: np.ndarray) -> np.ndarray:
         bad = dens[~(np.isfinite(dens) & (dens >= 0.0))]
         raise PrefilterError(f"pdf: expected finite densities >= 0, got {bad[:4]}")
     return dens
+
+
+def _cell_masses(a0, b0, a1, b1, density, quad, p1_range=None):
+    """Integrals of ``density(p0, p1)`` over the rectangles ``[a0, b0] x [a1, b1]`` (arrays),
+    ``quad x quad`` Gauss-Legendre nodes; the inner rule spans only the chords ``p1_range(p0)``
+    of the domain (see :func:`_binned_test`)."""
+    x, wq = np.polynomial.legendre.leggauss(quad)
+    q0 = a0[:, None] + (b0 - a0)[:, None] * (x[None, :] + 1) / 2
+    if p1_range is None:
+        q1 = a1[:, None] + (b1 - a1)[:, None] * (x[None, :] + 1) / 2
+        dens = density(q0[:, :, None], q1[:, None, :])
+        w2 = wq[:, None] * wq[None, :] / 4
+        return np.sum(dens * w2, axis=(-2, -1)) * (b0 - a0) * (b1 - a1)
+    inner = 0.0
+    for lo, hi in p1_range(q0):
+        lo = np.maximum(a1[:, None], lo)
+        width = np.maximum(np.minimum(b1[:, None], hi) - lo, 0.0)
+        q1 = lo[..., None] + width[..., None] * (x + 1) / 2
+        dens = density(np.broadcast_to(q0[:, :, None], q1.shape), q1)
+        inner = inner + np.sum(dens * wq, axis=-1) * width / 2
+    return np.sum(inner * wq, axis=-1) * (b0 - a0) / 2
 
 
 def _binned_test(observed, cells, density, *, quad, min_expected, max_refine, refine_tol,
@@ -161,23 +216,9 @@ def _binned_test(observed, cells, density, *, quad, min_expected, max_refine, re
     """
     n = int(observed.sum())
     n_bins = observed.size - 1
-    x, wq = np.polynomial.legendre.leggauss(quad)
 
     def cell_mass(a0, b0, a1, b1):
-        q0 = a0[:, None] + (b0 - a0)[:, None] * (x[None, :] + 1) / 2
-        if p1_range is None:
-            q1 = a1[:, None] + (b1 - a1)[:, None] * (x[None, :] + 1) / 2
-            dens = density(q0[:, :, None], q1[:, None, :])
-            w2 = wq[:, None] * wq[None, :] / 4
-            return np.sum(dens * w2, axis=(-2, -1)) * (b0 - a0) * (b1 - a1)
-        inner = 0.0
-        for lo, hi in p1_range(q0):
-            lo = np.maximum(a1[:, None], lo)
-            width = np.maximum(np.minimum(b1[:, None], hi) - lo, 0.0)
-            q1 = lo[..., None] + width[..., None] * (x + 1) / 2
-            dens = density(np.broadcast_to(q0[:, :, None], q1.shape), q1)
-            inner = inner + np.sum(dens * wq, axis=-1) * width / 2
-        return np.sum(inner * wq, axis=-1) * (b0 - a0) / 2
+        return _cell_masses(a0, b0, a1, b1, density, quad, p1_range)
 
     # Bins where a 2 x 2 split changes the mass by more than a small fraction of the count's
     # standard deviation are split again (pdfs of BRDF lobes jump at the horizon).
@@ -244,6 +285,34 @@ def _binned_test(observed, cells, density, *, quad, min_expected, max_refine, re
     return Chi2Result(p, stat, dof, n, mass_cap)
 
 
+def _warped_density(pdf, warp):
+    """``pdf(w(u)) jac(u)`` at points ``(U, V)`` of the square: the density per unit area."""
+
+    def density(U, V):
+        w, jac = warp.from_square(np.stack(np.broadcast_arrays(U, V), axis=-1))
+        dens = _eval_pdf(pdf, w)
+        return np.where(jac > 0.0, dens * np.where(jac > 0.0, jac, 0.0), 0.0)
+
+    return density
+
+
+def warp_integral(f: Callable[[np.ndarray], np.ndarray], warp: "Warp", *,
+                  res: tuple[int, int] = (16, 16), quad: int = 8) -> float:
+    """Integral of ``f(w (..., 3)) >= 0`` over the domain of ``warp`` (solid angle), by
+    ``quad x quad`` Gauss-Legendre nodes in each of ``res`` cells of its square (the inner rule
+    over ``warp.v_range`` only). For a lobe's pdf under a warp that spreads it over the square
+    (e.g. :func:`slope_warp` of its half vectors) this converges where a quadrature in
+    spherical coordinates cannot resolve a narrow grazing lobe."""
+    if not isinstance(warp, Warp):
+        raise PrefilterError(f"warp: expected a prefilter.sphere.Warp, got {type(warp).__name__}")
+    n_u, n_v = (as_positive_int(r, "res") for r in res)
+    ii, jj = np.meshgrid(np.arange(n_u), np.arange(n_v), indexing="ij")
+    u0, v0 = (ii / n_u).ravel(), (jj / n_v).ravel()
+    masses = _cell_masses(u0, u0 + 1.0 / n_u, v0, v0 + 1.0 / n_v, _warped_density(f, warp),
+                          as_positive_int(quad, "quad"), warp.v_range)
+    return float(np.sum(masses))
+
+
 @dataclass(frozen=True)
 class Warp:
     """A bijection between (part of) the sphere and the unit square, for :func:`chi2_warped`.
@@ -307,10 +376,7 @@ def chi2_warped(
     u0, v0 = (ii / n_u).ravel(), (jj / n_v).ravel()
     cells = (np.arange(n_u * n_v), u0, u0 + 1.0 / n_u, v0, v0 + 1.0 / n_v)
 
-    def density(U, V):
-        w, jac = warp.from_square(np.stack(np.broadcast_arrays(U, V), axis=-1))
-        dens = _eval_pdf(pdf, w)
-        return np.where(jac > 0.0, dens * np.where(jac > 0.0, jac, 0.0), 0.0)
+    density = _warped_density(pdf, warp)
 
     return _binned_test(observed, cells, density, quad=quad, min_expected=min_expected,
                         max_refine=max_refine, refine_tol=refine_tol,
