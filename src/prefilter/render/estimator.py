@@ -95,23 +95,42 @@ def owen_scramble32(x, seed):
     return reverse32(x)
 
 
+@njit_inline
+def owen_sobol_pixel(key, pixel, seeds):
+    """The scrambles of one pixel's set (see :func:`owen_sobol`): writes the coordinates'
+    scramble seeds into ``seeds (dims,)`` and returns the shuffle's seed. ``key`` identifies the
+    seed and the sample block."""
+    s = hash32(key ^ hash32(pixel))
+    for d in range(seeds.shape[0]):
+        seeds[d] = hash32(s + 0x9E3779B9 * (d + 1))
+    return hash32(s + 0x68E31DA4)
+
+
+@njit_inline
+def owen_sobol_index(j, shuffle, m):
+    """Row of the Sobol table holding point ``j < 2^m`` of a pixel's set: the low ``m`` bits of
+    a nested scramble of ``j`` (a permutation of ``[0, 2^m)``)."""
+    return owen_scramble32(j, shuffle) & ((1 << m) - 1)
+
+
+@njit_inline
+def owen_sobol_coord(base, k, d, seeds):
+    """Coordinate ``d`` of Sobol table row ``k``, scrambled by ``seeds[d]``, in ``[0, 1)``."""
+    return owen_scramble32(base[k, d], seeds[d]) * (1.0 / 4294967296.0)
+
+
 @njit_parallel
 def owen_sobol_kernel(base, m, pixels, key, n, out):
     """``out[p, j]``: point ``j < n`` of pixel ``pixels[p]``'s scrambled set (see
     :func:`owen_sobol`); ``key`` identifies the seed and the sample block."""
-    mask = (1 << m) - 1
     dims = out.shape[2]
     for p in prange(pixels.shape[0]):
-        s = hash32(key ^ hash32(pixels[p]))
-        shuffle = hash32(s + 0x68E31DA4)
         seeds = np.empty(dims, np.int64)
-        for d in range(dims):
-            seeds[d] = hash32(s + 0x9E3779B9 * (d + 1))
+        shuffle = owen_sobol_pixel(key, pixels[p], seeds)
         for j in range(n):
-            # the low m bits of a nested scramble of j < 2^m: a permutation of [0, 2^m)
-            k = owen_scramble32(j, shuffle) & mask
+            k = owen_sobol_index(j, shuffle, m)
             for d in range(dims):
-                out[p, j, d] = owen_scramble32(base[k, d], seeds[d]) * (1.0 / 4294967296.0)
+                out[p, j, d] = owen_sobol_coord(base, k, d, seeds)
 
 
 def owen_sobol(pixels, n: int, dims: int, seed: int, block: int) -> np.ndarray:
@@ -127,13 +146,13 @@ def owen_sobol(pixels, n: int, dims: int, seed: int, block: int) -> np.ndarray:
     pixels = np.ascontiguousarray(pixels, dtype=np.int64).reshape(-1)
     m = max(0, int(np.ceil(np.log2(max(n, 1)))))
     base = sobol_base(m, dims)
-    key = int(_key(seed, block))
+    key = int(sobol_key(seed, block))
     out = np.empty((len(pixels), n, dims))
     serial(owen_sobol_kernel, len(pixels) * n)(base, m, pixels, key, n, out)
     return out
 
 
-def _key(seed: int, block: int) -> int:
+def sobol_key(seed: int, block: int) -> int:
     """A 32-bit key of ``(seed, block)`` (SeedSequence mixing: no structure left between keys)."""
     return int(np.random.SeedSequence([int(seed), int(block)]).generate_state(1)[0])
 

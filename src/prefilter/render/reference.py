@@ -38,7 +38,12 @@ from prefilter.render.estimator import (
     material_mis_pair,
     mis_quad,
     owen_sobol,
+    owen_sobol_coord,
+    owen_sobol_index,
+    owen_sobol_pixel,
     quad_constants,
+    sobol_base,
+    sobol_key,
     specular_probability_jit,
 )
 from prefilter.render.kernels import (
@@ -163,18 +168,22 @@ BLOCK = 256
 
 @njit_parallel
 def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, read, qv, qn,
-                             qarea, qrad, u, power, view_z_min, rad):
+                             qarea, qrad, base, m, keys, pixels, npairs, power, view_z_min, rad):
     """:func:`shade_reference` for untextured quad lights fused with the surface of each
     sub-pixel position, without intermediate arrays: the surface seen through ``xy (N, 2)``
     (:func:`prefilter.render.kernels.surface_sample`, ``read`` at level 0), the view in its
     shading frame (:func:`prefilter.render.shading.local_view`), then per quad light
-    ``qv (Q, 4, 3)``, ``qn (Q, 3)``, ``qarea (Q,)``, ``qrad (Q, 3)`` the ``K`` MIS pairs of
-    ``u (N, Q, K, 4)`` (:func:`prefilter.render.estimator.material_mis_pair`, as
-    :func:`prefilter.render.estimator.material_mis_kernel`). Writes ``rad (N, 3)`` (0 on
-    misses)."""
+    ``qv (Q, 4, 3)``, ``qn (Q, 3)``, ``qarea (Q,)``, ``qrad (Q, 3)`` its ``K = npairs`` MIS pairs
+    (:func:`prefilter.render.estimator.material_mis_pair`, as
+    :func:`prefilter.render.estimator.material_mis_kernel`).
+
+    The pairs' uniforms are those of :func:`prefilter.render.estimator.owen_sobol` (Sobol table
+    ``base (2^m, 4)``, light ``q``'s key ``keys[q]``), drawn here: position ``i`` is position
+    ``i % S`` of pixel ``pixels[i // S]`` (``S = N / len(pixels)``), and its pair ``j`` is point
+    ``(i % S) K + j`` of the pixel's set. Writes ``rad (N, 3)`` (0 on misses)."""
     n_pts = xy.shape[0]
     nq = qv.shape[0]
-    npairs = u.shape[2]
+    npos = n_pts // pixels.shape[0]
     qc = np.empty((nq, 2))
     for q in range(nq):
         qc[q, 0], qc[q, 1] = quad_constants(qv[q], qn[q], qarea[q])
@@ -186,6 +195,7 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
         mat = np.empty(7)
         scratch = np.empty((5, 3))  # f, term (2, 3), pt (2, 3)
         f, term, pt = scratch[0], scratch[1:3], scratch[3:5]
+        seeds = np.empty(DIMS_PER_QUAD, np.int64)
         for i in range(blk * BLOCK, min(n_pts, (blk + 1) * BLOCK)):
             rad[i, 0] = 0.0
             rad[i, 1] = 0.0
@@ -201,16 +211,22 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
             woz = max(geo[4, 0] * ns[0] + geo[4, 1] * ns[1] + geo[4, 2] * ns[2], view_z_min)
             wn = np.sqrt(wox * wox + woy * woy + woz * woz)
             wox, woy, woz = wox / wn, woy / wn, woz / wn
-            base, f0 = mat[1:4], mat[4:7]
+            base_color, f0 = mat[1:4], mat[4:7]
             ax, ay = mat_f[o, 0], mat_f[o, 1]
-            p_spec = specular_probability_jit(woz, base, f0)
+            p_spec = specular_probability_jit(woz, base_color, f0)
+            pixel = pixels[i // npos]
+            first = (i % npos) * npairs
             for q in range(nq):
+                shuffle = owen_sobol_pixel(keys[q], pixel, seeds)
                 a0 = a1 = a2 = 0.0
                 for j in range(npairs):
+                    k = owen_sobol_index(first + j, shuffle, m)
                     material_mis_pair(geo[0, 0], geo[0, 1], geo[0, 2], ts, bs, ns, wox, woy, woz,
-                                      ax, ay, base, f0, p_spec, qv[q], qn[q], qarea[q], qc[q, 0],
-                                      qc[q, 1], u[i, q, j, 0], u[i, q, j, 1], u[i, q, j, 2],
-                                      u[i, q, j, 3], power, f, term, pt)
+                                      ax, ay, base_color, f0, p_spec, qv[q], qn[q], qarea[q],
+                                      qc[q, 0], qc[q, 1], owen_sobol_coord(base, k, 0, seeds),
+                                      owen_sobol_coord(base, k, 1, seeds),
+                                      owen_sobol_coord(base, k, 2, seeds),
+                                      owen_sobol_coord(base, k, 3, seeds), power, f, term, pt)
                     a0 += term[0, 0]
                     a0 += term[1, 0]
                     a1 += term[0, 1]
@@ -223,9 +239,10 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
 
 
 def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance"):
-    """``callable(xy (N, 2), u (N, Q, K, 4)) -> (N, 3)``: :func:`reference_samples_kernel` for
-    ``scene``, or ``None`` when the scene needs the staged path (point, directional or textured
-    quad lights, no quad light, textures with too few channels)."""
+    """``callable(xy (N, 2), pixels (P,), n, K, seed) -> (N, 3)``:
+    :func:`reference_samples_kernel` for ``scene`` (``n`` pairs per pixel, ``K`` per position),
+    or ``None`` when the scene needs the staged path (point, directional or textured quad
+    lights, no quad light, textures with too few channels)."""
     if lights.points or lights.directionals or textured or not lights.quads:
         return None
     packed = pack_materials(scene.objects)
@@ -244,12 +261,16 @@ def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance"):
     cam = camera_params(scene.camera)
     power = heuristic == "power"
 
-    def shade(xy, u):
+    def shade(xy, pixels, n, k, seed):
         xy = np.ascontiguousarray(xy, dtype=np.float64)
+        pixels = np.ascontiguousarray(pixels, dtype=np.int64)
+        m = max(0, int(np.ceil(np.log2(max(n, 1)))))
+        keys = np.array([sobol_key(seed, POSITION_BLOCK + 1 + q) for q in range(len(quads))],
+                        dtype=np.int64)
         rad = np.empty((len(xy), 3))
-        serial(reference_samples_kernel, len(xy) * u.shape[1] * u.shape[2])(
+        serial(reference_samples_kernel, len(xy) * len(quads) * k)(
             cam, xy, types, params, *packed, read, qv, qn, qa, qr,
-            np.ascontiguousarray(u, dtype=np.float64), power, VIEW_Z_MIN, rad)
+            sobol_base(m, DIMS_PER_QUAD), m, keys, pixels, k, power, VIEW_Z_MIN, rad)
         return rad
 
     return shade
@@ -314,8 +335,9 @@ def render_reference(scene, settings, *, pairs: int | None = None,
 
     shade = fused_shader(scene, lights, textured, heuristic) if fused else None
     if shade is not None:
-        return render_positions(scene, settings, lambda xy, pixels: shade(xy, pair_uniforms(
-            pixels)), desc="reference", positions=positions, per_pixel=npos)
+        return render_positions(scene, settings,
+                                lambda xy, pixels: shade(xy, pixels, npos * k, k, settings.seed),
+                                desc="reference", positions=positions, per_pixel=npos)
 
     def radiance(xy, pixels):
         g = gbuffer_at(scene, xy)
