@@ -19,6 +19,11 @@ columns): the same convention as the ``ltc`` method's prefiltered lookups. The d
 depend on the texture, so the estimator stays unbiased (only its variance grows with the
 texture's contrast).
 
+Scenes lit by untextured quad lights only are rendered by one fused Numba kernel per row chunk
+(:func:`reference_samples_kernel`: camera ray, hit, level-0 texture reads, shading frame, then the
+MIS pairs drawn and shaded in place by the same jitted helpers as the array kernel); others run the
+NumPy stages, which give the same image to rounding.
+
 Images depend only on ``seed`` and ``spp`` (scrambles are keyed by the pixel), not on the chunk size
 or thread count.
 """
