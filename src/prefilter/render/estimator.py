@@ -95,23 +95,42 @@ def owen_scramble32(x, seed):
     return reverse32(x)
 
 
+@njit_inline
+def owen_sobol_pixel(key, pixel, seeds):
+    """The scrambles of one pixel's set (see :func:`owen_sobol`): writes the coordinates'
+    scramble seeds into ``seeds (dims,)`` and returns the shuffle's seed. ``key`` identifies the
+    seed and the sample block."""
+    s = hash32(key ^ hash32(pixel))
+    for d in range(seeds.shape[0]):
+        seeds[d] = hash32(s + 0x9E3779B9 * (d + 1))
+    return hash32(s + 0x68E31DA4)
+
+
+@njit_inline
+def owen_sobol_index(j, shuffle, m):
+    """Row of the Sobol table holding point ``j < 2^m`` of a pixel's set: the low ``m`` bits of
+    a nested scramble of ``j`` (a permutation of ``[0, 2^m)``)."""
+    return owen_scramble32(j, shuffle) & ((1 << m) - 1)
+
+
+@njit_inline
+def owen_sobol_coord(base, k, d, seeds):
+    """Coordinate ``d`` of Sobol table row ``k``, scrambled by ``seeds[d]``, in ``[0, 1)``."""
+    return owen_scramble32(base[k, d], seeds[d]) * (1.0 / 4294967296.0)
+
+
 @njit_parallel
 def owen_sobol_kernel(base, m, pixels, key, n, out):
     """``out[p, j]``: point ``j < n`` of pixel ``pixels[p]``'s scrambled set (see
     :func:`owen_sobol`); ``key`` identifies the seed and the sample block."""
-    mask = (1 << m) - 1
     dims = out.shape[2]
     for p in prange(pixels.shape[0]):
-        s = hash32(key ^ hash32(pixels[p]))
-        shuffle = hash32(s + 0x68E31DA4)
         seeds = np.empty(dims, np.int64)
-        for d in range(dims):
-            seeds[d] = hash32(s + 0x9E3779B9 * (d + 1))
+        shuffle = owen_sobol_pixel(key, pixels[p], seeds)
         for j in range(n):
-            # the low m bits of a nested scramble of j < 2^m: a permutation of [0, 2^m)
-            k = owen_scramble32(j, shuffle) & mask
+            k = owen_sobol_index(j, shuffle, m)
             for d in range(dims):
-                out[p, j, d] = owen_scramble32(base[k, d], seeds[d]) * (1.0 / 4294967296.0)
+                out[p, j, d] = owen_sobol_coord(base, k, d, seeds)
 
 
 def owen_sobol(pixels, n: int, dims: int, seed: int, block: int) -> np.ndarray:
@@ -127,13 +146,13 @@ def owen_sobol(pixels, n: int, dims: int, seed: int, block: int) -> np.ndarray:
     pixels = np.ascontiguousarray(pixels, dtype=np.int64).reshape(-1)
     m = max(0, int(np.ceil(np.log2(max(n, 1)))))
     base = sobol_base(m, dims)
-    key = int(_key(seed, block))
+    key = int(sobol_key(seed, block))
     out = np.empty((len(pixels), n, dims))
     serial(owen_sobol_kernel, len(pixels) * n)(base, m, pixels, key, n, out)
     return out
 
 
-def _key(seed: int, block: int) -> int:
+def sobol_key(seed: int, block: int) -> int:
     """A 32-bit key of ``(seed, block)`` (SeedSequence mixing: no structure left between keys)."""
     return int(np.random.SeedSequence([int(seed), int(block)]).generate_state(1)[0])
 
@@ -334,7 +353,7 @@ def mis_quad(lobe: Lobe, light, position, ts, bs, ns, wo, u, *, heuristic: str =
 
 
 @njit_inline
-def _material_eval_pdf(wox, woy, woz, wix, wiy, wiz, ax, ay, base, f0, p_spec, f_out):
+def material_eval_pdf(wox, woy, woz, wix, wiy, wiz, ax, ay, base, f0, p_spec, f_out):
     """Writes :meth:`MaterialLobe.eval` (rgb) into ``f_out``; returns :meth:`MaterialLobe.pdf`."""
     hx, hy, hz = wox + wix, woy + wiy, woz + wiz
     hn = np.sqrt(hx * hx + hy * hy + hz * hz)
@@ -360,7 +379,7 @@ def _material_eval_pdf(wox, woy, woz, wix, wiy, wiz, ax, ay, base, f0, p_spec, f
 
 
 @njit_inline
-def _mis_over(p_s, p_o, power):
+def mis_over(p_s, p_o, power):
     """:func:`mis_weight` for scalars."""
     if power:
         den = p_s * p_s + p_o * p_o
@@ -369,17 +388,25 @@ def _mis_over(p_s, p_o, power):
     return 1.0 / den if (p_s > 0.0 and den > 0.0) else 0.0
 
 
-@njit_parallel
-def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, u, power,
-                        keep, acc, out, hit):
-    """:func:`mis_quad` for :class:`MaterialLobe` over ``K`` sample pairs per shading point.
+@njit_inline
+def specular_probability_jit(woz, base, f0):
+    """:func:`specular_probability` of one shading point: ``woz`` the view's cosine,
+    ``base, f0 (3,)``."""
+    c0 = min(max(woz, 0.0), 1.0)
+    s = 0.0
+    dsum = 0.0
+    for k in range(3):
+        s += schlick_jit(f0[k], c0) / 3.0
+        dsum += base[k] / 3.0
+    tot = s + dsum
+    return min(max(s / tot, 0.05), 1.0) if tot > 0.0 else 0.5
 
-    ``u (N, K, 4)``; writes ``acc[i]`` (rgb), the sum of all terms of point ``i``, and with
-    ``keep`` also ``out[i, k, s]`` (rgb) and ``hit[i, k, s]`` (point on the light) for the
-    light (``s = 0``) and lobe (``s = 1``) samples of pair ``k``.
-    """
-    n = pos.shape[0]
-    npairs = u.shape[1]
+
+@njit_inline
+def quad_constants(verts, normal, area):
+    """``(p1, d)`` of a quad light ``verts (4, 3)``: the probability of its first triangle
+    ``(v0, v1, v2)`` in :func:`prefilter.render.lights.sample_quad_area` and its plane's offset
+    ``normal . v0``."""
     tri1 = 0.5 * np.sqrt(
         ((verts[1, 1] - verts[0, 1]) * (verts[2, 2] - verts[0, 2])
          - (verts[1, 2] - verts[0, 2]) * (verts[2, 1] - verts[0, 1])) ** 2
@@ -387,116 +414,132 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
            - (verts[1, 0] - verts[0, 0]) * (verts[2, 2] - verts[0, 2])) ** 2
         + ((verts[1, 0] - verts[0, 0]) * (verts[2, 1] - verts[0, 1])
            - (verts[1, 1] - verts[0, 1]) * (verts[2, 0] - verts[0, 0])) ** 2)
-    p1 = tri1 / area
-    d_plane = verts[0, 0] * normal[0] + verts[0, 1] * normal[1] + verts[0, 2] * normal[2]
-    for i in prange(n):
-        f = np.empty(3)
-        wox, woy, woz = wo[i, 0], wo[i, 1], wo[i, 2]
-        axi, ayi = ax[i], ay[i]
-        # lobe choice probability (specular_probability)
-        c0 = min(max(woz, 0.0), 1.0)
-        s = 0.0
-        dsum = 0.0
-        for k in range(3):
-            s += schlick_jit(f0[i, k], c0) / 3.0
-            dsum += base[i, k] / 3.0
-        tot = s + dsum
-        p_spec = min(max(s / tot, 0.05), 1.0) if tot > 0.0 else 0.5
-        px, py, pz = pos[i, 0], pos[i, 1], pos[i, 2]
-        for k in range(3):
-            acc[i, k] = 0.0
-        for j in range(npairs):
-            if keep:
-                for q in range(2):
-                    for k in range(3):
-                        out[i, j, q, k] = 0.0
-            # -- light sample: uniform on the area (sample_quad_area) --
-            u0 = u[i, j, 0]
-            if u0 < p1:
-                u0 = u0 / p1
-                b_i, c_i = 1, 2
-            else:
-                u0 = (u0 - p1) / (1.0 - p1) if p1 < 1.0 else 0.0
-                b_i, c_i = 2, 3
-            u0 = min(max(u0, 0.0), 1.0)
-            su = np.sqrt(u0)
-            b1 = u[i, j, 1] * su
-            b2 = su - b1
-            lx = (verts[0, 0] + b1 * (verts[c_i, 0] - verts[0, 0])
-                  + b2 * (verts[b_i, 0] - verts[0, 0]))
-            ly = (verts[0, 1] + b1 * (verts[c_i, 1] - verts[0, 1])
-                  + b2 * (verts[b_i, 1] - verts[0, 1]))
-            lz = (verts[0, 2] + b1 * (verts[c_i, 2] - verts[0, 2])
-                  + b2 * (verts[b_i, 2] - verts[0, 2]))
-            if keep:
-                hit[i, j, 0, 0], hit[i, j, 0, 1], hit[i, j, 0, 2] = lx, ly, lz
-            dx, dy, dz = lx - px, ly - py, lz - pz
-            dist2 = dx * dx + dy * dy + dz * dz
-            dist = np.sqrt(dist2)
-            if dist > 1e-12:
-                dx, dy, dz = dx / dist, dy / dist, dz / dist
-                cos_l = -(dx * normal[0] + dy * normal[1] + dz * normal[2])
-                if cos_l > 1e-12:
-                    pl = dist2 / (area * cos_l)
-                    wx = dx * ts[i, 0] + dy * ts[i, 1] + dz * ts[i, 2]
-                    wy = dx * bs[i, 0] + dy * bs[i, 1] + dz * bs[i, 2]
-                    wz = dx * ns[i, 0] + dy * ns[i, 1] + dz * ns[i, 2]
-                    wn = np.sqrt(wx * wx + wy * wy + wz * wz)
-                    wx, wy, wz = wx / wn, wy / wn, wz / wn
-                    pb = _material_eval_pdf(wox, woy, woz, wx, wy, wz, axi, ayi, base[i], f0[i],
-                                            p_spec, f)
-                    w = _mis_over(pl, pb, power)
-                    for k in range(3):
-                        acc[i, k] += f[k] * w
-                        if keep:
-                            out[i, j, 0, k] = f[k] * w
-            # -- lobe sample: GGX visible normal reflected, or cosine (sample_brdf) --
-            if keep:
-                hit[i, j, 1, 0], hit[i, j, 1, 1], hit[i, j, 1, 2] = px, py, pz
-            ua = u[i, j, 2]
-            if ua < p_spec:
-                ua = min(ua / p_spec, 1.0 - 2.0**-53)
-                mx, my, mz = ggx_sample_vndf_jit(axi, ayi, wox, woy, woz, ua, u[i, j, 3])
-                dot = wox * mx + woy * my + woz * mz
-                bx, by, bz = 2.0 * dot * mx - wox, 2.0 * dot * my - woy, 2.0 * dot * mz - woz
-            else:
-                ua = min((ua - p_spec) / (1.0 - p_spec), 1.0 - 2.0**-53)
-                bx, by, bz = _cosine_hemisphere(ua, u[i, j, 3])
-            # world direction and its hit on the front of the quad (quad_light_pdf)
-            wx = bx * ts[i, 0] + by * bs[i, 0] + bz * ns[i, 0]
-            wy = bx * ts[i, 1] + by * bs[i, 1] + bz * ns[i, 1]
-            wz = bx * ts[i, 2] + by * bs[i, 2] + bz * ns[i, 2]
-            cos_l = -(wx * normal[0] + wy * normal[1] + wz * normal[2])
-            if cos_l > 1e-12:
-                t = (d_plane - (px * normal[0] + py * normal[1] + pz * normal[2])) / (-cos_l)
-                if t > 0.0:
-                    hx, hy, hz = px + t * wx, py + t * wy, pz + t * wz
-                    inside = True
-                    for k in range(4):
-                        k1 = (k + 1) % 4
-                        ex = verts[k1, 0] - verts[k, 0]
-                        ey = verts[k1, 1] - verts[k, 1]
-                        ez = verts[k1, 2] - verts[k, 2]
-                        qx, qy, qz = hx - verts[k, 0], hy - verts[k, 1], hz - verts[k, 2]
-                        cr = ((ey * qz - ez * qy) * normal[0] + (ez * qx - ex * qz) * normal[1]
-                              + (ex * qy - ey * qx) * normal[2])
-                        if cr < 0.0:
-                            inside = False
-                    if inside:
-                        if keep:
-                            hit[i, j, 1, 0], hit[i, j, 1, 1], hit[i, j, 1, 2] = hx, hy, hz
-                        plb = t * t / (area * cos_l)
-                        pb = _material_eval_pdf(wox, woy, woz, bx, by, bz, axi, ayi, base[i],
-                                                f0[i], p_spec, f)
-                        w = _mis_over(pb, plb, power)
-                        for k in range(3):
-                            acc[i, k] += f[k] * w
-                            if keep:
-                                out[i, j, 1, k] = f[k] * w
+    return tri1 / area, verts[0, 0] * normal[0] + verts[0, 1] * normal[1] + verts[0, 2] * normal[2]
 
 
 @njit_inline
-def _cosine_hemisphere(u1, u2):
+def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, ax, ay, base, f0, p_spec, verts,
+                      normal, area, p1, d_plane, u0, u1, u2, u3, power, f, term, pt):
+    """One light/lobe sample pair of :func:`mis_quad` for :class:`MaterialLobe` at the shading
+    point ``(px, py, pz)`` with frame ``ts, bs, ns (3,)``, view ``wo`` in that frame and lobe
+    choice probability ``p_spec`` (:func:`specular_probability_jit`); the quad light
+    ``verts (4, 3)``, ``normal (3,)``, ``area`` with :func:`quad_constants` ``p1, d_plane``;
+    uniforms ``u0, u1`` (light point), ``u2, u3`` (lobe direction).
+
+    Writes ``term (2, 3)``: the light-sample and lobe-sample terms (rgb, before the light's
+    radiance; 0 where a sample adds nothing) and ``pt (2, 3)``: their points on the light (the
+    shading point where the lobe's ray misses it). ``f (3,)``: scratch.
+    """
+    for q in range(2):
+        for k in range(3):
+            term[q, k] = 0.0
+    # -- light sample: uniform on the area (sample_quad_area) --
+    if u0 < p1:
+        u0 = u0 / p1
+        b_i, c_i = 1, 2
+    else:
+        u0 = (u0 - p1) / (1.0 - p1) if p1 < 1.0 else 0.0
+        b_i, c_i = 2, 3
+    u0 = min(max(u0, 0.0), 1.0)
+    su = np.sqrt(u0)
+    b1 = u1 * su
+    b2 = su - b1
+    lx = verts[0, 0] + b1 * (verts[c_i, 0] - verts[0, 0]) + b2 * (verts[b_i, 0] - verts[0, 0])
+    ly = verts[0, 1] + b1 * (verts[c_i, 1] - verts[0, 1]) + b2 * (verts[b_i, 1] - verts[0, 1])
+    lz = verts[0, 2] + b1 * (verts[c_i, 2] - verts[0, 2]) + b2 * (verts[b_i, 2] - verts[0, 2])
+    pt[0, 0], pt[0, 1], pt[0, 2] = lx, ly, lz
+    dx, dy, dz = lx - px, ly - py, lz - pz
+    dist2 = dx * dx + dy * dy + dz * dz
+    dist = np.sqrt(dist2)
+    if dist > 1e-12:
+        dx, dy, dz = dx / dist, dy / dist, dz / dist
+        cos_l = -(dx * normal[0] + dy * normal[1] + dz * normal[2])
+        if cos_l > 1e-12:
+            pl = dist2 / (area * cos_l)
+            wx = dx * ts[0] + dy * ts[1] + dz * ts[2]
+            wy = dx * bs[0] + dy * bs[1] + dz * bs[2]
+            wz = dx * ns[0] + dy * ns[1] + dz * ns[2]
+            wn = np.sqrt(wx * wx + wy * wy + wz * wz)
+            wx, wy, wz = wx / wn, wy / wn, wz / wn
+            pb = material_eval_pdf(wox, woy, woz, wx, wy, wz, ax, ay, base, f0, p_spec, f)
+            w = mis_over(pl, pb, power)
+            for k in range(3):
+                term[0, k] = f[k] * w
+    # -- lobe sample: GGX visible normal reflected, or cosine (sample_brdf) --
+    pt[1, 0], pt[1, 1], pt[1, 2] = px, py, pz
+    if u2 < p_spec:
+        ua = min(u2 / p_spec, 1.0 - 2.0**-53)
+        mx, my, mz = ggx_sample_vndf_jit(ax, ay, wox, woy, woz, ua, u3)
+        dot = wox * mx + woy * my + woz * mz
+        bx, by, bz = 2.0 * dot * mx - wox, 2.0 * dot * my - woy, 2.0 * dot * mz - woz
+    else:
+        ua = min((u2 - p_spec) / (1.0 - p_spec), 1.0 - 2.0**-53)
+        bx, by, bz = cosine_hemisphere_jit(ua, u3)
+    # world direction and its hit on the front of the quad (quad_light_pdf)
+    wx = bx * ts[0] + by * bs[0] + bz * ns[0]
+    wy = bx * ts[1] + by * bs[1] + bz * ns[1]
+    wz = bx * ts[2] + by * bs[2] + bz * ns[2]
+    cos_l = -(wx * normal[0] + wy * normal[1] + wz * normal[2])
+    if cos_l > 1e-12:
+        t = (d_plane - (px * normal[0] + py * normal[1] + pz * normal[2])) / (-cos_l)
+        if t > 0.0:
+            hx, hy, hz = px + t * wx, py + t * wy, pz + t * wz
+            inside = True
+            for k in range(4):
+                k1 = (k + 1) % 4
+                ex = verts[k1, 0] - verts[k, 0]
+                ey = verts[k1, 1] - verts[k, 1]
+                ez = verts[k1, 2] - verts[k, 2]
+                qx, qy, qz = hx - verts[k, 0], hy - verts[k, 1], hz - verts[k, 2]
+                cr = ((ey * qz - ez * qy) * normal[0] + (ez * qx - ex * qz) * normal[1]
+                      + (ex * qy - ey * qx) * normal[2])
+                if cr < 0.0:
+                    inside = False
+            if inside:
+                pt[1, 0], pt[1, 1], pt[1, 2] = hx, hy, hz
+                plb = t * t / (area * cos_l)
+                pb = material_eval_pdf(wox, woy, woz, bx, by, bz, ax, ay, base, f0, p_spec, f)
+                w = mis_over(pb, plb, power)
+                for k in range(3):
+                    term[1, k] = f[k] * w
+
+
+@njit_parallel
+def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, u, power,
+                        keep, acc, out, hit):
+    """:func:`mis_quad` for :class:`MaterialLobe` over ``K`` sample pairs per shading point
+    (:func:`material_mis_pair` each).
+
+    ``u (N, K, 4)``; writes ``acc[i]`` (rgb), the sum of all terms of point ``i``, and with
+    ``keep`` also ``out[i, k, s]`` (rgb) and ``hit[i, k, s]`` (point on the light) for the
+    light (``s = 0``) and lobe (``s = 1``) samples of pair ``k``.
+    """
+    n = pos.shape[0]
+    npairs = u.shape[1]
+    p1, d_plane = quad_constants(verts, normal, area)
+    for i in prange(n):
+        scratch = np.empty((5, 3))  # f, term (2, 3), pt (2, 3)
+        f, term, pt = scratch[0], scratch[1:3], scratch[3:5]
+        p_spec = specular_probability_jit(wo[i, 2], base[i], f0[i])
+        for k in range(3):
+            acc[i, k] = 0.0
+        for j in range(npairs):
+            material_mis_pair(pos[i, 0], pos[i, 1], pos[i, 2], ts[i], bs[i], ns[i], wo[i, 0],
+                              wo[i, 1], wo[i, 2], ax[i], ay[i], base[i], f0[i], p_spec, verts,
+                              normal, area, p1, d_plane, u[i, j, 0], u[i, j, 1], u[i, j, 2],
+                              u[i, j, 3], power, f, term, pt)
+            for k in range(3):
+                acc[i, k] += term[0, k]
+                acc[i, k] += term[1, k]
+            if keep:
+                for q in range(2):
+                    for k in range(3):
+                        out[i, j, q, k] = term[q, k]
+                        hit[i, j, q, k] = pt[q, k]
+
+
+@njit_inline
+def cosine_hemisphere_jit(u1, u2):
     """:func:`prefilter.sphere.sampling.cosine_hemisphere` for one pair of uniforms:
     Shirley-Chiu concentric disk lifted to the hemisphere."""
     a = 2.0 * u1 - 1.0

@@ -1,6 +1,7 @@
 """Numba kernels of the renderer's hot paths: primary rays + G-buffer, trilinear footprint
-lookups, and the surface of one sample (:func:`surface_sample`: ray, hit, the footprint's texture
-reads, shading frame and material) that fused shading kernels (``prefilter.ltc.kernels``) build on.
+lookups, and the surface of one sample (:func:`surface_sample`: ray, hit, texture reads over the
+footprint or at level 0, shading frame and material) that fused shading kernels
+(``prefilter.ltc.kernels``, the ``reference`` method's) build on.
 
 Each kernel writes every output element from exactly one loop iteration (no parallel reductions),
 so results do not depend on the thread count. The NumPy twin of the ray cast is a check in
@@ -55,7 +56,7 @@ def pack_objects(objects) -> tuple[np.ndarray, np.ndarray]:
     return types, params
 
 
-@njit_serial
+@njit_inline
 def _trace(k, ox, oy, oz, dx, dy, dz, xx, xy_, xz, yx, yy, yz, types, params,
            hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx, dpdy, dist, view, dirn):
     """Nearest hit of one ray and its surface data, written to row ``k`` of the outputs."""
@@ -372,6 +373,15 @@ def _trilinear_into(data, info, first, n_levels, stride, c, u, v, lod, out, k):
         _bilinear_add(data, info, first, stride, c, u, v, 1.0, out, k)
 
 
+@njit_serial
+def _level0_into(data, info, first, stride, c, u, v, out, k):
+    """The bilinear read of level ``first`` (a chain's level 0): channels ``:c`` into
+    ``out[k, :c]``."""
+    for ch in range(c):
+        out[k, ch] = 0.0
+    _bilinear_add(data, info, first, stride, c, u, v, 1.0, out, k)
+
+
 @njit_parallel
 def footprint_lookup_kernel(data, info, c, uv, dudv, out):
     """Isotropic trilinear lookup at ``lod = log2(max(major axis in texels, 1))``, as
@@ -395,9 +405,13 @@ MAT_WIDTH = 8  # alpha_x, alpha_y, base colour (3), f0 (3)
 # along the major axis at the minor axis' LOD; all other footprints by one isotropic tap.
 # ``READ_TAPS_NORM`` = 1: each tap's level-0 bilinear read is renormalised before the blend with
 # level 1 (interpolating between unit texels shortens them although the surface barely turns).
+# ``READ_LEVEL0`` = 1: every texture of the material (normal, height and colour maps) is read at
+# level 0, bilinearly, whatever the footprint (supersampled ground truth, ``MipChain.lookup(uv,
+# 0)``); the other settings are then ignored.
 READ_SCALE, READ_BIAS, READ_START, READ_RAMP = 0, 1, 2, 3
 READ_TAPS, READ_TAPS_BELOW, READ_TAPS_RATIO, READ_TAPS_NORM = 4, 5, 6, 7
-READ_WIDTH = 8
+READ_LEVEL0 = 8
+READ_WIDTH = 9
 
 
 def plain_read(n_objects: int) -> np.ndarray:
@@ -406,6 +420,15 @@ def plain_read(n_objects: int) -> np.ndarray:
     read = np.zeros((n_objects, READ_WIDTH))
     read[:, READ_SCALE] = 1.0
     return read
+
+
+def level0_read(n_objects: int) -> np.ndarray:
+    """Texture read settings ``(K, READ_WIDTH)`` of level 0, bilinear, for every texture (the
+    ``reference`` method's full-resolution reads)."""
+    read = plain_read(n_objects)
+    read[:, READ_LEVEL0] = 1.0
+    return read
+
 
 def pack_materials(objects):
     """Materials and their textures for :func:`surface_sample`, or ``None`` when a texture
@@ -453,13 +476,16 @@ def gscratch():
             np.empty((1, 3)), np.empty((1, 3)), np.empty(1), np.empty((1, 3)), np.empty((1, 3)))
 
 
-@njit_serial
+# inlined (as _trace): a call with its ~30 array arguments cost more than the surface itself
+# (0.67 vs 0.28 us per sample of the reference's fused kernel, one thread)
+@njit_inline
 def surface_sample(cam, x, y, types, params, mat_f, mat_i, data, info, tex, read, gs, tx, geo,
                    mat):  # pragma: no cover - compiled
     """The surface seen through pixel position ``(x, y)`` (``cam`` as in
-    :func:`gbuffer_camera_kernel`): the primary ray, its hit, the footprint's trilinear texture
-    reads (the normal map as set by ``read (K, READ_WIDTH)``), the shading frame (as
-    ``driver.shading_frame``, the frame flipped on back faces) and the material.
+    :func:`gbuffer_camera_kernel`): the primary ray, its hit, the texture reads (trilinear over
+    the footprint, the normal map as set by ``read (K, READ_WIDTH)``, or all at level 0), the
+    shading frame (as ``driver.shading_frame``, the frame flipped on back faces) and the
+    material.
 
     Writes ``geo (5, 3)``: position, shading t, b, n, unit view; ``mat[1:7]``: base colour (times
     the colour map), f0. ``gs``: :func:`gscratch`, ``tx (2, 4)``: scratch.
@@ -483,7 +509,12 @@ def surface_sample(cam, x, y, types, params, mat_f, mat_i, data, info, tex, read
     m0 = m1 = m2 = 0.0
     t_n = mat_i[o, 0]
     t_h = mat_i[o, 1]
-    if t_n >= 0:
+    level0 = read[o, READ_LEVEL0] != 0.0
+    if t_n >= 0 and level0:
+        _level0_into(data, info, tex[t_n, 0], tex[t_n, 2], 3, u, v, tx, 0)
+        m0, m1, m2 = tx[0, 0], tx[0, 1], tx[0, 2]
+        has_map = True
+    elif t_n >= 0:
         first = tex[t_n, 0]
         # the footprint scaled by 2^lod_bias (1: as MipChain.lookup_footprint)
         ns = read[o, READ_SCALE]
@@ -514,8 +545,11 @@ def surface_sample(cam, x, y, types, params, mat_f, mat_i, data, info, tex, read
         m0, m1, m2 = tx[0, 0], tx[0, 1], tx[0, 2]
         has_map = True
     elif t_h >= 0:
-        _footprint_into(data, info, tex[t_h, 0], tex[t_h, 1], tex[t_h, 2], 2, u, v,
-                        du00, du01, du10, du11, tx, 0)
+        if level0:
+            _level0_into(data, info, tex[t_h, 0], tex[t_h, 2], 2, u, v, tx, 0)
+        else:
+            _footprint_into(data, info, tex[t_h, 0], tex[t_h, 1], tex[t_h, 2], 2, u, v,
+                            du00, du01, du10, du11, tx, 0)
         # normalize(-s_x, -s_y, 1) of the mean slopes
         m0, m1, m2 = -tx[0, 0], -tx[0, 1], 1.0
         il = 1.0 / math.sqrt(m0 * m0 + m1 * m1 + 1.0)
@@ -571,8 +605,11 @@ def surface_sample(cam, x, y, types, params, mat_f, mat_i, data, info, tex, read
     t_c = mat_i[o, 2]
     if t_c >= 0:
         nc = tex[t_c, 2]
-        _footprint_into(data, info, tex[t_c, 0], tex[t_c, 1], nc, min(nc, 3), u, v, du00,
-                        du01, du10, du11, tx, 0)
+        if level0:
+            _level0_into(data, info, tex[t_c, 0], nc, min(nc, 3), u, v, tx, 0)
+        else:
+            _footprint_into(data, info, tex[t_c, 0], tex[t_c, 1], nc, min(nc, 3), u, v, du00,
+                            du01, du10, du11, tx, 0)
         for c in range(3):
             mat[1 + c] *= tx[0, c] if nc >= 3 else tx[0, 0]
     # the unnormalised average's length; height maps and plain materials are flat

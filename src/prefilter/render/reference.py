@@ -19,6 +19,11 @@ columns): the same convention as the ``ltc`` method's prefiltered lookups. The d
 depend on the texture, so the estimator stays unbiased (only its variance grows with the
 texture's contrast).
 
+Scenes lit by untextured quad lights only are rendered by one fused Numba kernel per row chunk
+(:func:`reference_samples_kernel`: camera ray, hit, level-0 texture reads, shading frame, then the
+MIS pairs drawn and shaded in place by the same jitted helpers as the array kernel); others run the
+NumPy stages, which give the same image to rounding.
+
 Images depend only on ``seed`` and ``spp`` (scrambles are keyed by the pixel), not on the chunk size
 or thread count.
 """
@@ -27,17 +32,34 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.render.camera import gbuffer_at
+from prefilter.jit import njit_parallel, prange, serial
+from prefilter.render.camera import camera_params, gbuffer_at
 from prefilter.render.driver import render_positions, surface_attributes, with_settings
 from prefilter.render.estimator import (
     DIMS_PER_QUAD,
+    HEURISTICS,
     MaterialLobe,
     material_mis,
+    material_mis_pair,
     mis_quad,
     owen_sobol,
+    owen_sobol_coord,
+    owen_sobol_index,
+    owen_sobol_pixel,
+    quad_constants,
+    sobol_base,
+    sobol_key,
+    specular_probability_jit,
+)
+from prefilter.render.kernels import (
+    gscratch,
+    level0_read,
+    pack_materials,
+    pack_objects,
+    surface_sample,
 )
 from prefilter.render.lights import LightSet, QuadLight
-from prefilter.render.shading import local_view, shade_delta_lights
+from prefilter.render.shading import VIEW_Z_MIN, local_view, shade_delta_lights
 
 #: Light/BRDF sample pairs shaded per traced sub-pixel position at high sample counts
 #: (:func:`pairs_per_position`).
@@ -145,6 +167,120 @@ def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
     return out
 
 
+#: Sub-pixel positions per scratch buffer of :func:`reference_samples_kernel`.
+BLOCK = 256
+
+
+@njit_parallel
+def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, read, qv, qn,
+                             qarea, qrad, base, m, keys, pixels, npairs, power, view_z_min, rad):
+    """:func:`shade_reference` for untextured quad lights fused with the surface of each
+    sub-pixel position, without intermediate arrays: the surface seen through ``xy (N, 2)``
+    (:func:`prefilter.render.kernels.surface_sample`, ``read`` at level 0), the view in its
+    shading frame (:func:`prefilter.render.shading.local_view`), then per quad light
+    ``qv (Q, 4, 3)``, ``qn (Q, 3)``, ``qarea (Q,)``, ``qrad (Q, 3)`` its ``K = npairs`` MIS pairs
+    (:func:`prefilter.render.estimator.material_mis_pair`, as
+    :func:`prefilter.render.estimator.material_mis_kernel`).
+
+    The pairs' uniforms are those of :func:`prefilter.render.estimator.owen_sobol` (Sobol table
+    ``base (2^m, 4)``, light ``q``'s key ``keys[q]``), drawn here: position ``i`` is position
+    ``i % S`` of pixel ``pixels[i // S]`` (``S = N / len(pixels)``), and its pair ``j`` is point
+    ``(i % S) K + j`` of the pixel's set. Writes ``rad (N, 3)`` (0 on misses)."""
+    n_pts = xy.shape[0]
+    nq = qv.shape[0]
+    npos = n_pts // pixels.shape[0]
+    qc = np.empty((nq, 2))
+    for q in range(nq):
+        qc[q, 0], qc[q, 1] = quad_constants(qv[q], qn[q], qarea[q])
+    n_blocks = (n_pts + BLOCK - 1) // BLOCK
+    for blk in prange(n_blocks):
+        gs = gscratch()
+        tx = np.empty((2, 4))
+        geo = np.empty((5, 3))
+        mat = np.empty(7)
+        scratch = np.empty((5, 3))  # f, term (2, 3), pt (2, 3)
+        f, term, pt = scratch[0], scratch[1:3], scratch[3:5]
+        seeds = np.empty(DIMS_PER_QUAD, np.int64)
+        for i in range(blk * BLOCK, min(n_pts, (blk + 1) * BLOCK)):
+            rad[i, 0] = 0.0
+            rad[i, 1] = 0.0
+            rad[i, 2] = 0.0
+            hit, o, _r = surface_sample(cam, xy[i, 0], xy[i, 1], types, params, mat_f, mat_i,
+                                        data, info, tex, read, gs, tx, geo, mat)
+            if not hit:
+                continue
+            ts, bs, ns = geo[1], geo[2], geo[3]
+            # local_view: the view in the shading frame, clamped to z >= view_z_min
+            wox = geo[4, 0] * ts[0] + geo[4, 1] * ts[1] + geo[4, 2] * ts[2]
+            woy = geo[4, 0] * bs[0] + geo[4, 1] * bs[1] + geo[4, 2] * bs[2]
+            woz = max(geo[4, 0] * ns[0] + geo[4, 1] * ns[1] + geo[4, 2] * ns[2], view_z_min)
+            wn = np.sqrt(wox * wox + woy * woy + woz * woz)
+            wox, woy, woz = wox / wn, woy / wn, woz / wn
+            base_color, f0 = mat[1:4], mat[4:7]
+            ax, ay = mat_f[o, 0], mat_f[o, 1]
+            p_spec = specular_probability_jit(woz, base_color, f0)
+            pixel = pixels[i // npos]
+            first = (i % npos) * npairs
+            for q in range(nq):
+                shuffle = owen_sobol_pixel(keys[q], pixel, seeds)
+                a0 = a1 = a2 = 0.0
+                for j in range(npairs):
+                    k = owen_sobol_index(first + j, shuffle, m)
+                    material_mis_pair(geo[0, 0], geo[0, 1], geo[0, 2], ts, bs, ns, wox, woy, woz,
+                                      ax, ay, base_color, f0, p_spec, qv[q], qn[q], qarea[q],
+                                      qc[q, 0], qc[q, 1], owen_sobol_coord(base, k, 0, seeds),
+                                      owen_sobol_coord(base, k, 1, seeds),
+                                      owen_sobol_coord(base, k, 2, seeds),
+                                      owen_sobol_coord(base, k, 3, seeds), power, f, term, pt)
+                    a0 += term[0, 0]
+                    a0 += term[1, 0]
+                    a1 += term[0, 1]
+                    a1 += term[1, 1]
+                    a2 += term[0, 2]
+                    a2 += term[1, 2]
+                rad[i, 0] += a0 * (qrad[q, 0] / npairs)
+                rad[i, 1] += a1 * (qrad[q, 1] / npairs)
+                rad[i, 2] += a2 * (qrad[q, 2] / npairs)
+
+
+def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance"):
+    """``callable(xy (N, 2), pixels (P,), n, K, seed) -> (N, 3)``:
+    :func:`reference_samples_kernel` for ``scene`` (``n`` pairs per pixel, ``K`` per position),
+    or ``None`` when the scene needs the staged path (point, directional or textured quad
+    lights, no quad light, textures with too few channels)."""
+    if lights.points or lights.directionals or textured or not lights.quads:
+        return None
+    packed = pack_materials(scene.objects)
+    if packed is None:
+        return None
+    if heuristic not in HEURISTICS:
+        raise ValueError(f"heuristic: expected one of {HEURISTICS}, got {heuristic!r}")
+    types, params = pack_objects(scene.objects)
+    read = level0_read(len(scene.objects))
+    quads = lights.quads
+    qv = np.ascontiguousarray([q.vertices for q in quads], dtype=np.float64).reshape(-1, 4, 3)
+    qn = np.ascontiguousarray([q.normal for q in quads], dtype=np.float64).reshape(-1, 3)
+    qa = np.ascontiguousarray([q.area for q in quads], dtype=np.float64)
+    qr = np.ascontiguousarray([np.broadcast_to(q.radiance, 3) for q in quads],
+                              dtype=np.float64).reshape(-1, 3)
+    cam = camera_params(scene.camera)
+    power = heuristic == "power"
+
+    def shade(xy, pixels, n, k, seed):
+        xy = np.ascontiguousarray(xy, dtype=np.float64)
+        pixels = np.ascontiguousarray(pixels, dtype=np.int64)
+        m = max(0, int(np.ceil(np.log2(max(n, 1)))))
+        keys = np.array([sobol_key(seed, POSITION_BLOCK + 1 + q) for q in range(len(quads))],
+                        dtype=np.int64)
+        rad = np.empty((len(xy), 3))
+        serial(reference_samples_kernel, len(xy) * len(quads) * k)(
+            cam, xy, types, params, *packed, read, qv, qn, qa, qr,
+            sobol_base(m, DIMS_PER_QUAD), m, keys, pixels, k, power, VIEW_Z_MIN, rad)
+        return rad
+
+    return shade
+
+
 def pairs_per_position(spp: int, pairs: int = PAIRS_PER_POSITION) -> int:
     """Light/BRDF pairs shaded per sub-pixel position for ``spp`` pairs per pixel: ``pairs``
     (a power of two) once there are at least 16 positions left, fewer below, so small sample
@@ -161,13 +297,18 @@ POSITION_BLOCK = 0
 
 
 def render_reference(scene, settings, *, pairs: int | None = None,
-                     heuristic: str = "balance") -> np.ndarray:
+                     heuristic: str = "balance", fused: bool = True) -> np.ndarray:
     """The ``reference`` method: ground truth for ``scene`` at ``settings.spp`` samples per pixel.
 
     Per pixel ``spp / K`` sub-pixel positions (whole pixel footprint), level-0 bilinear textures,
     and per position ``K = pairs_per_position(spp)`` MIS light/BRDF sample pairs per quad light,
     textured or not (:func:`shade_reference`); ``pairs`` overrides ``K``. Returns ``(H, W, 3)``
     linear radiance; deterministic for a given ``settings.seed``.
+
+    Scenes lit by untextured quad lights only run one Numba pass per row chunk
+    (:func:`fused_shader`); others, or ``fused=False``, the NumPy stages (G-buffer,
+    :func:`prefilter.render.driver.surface_attributes`, :func:`shade_reference`), which give the
+    same image to rounding.
     """
     from prefilter.render.lighttex import split_lights
 
@@ -190,14 +331,24 @@ def render_reference(scene, settings, *, pairs: int | None = None,
         xy[..., 1] += rows.astype(np.float64)[:, None, None]
         return xy, pixels
 
+    def pair_uniforms(pixels):
+        """``(P npos, Q, K, 4)``: pair ``j`` of position ``i`` is point ``i K + j`` of the
+        pixel's set (aligned runs of ``K``)."""
+        return np.stack([owen_sobol(pixels, npos * k, DIMS_PER_QUAD, settings.seed,
+                                    POSITION_BLOCK + 1 + q).reshape(-1, k, DIMS_PER_QUAD)
+                         for q in range(nq)], axis=1)
+
+    shade = fused_shader(scene, lights, textured, heuristic) if fused else None
+    if shade is not None:
+        return render_positions(scene, settings,
+                                lambda xy, pixels: shade(xy, pixels, npos * k, k, settings.seed),
+                                desc="reference", positions=positions, per_pixel=npos)
+
     def radiance(xy, pixels):
         g = gbuffer_at(scene, xy)
         rad = np.zeros((g.hit.size, 3))
         if np.any(g.hit):
-            # pair j of position i is point i K + j of the pixel's set: aligned runs of K
-            u = np.stack([owen_sobol(pixels, npos * k, DIMS_PER_QUAD, settings.seed,
-                                     POSITION_BLOCK + 1 + q).reshape(-1, k, DIMS_PER_QUAD)
-                          for q in range(nq)], axis=1) if nq else np.zeros((g.hit.size, 0))
+            u = pair_uniforms(pixels) if nq else np.zeros((g.hit.size, 0))
             gh = g.select(g.hit)
             a = surface_attributes(scene, gh, filtered=False)
             rad[g.hit] = shade_reference(gh.position, a["t"], a["b"], a["n"], gh.view,
