@@ -428,13 +428,12 @@ def bench_breakdown_quad(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7):
     over the distances, best of ``repeat`` per entry (CPU time of this process)."""
     import functools
 
-    from prefilter.glints import brdf
     from prefilter.glints import render as grender
     from prefilter.render.methods import RenderSettings
     from prefilter.render.scene import load_scene
 
-    parts = [(grender, "quad_range"), (grender, "quad_mis"), (brdf, "direct_mis_k"),
-             (brdf, "sample_s_k"), (brdf, "direct_ndf_k")]
+    parts = [(grender, "quad_range"), (grender, "quad_mis"), (grender, "direct_mis_k"),
+             (grender, "sample_s_k"), (grender, "direct_ndf_k")]
     acc = {}
     depth = {}
     orig = {name: getattr(mod, name) for mod, name in parts}

@@ -185,7 +185,7 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
         extra.update(stop_exposure=stop_exposure, flip_capped=float(fc.mean),
                      flip_capped_object=float(fc.error_map[hit].mean()))
     if lossless:
-        from prefilter.glints.render import BAKE_SETTINGS
+        from prefilter.glints.bake import BAKE_SETTINGS
 
         saved = dict(BAKE_SETTINGS)
         BAKE_SETTINGS.update(LOSSLESS)
@@ -440,7 +440,7 @@ def main():
                          "depend on the bake settings)")
     a = ap.parse_args()
     if a.bake:
-        from prefilter.glints.render import BAKE_SETTINGS
+        from prefilter.glints.bake import BAKE_SETTINGS
 
         BAKE_SETTINGS.update(json.loads(a.bake))
     if a.same_estimator:

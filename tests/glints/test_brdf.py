@@ -12,7 +12,8 @@ from scipy.special import erf
 from prefilter.errors import PrefilterError
 from prefilter.glints import load, pndf_image
 from prefilter.glints.bake import bake
-from prefilter.glints.brdf import glint_brdf_cos, glint_ndf, surface, vcavity_g1, vcavity_g2
+from prefilter.glints.brdf import glint_brdf_cos, glint_ndf, vcavity_g1, vcavity_g2
+from prefilter.glints.surface import surface
 from prefilter.glints.pndf import pndf
 from prefilter.glints.pyramid import resample_min_sigma
 from prefilter.glints.query import point

@@ -10,7 +10,8 @@ from maps import sinusoid
 from prefilter.errors import PrefilterError
 from prefilter.glints import load
 from prefilter.glints.bake import bake
-from prefilter.glints.brdf import glint_brdf_cos, surface
+from prefilter.glints.brdf import glint_brdf_cos
+from prefilter.glints.surface import surface
 from prefilter.glints.envlight import equirect_directions, fibonacci_axes, fit_sg, shade_sg
 from prefilter.glints.render import U_PAIR, QUAD_MIS, quad_mis, quad_mis_unfused, quad_range
 from prefilter.render.lights import QuadLight, sample_quad_area
@@ -200,9 +201,9 @@ def test_multi_point_kernels_equal_single_point(surf):
     """The per-footprint kernels of the fused MIS against the per-point functions: draws and
     densities (direct and compressed samplers, the masses), the direct NDF at K points, and the
     one-walk direct_mis_k (NDF at given points; draws, densities and NDF at the draws)."""
-    from prefilter.glints.brdf import (direct_mis_fits, direct_mis_k, direct_ndf,
-                                       direct_ndf_k, sample_s_direct_k, sample_s_k)
-    from prefilter.glints.sample import mass, n_uniforms, sample_s, sample_s_direct
+    from prefilter.glints.brdf import direct_ndf, direct_ndf_k
+    from prefilter.glints.sample import (direct_mis_fits, direct_mis_k, mass, n_uniforms,
+                                         sample_s, sample_s_direct, sample_s_direct_k, sample_s_k)
 
     rng = np.random.default_rng(9)
     N, K = 50, 3
@@ -242,8 +243,7 @@ def test_direct_mis_k_element_choice_extremes(surf):
     """The one-walk kernel picks its draws' elements by row, then column: at the uniforms' ends
     (0: the window's first texel; just below 1: its last), on the narrowest windows (sigma_p ~ 0:
     3-4 texels a side) and on wider ones, its draws and densities are the per-point sampler's."""
-    from prefilter.glints.brdf import direct_mis_k
-    from prefilter.glints.sample import sample_s_direct
+    from prefilter.glints.sample import direct_mis_k, sample_s_direct
 
     rng = np.random.default_rng(12)
     N, K = 24, 4

@@ -808,3 +808,35 @@ def test_range_multi_input_errors(baked):
     with pytest.raises(PrefilterError, match="active: expected a bool array"):
         range_multi(gm, idx, w, lo, lo + 1, np.ones((2, 3), bool))
     assert range_multi(gm, idx[:0], w[:0], lo[:0], lo[:0] + 1).shape == (0, 4)
+
+
+def test_cli_bake_is_the_render_bake(tmp_path, monkeypatch):
+    """``prefilter bake glints`` without -o writes the render cache's file: the glints render
+    method (baked_surface) loads it instead of baking, with the same settings."""
+    from click.testing import CliRunner
+
+    from prefilter.glints import render as grender
+    from prefilter.glints.bake import BAKE_SETTINGS, bake_settings, cache_path
+    from prefilter.glints.commands import bake_glints
+
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path / "cache"))
+    nm = sinusoid(16, px=16, py=8)
+    np.save(tmp_path / "n.npy", nm)
+    small = dict(rank=4, ndf_res=16, block=8, n_iter_max=10)
+    res = CliRunner().invoke(bake_glints, [str(tmp_path / "n.npy"), "--rank", "4", "--ndf-res",
+                                           "16", "--block", "8", "--iters", "10", "--quiet"])
+    assert res.exit_code == 0, res.output
+    path = cache_path(nm, bake_settings(nm.shape, small))
+    assert path.exists() and str(path) in res.output
+    st = load(path).header["settings"]
+    for k, v in dict(BAKE_SETTINGS, **small).items():
+        if k != "intrinsic_roughness":
+            assert st[k] == v, k
+
+    def found(normal_map, out, **kwargs):
+        assert out == path and out.exists(), "baked again"
+        return False
+
+    monkeypatch.setattr(grender, "bake_if_missing", found)
+    surf = grender.baked_surface(nm, settings=small)
+    assert surf.gm.header["settings"] == st

@@ -116,7 +116,7 @@ def as_ndf_truncation(ndf_truncation, name: str = "ndf_truncation") -> float:
 
 def map_digest(normal_map: np.ndarray) -> str:
     """SHA-1 (hex) of a validated normal map's float64 values: what a bake records
-    (``map_sha1``), what :func:`prefilter.glints.brdf.surface` checks and what the render and
+    (``map_sha1``), what :func:`prefilter.glints.surface.surface` checks and what the render and
     Wang-tile caches are keyed by."""
     return hashlib.sha1(np.ascontiguousarray(normal_map, dtype=np.float64).tobytes()).hexdigest()
 

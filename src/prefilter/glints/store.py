@@ -152,16 +152,6 @@ class GlintsMap:
         n = self.block_index.shape[0] if self.block_index is not None else 0
         return f"GlintsMap({n} images, rank {self.header.get('ndf', {}).get('rank')})"
 
-    def point(self, center, sigma_p, s):
-        from prefilter.glints.query import point
-
-        return point(self, center, sigma_p, s)
-
-    def range(self, center, sigma_p, s_min, s_max):
-        from prefilter.glints.query import range_mean
-
-        return range_mean(self, center, sigma_p, s_min, s_max)
-
 
 def encode_v2(a: np.ndarray, b: np.ndarray, c: np.ndarray, group_rows: np.ndarray) -> dict:
     """Version-2 arrays of float64 factors ``a``, ``b`` ``(G, R, B)`` (columns summing to 1 or

@@ -1102,7 +1102,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     direct P-NDF's point value as ``pndf.pndf``; above it the dependent texels) as point
     densities with intrinsic roughness ``point_roughness`` (default
     ``wn.intrinsic_roughness``). Bake with
-    :func:`prefilter.glints.brdf.bilinear_bake_roughness` of it so that the interpolation's blur
+    :func:`prefilter.glints.bake.bilinear_bake_roughness` of it so that the interpolation's blur
     restores it (as the ``glints`` render cache does)."""
     if not isinstance(wn, TiledNDF):
         raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")

@@ -52,7 +52,7 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: 232 MB of storage at ``rank`` 16 with ``block`` 16 (stored-image error 2.5 / 1.7 / 1.0 % per
 #: level on the flakes map; docs/glints-wang.md, "Rendering"). ``bilinear``: NDF values
 #: interpolated between pixel centres, the pyramids baked with
-#: :func:`prefilter.glints.brdf.bilinear_bake_roughness` (the interpolation's blur restores the
+#: :func:`prefilter.glints.bake.bilinear_bake_roughness` (the interpolation's blur restores the
 #: intrinsic roughness), the texels evaluated at query time as point densities
 #: (:func:`prefilter.glints.wang_ndf.ndf_points`); the pixel's value instead: FLIP 0.167 /
 #: 0.120 / 0.104 instead of 0.004 / 0.029 / 0.027 (tests/glints/test_wang_render.py scene).
@@ -138,7 +138,7 @@ def cache_path(normal_map, settings: dict | None = None):
 def _cache_path(nm: np.ndarray, st: dict):
     """:func:`cache_path` of a validated exemplar ``nm`` and complete settings ``st`` (hashed
     as they are: validating ``nm`` again may change its last bits)."""
-    from prefilter.glints.render import cache_dir, settings_key
+    from prefilter.glints.bake import cache_dir, settings_key
     from prefilter.glints.wang_store import VERSION
 
     # the store's format version in the key (and, by settings_key, the CP fit's): a file of
@@ -188,7 +188,7 @@ def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = Fa
 def _bake_roughness(st: dict) -> float:
     if not st["bilinear"]:
         return st["intrinsic_roughness"]
-    from prefilter.glints.brdf import bilinear_bake_roughness
+    from prefilter.glints.bake import bilinear_bake_roughness
 
     return bilinear_bake_roughness(st["intrinsic_roughness"], st["support"], st["ndf_res"])
 
