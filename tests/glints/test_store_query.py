@@ -747,8 +747,7 @@ def test_range_multi_equals_range_weighted_per_rectangle(request, interp, bits):
     rtol 1e-5 on the code maps (8-bit ``c``: float32 sums of uint16 prefix sums, the 16/8
     render default included; measured <= 3e-7; 16-bit ``c``: float64), 1e-6 on the float maps
     (float64; measured <= 4e-7, the former kernel's rounding: against the float64 images
-    rebuilt from the same float32 prefix sums it is off by up to 5e-8, range_multi by 2e-14);
-    the former path (``RANGE_SHARED = False``) exactly."""
+    rebuilt from the same float32 prefix sums it is off by up to 5e-8, range_multi by 2e-14)."""
     import dataclasses
 
     from prefilter.glints import query as gq
@@ -773,17 +772,12 @@ def test_range_multi_equals_range_weighted_per_rectangle(request, interp, bits):
         got = gq.range_multi(m, idx, w, lo, hi)
         np.testing.assert_allclose(got, want, rtol=rtol, atol=rtol * 1e-3 * want.max())
         assert np.all(got[want == 0] == 0)
-        try:
-            gq.RANGE_SHARED = False
-            np.testing.assert_array_equal(gq.range_multi(m, idx, w, lo, hi), want)
-        finally:
-            gq.RANGE_SHARED = True
         act = rng.random((n, k)) < 0.7
         np.testing.assert_array_equal(gq.range_multi(m, idx, w, lo, hi, act),
                                       np.where(act, got, 0.0))
         # serial and parallel kernels alike, up to the float32 sums' rounding: they are separate
         # compilations and fastmath lets LLVM reassociate those sums differently (seen once in a
-        # full test run, session 10: 1.3e-7 relative on the 8-bit map; not reproduced alone)
+        # full test run: 1.3e-7 relative on the 8-bit map; not reproduced alone)
         big = np.repeat(np.arange(n), 120 // k * 300 // n + 1)
         got_p = gq.range_multi(m, idx[big], w[big], lo[big], hi[big])
         assert got_p.size >= gq.SERIAL_BELOW

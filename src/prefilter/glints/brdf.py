@@ -37,7 +37,8 @@ from prefilter.jit import njit_inline, njit_parallel, prange, serial
 from prefilter.validation import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.microfacet.fresnel import schlick
-from prefilter.glints.pndf import SIGMA_H, pndf, texel_window
+from prefilter.glints.pndf import (SIGMA_H, element_covariance, element_density,
+                                   element_gaussian, footprint_window, pndf)
 from prefilter.glints._simd import exp_neg, fdiv
 from prefilter.glints.query import point_flat
 from prefilter.glints.surface import GlintSurface, as_surface, surface  # noqa: F401  (public here)
@@ -62,14 +63,9 @@ def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
     sh2 = sh * sh
     sr2 = sr * sr
     for q in prange(out.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
+        x0, x1, y0, y1, f, var, tot2, _ = footprint_window(cx[q], cy[q], sp[q], sh2, trunc, H, W,
+                                                           np.inf)
         sv = math.sqrt(var)
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = texel_window(cx[q], rad)
-        y0, y1 = texel_window(cy[q], rad)
         nx = x1 - x0 + 1
         wx = np.empty(nx)
         col = np.empty(nx, np.int64)
@@ -96,19 +92,13 @@ def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
                 if max(e0x, e0y) - f * g * (abs(dx) + abs(dy)) > 6.0 * (1.4142135623730951 * sr
                                                                        + sv * g):
                     continue
-                j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
-                ex = qx[q] - s_el[r, c, 0] - f * (j00 * dx + j01 * dy)
-                ey = qy[q] - s_el[r, c, 1] - f * (j10 * dx + j11 * dy)
-                a = sr2 + var * (j00 * j00 + j01 * j01)
-                d = sr2 + var * (j10 * j10 + j11 * j11)
+                mx, my, a, b, d = element_gaussian(s_el, J, r, c, dx, dy, f, var, sr2)
+                ex = qx[q] - mx
+                ey = qy[q] - my
                 # quad >= |e|^2 / trace(cov): cheap rejection before the exact form
                 if ex * ex + ey * ey > 36.0 * (a + d):
                     continue
-                b = var * (j00 * j10 + j01 * j11)
-                det = a * d - b * b
-                quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-                if quad < 36.0:
-                    acc += wy * wx[i] * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+                acc += wy * wx[i] * element_density(ex, ey, a, b, d, 36.0)
         out[q] = acc / (sx * sy)
 
 
@@ -119,13 +109,7 @@ def _footprint_columns(cx, cy, sp, sh2, trunc, W):  # pragma: no cover - compile
     ``f``, element variance ``var``, ``inv = 1 / (2 tot2)``, window ``x0, y0, y1``, ``nx``
     columns starting at ``xs`` in the doubled planes (width ``2 W``), column weights ``wx`` and
     their sum ``sx``, and ``fdx = f dx`` per column."""
-    sp2 = sp * sp
-    tot2 = sp2 + sh2
-    f = sh2 / tot2
-    var = sp2 * sh2 / tot2
-    rad = trunc * math.sqrt(tot2)
-    x0, x1 = texel_window(cx, rad)
-    y0, y1 = texel_window(cy, rad)
+    x0, x1, y0, y1, f, var, tot2, _ = footprint_window(cx, cy, sp, sh2, trunc, 0, W, np.inf)
     nx = x1 - x0 + 1
     wx = np.empty(nx)
     fdx = np.empty(nx)
@@ -176,9 +160,7 @@ def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, 
                 j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
                 ex = qxq - sxr[i] - (j00 * fdx[i] + j01 * fdy)
                 ey = qyq - syr[i] - (j10 * fdx[i] + j11 * fdy)
-                a = sr2 + var * (j00 * j00 + j01 * j01)
-                d = sr2 + var * (j10 * j10 + j11 * j11)
-                b = var * (j00 * j10 + j01 * j11)
+                a, b, d = element_covariance(j00, j01, j10, j11, var, sr2)
                 det[i] = a * d - b * b  # >= sr^4 > 0 (Cauchy-Schwarz)
                 quad[i] = d * ex * ex - 2.0 * b * ex * ey + a * ey * ey
             racc = 0.0
@@ -401,9 +383,7 @@ def _row_gaussians(J00, J01, J10, J11, SX, SY, r, xs, nx, fdx, fdy, var, sr2, wx
     syr = SY[r, xs:xs + nx]
     for i in range(nx):
         j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
-        a = sr2 + var * (j00 * j00 + j01 * j01)
-        d = sr2 + var * (j10 * j10 + j11 * j11)
-        b = var * (j00 * j10 + j01 * j11)
+        a, b, d = element_covariance(j00, j01, j10, j11, var, sr2)
         det = a * d - b * b  # >= sr^4 > 0 (Cauchy-Schwarz)
         nh = fdiv(-0.5, det)
         T[0, o + i] = sxr[i] + (j00 * fdx[i] + j01 * fdy)

@@ -23,8 +23,9 @@ footprint divided by the sample count").
 * ``glints``: the compressed NDF (:func:`prefilter.glints.brdf.glint_ndf`: point query, trilinear
   over the pyramid, direct P-NDF below the finest level). The normal map is baked on first use
   with :data:`prefilter.glints.bake.BAKE_SETTINGS` (what ``prefilter bake glints`` makes) and
-  cached on disk (``$PREFILTER_GLINTS_CACHE`` or ``~/.cache/prefilter/glints``) under the SHA-1 of the normals, the settings, the CP fit's
-  version (:data:`prefilter.glints.cp.FIT_VERSION`) and the bake's budget rule
+  cached on disk (``$PREFILTER_GLINTS_CACHE`` or ``~/.cache/prefilter/glints``) under the SHA-1
+  of the normals, the settings, the CP fit's version (:data:`prefilter.glints.cp.FIT_VERSION`)
+  and the bake's budget rule
   (:data:`prefilter.glints.bake.EXACT_BUDGET_RULE`, settings with exact levels).
 * ``glints-direct``: the direct P-NDF of Yan et al. 2016 for every footprint (cost ~ its area).
 * ``glints-reference``: supersampling of the footprint with the full-resolution normal map and the
@@ -57,7 +58,7 @@ from prefilter.glints.envlight import equirect_directions, fit_sg, shade_sg
 from prefilter.glints.pndf import TRUNCATION, as_normal_map, map_digest, pndf
 from prefilter.glints.query import point, point_flat, range_multi, weights
 from prefilter.glints.sample import (direct_mis_fits, direct_mis_k, half_from_s, n_uniforms,
-                                     pdf_wi, sample_s_direct_k, sample_s_k, sample_wi)
+                                     sample_s_direct_k, sample_s_k)
 from prefilter.glints.store import load
 from prefilter.glints.surface import GlintSurface, surface
 from prefilter.render.shading import point_incoming, shading_frames
@@ -297,8 +298,9 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
 
     Returns
     -------
-    (N, 3) the unbiased estimate of ``int_quad f cos L dwi``: that of :func:`quad_mis_unfused`
-    to rounding, evaluated per footprint instead of per direction. Below the finest level (with
+    (N, 3) the unbiased estimate of ``int_quad f cos L dwi``: the balance heuristic of
+    ``glint_brdf_cos``, ``pdf_wi`` and ``sample_wi`` per pair, evaluated per footprint instead of
+    per direction (the tests check it against that per-direction form). Below the finest level (with
     the 4-std fallback) one walk over its texels gives the NDF at the light samples' half
     vectors (also their density), the draws, their densities and the NDF at them
     (:func:`prefilter.glints.sample.direct_mis_k`); elsewhere the draws are taken together with
@@ -444,51 +446,6 @@ def _mis_light_pdf(surf, c, sp, wo, h, D, M, fallback_truncation):
     woh = np.sum(wo[:, None] * h, -1)
     ok = (h[..., 2] > 0) & (woh > 0) & (wo[:, None, 2] > 0)
     return np.where(ok, ps * h[..., 2] / (4.0 * np.where(ok, woh, 1.0)), 0.0)
-
-
-def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u,
-                     *, fallback_truncation: float | None = None):
-    """:func:`quad_mis` spelled out with the per-direction functions (the NDF walked once per
-    BRDF value, density and draw): the same estimate to rounding, slower; its reference.
-
-    Parameters
-    ----------
-    position : (N, 3) world shading points; frame : (t, b, n) each (N, 3) (world);
-    light : QuadLight; u : (N, n * 11) uniforms in ``[0, 1)``; fallback_truncation: see
-    :func:`prefilter.glints.brdf.glint_ndf` (the BRDF's direct P-NDF below the finest level).
-
-    Returns
-    -------
-    (N, 3) the unbiased estimate of ``int_quad f cos L dwi``.
-    """
-    from prefilter.render.lights import quad_light_pdf, quad_light_sample
-
-    t, b, n = frame
-    N = len(wo)
-    n_pairs = u.shape[1] // U_PAIR
-    L = np.asarray(light.radiance, dtype=np.float64)
-    out = np.zeros((N, 3))
-    for j in range(n_pairs):
-        uj = u[:, j * U_PAIR:(j + 1) * U_PAIR]
-        # light sample
-        wl, pl = quad_light_sample(light, position, uj[:, :2])
-        wl_loc = to_local(wl, t, b, n)
-        fl = glint_brdf_cos(surf, center, sigma_p, wo, wl_loc, f0,
-                            fallback_truncation=fallback_truncation)
-        pb = pdf_wi(surf, center, sigma_p, wo, wl_loc)
-        w = np.where(pl > 0, 1.0 / np.where(pl > 0, pl + pb, 1.0), 0.0)
-        out += fl * w[:, None]
-        # BRDF sample
-        wb_loc, pb2 = sample_wi(surf, center, sigma_p, wo, u=uj[:, 2:])
-        ok = pb2 > 0
-        wb_loc = np.where(ok[:, None], wb_loc, np.array([0.0, 0.0, 1.0]))
-        wb = to_world(wb_loc, t, b, n)
-        pl2 = quad_light_pdf(light, position, wb)
-        fb = glint_brdf_cos(surf, center, sigma_p, wo, wb_loc, f0,
-                            fallback_truncation=fallback_truncation)
-        w2 = np.where(ok & (pl2 > 0), 1.0 / np.where(ok, pb2 + pl2, 1.0), 0.0)
-        out += fb * w2[:, None]
-    return out * L / max(n_pairs, 1)
 
 
 def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,

@@ -35,7 +35,8 @@ from prefilter.glints._qkernels import _quad_masses, _rect_mass
 from prefilter.glints._simd import exp_neg
 from prefilter.glints.brdf import (_ANGULAR_CUT, _element_planes, _exponents, _footprint_columns,
                                    _row_gaussians, _serial_below, direct_ndf)
-from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, element_moments, pndf, texel_window,
+from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, choose_texel, element_density, element_draw,
+                                   element_gaussian, footprint_weights, footprint_window, pndf,
                                    wide_limit2)
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.query import kernel_args, point
@@ -335,50 +336,16 @@ def _direct_kernel(s_el, J, cx, cy, sp, sr, sh, trunc, u, out):
     ``w_i / sum w``, then its Gaussian ``N(n_i + J_i mu_i, sr^2 I + var J_i J_i^T)``."""
     H, W = s_el.shape[0], s_el.shape[1]
     sh2 = sh * sh
+    sr2 = sr * sr
     for q in prange(out.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = texel_window(cx[q], rad)
-        y0, y1 = texel_window(cy[q], rad)
-        wsum = 0.0
-        for y in range(y0, y1 + 1):
-            dy = cy[q] - (y + 0.5)
-            for x in range(x0, x1 + 1):
-                dx = cx[q] - (x + 0.5)
-                wsum += math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-        t = u[q, 0] * wsum
-        run = 0.0
-        bx, by = x1, y1
-        done = False
-        for y in range(y0, y1 + 1):
-            dy = cy[q] - (y + 0.5)
-            for x in range(x0, x1 + 1):
-                dx = cx[q] - (x + 0.5)
-                run += math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-                if t < run:
-                    bx, by = x, y
-                    done = True
-                    break
-            if done:
-                break
-        dx = cx[q] - (bx + 0.5)
-        dy = cy[q] - (by + 0.5)
-        r, c = by % H, bx % W
-        mx, my, a, b, d = element_moments(s_el, J, r, c, dx, dy, f, var)
-        a += sr * sr
-        d += sr * sr
-        # Cholesky of [[a, b], [b, d]] applied to a Box-Muller pair
-        l11 = math.sqrt(a)
-        l21 = b / l11
-        l22 = math.sqrt(max(d - l21 * l21, 0.0))
-        rr = math.sqrt(-2.0 * math.log(1.0 - u[q, 1]))
-        z1 = rr * math.cos(2.0 * math.pi * u[q, 2])
-        z2 = rr * math.sin(2.0 * math.pi * u[q, 2])
-        out[q, 0] = mx + l11 * z1
-        out[q, 1] = my + l21 * z1 + l22 * z2
+        x0, x1, y0, y1, f, var, tot2, _ = footprint_window(cx[q], cy[q], sp[q], sh2, trunc, H, W,
+                                                           np.inf)
+        wb = np.empty((x1 - x0 + 1) * (y1 - y0 + 1))
+        wsum = footprint_weights(cx[q], cy[q], x0, x1, y0, y1, tot2, wb)
+        bx, by = choose_texel(wb, wsum, x0, x1, y0, y1, u[q, 0])
+        mx, my, a, b, d = element_gaussian(s_el, J, by % H, bx % W, cx[q] - (bx + 0.5),
+                                           cy[q] - (by + 0.5), f, var, sr2)
+        out[q, 0], out[q, 1] = element_draw(mx, my, a, b, d, u[q, 1], u[q, 2])
 
 
 def sample_s_direct(surf, center, sigma_p, rng=0, *, u=None):
@@ -427,76 +394,34 @@ def _direct_sample_k(s_el, J, cx, cy, sp, sr, sh, trunc, lim2, u, out_s, out_pdf
     H, W = s_el.shape[0], s_el.shape[1]
     K = u.shape[1]
     sh2 = sh * sh
-    cut = 2.0 * trunc * trunc * 4.0
+    sr2 = sr * sr
+    cut = 8.0 * trunc * trunc
     for q in prange(out_pdf.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        if tot2 >= lim2:
+        x0, x1, y0, y1, f, var, tot2, wide = footprint_window(cx[q], cy[q], sp[q], sh2, trunc,
+                                                              H, W, lim2)
+        if wide:
             continue
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = texel_window(cx[q], rad)
-        y0, y1 = texel_window(cy[q], rad)
-        nx = x1 - x0 + 1
-        wb = np.empty(nx * (y1 - y0 + 1))
-        wsum = 0.0
-        n = 0
-        for y in range(y0, y1 + 1):
-            dy = cy[q] - (y + 0.5)
-            for x in range(x0, x1 + 1):
-                dx = cx[q] - (x + 0.5)
-                wb[n] = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-                wsum += wb[n]
-                n += 1
+        wb = np.empty((x1 - x0 + 1) * (y1 - y0 + 1))
+        wsum = footprint_weights(cx[q], cy[q], x0, x1, y0, y1, tot2, wb)
         for k in range(K):
-            t = u[q, k, 0] * wsum
-            run = 0.0
-            n = 0
-            bx, by = x1, y1
-            done = False
-            for y in range(y0, y1 + 1):
-                for x in range(x0, x1 + 1):
-                    run += wb[n]
-                    n += 1
-                    if t < run:
-                        bx, by = x, y
-                        done = True
-                        break
-                if done:
-                    break
-            dx = cx[q] - (bx + 0.5)
-            dy = cy[q] - (by + 0.5)
-            mx, my, a, b, d = element_moments(s_el, J, by % H, bx % W, dx, dy, f, var)
-            a += sr * sr
-            d += sr * sr
-            l11 = math.sqrt(a)
-            l21 = b / l11
-            l22 = math.sqrt(max(d - l21 * l21, 0.0))
-            rr = math.sqrt(-2.0 * math.log(1.0 - u[q, k, 1]))
-            z1 = rr * math.cos(2.0 * math.pi * u[q, k, 2])
-            z2 = rr * math.sin(2.0 * math.pi * u[q, k, 2])
-            out_s[q, k, 0] = mx + l11 * z1
-            out_s[q, k, 1] = my + l21 * z1 + l22 * z2
+            bx, by = choose_texel(wb, wsum, x0, x1, y0, y1, u[q, k, 0])
+            mx, my, a, b, d = element_gaussian(s_el, J, by % H, bx % W, cx[q] - (bx + 0.5),
+                                               cy[q] - (by + 0.5), f, var, sr2)
+            out_s[q, k, 0], out_s[q, k, 1] = element_draw(mx, my, a, b, d, u[q, k, 1],
+                                                          u[q, k, 2])
         acc = np.zeros(K)
         n = 0
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
             r = y % H
             for x in range(x0, x1 + 1):
-                dx = cx[q] - (x + 0.5)
                 w = wb[n]
                 n += 1
-                mx, my, a, b, d = element_moments(s_el, J, r, x % W, dx, dy, f, var)
-                a += sr * sr
-                d += sr * sr
-                det = a * d - b * b
+                mx, my, a, b, d = element_gaussian(s_el, J, r, x % W, cx[q] - (x + 0.5), dy, f,
+                                                   var, sr2)
                 for k in range(K):
-                    ex = out_s[q, k, 0] - mx
-                    ey = out_s[q, k, 1] - my
-                    quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-                    if quad < cut:
-                        acc[k] += w * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+                    acc[k] += w * element_density(out_s[q, k, 0] - mx, out_s[q, k, 1] - my, a, b,
+                                                  d, cut)
         for k in range(K):
             out_pdf[q, k] = acc[k] / wsum
 
@@ -659,20 +584,10 @@ def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, 
                 if tu < run:
                     bi = i
                     break
-            mx, my, a, b, d = element_moments(s_el, J, (y0 + bj) % Hs, (x0 + bi) % Ws,
-                                              cx[q] - (x0 + bi + 0.5), cy[q] - (y0 + bj + 0.5),
-                                              f, var)
-            a += sr2
-            d += sr2
-            # Cholesky of [[a, b], [b, d]] applied to a Box-Muller pair
-            l11 = math.sqrt(a)
-            l21 = b / l11
-            l22 = math.sqrt(max(d - l21 * l21, 0.0))
-            rr = math.sqrt(-2.0 * math.log(1.0 - u[q, k, 1]))
-            z1 = rr * math.cos(2.0 * math.pi * u[q, k, 2])
-            z2 = rr * math.sin(2.0 * math.pi * u[q, k, 2])
-            qx[P + k] = mx + l11 * z1
-            qy[P + k] = my + l21 * z1 + l22 * z2
+            mx, my, a, b, d = element_gaussian(s_el, J, (y0 + bj) % Hs, (x0 + bi) % Ws,
+                                               cx[q] - (x0 + bi + 0.5), cy[q] - (y0 + bj + 0.5),
+                                               f, var, sr2)
+            qx[P + k], qy[P + k] = element_draw(mx, my, a, b, d, u[q, k, 1], u[q, k, 2])
             out_s[q, k, 0] = qx[P + k]
             out_s[q, k, 1] = qy[P + k]
         n = nx * ny

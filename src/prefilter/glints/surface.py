@@ -42,7 +42,8 @@ class GlintSurface:
     @property
     def sigma_min(self) -> float:
         """Footprint std below which :func:`prefilter.glints.brdf.glint_ndf` uses the direct
-        P-NDF (when the normal map is known): ``sigma0``, or the smallest resampled std for ``interp="resample"``."""
+        P-NDF (when the normal map is known): ``sigma0``, or the smallest resampled std for
+        ``interp="resample"``."""
         if self.gm is None:
             return np.inf
         if self.interp == "resample":

@@ -36,8 +36,10 @@ from prefilter.jit import njit_parallel, njit_serial, prange, serial
 from prefilter.validation import as_float_array, as_positive_int, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
-                                   as_sigma_p, as_support, element_split, line_nodes, normal_cdf,
-                                   pixel_edges, pndf_image, principal_axis, splat)
+                                   as_sigma_p, as_support, element_covariance, element_density,
+                                   element_split, line_nodes, normal_cdf, pixel_edges, pndf_image,
+                                   principal_axis, splat)
+from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
                                    pndf_image_implicit, tile_index, tile_window)
@@ -838,8 +840,8 @@ def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, 
     mx = _nb_s(tiles, ty, i0, j0, gx, gy, 0) + f * (jx0 * dx + jy0 * dy)
     my = _nb_s(tiles, ty, i0, j0, gx, gy, 1) + f * (jx1 * dx + jy1 * dy)
     w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-    return _nb_element(mx, my, var * (jx0 * jx0 + jy0 * jy0), var * (jx0 * jx1 + jy0 * jy1),
-                       var * (jx1 * jx1 + jy1 * jy1), w, sr, lo, h, R, trunc, iy, ix)
+    a, b, d = element_covariance(jx0, jy0, jx1, jy1, var, 0.0)
+    return _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix)
 
 
 @njit_serial
@@ -864,14 +866,8 @@ def _nb_texel_point(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, trun
 def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover - compiled
     """``N((ex, ey); 0, sr^2 I + var J J^T)``, 0 beyond ``2 trunc`` stds (``pndf._pndf_points``;
     ``J = [[j00, j01], [j10, j11]]``)."""
-    a = var * (j00 * j00 + j01 * j01) + sr * sr
-    b = var * (j00 * j10 + j01 * j11)
-    d = var * (j10 * j10 + j11 * j11) + sr * sr
-    det = a * d - b * b
-    quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-    if quad >= 8.0 * trunc * trunc:
-        return 0.0
-    return math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+    a, b, d = element_covariance(j00, j01, j10, j11, var, sr * sr)
+    return element_density(ex, ey, a, b, d, 8.0 * trunc * trunc)
 
 
 @njit_parallel
@@ -1070,21 +1066,23 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
         out[q] = acc + dsum / (sx * sy * h * h) + psum / (sx * sy)
 
 
+@njit_serial
+def _taps_kernel(f, R, bilinear, p, w):  # pragma: no cover - compiled
+    for n in range(f.shape[0]):
+        for a in range(2):
+            p[n, a], w[n, a, 0], w[n, a, 1] = pixel_taps(f[n, a], R, bilinear)
+
+
 def _pixel_taps(wn: TiledNDF, q, bilinear: bool):
     """First pixel row / column ``(N,)`` and the weights ``(N, 2)`` of it and the next, per
-    axis: the pixel holding ``q (N, 2)`` (weight 1, 0 outside the support), or bilinear between
-    pixel centres (pixels outside the support weigh 0, as the glints map's bilinear lookup)."""
+    axis (:func:`prefilter.glints._qkernels.pixel_taps`, the glints map's lookup): the pixel
+    holding ``q (N, 2)`` (weight 1, 0 outside the support), or bilinear between pixel centres
+    (pixels outside the support weigh 0)."""
     R, S = wn.resolution, wn.support
-    f = (q + S) / (2.0 * S / R)
-    if bilinear:
-        f = f - 0.5
-    p = np.floor(f).astype(np.int64)
-    t = f - p if bilinear else np.zeros_like(f)
-    w = np.stack([1.0 - t, t], axis=-1)  # (N, 2 axes, 2 taps)
-    w[..., 0] *= (p >= 0) & (p < R)
-    w[..., 1] *= (p + 1 >= 0) & (p + 1 < R)
-    if not bilinear:  # one pixel: outside the square on either axis, no value
-        w[..., 0] *= np.all((p >= 0) & (p < R), axis=-1)[:, None]
+    f = np.ascontiguousarray((q + S) / (2.0 * S / R), dtype=np.float64)
+    p = np.empty(f.shape, np.int64)
+    w = np.empty(f.shape + (2,))
+    _taps_kernel(f, R, bool(bilinear), p, w)
     # x is axis 0 of q, the image's column
     return p[:, 1], p[:, 0], np.ascontiguousarray(w[:, 1]), np.ascontiguousarray(w[:, 0])
 
