@@ -34,7 +34,7 @@ Compression error alone: quad ``compressed`` vs ``converged`` (both noise-free);
 ``glints`` (averaged) vs ``matched``. CPU times are process times (``time.process_time``).
 
 ``--bake '{"ndf_truncation": 4}'`` overrides entries of the render bake settings
-(:data:`prefilter.glints.render.BAKE_SETTINGS`; the cache is keyed by them, so other settings
+(:data:`prefilter.glints.bake.BAKE_SETTINGS`; the cache is keyed by them, so other settings
 bake into other files). ``--by-luminance`` adds the share of each cell's FLIP error sum by the
 pixel's luminance relative to the frame maximum (:func:`error_by_luminance`): on a mostly black
 frame HDR-FLIP's automatic exposure range reaches +24 stops and the tails count.

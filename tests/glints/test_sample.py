@@ -19,7 +19,7 @@ H = 2 * S / R
 
 @pytest.fixture(scope="module", params=[16, 32], ids=["B16", "B32"])
 def gm(request, tmp_path_factory):
-    """Blocks of 16 pixels, and of 32 (the render bake's since session 10: a 5-level quadtree
+    """Blocks of 16 pixels, and of 32 (the render bake's: a 5-level quadtree
     descent per block)."""
     out = tmp_path_factory.mktemp("gs") / "map.npz"
     bake(sinusoid(64, ax=0.25, ay=0.2, px=16, py=8), out, rank=16, ndf_res=R,

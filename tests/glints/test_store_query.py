@@ -277,7 +277,7 @@ def test_bake_parts_keyed_by_fit_version(tmp_path, monkeypatch):
     bake(nm, out, **kw)
     assert json.loads(meta.read_text())["cp_fit"] == cpmod.FIT_VERSION
     assert "exact_budget" not in json.loads(meta.read_text())
-    # with exact levels the parts also record the budget rule (session 11 changed it)
+    # with exact levels the parts also record the budget rule
     out.unlink()
     bake(nm, out, exact_from_level=1, **kw)
     assert json.loads(meta.read_text())["exact_budget"] == EXACT_BUDGET_RULE

@@ -284,7 +284,7 @@ def test_cache_keys_record_the_fit_version(tmp_path, monkeypatch):
 
 
 def test_render_key_records_the_exact_budget_rule(tmp_path, monkeypatch):
-    """Bake settings with exact levels key on the budget rule (session 11 changed it); the
+    """Bake settings with exact levels key on the budget rule; the
     Wang-tile key (no exact levels) does not."""
     from prefilter.glints import bake as gbake
 

@@ -62,9 +62,9 @@ RANK_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
 LEVEL_RANK = ("global", "level", "uniform")
 #: allocation marker of the groups stored exactly (``bake(exact_from_level=...)``)
 EXACT = -1
-#: How a bake with exact levels spends the rank budget (1: over all groups, the exact ones then
-#: replacing theirs; 2, session 11: over the fitted groups only). Bakes with exact levels key
-#: their checkpoints, and the render cache its files, on it (:func:`code_versions`).
+#: How a bake with exact levels spends the rank budget: 2, over the fitted groups only (1: over
+#: all groups, the exact ones then replacing theirs). Bakes with exact levels key their
+#: checkpoints, and the render cache its files, on it (:func:`code_versions`).
 EXACT_BUDGET_RULE = 2
 
 
@@ -238,7 +238,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     rank``; it is the width of the in-memory factors, so it sets the query cost). The summary
     reports the resulting mean and histogram.
 
-    ``level_rank`` (issue #8, query cost vs footprint size): ``"global"`` spends the budget
+    ``level_rank`` (query cost vs footprint size): ``"global"`` spends the budget
     where the predicted error drop per byte is largest over the whole map (level-0 groups end up
     with about twice the rank of the top levels'); ``"level"`` gives every pyramid level its own
     budget of ``rank`` per byte (the same total, the same mean rank per byte at every level);
@@ -250,15 +250,15 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
 
     ``code_bits``: 8 (default) or 16 bits per stored factor value (:func:`store.encode`). The
     budget ``rank`` keeps its meaning (the bytes per rank double, so the file about doubles);
-    16 bits remove the rounding that shows in the NDF tails (docs/glints-part2-log.md, session 7).
+    16 bits remove the rounding that shows in the NDF tails.
     ``c_bits``: bits of the per-image factor ``c`` (default ``code_bits``); 16-bit ``a``, ``b``
     with 8-bit ``c`` are as accurate as all-16-bit codes on the brushed map's scenes and as fast
-    to query as 8-bit ones (docs/glints-part2-log.md, session 9).
+    to query as 8-bit ones.
 
     ``exact_from_level``: the groups of pyramid levels ``>=`` this are stored as their exact
     non-negative CP (:func:`prefilter.glints.cp.exact_cp`: ranks up to ``B^2``, beyond
     ``max_rank``) instead of a fit, outside the budget (``rank`` is then the mean rank per byte
-    of the fitted groups; before session 11 the exact groups took part in the split). The
+    of the fitted groups). The
     levels above the finest few hold few images, so this costs little storage and removes the
     compression error that far footprints see.
 
@@ -537,7 +537,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
             parts[k].append(part[k])
         err2[lv] += float(part["err2_g"].sum() + p1["blank2"])
         err2_groups.append(part["err2_g"])
-        # parts written before session 10 lack the fit's error: the stored one bounds it
+        # parts without the fit's error: the stored one bounds it
         fit2 += float(part.get("fit2_g", part["err2_g"]).sum() + p1["blank2"])
         norm2[lv] += float(p1["norm2"])
         kept += int(p1["kept"])

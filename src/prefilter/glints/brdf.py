@@ -47,8 +47,8 @@ from prefilter.glints.surface import GlintSurface, as_surface, surface  # noqa: 
 #: Spatial truncation the render methods use for the direct P-NDF fallback below the finest
 #: level, in stds of the element weights per axis (as ``pndf``). Cutting it to 3 visits (3/4)^2
 #: of the texels and changes the NDF by only 0.6 % relative L2, but drops the glints of texels
-#: 3-4 stds away: HDR-FLIP of the near measurement frame vs glints-direct went 0.067 -> 0.174
-#: (3.5: 0.104), so the render keeps 4 (the separable kernel still saves one exp per texel).
+#: 3-4 stds away (HDR-FLIP of the near measurement frame vs glints-direct 0.174 at 3, 0.104 at
+#: 3.5, 0.067 at 4).
 FALLBACK_TRUNCATION = 4.0
 
 
@@ -129,8 +129,8 @@ def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, 
     footprint row of at most ``W`` texels is one contiguous slice, no index wrap). Each row's
     quadratic forms are computed for all its texels in a branch-free loop (SIMD), the
     exponentials only where ``quad < 36``: the bound-then-branch of :func:`_direct_points`
-    rejected 2/3 of the near frame's texels but paid a mispredicted branch and three scattered
-    loads for each (10.8 -> 4.6 ms on the near measurement frame, same values to 1e-15)."""
+    rejects 2/3 of the near frame's texels but pays a mispredicted branch and three scattered
+    loads for each (this kernel takes about half its time, the same values to 1e-15)."""
     H = SX.shape[0]
     W = SX.shape[1] // 2
     sh2 = sh * sh
@@ -358,8 +358,9 @@ def brdf_cos_from_ndf(wo, wi, h, D, f0):
 # arithmetic of the single-point kernels per point (the same values to rounding), so that each
 # texel's element is loaded, and its covariance formed, once instead of once per point. Their
 # per-texel loops are written to vectorise (prefilter.glints._simd: division without Numba's
-# zero check, a polynomial exp) and run over a footprint's whole window: on the near quad
-# frame's 2 560 footprints (950 000 texels, 8 points each) the one-walk kernel went 52 -> 29 ms.
+# zero check, a polynomial exp) and run over a footprint's whole window (on the near quad
+# frame's 2 560 footprints, 950 000 texels, 8 points each, about half the time of per-point
+# walks).
 
 #: Exponent below which an element's angular Gaussian is dropped from the NDF: ``exp(-18)``, 6 of
 #: its stds (the cut ``quad < 36`` of :func:`_direct_rows`).

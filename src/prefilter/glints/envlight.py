@@ -32,10 +32,10 @@ from prefilter.glints.query import range_multi, weights
 from prefilter.glints.surface import as_surface
 
 
-#: Pyramid weights of the environment lights' range queries (:func:`shade_sg`):
-#: kept trilinear: unlike quads it shows no bias there (plane mid, 32 seeds, FLIP vs the matched
-#: reference: flakes 0.030 trilinear / 0.033 resampled, gaussian 0.023 / 0.023) while resampling
-#: costs 3-4x the frame (0.28 -> 0.85 s CPU, flakes; benchmarks/study_glints_env_interp.py).
+#: Pyramid weights of the environment lights' range queries (:func:`shade_sg`): trilinear.
+#: Unlike quad lights' it shows no bias here (plane mid, 32 seeds, FLIP vs the matched reference:
+#: flakes 0.030 trilinear / 0.033 resampled, gaussian 0.023 / 0.023) and resampling costs 3-4x
+#: the frame (benchmarks/study_glints_env_interp.py).
 RANGE_INTERP = "trilinear"
 
 

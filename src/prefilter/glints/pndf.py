@@ -382,9 +382,8 @@ def splat(img, px, py, mx, my, siso, w, lo, h, trunc):
         py[i] = cur - prev
         prev = cur
     # rows and columns as views indexed from 0: Numba then drops its negative-index branch and
-    # LLVM vectorises the row update (benchmarks/bench_glints_bake.py at 512^2: splats 740-780 ->
-    # 370-500 ns, level-0 NDF images ~2x faster; sums within 1 ulp of the scalar loop's, 8e-16
-    # relative)
+    # LLVM vectorises the row update (level-0 NDF images ~2x faster than indexed loops,
+    # benchmarks/bench_glints_bake.py; sums within 1 ulp)
     pxs = px[j0:j1 + 1]
     n = pxs.size
     for i in range(i0, i1 + 1):
@@ -536,7 +535,7 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     resolution : pixels per side ``R``; support : half-width of the square in ``s``.
     ndf_truncation : each element's Gaussian in ``s`` is cut at this many stds.
     footprint_truncation : the footprint weights are cut at this many stds per axis.
-        The renderer's bakes use 6 for both (:data:`prefilter.glints.render.BAKE_SETTINGS`):
+        The renderer's bakes use 6 for both (:data:`prefilter.glints.bake.BAKE_SETTINGS`):
         HDR-FLIP at the top exposures of a mostly black frame sees the tails beyond 4.
 
     Returns

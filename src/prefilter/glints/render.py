@@ -35,8 +35,7 @@ footprint divided by the sample count").
   integral with the view and light directions of each sub-pixel position; ``glints-direct``
   evaluates that integral in closed form up to the isotropic approximation of the footprint, the
   linearisation of ``uv`` across the pixel and the half vector taken at the pixel centre (it moves
-  by about the intrinsic roughness per half pixel: docs/glints-part2-log.md, "Against
-  ``glints-reference``").
+  by about the intrinsic roughness per half pixel).
 """
 
 from __future__ import annotations
@@ -69,7 +68,7 @@ PIXEL_SIGMA = 0.5
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid
 #: samples: FLIP vs glints-direct 0.065 / 0.212 / 0.090 instead of 0.039 / 0.103 / 0.059 on the
-#: measurement scene (docs/glints-part2-log.md).
+#: measurement scene (near / mid / far).
 INTERP = "resample"
 BILINEAR = True
 _SURFACES: dict = {}
@@ -149,17 +148,15 @@ U_PAIR = 11
 #: half-vector region must have a bounding box narrower than ``RANGE_MAX`` in ``s`` (the BRDF's
 #: smooth factors are taken at the patch centre) and fill at least ``FILL_MIN`` of it (the range
 #: mean is over a rectangle of the patch's area, :data:`QUAD_RECT`; the guard is against
-#: degenerate patches: with bounding boxes it was 0.5, which sent the 8 % of the plane's mid
-#: pixels with patches filled 0.40-0.5 to Monte Carlo; with equal-area rectangles those cost
-#: FLIP 0.027 -> 0.028 vs the reference on the range pixels, docs/glints-part2-log.md, session 5).
+#: degenerate patches: 0.3 keeps the plane's mid pixels with patches filled 0.3-0.5 on the range
+#: path, at FLIP 0.028 vs the reference on the range pixels).
 QUAD_SUB = 2
 RANGE_MAX = 0.08
 #: Pyramid weights of the quad lights' range queries: Gaussian resampling, the point queries'
-#: footprint (:data:`INTERP`). The trilinear blend (8 images of the wrong sizes and places) was
-#: the systematic error of the range path (issue #9): plane flakes mid, range pixels vs the
-#: deterministic reference FLIP 0.143 trilinear, 0.042 resampled (both with bounding boxes;
-#: docs/glints-part2-log.md, session 5). The weights are computed once per pixel and shared by its
-#: patches.
+#: footprint (:data:`INTERP`). The trilinear blend (8 images of the wrong sizes and places) is
+#: a systematic error of the range path: plane flakes mid, range pixels vs the deterministic
+#: reference FLIP 0.143 trilinear, 0.042 resampled (both with bounding boxes). The weights are
+#: computed once per pixel and shared by its patches.
 QUAD_INTERP = "resample"
 #: The rectangle of each patch's range query: ``"equal-area"`` (:func:`_equal_area_rects`) or
 #: ``"box"`` (the bounding box of its half-vector polygon, the mean scaled by the polygon's area).

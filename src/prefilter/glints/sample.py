@@ -120,21 +120,6 @@ def quadtree_draw(A, Bp, C, block_index, image_cell, granks, idx, wts, q, bm, u,
             p / (h * h))
 
 
-@njit_parallel
-def _sample_kernel(A, Bp, C, block_index, image_cell, granks, idx, wts, u, lo, h, out_s, out_pdf):
-    B = A.shape[1] - 1
-    nb = block_index.shape[1]
-    for q in prange(out_pdf.shape[0]):
-        bm = np.empty(nb * nb)
-        for bi in range(nb):
-            for bj in range(nb):
-                bm[bi * nb + bj] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx,
-                                              wts, q, bi, bj, 0, B, 0, B)
-        out_s[q, 0], out_s[q, 1], out_pdf[q] = quadtree_draw(
-            A, Bp, C, block_index, image_cell, granks, idx, wts, q, bm, u[q], lo, h,
-            np.empty(4), np.empty((4, 4), np.int64))
-
-
 def n_uniforms(gm: GlintsMap) -> int:
     """Uniform numbers used per sample: block choice, one per quadtree level, 2 for the jitter."""
     return 3 + int(math.ceil(math.log2(max(gm.block, 1)))) if gm.block > 1 else 3
@@ -211,9 +196,14 @@ def sample_s(gm: GlintsMap, center, sigma_p, rng=0, *, u=None):
     shape, arrs, idx, w = _prep(gm, center, sigma_p)
     uu = _uniforms(gm, idx.shape[0], rng, u)
     h = 2.0 * gm.support / gm.resolution
-    s = np.empty((idx.shape[0], 2))
-    pdf = np.empty(idx.shape[0])
-    serial(_sample_kernel, len(pdf))(*arrs, idx, w, uu, -gm.support, h, s, pdf)
+    n = idx.shape[0]
+    nb = gm.block_index.shape[1]
+    bm = np.empty((n, nb, nb))
+    serial(_block_masses, n)(*arrs, idx, w, bm)
+    s = np.empty((n, 1, 2))
+    pdf = np.empty((n, 1))
+    serial(_sample_masses_k, n)(*arrs, idx, w, bm.reshape(n, -1), uu.reshape(n, 1, -1),
+                                -gm.support, h, s, pdf)
     return s.reshape(shape + (2,)), pdf.reshape(shape)
 
 
@@ -456,9 +446,9 @@ def sample_s_direct_k(surf, center, sigma_p, u):
 @njit_parallel
 def _sample_masses_k(A, Bp, C, block_index, image_cell, granks, idx, wts, bm, u, lo, h, out_s,
                      out_pdf):
-    """:func:`_sample_kernel` for ``K`` draws per footprint (uniforms
-    ``u (N, K, k)``) with the footprint's block masses ``bm (N, nb * nb)`` given: they depend on
-    the footprint only, and were the kernel's cost (every block's mass for every draw)."""
+    """``K`` draws per footprint (uniforms ``u (N, K, k)``, :func:`quadtree_draw`) given the
+    footprints' block masses ``bm (N, nb * nb)``: they depend on the footprint only, so they are
+    computed once for all its draws."""
     for q in prange(out_pdf.shape[0]):
         cm = np.empty(4)
         ci = np.empty((4, 4), np.int64)

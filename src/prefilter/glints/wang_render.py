@@ -45,9 +45,9 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 
 #: Tiles and bake of the render cache. ``tile`` 32 (the CLI's default), or the exemplar's size
 #: (even, >= 4) when it is smaller (:func:`tile_size`); ``intrinsic_roughness``, ``support``:
-#: those of ``glints`` (:data:`prefilter.glints.render.BAKE_SETTINGS`, whole disk of half
+#: those of ``glints`` (:data:`prefilter.glints.bake.BAKE_SETTINGS`, whole disk of half
 #: vectors); ``ndf_res`` 256 (pixel 0.78 intrinsic stds, as ``glints``): at 128 the FLIP against
-#: ``glints-direct`` on the assembled map was 0.127 instead of 0.074 at mid distance; the cost
+#: ``glints-direct`` on the assembled map is 0.127 instead of 0.074 at mid distance; the cost
 #: is the bake (4.1 GiB peak RSS, ~9-12 min on the shared machine) and
 #: 232 MB of storage at ``rank`` 16 with ``block`` 16 (stored-image error 2.5 / 1.7 / 1.0 % per
 #: level on the flakes map; docs/glints-wang.md, "Rendering"). ``bilinear``: NDF values
@@ -73,7 +73,7 @@ _BY_ID: dict = {}
 
 
 #: Environment variable with a JSON object of :data:`WANG_SETTINGS` overrides (cheap bakes for
-#: test sessions: the default bake takes minutes whatever the exemplar's size).
+#: test runs: the default bake takes minutes whatever the exemplar's size).
 SETTINGS_ENV = "PREFILTER_GLINTS_WANG_SETTINGS"
 
 
