@@ -37,7 +37,7 @@ from prefilter.jit import njit_inline, njit_parallel, prange, serial
 from prefilter.validation import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.microfacet.fresnel import schlick
-from prefilter.glints.pndf import (SIGMA_H, element_covariance, element_density,
+from prefilter.glints.pndf import (SIGMA_H, as_footprints, element_covariance, element_density,
                                    element_gaussian, footprint_window, pndf)
 from prefilter.glints._simd import exp_neg, fdiv
 from prefilter.glints.query import point_flat
@@ -251,12 +251,8 @@ def glint_ndf(surf, center, sigma_p, s, *, fallback_truncation: float | None = N
     ``None``: :func:`prefilter.glints.pndf.pndf` exactly).
     """
     surf = as_surface(surf)
-    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = as_float_array(sigma_p, "sigma_p")
     q = as_float_array(s, "s", ndim_min=1, last_dim=2)
-    if np.any(sp < 0):
-        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
+    c, sp, shape = as_footprints(center, sigma_p, s=q.shape[:-1])
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)

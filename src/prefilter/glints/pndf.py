@@ -87,6 +87,17 @@ def as_sigma_p(sigma_p, name: str = "sigma_p") -> np.ndarray:
     return a
 
 
+def as_footprints(center, sigma_p, **batch) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """Validated footprint centres ``(..., 2)`` and stds ``(...)`` (texels, ``>= 0``) and the
+    batch shape they broadcast to together with the named shapes ``batch``
+    (:func:`prefilter.validation.broadcast_batch`)."""
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_float_array(sigma_p, "sigma_p")
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    return c, sp, broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, **batch)
+
+
 def as_support(support, name: str = "support") -> float:
     """A validated half-width of the NDF images' square in ``s``."""
     try:

@@ -29,15 +29,15 @@ import weakref
 import numpy as np
 
 from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange, serial
-from prefilter.validation import as_directions, as_float_array, as_rng, broadcast_batch
+from prefilter.validation import as_directions, as_float_array, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _quad_masses, _rect_mass
 from prefilter.glints._simd import exp_neg
 from prefilter.glints.brdf import (_ANGULAR_CUT, _element_planes, _exponents, _footprint_columns,
                                    _row_gaussians, _serial_below, direct_ndf)
-from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, choose_texel, element_density, element_draw,
-                                   element_gaussian, footprint_weights, footprint_window, pndf,
-                                   wide_limit2)
+from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_footprints, choose_texel,
+                                   element_density, element_draw, element_gaussian,
+                                   footprint_weights, footprint_window, pndf, wide_limit2)
 from prefilter.glints.pyramid import interp_weights
 from prefilter.glints.query import kernel_args, point
 from prefilter.glints.store import GlintsMap
@@ -129,11 +129,7 @@ def _prep(gm, center, sigma_p):
     if not isinstance(gm, GlintsMap):
         raise PrefilterError(f"gm: expected a GlintsMap (prefilter.glints.load), got "
                              f"{type(gm).__name__}")
-    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = as_float_array(sigma_p, "sigma_p")
-    if np.any(sp < 0):
-        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
+    c, sp, shape = as_footprints(center, sigma_p)
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     idx, w = interp_weights(gm.pyramid, c, sp)
@@ -235,11 +231,7 @@ def sample_wi(gm, center, sigma_p, wo, rng=0, *, u=None):
     samples with ``pdf == 0`` (empty image, ``|s| >= 1``, ``wo.m <= 0``) carry no estimate.
     """
     wo = as_directions(wo, "wo")
-    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = as_float_array(sigma_p, "sigma_p")
-    if np.any(sp < 0):
-        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, wo=wo.shape[:-1])
+    c, sp, shape = as_footprints(center, sigma_p, wo=wo.shape[:-1])
     c = np.broadcast_to(c, shape + (2,))
     sp = np.broadcast_to(sp, shape)
     if isinstance(gm, GlintSurface):
@@ -289,12 +281,7 @@ def pdf_wi(surf, center, sigma_p, wo, wi) -> np.ndarray:
     surf = surf if isinstance(surf, GlintSurface) else as_surface(surf)
     wo = as_directions(wo, "wo")
     wi = as_directions(wi, "wi")
-    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = as_float_array(sigma_p, "sigma_p")
-    if np.any(sp < 0):
-        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, wo=wo.shape[:-1],
-                            wi=wi.shape[:-1])
+    c, sp, shape = as_footprints(center, sigma_p, wo=wo.shape[:-1], wi=wi.shape[:-1])
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     wo = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
@@ -347,11 +334,7 @@ def sample_s_direct(surf, center, sigma_p, rng=0, *, u=None):
     surf = as_surface(surf)
     if surf.normal_map is None:
         raise PrefilterError("surf: direct sampling needs the normal map (surface(gm, normal_map))")
-    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = as_float_array(sigma_p, "sigma_p")
-    if np.any(sp < 0):
-        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
+    c, sp, shape = as_footprints(center, sigma_p)
     cf = np.ascontiguousarray(np.broadcast_to(c, shape + (2,)).reshape(-1, 2))
     spf = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1), dtype=np.float64)
     if u is None:
