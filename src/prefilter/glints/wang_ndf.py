@@ -42,7 +42,7 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_in
 from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
-                                   pndf_image_implicit, tile_index, tile_window)
+                                   implicit_type, pndf_image_implicit, tile_index, tile_window)
 
 
 def tile_elements(wt: WangTiles) -> tuple[np.ndarray, np.ndarray]:
@@ -736,28 +736,11 @@ def sample(wn: TiledNDF, center, sigma_p, n: int, rng=0, *, index=None):
 # ---------------------------------------------------------------------------------------------
 # batched point queries (Numba): the same arithmetic as ndf(), one kernel for many footprints
 
-_H1, _H2, _H3 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), \
-    np.uint64(0x165667B19E3779F9)
-_H4, _S29, _S32, _ONE = np.uint64(0xBF58476D1CE4E5B9), np.uint64(29), np.uint64(32), np.uint64(1)
-
-
-@njit_serial
-def _nb_bits(i, j, seed):  # pragma: no cover - compiled; wang._hash_bits
-    h = (np.uint64(i) * _H1) ^ (np.uint64(j) * _H2) ^ (np.uint64(seed) * _H3)
-    h ^= h >> _S29
-    h *= _H4
-    h ^= h >> _S32
-    return np.int64(h & _ONE), np.int64((h >> _ONE) & _ONE)
-
-
 @njit_serial
 def _nb_type(i, j, seed, index):  # pragma: no cover - compiled; _lookup
     if index.shape[0] > 0:
         return index[j % index.shape[0], i % index.shape[1]]
-    r_ij, b_ij = _nb_bits(i, j, seed)
-    r_below = _nb_bits(i, j + 1, seed)[0]
-    b_right = _nb_bits(i + 1, j, seed)[1]
-    return r_ij + 2 * r_below + 4 * b_ij + 8 * b_right
+    return implicit_type(i, j, seed)
 
 
 @njit_serial
