@@ -809,10 +809,11 @@ def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no 
 
 
 @njit_serial
-def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
-              ix):  # pragma: no cover - compiled
-    """Unnormalised pixel value of texel ``(gx, gy)``'s element (exact neighbours; ``types``
-    covers its tile and the neighbouring ones, from tile ``(i0, j0)``)."""
+def _nb_gaussian(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2):  # pragma: no cover
+    """Footprint weight and element Gaussian (mean ``(mx, my)``, positional covariance
+    ``(a, b, d)``, :func:`prefilter.glints.pndf.element_moments`) of texel ``(gx, gy)`` of the
+    tiled plane, its slope Jacobian by central differences over the exact neighbours
+    (``types`` covers its tile and the neighbouring ones, from tile ``(i0, j0)``)."""
     ty = types
     jx0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 0) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 0))
     jx1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 1) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 1))
@@ -822,8 +823,15 @@ def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, 
     dy = cy - (gy + 0.5)
     mx = _nb_s(tiles, ty, i0, j0, gx, gy, 0) + f * (jx0 * dx + jy0 * dy)
     my = _nb_s(tiles, ty, i0, j0, gx, gy, 1) + f * (jx1 * dx + jy1 * dy)
-    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
     a, b, d = element_covariance(jx0, jy0, jx1, jy1, var, 0.0)
+    return math.exp(-(dx * dx + dy * dy) / (2.0 * tot2)), mx, my, a, b, d
+
+
+@njit_serial
+def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
+              ix):  # pragma: no cover - compiled
+    """Unnormalised pixel value of texel ``(gx, gy)``'s element (:func:`_nb_gaussian`)."""
+    w, mx, my, a, b, d = _nb_gaussian(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2)
     return _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix)
 
 
@@ -832,17 +840,9 @@ def _nb_texel_point(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, trun
                     qy):  # pragma: no cover - compiled
     """Unnormalised density at ``(qx, qy)`` of texel ``(gx, gy)``'s element (as
     ``pndf._pndf_points``: covariance ``sr^2 I + var J J^T``, cut beyond ``2 trunc`` stds)."""
-    ty = types
-    jx0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 0) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 0))
-    jx1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 1) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 1))
-    jy0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 0) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 0))
-    jy1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 1) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 1))
-    dx = cx - (gx + 0.5)
-    dy = cy - (gy + 0.5)
-    ex = qx - _nb_s(tiles, ty, i0, j0, gx, gy, 0) - f * (jx0 * dx + jy0 * dy)
-    ey = qy - _nb_s(tiles, ty, i0, j0, gx, gy, 1) - f * (jx1 * dx + jy1 * dy)
-    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-    return w * _nb_density(ex, ey, jx0, jy0, jx1, jy1, var, sr, trunc)
+    w, mx, my, a, b, d = _nb_gaussian(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2)
+    sr2 = sr * sr
+    return w * element_density(qx - mx, qy - my, a + sr2, b, d + sr2, 8.0 * trunc * trunc)
 
 
 @njit_serial
