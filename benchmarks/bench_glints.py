@@ -19,13 +19,6 @@
     python benchmarks/bench_glints.py --breakdown --lights quad  # quad frames: range, MIS, kernels
     git archive c576186 src | tar -x -C /tmp/old && python benchmarks/bench_glints.py --frames \
         --lights quad --cpu --runs 6 --baseline /tmp/old/src   # before/after, alternating runs
-    python benchmarks/bench_glints.py --frames --lights quad --cpu --unfused
-                                  # also the per-direction quad MIS (quad_mis_unfused), interleaved,
-                                  # and the max relative difference of the two float64 frames
-    python benchmarks/bench_glints.py --frames --lights quad --cpu --old-range
-                                  # also the former range path (weights repeated per rectangle,
-                                  # range_weighted; query.RANGE_SHARED = False), interleaved, and
-                                  # the max relative difference of the frames (quad/environment)
 
 The machine is shared, so every ratio is computed from timings of the same run; the absolute
 numbers are only indicative. Footprint "width" is 2 sigma_p (texels).
@@ -259,31 +252,17 @@ def bench_ranks(size, tmp, ranks=(8, 16, 32, 64),
                   flush=True)
 
 
-def _rel_diff(a, b):
-    """Largest ``|a - b| / |b|`` over the entries where ``b != 0`` (and whether ``a == 0`` where
-    ``b == 0``)."""
-    nz = b != 0
-    r = np.abs(a[nz] - b[nz]) / np.abs(b[nz])
-    return (float(r.max()) if r.size else 0.0), bool(np.all(a[~nz] == 0))
-
-
 def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=False, lights="point",
-                 interp=None, bilinear=None, bake_settings=None, clock=time.perf_counter,
-                 unfused=False, old_range=False):
+                 interp=None, bilinear=None, bake_settings=None, clock=time.perf_counter):
     """Whole-frame time of ``glints`` at several distances in one run (the measurement scene of
     :mod:`prefilter.glints.render`: 64 x 48 pixels, 128^2 map, footprint ~ distance). Rounds are
     interleaved over the distances so that load changes hit all of them; best of ``repeat``.
     ``interp``, ``bilinear``, ``bake_settings``: override the render module's evaluation
     (``INTERP``, ``BILINEAR``) and bake settings (e.g. ``stride0``/``sigma0``). ``clock``:
     ``time.process_time`` counts this process's CPU time (all threads), which a loaded machine
-    disturbs far less than the wall time (the render kernels are serial at this size).
-    ``unfused``: each round also times the frames with :func:`prefilter.glints.render.
-    quad_mis_unfused` (the per-direction MIS) right after the default, and the float64 frames of
-    the two are compared (largest relative difference per pixel channel). ``old_range``: the
-    same with the former range path (:data:`prefilter.glints.query.RANGE_SHARED` False) in place
-    of the per-direction MIS."""
-    from prefilter.glints import query as gquery
+    disturbs far less than the wall time (the render kernels are serial at this size)."""
     from prefilter.glints import render as grender
+    from prefilter.glints.bake import BAKE_SETTINGS
     from prefilter.glints.render import measurement_scene
 
     if interp is not None:
@@ -291,62 +270,36 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
     if bilinear is not None:
         grender.BILINEAR = bilinear
     if bake_settings:
-        grender.BAKE_SETTINGS.update(bake_settings)
+        BAKE_SETTINGS.update(bake_settings)
     from prefilter.render.metrics import flip
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     from prefilter.render.methods import RenderSettings
 
-    fused = grender.quad_mis
-    mis = [fused, grender.quad_mis_unfused] if unfused else [fused]
-    label, tol = "unfused MIS", 1e-9
-    if old_range:  # the variant: the former range path (the MIS stays fused)
-        unfused = True
-        mis = [fused, "old-range"]
-        # range_multi sums the taps' 8-bit code rows in float32 (tests: rtol 1e-5 per query)
-        label, tol = "old range", 1e-5
-
-    def frame(sc, f):  # the float64 radiance (render() returns float32)
-        if f == "old-range":
-            gquery.RANGE_SHARED = False
-            f = fused
-        grender.quad_mis = f
-        try:
-            return grender.render_glints(sc, RenderSettings())
-        finally:
-            grender.quad_mis = fused
-            gquery.RANGE_SHARED = True
+    def frame(sc):
+        return grender.render_glints(sc, RenderSettings())
 
     scenes = [load_scene(measurement_scene(d, kind, lights=lights)) for d in distances]
-    imgs = [[frame(sc, f) for f in mis] for sc in scenes]  # bake and compile outside the timing
+    for sc in scenes:  # bake and compile outside the timing
+        frame(sc)
     if direct:
         # glints-direct's kernels too: with a cold Numba cache its near frame was mostly
         # compilation (point 714 ms instead of ~70, a 86x "speed-up")
         render(scenes[0], "glints-direct")
     best = [np.inf] * len(scenes)
-    best_u = [np.inf] * len(scenes)
     for _ in range(repeat):
         for i, sc in enumerate(scenes):
             t = clock()
-            frame(sc, fused)
+            frame(sc)
             best[i] = min(best[i], clock() - t)
-            if unfused:
-                t = clock()
-                frame(sc, mis[1])
-                best_u[i] = min(best_u[i], clock() - t)
     print(f"glints frame time ({lights} light, {kind} 128^2 map, 64x48 pixels, best of {repeat}, "
           f"NUMBA threads {os.environ.get('NUMBA_NUM_THREADS', 'all')}, interp "
           f"{grender.INTERP}, bilinear {grender.BILINEAR}, stride0 "
-          f"{grender.BAKE_SETTINGS['stride0']}, sigma0 {grender.BAKE_SETTINGS.get('sigma0')}, "
+          f"{BAKE_SETTINGS['stride0']}, sigma0 {BAKE_SETTINGS.get('sigma0')}, "
           f"clock {clock.__name__})")
     for d, t in zip(distances, best):
         line = f"  distance {d:4g}: glints {t * 1e3:8.1f} ms"
-        if unfused:
-            i = distances.index(d)
-            rel, zeros = _rel_diff(imgs[i][0], imgs[i][1])
-            line += (f", {label} {best_u[i] * 1e3:8.1f} ms (x{best_u[i] / t:.2f}), max rel "
-                     f"diff {rel:.1e}{'' if zeros else f' (nonzero where {label} is 0)'}")
         if direct:
             sc = scenes[distances.index(d)]
             t0 = clock()  # the same clock as glints' (CPU time with --cpu: all threads)
@@ -355,13 +308,7 @@ def bench_frames(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7, direct=Fals
             fl = flip(render(sc, "glints"), img_d).mean
             line += f", glints-direct {td * 1e3:9.1f} ms, speed-up {td / t:6.1f}x, FLIP {fl:.3f}"
         print(line, flush=True)
-    print(f"max/min over distances: {max(best) / min(best):.2f} (target <= 1.5)"
-          + (f"; {label} {max(best_u) / min(best_u):.2f}" if unfused else ""))
-    if unfused:  # the same estimator either way: equal frames to rounding
-        worst = [_rel_diff(a, b) for a, b in imgs]
-        if max(r for r, _ in worst) > tol or not all(z for _, z in worst):
-            raise SystemExit(f"default vs {label}: max relative difference {worst} exceeds "
-                             f"{tol:g}")
+    print(f"max/min over distances: {max(best) / min(best):.2f} (target <= 1.5)")
     return best
 
 
@@ -372,7 +319,7 @@ def bench_breakdown(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=5):
     from prefilter.glints import brdf
     from prefilter.glints.pyramid import resample_weights
     from prefilter.glints.render import measurement_scene
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     calls = {}
@@ -428,13 +375,12 @@ def bench_breakdown_quad(distances=(0.5, 2.0, 8.0), kind="flakes", repeat=7):
     over the distances, best of ``repeat`` per entry (CPU time of this process)."""
     import functools
 
-    from prefilter.glints import brdf
     from prefilter.glints import render as grender
     from prefilter.render.methods import RenderSettings
     from prefilter.render.scene import load_scene
 
-    parts = [(grender, "quad_range"), (grender, "quad_mis"), (brdf, "direct_mis_k"),
-             (brdf, "sample_s_k"), (brdf, "direct_ndf_k")]
+    parts = [(grender, "quad_range"), (grender, "quad_mis"), (grender, "direct_mis_k"),
+             (grender, "sample_s_k"), (grender, "direct_ndf_k")]
     acc = {}
     depth = {}
     orig = {name: getattr(mod, name) for mod, name in parts}
@@ -539,11 +485,6 @@ def main():
                     help="queries: also a random-order run with centres in a CORNER^2 square")
     ap.add_argument("--frames", action="store_true", help="only the frame-time benchmark")
     ap.add_argument("--direct", action="store_true", help="--frames: also glints-direct + FLIP")
-    ap.add_argument("--unfused", action="store_true",
-                    help="--frames: also the per-direction quad MIS, interleaved, + difference")
-    ap.add_argument("--old-range", action="store_true",
-                    help="--frames: also the former range path, interleaved, and the frames' "
-                    "max relative difference")
     ap.add_argument("--lights", default="point", help="--frames: point, quad or environment")
     ap.add_argument("--baseline", default=None,
                     help="--frames: alternate each run with a process on this source tree "
@@ -579,8 +520,6 @@ def main():
             bench_breakdown()
         return
     if a.frames:
-        if a.unfused and a.old_range:
-            ap.error("--unfused and --old-range: each is its own interleaved comparison; give one")
         bs = {k: v for k, v in (("stride0", a.stride0), ("sigma0", a.sigma0),
                                 ("rank", a.bake_rank)) if v is not None}
         if a.baseline:
@@ -590,8 +529,7 @@ def main():
         for _ in range(a.runs):
             best = bench_frames(direct=a.direct, lights=a.lights, interp=a.interp,
                                 bilinear=False if a.nearest else None, bake_settings=bs,
-                                clock=time.process_time if a.cpu else time.perf_counter,
-                                unfused=a.unfused, old_range=a.old_range)
+                                clock=time.process_time if a.cpu else time.perf_counter)
             ratios.append(max(best) / min(best))
         if a.runs > 1:
             print("max/min per run: " + ", ".join(f"{r:.2f}" for r in ratios))

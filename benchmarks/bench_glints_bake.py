@@ -95,8 +95,8 @@ def main():
     ap.add_argument("--no-bake", action="store_true", help="only the splat and level-0 timings")
     a = ap.parse_args()
 
-    from prefilter.glints.brdf import bilinear_bake_roughness
-    from prefilter.glints.render import BAKE_SETTINGS
+    from prefilter.glints.bake import bilinear_bake_roughness
+    from prefilter.glints.bake import BAKE_SETTINGS
 
     R = BAKE_SETTINGS["ndf_res"]
     sr = bilinear_bake_roughness(BAKE_SETTINGS["intrinsic_roughness"], BAKE_SETTINGS["support"],

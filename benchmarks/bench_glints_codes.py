@@ -1,12 +1,12 @@
-"""Environment range queries vs the factor code widths (docs/glints-part2-log.md, session 9).
+"""Environment range queries vs the factor code widths.
 
     python benchmarks/bench_glints_codes.py [--kind flakes] [--distance 2.0] [--repeat 7]
 
 Captures the ``query.range_multi`` call of one ``glints`` environment frame (the measurement
 plane, render bake) and replays it, alternating, on the same map baked with other code widths
-(:data:`prefilter.glints.render.BAKE_SETTINGS` otherwise): all 8-bit; all 16-bit; 16-bit with
-its ``a`` / ``b`` codes rescaled to 65535 steps of their maximum (what bakes wrote before
-session 9: uint32 prefix sums); and the render default (16-bit ``a``, ``b``, 8-bit ``c``). Prints
+(:data:`prefilter.glints.bake.BAKE_SETTINGS` otherwise): all 8-bit; all 16-bit; 16-bit with
+its ``a`` / ``b`` codes rescaled to 65535 steps of their maximum (uncapped code sums: uint32
+prefix sums); and the render default (16-bit ``a``, ``b``, 8-bit ``c``). Prints
 the best and median milliseconds per replay; run with ``NUMBA_NUM_THREADS=1`` for the kernel
 alone on one core. Bakes go to the render cache (``$PREFILTER_GLINTS_CACHE``), ~2 min each when
 missing.
@@ -22,7 +22,7 @@ import numpy as np
 
 
 def _max_scaled(gm):
-    """``gm`` with its ``a`` / ``b`` codes at 65535 steps of each row's maximum (the pre-session-9
+    """``gm`` with its ``a`` / ``b`` codes at 65535 steps of each row's maximum (the uncapped
     encoding of 16-bit rows; the loader's renormalisation makes it the same NDF)."""
     codes = dict(gm.codes)
     for k in ("a", "b"):
@@ -42,7 +42,7 @@ def main():
     import prefilter.glints.envlight as envlight
     import prefilter.glints.render as gr
     from prefilter.glints.query import packed, range_multi
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     calls = []
@@ -61,7 +61,7 @@ def main():
     nm = sc.objects[0].material.normal_map.load()
     maps = {"8-bit a, b, c": gr.baked_surface(nm, settings=dict(code_bits=8, c_bits=8)).gm}
     m16 = gr.baked_surface(nm, settings=dict(code_bits=16, c_bits=16)).gm
-    maps["16-bit, a / b scaled to their maximum (before session 9)"] = _max_scaled(m16)
+    maps["16-bit, a / b scaled to their maximum (uint32 prefix sums)"] = _max_scaled(m16)
     maps["16-bit a, b, c"] = m16
     maps["16-bit a, b, 8-bit c (render default)"] = gr.baked_surface(nm).gm
     times = {k: [] for k in maps}

@@ -1,6 +1,6 @@
 """Environment lights: does the trilinear pyramid blend of ``glints``' range queries bias them,
 as it did for quad lights (issue #9)? Plane at mid distance, ``glints`` averaged over ``--seeds``
-seeds with ``render.RANGE_INTERP`` trilinear and resample, FLIP against the deterministic
+seeds with ``envlight.RANGE_INTERP`` trilinear and resample, FLIP against the deterministic
 ``matched`` and ``converged`` references (:mod:`prefilter.glints.reference`); one JSON row per map.
 
     python benchmarks/study_glints_env_interp.py --kinds flakes,gaussian
@@ -24,9 +24,9 @@ def study(kind: str, seeds: int = 32) -> dict:
     references, per range-weight interpolation, and CPU seconds per frame."""
     import study_glints_scenes as st
 
-    from prefilter.glints import render as gr
+    from prefilter.glints import envlight
     from prefilter.glints.reference import render_converged
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     sc = load_scene(st.scene("plane", st.DISTANCES["mid"], kind, "environment"))
@@ -36,10 +36,10 @@ def study(kind: str, seeds: int = 32) -> dict:
     matched = render_converged(sc, matched=True)
     row = {"map": kind, "cpu_matched": time.process_time() - t0}
     conv = render_converged(sc)
-    saved = gr.RANGE_INTERP
+    saved = envlight.RANGE_INTERP
     try:
         for interp in ("trilinear", "resample"):
-            gr.RANGE_INTERP = interp
+            envlight.RANGE_INTERP = interp
             render(sc, "glints", seed=0)
             t0 = time.process_time()
             imgs = [render(sc, "glints", seed=k) for k in range(seeds)]
@@ -50,7 +50,7 @@ def study(kind: str, seeds: int = 32) -> dict:
                 row[f"{interp}_{n}_converged"] = st._flip_pair(g, conv, hit)
             row[f"{interp}_mean_matched"] = float(np.mean(imgs) / matched.mean())
     finally:
-        gr.RANGE_INTERP = saved
+        envlight.RANGE_INTERP = saved
     return row
 
 

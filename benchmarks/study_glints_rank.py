@@ -10,13 +10,13 @@ environment light with ``--same-estimator`` (``glints`` shades with the unprefil
 estimator: the FLIP between the frames is the compression error alone), plane and sphere (sphere:
 FLIP over the object's pixels), mid and far. ``glints-direct`` does not depend on the bake: its 8
 frames are rendered once into ``--frames``. Per setting (a JSON object overriding
-:data:`prefilter.glints.render.BAKE_SETTINGS`, i.e. :func:`prefilter.glints.bake.bake` keys) one
+:data:`prefilter.glints.bake.BAKE_SETTINGS`, i.e. :func:`prefilter.glints.bake.bake` keys) one
 row: wall time of the first ``glints`` frame (the bake when it was not cached), the bake
 summary (stored MB, relative L2 error, largest group rank), per cell FLIP (HDR, and capped at +12
 stops) and the "leak": pixels where ``glints > 0`` and ``glints-direct == 0`` and their largest
 value relative to the ``glints-direct`` frame maximum.
 
-``"exact_from_level": L`` (a bake key since session 9) stores every group of pyramid levels
+``"exact_from_level": L`` (a bake key) stores every group of pyramid levels
 ``>= L`` as its exact non-negative CP (:func:`prefilter.glints.cp.exact_cp`; ranks up to 192 on
 this map). ``L = 0`` is lossless up to the codes' rounding: its FLIP is what the query (pyramid
 resampling, bilinear NDF lookup, blank blocks) costs without compression error. (Session 8's
@@ -73,7 +73,7 @@ def direct_frames(folder: Path) -> dict:
     kept in ``folder``)."""
     import study_glints_scenes as st
 
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     folder.mkdir(parents=True, exist_ok=True)
     out = {}
@@ -103,7 +103,7 @@ def run_setting(label: str, setting: dict, frames: dict) -> dict:
 
     import prefilter.glints.render as gr
     from prefilter.render.metrics import flip
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     saved = dict(gr.BAKE_SETTINGS), gr.environment_radiance
     with contextlib.ExitStack() as stack:

@@ -33,7 +33,7 @@ at 128^2, near / mid / far; 64x48). Per cell:
    cache's intrinsic roughness), of (a) ``glints``' own NDF query at the pixel centres
    (:func:`prefilter.glints.brdf.glint_ndf` on the render's surface: resampled pyramid, bilinear
    lookup, truncated direct fallback below ``sigma_min``) and (b) the smooth lobe with the
-   footprint NDF's mean and covariance (as :func:`prefilter.glints.render.ndf_errors`). Point
+   footprint NDF's mean and covariance (as ``study_glints_frames.ndf_errors``). Point
    values vs pixel averages put a floor of a few % under (a) (below ``sigma_min`` (a) is that
    floor). The glint look is preserved when (a) << (b).
 
@@ -89,7 +89,7 @@ def ndf_image_errors(normal_map, surf, center, sigma_p, *, resolution: int = 256
     ``roughness``: the model's intrinsic roughness (default ``surf.intrinsic_roughness``)."""
     from prefilter.glints import pndf_image
     from prefilter.glints.brdf import FALLBACK_TRUNCATION, glint_ndf
-    from prefilter.glints.render import matched_lobe
+    from study_glints_frames import matched_lobe
 
     sr = surf.intrinsic_roughness if roughness is None else roughness
     X, Y, h = ndf_grid(resolution, support)
@@ -243,7 +243,7 @@ def check(shape: str, dist_name: str, kind: str, shrinks=(1.0, 0.5, 0.3), n: int
           samples: int = 20000) -> None:
     """Print, at the ``n // 2`` brightest pixels of ``E(min shrink)`` and ``n - n // 2`` random
     ones, ``glints-direct``, ``E(shrink)`` for each shrink and :func:`pixel_mc` (green)."""
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     sc = load_scene(scene(shape, DISTANCES[dist_name], kind, "point"))
@@ -271,7 +271,7 @@ def cell(shape: str, dist_name: str, kind: str, spp: int = REF_SPP, n_pixels: in
     """One point-light cell (see the module docstring); FLIP values are ``[frame, object]``."""
     from prefilter.glints.render import baked_surface, footprints
     from prefilter.render.camera import gbuffer_at
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     sc = load_scene(scene(shape, DISTANCES[dist_name], kind, "point"))

@@ -34,7 +34,7 @@ Compression error alone: quad ``compressed`` vs ``converged`` (both noise-free);
 ``glints`` (averaged) vs ``matched``. CPU times are process times (``time.process_time``).
 
 ``--bake '{"ndf_truncation": 4}'`` overrides entries of the render bake settings
-(:data:`prefilter.glints.render.BAKE_SETTINGS`; the cache is keyed by them, so other settings
+(:data:`prefilter.glints.bake.BAKE_SETTINGS`; the cache is keyed by them, so other settings
 bake into other files). ``--by-luminance`` adds the share of each cell's FLIP error sum by the
 pixel's luminance relative to the frame maximum (:func:`error_by_luminance`): on a mostly black
 frame HDR-FLIP's automatic exposure range reaches +24 stops and the tails count.
@@ -122,7 +122,7 @@ def _direct_frame(sc_dict: dict, sc, cache: Path | None) -> tuple[np.ndarray, fl
     kept there under the SHA-1 of the scene (the frame does not depend on the bake: re-runs of
     the matrix with other bake settings skip it; delete the folder when glints-direct
     changes)."""
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     f = None
     if cache is not None:
@@ -154,7 +154,7 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
     start exposure but the top exposure capped at this many stops (``flip_capped``): on nearly
     black frames FLIP's automatic top (+24 stops) compares tails far below the peak."""
     from prefilter.render.metrics import flip
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     sd = scene(shape, DISTANCES[dist_name], kind, lights)
@@ -185,7 +185,7 @@ def cell(shape: str, dist_name: str, kind: str, lights: str, floor: bool = False
         extra.update(stop_exposure=stop_exposure, flip_capped=float(fc.mean),
                      flip_capped_object=float(fc.error_map[hit].mean()))
     if lossless:
-        from prefilter.glints.render import BAKE_SETTINGS
+        from prefilter.glints.bake import BAKE_SETTINGS
 
         saved = dict(BAKE_SETTINGS)
         BAKE_SETTINGS.update(LOSSLESS)
@@ -223,7 +223,7 @@ def reference_cell(shape: str, dist_name: str, kind: str, lights: str, seeds: in
     """One cell against the deterministic references (see the module docstring); FLIP values are
     pairs (frame, object pixels)."""
     from prefilter.glints.reference import render_converged
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
     from prefilter.render.scene import load_scene
 
     sc = load_scene(scene(shape, DISTANCES[dist_name], kind, lights))
@@ -440,7 +440,7 @@ def main():
                          "depend on the bake settings)")
     a = ap.parse_args()
     if a.bake:
-        from prefilter.glints.render import BAKE_SETTINGS
+        from prefilter.glints.bake import BAKE_SETTINGS
 
         BAKE_SETTINGS.update(json.loads(a.bake))
     if a.same_estimator:

@@ -62,7 +62,7 @@ def _timed(fn):
 def _repeat_times(sc, methods, repeats):
     """Wall and CPU seconds ``{method: [t, ...]}`` of ``repeats`` frames of each method,
     interleaved (one frame of each per round)."""
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     wall = {m: [] for m in methods}
     cpu = {m: [] for m in methods}
@@ -137,7 +137,7 @@ def _lights_row(args, wang, tmp, d, kind):
     """One ``--lights quad|environment`` row (module docstring)."""
     from prefilter.glints import wang_render
     from prefilter.render.methods import RenderSettings
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     sc, nm, wn, t_bake, idx, sa = _assembled(d, kind, tmp)
     row = dict(lights=kind, distance=d, tile=wn.wang.size,
@@ -185,7 +185,7 @@ def _point_row(args, wang, tmp, d):
     from prefilter.glints.render import baked_surface, pixel_footprints
     from prefilter.render.methods import RenderSettings
     from prefilter.render.metrics import flip
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     sc, nm, wn, t_bake, idx, sa = _assembled(d, "point", tmp)
     size, T = nm.shape[0], wn.wang.size

@@ -9,7 +9,7 @@ import pytest
 
 from prefilter.glints import load
 from prefilter.glints.bake import bake
-from prefilter.glints.brdf import surface
+from prefilter.glints.surface import surface
 from prefilter.texture.procedural import normal_map
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))

@@ -12,7 +12,8 @@ from scipy.special import erf
 from prefilter.errors import PrefilterError
 from prefilter.glints import load, pndf_image
 from prefilter.glints.bake import bake
-from prefilter.glints.brdf import glint_brdf_cos, glint_ndf, surface, vcavity_g1, vcavity_g2
+from prefilter.glints.brdf import glint_brdf_cos, glint_ndf, vcavity_g1, vcavity_g2
+from prefilter.glints.surface import surface
 from prefilter.glints.pndf import pndf
 from prefilter.glints.pyramid import resample_min_sigma
 from prefilter.glints.query import point
@@ -233,7 +234,7 @@ def small_bakes(tmp_path, monkeypatch):
 def test_render_glints_vs_direct(small_bakes):
     """Mid distance (footprints 4-16 texels): compressed vs direct agree up to the compression,
     NDF-pixel and pyramid-interpolation error."""
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     sc = glint_scene(3.0, w=24, h=16)
     comp = render(sc, "glints")
@@ -247,7 +248,7 @@ def test_render_glints_vs_direct(small_bakes):
 @pytest.mark.slow
 def test_render_reference_converges_to_direct(small_bakes):
     """The supersampled reference's image mean matches the direct footprint integral."""
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     smooth = glint_scene(3.0, uv_scale=80, w=16, h=12,
                          kind={"procedural": "gaussian", "size": 64, "seed": 2})

@@ -11,7 +11,7 @@ from maps import sinusoid
 from prefilter.errors import PrefilterError
 from prefilter.glints import load
 from prefilter.glints.bake import bake
-from prefilter.glints.brdf import surface
+from prefilter.glints.surface import surface
 from prefilter.glints.envlight import as_lobes, eps_support, sample_sg, sg_eval, sg_pdf, shade_sg
 from prefilter.sphere import chi2_sphere
 

@@ -10,14 +10,48 @@ from maps import sinusoid
 from prefilter.errors import PrefilterError
 from prefilter.glints import load
 from prefilter.glints.bake import bake
-from prefilter.glints.brdf import glint_brdf_cos, surface
+from prefilter.glints.brdf import glint_brdf_cos
+from prefilter.glints.surface import surface
 from prefilter.glints.envlight import equirect_directions, fibonacci_axes, fit_sg, shade_sg
-from prefilter.glints.render import U_PAIR, QUAD_MIS, quad_mis, quad_mis_unfused, quad_range
-from prefilter.render.lights import QuadLight, sample_quad_area
+from prefilter.glints.render import U_PAIR, QUAD_MIS, quad_mis, quad_range
+from prefilter.glints.sample import pdf_wi, sample_wi
+from prefilter.render.lights import QuadLight, quad_light_pdf, quad_light_sample, sample_quad_area
+from prefilter.sphere.sampling import to_local, to_world
 
 NM = sinusoid(64, ax=0.25, ay=0.2, px=16, py=8)
 EYE = np.eye(3)
 
+
+
+def quad_mis_unfused(surf, center, sigma_p, wo, position, frame, light, f0, u, *,
+                     fallback_truncation=None):
+    """``quad_mis`` spelled out with the per-direction functions (glint_brdf_cos, pdf_wi,
+    sample_wi: the NDF walked once per BRDF value, density and draw), the check of the fused
+    estimator: the balance heuristic over ``u.shape[1] // U_PAIR`` pairs of a light sample
+    (uniform on the quad) and a BRDF sample."""
+    t, b, n = frame
+    N = len(wo)
+    n_pairs = u.shape[1] // U_PAIR
+    L = np.asarray(light.radiance, dtype=np.float64)
+    out = np.zeros((N, 3))
+    for j in range(n_pairs):
+        uj = u[:, j * U_PAIR:(j + 1) * U_PAIR]
+        wl, pl = quad_light_sample(light, position, uj[:, :2])
+        wl_loc = to_local(wl, t, b, n)
+        fl = glint_brdf_cos(surf, center, sigma_p, wo, wl_loc, f0,
+                            fallback_truncation=fallback_truncation)
+        pb = pdf_wi(surf, center, sigma_p, wo, wl_loc)
+        w = np.where(pl > 0, 1.0 / np.where(pl > 0, pl + pb, 1.0), 0.0)
+        out += fl * w[:, None]
+        wb_loc, pb2 = sample_wi(surf, center, sigma_p, wo, u=uj[:, 2:])
+        ok = pb2 > 0
+        wb_loc = np.where(ok[:, None], wb_loc, np.array([0.0, 0.0, 1.0]))
+        pl2 = quad_light_pdf(light, position, to_world(wb_loc, t, b, n))
+        fb = glint_brdf_cos(surf, center, sigma_p, wo, wb_loc, f0,
+                            fallback_truncation=fallback_truncation)
+        w2 = np.where(ok & (pl2 > 0), 1.0 / np.where(ok, pb2 + pl2, 1.0), 0.0)
+        out += fb * w2[:, None]
+    return out * L / max(n_pairs, 1)
 
 @pytest.fixture(scope="module")
 def surf(tmp_path_factory):
@@ -200,9 +234,9 @@ def test_multi_point_kernels_equal_single_point(surf):
     """The per-footprint kernels of the fused MIS against the per-point functions: draws and
     densities (direct and compressed samplers, the masses), the direct NDF at K points, and the
     one-walk direct_mis_k (NDF at given points; draws, densities and NDF at the draws)."""
-    from prefilter.glints.brdf import (direct_mis_fits, direct_mis_k, direct_ndf,
-                                       direct_ndf_k, sample_s_direct_k, sample_s_k)
-    from prefilter.glints.sample import mass, n_uniforms, sample_s, sample_s_direct
+    from prefilter.glints.brdf import direct_ndf, direct_ndf_k
+    from prefilter.glints.sample import (direct_mis_fits, direct_mis_k, mass, n_uniforms,
+                                         sample_s, sample_s_direct, sample_s_direct_k, sample_s_k)
 
     rng = np.random.default_rng(9)
     N, K = 50, 3
@@ -242,8 +276,7 @@ def test_direct_mis_k_element_choice_extremes(surf):
     """The one-walk kernel picks its draws' elements by row, then column: at the uniforms' ends
     (0: the window's first texel; just below 1: its last), on the narrowest windows (sigma_p ~ 0:
     3-4 texels a side) and on wider ones, its draws and densities are the per-point sampler's."""
-    from prefilter.glints.brdf import direct_mis_k
-    from prefilter.glints.sample import sample_s_direct
+    from prefilter.glints.sample import direct_mis_k, sample_s_direct
 
     rng = np.random.default_rng(12)
     N, K = 24, 4
@@ -360,7 +393,7 @@ def _scene(gr, lights):
 def test_render_area_and_environment_lights(small_render, lights):
     """Quad (range + MIS) and environment (SG) lights render deterministically, and the
     compressed image's mean agrees with the direct P-NDF's (Monte Carlo) within 15 %."""
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     sc = _scene(small_render, lights)
     a = render(sc, "glints", seed=3, spp=16)
@@ -394,7 +427,7 @@ def test_render_quad_mis_fused_equals_unfused(small_render, monkeypatch, distanc
     a = gr.render_glints(sc, st)
     ad = gr.render_glints_direct(sc, st)
     assert calls[0][0] > 10 and calls[0][1] > 10  # both samplers of the compressed mode
-    monkeypatch.setattr(gr, "quad_mis", gr.quad_mis_unfused)
+    monkeypatch.setattr(gr, "quad_mis", quad_mis_unfused)
     np.testing.assert_allclose(a, gr.render_glints(sc, st), rtol=1e-9, atol=0)
     np.testing.assert_allclose(ad, gr.render_glints_direct(sc, st), rtol=1e-9, atol=0)
     assert a.max() > 0 and ad.max() > 0
@@ -414,7 +447,7 @@ def test_uniform_columns_tile_the_layout():
 
 
 def test_render_rejects_textured_quads(small_render):
-    from prefilter.render.pipeline import render
+    from prefilter.render.driver import render
 
     sc = _scene(small_render, "quad")
     sc["lights"][0]["texture"] = {"procedural": "noise", "size": 8}

@@ -151,7 +151,8 @@ def test_environment_blur_is_the_prefiltered_expectation():
     of that estimator with SG samples; the blur is visible at the test's tolerance."""
     from scipy.special import ndtr
 
-    from prefilter.glints.brdf import schlick, vcavity_g2
+    from prefilter.glints.brdf import vcavity_g2
+    from prefilter.microfacet.fresnel import schlick
     from prefilter.glints.envlight import sample_sg
 
     mu, lam, p = _sg_setup()
@@ -172,7 +173,7 @@ def test_environment_blur_is_the_prefiltered_expectation():
     ok = (wi[:, 2] > 0) & (h[:, 2] > 0)
     L = np.exp(lam * (wi @ p.T - 1.0)) @ mu
     f = (np.where(ok, Dbar * vcavity_g2(wo, wi, h) / (4 * wo[2] * pdf), 0.0)[:, None]
-         * schlick(0.9, np.sum(wi * h, -1)) * L)
+         * schlick(0.9, np.sum(wi * h, -1)[:, None]) * L)
     mc, err = f.mean(0), f.std(0) / np.sqrt(n)
     assert np.all(err < 0.01 * mc)
     assert np.all(np.abs(got - mc) <= 3 * err), (got, mc, err)

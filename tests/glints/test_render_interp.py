@@ -159,7 +159,7 @@ def test_fused_resampling_equals_the_weighted_blend(rough, bilinear):
 
 
 def test_render_bake_keeps_dim_ndf_blocks(tmp_path, monkeypatch):
-    """The render bake (``render.BAKE_SETTINGS``) keeps NDF blocks whose maximum is 1e-6 to 1e-4
+    """The render bake (``bake.BAKE_SETTINGS``) keeps NDF blocks whose maximum is 1e-6 to 1e-4
     of their image's maximum: their compressed mass follows the direct pixel averages
     (``pndf_image`` at the bake's roughness). Dropped as blank (the bake's default ``blank_tol``
     1e-4), they were zero, which moved the dim glints of the scratches map (FLIP 0.08 at mid)."""
@@ -176,7 +176,7 @@ def test_render_bake_keeps_dim_ndf_blocks(tmp_path, monkeypatch):
     nm = normal_map("flakes", size=32, seed=1)
     gm = gr.baked_surface(nm).gm
     pyr, R = gm.pyramid, gm.resolution
-    # the direct images with the bake's cuts (render.BAKE_SETTINGS: 6 / 6 stds since session 6)
+    # the direct images with the bake's cuts (bake.BAKE_SETTINGS: 6 / 6 stds)
     cuts = {k: gr.BAKE_SETTINGS[k] for k in ("ndf_truncation", "footprint_truncation")
             if k in gr.BAKE_SETTINGS}
     want = pndf_image(nm, pyr.centers(0), pyr.sigma(0), R, gm.support,

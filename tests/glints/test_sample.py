@@ -8,7 +8,7 @@ from maps import sinusoid
 from scipy import stats
 
 from prefilter.errors import PrefilterError
-from prefilter.glints import load
+from prefilter.glints import load, point
 from prefilter.glints.bake import bake
 from prefilter.glints.sample import mass, n_uniforms, ndf_pdf, sample_s, sample_wi
 from prefilter.sphere import chi2_sphere
@@ -19,7 +19,7 @@ H = 2 * S / R
 
 @pytest.fixture(scope="module", params=[16, 32], ids=["B16", "B32"])
 def gm(request, tmp_path_factory):
-    """Blocks of 16 pixels, and of 32 (the render bake's since session 10: a 5-level quadtree
+    """Blocks of 16 pixels, and of 32 (the render bake's: a 5-level quadtree
     descent per block)."""
     out = tmp_path_factory.mktemp("gs") / "map.npz"
     bake(sinusoid(64, ax=0.25, ay=0.2, px=16, py=8), out, rank=16, ndf_res=R,
@@ -32,7 +32,7 @@ def pixel_values(gm, c, sp, sub=1):
     n = R * sub
     x = (np.arange(n) + 0.5) * (2 * S / n) - S
     X, Y = np.meshgrid(x, x)
-    return gm.point(c, sp, np.stack([X, Y], -1))
+    return point(gm, c, sp, np.stack([X, Y], -1))
 
 
 def histogram(s, sub=1):
@@ -148,7 +148,7 @@ def test_direct_sampling_chi2(gm):
     ``pndf_image`` (independent integration), chi-square; pdf == pndf at the samples."""
     from prefilter.glints import pndf_image
     from prefilter.glints.pndf import pndf
-    from prefilter.glints.brdf import surface
+    from prefilter.glints.surface import surface
     from prefilter.glints.sample import sample_s_direct
 
     nm = sinusoid(64, ax=0.25, ay=0.2, px=16, py=8)
@@ -171,7 +171,7 @@ def test_sample_wi_surface_routes_small_footprints(gm):
     """With the normal map, footprints below sigma0 are sampled from the direct P-NDF: the
     returned pdf is pndf(h_xy) h_z / (4 wo.h), and the compressed one elsewhere."""
     from prefilter.glints.pndf import pndf
-    from prefilter.glints.brdf import surface
+    from prefilter.glints.surface import surface
 
     nm = sinusoid(64, ax=0.25, ay=0.2, px=16, py=8)
     surf = surface(gm, nm)

@@ -277,7 +277,7 @@ def test_bake_parts_keyed_by_fit_version(tmp_path, monkeypatch):
     bake(nm, out, **kw)
     assert json.loads(meta.read_text())["cp_fit"] == cpmod.FIT_VERSION
     assert "exact_budget" not in json.loads(meta.read_text())
-    # with exact levels the parts also record the budget rule (session 11 changed it)
+    # with exact levels the parts also record the budget rule
     out.unlink()
     bake(nm, out, exact_from_level=1, **kw)
     assert json.loads(meta.read_text())["exact_budget"] == EXACT_BUDGET_RULE
@@ -747,8 +747,7 @@ def test_range_multi_equals_range_weighted_per_rectangle(request, interp, bits):
     rtol 1e-5 on the code maps (8-bit ``c``: float32 sums of uint16 prefix sums, the 16/8
     render default included; measured <= 3e-7; 16-bit ``c``: float64), 1e-6 on the float maps
     (float64; measured <= 4e-7, the former kernel's rounding: against the float64 images
-    rebuilt from the same float32 prefix sums it is off by up to 5e-8, range_multi by 2e-14);
-    the former path (``RANGE_SHARED = False``) exactly."""
+    rebuilt from the same float32 prefix sums it is off by up to 5e-8, range_multi by 2e-14)."""
     import dataclasses
 
     from prefilter.glints import query as gq
@@ -773,17 +772,12 @@ def test_range_multi_equals_range_weighted_per_rectangle(request, interp, bits):
         got = gq.range_multi(m, idx, w, lo, hi)
         np.testing.assert_allclose(got, want, rtol=rtol, atol=rtol * 1e-3 * want.max())
         assert np.all(got[want == 0] == 0)
-        try:
-            gq.RANGE_SHARED = False
-            np.testing.assert_array_equal(gq.range_multi(m, idx, w, lo, hi), want)
-        finally:
-            gq.RANGE_SHARED = True
         act = rng.random((n, k)) < 0.7
         np.testing.assert_array_equal(gq.range_multi(m, idx, w, lo, hi, act),
                                       np.where(act, got, 0.0))
         # serial and parallel kernels alike, up to the float32 sums' rounding: they are separate
         # compilations and fastmath lets LLVM reassociate those sums differently (seen once in a
-        # full test run, session 10: 1.3e-7 relative on the 8-bit map; not reproduced alone)
+        # full test run: 1.3e-7 relative on the 8-bit map; not reproduced alone)
         big = np.repeat(np.arange(n), 120 // k * 300 // n + 1)
         got_p = gq.range_multi(m, idx[big], w[big], lo[big], hi[big])
         assert got_p.size >= gq.SERIAL_BELOW
@@ -808,3 +802,35 @@ def test_range_multi_input_errors(baked):
     with pytest.raises(PrefilterError, match="active: expected a bool array"):
         range_multi(gm, idx, w, lo, lo + 1, np.ones((2, 3), bool))
     assert range_multi(gm, idx[:0], w[:0], lo[:0], lo[:0] + 1).shape == (0, 4)
+
+
+def test_cli_bake_is_the_render_bake(tmp_path, monkeypatch):
+    """``prefilter bake glints`` without -o writes the render cache's file: the glints render
+    method (baked_surface) loads it instead of baking, with the same settings."""
+    from click.testing import CliRunner
+
+    from prefilter.glints import render as grender
+    from prefilter.glints.bake import BAKE_SETTINGS, bake_settings, cache_path
+    from prefilter.glints.commands import bake_glints
+
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path / "cache"))
+    nm = sinusoid(16, px=16, py=8)
+    np.save(tmp_path / "n.npy", nm)
+    small = dict(rank=4, ndf_res=16, block=8, n_iter_max=10)
+    res = CliRunner().invoke(bake_glints, [str(tmp_path / "n.npy"), "--rank", "4", "--ndf-res",
+                                           "16", "--block", "8", "--iters", "10", "--quiet"])
+    assert res.exit_code == 0, res.output
+    path = cache_path(nm, bake_settings(nm.shape, small))
+    assert path.exists() and str(path) in res.output
+    st = load(path).header["settings"]
+    for k, v in dict(BAKE_SETTINGS, **small).items():
+        if k != "intrinsic_roughness":
+            assert st[k] == v, k
+
+    def found(normal_map, out, **kwargs):
+        assert out == path and out.exists(), "baked again"
+        return False
+
+    monkeypatch.setattr(grender, "bake_if_missing", found)
+    surf = grender.baked_surface(nm, settings=small)
+    assert surf.gm.header["settings"] == st

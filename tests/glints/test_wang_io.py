@@ -382,11 +382,14 @@ def test_cli_bake_glints_wang(tmp_path):
 def test_bakes_share_their_options_with_per_command_defaults():
     """``glints`` and ``glints-wang`` declare the shared options once (commands.shared_options),
     each with its own defaults, help and position in ``--help``."""
+    from prefilter.glints.bake import BAKE_SETTINGS
     from prefilter.glints.commands import bake_glints, bake_glints_wang
 
     shared = ("ndf_res", "block", "support", "roughness", "iters", "seed", "quiet")
     opts = {c.name: {p.name: p for p in c.params} for c in (bake_glints, bake_glints_wang)}
-    want = {"glints": (128, 16, 0.5, 0.005, 50, 0, False),
+    st = BAKE_SETTINGS  # glints: the render method's bake
+    want = {"glints": (st["ndf_res"], st["block"], st["support"], st["intrinsic_roughness"],
+                       st["n_iter_max"], st["seed"], False),
             "glints-wang": (64, 8, 0.5, 0.005, 100, 0, False)}
     for name, defaults in want.items():
         assert tuple(opts[name][k].default for k in shared) == defaults

@@ -10,6 +10,7 @@ from maps import sinusoid
 
 from prefilter.errors import PrefilterError
 from prefilter.glints import render as grender
+from prefilter.glints.bake import settings_key
 from prefilter.glints.wang import (assemble, edge_colours, index_map,
                                    periodic_index_map, synthesize)
 from prefilter.glints.wang_ndf import bake_tiles, compress_tiles, ndf, ndf_points
@@ -17,7 +18,7 @@ from prefilter.glints.wang_render import (baked_tiles, cache_path, render_wang, 
                                           wang_settings)
 from prefilter.render.methods import RenderSettings, available, describe
 from prefilter.render.metrics import flip
-from prefilter.render.pipeline import render
+from prefilter.render.driver import render
 from prefilter.render.scene import load_scene
 from prefilter.texture.normalmap import encode_normals
 
@@ -276,14 +277,14 @@ def test_cache_keys_record_the_fit_version(tmp_path, monkeypatch):
     monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path))
     nm = sinusoid(8, 0.2, 0.2, 8, 8)
     st = dict(grender.BAKE_SETTINGS)
-    before = grender.settings_key(st), cache_path(nm)
+    before = settings_key(st), cache_path(nm)
     monkeypatch.setattr(cpmod, "FIT_VERSION", cpmod.FIT_VERSION + 1)
-    after = grender.settings_key(st), cache_path(nm)
+    after = settings_key(st), cache_path(nm)
     assert before[0] != after[0] and before[1] != after[1]
 
 
 def test_render_key_records_the_exact_budget_rule(tmp_path, monkeypatch):
-    """Bake settings with exact levels key on the budget rule (session 11 changed it); the
+    """Bake settings with exact levels key on the budget rule; the
     Wang-tile key (no exact levels) does not."""
     from prefilter.glints import bake as gbake
 
@@ -292,9 +293,9 @@ def test_render_key_records_the_exact_budget_rule(tmp_path, monkeypatch):
     st = dict(grender.BAKE_SETTINGS)
     assert st.get("exact_from_level") is not None
     no_exact = {k: v for k, v in st.items() if k not in ("exact_from_level", "exact_cell")}
-    before = grender.settings_key(st), grender.settings_key(no_exact), cache_path(nm)
+    before = settings_key(st), settings_key(no_exact), cache_path(nm)
     monkeypatch.setattr(gbake, "EXACT_BUDGET_RULE", gbake.EXACT_BUDGET_RULE - 1)
-    after = grender.settings_key(st), grender.settings_key(no_exact), cache_path(nm)
+    after = settings_key(st), settings_key(no_exact), cache_path(nm)
     assert before[0] != after[0] and before[1:] == after[1:]
 
 

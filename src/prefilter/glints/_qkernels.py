@@ -495,8 +495,8 @@ def bilinear_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, sx, sy, 
     nb = block_index.shape[1]
     R = nb * B
     for q in prange(out.shape[0]):
-        i0, u0, u1 = _axis_taps2((sy[q] - lo) / h, R, True)
-        j0, v0, v1 = _axis_taps2((sx[q] - lo) / h, R, True)
+        i0, u0, u1 = pixel_taps((sy[q] - lo) / h, R, True)
+        j0, v0, v1 = pixel_taps((sx[q] - lo) / h, R, True)
         acc = 0.0
         for di in range(2):
             bi, ia, wa0, wa1 = _block_tap(i0, u0, u1, di, B)
@@ -543,7 +543,7 @@ def _factor_dot(Fa, Fb, wsc, m, B, nr, ia, wa0, wa1, ja, wb0, wb1, cw, kc):
 
 
 @njit_serial
-def _axis_taps2(f, R, bilinear):
+def pixel_taps(f, R, bilinear):
     """Bilinear taps along one axis at pixel coordinate ``f`` (pixel centres at ``k + 0.5``):
     pixels ``p0, p0 + 1`` with weights ``1 - t, t``, pixels outside ``[0, R)`` weight 0; or the
     pixel containing ``f`` with weight 1 (``bilinear`` False)."""
@@ -627,8 +627,8 @@ def resample_point_kernel(Pa, Pb, C, block_index, image_cell, meta, offs, ny_l, 
             d = ((ky0 + i) * st + 0.5 - cy[q]) / r
             wy[i] = math.exp(-0.5 * d * d)
             syw += wy[i]
-        i0, u0, u1 = _axis_taps2((sy[q] - lo) / h, R, bilinear)
-        j0, v0, v1 = _axis_taps2((sx[q] - lo) / h, R, bilinear)
+        i0, u0, u1 = pixel_taps((sy[q] - lo) / h, R, bilinear)
+        j0, v0, v1 = pixel_taps((sx[q] - lo) / h, R, bilinear)
         # per CP group, the weighted sum of its taps' C rows first (nr multiply-adds per tap),
         # then one product with the group's factor values: taps spanning several cells no
         # longer recompute the factors at every change of group (the mid frame's level-0 taps)

@@ -29,6 +29,9 @@ blocks dominated and the upper levels had ~10 % error). Measurements in docs/gli
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
+import math
 import os
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -59,9 +62,9 @@ RANK_STEPS = (1.0, 1.5, 2.0, 2.5, 3.0, 4.0, 6.0)
 LEVEL_RANK = ("global", "level", "uniform")
 #: allocation marker of the groups stored exactly (``bake(exact_from_level=...)``)
 EXACT = -1
-#: How a bake with exact levels spends the rank budget (1: over all groups, the exact ones then
-#: replacing theirs; 2, session 11: over the fitted groups only). Bakes with exact levels key
-#: their checkpoints, and the render cache its files, on it (:func:`code_versions`).
+#: How a bake with exact levels spends the rank budget: 2, over the fitted groups only (1: over
+#: all groups, the exact ones then replacing theirs). Bakes with exact levels key their
+#: checkpoints, and the render cache its files, on it (:func:`code_versions`).
 EXACT_BUDGET_RULE = 2
 
 
@@ -74,6 +77,77 @@ def code_versions(settings: dict) -> dict:
     if settings.get("exact_from_level") is not None:
         out["exact_budget"] = EXACT_BUDGET_RULE
     return out
+
+
+#: The bake of ``prefilter bake glints`` and of the ``glints`` render method (one definition: the
+#: command writes, by default into the render cache, what the renderer reads; :func:`bake_settings`
+#: completes it for a map). ``intrinsic_roughness`` is the model's (direct P-NDF, fallback,
+#: reference), twice Yan et al.'s 0.005 so that the NDF pixels resolve the intrinsic lobe; with
+#: the bilinear lookup the map is baked with :func:`bilinear_bake_roughness` of it. ``support`` 1:
+#: the images cover the whole disk of projected half vectors. ``rank`` 48: the adaptive-rank
+#: storage budget at which the measurement scene's FLIP vs ``glints-direct`` stays <= 0.05 at
+#: every distance. ``blank_tol`` 1e-6: coarser thresholds drop the dim lines and flakes next to a
+#: bright peak that a point light sees at mid and far distance. ``ndf_truncation`` /
+#: ``footprint_truncation`` 6: HDR-FLIP of the mostly black brushed plane exposes the element and
+#: footprint tails beyond 4 stds. ``code_bits`` 16 / ``c_bits`` 8: 8-bit ``a``, ``b`` rounding
+#: shows in the NDF tails, 8-bit ``c`` does not and keeps range queries as fast as all-8-bit
+#: codes. ``ndf_res`` 512 with ``block`` 32: the environment's brushed plane needs 512^2 images;
+#: 32-pixel blocks keep the blocks a range query spans (and the frame time) low. Levels >= 3 are
+#: stored exactly, each image its own group (``exact_cell`` 1: exact ranks <= ``block``, faster
+#: queries). Measurements: docs/glints-part2.md, ``benchmarks/study_glints_scenes.py``.
+BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
+                     intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
+                     blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
+                     code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1)
+#: Spatial cell of a group at level 0 (texels), at most the map's side.
+CELL = 32
+
+
+def bake_settings(shape, settings: dict | None = None, *, bilinear: bool = True) -> dict:
+    """The keyword arguments of :func:`bake` that make the render methods' map of a normal map
+    of ``shape (H, W, ...)``: :data:`BAKE_SETTINGS` updated by ``settings``, ``cell`` at most the
+    map's side (:data:`CELL`), and, for the bilinear NDF lookup (``bilinear``), the intrinsic
+    roughness sharpened by :func:`bilinear_bake_roughness`."""
+    st = dict(BAKE_SETTINGS, **(settings or {}))
+    st.setdefault("cell", min(CELL, int(shape[0]), int(shape[1])))
+    if bilinear:
+        st["intrinsic_roughness"] = bilinear_bake_roughness(st["intrinsic_roughness"],
+                                                            st["support"], st["ndf_res"])
+    return st
+
+
+def settings_key(settings: dict) -> str:
+    """The cache key (12 hex digits) of complete bake ``settings``: their JSON and the code
+    versions they depend on (:func:`code_versions`: the CP fit's and, with exact levels, the budget
+    rule's), so files made before a change to either are not reused."""
+    return hashlib.sha1(json.dumps(dict(settings, **code_versions(settings)), sort_keys=True)
+                        .encode()).hexdigest()[:12]
+
+
+def cache_dir() -> Path:
+    """The render cache of baked maps: ``$PREFILTER_GLINTS_CACHE`` or
+    ``~/.cache/prefilter/glints``."""
+    d = os.environ.get("PREFILTER_GLINTS_CACHE")
+    return Path(d) if d else Path.home() / ".cache" / "prefilter" / "glints"
+
+
+def cache_path(normal_map, settings: dict) -> Path:
+    """The render cache's file of ``normal_map`` baked with complete ``settings``
+    (:func:`bake_settings`): named by the SHA-1 of the normals and :func:`settings_key`."""
+    digest = map_digest(as_normal_map(normal_map))
+    return cache_dir() / f"{digest[:20]}-{settings_key(settings)}.npz"
+
+
+def bilinear_bake_roughness(intrinsic_roughness: float, support: float, ndf_res: int) -> float:
+    """Intrinsic roughness to bake with so that the bilinear lookup reproduces ``sigma_r``.
+
+    A bilinear interpolation of pixel averages (pitch ``h = 2 support / ndf_res``) blurs the NDF
+    by the pixel box (variance ``h^2 / 12``) and the tent (``h^2 / 6``), i.e. adds ``(h / 2)^2``
+    to the variance of every element's Gaussian: baking with ``sqrt(sigma_r^2 - (h/2)^2)`` puts it
+    back (not below ``sigma_r / 2`` when the pixels are too coarse for that)."""
+    sr = as_intrinsic_roughness(intrinsic_roughness)
+    hh = float(support) / int(ndf_res)
+    return max(math.sqrt(max(sr * sr - hh * hh, 0.0)), 0.5 * sr)
 
 
 def _memmap(path, shape):
@@ -164,7 +238,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     rank``; it is the width of the in-memory factors, so it sets the query cost). The summary
     reports the resulting mean and histogram.
 
-    ``level_rank`` (issue #8, query cost vs footprint size): ``"global"`` spends the budget
+    ``level_rank`` (query cost vs footprint size): ``"global"`` spends the budget
     where the predicted error drop per byte is largest over the whole map (level-0 groups end up
     with about twice the rank of the top levels'); ``"level"`` gives every pyramid level its own
     budget of ``rank`` per byte (the same total, the same mean rank per byte at every level);
@@ -176,15 +250,15 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
 
     ``code_bits``: 8 (default) or 16 bits per stored factor value (:func:`store.encode`). The
     budget ``rank`` keeps its meaning (the bytes per rank double, so the file about doubles);
-    16 bits remove the rounding that shows in the NDF tails (docs/glints-part2-log.md, session 7).
+    16 bits remove the rounding that shows in the NDF tails.
     ``c_bits``: bits of the per-image factor ``c`` (default ``code_bits``); 16-bit ``a``, ``b``
     with 8-bit ``c`` are as accurate as all-16-bit codes on the brushed map's scenes and as fast
-    to query as 8-bit ones (docs/glints-part2-log.md, session 9).
+    to query as 8-bit ones.
 
     ``exact_from_level``: the groups of pyramid levels ``>=`` this are stored as their exact
     non-negative CP (:func:`prefilter.glints.cp.exact_cp`: ranks up to ``B^2``, beyond
     ``max_rank``) instead of a fit, outside the budget (``rank`` is then the mean rank per byte
-    of the fitted groups; before session 11 the exact groups took part in the split). The
+    of the fitted groups). The
     levels above the finest few hold few images, so this costs little storage and removes the
     compression error that far footprints see.
 
@@ -463,7 +537,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
             parts[k].append(part[k])
         err2[lv] += float(part["err2_g"].sum() + p1["blank2"])
         err2_groups.append(part["err2_g"])
-        # parts written before session 10 lack the fit's error: the stored one bounds it
+        # parts without the fit's error: the stored one bounds it
         fit2 += float(part.get("fit2_g", part["err2_g"]).sum() + p1["blank2"])
         norm2[lv] += float(p1["norm2"])
         kept += int(p1["kept"])

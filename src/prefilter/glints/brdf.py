@@ -30,131 +30,25 @@ from __future__ import annotations
 
 import math
 import weakref
-from dataclasses import dataclass
 
 import numpy as np
 
 from prefilter.jit import njit_inline, njit_parallel, prange, serial
 from prefilter.validation import as_directions, as_float_array, broadcast_batch
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, as_intrinsic_roughness, texel_window,
-                                   as_normal_map, element_moments, elements, map_digest, pndf)
-from prefilter.glints._qkernels import _rect_mass
+from prefilter.microfacet.fresnel import schlick
+from prefilter.glints.pndf import (SIGMA_H, as_footprints, element_covariance, element_density,
+                                   element_gaussian, footprint_window, pndf)
 from prefilter.glints._simd import exp_neg, fdiv
 from prefilter.glints.query import point_flat
-from prefilter.glints.sample import quadtree_draw
-from prefilter.glints.store import GlintsMap
-
-
-@dataclass(frozen=True)
-class GlintSurface:
-    """A compressed glints map with (optionally) the normal map it was baked from.
-
-    Build it with :func:`surface`. ``normal_map`` and ``elements_`` are ``None`` when the
-    direct-P-NDF fallback below the finest level is not available (then level 0 is used).
-    """
-
-    gm: GlintsMap | None
-    normal_map: np.ndarray | None
-    elements_: tuple | None
-    intrinsic_roughness: float
-    interp: str = "resample"
-    bilinear: bool = True
-
-    @property
-    def sigma0(self) -> float:
-        return self.gm.pyramid.sigma0 if self.gm is not None else np.inf
-
-    @property
-    def sigma_min(self) -> float:
-        """Footprint std below which :func:`glint_ndf` uses the direct P-NDF (when the normal
-        map is known): ``sigma0``, or the smallest resampled std for ``interp="resample"``."""
-        if self.gm is None:
-            return np.inf
-        if self.interp == "resample":
-            from prefilter.glints.pyramid import resample_min_sigma
-
-            return resample_min_sigma(self.gm.pyramid)
-        return self.gm.pyramid.sigma0
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        if self.normal_map is not None:
-            return self.normal_map.shape[:2]
-        p = self.gm.pyramid
-        return p.height, p.width
-
-
-def surface(gm: GlintsMap | None = None, normal_map=None, *, check: bool = True,
-            intrinsic_roughness: float | None = None, interp: str = "resample",
-            bilinear: bool = True) -> GlintSurface:
-    """Bundle a baked map and its normal map (the direct P-NDF for tiny footprints).
-
-    ``gm=None`` gives a direct-only surface (every query by :func:`prefilter.glints.pndf.pndf`, the
-    ``glints-direct`` method). ``check`` verifies that ``normal_map`` is the one ``gm`` was baked
-    from (SHA-1 of the float64 normals recorded by the bake). ``intrinsic_roughness``: that of
-    the direct P-NDF (default: the bake's, else Yan et al.'s 0.005). ``interp``: how
-    :func:`glint_ndf` evaluates compressed footprints (:func:`prefilter.glints.query.weights`):
-    ``"resample"`` (default; Gaussian resampling, the footprint's exact P-NDF up to compression)
-    or ``"trilinear"`` (the paper's 8-image blend); ``bilinear``: NDF values interpolated between
-    the stored pixel averages (default) instead of the pixel's value.
-    """
-    from prefilter.glints.query import check_interp
-
-    check_interp(interp)
-    if gm is None and normal_map is None:
-        raise PrefilterError("surface: expected a GlintsMap, a normal map, or both; got neither")
-    if gm is not None and not isinstance(gm, GlintsMap):
-        raise PrefilterError(f"gm: expected a GlintsMap (prefilter.glints.load), got "
-                             f"{type(gm).__name__}")
-    nm = el = None
-    if normal_map is not None:
-        nm = as_normal_map(normal_map)
-        el = elements(nm)
-        if gm is not None and check:
-            digest = map_digest(nm)
-            baked = gm.header.get("map_sha1")
-            if baked is not None and baked != digest:
-                raise PrefilterError("normal_map: expected the normal map the glints map was baked "
-                                     f"from (SHA-1 {baked[:12]}...), got one with SHA-1 "
-                                     f"{digest[:12]}...")
-    if gm is not None:
-        sr = float(gm.header.get("settings", {}).get("intrinsic_roughness", DEFAULT_ROUGHNESS))
-    else:
-        sr = DEFAULT_ROUGHNESS
-    if intrinsic_roughness is not None:
-        sr = as_intrinsic_roughness(intrinsic_roughness)
-    return GlintSurface(gm, nm, el, sr, interp, bool(bilinear))
-
-
-def bilinear_bake_roughness(intrinsic_roughness: float, support: float, ndf_res: int) -> float:
-    """Intrinsic roughness to bake with so that the bilinear lookup reproduces ``sigma_r``.
-
-    A bilinear interpolation of pixel averages (pitch ``h = 2 support / ndf_res``) blurs the NDF
-    by the pixel box (variance ``h^2 / 12``) and the tent (``h^2 / 6``), i.e. adds ``(h / 2)^2``
-    to the variance of every element's Gaussian: baking with ``sqrt(sigma_r^2 - (h/2)^2)`` puts it
-    back (not below ``sigma_r / 2`` when the pixels are too coarse for that)."""
-    sr = as_intrinsic_roughness(intrinsic_roughness)
-    hh = float(support) / int(ndf_res)
-    return max(math.sqrt(max(sr * sr - hh * hh, 0.0)), 0.5 * sr)
-
-
-def as_surface(surf) -> GlintSurface:
-    """``surf`` as a :class:`GlintSurface`: a surface is returned as is, a :class:`GlintsMap`
-    is wrapped by :func:`surface` (compressed queries only); anything else is an error."""
-    if isinstance(surf, GlintSurface):
-        return surf
-    if isinstance(surf, GlintsMap):
-        return surface(surf)
-    raise PrefilterError(f"surf: expected a GlintSurface (prefilter.glints.brdf.surface) or a "
-                         f"GlintsMap, got {type(surf).__name__}")
+from prefilter.glints.surface import GlintSurface, as_surface, surface  # noqa: F401  (public here)
 
 
 #: Spatial truncation the render methods use for the direct P-NDF fallback below the finest
 #: level, in stds of the element weights per axis (as ``pndf``). Cutting it to 3 visits (3/4)^2
 #: of the texels and changes the NDF by only 0.6 % relative L2, but drops the glints of texels
-#: 3-4 stds away: HDR-FLIP of the near measurement frame vs glints-direct went 0.067 -> 0.174
-#: (3.5: 0.104), so the render keeps 4 (the separable kernel still saves one exp per texel).
+#: 3-4 stds away (HDR-FLIP of the near measurement frame vs glints-direct 0.174 at 3, 0.104 at
+#: 3.5, 0.067 at 4).
 FALLBACK_TRUNCATION = 4.0
 
 
@@ -169,14 +63,9 @@ def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
     sh2 = sh * sh
     sr2 = sr * sr
     for q in prange(out.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
+        x0, x1, y0, y1, f, var, tot2, _ = footprint_window(cx[q], cy[q], sp[q], sh2, trunc, H, W,
+                                                           np.inf)
         sv = math.sqrt(var)
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = texel_window(cx[q], rad)
-        y0, y1 = texel_window(cy[q], rad)
         nx = x1 - x0 + 1
         wx = np.empty(nx)
         col = np.empty(nx, np.int64)
@@ -203,19 +92,13 @@ def _direct_points(s_el, J, jn, cx, cy, sp, qx, qy, sr, sh, trunc, out):
                 if max(e0x, e0y) - f * g * (abs(dx) + abs(dy)) > 6.0 * (1.4142135623730951 * sr
                                                                        + sv * g):
                     continue
-                j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
-                ex = qx[q] - s_el[r, c, 0] - f * (j00 * dx + j01 * dy)
-                ey = qy[q] - s_el[r, c, 1] - f * (j10 * dx + j11 * dy)
-                a = sr2 + var * (j00 * j00 + j01 * j01)
-                d = sr2 + var * (j10 * j10 + j11 * j11)
+                mx, my, a, b, d = element_gaussian(s_el, J, r, c, dx, dy, f, var, sr2)
+                ex = qx[q] - mx
+                ey = qy[q] - my
                 # quad >= |e|^2 / trace(cov): cheap rejection before the exact form
                 if ex * ex + ey * ey > 36.0 * (a + d):
                     continue
-                b = var * (j00 * j10 + j01 * j11)
-                det = a * d - b * b
-                quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-                if quad < 36.0:
-                    acc += wy * wx[i] * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+                acc += wy * wx[i] * element_density(ex, ey, a, b, d, 36.0)
         out[q] = acc / (sx * sy)
 
 
@@ -226,13 +109,7 @@ def _footprint_columns(cx, cy, sp, sh2, trunc, W):  # pragma: no cover - compile
     ``f``, element variance ``var``, ``inv = 1 / (2 tot2)``, window ``x0, y0, y1``, ``nx``
     columns starting at ``xs`` in the doubled planes (width ``2 W``), column weights ``wx`` and
     their sum ``sx``, and ``fdx = f dx`` per column."""
-    sp2 = sp * sp
-    tot2 = sp2 + sh2
-    f = sh2 / tot2
-    var = sp2 * sh2 / tot2
-    rad = trunc * math.sqrt(tot2)
-    x0, x1 = texel_window(cx, rad)
-    y0, y1 = texel_window(cy, rad)
+    x0, x1, y0, y1, f, var, tot2, _ = footprint_window(cx, cy, sp, sh2, trunc, 0, W, np.inf)
     nx = x1 - x0 + 1
     wx = np.empty(nx)
     fdx = np.empty(nx)
@@ -252,8 +129,8 @@ def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, 
     footprint row of at most ``W`` texels is one contiguous slice, no index wrap). Each row's
     quadratic forms are computed for all its texels in a branch-free loop (SIMD), the
     exponentials only where ``quad < 36``: the bound-then-branch of :func:`_direct_points`
-    rejected 2/3 of the near frame's texels but paid a mispredicted branch and three scattered
-    loads for each (10.8 -> 4.6 ms on the near measurement frame, same values to 1e-15)."""
+    rejects 2/3 of the near frame's texels but pays a mispredicted branch and three scattered
+    loads for each (this kernel takes about half its time, the same values to 1e-15)."""
     H = SX.shape[0]
     W = SX.shape[1] // 2
     sh2 = sh * sh
@@ -283,9 +160,7 @@ def _direct_rows(SX, SY, J00, J01, J10, J11, cx, cy, sp, qx, qy, sr, sh, trunc, 
                 j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
                 ex = qxq - sxr[i] - (j00 * fdx[i] + j01 * fdy)
                 ey = qyq - syr[i] - (j10 * fdx[i] + j11 * fdy)
-                a = sr2 + var * (j00 * j00 + j01 * j01)
-                d = sr2 + var * (j10 * j10 + j11 * j11)
-                b = var * (j00 * j10 + j01 * j11)
+                a, b, d = element_covariance(j00, j01, j10, j11, var, sr2)
                 det[i] = a * d - b * b  # >= sr^4 > 0 (Cauchy-Schwarz)
                 quad[i] = d * ex * ex - 2.0 * b * ex * ey + a * ey * ey
             racc = 0.0
@@ -376,12 +251,8 @@ def glint_ndf(surf, center, sigma_p, s, *, fallback_truncation: float | None = N
     ``None``: :func:`prefilter.glints.pndf.pndf` exactly).
     """
     surf = as_surface(surf)
-    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
-    sp = as_float_array(sigma_p, "sigma_p")
     q = as_float_array(s, "s", ndim_min=1, last_dim=2)
-    if np.any(sp < 0):
-        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
-    shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
+    c, sp, shape = as_footprints(center, sigma_p, s=q.shape[:-1])
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
@@ -425,13 +296,6 @@ def vcavity_g1(w, m) -> np.ndarray:
 def vcavity_g2(wo, wi, m) -> np.ndarray:
     """V-cavity masking-shadowing ``min(G1(wo, m), G1(wi, m))`` (Cook and Torrance 1982)."""
     return np.minimum(vcavity_g1(wo, m), vcavity_g1(wi, m))
-
-
-def schlick(f0, cos_theta) -> np.ndarray:
-    """Schlick Fresnel ``f0 + (1 - f0)(1 - cos)^5``; ``f0 (..., C)``, ``cos_theta (...)``."""
-    c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
-    f0 = np.asarray(f0, dtype=np.float64)
-    return f0 + (1.0 - f0) * ((1.0 - c) ** 5)[..., None]
 
 
 def half(wo, wi):
@@ -480,7 +344,7 @@ def brdf_cos_from_ndf(wo, wi, h, D, f0):
     G = vcavity_g2(wo, wi, h)
     ok = (wo[..., 2] > 0.0) & (wi[..., 2] > 0.0) & (h[..., 2] > 0.0)
     val = np.where(ok, D * G / (4.0 * np.where(ok, wo[..., 2], 1.0)), 0.0)
-    return val[..., None] * schlick(f0, np.sum(wi * h, axis=-1))
+    return val[..., None] * schlick(f0, np.sum(wi * h, axis=-1)[..., None])
 
 
 # ------------------------------------------------------- several points per footprint (quad MIS)
@@ -490,8 +354,9 @@ def brdf_cos_from_ndf(wo, wi, h, D, f0):
 # arithmetic of the single-point kernels per point (the same values to rounding), so that each
 # texel's element is loaded, and its covariance formed, once instead of once per point. Their
 # per-texel loops are written to vectorise (prefilter.glints._simd: division without Numba's
-# zero check, a polynomial exp) and run over a footprint's whole window: on the near quad
-# frame's 2 560 footprints (950 000 texels, 8 points each) the one-walk kernel went 52 -> 29 ms.
+# zero check, a polynomial exp) and run over a footprint's whole window (on the near quad
+# frame's 2 560 footprints, 950 000 texels, 8 points each, about half the time of per-point
+# walks).
 
 #: Exponent below which an element's angular Gaussian is dropped from the NDF: ``exp(-18)``, 6 of
 #: its stds (the cut ``quad < 36`` of :func:`_direct_rows`).
@@ -515,9 +380,7 @@ def _row_gaussians(J00, J01, J10, J11, SX, SY, r, xs, nx, fdx, fdy, var, sr2, wx
     syr = SY[r, xs:xs + nx]
     for i in range(nx):
         j00, j01, j10, j11 = a0[i], a1[i], b0[i], b1[i]
-        a = sr2 + var * (j00 * j00 + j01 * j01)
-        d = sr2 + var * (j10 * j10 + j11 * j11)
-        b = var * (j00 * j10 + j01 * j11)
+        a, b, d = element_covariance(j00, j01, j10, j11, var, sr2)
         det = a * d - b * b  # >= sr^4 > 0 (Cauchy-Schwarz)
         nh = fdiv(-0.5, det)
         T[0, o + i] = sxr[i] + (j00 * fdx[i] + j01 * fdy)
@@ -601,349 +464,3 @@ def direct_ndf_k(surf, center, sigma_p, s, *, truncation: float = FALLBACK_TRUNC
         out[wide] = direct_ndf(surf, np.repeat(c[wide], K, 0), np.repeat(sp[wide], K),
                                q[wide].reshape(n * K, 2), truncation=truncation).reshape(n, K)
     return out
-
-
-@njit_parallel
-def _direct_sample_k(s_el, J, cx, cy, sp, sr, sh, trunc, lim2, u, out_s, out_pdf):
-    """``K`` draws per footprint from the direct P-NDF's element mixture (the arithmetic of
-    :func:`prefilter.glints.sample._direct_kernel`, uniforms ``u (N, K, 3)``) and their exact
-    densities (that of :func:`prefilter.glints.pndf.pndf`'s kernel, cut at ``quad < 8 trunc^2``):
-    the footprint weights are computed once and serve the element choices and the densities.
-    Footprints at the sigma_p -> inf limit (``tot2 >= lim2``) are left to the caller."""
-    H, W = s_el.shape[0], s_el.shape[1]
-    K = u.shape[1]
-    sh2 = sh * sh
-    cut = 2.0 * trunc * trunc * 4.0
-    for q in prange(out_pdf.shape[0]):
-        sp2 = sp[q] * sp[q]
-        tot2 = sp2 + sh2
-        if tot2 >= lim2:
-            continue
-        f = sh2 / tot2
-        var = sp2 * sh2 / tot2
-        rad = trunc * math.sqrt(tot2)
-        x0, x1 = texel_window(cx[q], rad)
-        y0, y1 = texel_window(cy[q], rad)
-        nx = x1 - x0 + 1
-        wb = np.empty(nx * (y1 - y0 + 1))
-        wsum = 0.0
-        n = 0
-        for y in range(y0, y1 + 1):
-            dy = cy[q] - (y + 0.5)
-            for x in range(x0, x1 + 1):
-                dx = cx[q] - (x + 0.5)
-                wb[n] = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-                wsum += wb[n]
-                n += 1
-        for k in range(K):
-            t = u[q, k, 0] * wsum
-            run = 0.0
-            n = 0
-            bx, by = x1, y1
-            done = False
-            for y in range(y0, y1 + 1):
-                for x in range(x0, x1 + 1):
-                    run += wb[n]
-                    n += 1
-                    if t < run:
-                        bx, by = x, y
-                        done = True
-                        break
-                if done:
-                    break
-            dx = cx[q] - (bx + 0.5)
-            dy = cy[q] - (by + 0.5)
-            mx, my, a, b, d = element_moments(s_el, J, by % H, bx % W, dx, dy, f, var)
-            a += sr * sr
-            d += sr * sr
-            l11 = math.sqrt(a)
-            l21 = b / l11
-            l22 = math.sqrt(max(d - l21 * l21, 0.0))
-            rr = math.sqrt(-2.0 * math.log(1.0 - u[q, k, 1]))
-            z1 = rr * math.cos(2.0 * math.pi * u[q, k, 2])
-            z2 = rr * math.sin(2.0 * math.pi * u[q, k, 2])
-            out_s[q, k, 0] = mx + l11 * z1
-            out_s[q, k, 1] = my + l21 * z1 + l22 * z2
-        acc = np.zeros(K)
-        n = 0
-        for y in range(y0, y1 + 1):
-            dy = cy[q] - (y + 0.5)
-            r = y % H
-            for x in range(x0, x1 + 1):
-                dx = cx[q] - (x + 0.5)
-                w = wb[n]
-                n += 1
-                mx, my, a, b, d = element_moments(s_el, J, r, x % W, dx, dy, f, var)
-                a += sr * sr
-                d += sr * sr
-                det = a * d - b * b
-                for k in range(K):
-                    ex = out_s[q, k, 0] - mx
-                    ey = out_s[q, k, 1] - my
-                    quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-                    if quad < cut:
-                        acc[k] += w * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
-        for k in range(K):
-            out_pdf[q, k] = acc[k] / wsum
-
-
-def sample_s_direct_k(surf, center, sigma_p, u):
-    """:func:`prefilter.glints.sample.sample_s_direct` for ``K`` draws per footprint:
-    ``center (N, 2)``, ``sigma_p (N,)``, uniforms ``u (N, K, 3)`` -> ``s (N, K, 2)``,
-    ``pdf (N, K)`` (the same draws and densities to rounding, in one walk per footprint)."""
-    from prefilter.glints.pndf import TRUNCATION, wide_limit2
-    from prefilter.glints.sample import sample_s_direct
-
-    if surf.elements_ is None:
-        raise PrefilterError("surf: direct sampling needs the normal map (surface(gm, normal_map))")
-    cc = np.ascontiguousarray
-    c = cc(center, dtype=np.float64)
-    uu = cc(u, dtype=np.float64)
-    N, K = uu.shape[:2]
-    sp = cc(np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,)))
-    s_el, J = surf.elements_
-    lim2 = wide_limit2(s_el)
-    s = np.zeros((N, K, 2))
-    pdf = np.zeros((N, K))
-    _serial_below(_direct_sample_k, N)(s_el, J, cc(c[:, 0]), cc(c[:, 1]), sp,
-                                       surf.intrinsic_roughness, SIGMA_H, TRUNCATION, lim2, uu,
-                                       s, pdf)
-    wide = sp * sp + SIGMA_H * SIGMA_H >= lim2
-    if np.any(wide):  # the sigma_p -> inf limit of pndf: the single-point functions
-        n = int(wide.sum())
-        sw, pw = sample_s_direct(surf, np.repeat(c[wide], K, 0), np.repeat(sp[wide], K),
-                                 u=uu[wide].reshape(n * K, 3))
-        s[wide], pdf[wide] = sw.reshape(n, K, 2), pw.reshape(n, K)
-    return s, pdf
-
-
-@njit_parallel
-def _sample_masses_k(A, Bp, C, block_index, image_cell, granks, idx, wts, bm, u, lo, h, out_s,
-                     out_pdf):
-    """:func:`prefilter.glints.sample._sample_kernel` for ``K`` draws per footprint (uniforms
-    ``u (N, K, k)``) with the footprint's block masses ``bm (N, nb * nb)`` given: they depend on
-    the footprint only, and were the kernel's cost (every block's mass for every draw)."""
-    for q in prange(out_pdf.shape[0]):
-        cm = np.empty(4)
-        ci = np.empty((4, 4), np.int64)
-        for kk in range(u.shape[1]):
-            out_s[q, kk, 0], out_s[q, kk, 1], out_pdf[q, kk] = quadtree_draw(
-                A, Bp, C, block_index, image_cell, granks, idx, wts, q, bm[q], u[q, kk], lo, h,
-                cm, ci)
-
-
-@njit_parallel
-def _block_sums(A, Bp, C, block_index, image_cell, granks, idx, wts, out):
-    """Pixel sum of every stored block of every image, ``out (n_images, nb, nb)`` (0 where the
-    block is dropped): ``_rect_mass`` of image ``idx[q, 0] = q`` with weight 1 over the block."""
-    B = A.shape[1] - 1
-    nb = block_index.shape[1]
-    for q in prange(out.shape[0]):
-        for bi in range(nb):
-            for bj in range(nb):
-                out[q, bi, bj] = _rect_mass(A, Bp, C, block_index, image_cell, granks, idx, wts,
-                                            q, bi, bj, 0, B, 0, B)
-
-
-@njit_parallel
-def _block_masses_from_sums(T, block_index, idx, wts, out):
-    """Block masses ``out (N, nb, nb)`` of blends ``(idx, wts)`` from the per-image block sums
-    ``T`` (:func:`_block_sums`), in ``_rect_mass``'s order of terms (the same values)."""
-    nb = block_index.shape[1]
-    for q in prange(out.shape[0]):
-        for bi in range(nb):
-            for bj in range(nb):
-                acc = 0.0
-                for c in range(idx.shape[1]):
-                    w = wts[q, c]
-                    if w == 0.0:
-                        continue
-                    img = idx[q, c]
-                    if block_index[img, bi, bj] < 0:
-                        continue
-                    acc += w * T[img, bi, bj]
-                out[q, bi, bj] = acc
-
-
-_SUMS: dict = {}
-
-
-def _block_sum_table(gm):
-    """:func:`_block_sums` of ``gm`` (cached while the map lives; 1365 x 16 x 16 for the 128^2
-    render map: 2.8 MB)."""
-    from prefilter.glints.query import kernel_args
-
-    key = id(gm)
-    hit = _SUMS.get(key)
-    if hit is None or hit[0]() is not gm:
-        arrs = kernel_args(gm)[0]
-        n, nb = gm.block_index.shape[0], gm.block_index.shape[1]
-        T = np.empty((n, nb, nb))
-        _serial_below(_block_sums, n)(*arrs, np.arange(n, dtype=np.int64)[:, None],
-                                      np.ones((n, 1)), T)
-        hit = _SUMS[key] = (weakref.ref(gm), T)
-        weakref.finalize(gm, _SUMS.pop, key, None)
-    return hit[1]
-
-
-def sample_s_k(gm: GlintsMap, center, sigma_p, u):
-    """:func:`prefilter.glints.sample.sample_s` for ``K`` draws per footprint: ``center (N, 2)``,
-    ``sigma_p (N,)``, uniforms ``u (N, K, n_uniforms(gm))`` -> ``s (N, K, 2)``, ``pdf (N, K)``
-    and the footprints' NDF masses ``M (N,)`` (:func:`prefilter.glints.sample.mass`), the block
-    masses computed once per footprint (the same draws, densities and masses to rounding)."""
-    from prefilter.glints.pyramid import interp_weights
-    from prefilter.glints.query import kernel_args
-
-    cc = np.ascontiguousarray
-    c = cc(center, dtype=np.float64)
-    uu = cc(u, dtype=np.float64)
-    N, K = uu.shape[:2]
-    sp = cc(np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,)))
-    # the block masses from per-image block sums: 8 products per block instead of 8 rank-long
-    # sums (the compressed sampler's cost: every block for every draw and density)
-    idx, w = interp_weights(gm.pyramid, c, sp)
-    idx, w = cc(idx), cc(w)
-    bm = np.empty((N,) + gm.block_index.shape[1:])
-    _serial_below(_block_masses_from_sums, N)(_block_sum_table(gm), gm.block_index, idx, w, bm)
-    h = 2.0 * gm.support / gm.resolution
-    M = bm.sum(axis=(-2, -1)) * h * h
-    s = np.empty((N, K, 2))
-    pdf = np.empty((N, K))
-    _serial_below(_sample_masses_k, N)(*kernel_args(gm)[0], idx, w, cc(bm.reshape(N, -1)), uu,
-                                       -gm.support, h, s, pdf)
-    return s, pdf, M
-
-
-@njit_parallel
-def _direct_mis_k(SX, SY, J00, J01, J10, J11, s_el, J, cx, cy, sp, qlx, qly, u, sr, sh, trunc,
-                  out_s, out_pdf, out_dl, out_db):
-    """Everything the quad MIS needs of a footprint's direct P-NDF in one walk over its texels:
-    the NDF (as :func:`_direct_rows`) at the ``P`` light samples' half vectors ``qlx, qly (N, P)``
-    -> ``out_dl``; ``P`` draws from the element mixture (uniforms ``u (N, P, 3)``, as
-    ``sample._direct_kernel``) -> ``out_s (N, P, 2)``, their density (as ``pndf``: cut at
-    ``quad < 8 trunc^2``) -> ``out_pdf`` and the NDF at them (the BRDF sample's half vector is
-    the draw) -> ``out_db``. The footprint weights are separable (one exp per row and column, the
-    single-point kernels' per-texel weights to rounding) and shared by the draws and the sums;
-    a texel's term is formed once for the density and the NDF of a draw."""
-    H = SX.shape[0]
-    W = SX.shape[1] // 2
-    P = qlx.shape[1]
-    Hs, Ws = s_el.shape[0], s_el.shape[1]
-    sh2 = sh * sh
-    sr2 = sr * sr
-    pdf_cut = -4.0 * trunc * trunc  # quad < 8 trunc^2
-    for q in prange(out_pdf.shape[0]):
-        f, var, inv, x0, y0, y1, nx, xs, wx, fdx, sx = _footprint_columns(
-            cx[q], cy[q], sp[q], sh2, trunc, W)
-        ny = y1 - y0 + 1
-        wy = np.empty(ny)
-        sy = 0.0
-        for j in range(ny):
-            dy = cy[q] - (y0 + j + 0.5)
-            wy[j] = math.exp(-dy * dy * inv)
-            sy += wy[j]
-        qx = np.empty(2 * P)
-        qy = np.empty(2 * P)
-        for k in range(P):
-            qx[k] = qlx[q, k]
-            qy[k] = qly[q, k]
-            # the texel of weight wy_j wx_i / (sx sy): its row by the rows' masses wy_j sx, then
-            # its column (ny + nx steps instead of a scan over the ny nx texels)
-            tu = u[q, k, 0] * sy
-            bj = ny - 1
-            run = 0.0
-            for j in range(ny):
-                run += wy[j]
-                if tu < run:
-                    bj = j
-                    break
-            tu = (tu - (run - wy[bj])) * sx
-            bi = nx - 1
-            run = 0.0
-            for i in range(nx):
-                run += wy[bj] * wx[i]
-                if tu < run:
-                    bi = i
-                    break
-            mx, my, a, b, d = element_moments(s_el, J, (y0 + bj) % Hs, (x0 + bi) % Ws,
-                                              cx[q] - (x0 + bi + 0.5), cy[q] - (y0 + bj + 0.5),
-                                              f, var)
-            a += sr2
-            d += sr2
-            # Cholesky of [[a, b], [b, d]] applied to a Box-Muller pair
-            l11 = math.sqrt(a)
-            l21 = b / l11
-            l22 = math.sqrt(max(d - l21 * l21, 0.0))
-            rr = math.sqrt(-2.0 * math.log(1.0 - u[q, k, 1]))
-            z1 = rr * math.cos(2.0 * math.pi * u[q, k, 2])
-            z2 = rr * math.sin(2.0 * math.pi * u[q, k, 2])
-            qx[P + k] = mx + l11 * z1
-            qy[P + k] = my + l21 * z1 + l22 * z2
-            out_s[q, k, 0] = qx[P + k]
-            out_s[q, k, 1] = qy[P + k]
-        n = nx * ny
-        T = np.empty((6, n))
-        t = np.empty(n)
-        for j in range(ny):
-            y = y0 + j
-            _row_gaussians(J00, J01, J10, J11, SX, SY, y % H, xs, nx, fdx, f * (cy[q] - (y + 0.5)),
-                           var, sr2, wx, wy[j], T, j * nx)
-        acc = np.zeros(2 * P)
-        accp = np.zeros(P)
-        for k in range(2 * P):
-            _exponents(qx[k], qy[k], T, n, t)
-            racc = 0.0
-            if k < P:
-                for i in range(n):
-                    if t[i] > _ANGULAR_CUT:
-                        racc += T[5, i] * exp_neg(t[i])
-            else:
-                pacc = 0.0
-                for i in range(n):
-                    if t[i] > pdf_cut:
-                        e = T[5, i] * exp_neg(t[i])
-                        pacc += e
-                        if t[i] > _ANGULAR_CUT:
-                            racc += e
-                accp[k - P] = pacc
-            acc[k] = racc
-        for k in range(P):
-            out_dl[q, k] = acc[k] / (2.0 * math.pi * sx * sy)
-            out_db[q, k] = acc[P + k] / (2.0 * math.pi * sx * sy)
-            out_pdf[q, k] = accp[k] / (2.0 * math.pi * sx * sy)
-
-
-def direct_mis_fits(surf, sigma_p) -> np.ndarray:
-    """Footprints ``(N,)`` whose direct P-NDF :func:`direct_mis_k` evaluates: rows narrower
-    than the map and below the P-NDF's sigma_p -> inf limit (``pndf.wide_limit2``)."""
-    from prefilter.glints.pndf import TRUNCATION, wide_limit2
-
-    s_el = surf.elements_[0]
-    tot2 = np.asarray(sigma_p, dtype=np.float64) ** 2 + SIGMA_H * SIGMA_H
-    return (2.0 * TRUNCATION * np.sqrt(tot2) + 2.0 <= s_el.shape[1]) & (tot2 < wide_limit2(s_el))
-
-
-def direct_mis_k(surf, center, sigma_p, q_light, u):
-    """The quad MIS's direct P-NDF of footprints ``center (N, 2)``, ``sigma_p (N,)`` (all
-    :func:`direct_mis_fits`) in one walk each (:func:`_direct_mis_k`, 4-std truncation):
-    ``D_light (N, P)`` at ``q_light (N, P, 2)``; draws ``s (N, P, 2)`` for uniforms
-    ``u (N, P, 3)`` as :func:`prefilter.glints.sample.sample_s_direct`, their density
-    ``pdf (N, P)`` (its ``pndf``) and ``D_draw (N, P)`` at them; all to rounding."""
-    from prefilter.glints.pndf import TRUNCATION
-
-    cc = np.ascontiguousarray
-    c = cc(center, dtype=np.float64)
-    ql = np.asarray(q_light, dtype=np.float64)
-    uu = cc(u, dtype=np.float64)
-    N, P = uu.shape[:2]
-    sp = cc(np.broadcast_to(np.asarray(sigma_p, dtype=np.float64), (N,)))
-    if not np.all(direct_mis_fits(surf, sp)):
-        raise PrefilterError("sigma_p: expected footprints narrower than the map "
-                             "(direct_mis_fits)")
-    s_el, J = surf.elements_
-    s = np.empty((N, P, 2))
-    pdf, dl, db = np.empty((N, P)), np.empty((N, P)), np.empty((N, P))
-    _serial_below(_direct_mis_k, N)(*_element_planes(s_el, J), s_el, J, cc(c[:, 0]), cc(c[:, 1]),
-                                    sp, cc(ql[..., 0]), cc(ql[..., 1]), uu,
-                                    surf.intrinsic_roughness, SIGMA_H, TRUNCATION, s, pdf, dl, db)
-    return dl, s, pdf, db

@@ -10,6 +10,7 @@ import click
 import numpy as np
 
 from prefilter.errors import PrefilterError
+from prefilter.glints.bake import BAKE_SETTINGS, CELL, bake, bake_settings, cache_path
 
 
 def load_normal_map(spec: str) -> np.ndarray:
@@ -68,11 +69,37 @@ def shared_options(**defaults):
     return decorate
 
 
+class _IntOrNone(click.ParamType):
+    """An integer >= ``lo``, or ``none``."""
+
+    name = "integer|none"
+
+    def __init__(self, lo: int):
+        self.lo = lo
+
+    def convert(self, value, param, ctx):
+        if value is None or isinstance(value, int):
+            return value
+        if str(value).lower() == "none":
+            return None
+        try:
+            v = int(value)
+        except ValueError:
+            self.fail(f"expected an integer >= {self.lo} or 'none', got {value!r}", param, ctx)
+        if v < self.lo:
+            self.fail(f"expected an integer >= {self.lo} or 'none', got {v}", param, ctx)
+        return v
+
+
+_D = BAKE_SETTINGS
+
+
 @click.command("glints")
 @click.argument("normal_map")
-@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
-              help="Output .npz (written atomically; parts in OUT.parts/ make it resumable).")
-@click.option("--rank", default=16, show_default=True,
+@click.option("-o", "--out", default=None, type=click.Path(dir_okay=False),
+              help="Output .npz (written atomically; parts in OUT.parts/ make it resumable) "
+                   "[default: the render cache, where the glints render method finds it].")
+@click.option("--rank", default=_D["rank"], show_default=True,
               help="Mean CP rank per group: the storage budget, spent where the error drops most "
                    "per byte (paper: a fixed rank 16, 32 for flakes).")
 @click.option("--max-rank", default=None, type=int,
@@ -82,50 +109,69 @@ def shared_options(**defaults):
               type=click.Choice(["global", "level", "uniform"]),
               help="How the rank budget is spread: over all groups, per pyramid level (equal "
                    "query work at every footprint size), or every group at --rank.")
-@shared_options(ndf_res=128, block=16, support=0.5, roughness=0.005)
-@click.option("--stride0", default=4, show_default=True, help="Level-0 footprint stride (texels).")
+@shared_options(ndf_res=_D["ndf_res"], block=_D["block"], support=_D["support"],
+                roughness=(_D["intrinsic_roughness"],
+                           "Intrinsic roughness sigma_r of the model; the map is baked sharper "
+                           "by the bilinear lookup's blur (glints.bake.bilinear_bake_roughness)."))
+@click.option("--stride0", default=_D["stride0"], show_default=True,
+              help="Level-0 footprint stride (texels).")
 @click.option("--sigma0", default=None, type=float,
               help="Level-0 footprint std [default: stride0].")
-@click.option("--cell", default=32, show_default=True,
-              help="Spatial cell of a group at level 0 (texels; doubles with each level).")
+@click.option("--cell", default=None, type=click.IntRange(min=1),
+              help=f"Spatial cell of a group at level 0 (texels; doubles with each level) "
+                   f"[default: {CELL}, at most the map's side].")
 @click.option("--converge", default=0.01, show_default=True,
               help="Stop adding levels when one differs from the previous by less (rel. L2).")
-@click.option("--ndf-truncation", default=4.0, show_default=True,
-              help="Stds at which each texel's Gaussian in s is cut (the renderer bakes with 6).")
-@click.option("--footprint-truncation", default=4.0, show_default=True,
-              help="Stds at which the footprint weights are cut (the renderer bakes with 6).")
-@click.option("--code-bits", default=8, show_default=True, type=click.Choice(["8", "16"]),
+@click.option("--blank-tol", default=_D["blank_tol"], show_default=True,
+              help="Drop NDF blocks whose maximum is below this fraction of their image's.")
+@click.option("--ndf-truncation", default=_D["ndf_truncation"], show_default=True,
+              help="Stds at which each texel's Gaussian in s is cut.")
+@click.option("--footprint-truncation", default=_D["footprint_truncation"], show_default=True,
+              help="Stds at which the footprint weights are cut.")
+@click.option("--code-bits", default=str(_D["code_bits"]), show_default=True,
+              type=click.Choice(["8", "16"]),
               help="Bits per stored factor value: 16 doubles the file and removes the 8-bit "
                    "rounding that shows in the NDF tails.")
-@click.option("--c-bits", default=None, type=click.Choice(["8", "16"]),
-              help="Bits of the per-image factor c (default: --code-bits); the renderer bakes "
-                   "--code-bits 16 --c-bits 8.")
-@click.option("--exact-from-level", default=None, type=click.IntRange(min=0),
+@click.option("--c-bits", default=str(_D["c_bits"]), show_default=True,
+              type=click.Choice(["8", "16"]), help="Bits of the per-image factor c.")
+@click.option("--exact-from-level", default=str(_D["exact_from_level"]), show_default=True,
+              type=_IntOrNone(0),
               help="Store the groups of pyramid levels >= this exactly (no CP fit; outside the "
-                   "rank budget).")
-@click.option("--exact-cell", default=None, type=click.IntRange(min=1),
-              help="Footprint centres per side of the cells of those exact levels [default: "
-                   "cell / stride0]; 1 makes every image a group (exact ranks <= block instead "
+                   "rank budget); 'none': fit every level.")
+@click.option("--exact-cell", default=str(_D["exact_cell"]), show_default=True,
+              type=_IntOrNone(1),
+              help="Footprint centres per side of the cells of those exact levels ('none': "
+                   "cell / stride0); 1 makes every image a group (exact ranks <= block instead "
                    "of block^2: faster queries).")
-@shared_options(iters=50, seed=0, quiet=False)
+@shared_options(iters=_D["n_iter_max"], seed=_D["seed"], quiet=False)
 def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
-                stride0, sigma0, cell, converge, ndf_truncation, footprint_truncation,
+                stride0, sigma0, cell, converge, blank_tol, ndf_truncation, footprint_truncation,
                 code_bits, c_bits, exact_from_level, exact_cell, iters, seed, quiet):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
-    'procedural:KIND[:SIZE[:SEED]]' (prefilter.texture.procedural.normal_map).
+    'procedural:KIND[:SIZE[:SEED]]' (prefilter.texture.procedural.normal_map). The defaults make
+    the map the glints render method uses (prefilter.glints.bake.BAKE_SETTINGS); without -o it
+    is written to the render cache, where that method finds it.
     """
-    from prefilter.glints.bake import bake
-
     nm = load_normal_map(normal_map)
-    summary = bake(nm, out, rank=rank, ndf_res=ndf_res, block=block, support=support,
-                   intrinsic_roughness=roughness, stride0=stride0, sigma0=sigma0, cell=cell,
-                   converge=converge, n_iter_max=iters, seed=seed, progress=not quiet,
-                   max_rank=max_rank, level_rank=level_rank, ndf_truncation=ndf_truncation,
-                   footprint_truncation=footprint_truncation, code_bits=int(code_bits),
-                   c_bits=None if c_bits is None else int(c_bits),
-                   exact_from_level=exact_from_level, exact_cell=exact_cell)
+    settings = dict(rank=rank, ndf_res=ndf_res, block=block, support=support,
+                    stride0=stride0, intrinsic_roughness=roughness, n_iter_max=iters, seed=seed,
+                    blank_tol=blank_tol, ndf_truncation=ndf_truncation,
+                    footprint_truncation=footprint_truncation, code_bits=int(code_bits),
+                    c_bits=int(c_bits), exact_from_level=exact_from_level, exact_cell=exact_cell)
+    if cell is not None:
+        settings["cell"] = cell
+    # arguments outside BAKE_SETTINGS enter the settings (and the cache key) only when given
+    for k, v, default in (("max_rank", max_rank, None), ("level_rank", level_rank, "global"),
+                          ("sigma0", sigma0, None), ("converge", converge, 0.01)):
+        if v != default:
+            settings[k] = v
+    st = bake_settings(nm.shape, settings)
+    if out is None:
+        out = cache_path(nm, st)
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+    summary = bake(nm, out, progress=not quiet, **st)
     s = summary
     click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
     click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "

@@ -32,7 +32,7 @@ from prefilter.errors import PrefilterError
 #: Version of the fit's results: bumped whenever a change to :func:`nn_cp` (or what the bake does
 #: with it) changes the factors it returns for the same inputs. The render and Wang-tile caches and
 #: the bake's checkpoints key on it, so files fitted by an older version are never reused
-#: (1: absolute stop test, sessions 1-8; 2: relative stop test ``prev - err < tol err``).
+#: (2: the relative stop test ``prev - err < tol err``; 1: an absolute one).
 FIT_VERSION = 2
 
 
@@ -112,9 +112,9 @@ def nn_cp(tensor: np.ndarray, rank: int, *, n_iter_max: int = 200, tol: float = 
     rank : number of rank-one terms ``R``.
     n_iter_max : iteration cap (the paper uses ALS with at most 500 iterations).
     tol : stop when the relative error improves by less than ``tol`` times itself between
-        iterations (relative, since session 9: the absolute test stopped the bake's fits, whose
-        errors sit near 1e-3, after a few iterations with leaked values over empty NDF regions;
-        ``method="tensorly"`` passes ``tol`` on with tensorly's meaning).
+        iterations (relative: an absolute test stops the bake's fits, whose errors sit near 1e-3,
+        after a few iterations with leaked values over empty NDF regions; ``method="tensorly"``
+        passes ``tol`` on with tensorly's meaning).
     seed : seed of the random non-negative initialisation.
     method : ``"hals"`` (this module) or ``"tensorly"`` (``non_negative_parafac_hals``).
 

@@ -87,6 +87,17 @@ def as_sigma_p(sigma_p, name: str = "sigma_p") -> np.ndarray:
     return a
 
 
+def as_footprints(center, sigma_p, **batch) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """Validated footprint centres ``(..., 2)`` and stds ``(...)`` (texels, ``>= 0``) and the
+    batch shape they broadcast to together with the named shapes ``batch``
+    (:func:`prefilter.validation.broadcast_batch`)."""
+    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    sp = as_float_array(sigma_p, "sigma_p")
+    if np.any(sp < 0):
+        raise PrefilterError(f"sigma_p: expected footprint stds >= 0, got min {sp.min()}")
+    return c, sp, broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, **batch)
+
+
 def as_support(support, name: str = "support") -> float:
     """A validated half-width of the NDF images' square in ``s``."""
     try:
@@ -116,7 +127,7 @@ def as_ndf_truncation(ndf_truncation, name: str = "ndf_truncation") -> float:
 
 def map_digest(normal_map: np.ndarray) -> str:
     """SHA-1 (hex) of a validated normal map's float64 values: what a bake records
-    (``map_sha1``), what :func:`prefilter.glints.brdf.surface` checks and what the render and
+    (``map_sha1``), what :func:`prefilter.glints.surface.surface` checks and what the render and
     Wang-tile caches are keyed by."""
     return hashlib.sha1(np.ascontiguousarray(normal_map, dtype=np.float64).tobytes()).hexdigest()
 
@@ -203,15 +214,88 @@ def footprint_window(cx, cy, sp, sh2, trunc, H, W, lim2):
 
 
 @njit_inline
+def element_covariance(j00, j01, j10, j11, var, sr2):  # pragma: no cover - compiled
+    """Covariance ``(a, b, d)`` = ``[[a, b], [b, d]] = sr2 I + var J J^T`` of an element's
+    Gaussian in ``s`` (Yan et al. 2016), ``J = [[j00, j01], [j10, j11]]`` the texel's slope
+    Jacobian, ``var`` the footprint-conditioned positional variance, ``sr2`` the intrinsic
+    roughness squared (0: the positional part alone)."""
+    return (sr2 + var * (j00 * j00 + j01 * j01), var * (j00 * j10 + j01 * j11),
+            sr2 + var * (j10 * j10 + j11 * j11))
+
+
+@njit_inline
 def element_moments(s_el, J, r, c, dx, dy, f, var):  # pragma: no cover - compiled
     """Mean slope ``(mx, my)`` and positional covariance ``(a, b, d)`` (without the intrinsic
     roughness) of texel ``(r, c)``'s element seen from a footprint offset ``(dx, dy)``: the
     4D Gaussian's slope marginal conditioned on the footprint (Yan et al. 2016)."""
+    return element_gaussian(s_el, J, r, c, dx, dy, f, var, 0.0)
+
+
+@njit_inline
+def element_gaussian(s_el, J, r, c, dx, dy, f, var, sr2):  # pragma: no cover - compiled
+    """:func:`element_moments` with the intrinsic roughness ``sr2 = sigma_r^2`` on the
+    covariance's diagonal: the element's Gaussian in ``s`` (Yan et al. 2016)."""
     j00, j01, j10, j11 = J[r, c, 0, 0], J[r, c, 0, 1], J[r, c, 1, 0], J[r, c, 1, 1]
     mx = s_el[r, c, 0] + f * (j00 * dx + j01 * dy)
     my = s_el[r, c, 1] + f * (j10 * dx + j11 * dy)
-    return (mx, my, var * (j00 * j00 + j01 * j01), var * (j00 * j10 + j01 * j11),
-            var * (j10 * j10 + j11 * j11))
+    a, b, d = element_covariance(j00, j01, j10, j11, var, sr2)
+    return mx, my, a, b, d
+
+
+@njit_inline
+def element_density(ex, ey, a, b, d, cut):  # pragma: no cover - compiled
+    """Density ``N((ex, ey); 0, [[a, b], [b, d]])`` of an element's Gaussian at the offset
+    ``(ex, ey)`` from its mean, 0 where the squared Mahalanobis distance is ``>= cut``."""
+    det = a * d - b * b
+    quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
+    if quad >= cut:
+        return 0.0
+    return math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+
+
+@njit_inline
+def element_draw(mx, my, a, b, d, u1, u2):  # pragma: no cover - compiled
+    """A draw from ``N((mx, my), [[a, b], [b, d]])`` for the uniforms ``u1, u2``: the Cholesky
+    factor applied to a Box-Muller pair."""
+    l11 = math.sqrt(a)
+    l21 = b / l11
+    l22 = math.sqrt(max(d - l21 * l21, 0.0))
+    rr = math.sqrt(-2.0 * math.log(1.0 - u1))
+    z1 = rr * math.cos(2.0 * math.pi * u2)
+    z2 = rr * math.sin(2.0 * math.pi * u2)
+    return mx + l11 * z1, my + l21 * z1 + l22 * z2
+
+
+@njit_inline
+def footprint_weights(cx, cy, x0, x1, y0, y1, tot2, out):  # pragma: no cover - compiled
+    """Gaussian footprint weights ``exp(-|c - u_i|^2 / (2 tot2))`` of the window's texels,
+    row-major into ``out (>= n_texels,)``; returns their sum (Yan et al. 2016)."""
+    wsum = 0.0
+    n = 0
+    for y in range(y0, y1 + 1):
+        dy = cy - (y + 0.5)
+        for x in range(x0, x1 + 1):
+            dx = cx - (x + 0.5)
+            out[n] = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
+            wsum += out[n]
+            n += 1
+    return wsum
+
+
+@njit_inline
+def choose_texel(wb, wsum, x0, x1, y0, y1, u):  # pragma: no cover - compiled
+    """Texel ``(x, y)`` of the window drawn with probability ``wb / wsum`` (weights of
+    :func:`footprint_weights`) by the uniform ``u``; the last texel if rounding runs out."""
+    t = u * wsum
+    run = 0.0
+    n = 0
+    for y in range(y0, y1 + 1):
+        for x in range(x0, x1 + 1):
+            run += wb[n]
+            n += 1
+            if t < run:
+                return x, y
+    return x1, y1
 
 
 @njit_inline
@@ -262,8 +346,12 @@ def line_nodes(kappa, siso, trunc):  # pragma: no cover - compiled
 
 @njit_parallel
 def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
+    """P-NDF at one point per footprint: the footprint-weighted mixture of the window's element
+    Gaussians, each cut at ``2 trunc`` of its stds (Yan et al. 2016)."""
     H, W = s_el.shape[0], s_el.shape[1]
     sh2 = sh * sh
+    sr2 = sr * sr
+    cut = 8.0 * trunc * trunc
     for q in prange(out.shape[0]):
         x0, x1, y0, y1, f, var, tot2, wide = footprint_window(cx[q], cy[q], sp[q], sh2, trunc,
                                                               H, W, lim2)
@@ -277,15 +365,8 @@ def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
                 c = x % W
                 w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
                 wsum += w
-                mx, my, a, b, d = element_moments(s_el, J, r, c, dx, dy, f, var)
-                a += sr * sr
-                d += sr * sr
-                det = a * d - b * b
-                ex = qx[q] - mx
-                ey = qy[q] - my
-                quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-                if quad < 2.0 * trunc * trunc * 4.0:
-                    acc += w * math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+                mx, my, a, b, d = element_gaussian(s_el, J, r, c, dx, dy, f, var, sr2)
+                acc += w * element_density(qx[q] - mx, qy[q] - my, a, b, d, cut)
         out[q] = acc / wsum
 
 
@@ -312,9 +393,8 @@ def splat(img, px, py, mx, my, siso, w, lo, h, trunc):
         py[i] = cur - prev
         prev = cur
     # rows and columns as views indexed from 0: Numba then drops its negative-index branch and
-    # LLVM vectorises the row update (benchmarks/bench_glints_bake.py at 512^2: splats 740-780 ->
-    # 370-500 ns, level-0 NDF images ~2x faster; sums within 1 ulp of the scalar loop's, 8e-16
-    # relative)
+    # LLVM vectorises the row update (level-0 NDF images ~2x faster than indexed loops,
+    # benchmarks/bench_glints_bake.py; sums within 1 ulp)
     pxs = px[j0:j1 + 1]
     n = pxs.size
     for i in range(i0, i1 + 1):
@@ -466,7 +546,7 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     resolution : pixels per side ``R``; support : half-width of the square in ``s``.
     ndf_truncation : each element's Gaussian in ``s`` is cut at this many stds.
     footprint_truncation : the footprint weights are cut at this many stds per axis.
-        The renderer's bakes use 6 for both (:data:`prefilter.glints.render.BAKE_SETTINGS`):
+        The renderer's bakes use 6 for both (:data:`prefilter.glints.bake.BAKE_SETTINGS`):
         HDR-FLIP at the top exposures of a mostly black frame sees the tails beyond 4.
 
     Returns

@@ -102,13 +102,6 @@ def range_weighted(gm: GlintsMap, idx, w, s_min, s_max) -> np.ndarray:
     return out
 
 
-#: :func:`range_multi` shares each footprint's taps across its rectangles (one fused kernel);
-#: False: the former path, the weights repeated per rectangle and :func:`range_weighted` on every
-#: rectangle (``active`` ignored), kept for before/after measurements
-#: (``benchmarks/bench_glints.py --frames --old-range``).
-RANGE_SHARED = True
-
-
 def range_multi(gm: GlintsMap, idx, w, s_min, s_max, active=None) -> np.ndarray:
     """Mean NDF values ``(N, K)`` over ``K`` rectangles per footprint, ``[s_min, s_max]``
     (``(N, K, 2)`` each, ``s_max > s_min``), of the blends ``(idx, w)`` ``(N, T)`` of
@@ -144,13 +137,10 @@ def range_multi(gm: GlintsMap, idx, w, s_min, s_max, active=None) -> np.ndarray:
         if act.dtype != bool or act.shape != (N, K):
             raise PrefilterError(f"active: expected a bool array of shape {(N, K)}, got "
                                  f"{act.dtype} {act.shape}")
-    if active is not None and RANGE_SHARED:
+    if active is not None:
         # inactive ones: a unit square outside the support (no block touched, value 0)
         lo_ = np.where(act[..., None], lo_, 4.0 * gm.support)
         hi_ = np.where(act[..., None], hi_, 4.0 * gm.support + 1.0)
-    if not RANGE_SHARED:
-        return range_weighted(gm, np.repeat(idx, K, 0), np.repeat(w, K, 0),
-                              lo_.reshape(-1, 2), hi_.reshape(-1, 2)).reshape(N, K)
     arrs, lo, h = kernel_args(gm)
     out = np.empty((N, K))
     if N == 0 or K == 0:

@@ -275,13 +275,14 @@ def pndf_integral(surf, center, sigma_p, table, lo: float, h: float, *,
 
 def _smooth_factor(wo, wi, f0):
     """``F G / (4 wo_z)`` (..., C), the half vector and the validity mask: ``f cos = k D``."""
-    from prefilter.glints.brdf import schlick, vcavity_g2
+    from prefilter.glints.brdf import vcavity_g2
+    from prefilter.microfacet.fresnel import schlick
 
     h = wo + wi
     h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
     ok = (wo[..., 2] > 0) & (wi[..., 2] > 0) & (h[..., 2] > 0)
     k = np.where(ok, vcavity_g2(wo, wi, h) / (4.0 * np.where(ok, wo[..., 2], 1.0)), 0.0)
-    return k[..., None] * schlick(f0, np.sum(wi * h, -1)), h, ok
+    return k[..., None] * schlick(f0, np.sum(wi * h, -1)[..., None]), h, ok
 
 
 def quad_integral(surf, center, sigma_p, wo, corners, radiance, f0=1.0, *,
@@ -546,7 +547,7 @@ def render_converged(scene, *, matched: bool = False, ndf: str = "direct",
     """Image ``(H, W, 3)`` float32 of :func:`shade_converged` at the pixel centres (the 1-spp
     samples of the ``glints`` methods)."""
     from prefilter.render.methods import RenderSettings
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.driver import render_samples
     from prefilter.render.scene import Scene, load_scene
 
     if not isinstance(scene, Scene):

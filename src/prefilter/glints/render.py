@@ -22,9 +22,10 @@ footprint divided by the sample count").
 
 * ``glints``: the compressed NDF (:func:`prefilter.glints.brdf.glint_ndf`: point query, trilinear
   over the pyramid, direct P-NDF below the finest level). The normal map is baked on first use
-  with :data:`BAKE_SETTINGS` and cached on disk (``$PREFILTER_GLINTS_CACHE`` or
-  ``~/.cache/prefilter/glints``) under the SHA-1 of the normals, the settings, the CP fit's
-  version (:data:`prefilter.glints.cp.FIT_VERSION`) and the bake's budget rule
+  with :data:`prefilter.glints.bake.BAKE_SETTINGS` (what ``prefilter bake glints`` makes) and
+  cached on disk (``$PREFILTER_GLINTS_CACHE`` or ``~/.cache/prefilter/glints``) under the SHA-1
+  of the normals, the settings, the CP fit's version (:data:`prefilter.glints.cp.FIT_VERSION`)
+  and the bake's budget rule
   (:data:`prefilter.glints.bake.EXACT_BUDGET_RULE`, settings with exact levels).
 * ``glints-direct``: the direct P-NDF of Yan et al. 2016 for every footprint (cost ~ its area).
 * ``glints-reference``: supersampling of the footprint with the full-resolution normal map and the
@@ -34,13 +35,11 @@ footprint divided by the sample count").
   integral with the view and light directions of each sub-pixel position; ``glints-direct``
   evaluates that integral in closed form up to the isotropic approximation of the footprint, the
   linearisation of ``uv`` across the pixel and the half vector taken at the pixel centre (it moves
-  by about the intrinsic roughness per half pixel: docs/glints-part2-log.md, "Against
-  ``glints-reference``").
+  by about the intrinsic roughness per half pixel).
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 from pathlib import Path
@@ -49,111 +48,62 @@ import numpy as np
 from tqdm import tqdm
 
 from prefilter.errors import PrefilterError
-from prefilter.glints.brdf import (FALLBACK_TRUNCATION, GlintSurface, bilinear_bake_roughness,
-                                   glint_brdf_cos, glint_ndf, surface)
-from prefilter.glints.bake import code_versions
-from prefilter.glints.pndf import DEFAULT_ROUGHNESS, as_normal_map, map_digest
+from prefilter.validation import as_directions, as_float_array
+from prefilter.glints.bake import (BAKE_SETTINGS, bake_if_missing, bake_settings, cache_dir,
+                                  cache_path)
+from prefilter.glints.brdf import (FALLBACK_TRUNCATION, brdf_cos_from_ndf, direct_ndf_k,
+                                   glint_brdf_cos, half)
+from prefilter.glints.envlight import equirect_directions, fit_sg, shade_sg
+from prefilter.glints.pndf import TRUNCATION, as_normal_map, map_digest, pndf
+from prefilter.glints.query import point, point_flat, range_multi, weights
+from prefilter.glints.sample import (direct_mis_fits, direct_mis_k, half_from_s, n_uniforms,
+                                     sample_s_direct_k, sample_s_k)
+from prefilter.glints.store import load
+from prefilter.glints.surface import GlintSurface, surface
 from prefilter.render.shading import point_incoming, shading_frames
 from prefilter.sphere.sampling import to_local, to_world
 
 PIXEL_SIGMA = 0.5
-#: Bake settings of the render cache. The intrinsic roughness is twice Yan et al.'s 0.005 so that
-#: the NDF pixels (pitch 1/128 at 256^2, 1/256 now) resolve the intrinsic lobe: with 0.005 a 1/128
-#: pixel is 1.6 std wide and the pixel averages differ from the direct P-NDF's point values at
-#: every sharp glint.
-#: The images cover the whole disk of projected half vectors (support 1, 256 pixels at that
-#: pitch): with support 0.5 every half vector tilted more than 27 degrees per axis had a zero NDF
-#: (a fifth of the pixels of the measurement scene, FLIP 0.36 -> 0.21 at mid distance).
-#: ``intrinsic_roughness`` is the model's (direct P-NDF, fallback, reference); with the bilinear
-#: lookup the map is baked with :func:`prefilter.glints.brdf.bilinear_bake_roughness` of it.
-#: ``rank`` is the adaptive-rank storage budget: 48 keeps the measurement scene's FLIP vs
-#: glints-direct <= 0.05 at every distance (16 / 32 / 48: mid 0.075 / 0.050 / 0.045) at 3.1 % of
-#: the uncompressed pyramid (11.0 MB for the 128^2 flakes map, bake 55 s).
-#: ``blank_tol``: NDF blocks whose maximum is below this fraction of their image's maximum are
-#: dropped (zero). The bake's default 1e-4 zeroed the dim lines of the scratches map next to its
-#: bright flat-surface peak (and dim flakes next to bright ones), which the point light sees at
-#: mid/far distance: FLIP vs glints-direct 0.081 on the scratches plane at mid; the uncompressed
-#: pyramid with the same blocks dropped gives 0.080, with 1e-5 / 1e-6 0.018 / 0.015 (rendered
-#: with 1e-6: 0.017; docs/glints-part2-log.md). Cost: 1.2-1.9x the kept blocks and bytes (flakes
-#: 11.0 -> 17.5 MB, scratches 13.3 -> 21.6 MB), frame time +5 % at mid.
-#: ``ndf_truncation`` / ``footprint_truncation`` (6 / 6, the bake's default 4 / 4): HDR-FLIP of
-#: the mostly black brushed plane frames exposes up to +24 stops, where the element and footprint
-#: tails beyond 4 stds show: plane brushed mid / far 0.101 / 0.097 -> 0.078 / 0.079 (6 / 6;
-#: element cut alone 0.100 / 0.081), no cell of the point matrix worse by more than 0.001; bake
-#: time ~2x, storage +0.1-3.5 % (docs/glints-part2-log.md, session 6).
-#: ``code_bits`` 16 / ``c_bits`` 8: 16-bit ``a``, ``b`` factors, 8-bit per-image ``c``. The
-#: 8-bit ``a``, ``b`` rounding (with the CP's early stop, now fixed in :mod:`cp`) was the
-#: brushed plane's point-light miss: mid / far 0.078 / 0.079 -> 0.040 / 0.050; 8-bit ``c``
-#: changes no brushed cell by more than 0.0005 and keeps the range queries as fast as
-#: all-8-bit codes (all-16-bit ones: 1.5x slower kernel, bench_glints_codes.py).
-#: ``exact_from_level``: levels >= L stored exactly (session 9, 256^2 images: L = 2, brushed
-#: point far 0.050 -> 0.028; docs/glints-part2-log.md, session 9).
-#: ``ndf_res`` 512 with ``block`` 32 (session 10; was 256 / 16) and ``exact_from_level`` 3: the
-#: environment's brushed plane cells were at the 256^2 images' resolution floor (compression
-#: alone 0.053 / 0.050 -> 0.029 / 0.021). 32-pixel blocks keep the blocks a range query spans
-#: (and the frame time) at the 256 / 16 layout's: 512 / 16 made environment frames 2x slower;
-#: exact levels >= 2 at this block size reach ranks 1024 (flakes 105 MB, environment max/min
-#: 1.9), >= 3 ranks 384-1024 on few groups. Storage brushed 4.88 -> 7.87 MB, flakes 36.6 ->
-#: 61.7 MB (the uncompressed pyramid is 4x larger); bake ~2.3x longer (docs/glints-part2.md).
-#: ``exact_cell`` 1 (session 11): every image of the exact levels is its own group, so their
-#: exact ranks are at most 32 instead of up to 1024 (a query reads the whole rank): far frames
-#: environment 107-109 -> 93-94 ms, point 13 -> 11 ms (max/min 1.30 -> 1.13, 1.20 -> 1.11;
-#: ``bench_glints.py --frames --cpu --runs 2 --baseline``). The exact groups no longer take part
-#: in the rank budget: flakes 61.7 -> 57.9 MB, gaussian 24.6 -> 23.0 MB, level-0 relative L2
-#: error +1 % / +6 % (docs/glints-part2-log.md, session 11).
-BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
-                     intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
-                     blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
-                     code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1)
-#: How ``glints`` evaluates compressed footprints (:func:`prefilter.glints.brdf.surface`):
+#: How ``glints`` evaluates compressed footprints (:func:`prefilter.glints.surface.surface`):
 #: Gaussian resampling of a finer pyramid level with bilinear NDF lookup. The paper's trilinear
 #: blend with the pixel's value (``"trilinear"``, ``False``) moves sparse glints between pyramid
 #: samples: FLIP vs glints-direct 0.065 / 0.212 / 0.090 instead of 0.039 / 0.103 / 0.059 on the
-#: measurement scene (docs/glints-part2-log.md).
+#: measurement scene (near / mid / far).
 INTERP = "resample"
 BILINEAR = True
 _SURFACES: dict = {}
 _BY_ID: dict = {}
 
 
-def cache_dir() -> Path:
-    d = os.environ.get("PREFILTER_GLINTS_CACHE")
-    return Path(d) if d else Path.home() / ".cache" / "prefilter" / "glints"
-
-
 def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = None,
                   progress: bool = False) -> GlintSurface:
-    """The :class:`GlintSurface` of a normal map: baked once (disk cache), then kept in memory.
+    """The :class:`GlintSurface` of a normal map: baked once (disk cache,
+    :func:`prefilter.glints.bake.cache_path`, where ``prefilter bake glints`` writes by default),
+    then kept in memory. ``settings`` override :data:`prefilter.glints.bake.BAKE_SETTINGS`.
 
     ``direct=True`` returns a surface without the compressed map (``glints-direct``).
     """
-    from prefilter.glints.bake import bake_if_missing
-    from prefilter.glints.store import load
-
     # the renderer passes the same (cached) texture array every frame: skip validating and
     # hashing it again (~20 ms per frame for a 128^2 map)
-    st = dict(BAKE_SETTINGS, **(settings or {}))
-    ident = (id(normal_map), direct, json.dumps(st, sort_keys=True), str(cache_dir()), INTERP,
+    model = dict(BAKE_SETTINGS, **(settings or {}))
+    ident = (id(normal_map), direct, json.dumps(model, sort_keys=True), str(cache_dir()), INTERP,
              BILINEAR)
     hit = _BY_ID.get(ident)
     if hit is not None and hit[0] is normal_map:
         return hit[1]
     nm = as_normal_map(normal_map)
-    H, W = nm.shape[:2]
-    st.setdefault("cell", min(32, H, W))
-    sr = st["intrinsic_roughness"]  # the model's: direct P-NDF, fallback and reference
-    if BILINEAR and not direct:
-        # the bilinear lookup adds (h/2)^2 to the NDF's variance: bake that much sharper
-        st["intrinsic_roughness"] = bilinear_bake_roughness(sr, st["support"], st["ndf_res"])
+    sr = model["intrinsic_roughness"]  # the model's: direct P-NDF, fallback and reference
     digest = map_digest(nm)
-    key = settings_key(st)
-    # the direct surface is the normal map and the model's roughness (no bake): key it by both
-    mem = (digest, f"direct-{sr!r}" if direct else key, INTERP, BILINEAR)
-    if mem not in _SURFACES:
-        if direct:
-            _SURFACES[mem] = surface(None, nm, intrinsic_roughness=st["intrinsic_roughness"])
-        else:
-            path = cache_dir() / f"{digest[:20]}-{key}.npz"
+    if direct:
+        # the direct surface is the normal map and the model's roughness (no bake): key it by both
+        mem = (digest, f"direct-{sr!r}", INTERP, BILINEAR)
+        if mem not in _SURFACES:
+            _SURFACES[mem] = surface(None, nm, intrinsic_roughness=sr)
+    else:
+        st = bake_settings(nm.shape, settings, bilinear=BILINEAR)
+        path = cache_path(nm, st)
+        mem = (digest, path.name, INTERP, BILINEAR)
+        if mem not in _SURFACES:
             # several renderers (pytest workers, CLI runs) may share the cache: the first bakes
             # under the lock, the others wait for it and load its file
             path.parent.mkdir(parents=True, exist_ok=True)
@@ -163,14 +113,6 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
     if isinstance(normal_map, np.ndarray):
         _BY_ID[ident] = (normal_map, _SURFACES[mem])
     return _SURFACES[mem]
-
-
-def settings_key(settings: dict) -> str:
-    """The cache key (12 hex digits) of complete bake ``settings``: their JSON and the code
-    versions they depend on (:func:`prefilter.glints.bake.code_versions`: the CP fit's and, with
-    exact levels, the budget rule's), so files made before a change to either are not reused."""
-    return hashlib.sha1(json.dumps(dict(settings, **code_versions(settings)), sort_keys=True)
-                        .encode()).hexdigest()[:12]
 
 
 def footprints(g, shape, spp: int = 1):
@@ -206,23 +148,16 @@ U_PAIR = 11
 #: half-vector region must have a bounding box narrower than ``RANGE_MAX`` in ``s`` (the BRDF's
 #: smooth factors are taken at the patch centre) and fill at least ``FILL_MIN`` of it (the range
 #: mean is over a rectangle of the patch's area, :data:`QUAD_RECT`; the guard is against
-#: degenerate patches: with bounding boxes it was 0.5, which sent the 8 % of the plane's mid
-#: pixels with patches filled 0.40-0.5 to Monte Carlo; with equal-area rectangles those cost
-#: FLIP 0.027 -> 0.028 vs the reference on the range pixels, docs/glints-part2-log.md, session 5).
+#: degenerate patches: 0.3 keeps the plane's mid pixels with patches filled 0.3-0.5 on the range
+#: path, at FLIP 0.028 vs the reference on the range pixels).
 QUAD_SUB = 2
 RANGE_MAX = 0.08
 #: Pyramid weights of the quad lights' range queries: Gaussian resampling, the point queries'
-#: footprint (:data:`INTERP`). The trilinear blend (8 images of the wrong sizes and places) was
-#: the systematic error of the range path (issue #9): plane flakes mid, range pixels vs the
-#: deterministic reference FLIP 0.143 trilinear, 0.042 resampled (both with bounding boxes;
-#: docs/glints-part2-log.md, session 5). The weights are computed once per pixel and shared by its
-#: patches.
+#: footprint (:data:`INTERP`). The trilinear blend (8 images of the wrong sizes and places) is
+#: a systematic error of the range path: plane flakes mid, range pixels vs the deterministic
+#: reference FLIP 0.143 trilinear, 0.042 resampled (both with bounding boxes). The weights are
+#: computed once per pixel and shared by its patches.
 QUAD_INTERP = "resample"
-#: Pyramid weights of the environment lights' range queries (:mod:`prefilter.glints.envlight`):
-#: kept trilinear: unlike quads it shows no bias there (plane mid, 32 seeds, FLIP vs the matched
-#: reference: flakes 0.030 trilinear / 0.033 resampled, gaussian 0.023 / 0.023) while resampling
-#: costs 3-4x the frame (0.28 -> 0.85 s CPU, flakes; benchmarks/study_glints_env_interp.py).
-RANGE_INTERP = "trilinear"
 #: The rectangle of each patch's range query: ``"equal-area"`` (:func:`_equal_area_rects`) or
 #: ``"box"`` (the bounding box of its half-vector polygon, the mean scaled by the polygon's area).
 QUAD_RECT = "equal-area"
@@ -232,13 +167,8 @@ _HORIZON = 1e-3
 
 def _brdf_terms(wo, wi, f0):
     """``F G / (4 wo_z)`` (..., C) and the half vector: everything of ``f cos`` but ``D``."""
-    h = wo + wi
-    h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
-    ok = (wo[..., 2] > 0) & (wi[..., 2] > 0) & (h[..., 2] > 0)
-    from prefilter.glints.brdf import schlick, vcavity_g2
-
-    k = np.where(ok, vcavity_g2(wo, wi, h) / (4.0 * np.where(ok, wo[..., 2], 1.0)), 0.0)
-    return k[..., None] * schlick(f0, np.sum(wi * h, -1)), h
+    h = half(wo, wi)
+    return brdf_cos_from_ndf(wo, wi, h, 1.0, f0), h
 
 
 def _equal_area_rects(x, y, area, lo, hi):
@@ -328,8 +258,6 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     if QUAD_RECT == "equal-area":
         lo, hi = _equal_area_rects(x, y, area, lo, hi)
     lo_v, hi_v = lo[valid].reshape(nv, m, 2), hi[valid].reshape(nv, m, 2) + eps
-    from prefilter.glints.query import range_multi, weights
-
     # one footprint per pixel: its (up to ~170) resampling weights serve all its patches, whose
     # rectangles share the walk over the taps (range_multi)
     idx, w, _ = weights(surf.gm, np.asarray(center)[valid], np.asarray(sigma_p)[valid],
@@ -367,20 +295,17 @@ def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0
 
     Returns
     -------
-    (N, 3) the unbiased estimate of ``int_quad f cos L dwi``: that of :func:`quad_mis_unfused`
-    to rounding, evaluated per footprint instead of per direction. Below the finest level (with
+    (N, 3) the unbiased estimate of ``int_quad f cos L dwi``: the balance heuristic of
+    ``glint_brdf_cos``, ``pdf_wi`` and ``sample_wi`` per pair, evaluated per footprint instead of
+    per direction (the tests check it against that per-direction form). Below the finest level (with
     the 4-std fallback) one walk over its texels gives the NDF at the light samples' half
     vectors (also their density), the draws, their densities and the NDF at them
-    (:func:`prefilter.glints.brdf.direct_mis_k`); elsewhere the draws are taken together with
-    the block masses computed once (:func:`prefilter.glints.brdf.sample_s_k`), then the NDF at
+    (:func:`prefilter.glints.sample.direct_mis_k`); elsewhere the draws are taken together with
+    the block masses computed once (:func:`prefilter.glints.sample.sample_s_k`), then the NDF at
     all ``2 n`` half vectors together (:func:`prefilter.glints.brdf.direct_ndf_k`). The
     per-direction version walked a near footprint's texels ~16 times (the NDF for the BRDF and
     again for the density, the sampler twice and the exact P-NDF for the draw's density).
     """
-    from prefilter.validation import as_directions, as_float_array
-    from prefilter.glints.brdf import brdf_cos_from_ndf, half, direct_mis_fits, direct_mis_k
-    from prefilter.glints.pndf import TRUNCATION
-    from prefilter.glints.sample import half_from_s
     from prefilter.render.lights import quad_light_pdf, quad_light_sample
 
     N = len(wo)
@@ -458,9 +383,6 @@ def _mis_draws(surf, c, sp, u):
     """``sample_wi``'s projected half vectors ``s (N, K, 2)`` and densities ``(N, K)`` for the
     uniforms ``u (N, K, 9)``, and the compressed footprints' NDF masses ``M (N,)`` (NaN for the
     direct ones)."""
-    from prefilter.glints.brdf import sample_s_direct_k, sample_s_k
-    from prefilter.glints.sample import n_uniforms
-
     N, K = u.shape[:2]
     s = np.zeros((N, K, 2))
     ps = np.zeros((N, K))
@@ -478,10 +400,6 @@ def _mis_draws(surf, c, sp, u):
 
 def _mis_ndf(surf, c, sp, q, fallback_truncation):
     """``glint_ndf`` at ``q (N, K, 2)`` -> ``(N, K)``, the ``K`` points of a footprint together."""
-    from prefilter.glints.brdf import direct_ndf_k
-    from prefilter.glints.pndf import pndf
-    from prefilter.glints.query import point_flat
-
     N, K = q.shape[:2]
     out = np.zeros((N, K))
     direct = sp < surf.sigma_min if surf.normal_map is not None else np.zeros(sp.shape, bool)
@@ -506,10 +424,6 @@ def _mis_light_pdf(surf, c, sp, wo, h, D, M, fallback_truncation):
     """``pdf_wi`` of light samples with half vectors ``h (N, K, 3)``: the direct P-NDF at 4 stds
     below the finest level (``D``, the BRDF's values, when it was evaluated so), else the
     compressed NDF over its mass ``M``."""
-    from prefilter.glints.brdf import direct_ndf_k
-    from prefilter.glints.pndf import TRUNCATION
-    from prefilter.glints.query import point
-
     N, K = h.shape[:2]
     ps = np.zeros((N, K))
     small = _mis_small(surf, sp)
@@ -529,52 +443,6 @@ def _mis_light_pdf(surf, c, sp, wo, h, D, M, fallback_truncation):
     woh = np.sum(wo[:, None] * h, -1)
     ok = (h[..., 2] > 0) & (woh > 0) & (wo[:, None, 2] > 0)
     return np.where(ok, ps * h[..., 2] / (4.0 * np.where(ok, woh, 1.0)), 0.0)
-
-
-def quad_mis_unfused(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u,
-                     *, fallback_truncation: float | None = None):
-    """:func:`quad_mis` spelled out with the per-direction functions (the NDF walked once per
-    BRDF value, density and draw): the same estimate to rounding, slower; its reference.
-
-    Parameters
-    ----------
-    position : (N, 3) world shading points; frame : (t, b, n) each (N, 3) (world);
-    light : QuadLight; u : (N, n * 11) uniforms in ``[0, 1)``; fallback_truncation: see
-    :func:`prefilter.glints.brdf.glint_ndf` (the BRDF's direct P-NDF below the finest level).
-
-    Returns
-    -------
-    (N, 3) the unbiased estimate of ``int_quad f cos L dwi``.
-    """
-    from prefilter.glints.sample import pdf_wi, sample_wi
-    from prefilter.render.lights import quad_light_pdf, quad_light_sample
-
-    t, b, n = frame
-    N = len(wo)
-    n_pairs = u.shape[1] // U_PAIR
-    L = np.asarray(light.radiance, dtype=np.float64)
-    out = np.zeros((N, 3))
-    for j in range(n_pairs):
-        uj = u[:, j * U_PAIR:(j + 1) * U_PAIR]
-        # light sample
-        wl, pl = quad_light_sample(light, position, uj[:, :2])
-        wl_loc = to_local(wl, t, b, n)
-        fl = glint_brdf_cos(surf, center, sigma_p, wo, wl_loc, f0,
-                            fallback_truncation=fallback_truncation)
-        pb = pdf_wi(surf, center, sigma_p, wo, wl_loc)
-        w = np.where(pl > 0, 1.0 / np.where(pl > 0, pl + pb, 1.0), 0.0)
-        out += fl * w[:, None]
-        # BRDF sample
-        wb_loc, pb2 = sample_wi(surf, center, sigma_p, wo, u=uj[:, 2:])
-        ok = pb2 > 0
-        wb_loc = np.where(ok[:, None], wb_loc, np.array([0.0, 0.0, 1.0]))
-        wb = to_world(wb_loc, t, b, n)
-        pl2 = quad_light_pdf(light, position, wb)
-        fb = glint_brdf_cos(surf, center, sigma_p, wo, wb_loc, f0,
-                            fallback_truncation=fallback_truncation)
-        w2 = np.where(ok & (pl2 > 0), 1.0 / np.where(ok, pb2 + pl2, 1.0), 0.0)
-        out += fb * w2[:, None]
-    return out * L / max(n_pairs, 1)
 
 
 def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
@@ -663,8 +531,6 @@ _SG_FITS: dict = {}
 def environment_sgs(light):
     """The spherical-Gaussian fit ``(mu, lam, p)`` (world axes) of an environment light, times
     its ``scale`` (:func:`prefilter.glints.envlight.fit_sg`; cached per image)."""
-    from prefilter.glints.envlight import fit_sg
-
     key = light.image.cache_key()
     if key not in _SG_FITS:
         _SG_FITS[key] = fit_sg(light.image.load(), ENV_LOBES)
@@ -692,8 +558,6 @@ def environment_radiance(env, surf, center, sigma_p, wo, frame, f0, base, u, *,
     range-prefiltered over the lobe's compact epsilon-support when ``prefilter`` (sec. 5.4).
     ``u``: the shading samples' uniforms (:func:`uniform_columns` with ``n_quads`` quad lights;
     None or too few columns: drawn from a fixed seed)."""
-    from prefilter.glints.envlight import shade_sg
-
     out = np.zeros((len(wo), 3))
     for j, light in enumerate(env):
         mu, lam, pl = environment_lobes(light, frame)
@@ -737,7 +601,7 @@ def check_lights(scene, name):
 
 
 def _render(scene, settings, mode, name):
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.driver import render_samples
 
     check_lights(scene, name)
     spp = settings.spp
@@ -764,7 +628,7 @@ def render_glints_reference(scene, settings) -> np.ndarray:
     shaded with the point P-NDF of the full-resolution normal map (``sigma_p = 0``); quad and
     environment lights by Monte Carlo as in ``glints-direct``."""
     from prefilter.render.camera import gbuffer_at
-    from prefilter.render.pipeline import row_rng
+    from prefilter.render.driver import row_rng
 
     check_lights(scene, "glints-reference")
     cam = scene.camera
@@ -800,8 +664,6 @@ def measurement_environment() -> Path:
     a dim sky (0.3), a dark ground (0.05) and a bright window (20) of +-12 degrees around the
     direction that the measurement scenes' plane mirrors towards the camera (59 degrees from
     ``+y``, towards ``-z``: near the image centre in the convention of ``docs/scenes.md``)."""
-    from prefilter.glints.envlight import equirect_directions
-
     path = cache_dir() / "measurement-environment-v2.npy"
     if not path.exists():
         d = equirect_directions(64, 128)
@@ -851,103 +713,3 @@ def measurement_scene(distance: float, kind: str = "flakes", size: int = 128, wi
                                       "normal_map": {"procedural": kind, "size": size,
                                                      "seed": 1}}}],
             "lights": light}
-
-
-def measure(distances=(0.5, 2.0, 8.0), kind: str = "flakes", size: int = 128,
-            ref_spp: int = 64, lights: str = "point") -> list[dict]:
-    """Frame times (best of 2) of ``glints`` and ``glints-direct`` at each distance in one run,
-    FLIP between them and against ``glints-reference`` (``ref_spp``)."""
-    import time
-
-    from prefilter.render.metrics import flip
-    from prefilter.render.pipeline import render
-    from prefilter.render.scene import load_scene
-
-    rows = []
-    for d in distances:
-        sc = load_scene(measurement_scene(d, kind, size, lights=lights))
-        render(sc, "glints")  # bake / compile outside the timing
-        t = {}
-        img = {}
-        for m in ("glints", "glints-direct"):
-            best = np.inf
-            for _ in range(2 if m == "glints" else 1):
-                t0 = time.perf_counter()
-                img[m] = render(sc, m)
-                best = min(best, time.perf_counter() - t0)
-            t[m] = best
-        img["ref"] = render(sc, "glints-reference", spp=ref_spp)
-        _, sp, _ = pixel_footprints(sc, (size, size))
-        rows.append(dict(distance=d, sigma_p_median=float(np.median(sp)),
-                         t_glints=t["glints"], t_direct=t["glints-direct"],
-                         speedup=t["glints-direct"] / t["glints"],
-                         flip_glints_direct=float(flip(img["glints"], img["glints-direct"]).mean),
-                         flip_glints_ref=float(flip(img["glints"], img["ref"]).mean),
-                         flip_direct_ref=float(flip(img["glints-direct"], img["ref"]).mean),
-                         mean_ratio=float(img["glints"].mean() / img["glints-direct"].mean())))
-        print(json.dumps(rows[-1]), flush=True)
-    return rows
-
-
-def matched_lobe(ref, X, Y, h):
-    """Gaussian NDFs ``(K, R, R)`` with the mass, mean and covariance of the NDF images ``ref
-    (K, R, R)`` (pixel centres ``X, Y (R, R)``, pitch ``h``): a plain smooth microfacet lobe with
-    the footprint's moments, the comparison of "the glint look preserved" (issue #9)."""
-    w = ref * h * h
-    m = w.sum((1, 2))
-    mx = (w * X).sum((1, 2)) / m
-    my = (w * Y).sum((1, 2)) / m
-    dx, dy = X - mx[:, None, None], Y - my[:, None, None]
-    cxx = ((w * dx * dx).sum((1, 2)) / m)[:, None, None]
-    cyy = ((w * dy * dy).sum((1, 2)) / m)[:, None, None]
-    cxy = ((w * dx * dy).sum((1, 2)) / m)[:, None, None]
-    det = cxx * cyy - cxy**2
-    q = (cyy * dx * dx - 2.0 * cxy * dx * dy + cxx * dy * dy) / det
-    return m[:, None, None] * np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(det))
-
-
-def ndf_errors(kinds=("gaussian", "brushed", "flakes", "scratches"), size: int = 64,
-               sigmas=(4.0, 8.0, 16.0), n: int = 6, seed: int = 0) -> list[dict]:
-    """Relative L2 error of NDF images against the direct P-NDF images (pixel averages) for
-    ``n`` random footprints per size: the compressed query as ``glints`` renders it
-    (:func:`prefilter.glints.brdf.glint_ndf` on the render cache's surface), and a smooth lobe (a
-    Gaussian NDF of ``s`` with the footprint's mean and covariance: a plain microfacet model with
-    matched moments)."""
-    from prefilter.glints import pndf_image
-    from prefilter.texture.procedural import normal_map
-
-    R, S = BAKE_SETTINGS["ndf_res"], BAKE_SETTINGS["support"]
-    sr, h = BAKE_SETTINGS["intrinsic_roughness"], 2 * BAKE_SETTINGS["support"] / R
-    x = (np.arange(R) + 0.5) * h - S
-    X, Y = np.meshgrid(x, x)
-    grid = np.stack([X, Y], -1)
-    rng = np.random.default_rng(seed)
-    rows = []
-    for kind in kinds:
-        nm = normal_map(kind, size=size, seed=1)
-        surf = baked_surface(nm)
-        row = {"map": kind, "bake_error": surf.gm.header["summary"]["rel_l2_error"]}
-        for sp in sigmas:
-            c = rng.uniform(0, size, (n, 2))
-            ref = pndf_image(nm, c, sp, R, S, sr)
-            got = glint_ndf(surf, c[:, None, None], sp, grid[None])
-            smooth = matched_lobe(ref, X, Y, h)
-
-            def err(a):
-                d = np.linalg.norm((a - ref).reshape(n, -1), axis=1)
-                return float(np.mean(d / np.linalg.norm(ref.reshape(n, -1), axis=1)))
-
-            row[f"sigma_p={sp:g}"] = {"glints": err(got), "smooth": err(smooth)}
-        print(json.dumps(row), flush=True)
-        rows.append(row)
-    return rows
-
-
-if __name__ == "__main__":  # python -m prefilter.glints.render [frames KIND [LIGHTS] | ndf]
-    import sys
-
-    if len(sys.argv) > 1 and sys.argv[1] == "ndf":
-        ndf_errors()
-    else:
-        measure(kind=sys.argv[2] if len(sys.argv) > 2 else "flakes",
-                lights=sys.argv[3] if len(sys.argv) > 3 else "point")

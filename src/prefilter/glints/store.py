@@ -26,10 +26,10 @@ largest rank; the queries compute on the 8-bit codes and never decode them):
 * ``a``, ``b``, ``c`` may instead all be uint16 (65535 steps; ``bake(code_bits=16)``): the
   number of steps is the dtype's maximum (:func:`code_levels`); ``c`` may keep uint8 codes while
   ``a``, ``b`` are uint16 (``bake(code_bits=16, c_bits=8)``, the renderer's setting: the 8-bit
-  rounding that matters is that of ``a``, ``b``). Since session 9 the encoder
-  caps each ``a`` / ``b`` row's code sum at 65535 (:func:`factor_codes`; the loader's
-  renormalisation makes the scale free), so the queries' prefix sums fit uint16; files
-  written before that load as they are (uint32 prefix sums).
+  rounding that matters is that of ``a``, ``b``). The encoder caps each ``a`` / ``b`` row's
+  code sum at 65535 (:func:`factor_codes`; the loader's renormalisation makes the scale free),
+  so the queries' prefix sums fit uint16; files without that cap load as they are (uint32
+  prefix sums).
 * ``block_mask (N, ceil(nb^2 / 8))`` uint8: packed bits, set for kept blocks (row-major
   ``[bi, bj]``). The rows of ``C`` are ordered by group, then by image, so ``block_index`` and the
   group offsets follow from the mask and ``image_cell`` (:func:`block_index_from_mask`).
@@ -38,7 +38,7 @@ largest rank; the queries compute on the 8-bit codes and never decode them):
 The 8-bit rounding adds 0.01 points of relative L2 error to a 5.47 % fit (sampled cells of the
 512^2 gaussian map, rank 24; float16 added nothing measurable): see docs/glints.md. On the
 render's much closer fits it dominates: the brushed 128^2 map's 0.235 % is 0.110 % with 16-bit
-codes (docs/glints-part2-log.md, session 7). Version 2
+codes. Version 2
 (float16 factors of one rank, ``c_scale`` per group and rank, ``group_rows``, an int32
 ``block_index``) and version 1 (float32 prefix sums ``A``, ``Bp``, ``C``) still load.
 
@@ -152,16 +152,6 @@ class GlintsMap:
         n = self.block_index.shape[0] if self.block_index is not None else 0
         return f"GlintsMap({n} images, rank {self.header.get('ndf', {}).get('rank')})"
 
-    def point(self, center, sigma_p, s):
-        from prefilter.glints.query import point
-
-        return point(self, center, sigma_p, s)
-
-    def range(self, center, sigma_p, s_min, s_max):
-        from prefilter.glints.query import range_mean
-
-        return range_mean(self, center, sigma_p, s_min, s_max)
-
 
 def encode_v2(a: np.ndarray, b: np.ndarray, c: np.ndarray, group_rows: np.ndarray) -> dict:
     """Version-2 arrays of float64 factors ``a``, ``b`` ``(G, R, B)`` (columns summing to 1 or
@@ -189,7 +179,7 @@ def factor_codes(f: np.ndarray, Q: int) -> np.ndarray:
     at most ``PREFIX_MAX`` instead, a step of ``1 / 65527`` of the row's sum for ``B = 16`` rather
     than ``1 / 65535`` of its maximum. Why: uint32 prefix sums made the environment's range
     queries ~1.1x slower than uint16 ones (benchmarks/bench_glints_codes.py: 100.5 vs 90.2 ms
-    with 16-bit ``c``; docs/glints-part2-log.md, session 9)."""
+    with 16-bit ``c``)."""
     f = np.asarray(f, np.float64)
     if not f.size:
         return np.zeros(f.shape)

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from prefilter.jit import njit_serial
 from prefilter.validation import as_float_array, as_positive_int, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_normal_map,
@@ -93,27 +94,44 @@ def synthesize(normal_map, tile: int = 32, band: float = 4.0, rng=0) -> WangTile
     return WangTiles(tiles, int(gen.integers(0, 2**31)))
 
 
-def _hash_bits(i, j, seed):
-    """Two pseudo-random bits per grid vertex (a 64-bit integer mix of its coordinates)."""
-    h = (np.asarray(i, np.int64).astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)
-         ^ np.asarray(j, np.int64).astype(np.uint64) * np.uint64(0xC2B2AE3D27D4EB4F)
-         ^ np.uint64(seed) * np.uint64(0x165667B19E3779F9))
-    h ^= h >> np.uint64(29)
-    h *= np.uint64(0xBF58476D1CE4E5B9)
-    h ^= h >> np.uint64(32)
-    one = np.uint64(1)
-    return (h & one).astype(np.int64), ((h >> one) & one).astype(np.int64)
+_H1, _H2, _H3 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), \
+    np.uint64(0x165667B19E3779F9)
+_H4, _S29, _S32, _ONE = np.uint64(0xBF58476D1CE4E5B9), np.uint64(29), np.uint64(32), np.uint64(1)
+
+
+@njit_serial
+def hash_bits(i, j, seed):  # pragma: no cover - compiled
+    """Two pseudo-random bits per grid vertex ``(i, j)`` (a 64-bit integer mix of its
+    coordinates): the colours of its right and lower edges."""
+    h = (np.uint64(i) * _H1) ^ (np.uint64(j) * _H2) ^ (np.uint64(seed) * _H3)
+    h ^= h >> _S29
+    h *= _H4
+    h ^= h >> _S32
+    return np.int64(h & _ONE), np.int64((h >> _ONE) & _ONE)
+
+
+@njit_serial
+def implicit_type(i, j, seed):  # pragma: no cover - compiled
+    """Tile index of the implicit tiling at tile ``(i, j)`` from the colours of its edges."""
+    r_ij, b_ij = hash_bits(i, j, seed)
+    r_below = hash_bits(i, j + 1, seed)[0]
+    b_right = hash_bits(i + 1, j, seed)[1]
+    return r_ij + 2 * r_below + 4 * b_ij + 8 * b_right
+
+
+@njit_serial
+def _tile_index_kernel(i, j, seed, out):  # pragma: no cover - compiled
+    for k in range(out.shape[0]):
+        out[k] = implicit_type(i[k], j[k], seed)
 
 
 def tile_index(wt: WangTiles, i, j) -> np.ndarray:
     """Implicit tile index at tile coordinates ``(i, j)`` (column, row), any integers."""
-    i = np.asarray(i, np.int64)
-    j = np.asarray(j, np.int64)
-    with np.errstate(over="ignore"):
-        right_ij, below_ij = _hash_bits(i, j, wt.seed)
-        right_below, _ = _hash_bits(i, j + 1, wt.seed)
-        _, below_right = _hash_bits(i + 1, j, wt.seed)
-    return right_ij + 2 * right_below + 4 * below_ij + 8 * below_right
+    i, j = np.broadcast_arrays(np.asarray(i, np.int64), np.asarray(j, np.int64))
+    out = np.empty(i.shape, np.int64)
+    _tile_index_kernel(np.ascontiguousarray(i).reshape(-1), np.ascontiguousarray(j).reshape(-1),
+                       int(wt.seed), out.reshape(-1))
+    return out
 
 
 def index_map(wt: WangTiles, ny: int, nx: int, i0: int = 0, j0: int = 0) -> np.ndarray:

@@ -36,11 +36,13 @@ from prefilter.jit import njit_parallel, njit_serial, prange, serial
 from prefilter.validation import as_float_array, as_positive_int, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
-                                   as_sigma_p, as_support, element_split, line_nodes, normal_cdf,
-                                   pixel_edges, pndf_image, principal_axis, splat)
+                                   as_sigma_p, as_support, element_covariance, element_density,
+                                   element_split, line_nodes, normal_cdf, pixel_edges, pndf_image,
+                                   principal_axis, splat)
+from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
-                                   pndf_image_implicit, tile_index, tile_window)
+                                   implicit_type, pndf_image_implicit, tile_index, tile_window)
 
 
 def tile_elements(wt: WangTiles) -> tuple[np.ndarray, np.ndarray]:
@@ -734,28 +736,11 @@ def sample(wn: TiledNDF, center, sigma_p, n: int, rng=0, *, index=None):
 # ---------------------------------------------------------------------------------------------
 # batched point queries (Numba): the same arithmetic as ndf(), one kernel for many footprints
 
-_H1, _H2, _H3 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xC2B2AE3D27D4EB4F), \
-    np.uint64(0x165667B19E3779F9)
-_H4, _S29, _S32, _ONE = np.uint64(0xBF58476D1CE4E5B9), np.uint64(29), np.uint64(32), np.uint64(1)
-
-
-@njit_serial
-def _nb_bits(i, j, seed):  # pragma: no cover - compiled; wang._hash_bits
-    h = (np.uint64(i) * _H1) ^ (np.uint64(j) * _H2) ^ (np.uint64(seed) * _H3)
-    h ^= h >> _S29
-    h *= _H4
-    h ^= h >> _S32
-    return np.int64(h & _ONE), np.int64((h >> _ONE) & _ONE)
-
-
 @njit_serial
 def _nb_type(i, j, seed, index):  # pragma: no cover - compiled; _lookup
     if index.shape[0] > 0:
         return index[j % index.shape[0], i % index.shape[1]]
-    r_ij, b_ij = _nb_bits(i, j, seed)
-    r_below = _nb_bits(i, j + 1, seed)[0]
-    b_right = _nb_bits(i + 1, j, seed)[1]
-    return r_ij + 2 * r_below + 4 * b_ij + 8 * b_right
+    return implicit_type(i, j, seed)
 
 
 @njit_serial
@@ -824,10 +809,11 @@ def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no 
 
 
 @njit_serial
-def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
-              ix):  # pragma: no cover - compiled
-    """Unnormalised pixel value of texel ``(gx, gy)``'s element (exact neighbours; ``types``
-    covers its tile and the neighbouring ones, from tile ``(i0, j0)``)."""
+def _nb_gaussian(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2):  # pragma: no cover
+    """Footprint weight and element Gaussian (mean ``(mx, my)``, positional covariance
+    ``(a, b, d)``, :func:`prefilter.glints.pndf.element_moments`) of texel ``(gx, gy)`` of the
+    tiled plane, its slope Jacobian by central differences over the exact neighbours
+    (``types`` covers its tile and the neighbouring ones, from tile ``(i0, j0)``)."""
     ty = types
     jx0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 0) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 0))
     jx1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 1) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 1))
@@ -837,9 +823,16 @@ def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, 
     dy = cy - (gy + 0.5)
     mx = _nb_s(tiles, ty, i0, j0, gx, gy, 0) + f * (jx0 * dx + jy0 * dy)
     my = _nb_s(tiles, ty, i0, j0, gx, gy, 1) + f * (jx1 * dx + jy1 * dy)
-    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-    return _nb_element(mx, my, var * (jx0 * jx0 + jy0 * jy0), var * (jx0 * jx1 + jy0 * jy1),
-                       var * (jx1 * jx1 + jy1 * jy1), w, sr, lo, h, R, trunc, iy, ix)
+    a, b, d = element_covariance(jx0, jy0, jx1, jy1, var, 0.0)
+    return math.exp(-(dx * dx + dy * dy) / (2.0 * tot2)), mx, my, a, b, d
+
+
+@njit_serial
+def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
+              ix):  # pragma: no cover - compiled
+    """Unnormalised pixel value of texel ``(gx, gy)``'s element (:func:`_nb_gaussian`)."""
+    w, mx, my, a, b, d = _nb_gaussian(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2)
+    return _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix)
 
 
 @njit_serial
@@ -847,31 +840,17 @@ def _nb_texel_point(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, trun
                     qy):  # pragma: no cover - compiled
     """Unnormalised density at ``(qx, qy)`` of texel ``(gx, gy)``'s element (as
     ``pndf._pndf_points``: covariance ``sr^2 I + var J J^T``, cut beyond ``2 trunc`` stds)."""
-    ty = types
-    jx0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 0) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 0))
-    jx1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx + 1, gy, 1) - _nb_s(tiles, ty, i0, j0, gx - 1, gy, 1))
-    jy0 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 0) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 0))
-    jy1 = 0.5 * (_nb_s(tiles, ty, i0, j0, gx, gy + 1, 1) - _nb_s(tiles, ty, i0, j0, gx, gy - 1, 1))
-    dx = cx - (gx + 0.5)
-    dy = cy - (gy + 0.5)
-    ex = qx - _nb_s(tiles, ty, i0, j0, gx, gy, 0) - f * (jx0 * dx + jy0 * dy)
-    ey = qy - _nb_s(tiles, ty, i0, j0, gx, gy, 1) - f * (jx1 * dx + jy1 * dy)
-    w = math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
-    return w * _nb_density(ex, ey, jx0, jy0, jx1, jy1, var, sr, trunc)
+    w, mx, my, a, b, d = _nb_gaussian(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2)
+    sr2 = sr * sr
+    return w * element_density(qx - mx, qy - my, a + sr2, b, d + sr2, 8.0 * trunc * trunc)
 
 
 @njit_serial
 def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover - compiled
     """``N((ex, ey); 0, sr^2 I + var J J^T)``, 0 beyond ``2 trunc`` stds (``pndf._pndf_points``;
     ``J = [[j00, j01], [j10, j11]]``)."""
-    a = var * (j00 * j00 + j01 * j01) + sr * sr
-    b = var * (j00 * j10 + j01 * j11)
-    d = var * (j10 * j10 + j11 * j11) + sr * sr
-    det = a * d - b * b
-    quad = (d * ex * ex - 2.0 * b * ex * ey + a * ey * ey) / det
-    if quad >= 8.0 * trunc * trunc:
-        return 0.0
-    return math.exp(-0.5 * quad) / (2.0 * math.pi * math.sqrt(det))
+    a, b, d = element_covariance(j00, j01, j10, j11, var, sr * sr)
+    return element_density(ex, ey, a, b, d, 8.0 * trunc * trunc)
 
 
 @njit_parallel
@@ -1070,21 +1049,23 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
         out[q] = acc + dsum / (sx * sy * h * h) + psum / (sx * sy)
 
 
+@njit_serial
+def _taps_kernel(f, R, bilinear, p, w):  # pragma: no cover - compiled
+    for n in range(f.shape[0]):
+        for a in range(2):
+            p[n, a], w[n, a, 0], w[n, a, 1] = pixel_taps(f[n, a], R, bilinear)
+
+
 def _pixel_taps(wn: TiledNDF, q, bilinear: bool):
     """First pixel row / column ``(N,)`` and the weights ``(N, 2)`` of it and the next, per
-    axis: the pixel holding ``q (N, 2)`` (weight 1, 0 outside the support), or bilinear between
-    pixel centres (pixels outside the support weigh 0, as the glints map's bilinear lookup)."""
+    axis (:func:`prefilter.glints._qkernels.pixel_taps`, the glints map's lookup): the pixel
+    holding ``q (N, 2)`` (weight 1, 0 outside the support), or bilinear between pixel centres
+    (pixels outside the support weigh 0)."""
     R, S = wn.resolution, wn.support
-    f = (q + S) / (2.0 * S / R)
-    if bilinear:
-        f = f - 0.5
-    p = np.floor(f).astype(np.int64)
-    t = f - p if bilinear else np.zeros_like(f)
-    w = np.stack([1.0 - t, t], axis=-1)  # (N, 2 axes, 2 taps)
-    w[..., 0] *= (p >= 0) & (p < R)
-    w[..., 1] *= (p + 1 >= 0) & (p + 1 < R)
-    if not bilinear:  # one pixel: outside the square on either axis, no value
-        w[..., 0] *= np.all((p >= 0) & (p < R), axis=-1)[:, None]
+    f = np.ascontiguousarray((q + S) / (2.0 * S / R), dtype=np.float64)
+    p = np.empty(f.shape, np.int64)
+    w = np.empty(f.shape + (2,))
+    _taps_kernel(f, R, bool(bilinear), p, w)
     # x is axis 0 of q, the image's column
     return p[:, 1], p[:, 0], np.ascontiguousarray(w[:, 1]), np.ascontiguousarray(w[:, 0])
 
@@ -1102,7 +1083,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     direct P-NDF's point value as ``pndf.pndf``; above it the dependent texels) as point
     densities with intrinsic roughness ``point_roughness`` (default
     ``wn.intrinsic_roughness``). Bake with
-    :func:`prefilter.glints.brdf.bilinear_bake_roughness` of it so that the interpolation's blur
+    :func:`prefilter.glints.bake.bilinear_bake_roughness` of it so that the interpolation's blur
     restores it (as the ``glints`` render cache does)."""
     if not isinstance(wn, TiledNDF):
         raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")

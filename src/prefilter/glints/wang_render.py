@@ -45,14 +45,14 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 
 #: Tiles and bake of the render cache. ``tile`` 32 (the CLI's default), or the exemplar's size
 #: (even, >= 4) when it is smaller (:func:`tile_size`); ``intrinsic_roughness``, ``support``:
-#: those of ``glints`` (:data:`prefilter.glints.render.BAKE_SETTINGS`, whole disk of half
+#: those of ``glints`` (:data:`prefilter.glints.bake.BAKE_SETTINGS`, whole disk of half
 #: vectors); ``ndf_res`` 256 (pixel 0.78 intrinsic stds, as ``glints``): at 128 the FLIP against
-#: ``glints-direct`` on the assembled map was 0.127 instead of 0.074 at mid distance; the cost
+#: ``glints-direct`` on the assembled map is 0.127 instead of 0.074 at mid distance; the cost
 #: is the bake (4.1 GiB peak RSS, ~9-12 min on the shared machine) and
 #: 232 MB of storage at ``rank`` 16 with ``block`` 16 (stored-image error 2.5 / 1.7 / 1.0 % per
 #: level on the flakes map; docs/glints-wang.md, "Rendering"). ``bilinear``: NDF values
 #: interpolated between pixel centres, the pyramids baked with
-#: :func:`prefilter.glints.brdf.bilinear_bake_roughness` (the interpolation's blur restores the
+#: :func:`prefilter.glints.bake.bilinear_bake_roughness` (the interpolation's blur restores the
 #: intrinsic roughness), the texels evaluated at query time as point densities
 #: (:func:`prefilter.glints.wang_ndf.ndf_points`); the pixel's value instead: FLIP 0.167 /
 #: 0.120 / 0.104 instead of 0.004 / 0.029 / 0.027 (tests/glints/test_wang_render.py scene).
@@ -73,7 +73,7 @@ _BY_ID: dict = {}
 
 
 #: Environment variable with a JSON object of :data:`WANG_SETTINGS` overrides (cheap bakes for
-#: test sessions: the default bake takes minutes whatever the exemplar's size).
+#: test runs: the default bake takes minutes whatever the exemplar's size).
 SETTINGS_ENV = "PREFILTER_GLINTS_WANG_SETTINGS"
 
 
@@ -138,7 +138,7 @@ def cache_path(normal_map, settings: dict | None = None):
 def _cache_path(nm: np.ndarray, st: dict):
     """:func:`cache_path` of a validated exemplar ``nm`` and complete settings ``st`` (hashed
     as they are: validating ``nm`` again may change its last bits)."""
-    from prefilter.glints.render import cache_dir, settings_key
+    from prefilter.glints.bake import cache_dir, settings_key
     from prefilter.glints.wang_store import VERSION
 
     # the store's format version in the key (and, by settings_key, the CP fit's): a file of
@@ -188,7 +188,7 @@ def baked_tiles(normal_map, settings: dict | None = None, *, progress: bool = Fa
 def _bake_roughness(st: dict) -> float:
     if not st["bilinear"]:
         return st["intrinsic_roughness"]
-    from prefilter.glints.brdf import bilinear_bake_roughness
+    from prefilter.glints.bake import bilinear_bake_roughness
 
     return bilinear_bake_roughness(st["intrinsic_roughness"], st["support"], st["ndf_res"])
 
@@ -356,7 +356,7 @@ def render_wang(scene, settings, *, index=None, wang: dict | None = None) -> np.
     ``glints-direct`` (:func:`prefilter.glints.render.random_dims`, same rows and seed): the
     same light samples. The registered method is this with the defaults."""
     from prefilter.glints.render import random_dims
-    from prefilter.render.pipeline import render_samples
+    from prefilter.render.driver import render_samples
 
     check_lights(scene)
     wang_settings(wang)

@@ -52,7 +52,7 @@ class DemoSettings:
     per texel side of the per-footprint LEADR table; ``glints_*``: normal-map side, NDF image
     resolution and CP rank of the glints bake; ``glints_render_*``: normal-map side, frame size
     and camera distances of the rendered glints frames (the renderer's own bake settings,
-    :data:`prefilter.glints.render.BAKE_SETTINGS`); ``viewer_*``: screenshot size, pixel-match image
+    :data:`prefilter.glints.bake.BAKE_SETTINGS`); ``viewer_*``: screenshot size, pixel-match image
     size, and whether the viewer section runs the browser at all. ``methods`` (showcase;
     ``None``: every registered method but :data:`SHOWCASE_EXCLUDE`), ``multiscale_maps`` and
     ``colormap_configs`` restrict the scenes (for tests: each HDR-FLIP evaluation costs most of
