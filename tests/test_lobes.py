@@ -7,7 +7,8 @@ slope space of the half vector (:func:`prefilter.sphere.slope_warp`), which stay
 narrow grazing lobes; glint lobes in a cap around pilot draws, restricted to the upper
 hemisphere. Draws below the horizon (weight 0, or failed) join the outside bin. Glint lobes
 are sums of narrow element Gaussians (intrinsic roughness 0.005): the fast cases use a small
-footprint (1.5 texels, ~40 elements), wide ones (6 texels) are slow cases; their bins' quadrature is coarser (see :func:`chi2`).
+footprint (1.5 texels, ~40 elements), wide ones (6 texels) are slow cases; their bins'
+quadrature is coarser (see :func:`chi2`).
 """
 
 from __future__ import annotations
