@@ -22,8 +22,8 @@ at 128^2, near / mid / far; 64x48). Per cell:
    use the isotropic Gaussian of the same area, :func:`prefilter.glints.render.footprints`), so
    FLIP(``glints-direct``, ``E(1)``) is that approximation's error alone; smaller ``shrink`` also
    lets the half vector vary across the pixel, as it does in ``glints-reference`` (both methods
-   take it at the pixel centre; on the sphere's curvature ``E(0.3)`` is not converged yet,
-   docs/glints-part2-log.md). No registered method renders a plain smooth microfacet BRDF of
+   take it at the pixel centre; on the sphere's curvature ``E(0.3)`` is not converged yet).
+   No registered method renders a plain smooth microfacet BRDF of
    these materials (``ltc``, ``reference`` and ``leadr-point`` shade GGX with the material's
    ``alpha`` and normal or height mip levels, not the glint map's footprint NDF), so the smooth
    comparison is on NDF images (2).

@@ -3,7 +3,7 @@
 A material's ``normal_map`` is the *exemplar*: the method synthesises 16 Wang tiles from it
 (:func:`prefilter.glints.wang.synthesize`, :data:`WANG_SETTINGS`), bakes their per-tile
 footprint pyramids (:func:`prefilter.glints.wang_ndf.bake_tiles`, CP-compressed) once and
-caches them on disk next to the ``glints`` bakes (:func:`prefilter.glints.render.cache_dir`,
+caches them on disk next to the ``glints`` bakes (:func:`prefilter.glints.bake.cache_dir`,
 ``wang-<SHA-1 of the normals>-<SHA-1 of the settings and store version>.npz``,
 :mod:`~prefilter.glints.wang_store` format, 8-bit factor codes by default, written atomically
 under a lock; the render uses the pyramids decoded from the file, also in the baking
