@@ -7,9 +7,15 @@ directory and renamed over the target, so readers never see a half-written file.
 Every ``.npz`` written by :func:`save_npz_atomic` carries a ``__meta__`` entry, a JSON string
 ``{"checksum": "sha256", "sha256": ..., "arrays": [...], "format": ..., "version": ...}`` whose
 digest (:func:`array_digest`) covers the names, dtypes, shapes and bytes of all other arrays.
-:func:`load_npz_checked` verifies it (files without ``__meta__``, written before checksums
-existed, still load) and turns every decoding failure into a
+:func:`load_npz_checked` verifies it (a file without ``__meta__`` is refused: removing the entry
+must not turn the checksum off) and turns every decoding failure into a
 :class:`~prefilter.errors.TableFileError` that names the file.
+
+A bake holds :func:`bake_lock` on its output for its whole run: a second bake of the same output
+fails at once naming the holder (or waits, ``wait=True``). Files that only make sense together
+(a table and its sidecar) are written by :func:`atomic_file_set`, which switches all of them to
+the new version with one atomic rename. :func:`user_data_dir` is where bakes write tables that
+replace the package's own.
 """
 
 from __future__ import annotations
@@ -18,27 +24,62 @@ import glob
 import hashlib
 import json
 import os
+import shlex
 import shutil
+import sys
 import tempfile
+import threading
+import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Iterator, Mapping
+from typing import Iterator, Mapping, Sequence
 
 import numpy as np
 
-from prefilter.errors import TableFileError
+from prefilter.errors import PrefilterError, TableFileError
 
 #: Name of the checksum entry of a ``.npz`` written by :func:`save_npz_atomic`.
 META_KEY = "__meta__"
 
 
+#: Lock files held by this process: (resolved path, thread) -> [file descriptor, depth]. A bake
+#: that calls another locked bake on the same output in the same thread (the CLI locks, then the
+#: library bake locks again) re-enters the lock instead of waiting for itself; another thread
+#: waits as another process does.
+_HELD: dict[tuple[str, int], list[int]] = {}
+_HELD_GUARD = threading.Lock()
+
+
+def _holder_text() -> str:
+    """What a lock file records about its holder: pid, command line and start time (JSON)."""
+    return json.dumps({"pid": os.getpid(), "command": shlex.join(sys.argv),
+                       "started": time.strftime("%Y-%m-%d %H:%M:%S %Z", time.localtime())})
+
+
+def _describe_holder(fd: int) -> str:
+    """The holder recorded in the lock file open as ``fd`` ("pid P, command C, started T")."""
+    info = None
+    for _ in range(20):  # the holder writes its record right after locking: give it a moment
+        try:
+            info = json.loads(os.pread(fd, 1 << 16, 0).decode("utf-8", "replace"))
+            break
+        except (OSError, ValueError):
+            time.sleep(0.025)
+    if not isinstance(info, dict):
+        return "a process that has not recorded itself yet"
+    return (f"pid {info.get('pid', '?')}, command {info.get('command', '?')!r}, "
+            f"started {info.get('started', '?')}")
+
+
 @contextmanager
-def exclusive_lock(path: str | os.PathLike) -> Iterator[None]:
+def exclusive_lock(path: str | os.PathLike, *, wait: bool = True,
+                   what: str | None = None) -> Iterator[None]:
     """Hold an exclusive advisory lock on the file ``path`` (created if missing) for the block.
 
-    Two processes baking into the same output (pytest workers sharing the render cache, two
-    shells) would otherwise share and delete each other's checkpoint parts. A waiting process
-    blocks until the holder leaves. The lock file is unlinked on release; a waiter that then
+    ``wait=True`` blocks until the holder leaves; ``wait=False`` raises
+    :class:`~prefilter.errors.PrefilterError` at once, naming ``what`` (default: ``path``) and
+    the holder: its pid, command line and start time, which the holder writes into the lock
+    file. Re-entrant within a process. The lock file is unlinked on release; a waiter that then
     holds a lock on the unlinked file notices (inode changed) and locks the new one. Without
     ``fcntl`` (Windows) this is a no-op.
     """
@@ -49,10 +90,28 @@ def exclusive_lock(path: str | os.PathLike) -> Iterator[None]:
         return
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    key = (str(path.resolve()), threading.get_ident())
+    with _HELD_GUARD:
+        held = _HELD.get(key)
+        if held is not None:
+            held[1] += 1
+    if held is not None:
+        try:
+            yield
+        finally:
+            with _HELD_GUARD:
+                held[1] -= 1
+        return
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
         try:
-            fcntl.flock(fd, fcntl.LOCK_EX)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+            except BlockingIOError:
+                raise PrefilterError(
+                    f"{what or path}: expected no other bake writing this output, got one "
+                    f"running ({_describe_holder(fd)}); wait for it to finish, or pass --wait "
+                    f"to queue behind it") from None
             try:
                 same = os.stat(path).st_ino == os.fstat(fd).st_ino
             except FileNotFoundError:
@@ -64,13 +123,54 @@ def exclusive_lock(path: str | os.PathLike) -> Iterator[None]:
             break
         os.close(fd)  # released by a holder that unlinked it: lock the current file
     try:
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, _holder_text().encode(), 0)
+    except OSError:
+        pass  # the record only improves the message a contender prints
+    with _HELD_GUARD:
+        _HELD[key] = [fd, 1]
+    try:
         yield
     finally:
+        with _HELD_GUARD:
+            del _HELD[key]
         try:
             os.unlink(path)
         except FileNotFoundError:
             pass
         os.close(fd)
+
+
+def lock_path(out: str | os.PathLike) -> Path:
+    """The lock file of the output ``out`` of a bake: ``<out>.lock``."""
+    return Path(str(out) + ".lock")
+
+
+def bake_lock(out: str | os.PathLike, *, wait: bool = False):
+    """:func:`exclusive_lock` on :func:`lock_path` ``(out)``, held by a bake of ``out`` for its
+    whole run (checkpoints, final write, clean-up), so that two bakes of one output never mix
+    rows or delete each other's parts. ``wait=False``: a second bake fails at once (a
+    :class:`~prefilter.errors.PrefilterError` naming the holder); ``wait=True``: it waits."""
+    return exclusive_lock(lock_path(out), wait=wait, what=out)
+
+
+def user_data_dir() -> Path:
+    """Where bakes write tables that take the place of the package's own: ``$PREFILTER_DATA``,
+    else ``$XDG_DATA_HOME/prefilter``, else ``~/.local/share/prefilter``."""
+    base = os.environ.get("PREFILTER_DATA")
+    if base:
+        return Path(base).expanduser()
+    xdg = os.environ.get("XDG_DATA_HOME")
+    return (Path(xdg) if xdg else Path.home() / ".local" / "share") / "prefilter"
+
+
+def table_source(path: str | os.PathLike, shipped: str | os.PathLike) -> str:
+    """Where a table file comes from: ``"shipped"`` (the package's own, ``shipped``), ``"user"``
+    (in :func:`user_data_dir`) or ``"file"`` (any other path)."""
+    path = Path(path).resolve()
+    if path == Path(shipped).resolve():
+        return "shipped"
+    return "user" if path.parent == user_data_dir().resolve() else "file"
 
 
 @contextmanager
@@ -84,9 +184,7 @@ def atomic_path(path: str | os.PathLike, suffix: str | None = None) -> Iterator[
     os.close(fd)
     tmp = Path(tmp)
     # mkstemp creates 0600 files; outputs (tables, package data) should be readable like any file.
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)
+    os.chmod(tmp, 0o666 & ~_umask())
     try:
         yield tmp
         with open(tmp, "rb") as fh:
@@ -166,15 +264,17 @@ def verify_npz(path: str | os.PathLike, what: str, data: dict[str, np.ndarray], 
                format_version: int | None = None) -> dict[str, np.ndarray]:
     """``data`` (from :func:`read_npz`) without ``__meta__``, after checking it.
 
-    A present ``__meta__`` must be a JSON object whose ``sha256`` matches the other arrays and,
-    when given, whose ``format`` and ``version`` match; files without it (written before
-    checksums existed) pass unchecked.
+    ``__meta__`` must be present, a JSON object whose ``sha256`` matches the other arrays and,
+    when given, whose ``format`` and ``version`` match. A file without it is refused: the
+    project's own formats are always written with it, and deleting the entry must not be a way
+    to skip the check.
     """
     data = dict(data)
     raw = data.pop(META_KEY, None)
-    if raw is None:
-        return data
     field = f"{what} {path}: {META_KEY}"
+    if raw is None:
+        raise TableFileError(f"{field}: expected the checksum entry, got none: the file was "
+                             f"edited or not written by prefilter; re-bake it")
     meta = decode_json_object(raw)
     if meta is None:
         raise TableFileError(f"{field}: expected a JSON object string, got "
@@ -256,6 +356,96 @@ def save_json_atomic(path: str | os.PathLike, obj) -> None:
         tmp.write_text(json.dumps(obj, indent=2, sort_keys=True) + "\n")
 
 
+#: Folder beside a file set's first file holding its versions (see :func:`atomic_file_set`).
+VERSIONS_SUFFIX = "-versions"
+
+
+def _symlink_over(target: str, link: Path) -> None:
+    """Make ``link`` a symbolic link to ``target`` with one atomic rename (over any file)."""
+    tmp = link.parent / f".{link.name}.{os.getpid()}-{threading.get_ident()}.link"
+    tmp.unlink(missing_ok=True)
+    os.symlink(target, tmp)
+    os.replace(tmp, link)
+
+
+def _fsync_dir(d: Path) -> None:
+    try:
+        fd = os.open(d, os.O_RDONLY)
+    except OSError:  # pragma: no cover - platforms without directory descriptors
+        return
+    try:
+        os.fsync(fd)
+    except OSError:  # pragma: no cover
+        pass
+    finally:
+        os.close(fd)
+
+
+@contextmanager
+def atomic_file_set(paths: Sequence[str | os.PathLike]) -> Iterator[list[Path]]:
+    """Write files that belong together (a table and its sidecar) as one unit.
+
+    Yields one path per entry of ``paths`` (same folder, distinct names) inside a new version
+    folder ``.<first name>-versions/<token>/``; when the block succeeds, the version becomes
+    current with one atomic rename of the link ``.<first name>-versions/current``, and each of
+    ``paths`` is (made) a relative symbolic link to ``current/<name>``. A process killed at any
+    moment leaves the previous set or the new one, never a mix; the previous version is kept
+    for readers that resolved its links just before the switch, older ones are removed.
+    Readers should resolve the first path (``Path.resolve``) and read the others next to it.
+    Without symbolic links (some Windows set-ups) the files are replaced one by one.
+    """
+    paths = [Path(p) for p in paths]
+    folder = paths[0].parent
+    if any(p.parent != folder for p in paths) or len({p.name for p in paths}) != len(paths):
+        raise ValueError("atomic_file_set: expected distinct names in one folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    store = folder / f".{paths[0].name}{VERSIONS_SUFFIX}"
+    store.mkdir(exist_ok=True)
+    version = Path(tempfile.mkdtemp(prefix="v", dir=store))
+    os.chmod(version, 0o777 & ~_umask())
+    try:
+        yield [version / p.name for p in paths]
+        for p in paths:
+            if not (version / p.name).is_file():
+                raise FileNotFoundError(f"{version / p.name}: not written")
+            with open(version / p.name, "rb") as fh:
+                os.fsync(fh.fileno())
+        _fsync_dir(version)
+        current = store / "current"
+        try:
+            previous = os.readlink(current)
+        except OSError:
+            previous = None
+        try:
+            _symlink_over(version.name, current)
+        except (OSError, NotImplementedError):  # pragma: no cover - no symbolic links
+            for p in paths:
+                os.replace(version / p.name, p)
+            shutil.rmtree(store, ignore_errors=True)
+            return
+        _fsync_dir(store)
+        for p in paths:
+            target = f"{store.name}/current/{p.name}"
+            if not (p.is_symlink() and os.readlink(p) == target):
+                _symlink_over(target, p)
+        _fsync_dir(folder)
+        for old in store.iterdir():
+            if old.name not in (version.name, previous, "current"):
+                if old.is_dir() and not old.is_symlink():
+                    shutil.rmtree(old, ignore_errors=True)
+                else:
+                    old.unlink(missing_ok=True)
+    except BaseException:
+        shutil.rmtree(version, ignore_errors=True)
+        raise
+
+
+def _umask() -> int:
+    umask = os.umask(0)
+    os.umask(umask)
+    return umask
+
+
 class Checkpoints:
     """Per-chunk results of a bake, stored beside its output in ``<out>.parts/``.
 
@@ -307,4 +497,5 @@ class Checkpoints:
         writing its output left beside it (``.<out name>.*``)."""
         shutil.rmtree(self.dir, ignore_errors=True)
         for stale in self.out.parent.glob(f".{glob.escape(self.out.name)}.*"):
-            stale.unlink(missing_ok=True)
+            if stale.is_file():
+                stale.unlink(missing_ok=True)

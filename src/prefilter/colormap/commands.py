@@ -78,22 +78,28 @@ def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigm
               help="Output table (.exr, .npy or .png); metadata goes next to it as .json.")
 @click.option("--glsl", "glsl_out", type=click.Path(dir_okay=False), default=None,
               help="Also write the GLSL lookup snippet for this table.")
-def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear, out, glsl_out):
+@click.option("--wait", is_flag=True,
+              help="If another bake is writing the same output, wait for it (default: fail at "
+                   "once, naming it).")
+def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear, out, glsl_out,
+                  wait):
     """Pre-convolve COLORMAP (an image) with Gaussians of std 0..SIGMA_MAX (Heitz et al. 2013,
-    eq. 10). Writes the table (rows = sigma, columns = mean) and TABLE.json with its layout."""
+    eq. 10). Writes the table (rows = sigma, columns = mean) and TABLE.json with its layout,
+    switched together (a killed bake leaves the previous pair or the new one)."""
     import hashlib
     from pathlib import Path
 
-    from prefilter.fileio import atomic_path
+    from prefilter.fileio import atomic_path, bake_lock
     from prefilter.colormap.glsl import glsl_snippet
 
     c = load_colormap_image(colormap, srgb=not linear)
-    table, ck = bake_table(c, value_range, sigma_max, size=size, edge=edge, n_sigma=n_sigma,
-                           out=out)
     digest = hashlib.sha256(Path(colormap).read_bytes()).hexdigest()
-    out, side = table.save(out, meta=dict(source=str(colormap), source_sha256=digest,
-                                          source_encoding="linear" if linear else "srgb"))
-    ck.clear()
+    with bake_lock(out, wait=wait):
+        table, ck = bake_table(c, value_range, sigma_max, size=size, edge=edge,
+                               n_sigma=n_sigma, out=out)
+        out, side = table.save(out, meta=dict(source=str(colormap), source_sha256=digest,
+                                              source_encoding="linear" if linear else "srgb"))
+        ck.clear()
     meta = table.metadata()
     click.echo(f"wrote {out} ({table.n_sigma} x {table.n_mean} x {table.table.shape[2]}) and "
                f"{side.name}")

@@ -325,25 +325,38 @@ class ColormapTable:
         float64; rows = sigma) and its sidecar ``path.with_suffix(".json")`` (:meth:`metadata`
         plus ``meta``, ``table_file``, ``sha256``, the digest of the stored pixels as
         :func:`prefilter.texture.read_image` returns them, and ``meta_sha256``, the digest of all
-        other fields), each atomically, the sidecar last."""
-        from prefilter.fileio import array_digest, json_digest, save_json_atomic
+        other fields).
+
+        The two are one unit (:func:`prefilter.fileio.atomic_file_set`): they are written into a
+        new version folder beside ``path`` and switched together by one atomic rename, so a
+        process killed at any moment leaves the previous table and sidecar or the new ones;
+        ``path`` and the sidecar are symbolic links into the current version. Concurrent saves
+        to one ``path`` take turns (:func:`prefilter.fileio.bake_lock`, waiting)."""
+        from prefilter.fileio import (array_digest, atomic_file_set, bake_lock, json_digest,
+                                      save_json_atomic)
         from prefilter.texture.io import read_image, write_image
 
         path = Path(path)
-        write_image(path, self.table, bits=16)
-        info = dict(meta or {})
-        info.update(self.metadata(), table_file=path.name,
-                    sha256=array_digest({"table": read_image(path)}))
-        info["meta_sha256"] = json_digest(info)
         side = path.with_suffix(".json")
-        save_json_atomic(side, info)
+        if side == path:
+            raise PrefilterError(f"path: expected the table image file, got the sidecar name "
+                                 f"{path}")
+        with bake_lock(path, wait=True), atomic_file_set([path, side]) as (img_tmp, side_tmp):
+            write_image(img_tmp, self.table, bits=16)
+            info = dict(meta or {})
+            info.update(self.metadata(), table_file=path.name,
+                        sha256=array_digest({"table": read_image(img_tmp)}))
+            info["meta_sha256"] = json_digest(info)
+            save_json_atomic(side_tmp, info)
         return path, side
 
     @classmethod
     def load(cls, path) -> "ColormapTable":
         """Read a table written by :meth:`save` (or ``prefilter bake colormap``) and its JSON
         sidecar; every field, the image shape and the checksum (when present) are verified and
-        a failure raises :class:`~prefilter.errors.TableFileError` naming the file and field."""
+        a failure raises :class:`~prefilter.errors.TableFileError` naming the file and field.
+        ``path`` is resolved once and the sidecar read next to the file it names, so a save
+        running at the same time is seen whole or not at all."""
         from prefilter.fileio import array_digest, json_digest
         from prefilter.texture.io import read_image
 
@@ -351,11 +364,13 @@ class ColormapTable:
         side = path.with_suffix(".json")
         if side == path:
             raise TableFileError(f"{path}: expected the table image, not its JSON sidecar")
-        if not side.is_file():
+        real = path.resolve()  # the current version of a saved table (see save)
+        side_file = real.with_suffix(".json")
+        if not side_file.is_file():
             raise TableFileError(f"{side}: colour-table metadata not found (written next to "
                                  f"{path.name} by `prefilter bake colormap`)")
         try:
-            info = json.loads(side.read_text())
+            info = json.loads(side_file.read_text())
         except (ValueError, OSError) as exc:
             raise TableFileError(f"{side}: unreadable JSON ({type(exc).__name__}: {exc})"
                                  ) from None
@@ -389,11 +404,11 @@ class ColormapTable:
         shape = (need("n_sigma", count(2), "an integer >= 2"),
                  need("n_mean", count(2), "an integer >= 2"),
                  need("channels", count(1), "an integer >= 1"))
-        if "table_file" in info and info["table_file"] != path.name:
-            raise TableFileError(f"{side}: table_file: expected {path.name!r}, got "
+        if "table_file" in info and info["table_file"] != real.name:
+            raise TableFileError(f"{side}: table_file: expected {real.name!r}, got "
                                  f"{info['table_file']!r}")
         try:
-            img = read_image(path)
+            img = read_image(real)
         except TableFileError:
             raise
         except PrefilterError as exc:

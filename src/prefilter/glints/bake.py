@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.fileio import Checkpoints, exclusive_lock
+from prefilter.fileio import Checkpoints, bake_lock, exclusive_lock
 from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
@@ -168,7 +168,7 @@ def _locked(out, levels_dir):
     """Exclusive locks on ``<out>.lock`` and on the shared ``levels_dir``: two processes baking
     the same output wait for each other instead of sharing (and deleting) checkpoint parts."""
     with ExitStack() as locks:
-        locks.enter_context(exclusive_lock(str(out) + ".lock"))
+        locks.enter_context(bake_lock(out, wait=True))
         if levels_dir is not None:
             locks.enter_context(exclusive_lock(str(levels_dir).removesuffix(".parts") + ".lock"))
         yield

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
-
+import math
 from pathlib import Path
 
 import click
 import numpy as np
 
 from prefilter.errors import PrefilterError
+from prefilter.fileio import bake_lock
 from prefilter.glints.bake import BAKE_SETTINGS, CELL, bake, bake_settings, cache_path
 
 
@@ -42,15 +43,37 @@ def load_normal_map(spec: str) -> np.ndarray:
         raise PrefilterError(f"{path}: {exc}") from None
 
 
+class FiniteFloat(click.FloatRange):
+    """A finite number in a range (``click.FloatRange`` lets NaN through: NaN compares false)."""
+
+    name = "finite float"
+
+    def convert(self, value, param, ctx):
+        v = super().convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"expected a finite number, got {value!r}", param, ctx)
+        return v
+
+
+_POSITIVE = FiniteFloat(0.0, min_open=True)
+_SEED = click.IntRange(0, 2**32 - 1)
+
 # Options both bakes declare: click declarations, fixed keyword arguments and help.
 _SHARED_OPTIONS = {
-    "ndf_res": (("--ndf-res",), dict(show_default=True), "NDF image resolution."),
-    "block": (("--block",), dict(show_default=True), "Block size B of the NDF images."),
-    "support": (("--support",), dict(show_default=True),
+    "ndf_res": (("--ndf-res",), dict(show_default=True, type=click.IntRange(1)),
+                "NDF image resolution."),
+    "block": (("--block",), dict(show_default=True, type=click.IntRange(1)),
+              "Block size B of the NDF images."),
+    "support": (("--support",), dict(show_default=True, type=_POSITIVE),
                 "Half-width of the NDF images in projected normals s."),
-    "roughness": (("--roughness",), dict(show_default=True), "Intrinsic roughness sigma_r."),
-    "iters": (("--iters",), dict(show_default=True), "Max CP iterations per group."),
-    "seed": (("--seed",), dict(show_default=True), None),
+    "roughness": (("--roughness",), dict(show_default=True, type=_POSITIVE),
+                  "Intrinsic roughness sigma_r."),
+    "iters": (("--iters",), dict(show_default=True, type=click.IntRange(1)),
+              "Max CP iterations per group."),
+    "seed": (("--seed",), dict(show_default=True, type=_SEED), None),
+    "wait": (("--wait",), dict(is_flag=True),
+             "If another bake is writing the same output, wait for it (default: fail at once, "
+             "naming it)."),
     "quiet": (("--quiet",), dict(is_flag=True), "No progress bar."),
 }
 
@@ -99,10 +122,10 @@ _D = BAKE_SETTINGS
 @click.option("-o", "--out", default=None, type=click.Path(dir_okay=False),
               help="Output .npz (written atomically; parts in OUT.parts/ make it resumable) "
                    "[default: the render cache, where the glints render method finds it].")
-@click.option("--rank", default=_D["rank"], show_default=True,
+@click.option("--rank", default=_D["rank"], show_default=True, type=click.IntRange(1),
               help="Mean CP rank per group: the storage budget, spent where the error drops most "
                    "per byte (paper: a fixed rank 16, 32 for flakes).")
-@click.option("--max-rank", default=None, type=int,
+@click.option("--max-rank", default=None, type=click.IntRange(1),
               help="Largest rank of a group (the width of the in-memory factors, which sets the "
                    "query cost) [default: 3 x rank].")
 @click.option("--level-rank", default="global", show_default=True,
@@ -113,20 +136,22 @@ _D = BAKE_SETTINGS
                 roughness=(_D["intrinsic_roughness"],
                            "Intrinsic roughness sigma_r of the model; the map is baked sharper "
                            "by the bilinear lookup's blur (glints.bake.bilinear_bake_roughness)."))
-@click.option("--stride0", default=_D["stride0"], show_default=True,
+@click.option("--stride0", default=_D["stride0"], show_default=True, type=click.IntRange(1),
               help="Level-0 footprint stride (texels).")
-@click.option("--sigma0", default=None, type=float,
+@click.option("--sigma0", default=None, type=_POSITIVE,
               help="Level-0 footprint std [default: stride0].")
 @click.option("--cell", default=None, type=click.IntRange(min=1),
               help=f"Spatial cell of a group at level 0 (texels; doubles with each level) "
                    f"[default: {CELL}, at most the map's side].")
-@click.option("--converge", default=0.01, show_default=True,
+@click.option("--converge", default=0.01, show_default=True, type=FiniteFloat(0.0),
               help="Stop adding levels when one differs from the previous by less (rel. L2).")
 @click.option("--blank-tol", default=_D["blank_tol"], show_default=True,
+              type=FiniteFloat(0.0, 1.0, max_open=True),
               help="Drop NDF blocks whose maximum is below this fraction of their image's.")
-@click.option("--ndf-truncation", default=_D["ndf_truncation"], show_default=True,
+@click.option("--ndf-truncation", default=_D["ndf_truncation"], show_default=True, type=_POSITIVE,
               help="Stds at which each texel's Gaussian in s is cut.")
 @click.option("--footprint-truncation", default=_D["footprint_truncation"], show_default=True,
+              type=_POSITIVE,
               help="Stds at which the footprint weights are cut.")
 @click.option("--code-bits", default=str(_D["code_bits"]), show_default=True,
               type=click.Choice(["8", "16"]),
@@ -143,10 +168,10 @@ _D = BAKE_SETTINGS
               help="Footprint centres per side of the cells of those exact levels ('none': "
                    "cell / stride0); 1 makes every image a group (exact ranks <= block instead "
                    "of block^2: faster queries).")
-@shared_options(iters=_D["n_iter_max"], seed=_D["seed"], quiet=False)
+@shared_options(iters=_D["n_iter_max"], seed=_D["seed"], wait=False, quiet=False)
 def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
                 stride0, sigma0, cell, converge, blank_tol, ndf_truncation, footprint_truncation,
-                code_bits, c_bits, exact_from_level, exact_cell, iters, seed, quiet):
+                code_bits, c_bits, exact_from_level, exact_cell, iters, seed, wait, quiet):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
@@ -171,7 +196,8 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
     if out is None:
         out = cache_path(nm, st)
         Path(out).parent.mkdir(parents=True, exist_ok=True)
-    summary = bake(nm, out, progress=not quiet, **st)
+    with bake_lock(out, wait=wait):
+        summary = bake(nm, out, progress=not quiet, **st)
     s = summary
     click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
     click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "
@@ -191,27 +217,28 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
 @click.argument("normal_map")
 @click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
               help="Output .npz (written atomically; prefilter.glints.wang_store format).")
-@click.option("--tile", default=32, show_default=True, help="Tile size T in texels (even).")
-@click.option("--band", default=4.0, show_default=True,
+@click.option("--tile", default=32, show_default=True, type=click.IntRange(2),
+              help="Tile size T in texels (even).")
+@click.option("--band", default=4.0, show_default=True, type=FiniteFloat(0.0),
               help="Width of the diagonal seams' cross-fade in texels.")
-@click.option("--rank", default=16, show_default=True,
+@click.option("--rank", default=16, show_default=True, type=click.IntRange(0),
               help="CP rank of every (tile, level, angular block); 0 stores the images "
                    "uncompressed.")
 @shared_options(block=8, ndf_res=64, support=0.5, roughness=0.005)
-@click.option("--stride0", default=None, type=int,
+@click.option("--stride0", default=None, type=click.IntRange(1),
               help="Level-0 footprint stride (texels) [default: tile / 8].")
-@click.option("--wide-tiles", default=0.5, show_default=True,
+@click.option("--wide-tiles", default=0.5, show_default=True, type=_POSITIVE,
               help="Footprint std (in tiles) from which the tile-type shares replace the pyramids.")
-@click.option("--uniform-tiles", default=8.0, show_default=True,
+@click.option("--uniform-tiles", default=8.0, show_default=True, type=_POSITIVE,
               help="Footprint std (in tiles) from which the expected tiling is used.")
 @click.option("--code-bits", default="8", show_default=True, type=click.Choice(["0", "8", "16"]),
               help="Bits per stored CP factor code (file version 2); 0 stores float32 factors "
                    "(version 1). Uncompressed pyramids (--rank 0) are always float32.")
 @shared_options(iters=100,
                 seed=(0, "Seeds the tile synthesis (patches, hashing seed) and the CP fits."),
-                quiet=False)
+                wait=False, quiet=False)
 def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support, roughness,
-                     stride0, wide_tiles, uniform_tiles, code_bits, iters, seed, quiet):
+                     stride0, wide_tiles, uniform_tiles, code_bits, iters, seed, wait, quiet):
     """Synthesise 16 Wang tiles from NORMAL_MAP and precompute their per-tile NDF pyramids
     (glints paper, sec. 5.5; docs/glints-wang.md).
 
@@ -228,12 +255,13 @@ def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support,
     if rank < 0:
         raise PrefilterError(f"--rank: expected a CP rank >= 0 (0: uncompressed), got {rank}")
     t0 = time.perf_counter()
-    wt = synthesize(load_normal_map(normal_map), tile=tile, band=band, rng=seed)
-    wn = bake_tiles(wt, ndf_res=ndf_res, support=support, intrinsic_roughness=roughness,
-                    stride0=stride0, wide_tiles=wide_tiles, uniform_tiles=uniform_tiles,
-                    rank=rank or None, block=block, n_iter_max=iters, seed=seed,
-                    progress=not quiet)
-    save_tiles(wn, out, code_bits=int(code_bits))
+    with bake_lock(out, wait=wait):
+        wt = synthesize(load_normal_map(normal_map), tile=tile, band=band, rng=seed)
+        wn = bake_tiles(wt, ndf_res=ndf_res, support=support, intrinsic_roughness=roughness,
+                        stride0=stride0, wide_tiles=wide_tiles, uniform_tiles=uniform_tiles,
+                        rank=rank or None, block=block, n_iter_max=iters, seed=seed,
+                        progress=not quiet)
+        save_tiles(wn, out, code_bits=int(code_bits))
     summary = dict(tiles=16, tile=wt.size, levels=wn.n_levels,
                    crops=[wn.crop(lv) for lv in range(wn.n_levels)],
                    rank=rank, block=wn.block, code_bits=int(code_bits) if wn.block else 0,

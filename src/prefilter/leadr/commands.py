@@ -19,10 +19,24 @@ import click
               help="HEIGHT is a tangent-space normal map (RGB in [-1, 1] for EXR/.npy, "
                    "[0, 1]-encoded for PNG) instead of a height map.")
 @click.option("--level0-only", is_flag=True, help="Write level 0 only (moments mip by box filter).")
-def bake_leadr(height, out, texel_size, base_roughness, normal_map, level0_only):
+@click.option("--wait", is_flag=True,
+              help="If another bake is writing the same output, wait for it (default: fail at "
+                   "once, naming it).")
+def bake_leadr(height, out, texel_size, base_roughness, normal_map, level0_only, wait):
     """Bake the slope moments of HEIGHT (EXR/PNG/.npy height map, first channel) into EXR maps.
 
     Dupuy et al. 2013; slopes s = grad h by periodic central differences."""
+    from prefilter.fileio import bake_lock
+    from prefilter.leadr.maps import _positive_float
+
+    # the numbers first: refused before the map is read
+    _positive_float(texel_size, "texel_size")
+    _positive_float(base_roughness, "base_roughness", closed=True)
+    with bake_lock(out, wait=wait):
+        _bake(height, out, texel_size, base_roughness, normal_map, level0_only)
+
+
+def _bake(height, out, texel_size, base_roughness, normal_map, level0_only):
     from pathlib import Path
 
     from prefilter.leadr.io import write_maps

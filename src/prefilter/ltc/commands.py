@@ -15,30 +15,38 @@ import click
 @click.command("ltc-iso")
 @click.option("--res", default=64, show_default=True, type=click.IntRange(2, 1024),
               help="Table resolution along view angle and roughness.")
-@click.option("--seed", default=0, show_default=True, type=int,
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**32 - 1),
               help="Seed of the fixed stratified fitting samples.")
 @click.option("--samples", "n_fit", default=32, show_default=True, type=click.IntRange(2, 512),
               help="Stratified samples per axis of each fitting sample set.")
 @click.option("-j", "--processes", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Worker processes (rows are fitted independently).")
 @click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
-              help="Output .npz (default: the table shipped with the package).")
+              help="Output .npz (default: the user table, $PREFILTER_DATA/ggx_iso.npz or "
+                   "~/.local/share/prefilter/ggx_iso.npz, which renders then use instead of "
+                   "the table shipped with the package).")
 @click.option("--objective", default="density", show_default=True,
               type=click.Choice(["density", "quads"]),
               help="density: fit |p - q|^power; quads: then refit each row on quad-light "
                    "integrals (the acceptance test's relative error, docs/ltc.md).")
 @click.option("--power", default=1.0, show_default=True, type=click.FloatRange(0.1, 4.0),
               help="Exponent k of the density objective integral |p - q|^k.")
+@click.option("--wait", is_flag=True,
+              help="If another bake is writing the same output, wait for it (default: fail at "
+                   "once, naming it).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def bake_ltc_iso(res, seed, n_fit, processes, out, objective, power, quiet):
+def bake_ltc_iso(res, seed, n_fit, processes, out, objective, power, wait, quiet):
     """Fit the isotropic GGX LTC table (resumable: rerun the same command after a kill)."""
-    from prefilter.ltc.fit_iso import FitSettings, bake_table
+    from prefilter.ltc.fit_iso import FitSettings, bake_table, user_table_path
 
     settings = FitSettings(res_theta=res, res_alpha=res, n_fit=n_fit, seed=seed,
                            objective=objective, power=power)
     t0 = time.perf_counter()
-    path = bake_table(out, settings, processes=processes, progress=not quiet)
+    path = bake_table(out, settings, processes=processes, progress=not quiet, wait=wait)
     click.echo(f"wrote {path} ({res}x{res}) in {time.perf_counter() - t0:.1f} s")
+    if out is None:
+        click.echo(f"renders now use this user table instead of the shipped one; delete "
+                   f"{user_table_path()} to go back")
 
 
 @click.command("validate")
@@ -46,9 +54,10 @@ def bake_ltc_iso(res, seed, n_fit, processes, out, objective, power, quiet):
               help="Number of random (view, roughness, quad) configurations.")
 @click.option("--samples", default=100_000, show_default=True, type=click.IntRange(2),
               help="Monte Carlo samples per configuration (half BRDF, half light).")
-@click.option("--seed", default=0, show_default=True, type=int)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**32 - 1))
 @click.option("--table", "table_path", type=click.Path(dir_okay=False), default=None,
-              help="LTC table .npz (default: the shipped table).")
+              help="LTC table .npz (default: the user table if one was baked, else the "
+                   "shipped one).")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
               help="Also write the statistics as JSON.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
@@ -59,6 +68,7 @@ def validate(configs, samples, seed, table_path, json_out, quiet):
     from prefilter.ltc.validate import format_statistics, run_acceptance
 
     table = GGXTable.load(table_path)
+    click.echo(f"LTC table: {table.path} ({table.source})")
     res = run_acceptance(table, configs, samples, seed, progress=not quiet)
     stats = res["stats"]
     stats["n_samples"] = samples

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import minimize
 
-from prefilter.fileio import Checkpoints, save_npz_atomic
+from prefilter.fileio import Checkpoints, bake_lock, save_npz_atomic, user_data_dir
 from prefilter.validation import as_positive_int, as_roughness
 from prefilter.errors import PrefilterError
 from prefilter.microfacet import GGX, reflect
@@ -99,6 +99,15 @@ class FitSettings:
     quad: QuadFitSettings | None = None
 
     def __post_init__(self):
+        # checked here, before any work: a bad value would only show in the finished table
+        as_positive_int(self.res_theta, "res_theta", lo=2)
+        as_positive_int(self.res_alpha, "res_alpha", lo=2)
+        as_positive_int(self.n_fit, "n_fit", lo=2)
+        as_positive_int(self.quad_nodes, "quad_nodes", lo=2)
+        as_positive_int(self.seed, "seed", lo=0)
+        _in_range(self.alpha_min, "alpha_min", 1e-4, 1.0, hi_open=True)
+        _in_range(self.theta_max_deg, "theta_max_deg", 0.0, 90.0, lo_open=True, hi_open=True)
+        _in_range(self.power, "power", 0.1, 4.0)
         if self.objective not in OBJECTIVES:
             raise PrefilterError(f"objective: expected one of {OBJECTIVES}, got "
                                  f"{self.objective!r}")
@@ -111,6 +120,19 @@ class FitSettings:
         axis_t = np.linspace(0.0, t_max, self.res_theta)
         axis_r = np.linspace(np.sqrt(self.alpha_min), 1.0, self.res_alpha)
         return axis_t, axis_r
+
+
+def _in_range(x, name: str, lo: float, hi: float, *, lo_open: bool = False,
+              hi_open: bool = False) -> float:
+    """``x`` as a finite float in ``[lo, hi]`` (open ends as flagged), else a PrefilterError."""
+    ok = isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool)
+    v = float(x) if ok else float("nan")
+    above = lo < v if lo_open else lo <= v
+    below = v < hi if hi_open else v <= hi
+    if not (np.isfinite(v) and above and below):
+        span = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+        raise PrefilterError(f"{name}: expected a finite number in {span}, got {x!r}")
+    return v
 
 
 def view_from_t(t) -> np.ndarray:
@@ -354,9 +376,26 @@ def _row_job(args):
     return i, fit_row(t, settings, i)
 
 
+#: File name of the table, in the package data and in the user data folder.
+TABLE_NAME = "ggx_iso.npz"
+
+
+def shipped_table_path() -> Path:
+    """The table shipped with the package (package data; never written by a bake)."""
+    return Path(__file__).with_name("data") / TABLE_NAME
+
+
+def user_table_path() -> Path:
+    """Where ``prefilter bake ltc-iso`` writes without ``-o``:
+    :func:`prefilter.fileio.user_data_dir` ``/ ggx_iso.npz``."""
+    return user_data_dir() / TABLE_NAME
+
+
 def default_table_path() -> Path:
-    """Where the shipped table lives (package data)."""
-    return Path(__file__).with_name("data") / "ggx_iso.npz"
+    """The table ``GGXTable.load()`` reads: the user table when one was baked, else the
+    shipped one."""
+    user = user_table_path()
+    return user if user.is_file() else shipped_table_path()
 
 
 def bake_table(
@@ -366,18 +405,28 @@ def bake_table(
     processes: int = 1,
     progress: bool = True,
     on_row: Callable[[int], None] | None = None,
+    wait: bool = False,
 ) -> Path:
-    """Fit the whole table row by row (resumable) and write it atomically to ``out``.
+    """Fit the whole table row by row (resumable) and write it atomically to ``out`` (default:
+    :func:`user_table_path`, which ``GGXTable.load()`` then prefers to the shipped table).
 
     Each finished row is checkpointed in ``<out>.parts/``; rerunning with the same settings
-    resumes from there and gives the same bytes as an uninterrupted bake. ``on_row(i)`` is called
+    resumes from there and gives the same bytes as an uninterrupted bake. The bake holds
+    :func:`prefilter.fileio.bake_lock` on ``out``: while another bake of ``out`` runs it raises
+    a PrefilterError naming that bake (``wait=True``: waits for it). ``on_row(i)`` is called
     after row ``i`` is saved (tests use it to interrupt a bake).
     """
     settings = settings or FitSettings()
-    as_positive_int(settings.res_theta, "res_theta", lo=2)
-    as_positive_int(settings.res_alpha, "res_alpha", lo=2)
+    if not isinstance(settings, FitSettings):
+        raise PrefilterError(f"settings: expected FitSettings, got {type(settings).__name__}")
     as_positive_int(processes, "processes")
-    out = Path(out) if out is not None else default_table_path()
+    out = Path(out) if out is not None else user_table_path()
+    with bake_lock(out, wait=wait):
+        return _bake_locked(out, settings, processes, progress, on_row)
+
+
+def _bake_locked(out: Path, settings: FitSettings, processes: int, progress: bool,
+                 on_row: Callable[[int], None] | None) -> Path:
     axis_t, axis_r = settings.axes()
     key = {"version": TABLE_VERSION, **asdict(settings)}
     ck = Checkpoints(out, key)

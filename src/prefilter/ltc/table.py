@@ -8,17 +8,20 @@ Heitz, Dupuy, Hill, Neubelt 2016, section 4: one LTC matrix, a magnitude and a F
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
 import numpy as np
 
 from prefilter.fileio import (META_KEY, expect_array, expect_json_object, expect_table_header,
-                           read_npz, verify_npz)
+                           read_npz, table_source, verify_npz)
 from prefilter.validation import (as_float_array, as_roughness, as_unit_interval,
                                  as_upper_directions, broadcast_batch)
 from prefilter.errors import PrefilterError, TableFileError
-from prefilter.ltc.fit_iso import TABLE_VERSION, default_table_path
+from prefilter.ltc.fit_iso import TABLE_VERSION, default_table_path, shipped_table_path
+
+_log = logging.getLogger(__name__)
 
 
 def schlick_scale(magnitude, fresnel, f0) -> np.ndarray:
@@ -44,7 +47,12 @@ class GGXTable:
         divided by the length of its third column.
     magnitude, fresnel : (T, R) ``n`` and ``f5``.
     settings : dict of the fit settings the table was baked with.
+    path : the file it was loaded from (``None`` when built in memory); source : ``"shipped"``
+        (the package's table), ``"user"`` (baked into the user data folder) or ``"file"``.
     """
+
+    path: Path | None = None
+    source: str = "memory"
 
     def __init__(self, axis_t, axis_r, M, magnitude, fresnel, settings=None, fit_error=None):
         self.axis_t = np.asarray(axis_t, dtype=np.float64)
@@ -71,12 +79,17 @@ class GGXTable:
 
     @classmethod
     def load(cls, path: str | os.PathLike | None = None) -> "GGXTable":
-        """Read and validate a table file (default: the table shipped with the package).
+        """Read and validate a table file.
+
+        Default: the user table (``prefilter bake ltc-iso`` without ``-o`` writes it, into
+        :func:`prefilter.fileio.user_data_dir`) when it exists, else the table shipped with the
+        package; :attr:`path` and :attr:`source` say which, and the logger
+        ``prefilter.ltc.table`` reports a user table at INFO level.
 
         Expected ``.npz`` arrays: ``version`` (int, == 1), ``axis_t`` (T,), ``axis_r`` (R,),
         ``M`` (T, R, 3, 3), ``magnitude`` (T, R), ``fresnel`` (T, R), ``settings`` (JSON string);
         optional ``fit_error`` (T, R); ``__meta__`` (JSON with the SHA-256 of the arrays, see
-        :mod:`prefilter.fileio`; verified when present). Raises
+        :mod:`prefilter.fileio`; required). Raises
         :class:`~prefilter.errors.TableFileError` naming the file and field when the file is
         missing, unreadable, corrupt (checksum), of another version, or has wrong shapes, dtypes
         or non-finite values.
@@ -112,8 +125,13 @@ class GGXTable:
             raise TableFileError(f"{where}: magnitude: expected values >= 0")
         settings = expect_json_object(data, "settings", where)
         verify_npz(path, "LTC table", raw_data, format_version=TABLE_VERSION)
-        return cls(t, r, data["M"], data["magnitude"], data["fresnel"], settings,
-                   data.get("fit_error"))
+        table = cls(t, r, data["M"], data["magnitude"], data["fresnel"], settings,
+                    data.get("fit_error"))
+        table.path = path
+        table.source = table_source(path, shipped_table_path())
+        if table.source == "user":
+            _log.info("LTC table: the user table %s (not the shipped one)", path)
+        return table
 
     def _coords(self, wo, alpha, wo_name: str = "wo"):
         wo = as_upper_directions(wo, wo_name)

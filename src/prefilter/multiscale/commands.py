@@ -49,9 +49,11 @@ def fit_report(n_grid: int = 32, samples: int = 1 << 17, seed: int = 0) -> dict:
 
 
 @click.command("multiscale-fit")
-@click.option("--grid", "n_grid", default=32, show_default=True, help="Grid nodes per axis.")
-@click.option("--samples", default=1 << 17, show_default=True, help="Monte Carlo samples/node.")
-@click.option("--seed", default=0, show_default=True)
+@click.option("--grid", "n_grid", default=32, show_default=True, type=click.IntRange(2, 1024),
+              help="Grid nodes per axis.")
+@click.option("--samples", default=1 << 17, show_default=True, type=click.IntRange(1),
+              help="Monte Carlo samples/node.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**32 - 1))
 @click.option("--out", type=click.Path(dir_okay=False), default=None, help="Write JSON here.")
 def multiscale_fit(n_grid, samples, seed, out):
     """Verify eq. 5 and refit eq. 7 of multi-scale LTC (Tao et al. 2021) by Monte Carlo."""

@@ -17,7 +17,7 @@ from typing import Callable
 
 import numpy as np
 
-from prefilter.fileio import Checkpoints
+from prefilter.fileio import Checkpoints, bake_lock
 from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.ltc.aniso.align import align
@@ -30,7 +30,7 @@ from prefilter.ltc.aniso.fit import (
 )
 from prefilter.ltc.aniso.symmetry import enforce
 from prefilter.ltc.polygon import clip_to_horizon
-from prefilter.ltc.aniso.table import TABLE_VERSION, AnisoGGXTable, default_table_path
+from prefilter.ltc.aniso.table import TABLE_VERSION, AnisoGGXTable, user_table_path
 
 
 @dataclass(frozen=True)
@@ -130,15 +130,30 @@ def fit_entries(wo, alpha_x, alpha_y, settings: BakeSettings, chunk: int = 0, *,
 
 
 def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool = True,
-               on_chunk: Callable[[int], None] | None = None) -> Path:
-    """Fit, align, post-process and write the table; returns the output path.
+               on_chunk: Callable[[int], None] | None = None, wait: bool = False) -> Path:
+    """Fit, align, post-process and write the table; returns the output path (default:
+    :func:`~prefilter.ltc.aniso.table.user_table_path`, which ``AnisoGGXTable.load()`` then
+    prefers to the shipped table).
 
     Resumable: chunk results live in ``<out>.parts/`` (keyed by the settings) until the table is
-    written. ``on_chunk(i)`` is called after chunk ``i`` is checkpointed (tests interrupt bakes
+    written. The bake holds :func:`prefilter.fileio.bake_lock` on ``out``: while another bake of
+    ``out`` runs it raises a PrefilterError naming that bake (``wait=True``: waits for it).
+    ``on_chunk(i)`` is called after chunk ``i`` is checkpointed (tests interrupt bakes
     with it). Wall times are not stored: the same settings give the same bytes, resumed or not.
     """
     settings = settings or BakeSettings()
-    out = Path(out) if out is not None else default_table_path()
+    if not isinstance(settings, BakeSettings):
+        raise PrefilterError(f"settings: expected BakeSettings, got {type(settings).__name__}")
+    # checked before any work (the fit would otherwise run, or fail deep inside)
+    as_positive_int(settings.sw.steps, "steps")
+    as_positive_int(settings.sw.seed, "seed", lo=0)
+    out = Path(out) if out is not None else user_table_path()
+    with bake_lock(out, wait=wait):
+        return _bake_locked(out, settings, progress, on_chunk)
+
+
+def _bake_locked(out: Path, settings: BakeSettings, progress: bool,
+                 on_chunk: Callable[[int], None] | None) -> Path:
     entries = grid_entries(settings)
     E = len(entries["wo"])
     chunk = as_positive_int(settings.chunk, "chunk")

@@ -15,24 +15,33 @@ import click
               help="Gradient steps of the sliced-Wasserstein fit.")
 @click.option("--chunk", default=512, show_default=True, type=click.IntRange(1),
               help="Entries fitted together as one tensor program (and per checkpoint).")
-@click.option("--seed", default=0, show_default=True, type=int)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**32 - 1))
 @click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
-              help="Output .npz (default: the table shipped with the package).")
+              help="Output .npz (default: the user table, $PREFILTER_DATA/ggx_aniso.npz or "
+                   "~/.local/share/prefilter/ggx_aniso.npz, which renders then use instead of "
+                   "the table shipped with the package).")
 @click.option("--export", "export_dir", type=click.Path(file_okay=False), default=None,
               help="Also write the float32 / half-float texture layouts and GLSL here.")
+@click.option("--wait", is_flag=True,
+              help="If another bake is writing the same output, wait for it (default: fail at "
+                   "once, naming it).")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def bake_ltc_aniso(res, steps, chunk, seed, out, export_dir, quiet):
+def bake_ltc_aniso(res, steps, chunk, seed, out, export_dir, wait, quiet):
     """Fit the anisotropic GGX LTC table (resumable: rerun the same command after a kill)."""
     from dataclasses import replace
 
     from prefilter.ltc.aniso.bake import BakeSettings, bake_table
     from prefilter.ltc.aniso.fit import SWSettings
+    from prefilter.ltc.aniso.table import user_table_path
 
     settings = BakeSettings(res_theta=res, res_phi=res, res_alpha=res, res_ratio=res,
                             chunk=chunk, sw=replace(SWSettings(), steps=steps, seed=seed))
     t0 = time.perf_counter()
-    path = bake_table(out, settings, progress=not quiet)
+    path = bake_table(out, settings, progress=not quiet, wait=wait)
     click.echo(f"wrote {path} ({res}^4) in {time.perf_counter() - t0:.1f} s")
+    if out is None:
+        click.echo(f"renders now use this user table instead of the shipped one; delete "
+                   f"{user_table_path()} to go back")
     if export_dir:
         from prefilter.ltc.aniso.export import export_all
         from prefilter.ltc.aniso.table import AnisoGGXTable

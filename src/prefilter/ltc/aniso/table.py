@@ -15,13 +15,14 @@ Coordinates outside the grid clamp to its border.
 from __future__ import annotations
 
 import json
+import logging
 import os
 from pathlib import Path
 
 import numpy as np
 
 from prefilter.fileio import (META_KEY, expect_array, expect_json_object, expect_table_header,
-                           read_npz, save_npz_atomic, verify_npz)
+                           read_npz, save_npz_atomic, table_source, user_data_dir, verify_npz)
 from prefilter.validation import as_roughness, as_upper_directions
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.ltc.aniso import symmetry
@@ -34,9 +35,28 @@ FORMAT = "prefilter-ltc-aniso"
 AXES = ("axis_theta", "axis_phi", "axis_alpha", "axis_ratio")
 
 
-def default_table_path() -> Path:
+#: File name of the table, in the package data and in the user data folder.
+TABLE_NAME = "ggx_aniso.npz"
+
+_log = logging.getLogger(__name__)
+
+
+def shipped_table_path() -> Path:
     """The table shipped with the package (``prefilter/ltc/data/ggx_aniso.npz``)."""
-    return Path(__file__).resolve().parent.parent / "data" / "ggx_aniso.npz"
+    return Path(__file__).resolve().parent.parent / "data" / TABLE_NAME
+
+
+def user_table_path() -> Path:
+    """Where ``prefilter bake ltc-aniso`` writes without ``-o``:
+    :func:`prefilter.fileio.user_data_dir` ``/ ggx_aniso.npz``."""
+    return user_data_dir() / TABLE_NAME
+
+
+def default_table_path() -> Path:
+    """The table ``AnisoGGXTable.load()`` reads: the user table when one was baked, else the
+    shipped one."""
+    user = user_table_path()
+    return user if user.is_file() else shipped_table_path()
 
 
 def _coord(name, x):
@@ -56,7 +76,12 @@ class AnisoGGXTable:
         ``GGX(alpha, alpha * ratio)``, ``v_x, v_y >= 0``).
     magnitude, fresnel : (T, F, A, R) ``n`` and ``f5`` (Hill and Heitz 2016).
     settings : dict, how the table was baked. diagnostics : dict of per-entry arrays (optional).
+    path : the file it was loaded from (``None`` when built in memory); source : ``"shipped"``,
+        ``"user"`` (baked into the user data folder) or ``"file"``.
     """
+
+    path: Path | None = None
+    source: str = "memory"
 
     def __init__(self, axes, M, magnitude, fresnel, settings=None, diagnostics=None):
         for name, a in zip(AXES, axes):
@@ -93,13 +118,18 @@ class AnisoGGXTable:
 
     @classmethod
     def load(cls, path: str | os.PathLike | None = None) -> "AnisoGGXTable":
-        """Read and validate a table (default: the one shipped with the package).
+        """Read and validate a table.
+
+        Default: the user table (``prefilter bake ltc-aniso`` without ``-o`` writes it, into
+        :func:`prefilter.fileio.user_data_dir`) when it exists, else the one shipped with the
+        package; :attr:`path` and :attr:`source` say which, and the logger
+        ``prefilter.ltc.aniso.table`` reports a user table at INFO level.
 
         ``.npz`` arrays: ``version`` (== 1), ``axis_theta`` (T,), ``axis_phi`` (F,),
         ``axis_alpha`` (A,), ``axis_ratio`` (R,), ``M`` (T, F, A, R, 3, 3), ``magnitude`` and
         ``fresnel`` (T, F, A, R), ``settings`` (JSON string); optional ``diag_*`` arrays;
-        ``__meta__`` (format, version and SHA-256 of the arrays, :mod:`prefilter.fileio`; verified
-        when present). Raises :class:`~prefilter.errors.TableFileError` naming the file and
+        ``__meta__`` (format, version and SHA-256 of the arrays, :mod:`prefilter.fileio`;
+        required). Raises :class:`~prefilter.errors.TableFileError` naming the file and
         field for missing, corrupt (checksum), unknown-version or malformed files.
         """
         path = Path(path) if path is not None else default_table_path()
@@ -137,7 +167,12 @@ class AnisoGGXTable:
         verify_npz(path, "anisotropic LTC table", raw_data, format_name=FORMAT,
                    format_version=TABLE_VERSION)
         diagnostics = {k[5:]: data[k] for k in data if k.startswith("diag_")}
-        return cls(axes, data["M"], data["magnitude"], data["fresnel"], settings, diagnostics)
+        table = cls(axes, data["M"], data["magnitude"], data["fresnel"], settings, diagnostics)
+        table.path = path
+        table.source = table_source(path, shipped_table_path())
+        if table.source == "user":
+            _log.info("anisotropic LTC table: the user table %s (not the shipped one)", path)
+        return table
 
     # -- lookup ----------------------------------------------------------------------------------
     def fractional_index(self, v, alpha, ratio):
