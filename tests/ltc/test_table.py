@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from prefilter.errors import PrefilterError, TableFileError
+from prefilter.fileio import save_npz_atomic
 from prefilter.ltc import LTC, GGXTable
 from prefilter.ltc.polygon import polygon_integral
 from prefilter.ltc.table import schlick_scale
@@ -178,7 +179,7 @@ def _write_table(path, table, **override):
                   settings=np.array('{"version": 1}'))
     arrays.update(override)
     arrays = {k: v for k, v in arrays.items() if v is not None}
-    np.savez(path, **arrays)
+    save_npz_atomic(path, **arrays)  # a valid checksum: only the edited layout is wrong
     return path
 
 

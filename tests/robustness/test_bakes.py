@@ -86,9 +86,10 @@ def _cmd(bake: Bake, inputs: Path, work: Path) -> list[str]:
 
 
 def _outputs(work: Path) -> dict[str, bytes]:
-    """Every file under ``work`` (hidden temporary files of a killed atomic write excluded)."""
+    """Every file under ``work`` (hidden temporary files of a killed atomic write, and the
+    hidden version folders that a table's visible links point into, excluded)."""
     return {str(p.relative_to(work)): p.read_bytes() for p in sorted(work.rglob("*"))
-            if p.is_file() and not p.name.startswith(".")}
+            if p.is_file() and not any(n.startswith(".") for n in p.relative_to(work).parts)}
 
 
 def _run(cmd, cwd) -> None:

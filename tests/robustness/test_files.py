@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from prefilter.fileio import META_KEY, save_npz_atomic
-from prefilter.errors import PrefilterError
+from prefilter.errors import PrefilterError, TableFileError
 
 N_FLIPS = 48
 TRUNCATE_FRACTIONS = (0.0, 0.001, 0.1, 0.25, 0.5, 0.75, 0.9, 0.999)
@@ -562,18 +562,19 @@ def test_checksum_catches_a_flip_in_array_data(originals, tmp_path):
         GGXTable.load(p)
 
 
-def test_files_without_checksum_still_load(originals, tmp_path):
-    """Older bakes (no ``__meta__``) load when otherwise valid, with the same arrays."""
+def test_files_without_checksum_are_refused(originals, tmp_path):
+    """Removing the ``__meta__`` entry does not turn the checksum off: an otherwise valid table
+    without it (here with an edited entry) is refused, naming the file and the entry."""
     from prefilter.ltc.table import GGXTable
 
-    _, src, expected = originals["iso_table"]
+    _, src, _ = originals["iso_table"]
     with np.load(src) as z:
         arrays = {k: z[k] for k in z.files if k != META_KEY}
-    p = tmp_path / "old.npz"
+    arrays["magnitude"] = arrays["magnitude"] * 0.5
+    p = tmp_path / "edited.npz"
     np.savez(p, **arrays)
-    assert _same(_load_iso(p), expected)
-    t = GGXTable.load(p)
-    assert t.M.shape == (4, 4, 3, 3)
+    with pytest.raises(TableFileError, match=r"edited\.npz: __meta__: expected the checksum"):
+        GGXTable.load(p)
 
 
 def test_cli_reports_a_corrupt_table_in_one_line(originals, tmp_path):

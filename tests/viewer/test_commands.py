@@ -80,12 +80,13 @@ def test_export_uses_the_given_table_file(tmp_path):
     magnitude halved), not the shipped table's."""
     import numpy as np
 
+    from prefilter.fileio import save_npz_atomic
     from prefilter.ltc.table import GGXTable
 
     t = GGXTable.load()
     p = tmp_path / "half.npz"
-    np.savez(p, version=np.int64(1), axis_t=t.axis_t, axis_r=t.axis_r, M=t.M,
-             magnitude=0.5 * t.magnitude, fresnel=t.fresnel, settings=np.array("{}"))
+    save_npz_atomic(p, version=np.int64(1), axis_t=t.axis_t, axis_r=t.axis_r, M=t.M,
+                    magnitude=0.5 * t.magnitude, fresnel=t.fresnel, settings=np.array("{}"))
     res = CliRunner().invoke(export, [str(_scene_file(tmp_path)), "--out", str(tmp_path / "s"),
                                       "--no-builtin-maps", "--iso-table", str(p)])
     assert res.exit_code == 0, res.output
