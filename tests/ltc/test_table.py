@@ -246,3 +246,51 @@ def test_schlick_scale_validates_f0():
     for f0 in (np.nan, 2.0, -0.1):
         with pytest.raises(PrefilterError, match="f0"):
             schlick_scale(0.9, 0.1, f0)
+
+
+def test_bake_without_out_writes_the_user_table_which_load_prefers(tmp_path, monkeypatch):
+    """``bake_table()`` without an output never touches the package data: it writes the user
+    table (``$PREFILTER_DATA``), which ``GGXTable.load()`` then reads and names."""
+    import logging
+
+    from prefilter.ltc.fit_iso import (FitSettings, bake_table, shipped_table_path,
+                                       user_table_path)
+
+    monkeypatch.setenv("PREFILTER_DATA", str(tmp_path / "data"))
+    shipped = shipped_table_path().read_bytes()
+    assert GGXTable.load().source == "shipped"
+    out = bake_table(None, FitSettings(res_theta=2, res_alpha=2, n_fit=4, quad_nodes=16),
+                     progress=False)
+    assert out == user_table_path() == tmp_path / "data" / "ggx_iso.npz"
+    assert shipped_table_path().read_bytes() == shipped
+    logger = logging.getLogger("prefilter.ltc.table")
+    seen = []
+    handler = logging.Handler()
+    handler.emit = seen.append
+    logger.addHandler(handler)
+    old_level = logger.level
+    logger.setLevel(logging.INFO)
+    try:
+        t = GGXTable.load()
+    finally:
+        logger.removeHandler(handler)
+        logger.setLevel(old_level)
+    assert (t.source, t.path, t.M.shape) == ("user", out, (2, 2, 3, 3))
+    assert any(str(out) in r.getMessage() for r in seen)
+    out.unlink()
+    t = GGXTable.load()
+    assert (t.source, t.path) == ("shipped", shipped_table_path())
+
+
+def test_cli_bake_without_out_says_where_it_wrote(tmp_path, monkeypatch):
+    from click.testing import CliRunner
+
+    from prefilter.cli import cli
+    from prefilter.ltc.fit_iso import shipped_table_path
+
+    monkeypatch.setenv("PREFILTER_DATA", str(tmp_path))
+    shipped = shipped_table_path().read_bytes()
+    r = CliRunner().invoke(cli, ["bake", "ltc-iso", "--res", "2", "--samples", "4", "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert str(tmp_path / "ggx_iso.npz") in r.output and "user table" in r.output
+    assert shipped_table_path().read_bytes() == shipped

@@ -163,3 +163,17 @@ def test_bake_command(tmp_path):
     t = AnisoGGXTable.load(out)
     assert t.shape == (2, 2, 2, 2) and t.settings["sw"]["steps"] == 3
     assert (tmp_path / "exp" / "ltc_aniso.glsl").is_file()
+
+
+def test_user_table_is_preferred_and_named(table, tmp_path, monkeypatch):
+    """A table in the user data folder (where ``prefilter bake ltc-aniso`` writes without
+    ``-o``) is what ``AnisoGGXTable.load()`` reads; its ``source`` and ``path`` say so."""
+    from prefilter.ltc.aniso.table import shipped_table_path, user_table_path
+
+    monkeypatch.setenv("PREFILTER_DATA", str(tmp_path))
+    assert AnisoGGXTable.load().source == "shipped"
+    table.save(user_table_path())
+    t = AnisoGGXTable.load()
+    assert (t.source, t.path) == ("user", tmp_path / "ggx_aniso.npz")
+    user_table_path().unlink()
+    assert AnisoGGXTable.load().path == shipped_table_path()
