@@ -207,14 +207,15 @@ def test_kill_restart_fast(kind, references, tmp_path):
 
 
 def test_concurrent_bakes_of_one_output(references, tmp_path):
-    """Two processes baking the same glints output at once (pytest workers sharing the render
-    cache did this) both succeed, one after the other, and leave the uninterrupted bake's bytes,
-    no parts directory and no lock file."""
+    """Two processes baking the same glints output at once with ``--wait`` (as pytest workers
+    sharing the render cache do) both succeed, one after the other, and leave the uninterrupted
+    bake's bytes, no parts directory and no lock file. Without ``--wait`` the second fails at
+    once (tests/robustness/test_concurrent_bakes.py)."""
     references.start("glints")
     inputs, work = tmp_path / "in", tmp_path / "work"
     inputs.mkdir()
     work.mkdir()
-    cmd = _cmd(BAKES["glints"], inputs, work)
+    cmd = [*_cmd(BAKES["glints"], inputs, work), "--wait"]
     procs = [subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL,
                               stderr=subprocess.PIPE, text=True) for _ in range(2)]
     for p in procs:
