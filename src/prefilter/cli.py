@@ -100,7 +100,11 @@ def main(argv: list[str] | None = None) -> None:
             exc.show()  # a bare group: its help, as click prints it
             sys.exit(exc.exit_code)
         except click.UsageError as exc:
-            hint = f" (see '{exc.ctx.command_path} --help')" if exc.ctx is not None else ""
+            # a missing or unknown argument points to the help; a bad value speaks for itself
+            bad_value = (isinstance(exc, click.BadParameter)
+                         and not isinstance(exc, click.MissingParameter))
+            hint = (f" (see '{exc.ctx.command_path} --help')"
+                    if exc.ctx is not None and not bad_value else "")
             _fail(exc.format_message() + hint)
         except click.ClickException as exc:
             _fail(exc.format_message())

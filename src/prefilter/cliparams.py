@@ -18,8 +18,9 @@ import click
 
 from prefilter.errors import PrefilterError
 
-__all__ = ["SEED", "OutputDir", "OutputFile", "check_writable"]
+__all__ = ["SEED", "SEED_MAX", "OutputDir", "OutputFile", "check_writable"]
 
+#: The largest seed the commands take.
 SEED_MAX = 2**63 - 1
 
 

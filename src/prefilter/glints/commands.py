@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from prefilter.cliparams import SEED, SEED_MAX, OutputFile
 from prefilter.errors import PrefilterError
 from prefilter.glints.bake import BAKE_SETTINGS, CELL, bake, bake_settings, cache_path
 
@@ -25,6 +26,9 @@ def load_normal_map(spec: str) -> np.ndarray:
         except ValueError as exc:
             raise PrefilterError(
                 f"NORMAL_MAP: expected procedural:KIND[:SIZE[:SEED]], got {spec!r}") from exc
+        if not 0 <= seed <= SEED_MAX:
+            raise PrefilterError(f"NORMAL_MAP: expected a SEED in [0, 2**63) in "
+                                 f"procedural:KIND[:SIZE[:SEED]], got {spec!r}")
         return normal_map(parts[0], size=size, seed=seed)
     path = Path(spec)
     if not path.is_file():
@@ -50,7 +54,7 @@ _SHARED_OPTIONS = {
                 "Half-width of the NDF images in projected normals s."),
     "roughness": (("--roughness",), dict(show_default=True), "Intrinsic roughness sigma_r."),
     "iters": (("--iters",), dict(show_default=True), "Max CP iterations per group."),
-    "seed": (("--seed",), dict(show_default=True), None),
+    "seed": (("--seed",), dict(show_default=True, type=SEED), None),
     "quiet": (("--quiet",), dict(is_flag=True), "No progress bar."),
 }
 
@@ -96,7 +100,7 @@ _D = BAKE_SETTINGS
 
 @click.command("glints")
 @click.argument("normal_map")
-@click.option("-o", "--out", default=None, type=click.Path(dir_okay=False),
+@click.option("-o", "--out", default=None, type=OutputFile(),
               help="Output .npz (written atomically; parts in OUT.parts/ make it resumable) "
                    "[default: the render cache, where the glints render method finds it].")
 @click.option("--rank", default=_D["rank"], show_default=True,
@@ -189,7 +193,7 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
 
 @click.command("glints-wang")
 @click.argument("normal_map")
-@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
+@click.option("-o", "--out", required=True, type=OutputFile(),
               help="Output .npz (written atomically; prefilter.glints.wang_store format).")
 @click.option("--tile", default=32, show_default=True, help="Tile size T in texels (even).")
 @click.option("--band", default=4.0, show_default=True,

@@ -7,6 +7,8 @@ import time
 
 import click
 
+from prefilter.cliparams import SEED, OutputDir, OutputFile
+
 
 @click.command("ltc-aniso")
 @click.option("--res", default=8, show_default=True, type=click.IntRange(2, 64),
@@ -15,10 +17,10 @@ import click
               help="Gradient steps of the sliced-Wasserstein fit.")
 @click.option("--chunk", default=512, show_default=True, type=click.IntRange(1),
               help="Entries fitted together as one tensor program (and per checkpoint).")
-@click.option("--seed", default=0, show_default=True, type=int)
-@click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
+@click.option("--seed", default=0, show_default=True, type=SEED)
+@click.option("-o", "--out", type=OutputFile(), default=None,
               help="Output .npz (default: the table shipped with the package).")
-@click.option("--export", "export_dir", type=click.Path(file_okay=False), default=None,
+@click.option("--export", "export_dir", type=OutputDir(), default=None,
               help="Also write the float32 / half-float texture layouts and GLSL here.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def bake_ltc_aniso(res, steps, chunk, seed, out, export_dir, quiet):
