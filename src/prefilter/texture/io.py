@@ -15,6 +15,7 @@ header attribute ``prefilter_sha256``, verified at reading (EXR has no checksum 
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import struct
 import sys
@@ -212,30 +213,43 @@ _EXR_LAYOUTS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B",
 EXR_CHECKSUM = "prefilter_sha256"
 
 
+def _flush_c_stdio() -> None:
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # no C library to reach: nothing buffered
+        pass
+
+
 @contextlib.contextmanager
 def _native_output(captured: list[str]):
-    """Send what native code writes to file descriptors 1 and 2 (OpenEXR's messages about a
-    corrupt file, some on stdout) into ``captured`` instead of the terminal: the error raised
-    from it says it once, and a successful read prints nothing."""
+    """Collect into ``captured`` what OpenEXR and its binding print (messages about a corrupt
+    file, some on stdout; through C stdio or Python's ``sys.stdout`` / ``sys.stderr``) instead
+    of letting it reach the terminal: the error raised from it says it once, and a successful
+    read prints nothing."""
     for stream in (sys.stdout, sys.stderr):
         stream.flush()
     try:
         saved = [os.dup(1), os.dup(2)]
-    except OSError:  # no usable descriptors: nothing to redirect
-        yield
-        return
+    except OSError:  # no usable descriptors: only Python's streams are redirected
+        saved = None
+    py = io.StringIO()
     with tempfile.TemporaryFile() as sink:
-        os.dup2(sink.fileno(), 1)
-        os.dup2(sink.fileno(), 2)
+        if saved is not None:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
         try:
-            yield
+            with contextlib.redirect_stdout(py), contextlib.redirect_stderr(py):
+                yield
         finally:
-            for stream in (sys.stdout, sys.stderr):  # bindings may print through Python
-                stream.flush()
-            for fd, old in zip((1, 2), saved):
-                os.dup2(old, fd)
-                os.close(old)
+            _flush_c_stdio()  # iostreams are buffered when not a terminal
+            if saved is not None:
+                for fd, old in zip((1, 2), saved):
+                    os.dup2(old, fd)
+                    os.close(old)
             sink.seek(0)
+            captured += py.getvalue().splitlines()
             captured += sink.read().decode("utf-8", "replace").splitlines()
 
 
