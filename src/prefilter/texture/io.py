@@ -227,7 +227,7 @@ def _native_output(captured: list[str]):
     """Collect into ``captured`` what OpenEXR and its binding print (messages about a corrupt
     file, some on stdout; through C stdio or Python's ``sys.stdout`` / ``sys.stderr``) instead
     of letting it reach the terminal: the error raised from it says it once, and a successful
-    read prints nothing."""
+    read prints nothing. The redirection is process-wide for the read's few milliseconds."""
     for stream in (sys.stdout, sys.stderr):
         stream.flush()
     try:
