@@ -2,13 +2,16 @@
 
 Subcommands live next to the code they drive (``<package>/commands.py``) and are imported lazily,
 so ``prefilter --help`` is fast and a missing optional dependency only affects its own command.
-Every :class:`~prefilter.errors.PrefilterError` becomes a one-line message and exit code 2.
+A problem of input, files or environment (:class:`~prefilter.errors.PrefilterError`, ``OSError``,
+a usage error) becomes a one-line message and exit code 2; anything else is a bug and keeps its
+traceback.
 """
 
 from __future__ import annotations
 
 import importlib
 import sys
+import warnings
 
 import click
 
@@ -71,18 +74,47 @@ def bake() -> None:
     """Fit or precompute tables and maps (resumable, atomic writes)."""
 
 
+def _one_line(text: str) -> str:
+    return " ".join(line.strip() for line in str(text).splitlines() if line.strip())
+
+
+def _fail(message: str) -> None:
+    click.echo(f"prefilter: error: {_one_line(message)}", err=True)
+    sys.exit(2)
+
+
 def main(argv: list[str] | None = None) -> None:
-    try:
-        rc = cli.main(args=argv, prog_name="prefilter", standalone_mode=False)
-    except PrefilterError as exc:
-        click.echo(f"prefilter: error: {exc}", err=True)
-        sys.exit(2)
-    except click.exceptions.Abort:
-        click.echo("prefilter: aborted", err=True)
-        sys.exit(130)
-    except click.ClickException as exc:
-        exc.show()
-        sys.exit(exc.exit_code)
+    """Run the command line. Problems of input, files and environment (PrefilterError, OSError,
+    MemoryError, usage errors) print one line and exit 2; any other exception is a bug and keeps
+    its traceback. Warnings are held back until the command ends and shown only on success, so
+    an error message is the last and only line a failed command prints."""
+    with warnings.catch_warnings(record=True) as caught:
+        try:
+            rc = cli.main(args=argv, prog_name="prefilter", standalone_mode=False)
+        except PrefilterError as exc:
+            _fail(str(exc))
+        except click.exceptions.Abort:
+            click.echo("prefilter: aborted", err=True)
+            sys.exit(130)
+        except click.exceptions.NoArgsIsHelpError as exc:
+            exc.show()  # a bare group: its help, as click prints it
+            sys.exit(exc.exit_code)
+        except click.UsageError as exc:
+            # a missing or unknown argument points to the help; a bad value speaks for itself
+            bad_value = (isinstance(exc, click.BadParameter)
+                         and not isinstance(exc, click.MissingParameter))
+            hint = (f" (see '{exc.ctx.command_path} --help')"
+                    if exc.ctx is not None and not bad_value else "")
+            _fail(exc.format_message() + hint)
+        except click.ClickException as exc:
+            _fail(exc.format_message())
+        except OSError as exc:
+            where = f": {exc.filename}" if exc.filename else ""
+            _fail(f"{exc.strerror or exc}{where}")
+        except MemoryError:
+            _fail("out of memory")
+    for w in caught:
+        warnings.showwarning(w.message, w.category, w.filename, w.lineno, w.file, w.line)
     sys.exit(rc if isinstance(rc, int) else 0)
 
 

@@ -105,3 +105,32 @@ def test_viewer_section_screenshots_and_pixel_match(tmp_path):
                                         page)]
     # f32 and f16 rows per mode, the colour-map modes f32 only
     assert len(rel) == 2 * len(METHODS) - 2 and max(rel) <= 0.01, rel
+
+
+def test_skipped_methods_are_logged_as_skipped_with_the_reason(monkeypatch, tmp_path):
+    """A method that cannot render the showcase is a note ("x: skipped: <reason>"), not a line
+    that reads like an error; the same for the viewer section without Chromium."""
+    import prefilter.render.driver as driver
+    import prefilter.viewer.browser as browser
+    from prefilter.errors import PrefilterError
+    from prefilter.report.demo import _render_all
+
+    def render(scene, method, **kw):
+        if method == "point-only":
+            raise PrefilterError("method 'point-only' renders point lights only")
+        return np.zeros((2, 3, 3))
+
+    monkeypatch.setattr(driver, "render", render)
+    lines = []
+    settings = DemoSettings(width=3, height=2, flicker_frames=2, distances=(1.0,))
+    _render_all(settings, ["ltc", "point-only"], 0, lines.append)
+    assert "distance 1: point-only: skipped: method 'point-only' renders point lights only" \
+        in lines, lines
+    assert not any("failed" in ln or "error" in ln.lower() for ln in lines), lines
+
+    monkeypatch.setattr(browser, "CHROMIUM", str(tmp_path / "no-chromium"))
+    lines = []
+    report = Report("t")
+    report.add_section("viewer")
+    _viewer_section(report, DemoSettings.quick(), 0, log=lines.append)
+    assert lines and lines[0].startswith("viewer section: skipped: "), lines

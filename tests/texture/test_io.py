@@ -162,3 +162,19 @@ def test_opengl_green_points_up_the_image():
         decode_normals([0.5, 0.5, 0.2])
     with pytest.raises(PrefilterError, match="convention"):
         decode_normals([0.5, 0.5, 1.0], "vulkan")
+
+
+def test_exr_checksum_attribute_of_another_type(tmp_path, capfd):
+    """A flipped bit in the checksum attribute's type name ("string") makes OpenEXR return an
+    opaque value: a PrefilterError naming the file, and nothing printed."""
+    from prefilter.texture.io import EXR_CHECKSUM
+
+    p = tmp_path / "a.exr"
+    write_image(p, np.ones((2, 2, 3)))
+    data = bytearray(p.read_bytes())
+    data[data.index(EXR_CHECKSUM.encode()) + len(EXR_CHECKSUM) + 1] ^= 0x80
+    p.write_bytes(bytes(data))
+    capfd.readouterr()
+    with pytest.raises(PrefilterError, match=rf"a\.exr: {EXR_CHECKSUM}: expected a string"):
+        read_image(p)
+    assert capfd.readouterr() == ("", "")

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import click
 
+from prefilter.cliparams import OutputFile
+
 
 def load_colormap_image(path, *, srgb: bool = True):
     """Colour-map samples ``(N, C)`` from an image: a single row or column is taken as is; a
@@ -74,9 +76,9 @@ def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigm
               show_default=True, help="How the colour map continues outside --range.")
 @click.option("--linear", is_flag=True,
               help="The PNG holds linear values (default: sRGB-encoded colours are decoded).")
-@click.option("-o", "--out", type=click.Path(dir_okay=False), required=True,
+@click.option("-o", "--out", type=OutputFile(), required=True,
               help="Output table (.exr, .npy or .png); metadata goes next to it as .json.")
-@click.option("--glsl", "glsl_out", type=click.Path(dir_okay=False), default=None,
+@click.option("--glsl", "glsl_out", type=OutputFile(), default=None,
               help="Also write the GLSL lookup snippet for this table.")
 @click.option("--wait", is_flag=True,
               help="If another bake is writing the same output, wait for it (default: fail at "

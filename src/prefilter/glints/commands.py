@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from prefilter.cliparams import SEED, SEED_MAX, OutputFile
 from prefilter.errors import PrefilterError
 from prefilter.fileio import bake_lock
 from prefilter.glints.bake import BAKE_SETTINGS, CELL, bake, bake_settings, cache_path
@@ -26,6 +27,9 @@ def load_normal_map(spec: str) -> np.ndarray:
         except ValueError as exc:
             raise PrefilterError(
                 f"NORMAL_MAP: expected procedural:KIND[:SIZE[:SEED]], got {spec!r}") from exc
+        if not 0 <= seed <= SEED_MAX:
+            raise PrefilterError(f"NORMAL_MAP: expected a SEED in [0, 2**63) in "
+                                 f"procedural:KIND[:SIZE[:SEED]], got {spec!r}")
         return normal_map(parts[0], size=size, seed=seed)
     path = Path(spec)
     if not path.is_file():
@@ -56,7 +60,6 @@ class FiniteFloat(click.FloatRange):
 
 
 _POSITIVE = FiniteFloat(0.0, min_open=True)
-_SEED = click.IntRange(0, 2**32 - 1)
 
 # Options both bakes declare: click declarations, fixed keyword arguments and help.
 _SHARED_OPTIONS = {
@@ -70,7 +73,7 @@ _SHARED_OPTIONS = {
                   "Intrinsic roughness sigma_r."),
     "iters": (("--iters",), dict(show_default=True, type=click.IntRange(1)),
               "Max CP iterations per group."),
-    "seed": (("--seed",), dict(show_default=True, type=_SEED), None),
+    "seed": (("--seed",), dict(show_default=True, type=SEED), None),
     "wait": (("--wait",), dict(is_flag=True),
              "If another bake is writing the same output, wait for it (default: fail at once, "
              "naming it)."),
@@ -119,7 +122,7 @@ _D = BAKE_SETTINGS
 
 @click.command("glints")
 @click.argument("normal_map")
-@click.option("-o", "--out", default=None, type=click.Path(dir_okay=False),
+@click.option("-o", "--out", default=None, type=OutputFile(),
               help="Output .npz (written atomically; parts in OUT.parts/ make it resumable) "
                    "[default: the render cache, where the glints render method finds it].")
 @click.option("--rank", default=_D["rank"], show_default=True, type=click.IntRange(1),
@@ -215,7 +218,7 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
 
 @click.command("glints-wang")
 @click.argument("normal_map")
-@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False),
+@click.option("-o", "--out", required=True, type=OutputFile(),
               help="Output .npz (written atomically; prefilter.glints.wang_store format).")
 @click.option("--tile", default=32, show_default=True, type=click.IntRange(2),
               help="Tile size T in texels (even).")

@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import click
 
+from prefilter.cliparams import OutputDir
+
 
 @click.command("leadr")
 @click.argument("height", type=click.Path(exists=True, dir_okay=False))
-@click.option("-o", "--out", type=click.Path(file_okay=False), required=True,
+@click.option("-o", "--out", type=OutputDir(), required=True,
               help="Output directory: leadr_L<level>.exr (channels E_x E_y E_xx E_yy E_xy) and "
                    "leadr.json.")
 @click.option("--texel-size", type=float, default=1.0, show_default=True,

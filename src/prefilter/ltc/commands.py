@@ -11,17 +11,19 @@ import time
 
 import click
 
+from prefilter.cliparams import SEED, OutputFile
+
 
 @click.command("ltc-iso")
 @click.option("--res", default=64, show_default=True, type=click.IntRange(2, 1024),
               help="Table resolution along view angle and roughness.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**32 - 1),
+@click.option("--seed", default=0, show_default=True, type=SEED,
               help="Seed of the fixed stratified fitting samples.")
 @click.option("--samples", "n_fit", default=32, show_default=True, type=click.IntRange(2, 512),
               help="Stratified samples per axis of each fitting sample set.")
 @click.option("-j", "--processes", default=1, show_default=True, type=click.IntRange(1, 64),
               help="Worker processes (rows are fitted independently).")
-@click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
+@click.option("-o", "--out", type=OutputFile(), default=None,
               help="Output .npz (default: the user table, $PREFILTER_DATA/ggx_iso.npz or "
                    "~/.local/share/prefilter/ggx_iso.npz, which renders then use instead of "
                    "the table shipped with the package).")
@@ -54,11 +56,11 @@ def bake_ltc_iso(res, seed, n_fit, processes, out, objective, power, wait, quiet
               help="Number of random (view, roughness, quad) configurations.")
 @click.option("--samples", default=100_000, show_default=True, type=click.IntRange(2),
               help="Monte Carlo samples per configuration (half BRDF, half light).")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**32 - 1))
+@click.option("--seed", default=0, show_default=True, type=SEED)
 @click.option("--table", "table_path", type=click.Path(dir_okay=False), default=None,
               help="LTC table .npz (default: the user table if one was baked, else the "
                    "shipped one).")
-@click.option("--json", "json_out", type=click.Path(dir_okay=False), default=None,
+@click.option("--json", "json_out", type=OutputFile(), default=None,
               help="Also write the statistics as JSON.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def validate(configs, samples, seed, table_path, json_out, quiet):

@@ -12,6 +12,8 @@ import json
 import click
 import numpy as np
 
+from prefilter.cliparams import SEED, OutputFile
+
 
 def fit_report(n_grid: int = 32, samples: int = 1 << 17, seed: int = 0) -> dict:
     """Everything ``multiscale-fit`` prints, as a JSON-able dict (grid uniform in sqrt(alpha)
@@ -48,13 +50,14 @@ def fit_report(n_grid: int = 32, samples: int = 1 << 17, seed: int = 0) -> dict:
     }
 
 
-@click.command("multiscale-fit")
+@click.command("multiscale-fit",
+               short_help="Check eq. 5, refit eq. 7 of multi-scale LTC (Monte Carlo).")
 @click.option("--grid", "n_grid", default=32, show_default=True, type=click.IntRange(2, 1024),
               help="Grid nodes per axis.")
 @click.option("--samples", default=1 << 17, show_default=True, type=click.IntRange(1),
               help="Monte Carlo samples/node.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**32 - 1))
-@click.option("--out", type=click.Path(dir_okay=False), default=None, help="Write JSON here.")
+@click.option("--seed", type=SEED, default=0, show_default=True)
+@click.option("--out", type=OutputFile(), default=None, help="Write JSON here.")
 def multiscale_fit(n_grid, samples, seed, out):
     """Verify eq. 5 and refit eq. 7 of multi-scale LTC (Tao et al. 2021) by Monte Carlo."""
     rep = fit_report(n_grid, samples, seed)

@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from prefilter.cliparams import SEED, OutputFile
 from prefilter.errors import PrefilterError
 
 # ------------------------------------------------------------------------------------- compare
@@ -72,9 +73,9 @@ def compare_images(test_path, reference_path, *, eps: float = 1e-2) -> dict:
 @click.command("compare")
 @click.argument("test", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.argument("reference", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--heatmap", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--heatmap", type=OutputFile(path_type=Path),
               help="Write the FLIP error map as a magma heat map PNG.")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--json", "json_path", type=OutputFile(path_type=Path),
               help="Write the metrics as JSON.")
 @click.option("--eps", type=float, default=1e-2, show_default=True,
               help="Regulariser of relMSE = mean((a-b)^2 / (b^2 + eps)).")
@@ -110,17 +111,39 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
 # -------------------------------------------------------------------------------------- render
 
 
-@click.command("render")
+def _summary(description: str, width: int) -> str:
+    """The first clause of a method's description, cut to at most ``width`` characters at a
+    clause boundary when there is one, else at a word."""
+    text = description.split("; ")[0]
+    if len(text) <= width:
+        return text
+    cuts = [i for i in range(width // 2, width) if text[i:i + 2] in (": ", ", ", " (")
+             and text[:i].count("(") == text[:i].count(")")]
+    return text[:max(cuts)] if cuts else text[:width - 3].rsplit(" ", 1)[0] + "..."
+
+
+def methods_epilog(width: int = 76) -> str:
+    """Every registered method with the first clause of its description, one line each (click
+    keeps the lines of a paragraph that starts with ``\\b``)."""
+    from prefilter.render.methods import available, describe
+
+    names = available()
+    w = max(map(len, names))
+    lines = [f"  {n:<{w}}  {_summary(describe(n), width - w - 4)}".rstrip() for n in names]
+    return ("\b\nMethods (--method; prefilter.render.methods.describe(name) has the full "
+            "descriptions):\n" + "\n".join(lines))
+
+
+@click.command("render", epilog=methods_epilog())
 @click.argument("scene", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--method", default="ltc", show_default=True,
-              help="Shading method: a name of `prefilter.render.methods.available()` (ltc, "
-                   "reference, ltc-multiscale, ...).")
+              help="Shading method: one of the methods listed below.")
 @click.option("--spp", type=int, default=1, show_default=True, help="Samples per pixel.")
-@click.option("--seed", type=int, default=0, show_default=True,
+@click.option("--seed", type=SEED, default=0, show_default=True,
               help="Seed of all random numbers (same seed -> same image bytes).")
-@click.option("--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", "out", required=True, type=OutputFile(path_type=Path),
               help="Output image, linear radiance (.exr; .npy also works).")
-@click.option("--png", "png", type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--png", "png", type=OutputFile(path_type=Path),
               help="Also write an sRGB 8-bit PNG (values clipped to [0, 1]).")
 @click.option("--jitter", type=float, nargs=2, default=(0.0, 0.0), show_default=True,
               help="Camera offset in pixels (dx dy).")

@@ -459,6 +459,16 @@ def _light(v, path, base):
                             o.number("scale", 1.0, lo=0.0))
 
 
+def _json_int(text: str) -> int:
+    """A JSON integer of a scene file; every scene number is used as a float, so one beyond the
+    float range is refused while parsing (Python would read it exactly, then fail to convert)."""
+    digits = len(text.lstrip("-"))  # JSON has no leading zeros; 2**1024 has 309 digits
+    if digits > 309 or abs(int(text)) >= 2**1024:
+        raise OverflowError(f"expected numbers within the float range (|x| < 1.8e308), got an "
+                            f"integer of {digits} digits")
+    return int(text)
+
+
 def _read_scene_file(p: Path):
     """The parsed JSON (or, for ``.toml``, TOML) document of a scene file."""
     if not p.is_file():
@@ -480,12 +490,14 @@ def _read_scene_file(p: Path):
         except tomllib.TOMLDecodeError as exc:
             raise PrefilterError(f"{p}: invalid TOML: {exc}") from None
     try:
-        return json.loads(text)
+        return json.loads(text, parse_int=_json_int)
     except json.JSONDecodeError as exc:
         raise PrefilterError(f"{p}: invalid JSON at line {exc.lineno}, column {exc.colno}: "
                              f"{exc.msg}") from None
     except RecursionError:
         raise PrefilterError(f"{p}: invalid JSON: nested too deeply") from None
+    except OverflowError as exc:  # from _json_int
+        raise PrefilterError(f"{p}: invalid JSON number: {exc}") from None
 
 
 def _parse(data, base: Path) -> Scene:

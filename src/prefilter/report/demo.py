@@ -32,6 +32,7 @@ from pathlib import Path
 import click
 import numpy as np
 
+from prefilter.cliparams import SEED, OutputDir
 from prefilter.errors import PrefilterError
 
 
@@ -288,7 +289,7 @@ def _render_all(settings: DemoSettings, methods: list[str], seed: int, log):
                 log(f"distance {d:g}: {m} {entry['times'][m]:.2f} s")
             except Exception as exc:  # noqa: BLE001  (e.g. a point-light-only method)
                 entry["skipped"][m] = f"{type(exc).__name__}: {exc}"
-                log(f"distance {d:g}: {m} skipped ({exc})")
+                log(f"distance {d:g}: {m}: skipped: {exc}")
         results.append(entry)
     return results
 
@@ -558,7 +559,7 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         report.add_text(f"Headless Chromium is missing ({', '.join(missing)}): no screenshots or "
                         "pixel match here. Install Debian's `chromium` and `chromium-driver` and "
                         "run `prefilter view` / `python -m prefilter.viewer.match`.")
-        log(f"viewer section: {', '.join(missing)} missing, skipped")
+        log(f"viewer section: skipped: {', '.join(missing)} missing")
         return
     w, h = settings.viewer_size
     mw, mh = settings.viewer_match_size
@@ -695,10 +696,10 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
 
 
 @click.command("demo")
-@click.option("--out", type=click.Path(file_okay=False, path_type=Path), default=Path("out/demo"),
+@click.option("--out", type=OutputDir(path_type=Path), default=Path("out/demo"),
               show_default=True, help="Output folder for index.html and its images.")
 @click.option("--quick", is_flag=True, help="A one-minute version (smaller images, fewer samples).")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=SEED, default=0, show_default=True)
 def demo(out: Path, quick: bool, seed: int) -> None:
     """Render the showcase and every method's section; write out/demo/index.html."""
     path = run_demo(out, quick=quick, seed=seed, log=lambda s: click.echo(s, err=True))

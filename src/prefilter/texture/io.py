@@ -14,8 +14,12 @@ header attribute ``prefilter_sha256``, verified at reading (EXR has no checksum 
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import struct
+import sys
+import tempfile
 import zlib
 from pathlib import Path
 
@@ -209,6 +213,46 @@ _EXR_LAYOUTS = {1: ("Y",), 2: ("Y", "A"), 3: ("R", "G", "B"), 4: ("R", "G", "B",
 EXR_CHECKSUM = "prefilter_sha256"
 
 
+def _flush_c_stdio() -> None:
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # no C library to reach: nothing buffered
+        pass
+
+
+@contextlib.contextmanager
+def _native_output(captured: list[str]):
+    """Collect into ``captured`` what OpenEXR and its binding print (messages about a corrupt
+    file, some on stdout; through C stdio or Python's ``sys.stdout`` / ``sys.stderr``) instead
+    of letting it reach the terminal: the error raised from it says it once, and a successful
+    read prints nothing. The redirection is process-wide for the read's few milliseconds."""
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    try:
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:  # no usable descriptors: only Python's streams are redirected
+        saved = None
+    py = io.StringIO()
+    with tempfile.TemporaryFile() as sink:
+        if saved is not None:
+            os.dup2(sink.fileno(), 1)
+            os.dup2(sink.fileno(), 2)
+        try:
+            with contextlib.redirect_stdout(py), contextlib.redirect_stderr(py):
+                yield
+        finally:
+            _flush_c_stdio()  # iostreams are buffered when not a terminal
+            if saved is not None:
+                for fd, old in zip((1, 2), saved):
+                    os.dup2(old, fd)
+                    os.close(old)
+            sink.seek(0)
+            captured += py.getvalue().splitlines()
+            captured += sink.read().decode("utf-8", "replace").splitlines()
+
+
 def read_exr_channels(path: Path) -> dict[str, np.ndarray]:
     """The channels of an EXR file as stored (float16/32 ``(H, W)``), checksum verified.
 
@@ -217,23 +261,28 @@ def read_exr_channels(path: Path) -> dict[str, np.ndarray]:
     """
     import OpenEXR
 
+    native: list[str] = []
     try:
-        with OpenEXR.File(str(path), separate_channels=True) as f:
+        with _native_output(native), OpenEXR.File(str(path), separate_channels=True) as f:
             ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
             want = f.header().get(EXR_CHECKSUM)
     except Exception as exc:  # noqa: BLE001 - RuntimeError, ValueError, UnicodeDecodeError, ...
-        raise PrefilterError(f"{path}: unreadable or corrupt EXR ({type(exc).__name__}: "
-                             f"{exc})") from None
+        detail = "; ".join([f"{type(exc).__name__}: {exc}"] + native[:1])
+        raise PrefilterError(f"{path}: unreadable or corrupt EXR ({detail})") from None
     if not ch or any(a.ndim != 2 or a.dtype.kind not in "fu" for a in ch.values()):
         raise PrefilterError(f"{path}: expected EXR channels of 2-D pixel arrays, got "
                              f"{ {k: (str(a.dtype), a.shape) for k, a in ch.items()} }")
     if want is not None:
         if isinstance(want, bytes):
             want = want.decode("latin-1")
+        if not isinstance(want, str):  # a flipped bit in the attribute's type name
+            raise PrefilterError(f"{path}: {EXR_CHECKSUM}: expected a string attribute, got "
+                                 f"one of type {type(want).__name__}: the file is corrupt or "
+                                 f"was modified")
         found = array_digest(ch)
         if want != found:
-            raise PrefilterError(f"{path}: {EXR_CHECKSUM}: checksum mismatch (expected {want!s}, "
-                                 f"found {found}): the file is corrupt or was modified")
+            raise PrefilterError(f"{path}: {EXR_CHECKSUM}: checksum mismatch (expected {want!r}, "
+                                 f"found {found!r}): the file is corrupt or was modified")
     return ch
 
 

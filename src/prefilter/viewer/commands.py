@@ -8,6 +8,8 @@ import tempfile
 
 import click
 
+from prefilter.cliparams import OutputDir
+
 
 def _table_options(f):
     f = click.option("--aniso-table", type=click.Path(exists=True, dir_okay=False), default=None,
@@ -26,15 +28,16 @@ def _load_tables(iso, aniso) -> dict:
             "aniso_table": AnisoGGXTable.load(aniso) if aniso else None}
 
 
-@click.command("export")
-@click.argument("scene", type=click.Path(exists=True, dir_okay=False))
-@click.option("--out", "-o", "out", required=True, type=click.Path(file_okay=False),
+@click.command("export", short_help="Write the viewer of a scene as a static web folder.")
+@click.argument("scene", required=False, type=click.Path(exists=True, dir_okay=False))
+@click.option("--out", "-o", "out", required=True, type=OutputDir(),
               help="Folder to write (page + data); it opens from any static web server.")
 @click.option("--no-builtin-maps", is_flag=True,
               help="Leave out the procedural normal maps of the page's normal-map choice.")
 @_table_options
 def export(scene, out, no_builtin_maps, iso_table, aniso_table):
-    """Write the viewer for SCENE (a scene JSON, docs/scenes.md) as a static folder."""
+    """Write the viewer for SCENE (a scene JSON, docs/scenes.md; default: a plane and a sphere
+    under a quad light) as a static folder."""
     from prefilter.viewer.export import export_scene
 
     path = export_scene(scene, out, builtin_maps=not no_builtin_maps,

@@ -7,6 +7,8 @@ import time
 
 import click
 
+from prefilter.cliparams import SEED, OutputDir, OutputFile
+
 
 @click.command("ltc-aniso")
 @click.option("--res", default=8, show_default=True, type=click.IntRange(2, 64),
@@ -15,12 +17,12 @@ import click
               help="Gradient steps of the sliced-Wasserstein fit.")
 @click.option("--chunk", default=512, show_default=True, type=click.IntRange(1),
               help="Entries fitted together as one tensor program (and per checkpoint).")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**32 - 1))
-@click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
+@click.option("--seed", default=0, show_default=True, type=SEED)
+@click.option("-o", "--out", type=OutputFile(), default=None,
               help="Output .npz (default: the user table, $PREFILTER_DATA/ggx_aniso.npz or "
                    "~/.local/share/prefilter/ggx_aniso.npz, which renders then use instead of "
                    "the table shipped with the package).")
-@click.option("--export", "export_dir", type=click.Path(file_okay=False), default=None,
+@click.option("--export", "export_dir", type=OutputDir(), default=None,
               help="Also write the float32 / half-float texture layouts and GLSL here.")
 @click.option("--wait", is_flag=True,
               help="If another bake is writing the same output, wait for it (default: fail at "
