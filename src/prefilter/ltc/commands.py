@@ -77,3 +77,18 @@ def _median_rel_se(se, ref):
 
     ok = ref > 0
     return np.median(se[ok] / ref[ok]) if ok.any() else float("nan")
+
+
+@click.command("export-ltc")
+@click.option("--preset", required=True, help="Engine layout (see --list).",
+              type=click.Choice(["ltc_code", "threejs", "babylon", "blender", "bevy"]))
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Output directory (created if missing).")
+@click.option("--table", "table_path", type=click.Path(dir_okay=False), default=None,
+              help="LTC table .npz (default: the shipped table).")
+def export_ltc(preset, out_dir, table_path):
+    """Write the isotropic GGX LTC table in an engine's layout (docs/ltc-export.md)."""
+    from prefilter.ltc.export import export_preset
+
+    for path in export_preset(preset, out_dir, table_path):
+        click.echo(f"wrote {path}")
