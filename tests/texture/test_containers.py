@@ -26,8 +26,7 @@ VK = {"R16G16B16A16_SFLOAT": 97, "R32G32B32A32_SFLOAT": 109, "R16G16_SFLOAT": 83
 def read_dds(blob: bytes):
     """(header fields, dx10 fields, texels (L, H, W, C)) of an uncompressed float DX10 DDS."""
     assert blob[:4] == b"DDS "
-    (size, flags, height, width, pitch, depth, mips), reserved = (
-        struct.unpack_from("<7I", blob, 4), struct.unpack_from("<11I", blob, 32))
+    size, flags, height, width, pitch, _depth, mips = struct.unpack_from("<7I", blob, 4)
     pf_size, pf_flags, fourcc = struct.unpack_from("<II4s", blob, 76)
     caps = struct.unpack_from("<4I", blob, 108)
     dxgi, dim, misc, array_size, misc2 = struct.unpack_from("<5I", blob, 128)

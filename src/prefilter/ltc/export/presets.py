@@ -89,8 +89,9 @@ def _ltc_code(table, out: Path) -> list[Path]:
     rows = ",\n".join("{" + _floats(e, 9, "f") + "}" for e in col_major)
     rows_inv = ",\n".join("{" + _floats(e, 9, "f") + "}" for e in col_major_inv)
     _write_text(paths[3], f"// {_header('ltc_code', table)}\n"
-                f"// index [a + t * size]: a = roughness node (sqrt(alpha)), t = sqrt(1 - cos theta)"
-                f" node; mat33 column-major; M forward, divided by the length of its third column\n"
+                f"// index [a + t * size]: a = roughness node (sqrt(alpha)), t = node of\n"
+                f"// sqrt(1 - cos theta); mat33 column-major; M forward, third column of unit"
+                f" length\n"
                 f"static const int size = {ENGINE_SIZE};\n\n"
                 f"static const mat33 tabM[size*size] = {{\n{rows}\n}};\n\n"
                 f"static const mat33 tabMinv[size*size] = {{\n{rows_inv}\n}};\n\n"
@@ -102,8 +103,8 @@ def _ltc_code(table, out: Path) -> list[Path]:
 _THREE_MODULE = """\
 // {header}
 // three.js layout (examples/jsm/lights/RectAreaLightTexturesLib.js): 64 x 64 RGBA, rows
-// v = sqrt(1 - cos theta), columns sqrt(alpha); LTC_*_1 = inverse matrix (m00, m20, m02, m22) / m11,
-// LTC_*_2 = (magnitude, fresnel, 0, sphere form factor).
+// v = sqrt(1 - cos theta), columns sqrt(alpha); LTC_*_1 = inverse matrix (m00, m20, m02, m22)
+// divided by m11, LTC_*_2 = (magnitude, fresnel, 0, sphere form factor).
 // WebGLRenderer: after RectAreaLightUniformsLib.init(), set UniformsLib.LTC_FLOAT_1/2 and
 // LTC_HALF_1/2 to those of PrefilterLTCTexturesLib.init();
 // WebGPURenderer: RectAreaLightNode.setLTC( PrefilterLTCTexturesLib.init() ).
@@ -185,7 +186,8 @@ def _blender(table, out: Path) -> list[Path]:
     path = out / "eevee_lut_ltc_ggx.cc"
     _write_text(path, f"/* {_header('blender', table)}.\n"
                 f" * Replaces the two tables of source/blender/draw/engines/eevee/eevee_lut.cc:\n"
-                f" * [y][x] = [sqrt(1 - cos theta)][roughness], inverse matrix / m11, (n, f5). */\n\n"
+                f" * [y][x] = [sqrt(1 - cos theta)][roughness]; inverse matrix / m11; (n, f5)."
+                f" */\n\n"
                 f"namespace blender::eevee::lut {{\n\n"
                 f"const float ltc_mat_ggx[64][64][4] = {{\n{_floats(ltc_1, 8, suffix='f')}\n}};\n\n"
                 f"const float ltc_mag_ggx[64][64][2] = {{\n"
