@@ -205,6 +205,21 @@ def _bevy(table, out: Path) -> list[Path]:
     return [path]
 
 
+def _compact(table, out: Path) -> list[Path]:
+    """``ggx_iso_half.npz`` and ``ggx_iso_fit.npz``: the encodings of
+    :mod:`prefilter.ltc.export.compact` (checksummed ``.npz``)."""
+    from prefilter.fileio import save_npz_atomic
+    from prefilter.ltc.export.compact import ENCODINGS, encode
+
+    paths = []
+    for name in ENCODINGS:
+        path = out / f"ggx_iso_{name}.npz"
+        save_npz_atomic(path, format_name=f"ltc-iso-{name}", format_version=1,
+                        **encode(table, name))
+        paths.append(path)
+    return paths
+
+
 @dataclass(frozen=True)
 class Preset:
     """One engine layout: ``write(table, out_dir) -> [paths]`` and a one-line summary."""
@@ -221,6 +236,8 @@ PRESETS: dict[str, Preset] = {
     "blender": Preset(_blender, "Blender EEVEE: ltc_mat_ggx[64][64][4], ltc_mag_ggx[64][64][2]"),
     "bevy": Preset(_bevy, "KTX2 (zstd) 2-layer RGBA16F array in the reference layout (no "
                           "upstream Bevy reader)"),
+    "compact": Preset(_compact, "the table's own grid as binary16 texels and as Chebyshev "
+                                "coefficients (.npz)"),
 }
 
 
