@@ -400,3 +400,30 @@ def test_export_command(tmp_path):
     res = CliRunner().invoke(cli, ["export-ltc", "--preset", "babylon", "-o", str(tmp_path),
                                    "--measure"])
     assert res.exit_code != 0 and "--measure applies to --preset compact" in res.output
+
+
+def test_sphere_form_factor():
+    # Against closed forms (fully visible cap: z; hemisphere cap: (1 + z) / 2) and a Monte Carlo
+    # estimate of the clipped projected solid angle of caps straddling the horizon.
+    from prefilter.ltc.export import sphere_form_factor
+
+    table = sphere_form_factor()
+    x = np.arange(SIZE) / (SIZE - 1)
+    z, length = 2 * x - 1, x
+    assert np.allclose(table[-1], (1 + z) / 2, atol=1e-6)
+    sigma = np.arcsin(np.sqrt(length))[:, None]
+    visible = np.arccos(np.clip(z, -1, 1))[None, :] + sigma <= np.pi / 2
+    assert np.allclose(table[np.broadcast_to(visible, table.shape)],
+                       np.broadcast_to(z, table.shape)[visible], atol=1e-6)
+    rng = np.random.default_rng(9)
+    for j, i in [(20, 30), (40, 25), (50, 40), (10, 31)]:
+        s, om = np.arcsin(np.sqrt(length[j])), np.arccos(z[i])
+        n = 400_000
+        ct = 1 - rng.random(n) * (1 - np.cos(s))  # uniform on the cap
+        st = np.sqrt(1 - ct * ct)
+        ph = rng.uniform(0, 2 * np.pi, n)
+        wz = ct * np.cos(om) - st * np.cos(ph) * np.sin(om)
+        estimate = 2 * np.pi * (1 - np.cos(s)) * np.maximum(wz, 0)
+        value = estimate.mean() / (np.pi * length[j])
+        se = estimate.std() / np.sqrt(n) / (np.pi * length[j])
+        assert abs(table[j, i] - value) <= 4 * se + 1e-6, (j, i, table[j, i], value, se)
