@@ -58,7 +58,9 @@ def table():
 @pytest.fixture(scope="module")
 def exported(tmp_path_factory, table):
     out = tmp_path_factory.mktemp("ltc_export")
-    return {p: export_preset(p, out / p, table) for p in PRESETS}
+    has_zstd = importlib.util.find_spec("zstandard") is not None
+    # bevy's KTX2 needs zstandard (its test skips without it)
+    return {p: export_preset(p, out / p, table) for p in PRESETS if p != "bevy" or has_zstd}
 
 
 @pytest.fixture(scope="module")
