@@ -98,10 +98,37 @@ def engine_lookup(ltc_1, ltc_2, roughness, cos_theta):
     return Minv, t2
 
 
-def relative_errors(table, ltc_1, ltc_2, roughness, cos_theta, quads, f0):
+# Godot's frame (area_lights_inc.glsl, ltc_evaluate): z = -normalize(V - N (V.N)), x = N x z,
+# y = N, so p_godot = P p with P below; its cosine is about y, brought back to z by S.
+GODOT_P = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0]])
+GODOT_S = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+def godot_lookup(lut1, lut2, roughness, cos_theta):
+    """As ``ltc_evaluate_specular``: ``uv = (max(r, 0.02), theta / (pi/2)) * 63/64 + 0.5/64``,
+    ``M_inv`` from the forward entries ``(a, b, c, d)``, ``e``; returned in the standard frame
+    with ``(n, f5)`` (Godot's ``fresnel = (mag, fres)``, ``F = f0 x + (f90 - f0) y``). Exact
+    ``acos`` here where the shader uses ``acos_approx``."""
+    theta = np.arccos(np.clip(cos_theta, -1.0, 1.0))
+    u = np.maximum(roughness, 0.02) * (SIZE - 1) / SIZE + 0.5 / SIZE
+    v = theta / (0.5 * np.pi) * (SIZE - 1) / SIZE + 0.5 / SIZE
+    abcd = sample_linear(np.asarray(lut1, float), u, v)
+    emf = sample_linear(np.asarray(lut2, float), u, v)
+    a, b, c, d = (abcd[..., k] for k in range(4))
+    e = emf[..., 0]
+    s = 1.0 / (a * e - b * d)
+    Minv = np.zeros(a.shape + (3, 3))
+    # GLSL mat3(col0, col1, col2): col0 = (0, 0, 1/c), col1 = (-d s, a s, 0), col2 = (-e s, b s, 0)
+    Minv[..., 2, 0] = 1.0 / c
+    Minv[..., 0, 1], Minv[..., 1, 1] = -d * s, a * s
+    Minv[..., 0, 2], Minv[..., 1, 2] = -e * s, b * s
+    return GODOT_S @ Minv @ GODOT_P, emf[..., 1:3]
+
+
+def relative_errors(table, ltc_1, ltc_2, roughness, cos_theta, quads, f0, lookup=None):
     """Relative error of the engine's shading against the table's where the table's LTC
     integral is >= 1e-3 (quads that catch some of the lobe)."""
-    Minv, t2 = engine_lookup(ltc_1, ltc_2, roughness, cos_theta)
+    Minv, t2 = (lookup or engine_lookup)(ltc_1, ltc_2, roughness, cos_theta)
     engine = (f0 * t2[..., 0] + (1 - f0) * t2[..., 1]) * polygon_integral_minv(Minv, quads)
     M, n, f5 = table.lookup_canonical(cos_theta, roughness ** 2)
     E = polygon_integral(M, quads)
@@ -111,12 +138,14 @@ def relative_errors(table, ltc_1, ltc_2, roughness, cos_theta, quads, f0):
     return np.abs(engine - ref)[keep] / ref[keep]
 
 
-def node_configurations(k=400, seed=5):
+def node_configurations(k=400, seed=5, view="sqrt"):
     """Roughness and view at engine texel centres inside the table's range, with quads."""
     rng = np.random.default_rng(seed)
     i = rng.integers(7, SIZE, k)  # sqrt(alpha) >= 0.111 > sqrt(alpha_min) = 0.1
-    j = rng.integers(0, SIZE - 2, k)  # sqrt(1 - cos theta) <= 61/63 < that of 88 deg
-    return i / (SIZE - 1), 1.0 - (j / (SIZE - 1)) ** 2, random_quads(k, rng)
+    # sqrt(1 - cos theta) <= 61/63 < that of 88 deg; theta <= 61/63 * 90 = 87.1 deg
+    v = rng.integers(0, SIZE - 2, k) / (SIZE - 1)
+    cos_theta = 1.0 - v ** 2 if view == "sqrt" else np.cos(0.5 * np.pi * v)
+    return i / (SIZE - 1), cos_theta, random_quads(k, rng)
 
 
 def random_configurations(k=400, seed=6):
@@ -126,13 +155,13 @@ def random_configurations(k=400, seed=6):
     return r, 1.0 - v * v, random_quads(k, rng)
 
 
-def check_convention(table, ltc_1, ltc_2, *, node_tol):
+def check_convention(table, ltc_1, ltc_2, *, node_tol, lookup=None, view="sqrt"):
     """Texel centres: agreement to ``node_tol`` (storage precision); elsewhere: the
     interpolation difference (median <= 2e-3, p90 <= 1e-2, max <= 6e-2)."""
     for f0 in (1.0, 0.04):
-        rel = relative_errors(table, ltc_1, ltc_2, *node_configurations(), f0)
+        rel = relative_errors(table, ltc_1, ltc_2, *node_configurations(view=view), f0, lookup)
         assert rel.max() <= node_tol, (f0, rel.max())
-        rel = relative_errors(table, ltc_1, ltc_2, *random_configurations(), f0)
+        rel = relative_errors(table, ltc_1, ltc_2, *random_configurations(), f0, lookup)
         assert np.median(rel) <= 2e-3 and np.percentile(rel, 90) <= 1e-2 and rel.max() <= 6e-2
 
 
@@ -301,6 +330,20 @@ int main() {{
     # EEVEE reads (n, f5): F0 * n + (1 - F0) * f5 as the other engines
     ltc_2 = np.concatenate([mag, np.zeros((SIZE, SIZE, 2))], -1)
     check_convention(table, ltc_1, ltc_2, node_tol=F32_TOL)
+
+
+def test_godot_dds(exported, table):
+    paths = {p.name: p for p in exported["godot"]}
+    luts = []
+    for name in ("ltc_lut1.dds", "ltc_lut2.dds"):
+        blob = paths[name].read_bytes()
+        head, data = read_dds(blob)
+        assert head == {"height": SIZE, "width": SIZE, "mips": 1, "format": "R32G32B32A32_FLOAT"}
+        # Godot's make_ltc_lut.py skips a 148-byte header and embeds the rest as 64 x 64 RGBA32F
+        godot = np.frombuffer(blob[148:], "<f4").reshape(SIZE, SIZE, 4)
+        assert np.array_equal(godot, data[0])
+        luts.append(godot)
+    check_convention(table, *luts, node_tol=F32_TOL, lookup=godot_lookup, view="theta")
 
 
 def test_bevy_ktx2(exported, table, reference_texels):

@@ -22,8 +22,8 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 
-__all__ = ["ENGINE_SIZE", "engine_nodes", "inverse_texels", "ltc_code_textures", "resample",
-           "sphere_form_factor"]
+__all__ = ["ENGINE_SIZE", "VIEW_AXES", "engine_nodes", "inverse_texels", "ltc_code_textures",
+           "resample", "sphere_form_factor"]
 
 #: Texels per side of every engine table (three.js, Babylon.js, Blender, the reference code).
 ENGINE_SIZE = 64
@@ -34,13 +34,18 @@ def engine_nodes(size: int = ENGINE_SIZE) -> np.ndarray:
     return np.arange(size, dtype=np.float64) / (size - 1)
 
 
-def resample(table, size: int = ENGINE_SIZE):
+#: Row parametrisations: ``v`` as a function of the view's ``cos theta``.
+VIEW_AXES = ("sqrt", "theta")
+
+
+def resample(table, size: int = ENGINE_SIZE, view: str = "sqrt"):
     """The table at the engine nodes, by the table's own bilinear lookup.
 
-    Rows are ``v = sqrt(1 - cos theta) = j / (size - 1)``, columns ``r = sqrt(alpha) =
-    i / (size - 1)``; nodes outside the table's range take its clamped values (roughness below
-    ``alpha_min`` uses the first column, views beyond ``theta_max`` the last row), as
-    :meth:`GGXTable.lookup` does.
+    Rows are ``v = j / (size - 1)`` with ``v = sqrt(1 - cos theta)`` (``view="sqrt"``, the
+    reference code's axis) or ``v = theta / (pi / 2)`` (``view="theta"``), columns
+    ``r = sqrt(alpha) = i / (size - 1)``; nodes outside the table's range take its clamped
+    values (roughness below ``alpha_min`` uses the first column, views beyond ``theta_max`` the
+    last row), as :meth:`GGXTable.lookup` does.
 
     Returns
     -------
@@ -48,9 +53,12 @@ def resample(table, size: int = ENGINE_SIZE):
     """
     if size < 2:
         raise PrefilterError(f"size: expected >= 2, got {size}")
+    if view not in VIEW_AXES:
+        raise PrefilterError(f"view: expected one of {', '.join(VIEW_AXES)}, got {view!r}")
     x = engine_nodes(size)
+    cos_theta = 1.0 - x * x if view == "sqrt" else np.cos(0.5 * np.pi * x)
     # grazing nodes clamp to the last row (as the lookup would); wo_z = 0 itself is degenerate
-    wo_z = np.maximum(1.0 - x * x, np.cos(table.theta_max))
+    wo_z = np.maximum(cos_theta, np.cos(table.theta_max))
     wo_z = np.broadcast_to(wo_z[:, None], (size, size))
     alpha = np.broadcast_to((x * x)[None, :], (size, size))
     M, n, f5 = table.lookup_canonical(wo_z, alpha)

@@ -196,6 +196,19 @@ def _blender(table, out: Path) -> list[Path]:
     return [path]
 
 
+def _godot(table, out: Path) -> list[Path]:
+    """``ltc_lut1.dds = (a, b, c, d)``, ``ltc_lut2.dds = (e, n, f5, 0)`` (RGBA32F): the *forward*
+    matrix ``[[a, 0, d], [0, c, 0], [b, 0, e]]`` (row, column) on rows ``theta / (pi / 2)``, as
+    Godot's ``area_lights_inc.glsl`` (``ltc_evaluate_specular``) reads it."""
+    M, n, f5 = resample(table, view="theta")
+    lut1 = np.stack([M[..., 0, 0], M[..., 2, 0], M[..., 1, 1], M[..., 0, 2]], -1)
+    lut2 = np.stack([M[..., 2, 2], n, f5, np.zeros_like(n)], -1)
+    paths = [out / "ltc_lut1.dds", out / "ltc_lut2.dds"]
+    write_dds(paths[0], lut1.astype(np.float32))
+    write_dds(paths[1], lut2.astype(np.float32))
+    return paths
+
+
 def _bevy(table, out: Path) -> list[Path]:
     """``ltc_ggx.ktx2``: one 2-layer RGBA16F texture array (``ltc_1``, ``ltc_2``), Zstandard
     supercompressed."""
@@ -233,6 +246,8 @@ PRESETS: dict[str, Preset] = {
     "threejs": Preset(_threejs, "three.js: LTC_FLOAT_1/2 (Float32) and LTC_HALF_1/2 (half) "
                                 "DataTextures in an ES module"),
     "babylon": Preset(_babylon, "Babylon.js: areaLightsLTC.bin (interleaved half floats)"),
+    "godot": Preset(_godot, "Godot 4: ltc_lut1.dds, ltc_lut2.dds (RGBA32F, forward matrix, rows "
+                            "theta)"),
     "blender": Preset(_blender, "Blender EEVEE: ltc_mat_ggx[64][64][4], ltc_mag_ggx[64][64][2]"),
     "bevy": Preset(_bevy, "KTX2 (zstd) 2-layer RGBA16F array in the reference layout (no "
                           "upstream Bevy reader)"),
