@@ -346,6 +346,33 @@ def test_godot_dds(exported, table):
     check_convention(table, *luts, node_tol=F32_TOL, lookup=godot_lookup, view="theta")
 
 
+def test_unity_hdrp_source(exported, table):
+    import re
+
+    src = exported["unity-hdrp"][0].read_text()
+    assert "internal static ushort[] s_LtcMatrixData_BRDF_GGX = new ushort[64 * 64 * 4]" in src
+    # the array initialiser as C# reads it: index [roughnessIndex + 64 * thetaIndex], 4 per texel
+    body = src[src.index("{", src.index("new ushort")) + 1:src.rindex("};")]
+    texels = np.array(re.findall(r"\d+", body), dtype=np.uint16).view(np.float16)
+    texels = texels.reshape(SIZE, SIZE, 4)
+
+    def hdrp_lookup(tex, _unused, roughness, cos_theta):
+        # SampleLtcMatrix: Remap01ToHalfTexelCoord((perceptualRoughness, sqrt(1 - NdotV)), 64);
+        # invM._m22 = 1, invM._m00_m02_m11_m20 = texel; invM is M^-1 transposed
+        u = roughness * (SIZE - 1) / SIZE + 0.5 / SIZE
+        v = np.sqrt(1.0 - cos_theta) * (SIZE - 1) / SIZE + 0.5 / SIZE
+        t = sample_linear(np.asarray(tex, float), u, v)
+        invMT = np.zeros(t.shape[:-1] + (3, 3))
+        m00, m02, m11, m20 = np.moveaxis(t, -1, 0)
+        invMT[..., 0, 0], invMT[..., 0, 2], invMT[..., 1, 1], invMT[..., 2, 0] = m00, m02, m11, m20
+        invMT[..., 2, 2] = 1.0
+        # HDRP's magnitude comes from its own FGD table: the table's (n, f5) here
+        _, n, f5 = table.lookup_canonical(cos_theta, roughness ** 2)
+        return np.swapaxes(invMT, -1, -2), np.stack([n, f5], -1)
+
+    check_convention(table, texels, None, node_tol=F16_TOL, lookup=hdrp_lookup)
+
+
 def test_bevy_ktx2(exported, table, reference_texels):
     pytest.importorskip("zstandard")
     h, dfd, _, level = read_ktx2(exported["bevy"][0].read_bytes())

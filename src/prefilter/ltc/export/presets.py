@@ -209,6 +209,43 @@ def _godot(table, out: Path) -> list[Path]:
     return paths
 
 
+_HDRP_SOURCE = """\
+// {header}
+// Replaces Packages/com.unity.render-pipelines.high-definition/Runtime/Material/LTCAreaLight/
+// Generated/LtcData.BRDF_GGX.cs. Index [roughnessIndex + 64 * thetaIndex]: alpha =
+// (roughnessIndex / 63)^2, cos theta = 1 - (thetaIndex / 63)^2. Each texel: binary16 bits of
+// (m00, m20, m11, m02) of M^-1 / m22, read by SampleLtcMatrix as the transposed matrix's
+// _m00_m02_m11_m20 with _m22 = 1. No magnitude: HDRP takes it from its own FGD table.
+using UnityEngine;
+using System;
+
+namespace UnityEngine.Rendering.HighDefinition
+{{
+    internal partial class LTCAreaLight
+    {{
+        internal static ushort[] s_LtcMatrixData_BRDF_GGX = new ushort[64 * 64 * 4]
+        {{
+{body}
+        }};
+    }}
+}}
+"""
+
+
+def _unity_hdrp(table, out: Path) -> list[Path]:
+    """``LtcData.BRDF_GGX.cs``: HDRP's ``s_LtcMatrixData_BRDF_GGX`` (binary16 bits of
+    ``(m00, m20, m11, m02)`` of ``M^-1 / (M^-1)_22``), the reference code's grid."""
+    M, _, _ = resample(table)
+    Minv = np.linalg.inv(M)
+    Minv = Minv / Minv[..., 2:3, 2:3]
+    texels = np.stack([Minv[..., 0, 0], Minv[..., 2, 0], Minv[..., 1, 1], Minv[..., 0, 2]], -1)
+    bits = half_bits(texels).reshape(-1, 4)
+    body = ",\n".join("            " + ", ".join(str(int(x)) for x in row) for row in bits)
+    path = out / "LtcData.BRDF_GGX.cs"
+    _write_text(path, _HDRP_SOURCE.format(header=_header("unity-hdrp", table), body=body))
+    return [path]
+
+
 def _bevy(table, out: Path) -> list[Path]:
     """``ltc_ggx.ktx2``: one 2-layer RGBA16F texture array (``ltc_1``, ``ltc_2``), Zstandard
     supercompressed."""
@@ -249,6 +286,8 @@ PRESETS: dict[str, Preset] = {
     "godot": Preset(_godot, "Godot 4: ltc_lut1.dds, ltc_lut2.dds (RGBA32F, forward matrix, rows "
                             "theta)"),
     "blender": Preset(_blender, "Blender EEVEE: ltc_mat_ggx[64][64][4], ltc_mag_ggx[64][64][2]"),
+    "unity-hdrp": Preset(_unity_hdrp, "Unity HDRP: LtcData.BRDF_GGX.cs (binary16 M^-1 / m22, "
+                                      "no magnitude)"),
     "bevy": Preset(_bevy, "KTX2 (zstd) 2-layer RGBA16F array in the reference layout (no "
                           "upstream Bevy reader)"),
     "compact": Preset(_compact, "the table's own grid as binary16 texels and as Chebyshev "
