@@ -499,3 +499,17 @@ def test_sphere_form_factor():
         value = estimate.mean() / (np.pi * length[j])
         se = estimate.std() / np.sqrt(n) / (np.pi * length[j])
         assert abs(table[j, i] - value) <= 4 * se + 1e-6, (j, i, table[j, i], value, se)
+
+
+def test_compare_encodings_shares_references(table):
+    # Few configurations and samples: the structure, the byte counts, and that the full table's
+    # statistics are those of the acceptance run with the same seed.
+    from prefilter.ltc.export.compact import compare_encodings
+    from prefilter.ltc.validate import run_acceptance
+
+    res = compare_encodings(table, n_configs=6, n_samples=2000, seed=3)
+    assert {k: v["bytes"] for k, v in res.items()} == {"full": 98304, "half": 49152, "fit": 2904}
+    ref = run_acceptance(table, 6, 2000, 3)["stats"]
+    full = res["full"]["stats"][1e-3]
+    assert full["count"] == ref["count"] and full["median"] == pytest.approx(ref["median"])
+    assert set(res["half"]["stats"]) == {1e-3, 0.05}
