@@ -1,9 +1,12 @@
 """Engine-layout files of the isotropic GGX LTC table (one writer per engine preset).
 
-Every preset stores the texels of :func:`prefilter.ltc.export.layout.ltc_code_textures` (the
-reference code's layout: ``u = sqrt(alpha)``, ``v = sqrt(1 - cos theta)``, 64 x 64 nodes at texel
-centres, inverse matrix divided by its middle entry, ``ltc_2 = (n, f5, 0, sphere)``) in the
-container and element order the engine's loader expects; ``docs/ltc-export.md`` gives the
+The reference code, three.js, Babylon.js, Blender and the Bevy preset store the texels of
+:func:`prefilter.ltc.export.layout.ltc_code_textures` (``u = sqrt(alpha)``,
+``v = sqrt(1 - cos theta)``, 64 x 64 nodes at texel centres, inverse matrix divided by its middle
+entry, ``ltc_2 = (n, f5, 0, sphere)``) in the container and element order each loader expects;
+Godot (forward matrix, rows uniform in theta) and Unity HDRP (inverse matrix divided by its last
+entry, another channel order) resample the table to their own conventions; ``compact`` encodes
+the table's own grid (:mod:`prefilter.ltc.export.compact`). ``docs/ltc-export.md`` gives the
 conventions and their sources per engine.
 """
 
