@@ -57,6 +57,7 @@ TOP_COMMANDS = {
     "compare": "prefilter.render.commands:compare",
     "demo": "prefilter.report.demo:demo",
     "validate": "prefilter.ltc.commands:validate",
+    "export-ltc": "prefilter.ltc.commands:export_ltc",
     "multiscale-fit": "prefilter.multiscale.commands:multiscale_fit",
     "view": "prefilter.viewer.commands:view",
     "export": "prefilter.viewer.commands:export",

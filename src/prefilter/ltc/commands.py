@@ -89,3 +89,54 @@ def _median_rel_se(se, ref):
 
     ok = ref > 0
     return np.median(se[ok] / ref[ok]) if ok.any() else float("nan")
+
+
+@click.command("export-ltc")
+@click.option("--preset", required=True, help="Engine layout (docs/ltc-export.md).",
+              type=click.Choice(["ltc_code", "threejs", "babylon", "godot", "blender", "unity-hdrp",
+                                 "bevy", "compact"]))
+@click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False),
+              help="Output directory (created if missing).")
+@click.option("--table", "table_path", type=click.Path(dir_okay=False), default=None,
+              help="LTC table .npz (default: the shipped table).")
+@click.option("--measure", is_flag=True,
+              help="compact: also measure the full table and both encodings with the "
+                   "acceptance protocol of `prefilter validate` (writes compact_errors.json).")
+@click.option("--configs", default=2000, show_default=True, type=click.IntRange(1),
+              help="--measure: number of configurations.")
+@click.option("--samples", default=100_000, show_default=True, type=click.IntRange(2),
+              help="--measure: Monte Carlo samples per configuration.")
+@click.option("--seed", default=0, show_default=True, type=int, help="--measure: seed.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+def export_ltc(preset, out_dir, table_path, measure, configs, samples, seed, quiet):
+    """Write the isotropic GGX LTC table in an engine's layout (docs/ltc-export.md)."""
+    from pathlib import Path
+
+    from prefilter.fileio import save_json_atomic
+    from prefilter.ltc.export import export_preset
+    from prefilter.ltc.table import as_table
+
+    if measure and preset != "compact":
+        raise click.UsageError("--measure applies to --preset compact")
+    table = as_table(table_path)
+    for path in export_preset(preset, out_dir, table):
+        click.echo(f"wrote {path}")
+    if measure:
+        from prefilter.ltc.export.compact import compare_encodings
+
+        def pct(x):
+            return "-" if x is None else f"{100 * x:.2f}%"
+
+        res = compare_encodings(table, configs, samples, seed, progress=not quiet)
+        for name, r in res.items():
+            for threshold, st in r["stats"].items():
+                click.echo(f"{name:5s} {r['bytes']:7d} bytes  reference >= {threshold:g}: "
+                           f"{st['count']:5d} configurations, median {pct(st['median'])}, "
+                           f"p90 {pct(st['p90'])}, mean {pct(st['mean'])}")
+        path = Path(out_dir) / "compact_errors.json"
+        save_json_atomic(path, {"configs": configs, "samples": samples, "seed": seed,
+                                "results": {k: {"bytes": v["bytes"],
+                                                "stats": {str(t): s for t, s in
+                                                          v["stats"].items()}}
+                                            for k, v in res.items()}})
+        click.echo(f"wrote {path}")
