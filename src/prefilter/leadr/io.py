@@ -15,7 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.fileio import array_digest, atomic_path, json_digest, save_json_atomic
+from prefilter.fileio import (
+    array_digest,
+    atomic_file_set,
+    atomic_path,
+    json_digest,
+    save_json_atomic,
+)
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.leadr.maps import CHANNELS, LeadrMaps
 from prefilter.texture.io import read_exr_channels, write_exr_channels
@@ -60,29 +66,30 @@ def read_moment_exr(path) -> np.ndarray:
 
 
 def write_maps(maps: LeadrMaps, out_dir, *, all_levels: bool = True, meta: dict | None = None):
-    """Write ``leadr_L{l}.exr`` for every level (or level 0 only) and ``leadr.json``."""
+    """Write ``leadr_L{l}.exr`` for every level (or level 0 only) and ``leadr.json`` as one unit
+    (:func:`~prefilter.fileio.atomic_file_set`): a bake killed at any moment leaves the previous
+    maps or the new ones, never new levels beside an old index."""
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     levels = maps.chain.levels if all_levels else maps.chain.levels[:1]
-    entries = []
-    for i, lv in enumerate(levels):
-        f = write_moment_exr(out / f"leadr_L{i}.exr", lv).name
-        entries.append({"file": f, "shape": list(lv.shape[:2]),
-                        "sha256": array_digest(_channels(lv))})
-    info = {
-        "format": FORMAT,
-        "version": VERSION,
-        "channels": list(CHANNELS),
-        "convention": CONVENTION,
-        "base_roughness": maps.base_roughness,
-        "levels": entries,
-        "mip_filter": "2x2 box average of the level above (moments are linear)",
-    }
-    info.update(meta or {})
-    info["meta_sha256"] = json_digest(info)
-    # written last: a bake killed before this point leaves no (or the previous) index, whose
-    # checksums then reject the new level files
-    save_json_atomic(out / "leadr.json", info)
+    names = ["leadr.json"] + [f"leadr_L{i}.exr" for i in range(len(levels))]
+    with atomic_file_set([out / n for n in names]) as paths:
+        entries = []
+        for lv, path in zip(levels, paths[1:]):
+            write_moment_exr(path, lv)
+            entries.append({"file": path.name, "shape": list(lv.shape[:2]),
+                            "sha256": array_digest(_channels(lv))})
+        info = {
+            "format": FORMAT,
+            "version": VERSION,
+            "channels": list(CHANNELS),
+            "convention": CONVENTION,
+            "base_roughness": maps.base_roughness,
+            "levels": entries,
+            "mip_filter": "2x2 box average of the level above (moments are linear)",
+        }
+        info.update(meta or {})
+        info["meta_sha256"] = json_digest(info)
+        save_json_atomic(paths[0], info)
     return [out / e["file"] for e in entries]
 
 
@@ -90,22 +97,27 @@ def read_maps(out_dir) -> tuple[list[np.ndarray], dict]:
     """The moment levels ``(H_l, W_l, 5)`` float64 and the ``leadr.json`` index of a baked
     directory, every field and checksum verified (:class:`~prefilter.errors.TableFileError`
     naming the file and field otherwise)."""
-    out = Path(out_dir)
-    index = out / "leadr.json"
+    index = Path(out_dir) / "leadr.json"
     if not index.is_file():
         raise TableFileError(f"{index}: LEADR index not found (bake it with "
-                             f"`prefilter bake leadr HEIGHT -o {out}`)")
+                             f"`prefilter bake leadr HEIGHT -o {index.parent}`)")
+    # the levels are read beside the resolved index, so a bake switching versions meanwhile
+    # cannot mix two bakes' files
+    index = index.resolve()
+    out = index.parent
     try:
         info = json.loads(index.read_text())
     except (ValueError, OSError) as exc:  # JSON and Unicode errors are ValueErrors
         raise TableFileError(f"{index}: unreadable JSON ({type(exc).__name__}: {exc})") from None
     if not isinstance(info, dict):
         raise TableFileError(f"{index}: expected a JSON object, got {type(info).__name__}")
-    if "meta_sha256" in info:
-        want = info.pop("meta_sha256")
-        if json_digest(info) != want:
-            raise TableFileError(f"{index}: meta_sha256: checksum mismatch (expected {want!r}): "
-                                 f"the index is corrupt or was edited")
+    if "meta_sha256" not in info:
+        raise TableFileError(f"{index}: meta_sha256: missing checksum (the index was edited or "
+                             f"not written by prefilter)")
+    want = info.pop("meta_sha256")
+    if json_digest(info) != want:
+        raise TableFileError(f"{index}: meta_sha256: checksum mismatch (expected {want!r}): "
+                             f"the index is corrupt or was edited")
     if info.get("format", FORMAT) != FORMAT:
         raise TableFileError(f"{index}: format: expected {FORMAT!r}, got {info.get('format')!r}")
     if info.get("version", VERSION) != VERSION:
@@ -133,7 +145,10 @@ def read_maps(out_dir) -> tuple[list[np.ndarray], dict]:
         if list(lv.shape[:2]) != e["shape"]:
             raise TableFileError(f"{f}: shape: expected {e['shape']} (leadr.json), got "
                                  f"{list(lv.shape[:2])}")
-        if "sha256" in e and array_digest(_channels(lv)) != e["sha256"]:
+        if "sha256" not in e:
+            raise TableFileError(f"{at}.sha256: missing checksum (the index was edited or not "
+                                 f"written by prefilter)")
+        if array_digest(_channels(lv)) != e["sha256"]:
             raise TableFileError(f"{f}: sha256: checksum mismatch with {index.name} (expected "
                                  f"{e['sha256']}): the file is corrupt or from another bake")
         levels.append(lv)
