@@ -178,3 +178,32 @@ def test_exr_checksum_attribute_of_another_type(tmp_path, capfd):
     with pytest.raises(PrefilterError, match=rf"a\.exr: {EXR_CHECKSUM}: expected a string"):
         read_image(p)
     assert capfd.readouterr() == ("", "")
+
+
+@pytest.mark.parametrize("at", [0, 9, len("prefilter_sha256") - 1])
+def test_exr_checksum_attribute_name_with_a_flipped_bit(tmp_path, at):
+    """A flipped bit in the checksum attribute's name must not turn the check off."""
+    from prefilter.texture.io import EXR_CHECKSUM
+
+    p = tmp_path / "a.exr"
+    write_image(p, np.ones((2, 2, 3)))
+    data = bytearray(p.read_bytes())
+    data[data.index(EXR_CHECKSUM.encode()) + at] ^= 0x01
+    p.write_bytes(bytes(data))
+    with pytest.raises(PrefilterError, match=rf"a\.exr: {EXR_CHECKSUM}: missing checksum"):
+        read_image(p)
+
+
+def test_exr_without_checksum_is_refused_where_required(tmp_path):
+    import OpenEXR
+
+    from prefilter.texture.io import read_exr_channels
+
+    p = tmp_path / "plain.exr"
+    pixels = np.ones((2, 2), np.float32)
+    with OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                      {"Y": pixels}) as f:
+        f.write(str(p))
+    assert read_exr_channels(p)["Y"].shape == (2, 2)  # images from elsewhere carry none
+    with pytest.raises(PrefilterError, match="missing checksum"):
+        read_exr_channels(p, require_checksum=True)

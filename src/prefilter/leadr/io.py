@@ -51,11 +51,11 @@ def write_moment_exr(path, level: np.ndarray) -> Path:
 
 def read_moment_exr(path) -> np.ndarray:
     """Read an EXR written by :func:`write_moment_exr` as ``(H, W, 5)`` float64 (checksum
-    verified when present)."""
+    required and verified)."""
     path = Path(path)
     if not path.is_file():
         raise TableFileError(f"{path}: moment map not found")
-    ch = read_exr_channels(path)
+    ch = read_exr_channels(path, require_checksum=True)
     missing = [n for n in CHANNELS if n not in ch]
     if missing:
         raise TableFileError(f"{path}: expected channels {', '.join(CHANNELS)}; missing {missing}")

@@ -253,11 +253,13 @@ def _native_output(captured: list[str]):
             captured += sink.read().decode("utf-8", "replace").splitlines()
 
 
-def read_exr_channels(path: Path) -> dict[str, np.ndarray]:
+def read_exr_channels(path: Path, *, require_checksum: bool = False) -> dict[str, np.ndarray]:
     """The channels of an EXR file as stored (float16/32 ``(H, W)``), checksum verified.
 
     Files written by this package carry :data:`EXR_CHECKSUM` (EXR itself has no checksum: a
-    flipped bit in pixel data decodes silently to other values); it must match when present.
+    flipped bit in pixel data decodes silently to other values); it must match when present,
+    and must be present with ``require_checksum`` (the project's own formats) or when the header
+    holds an attribute whose name is one flipped bit away from it.
     """
     import OpenEXR
 
@@ -265,13 +267,21 @@ def read_exr_channels(path: Path) -> dict[str, np.ndarray]:
     try:
         with _native_output(native), OpenEXR.File(str(path), separate_channels=True) as f:
             ch = {k: np.asarray(v.pixels) for k, v in f.channels().items()}
-            want = f.header().get(EXR_CHECKSUM)
+            header = f.header()
+            want = header.get(EXR_CHECKSUM)
+            damaged = [k for k in header if isinstance(k, str) and k != EXR_CHECKSUM
+                       and len(k) == len(EXR_CHECKSUM)
+                       and sum(a != b for a, b in zip(k, EXR_CHECKSUM)) == 1]
     except Exception as exc:  # noqa: BLE001 - RuntimeError, ValueError, UnicodeDecodeError, ...
         detail = "; ".join([f"{type(exc).__name__}: {exc}"] + native[:1])
         raise PrefilterError(f"{path}: unreadable or corrupt EXR ({detail})") from None
     if not ch or any(a.ndim != 2 or a.dtype.kind not in "fu" for a in ch.values()):
         raise PrefilterError(f"{path}: expected EXR channels of 2-D pixel arrays, got "
                              f"{ {k: (str(a.dtype), a.shape) for k, a in ch.items()} }")
+    if want is None and (require_checksum or damaged):
+        raise PrefilterError(f"{path}: {EXR_CHECKSUM}: missing checksum"
+                             + (f" (an attribute {damaged[0]!r} stands in its place)" if damaged
+                                else "") + ": the file is corrupt or was not written by prefilter")
     if want is not None:
         if isinstance(want, bytes):
             want = want.decode("latin-1")
