@@ -111,7 +111,7 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
 
 
 @click.command("render")
-@click.argument("scene", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))  # or example:NAME
 @click.option("--method", default="ltc", show_default=True,
               help="Shading method: a name of `prefilter.render.methods.available()` (ltc, "
                    "reference, ltc-multiscale, ...).")
@@ -134,7 +134,8 @@ def compare(test: Path, reference: Path, heatmap: Path | None, json_path: Path |
 def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path | None,
            jitter: tuple[float, float], table_path: Path | None, params: tuple[str, ...],
            quiet: bool) -> None:
-    """Render SCENE (JSON, see docs/scenes.md) with a shading method to an EXR image."""
+    """Render SCENE (JSON, see docs/scenes.md; `example:NAME` for a shipped example, see
+    `prefilter examples`) with a shading method to an EXR image."""
     import time
 
     from prefilter.render.methods import check_params
