@@ -110,3 +110,12 @@ def test_prefilter_render_example(tmp_path):
     assert result.exit_code == 0, result.output
     img = np.load(out)
     assert img.shape == (120, 192, 3) and np.isfinite(img).all()
+
+
+def test_examples_are_package_data():
+    tomllib = pytest.importorskip("tomllib")
+    data = tomllib.loads((REPO / "pyproject.toml").read_text())
+    globs = data["tool"]["setuptools"]["package-data"]["prefilter"]
+    src = REPO / "src" / "prefilter"
+    shipped = {p for g in globs for p in src.glob(g)}
+    assert set(EXAMPLE_DIR.glob("*.json")) <= shipped
