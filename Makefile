@@ -2,21 +2,28 @@
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed
 PYTEST_ARGS ?=
+# Two installs: `make demo` needs the package and its base dependencies only; `make test` adds
+# the `test` and `fit` extras (pytest, torch) to the same venv.
+DEMO_STAMP := $(VENV)/.installed-demo
+TEST_STAMP := $(VENV)/.installed-test
 
 .PHONY: demo test test-all bench lint clean clean-cache browser
 
-$(STAMP): pyproject.toml
+$(DEMO_STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -e .
+	touch $@
+
+$(TEST_STAMP): $(DEMO_STAMP)
 	# torch only for the `fit` extra; pinned to the CPU build that this machine serves from a local
 	# file (any other spelling pulls gigabytes of CUDA wheels). 2.13.0 satisfies `torch>=2.3`.
 	$(PY) -m pip install -q torch==2.13.0
 	$(PY) -m pip install -q -e '.[test,fit]'
-	touch $(STAMP)
+	touch $@
 
-demo: $(STAMP)
+demo: $(DEMO_STAMP)
 	$(VENV)/bin/prefilter demo --out out/demo
 
 # The viewer's tests drive Debian's Chromium headless (WebGL2 on SwiftShader) through chromedriver;
@@ -29,16 +36,16 @@ browser:
 	  || { $$SUDO apt-get update -q >/dev/null && \
 	       $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium chromium-driver >/dev/null; }; fi
 
-test: $(STAMP) browser
+test: $(TEST_STAMP) browser
 	$(PY) -m pytest -n 2 $(PYTEST_ARGS)
 
-test-all: $(STAMP) browser
+test-all: $(TEST_STAMP) browser
 	$(PY) -m pytest -n 2 -m "" $(PYTEST_ARGS)
 
-bench: $(STAMP)
+bench: $(TEST_STAMP)
 	$(PY) benchmarks/run_all.py
 
-lint: $(STAMP)
+lint: $(DEMO_STAMP)
 	$(PY) -m pip install -q ruff && $(VENV)/bin/ruff check src tests benchmarks tools
 
 # Numba's on-disk cache keys a kernel by its own file: after editing a helper in another module,

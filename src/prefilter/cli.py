@@ -61,6 +61,7 @@ TOP_COMMANDS = {
     "multiscale-fit": "prefilter.multiscale.commands:multiscale_fit",
     "view": "prefilter.viewer.commands:view",
     "export": "prefilter.viewer.commands:export",
+    "examples": "prefilter.examples.commands:examples",
 }
 
 

@@ -7,7 +7,8 @@ import re
 import numpy as np
 import pytest
 
-from prefilter.report.demo import DemoSettings, _section, _viewer_section, run_demo
+from prefilter.report.demo import (DemoSettings, HIDDEN_COLOUR, _section, _viewer_section,
+                                   _visible_reference, run_demo)
 from prefilter.report.report import Report
 
 SECTIONS = (
@@ -56,6 +57,19 @@ def test_quick_demo_writes_every_section_with_existing_images(tmp_path, monkeypa
     assert "<code>leadr-point</code>" in showcase and "ltc-multiscale" in showcase
     glints = page.split(f">{SECTIONS[7]}</h2>")[1].split(f">{SECTIONS[8]}</h2>")[0]
     assert "glints-direct" in glints and "speed-up" in glints
+    # the methods that reject the quad-lit showcase: one sentence, not a list of error messages
+    assert "<li>" not in showcase and "PrefilterError" not in showcase
+    assert showcase.count("Not shown here") == 1
+    # the LTC table check: its statistics block is preformatted, its table in percent like it
+    table = page.split(f">{SECTIONS[0]}</h2>")[1].split(f">{SECTIONS[1]}</h2>")[0]
+    assert re.search(r"<pre><code>relative error over \d+ configurations.*\n.*\n", table)
+    assert "median rel. error (%)" in table
+    cells = re.findall(r"<td>(\d+\.\d\d|-)</td>", table)
+    assert cells and all(c == "-" or 0 <= float(c) <= 1e4 for c in cells)
+    # inline code is rendered in captions too; no literal backticks, no issue numbers
+    body = page.split("</style>")[1]
+    assert "`" not in body and not re.search(r"issue|#\d", body, re.I)
+    assert "compilation" in showcase  # the times say what they measure
 
 
 def test_a_failing_section_leaves_a_note_and_the_rest_continues(tmp_path):
@@ -134,3 +148,18 @@ def test_skipped_methods_are_logged_as_skipped_with_the_reason(monkeypatch, tmp_
     report.add_section("viewer")
     _viewer_section(report, DemoSettings.quick(), 0, log=lines.append)
     assert lines and lines[0].startswith("viewer section: skipped: "), lines
+
+
+def test_colormap_reference_marks_pixels_without_a_visible_sample():
+    """A covered pixel whose reference weights are all zero (every microfacet faces away) reads
+    0 / 0 as black; it is marked, and left out of the errors, instead."""
+    ref = np.full((2, 3, 3), 0.4)
+    ref[0, 1] = 0.0  # covered, no visible sample
+    ref[1, 2] = 0.0  # not covered (background): black in every image
+    filtered = np.full((2, 3, 3), 0.5)
+    filtered[1, 2] = 0.0
+    shown, hidden = _visible_reference({"reference": ref, "filtered": filtered,
+                                        "naive": filtered})
+    assert hidden.tolist() == [[False, True, False], [False, False, False]]
+    assert tuple(shown[0, 1]) == HIDDEN_COLOUR and tuple(shown[1, 2]) == (0.0, 0.0, 0.0)
+    assert np.array_equal(shown[~hidden], ref[~hidden])

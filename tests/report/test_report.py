@@ -199,3 +199,33 @@ def test_add_comparison_metrics_and_heatmaps(tmp_path):
     assert all(a["width"] == "36" and a["height"] == "30" for a in imgs)
     with Image.open(tmp_path / imgs[3]["src"]) as im:  # heat map of the exact method: magma(0)
         np.testing.assert_allclose(np.asarray(im).reshape(-1, 3), [[0, 0, 4]] * 120, atol=1)
+
+
+def test_fenced_block_keeps_its_lines():
+    """A fenced block (a plain-text table) is preformatted, not joined into one paragraph."""
+    r = Report("t")
+    r.add_text("Numbers:\n\n```\nmedian  p90\n\n  3.47%  <29%\n```\nafter the `block`")
+    page = r.to_html()
+    assert "<pre><code>median  p90\n\n  3.47%  &lt;29%</code></pre>" in page
+    assert "<p>Numbers:</p>" in page and "<p>after the <code>block</code></p>" in page
+    assert "```" not in page
+
+
+def test_captions_and_labels_render_inline_code(tmp_path):
+    r = Report("t")
+    r.add_image_row("row of `ltc`", [("`ltc` <b>", np.zeros((2, 2, 3)))])
+    r.add_table(["a"], [[1]], caption="`glints.point` at **centres**")
+    r.add_plot(_png(tmp_path), caption="see `x`")
+    page = r.to_html()
+    assert "`" not in page.replace('alt="', "")
+    assert '<div class="row-label">row of <code>ltc</code></div>' in page
+    assert "<figcaption><code>ltc</code> &lt;b&gt;</figcaption>" in page
+    assert 'alt="ltc &lt;b&gt;"' in page  # alt text: the words without the marks
+    assert "<caption><code>glints.point</code> at <strong>centres</strong></caption>" in page
+    assert "<figcaption>see <code>x</code></figcaption>" in page
+
+
+def _png(tmp_path):
+    p = tmp_path / "p.png"
+    save_png(p, np.zeros((2, 2, 3), np.uint8))
+    return p

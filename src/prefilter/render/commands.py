@@ -135,7 +135,7 @@ def methods_epilog(width: int = 76) -> str:
 
 
 @click.command("render", epilog=methods_epilog())
-@click.argument("scene", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))  # or example:NAME
 @click.option("--method", default="ltc", show_default=True,
               help="Shading method: one of the methods listed below.")
 @click.option("--spp", type=int, default=1, show_default=True, help="Samples per pixel.")
@@ -157,7 +157,8 @@ def methods_epilog(width: int = 76) -> str:
 def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path | None,
            jitter: tuple[float, float], table_path: Path | None, params: tuple[str, ...],
            quiet: bool) -> None:
-    """Render SCENE (JSON, see docs/scenes.md) with a shading method to an EXR image."""
+    """Render SCENE (JSON, see docs/scenes.md; `example:NAME` for a shipped example, see
+    `prefilter examples`) with a shading method to an EXR image."""
     import time
 
     from prefilter.render.methods import check_params

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from prefilter.errors import PrefilterError
+from prefilter.examples import resolve as resolve_example
 from prefilter.render.camera import Camera
 
 __all__ = ["DirectionalLightSpec", "EnvironmentLight", "Material", "Plane", "PointLightSpec",
@@ -522,13 +523,14 @@ def load_scene(path_or_dict, *, base_dir: str | os.PathLike | None = None) -> Sc
     Texture paths are relative to the scene file's directory (``base_dir`` for dicts, default the
     current directory). Raises :class:`PrefilterError` naming the offending field (prefixed with
     the file for scene files).
+    ``example:NAME`` names a shipped example scene (:mod:`prefilter.examples`).
     """
     if isinstance(path_or_dict, dict):
         return _parse(path_or_dict, Path(base_dir or "."))
     if not isinstance(path_or_dict, (str, os.PathLike)):
         raise PrefilterError(
             f"scene: expected a JSON file path or a dict, got {type(path_or_dict).__name__}")
-    p = Path(path_or_dict)
+    p = Path(resolve_example(path_or_dict))
     data = _read_scene_file(p)
     base = Path(base_dir) if base_dir is not None else p.parent
     try:

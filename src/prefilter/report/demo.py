@@ -217,10 +217,10 @@ def _compare(report, label: str, scene, methods, *, spp: int, seed: int, log,
     images, times = {}, {}
     for m in methods:
         try:
-            t0 = time.perf_counter()
             name, *params = m.split()
             images[m] = render(scene, name, spp=1, seed=seed, params=params or None)
-            times[m] = time.perf_counter() - t0
+            times[m] = _warm_time(lambda: render(scene, name, spp=1, seed=seed,
+                                                 params=params or None))
         except Exception as exc:  # noqa: BLE001
             _note_failure(report, f"method {m} on {label}", exc, log)
     if not images:
@@ -233,6 +233,18 @@ def _compare(report, label: str, scene, methods, *, spp: int, seed: int, log,
 
 
 _COMPARE_HEADER = ["scene", "method", "RMSE", "relMSE", "FLIP", "time (s)"]
+
+#: What the time columns measure (one caption sentence for every table that has them).
+TIME_NOTE = ("Times: one frame at 1 spp after a first, untimed call of the same method (so "
+             "Numba compilation and texture set-up are not counted); the reference rows time "
+             "its one call, compilation included.")
+
+
+def _warm_time(frame) -> float:
+    """Wall time of ``frame()``, called after the caller's own first (compiling) call."""
+    t0 = time.perf_counter()
+    frame()
+    return time.perf_counter() - t0
 
 
 # -------------------------------------------------------------------------------- sections
@@ -255,10 +267,13 @@ def _table_section(report, settings: DemoSettings, seed: int, log) -> list[dict]
         "The full acceptance (2000 configurations, 1e5 samples) is `prefilter validate`.",
     )
     report.add_text("```\n" + format_statistics(stats) + "\n```")
-    rows = []
-    for b in stats["by_theta"]:
-        rows.append([f"{b['lo']:.0f}-{b['hi']:.0f}", b["count"], b["median"], b["p90"]])
-    report.add_table(["view angle (deg)", "count", "median rel. error", "p90 rel. error"], rows)
+    def pct(x):
+        return "-" if x is None else f"{100 * x:.2f}"
+
+    rows = [[f"{b['lo']:.0f}-{b['hi']:.0f}", b["count"], pct(b["median"]), pct(b["p90"])]
+            for b in stats["by_theta"]]
+    report.add_table(["view angle (deg)", "count", "median rel. error (%)", "p90 rel. error (%)"],
+                     rows)
     return [stats]
 
 
@@ -275,21 +290,26 @@ def _render_all(settings: DemoSettings, methods: list[str], seed: int, log):
         t0 = time.perf_counter()
         ref = render(scene, "reference", spp=settings.reference_spp, seed=seed, progress=True)
         entry = {"distance": d, "reference": ref, "images": {}, "times": {}, "flicker": {},
-                 "skipped": {}, "reference_time": time.perf_counter() - t0}
+                 "skipped": {}, "failed": {}, "reference_time": time.perf_counter() - t0}
         log(f"distance {d:g}: reference {entry['reference_time']:.1f} s")
         for m in methods:
             try:
-                t0 = time.perf_counter()
-                img = render(scene, m, spp=1, seed=seed)
-                entry["times"][m] = time.perf_counter() - t0
-                frames = np.stack([render(scene, m, spp=1, seed=seed, jitter=tuple(j))
-                                   for j in jit])
-                entry["flicker"][m] = flicker(frames)
+                img = render(scene, m, spp=1, seed=seed)  # first call: compiles, not timed
+                frames, times = [], []
+                for j in jit:  # warm frames: their median time is the method's time
+                    t0 = time.perf_counter()
+                    frames.append(render(scene, m, spp=1, seed=seed, jitter=tuple(j)))
+                    times.append(time.perf_counter() - t0)
+                entry["times"][m] = float(np.median(times))
+                entry["flicker"][m] = flicker(np.stack(frames))
                 entry["images"][m] = img
                 log(f"distance {d:g}: {m} {entry['times'][m]:.2f} s")
-            except Exception as exc:  # noqa: BLE001  (e.g. a point-light-only method)
-                entry["skipped"][m] = f"{type(exc).__name__}: {exc}"
+            except PrefilterError as exc:  # the method rejects the scene (e.g. point lights only)
+                entry["skipped"][m] = str(exc)
                 log(f"distance {d:g}: {m}: skipped: {exc}")
+            except Exception as exc:  # noqa: BLE001  (one broken method must not sink the demo)
+                entry["failed"][m] = f"{type(exc).__name__}: {exc}"
+                log(f"distance {d:g}: {m} failed ({exc})")
         results.append(entry)
     return results
 
@@ -298,12 +318,15 @@ def _showcase_section(report, settings: DemoSettings, seed: int, log) -> None:
     methods = _available_methods() if settings.methods is None else list(settings.methods)
     results = _render_all(settings, methods, seed, log)
     skipped = {m: why for e in results for m, why in e["skipped"].items()}
+    failed = {m: why for e in results for m, why in e["failed"].items()}
     if skipped:
-        report.add_text("Methods that cannot render this scene (not area-light methods, or "
-                        "failed):\n\n" + "\n".join(f"- `{m}`: {why}" for m, why in
-                                                   sorted(skipped.items())))
+        report.add_text(_not_applicable(skipped))
+    if failed:
+        report.add_text("**Failed on this scene:**\n\n" + "\n".join(
+            f"- `{m}`: {why}" for m, why in sorted(failed.items())))
     rows = []
-    curves: dict[str, list[float]] = {m: [] for m in methods if m not in skipped}
+    curves: dict[str, list[float]] = {m: [] for m in methods
+                                      if m not in skipped and m not in failed}
     for entry in results:
         if not entry["images"]:
             continue
@@ -320,11 +343,25 @@ def _showcase_section(report, settings: DemoSettings, seed: int, log) -> None:
                          entry["flicker"][m], entry["times"][m]])
             curves[m].append(mm["flip"])
     report.add_table(["distance", "method", "RMSE", "relMSE", "FLIP", "flicker", "time (s)"],
-                     rows, caption="Errors against the reference at each distance (the "
-                     "reference rows give its render time).")
+                     rows, caption="Errors against the reference at each distance. Times: median "
+                     "of the jittered 1-spp frames, each after the method's first (compiling) "
+                     "call; the reference rows time its one call, compilation included at x"
+                     f"{settings.distances[0]:g}.")
     if curves:
         report.add_plot(_distance_plot(list(settings.distances), curves), caption="Error "
                         "against distance.")
+
+
+def _not_applicable(skipped: dict[str, str]) -> str:
+    """One sentence naming the methods that reject the showcase scene, grouped by family."""
+    families: dict[str, list[str]] = {}
+    for m in sorted(skipped):
+        families.setdefault(m.split("-")[0], []).append(m)
+    names = ", ".join(f"`{ms[0]}`" if len(ms) == 1 else f"`{f}-*` ({len(ms)} methods)"
+                      for f, ms in families.items())
+    return (f"Not shown here: {names}. They reject this scene (they shade point, directional or "
+            "environment lights, or need a colour-map driver); the LEADR and colour-map sections "
+            "below show those methods on their own scenes.")
 
 
 def _distance_plot(x, curves):
@@ -341,7 +378,8 @@ def _aniso_section(report, settings: DemoSettings, seed: int, log) -> None:
     rows = _compare(report, "brushed plane + sphere", scene, ("ltc-aniso", "ltc"),
                     spp=settings.section_spp, seed=seed, log=log)
     report.add_table(_COMPARE_HEADER, rows, caption="ltc-aniso should be closer to the "
-                     "reference than the isotropic ltc (which shades with sqrt(alpha_x alpha_y)).")
+                     "reference than the isotropic ltc (which shades with sqrt(alpha_x alpha_y)). "
+                     + TIME_NOTE)
 
 
 def _multiscale_section(report, settings: DemoSettings, seed: int, log) -> None:
@@ -359,7 +397,16 @@ def _multiscale_section(report, settings: DemoSettings, seed: int, log) -> None:
                      "loses the meso-scale roughness (too sharp a highlight); the multi-scale "
                      "variants widen the lobe by the length of the averaged normal. Compare the "
                      "far rows; near, the reference resolves single texels that no "
-                     "one-lobe-per-pixel method reproduces.")
+                     "one-lobe-per-pixel method reproduces. " + TIME_NOTE)
+    if "brushed" in settings.multiscale_maps:
+        report.add_text(
+            "On the brushed map far away `ltc-multiscale` can have a lower RMSE but a higher FLIP "
+            "than `ltc`: it widens the lobe equally in every direction while the brushed slopes "
+            "vary along one axis only, so its highlight bleeds sideways into surroundings that "
+            "are dark in the reference (where its FLIP map is brightest), whereas the error of "
+            "`ltc` is a too-bright highlight, which weighs more in RMSE; "
+            "`ltc-multiscale-aniso` widens the lobe along the brushing only and does better on "
+            "both (`prefilter render example:multiscale-brushed --method ltc-multiscale-aniso`).")
 
 
 def leadr_scene(width: int, height: int) -> dict:
@@ -394,7 +441,8 @@ def _leadr_section(report, settings: DemoSettings, seed: int, log) -> None:
                         spp=settings.section_spp, seed=seed, log=log)
         report.add_table(_COMPARE_HEADER, rows, caption="Image level: the reference is the "
                          "normal-mapped surface supersampled at full resolution (the renderer "
-                         "has no displaced geometry); ltc = naive mip-mapped normals.")
+                         "has no displaced geometry); ltc = naive mip-mapped normals. "
+                         + TIME_NOTE)
     except Exception as exc:  # noqa: BLE001  (the per-footprint table below still runs)
         _note_failure(report, "LEADR image comparison", exc, log)
     rows = acceptance.run(size=settings.leadr_size, blocks=settings.leadr_blocks,
@@ -436,23 +484,44 @@ def _colormap_section(report, settings: DemoSettings, seed: int, log) -> None:
         scene = load_scene(cm.scene_dict(shape, view, density, n, n))
         imgs, mask, fp = cm.render_case(scene, data, n_ref=settings.colormap_nref, seed=seed)
         for case in cm.CASES:
-            ref = imgs[case]["reference"]
+            ref, hidden = _visible_reference(imgs[case])
+            valid = mask & ~hidden
             row_imgs = [("reference", _srgb8(ref))]
             row = [f"{shape} {view:.0f} deg", label, fp, _CASE_NAMES[case]]
             for m in ("filtered", "naive"):
                 row_imgs.append((m, _srgb8(imgs[case][m])))
                 f = flip(_srgb8(imgs[case][m]) / 255.0, _srgb8(ref) / 255.0, hdr=False)
-                row += [cm.lab_rmse(imgs[case][m], ref, mask),
-                        float(np.mean(np.asarray(f.error_map)[mask]))]
+                row += [cm.lab_rmse(imgs[case][m], ref, valid),
+                        float(np.mean(np.asarray(f.error_map)[valid]))]
             report.add_image_row(f"{shape}, {label} ({fp:.1f} texels/pixel): "
                                  f"{_CASE_NAMES[case]}", row_imgs, scale=scale)
-            rows.append(row)
+            rows.append(row + [int(hidden.sum())])
     report.add_table(["scene", "distance", "texels/pixel", "case", "dE filtered", "FLIP filtered",
-                      "dE naive", "FLIP naive"], rows,
+                      "dE naive", "FLIP naive", "hidden pixels"], rows,
                      caption="dE: RMS CIE76 colour difference to the reference over valid pixels "
                      "(view and light above the surface); FLIP: mean LDR-FLIP over the same "
                      "pixels. Far away, naive C(mean) collapses towards the colour of the mean "
-                     "input while the filtered colour stays close to the reference's average.")
+                     "input while the filtered colour stays close to the reference's average. "
+                     "Hidden pixels: every reference sample of the pixel has zero weight (in case "
+                     "(d) all microfacets under a pixel face away from the camera, so the pixel "
+                     "has no visible colour at the texture's resolution); the reference shows "
+                     "them in magenta and they are left out of dE and FLIP.")
+
+
+#: Display colour of reference pixels without a visible sample (linear RGB, a colour the four
+#: colour maps do not use).
+HIDDEN_COLOUR = (0.8, 0.0, 0.8)
+
+
+def _visible_reference(images: dict) -> tuple[np.ndarray, np.ndarray]:
+    """The colour-map reference with its hidden pixels marked, and their mask ``(H, W)``.
+
+    A covered pixel (the filtered or naive image is not black there) whose reference is exactly
+    zero had zero total weight: no reference sample is visible (``0 / 0`` reads as black)."""
+    ref = images["reference"]
+    covered = np.any(images["filtered"] != 0, -1) | np.any(images["naive"] != 0, -1)
+    hidden = covered & np.all(ref == 0, -1)
+    return np.where(hidden[..., None], HIDDEN_COLOUR, ref), hidden
 
 
 def _glints_section(report, settings: DemoSettings, seed: int, log) -> None:
@@ -522,6 +591,8 @@ def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> No
         if t_first > 5.0:
             log(f"glints: first frame (bake or cache load, compilation) {t_first:.1f} s; "
                 f"pyramids cached in {cache_dir()}")
+        if d == settings.glints_render_distances[0]:
+            render(sc, "glints-direct", seed=seed)  # compilation, not timed below
         images, times = {}, {}
         for m in ("glints", "glints-direct"):
             t0 = time.perf_counter()
@@ -538,7 +609,8 @@ def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> No
     report.add_table(
         ["distance", "median footprint std (texels)", "glints (s)", "glints-direct (s)",
          "speed-up", "FLIP glints vs direct", "mean radiance ratio"], rows,
-        caption="One frame each at 1 spp, measured now (wall clock, this machine). `glints` "
+        caption="One frame each at 1 spp, measured now (wall clock, this machine, after an "
+        "untimed first call of each method). `glints` "
         "queries the CP-compressed footprint pyramid (constant cost per pixel); `glints-direct` "
         "sums every texel under the footprint, so its cost grows with the footprint's area. "
         "The full acceptance matrix (plane and sphere, four maps, point, quad and environment "
@@ -635,7 +707,8 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "number of texels per pixel changes). `reference`: supersampled full-resolution normals "
         f"and MIS Monte Carlo over the light ({settings.reference_spp} spp). Flicker: mean "
         f"per-pixel standard deviation over {settings.flicker_frames} sub-pixel camera jitters "
-        "(lower is steadier). Time: one frame at 1 spp on this machine.",
+        "(lower is steadier). Time: one warm frame at 1 spp on this machine (compilation "
+        "excluded).",
         lambda r: _showcase_section(r, settings, seed, log), log)
     _section(
         report, status, "Anisotropic LTC: brushed metal",

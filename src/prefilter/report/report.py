@@ -36,12 +36,16 @@ h1 { border-bottom: 2px solid #ddd; padding-bottom: .3em; }
 h2 { margin-top: 2em; border-bottom: 1px solid #eee; }
 nav ul { columns: 2; }
 code { background: #f4f4f4; padding: 0 .25em; border-radius: 3px; }
+pre { background: #f4f4f4; padding: .6em .8em; border-radius: 3px; overflow-x: auto;
+      line-height: 1.3; }
+pre code { padding: 0; background: none; }
 .row { margin: 1em 0; }
 .row-label { font-weight: 600; margin-bottom: .3em; }
 .images { display: flex; flex-wrap: wrap; gap: .8em; align-items: flex-start; }
 figure { margin: 0; }
 figure img { max-width: 100%; height: auto; image-rendering: pixelated; border: 1px solid #ccc; }
 figcaption { font-size: .9em; color: #555; text-align: center; }
+figure.plot { display: inline-block; }
 .plot img { image-rendering: auto; }
 table { border-collapse: collapse; margin: 1em 0; font-variant-numeric: tabular-nums; }
 th, td { border: 1px solid #ccc; padding: .25em .7em; }
@@ -95,13 +99,15 @@ class Report:
 
     def add_text(self, text: str) -> "Report":
         """A markdown-ish paragraph: blank lines split paragraphs, ``- `` starts list items,
+        a fenced block (lines between two ```` ``` ```` lines) is kept verbatim,
         ``**bold**``, ``*italic*``, `` `code` `` and ``[text](url)`` are recognised."""
         self._blocks.append(("html", _markdownish(str(text))))
         return self
 
     def add_image_row(self, label: str, items, *, scale: int = 1) -> "Report":
         """A row of captioned images shown side by side, each pixel as ``scale`` x ``scale``
-        screen pixels (nearest neighbour, so aliasing stays visible).
+        screen pixels (nearest neighbour, so aliasing stays visible). The label and captions
+        take the inline markup of :meth:`add_text` (`` `code` ``, ``**bold**``, ...).
 
         ``items``: sequence of ``(caption, image)`` with ``image`` a float linear RGB array
         ``(H, W, 3)`` (tone mapped for display), a ``uint8`` sRGB array ``(H, W, 3)`` or ``(H, W)``,
@@ -151,7 +157,8 @@ class Report:
 
     def add_table(self, header, rows, *, caption: str | None = None,
                   float_format: str = "{:.4g}") -> "Report":
-        """A table; float cells are formatted with ``float_format``, everything else with str()."""
+        """A table; float cells are formatted with ``float_format``, everything else with str().
+        The caption takes the inline markup of :meth:`add_text`."""
         header = [str(h) for h in header]
         body = []
         for i, row in enumerate(rows):
@@ -330,7 +337,21 @@ def _inline(text: str) -> str:
     return "".join(out)
 
 
+_FENCE = re.compile(r"^[ \t]*```[^\n]*\n(.*?)\n[ \t]*```[ \t]*$", re.S | re.M)
+
+
 def _markdownish(text: str) -> str:
+    out, pos = [], 0
+    text = str(text)
+    for m in _FENCE.finditer(text):  # fenced blocks first: their blank lines split nothing
+        out.append(_paragraphs(text[pos:m.start()]))
+        out.append(f"<pre><code>{_esc(m.group(1))}</code></pre>")
+        pos = m.end()
+    out.append(_paragraphs(text[pos:]))
+    return "\n".join(o for o in out if o)
+
+
+def _paragraphs(text: str) -> str:
     out = []
     for para in re.split(r"\n\s*\n", text.strip()):
         lines = [ln.strip() for ln in para.splitlines() if ln.strip()]
@@ -339,6 +360,11 @@ def _markdownish(text: str) -> str:
         elif lines:
             out.append(f"<p>{_inline(' '.join(lines))}</p>")
     return "\n".join(out)
+
+
+def _plain(text: str) -> str:
+    """Inline markup without its marks (for ``alt`` attributes)."""
+    return re.sub(r"`([^`]+)`", r"\1", str(text))
 
 
 def _img_tag(asset: _Asset, alt: str, scale: int = 1) -> str:
@@ -358,14 +384,14 @@ def _render_block(block: tuple) -> str:
     if kind == "images":
         _, label, figures = block
         figs = "".join(
-            f"<figure>{_img_tag(a, c, k)}<figcaption>{_esc(c)}</figcaption></figure>"
+            f"<figure>{_img_tag(a, _plain(c), k)}<figcaption>{_inline(c)}</figcaption></figure>"
             for c, a, k in figures
         )
-        return (f'<div class="row"><div class="row-label">{_esc(label)}</div>'
+        return (f'<div class="row"><div class="row-label">{_inline(label)}</div>'
                 f'<div class="images">{figs}</div></div>')
     if kind == "table":
         _, header, body, caption = block
-        cap = f"<caption>{_esc(caption)}</caption>" if caption else ""
+        cap = f"<caption>{_inline(caption)}</caption>" if caption else ""
         head = "".join(f"<th>{_esc(h)}</th>" for h in header)
         rows = "".join(
             "<tr>" + "".join(
@@ -377,6 +403,6 @@ def _render_block(block: tuple) -> str:
         return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{rows}</tbody></table>"
     if kind == "plot":
         _, asset, caption = block
-        cap = f"<figcaption>{_esc(caption)}</figcaption>" if caption else ""
-        return f'<figure class="plot">{_img_tag(asset, caption or "plot")}{cap}</figure>'
+        cap = f"<figcaption>{_inline(caption)}</figcaption>" if caption else ""
+        return f'<figure class="plot">{_img_tag(asset, _plain(caption or "plot"))}{cap}</figure>'
     raise AssertionError(kind)  # pragma: no cover
