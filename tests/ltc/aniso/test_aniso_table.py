@@ -177,3 +177,15 @@ def test_user_table_is_preferred_and_named(table, tmp_path, monkeypatch):
     assert (t.source, t.path) == ("user", tmp_path / "ggx_aniso.npz")
     user_table_path().unlink()
     assert AnisoGGXTable.load().path == shipped_table_path()
+
+
+def test_bake_without_torch_says_so_and_writes_nothing(tmp_path, monkeypatch):
+    import sys
+
+    from prefilter.errors import PrefilterError
+    from prefilter.ltc.aniso.bake import bake_table
+
+    monkeypatch.setitem(sys.modules, "torch", None)  # import torch -> ImportError
+    with pytest.raises(PrefilterError, match=r"prefilter\[fit\]"):
+        bake_table(tmp_path / "t.npz", progress=False)
+    assert list(tmp_path.iterdir()) == []

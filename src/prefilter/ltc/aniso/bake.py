@@ -22,6 +22,7 @@ from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.ltc.aniso.align import align
 from prefilter.ltc.aniso.fit import (
+    _torch,
     SWSettings,
     fit_pointwise,
     fit_sw,
@@ -147,6 +148,7 @@ def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool
     # checked before any work (the fit would otherwise run, or fail deep inside)
     as_positive_int(settings.sw.steps, "steps")
     as_positive_int(settings.sw.seed, "seed", lo=0)
+    _torch()  # the fit needs PyTorch: say so before any file (lock, checkpoints) is made
     out = Path(out) if out is not None else user_table_path()
     with bake_lock(out, wait=wait):
         return _bake_locked(out, settings, progress, on_chunk)
