@@ -162,7 +162,8 @@ def _base_alpha(alpha, shape) -> np.ndarray:
     return a
 
 
-def bake_roughness(normals, alpha, method: str = "ltc") -> list[np.ndarray]:
+def bake_roughness(normals, alpha, method: str = "ltc", *,
+                   name: str = "normals") -> list[np.ndarray]:
     """GGX roughness ``alpha`` of every mip level of a normal map.
 
     Parameters
@@ -173,6 +174,8 @@ def bake_roughness(normals, alpha, method: str = "ltc") -> list[np.ndarray]:
         Base GGX roughness (the square of perceptual roughness), in ``[0, 1]``.
     method : {"toksvig", "lean", "ltc"}
         See the module docstring.
+    name : str
+        What error messages call the normal map (e.g. its file name).
 
     Returns
     -------
@@ -182,10 +185,10 @@ def bake_roughness(normals, alpha, method: str = "ltc") -> list[np.ndarray]:
     """
     if method not in METHODS:
         raise PrefilterError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    n = as_normal_field(normals, "normals")
+    n = as_normal_field(normals, name)
     h, w = n.shape[:2]
     if not (_is_pow2(h) and _is_pow2(w)):
-        raise PrefilterError(f"normal map: expected power-of-two height and width for a mip "
+        raise PrefilterError(f"{name}: expected power-of-two height and width for a mip "
                              f"chain (DDS / KTX2 levels halve exactly), got {h} x {w}")
     a0 = _base_alpha(alpha, (h, w))
     alpha2 = MipChain(a0 * a0).levels
