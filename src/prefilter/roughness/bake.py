@@ -114,8 +114,9 @@ def load_normals(spec: str, convention: str = "opengl") -> np.ndarray:
     v = img[..., :3].copy()
     if path.suffix.lower() != ".npy":
         if v.min() < 0.0 or v.max() > 1.0:
-            raise PrefilterError(f"{path}: not a normal map: expected colours in [0, 1], got "
-                                 f"range [{v.min():.4g}, {v.max():.4g}]")
+            raise PrefilterError(f"{path}: not a normal map: expected colours (n + 1) / 2 in "
+                                 f"[0, 1], got range [{v.min():.4g}, {v.max():.4g}] (raw "
+                                 f"vectors go in a .npy file)")
         v = 2.0 * v - 1.0
         if convention == "opengl":
             v[..., 1] = -v[..., 1]
