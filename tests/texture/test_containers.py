@@ -163,3 +163,112 @@ def test_bad_input(bad, match):
 def test_unknown_supercompression():
     with pytest.raises(PrefilterError, match="supercompression"):
         ktx2_bytes(np.zeros((2, 2, 4), np.float16), supercompression="lz4")
+
+
+def _chain(dtype, channels=1, layers=None, h=8, w=4):
+    """A full mip chain of random texels, level k of shape ([layers,] H >> k, W >> k, C)."""
+    rng = np.random.default_rng(5)
+    lead = (layers,) if layers else ()
+    return [rng.normal(size=lead + (max(h >> k, 1), max(w >> k, 1), channels)).astype(dtype)
+            for k in range(max(h, w).bit_length())]
+
+
+def read_dds_mips(blob: bytes):
+    """(mipMapCount, flags, caps, levels of layer 0) of a DX10 DDS, parsed per the file layout."""
+    _size, flags, height, width, _pitch, _depth, mips = struct.unpack_from("<7I", blob, 4)
+    caps = struct.unpack_from("<I", blob, 108)[0]
+    dxgi, _dim, _misc, array_size, _ = struct.unpack_from("<5I", blob, 128)
+    fmt = {v: k for k, v in DXGI.items()}[dxgi]
+    channels = fmt.count("32") + fmt.count("16")
+    dtype = np.dtype("<f4" if "32" in fmt else "<f2")
+    offset, layers = 148, []
+    for _ in range(array_size):
+        levels = []
+        for k in range(mips):
+            h, w = max(height >> k, 1), max(width >> k, 1)
+            n = h * w * channels
+            levels.append(np.frombuffer(blob, dtype, n, offset).reshape(h, w, channels))
+            offset += n * dtype.itemsize
+        layers.append(levels)
+    assert offset == len(blob)
+    return mips, flags, caps, layers
+
+
+@pytest.mark.parametrize("dtype", [np.float16, np.float32])
+def test_dds_mip_chain_layout(dtype):
+    chain = _chain(dtype)
+    mips, flags, caps, layers = read_dds_mips(dds_bytes(chain))
+    assert mips == 4 and flags & 0x20000  # DDSD_MIPMAPCOUNT
+    assert caps & 0x400008 == 0x400008  # DDSCAPS_MIPMAP | DDSCAPS_COMPLEX
+    assert [lv.shape for lv in layers[0]] == [(8, 4, 1), (4, 2, 1), (2, 1, 1), (1, 1, 1)]
+    assert all(np.array_equal(a, b) for a, b in zip(layers[0], chain))
+
+
+def test_dds_mip_chain_of_arrays_is_layer_major():
+    chain = _chain(np.float32, channels=2, layers=3)
+    mips, _, _, layers = read_dds_mips(dds_bytes(chain))
+    assert mips == 4 and len(layers) == 3
+    for i in range(3):
+        assert all(np.array_equal(layers[i][k], chain[k][i]) for k in range(4))
+
+
+def test_dds_one_level_has_no_mip_flags():
+    mips, flags, caps, _ = read_dds_mips(dds_bytes(_chain(np.float16)[:1]))
+    assert mips == 1 and not flags & 0x20000 and not caps & 0x400008
+
+
+def read_ktx2_mips(blob: bytes):
+    """(header, level index, inflated levels) of a KTX2 file with any number of levels."""
+    names = ("vkFormat", "typeSize", "pixelWidth", "pixelHeight", "pixelDepth", "layerCount",
+             "faceCount", "levelCount", "supercompressionScheme")
+    h = dict(zip(names, struct.unpack_from("<9I", blob, 12)))
+    dfd_off = struct.unpack_from("<I", blob, 48)[0]
+    index = [struct.unpack_from("<3Q", blob, 80 + 24 * k) for k in range(h["levelCount"])]
+    assert dfd_off == 80 + 24 * h["levelCount"]  # the DFD follows the level index
+    levels = []
+    for offset, length, uncompressed in index:
+        level = blob[offset:offset + length]
+        if h["supercompressionScheme"] == 2:
+            zstandard = pytest.importorskip("zstandard")
+            level = zstandard.ZstdDecompressor().decompress(level, max_output_size=uncompressed)
+        else:
+            assert offset % 4 == 0 and length == uncompressed
+        assert len(level) == uncompressed
+        levels.append(level)
+    return h, index, levels
+
+
+@pytest.mark.parametrize("supercompression", [None, "zstd"])
+def test_ktx2_mip_chain_layout(supercompression):
+    if supercompression:
+        pytest.importorskip("zstandard")
+    chain = _chain(np.float16)
+    blob = ktx2_bytes(chain, supercompression=supercompression)
+    h, index, levels = read_ktx2_mips(blob)
+    assert (h["levelCount"], h["pixelWidth"], h["pixelHeight"], h["layerCount"]) == (4, 4, 8, 0)
+    # level data from the smallest level to the largest, the largest ending the file
+    offsets = [o for o, _, _ in index]
+    assert offsets == sorted(offsets, reverse=True)
+    assert index[0][0] + index[0][1] == len(blob)
+    for k, level in enumerate(levels):
+        assert np.array_equal(np.frombuffer(level, "<f2").reshape(chain[k].shape), chain[k])
+
+
+def test_ktx2_mip_chain_alignment_uncompressed():
+    # R16 texels (2 bytes): uncompressed levels start at multiples of lcm(2, 4) = 4
+    blob = ktx2_bytes(_chain(np.float16, h=4, w=2), supercompression=None)
+    _, index, _ = read_ktx2_mips(blob)
+    assert all(o % 4 == 0 for o, _, _ in index)
+
+
+@pytest.mark.parametrize("bad,match", [
+    ([], "at least one mip level"),
+    ([np.zeros((4, 4, 1), np.float16), np.zeros((3, 2, 1), np.float16)], r"data\[1\]"),
+    ([np.zeros((4, 4, 1), np.float16), np.zeros((2, 2, 1), np.float32)], "dtype"),
+    ([np.zeros((2, 2, 1), np.float16)] + [np.zeros((1, 1, 1), np.float16)] * 2, "at most 2"),
+])
+def test_bad_mip_chains(bad, match):
+    with pytest.raises(PrefilterError, match=match):
+        dds_bytes(bad)
+    with pytest.raises(PrefilterError, match=match):
+        ktx2_bytes(bad, supercompression=None)
