@@ -45,7 +45,6 @@ __all__ = [
     "height_moments_approx",
     "height_moments_exact",
     "mean_visibility",
-    "naive_height",
     "smith_lambda",
     "smith_lambda_direction",
 ]
@@ -348,15 +347,6 @@ def filter_height(table, wo, wi, slope_cov, sigma_h=1.0, *, noise_mean=0.0, nois
     mr = as_float_array(noise_mean, "noise_mean")
     sr = _as_noise_sigma(noise_sigma)
     return vbar[..., None] * table.lookup(mu + mr, np.sqrt(sd * sd + sr * sr))
-
-
-def naive_height(table, sigma_h=1.0, *, noise_mean=0.0, noise_sigma=0.0) -> np.ndarray:
-    """View-independent filtering of a height colour map (the Gaussian height distribution, no
-    visibility): the "texture filtering" baseline of Heitz et al. 2013, fig. 8."""
-    as_table(table)
-    sh = _as_sigma_h(sigma_h)
-    sr = _as_noise_sigma(noise_sigma)
-    return table.lookup(as_float_array(noise_mean, "noise_mean"), np.sqrt(sh * sh + sr * sr))
 
 
 # -- footprints smaller than the whole surface (our extension) -------------------------------------

@@ -39,7 +39,7 @@ from prefilter.validation import (
 from prefilter.colormap.table import gaussian_operator
 from prefilter.errors import PrefilterError
 
-__all__ = ["SlopeColormapTable", "as_slope_colormap", "filter_slope", "slope_density",
+__all__ = ["SlopeColormapTable", "filter_slope", "slope_density",
            "slope_distribution", "slope_prefilter_table"]
 
 _SQRT_2_OVER_PI = 0.7978845608028654
@@ -281,12 +281,3 @@ def filter_slope(table: SlopeColormapTable, wo, mean, cov, n_taps: int = 7) -> n
     m, c = slope_distribution(wo, mean, cov)
     return table.lookup(m, c, n_taps)
 
-
-def as_slope_colormap(fn, extent: float = 1.0, n: int = 128) -> np.ndarray:
-    """Sample a slope colour map ``fn(s (..., 2)) -> (..., C)`` at the ``n x n`` texel centres of
-    ``[-extent, extent]^2``; returns ``(n, n, C)``."""
-    n = as_positive_int(n, "n", lo=2)
-    x = -extent + (np.arange(n) + 0.5) * 2.0 * extent / n
-    sx, sy = np.meshgrid(x, x)
-    out = as_float_array(fn(np.stack([sx, sy], -1)), "fn(s)")
-    return out[..., None] if out.ndim == 2 else out

@@ -2,8 +2,8 @@
 
 The surface is the bilinear interpolation ``z = h(x, y)`` of a periodic height grid (texel
 units, texel ``(i, j)`` at ``x = j, y = i``). Its slopes are the bilinear patches' gradients, whose
-moments over a cell are closed-form, so LEADR statistics of any block of cells are exact
-(:func:`block_moments`; moments are linear, so a block is the box average of its cells).
+moments over a cell are closed-form (:func:`cell_moments`), so LEADR statistics of any block of
+cells are exact (moments are linear: a block is the box average of its cells).
 
 :func:`displaced_radiance` averages, over parallel view rays through a uniform grid of points of a
 block of the mean plane (radiance per projected area, as LEADR defines it), the radiance of the
@@ -98,16 +98,6 @@ def cell_moments(height) -> np.ndarray:
     d = r(c, 1, 1)
     return np.stack([(a + b) / 2, (c + d) / 2, (a * a + a * b + b * b) / 3,
                      (c * c + c * d + d * d) / 3, (a + b) * (c + d) / 4], -1)
-
-
-def block_moments(height, block: int) -> np.ndarray:
-    """Moments ``(H / block, W / block, 5)`` of aligned ``block x block`` cell blocks."""
-    m = cell_moments(height)
-    hh, ww = m.shape[:2]
-    if hh % block or ww % block:
-        raise PrefilterError(
-            f"block: expected a divisor of the map size {m.shape[:2]}, got {block}")
-    return m.reshape(hh // block, block, ww // block, block, 5).mean(axis=(1, 3))
 
 
 def block_points(i0: int, j0: int, block: int, k: int):
