@@ -19,7 +19,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.special import erfc, erfcx, log_ndtr
+from scipy.special import erfcx, log_ndtr
 
 from prefilter.validation import (
     as_directions,
@@ -30,6 +30,7 @@ from prefilter.validation import (
 )
 from prefilter.colormap.table import as_table
 from prefilter.errors import PrefilterError
+from prefilter.microfacet.beckmann import beckmann_lambda
 
 __all__ = [
     "FIT_LAMBDA_MAX",
@@ -97,10 +98,8 @@ def smith_lambda(cot_theta, sigma_s) -> np.ndarray:
                              f"not grazing), got min {np.nanmin(c)!r}")
     if np.any(s <= 0.0):
         raise PrefilterError(f"sigma_s: expected slope standard deviations > 0, got {s.min()!r}")
-    a = c / s
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        lam = _INV_SQRT_2PI / a * np.exp(-0.5 * a * a) - 0.5 * erfc(a / np.sqrt(2.0))
-    return np.where(np.isfinite(a), np.maximum(lam, 0.0), 0.0)
+    with np.errstate(over="ignore"):
+        return beckmann_lambda(c / (s * np.sqrt(2.0)))
 
 
 def _slope_std_along(w: np.ndarray, slope_cov: np.ndarray) -> np.ndarray:

@@ -20,9 +20,10 @@ import numpy as np
 
 from prefilter.colormap.table import kernel_args, lookup_one
 from prefilter.jit import njit_parallel, njit_serial, prange
+from prefilter.microfacet.beckmann import beckmann_lambda_jit
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
-from prefilter.texture.fetch import bilinear_add, pack_levels, trilinear_add
+from prefilter.texture.fetch import bilinear_add, footprint_axes_jit, pack_levels, trilinear_add
 from prefilter.texture.mip import MipChain
 
 __all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
@@ -40,31 +41,6 @@ class PackedChain:
 
 
 @njit_serial
-def _footprint(j00, j01, j10, j11, w, h):  # pragma: no cover - compiled
-    """Major / minor axis (texels) and unit major direction (texel space) of the footprint."""
-    a00, a01, a10, a11 = j00 * w, j01 * w, j10 * h, j11 * h
-    p = a00 * a00 + a01 * a01
-    r = a10 * a10 + a11 * a11
-    q = a00 * a10 + a01 * a11
-    mid = 0.5 * (p + r)
-    disc = math.sqrt(max(0.25 * (p - r) ** 2 + q * q, 0.0))
-    l1 = mid + disc
-    l2 = max(mid - disc, 0.0)
-    v1x, v1y = q, l1 - p
-    v2x, v2y = l1 - r, q
-    if v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y:
-        dx, dy = v1x, v1y
-    else:
-        dx, dy = v2x, v2y
-    nrm = math.sqrt(dx * dx + dy * dy)
-    if nrm > 0:
-        dx, dy = dx / nrm, dy / nrm
-    else:
-        dx, dy = 1.0, 0.0
-    return math.sqrt(l1), math.sqrt(l2), dx, dy
-
-
-@njit_serial
 def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, out,
            ivar):  # pragma: no cover - compiled
     """Footprint lookup (isotropic or anisotropic, as ``MipChain.lookup_footprint``) into
@@ -73,7 +49,7 @@ def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, ou
     averaged over the taps (``texture.footprint_stats``)."""
     w = ws[0]
     h = hs[0]
-    major, minor, dx, dy = _footprint(j00, j01, j10, j11, w, h)
+    major, minor, dx, dy = footprint_axes_jit(h, w, j00, j01, j10, j11)
     for k in range(c):
         out[k] = 0.0
     area_lod = 0.5 * math.log2(max(major * minor, 1.0))
@@ -156,15 +132,14 @@ _INV_SQRT_2PI = 0.3989422804014327
 
 @njit_serial
 def _lambda(wx, wy, wz, cxx, cxy, cyy):  # pragma: no cover - compiled
-    """Smith Lambda of a Gaussian surface (Heitz et al. 2013, eq. 3)."""
+    """Smith Lambda of a centred Gaussian surface (Heitz et al. 2013, eq. 3) for ``w`` with
+    ``w_z > 0``: ``a = cot(theta) / (sqrt(2) sigma_s)``."""
     r = math.sqrt(wx * wx + wy * wy)
     if r <= 0.0:
         return 0.0
     cx, cy = wx / r, wy / r
     s = math.sqrt(cxx * cx * cx + 2 * cxy * cx * cy + cyy * cy * cy)
-    a = wz / r / s
-    return max(_INV_SQRT_2PI / a * math.exp(-0.5 * a * a) - 0.5 * math.erfc(a / math.sqrt(2.0)),
-               0.0)
+    return beckmann_lambda_jit(wz / r / (s * math.sqrt(2.0)))
 
 
 @njit_serial

@@ -18,6 +18,7 @@ import numpy as np
 
 from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange
 from prefilter.leadr.envmap import latlong_uv_jit
+from prefilter.microfacet.beckmann import beckmann_lambda_jit
 from prefilter.microfacet.fresnel import schlick_jit
 from prefilter.texture.fetch import trilinear_add
 
@@ -80,8 +81,7 @@ def _lambda_a(wx, wy, wz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
     if a > 5.0:
         # Lambda(5) = 1.6e-14: skip exp / erfc (most directions of a smooth surface)
         return 0.0
-    lam = 0.5 * (math.exp(-a * a) / (a * 1.7724538509055159) - math.erfc(a))
-    return max(lam, 0.0)
+    return beckmann_lambda_jit(a)
 
 
 @njit_serial

@@ -28,6 +28,40 @@ def pack_levels(levels) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
 
 
 @njit_inline
+def footprint_axes_jit(h, w, d00, d01, d10, d11):  # pragma: no cover - compiled
+    """``(major, minor, dir_x, dir_y)``: the footprint ellipse of the Jacobian ``dudv = d..`` in
+    texels of an ``h x w`` level 0, the major direction a unit vector in texel space (the
+    singular values and left singular vector of ``diag(w, h) dudv``,
+    :func:`prefilter.texture.mip.footprint_axes`)."""
+    j00, j01, j10, j11 = d00 * w, d01 * w, d10 * h, d11 * h
+    # eigen-decomposition of J J^T = [[p, q], [q, r]] in closed form
+    p = j00 * j00 + j01 * j01
+    r = j10 * j10 + j11 * j11
+    q = j00 * j10 + j01 * j11
+    mid = 0.5 * (p + r)
+    disc = math.sqrt(max(0.25 * (p - r) ** 2 + q * q, 0.0))
+    l1 = mid + disc
+    l2 = max(mid - disc, 0.0)
+    # eigenvector of l1: (q, l1 - p) or (l1 - r, q), whichever is longer (stable)
+    dx, dy = q, l1 - p
+    if dx * dx + dy * dy < (l1 - r) ** 2 + q * q:
+        dx, dy = l1 - r, q
+    nrm = math.sqrt(dx * dx + dy * dy)
+    if nrm > 0.0:
+        return math.sqrt(l1), math.sqrt(l2), dx / nrm, dy / nrm
+    return math.sqrt(l1), math.sqrt(l2), 1.0, 0.0
+
+
+@njit_parallel
+def footprint_axes_kernel(h, w, dudv, out):  # pragma: no cover - compiled
+    """``out (N, 4)``: :func:`footprint_axes_jit` of each ``dudv (N, 2, 2)``."""
+    for q in prange(dudv.shape[0]):
+        out[q, 0], out[q, 1], out[q, 2], out[q, 3] = footprint_axes_jit(
+            h, w, dudv[q, 0, 0], dudv[q, 0, 1], dudv[q, 1, 0], dudv[q, 1, 1])
+    return out
+
+
+@njit_inline
 def bilinear_add(data, offset, h, w, u, v, nc, weight, clamp_v, out):  # pragma: no cover
     """``out[:nc] += weight * bilinear(level, u, v)`` for the level at row ``offset`` of
     ``data``, ``h x w`` texels."""

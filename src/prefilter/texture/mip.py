@@ -17,6 +17,8 @@ import numpy as np
 
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
+from prefilter.jit import serial
+from prefilter.texture.fetch import footprint_axes_kernel
 
 __all__ = ["MipChain", "footprint_axes", "lod_from_footprint", "moment_chain", "moments_to_stats"]
 
@@ -155,7 +157,8 @@ def footprint_axes(dudv, shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
     The Jacobian in texel units ``J = diag(W, H) dudv`` maps the unit pixel to a parallelogram;
     its singular values are the major and minor axis lengths of the footprint ellipse, and the
-    left singular vector of the largest one is the major direction (in texel space).
+    left singular vector of the largest one is the major direction (in texel space); computed by
+    :func:`prefilter.texture.fetch.footprint_axes_jit`, which kernels call.
 
     Parameters
     ----------
@@ -171,21 +174,11 @@ def footprint_axes(dudv, shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if j.shape[-2:] != (2, 2):
         raise PrefilterError(f"dudv: expected shape (..., 2, 2), got {j.shape}")
     h, w = shape
-    j = j * np.array([w, h], float)[:, None]
-    # eigen-decomposition of J J^T = [[p, q], [q, r]] in closed form
-    p = j[..., 0, 0] ** 2 + j[..., 0, 1] ** 2
-    r = j[..., 1, 0] ** 2 + j[..., 1, 1] ** 2
-    q = j[..., 0, 0] * j[..., 1, 0] + j[..., 0, 1] * j[..., 1, 1]
-    mean = 0.5 * (p + r)
-    disc = np.sqrt(np.maximum(0.25 * (p - r) ** 2 + q * q, 0.0))
-    l1, l2 = mean + disc, np.maximum(mean - disc, 0.0)
-    # eigenvector of l1: (q, l1 - p) or (l1 - r, q), whichever is longer (stable)
-    v1 = np.stack([q, l1 - p], -1)
-    v2 = np.stack([l1 - r, q], -1)
-    v = np.where((np.sum(v1 * v1, -1) >= np.sum(v2 * v2, -1))[..., None], v1, v2)
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
-    v = np.where(norm > 0, v / np.where(norm > 0, norm, 1.0), np.array([1.0, 0.0]))
-    return np.sqrt(l1), np.sqrt(l2), v
+    flat = np.ascontiguousarray(j.reshape(-1, 2, 2))
+    out = np.empty((flat.shape[0], 4))
+    serial(footprint_axes_kernel, len(out))(int(h), int(w), flat, out)
+    out = out.reshape(j.shape[:-2] + (4,))
+    return out[..., 0], out[..., 1], out[..., 2:]
 
 
 def lod_from_footprint(dudv, shape, *, anisotropic: bool = False, max_aniso: int = 8):
