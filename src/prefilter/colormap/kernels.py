@@ -23,7 +23,8 @@ from prefilter.jit import njit_parallel, njit_serial, prange
 from prefilter.microfacet.beckmann import beckmann_lambda_jit
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
-from prefilter.texture.fetch import bilinear_add, footprint_axes_jit, pack_levels, trilinear_add
+from prefilter.texture.fetch import (WRAP, bilinear_add, footprint_axes_jit, pack_levels,
+                                     trilinear_add)
 from prefilter.texture.mip import MipChain
 
 __all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
@@ -73,18 +74,18 @@ def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, ou
     for i in range(taps):
         o = (i + 0.5) / taps - 0.5 if aniso else 0.0
         if not want:
-            trilinear_add(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, False,
+            trilinear_add(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, WRAP,
                           out)
             continue
         # the trilinear lookup by hand, keeping the unweighted level-0 moments of the tap
         ivar[1] = 0.0
         ivar[2] = 0.0
-        bilinear_add(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, False,
+        bilinear_add(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, WRAP,
                      ivar[1:3])
         out[0] += (1.0 - t) / taps * ivar[1]
         out[1] += (1.0 - t) / taps * ivar[2]
         if t > 0.0:
-            bilinear_add(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, False,
+            bilinear_add(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, WRAP,
                          out)
         ivar[0] += (ivar[2] - ivar[1] * ivar[1]) / taps
     return lod, area_lod

@@ -3,8 +3,9 @@
 A chain of levels ``(H_l, W_l, C)`` is packed as one ``(sum H_l W_l, C)`` array with per-level
 row offsets, heights and widths (:func:`pack_levels`): texel ``(i, j)`` of level ``l`` is row
 ``offsets[l] + i W_l + j``, its centre at ``u = (j + 0.5) / W_l``, ``v = (i + 0.5) / H_l``.
-``u`` wraps; ``v`` wraps too (periodic textures) or, with ``clamp_v``, is clamped to the first
-and last rows (lat-long maps, whose rows end at the poles).
+``u`` and ``v`` wrap (periodic textures); with :data:`CLAMP_V` ``v`` is clamped to the first and
+last rows (lat-long maps, whose rows end at the poles), with :data:`CLAMP_UV` both are clamped to
+the edge texels (a light's texture).
 """
 
 from __future__ import annotations
@@ -14,6 +15,9 @@ import math
 import numpy as np
 
 from prefilter.jit import njit_inline, njit_parallel, prange, serial
+
+#: Edge rules of the fetches: both coordinates wrap, ``v`` is clamped, both are clamped.
+WRAP, CLAMP_V, CLAMP_UV = 0, 1, 2
 
 
 def pack_levels(levels) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -62,15 +66,23 @@ def footprint_axes_kernel(h, w, dudv, out):  # pragma: no cover - compiled
 
 
 @njit_inline
-def bilinear_add(data, offset, h, w, u, v, nc, weight, clamp_v, out):  # pragma: no cover
+def bilinear_add(data, offset, h, w, u, v, nc, weight, clamp, out):  # pragma: no cover
     """``out[:nc] += weight * bilinear(level, u, v)`` for the level at row ``offset`` of
-    ``data``, ``h x w`` texels."""
-    x = u * w - 0.5
-    x0 = math.floor(x)
+    ``data``, ``h x w`` texels; ``clamp`` (:data:`WRAP`, :data:`CLAMP_V`, :data:`CLAMP_UV`, or a
+    bool for the first two) says which coordinates stop at the edge texels instead of
+    wrapping."""
+    if clamp >= CLAMP_UV:
+        x = min(max(u * w - 0.5, 0.0), w - 1.0)
+        x0 = min(math.floor(x), max(w - 2, 0))
+        j0 = int(x0)
+        j1 = min(j0 + 1, w - 1)
+    else:
+        x = u * w - 0.5
+        x0 = math.floor(x)
+        j0 = int(x0) % w
+        j1 = (j0 + 1) % w
     fx = x - x0
-    j0 = int(x0) % w
-    j1 = (j0 + 1) % w
-    if clamp_v:
+    if clamp >= CLAMP_V:
         y = min(max(v * h - 0.5, 0.0), h - 1.0)
         y0 = min(math.floor(y), max(h - 2, 0))
         i0 = int(y0)
@@ -88,7 +100,7 @@ def bilinear_add(data, offset, h, w, u, v, nc, weight, clamp_v, out):  # pragma:
 
 
 @njit_inline
-def trilinear_add(data, offsets, heights, widths, u, v, lod, nc, weight, clamp_v,
+def trilinear_add(data, offsets, heights, widths, u, v, lod, nc, weight, clamp,
                   out):  # pragma: no cover
     """``out[:nc] += weight * trilinear(u, v, lod)``: the two levels around ``lod`` (clamped
     to the chain), blended linearly; a level of zero weight is not read."""
@@ -98,33 +110,33 @@ def trilinear_add(data, offsets, heights, widths, u, v, lod, nc, weight, clamp_v
     t = lod - l0
     if t < 1.0:
         bilinear_add(data, offsets[l0], heights[l0], widths[l0], u, v, nc, weight * (1.0 - t),
-                     clamp_v, out)
+                     clamp, out)
     if t > 0.0:
         bilinear_add(data, offsets[l0 + 1], heights[l0 + 1], widths[l0 + 1], u, v, nc,
-                     weight * t, clamp_v, out)
+                     weight * t, clamp, out)
 
 
 @njit_parallel
-def trilinear_kernel(data, offsets, heights, widths, uv, lod, clamp_v,
+def trilinear_kernel(data, offsets, heights, widths, uv, lod, clamp,
                      out):  # pragma: no cover - compiled
     """``out (N, C)``: :func:`trilinear_add` at ``uv (N, 2)``, ``lod (N,)``."""
     for q in prange(uv.shape[0]):
         for c in range(out.shape[1]):
             out[q, c] = 0.0
         trilinear_add(data, offsets, heights, widths, uv[q, 0], uv[q, 1], lod[q], out.shape[1],
-                      1.0, clamp_v, out[q])
+                      1.0, clamp, out[q])
     return out
 
 
-def trilinear(packed, uv, lod, *, clamp_v: bool = False) -> np.ndarray:
+def trilinear(packed, uv, lod, *, clamp: int = WRAP) -> np.ndarray:
     """Trilinear lookups ``(..., C)`` of packed levels ``packed`` (:func:`pack_levels`) at
-    ``uv (..., 2)`` and ``lod (...)`` (broadcast together)."""
+    ``uv (..., 2)`` and ``lod (...)`` (broadcast together; clamped to the chain), edges as
+    ``clamp`` says (:data:`WRAP`, :data:`CLAMP_V` or :data:`CLAMP_UV`)."""
     data, offsets, heights, widths = packed
     uv = np.asarray(uv, np.float64)
     shape = np.broadcast_shapes(uv.shape[:-1], np.shape(lod))
     uvf = np.ascontiguousarray(np.broadcast_to(uv, shape + (2,)).reshape(-1, 2))
     lodf = np.ascontiguousarray(np.broadcast_to(np.asarray(lod, np.float64), shape).reshape(-1))
     out = np.empty((uvf.shape[0], data.shape[1]))
-    serial(trilinear_kernel, len(uvf))(data, offsets, heights, widths, uvf, lodf, bool(clamp_v),
-                                       out)
+    serial(trilinear_kernel, len(uvf))(data, offsets, heights, widths, uvf, lodf, int(clamp), out)
     return out.reshape(shape + (data.shape[1],))

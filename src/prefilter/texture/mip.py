@@ -13,12 +13,14 @@ Texture coordinates: ``u`` along columns, ``v`` along rows, texel ``(i, j)`` cen
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.jit import serial
-from prefilter.texture.fetch import footprint_axes_kernel
+from prefilter.texture.fetch import footprint_axes_kernel, pack_levels, trilinear
 
 __all__ = ["MipChain", "footprint_axes", "lod_from_footprint", "moment_chain", "moments_to_stats"]
 
@@ -66,22 +68,14 @@ class MipChain:
     def __repr__(self) -> str:
         return f"MipChain(shape={self.shape}, n_levels={self.n_levels})"
 
-    def _bilinear(self, level: int, uv: np.ndarray) -> np.ndarray:
-        tex = self.levels[level]
-        h, w = tex.shape[:2]
-        x = uv[..., 0] * w - 0.5
-        y = uv[..., 1] * h - 0.5
-        x0, y0 = np.floor(x), np.floor(y)
-        fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-        i0 = np.mod(y0.astype(np.int64), h)
-        j0 = np.mod(x0.astype(np.int64), w)
-        i1, j1 = np.mod(i0 + 1, h), np.mod(j0 + 1, w)
-        top = tex[i0, j0] * (1 - fx) + tex[i0, j1] * fx
-        bottom = tex[i1, j0] * (1 - fx) + tex[i1, j1] * fx
-        return top * (1 - fy) + bottom * fy
+    @functools.cached_property
+    def packed(self):
+        """The levels packed for compiled lookups (:func:`prefilter.texture.fetch.pack_levels`)."""
+        return pack_levels(self.levels)
 
     def lookup(self, uv, lod=0.0) -> np.ndarray:
-        """Trilinear lookup: bilinear in the two levels around ``lod``, linear between them.
+        """Trilinear lookup: bilinear in the two levels around ``lod``, linear between them
+        (:func:`prefilter.texture.fetch.trilinear`).
 
         Parameters
         ----------
@@ -95,21 +89,8 @@ class MipChain:
         numpy.ndarray, shape (..., C)
         """
         uv = as_float_array(uv, "uv", ndim_min=1, last_dim=2)
-        lod = np.clip(as_float_array(lod, "lod"), 0.0, self.n_levels - 1)
-        lod = np.broadcast_to(lod, uv.shape[:-1])
-        l0 = np.minimum(np.floor(lod).astype(np.int64), self.n_levels - 2) if self.n_levels > 1 \
-            else np.zeros(lod.shape, np.int64)
-        t = (lod - l0)[..., None]
-        out = np.zeros(uv.shape[:-1] + (self.shape[2],))
-        for level in np.unique(l0):  # a loop over levels, not texels
-            m = l0 == level
-            lo = self._bilinear(int(level), uv[m])
-            if self.n_levels > 1:
-                hi = self._bilinear(int(level) + 1, uv[m])
-                out[m] = lo * (1 - t[m]) + hi * t[m]
-            else:
-                out[m] = lo
-        return out
+        lod = np.broadcast_to(as_float_array(lod, "lod"), uv.shape[:-1])
+        return trilinear(self.packed, uv, lod)
 
     def lookup_footprint(self, uv, dudv, *, anisotropic: bool = False, max_aniso: int = 8):
         """Filtered lookup over a pixel footprint given by the Jacobian ``dudv = d(uv)/d(pixel)``.
