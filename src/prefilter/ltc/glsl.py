@@ -25,7 +25,7 @@ import numpy as np
 from prefilter.fileio import atomic_path, save_json_atomic
 from prefilter.errors import PrefilterError
 
-__all__ = ["GLSL", "export_all", "glsl_source", "glsl_twin", "texture_layout", "texture_params"]
+__all__ = ["GLSL", "export_all", "glsl_source", "texture_layout", "texture_params"]
 
 _CHANNELS = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]
 
@@ -174,35 +174,6 @@ vec3 ltcQuad(vec3 Q[4], vec3 qn, vec3 L, vec3 pos, vec3 t, vec3 b, vec3 n, mat3 
 def glsl_source(table) -> str:
     """:data:`GLSL` with the table's constants filled in."""
     return GLSL.format(**texture_params(table))
-
-
-def glsl_twin(tex, params, wo, alpha):
-    """:data:`GLSL`'s ``ltcIsoLookup`` in NumPy (float64), line by line, vectorised over ``(...)``.
-
-    ``tex (3, R, T, 4)`` from :func:`texture_layout` (any float dtype), ``params`` from
-    :func:`texture_params`. Returns ``(M (..., 3, 3), n, f5)`` with ``M`` in the local frame (the
-    shader goes on to its adjugate).
-    """
-    tex = np.asarray(tex, np.float64)
-    T, R = int(params["T"]), int(params["R"])
-    wo = np.asarray(wo, np.float64)
-    sa_min = params["sqrt_alpha_min"]
-    ft = np.clip(np.sqrt(np.maximum(0.0, 1.0 - wo[..., 2])) / params["t_max"], 0, 1) * (T - 1)
-    sa = np.sqrt(np.clip(np.asarray(alpha, np.float64), sa_min * sa_min, 1.0))
-    fr = np.clip((sa - sa_min) / (1.0 - sa_min), 0, 1) * (R - 1)
-    i = np.minimum(np.floor(ft).astype(np.intp), T - 2)
-    j = np.minimum(np.floor(fr).astype(np.intp), R - 2)
-    a, b = (ft - i)[..., None, None], (fr - j)[..., None, None]
-    t = np.moveaxis(tex, 0, -2)  # (R, T, 3, 4)
-    x = ((1 - a) * (1 - b) * t[j, i] + a * (1 - b) * t[j, i + 1] + (1 - a) * b * t[j + 1, i]
-         + a * b * t[j + 1, i + 1]).reshape(ft.shape + (12,))
-    M = x[..., :9].reshape(ft.shape + (3, 3))
-    rho = np.hypot(wo[..., 0], wo[..., 1])
-    safe = np.where(rho > 0, rho, 1.0)
-    c, s = np.where(rho > 0, wo[..., 0] / safe, 1.0), np.where(rho > 0, wo[..., 1] / safe, 0.0)
-    Rz = np.zeros(ft.shape + (3, 3))
-    Rz[..., 0, 0], Rz[..., 0, 1], Rz[..., 1, 0], Rz[..., 1, 1], Rz[..., 2, 2] = c, -s, s, c, 1
-    return Rz @ M @ np.swapaxes(Rz, -1, -2), x[..., 9], x[..., 10]
 
 
 def export_all(table, out_dir) -> list[Path]:
