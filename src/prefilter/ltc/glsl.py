@@ -25,19 +25,22 @@ import numpy as np
 from prefilter.fileio import atomic_path, save_json_atomic
 from prefilter.errors import PrefilterError
 
-__all__ = ["GLSL", "export_all", "glsl_source", "texture_layout", "texture_params"]
+__all__ = ["CHANNELS", "GLSL", "export_all", "glsl_source", "texture_layout", "texture_params",
+           "uniform_nodes"]
 
-_CHANNELS = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]
+#: The entries ``(row, column)`` of ``M`` in the order the texture channels hold them.
+CHANNELS = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]
 
 
-def _uniform(c) -> bool:
+def uniform_nodes(c) -> bool:
+    """Whether the table axis ``c`` is uniform (the GPU interpolates its index linearly)."""
     d = np.diff(c)
     return bool(np.allclose(d, d[0], rtol=1e-9, atol=1e-12))
 
 
 def texture_params(table) -> dict:
     """Grid sizes and axis ranges the shader needs (axes must be uniform: ``t`` from 0)."""
-    if not (_uniform(table.axis_t) and _uniform(table.axis_r) and table.axis_t[0] == 0.0):
+    if not (uniform_nodes(table.axis_t) and uniform_nodes(table.axis_r) and table.axis_t[0] == 0.0):
         raise PrefilterError("table axes: the texture layout needs nodes uniform in "
                              "sqrt(1 - cos theta) (from 0) and sqrt(alpha)")
     return {"T": len(table.axis_t), "R": len(table.axis_r), "t_max": float(table.axis_t[-1]),
@@ -46,7 +49,7 @@ def texture_params(table) -> dict:
 
 def texture_layout(table, dtype=np.float32) -> np.ndarray:
     """The three RGBA textures ``(3, H, W, 4)`` (``H = R`` rows of roughness, ``W = T``)."""
-    ch = [table.M[..., i, j] for i, j in _CHANNELS] + [table.magnitude, table.fresnel,
+    ch = [table.M[..., i, j] for i, j in CHANNELS] + [table.magnitude, table.fresnel,
                                                        np.zeros(table.magnitude.shape)]
     x = np.stack(ch, -1).reshape(len(table.axis_t), len(table.axis_r), 3, 4)  # (T, R, 3, 4)
     return np.ascontiguousarray(x.transpose(2, 1, 0, 3)).astype(dtype)

@@ -66,33 +66,27 @@ def footprint_axes_kernel(h, w, dudv, out):  # pragma: no cover - compiled
 
 
 @njit_inline
+def _texel_pair(x, n, clamp):  # pragma: no cover - compiled
+    """The texels ``i0, i1`` around ``x`` (texel units, centres at integers) on an axis of ``n``
+    texels, and the weight of ``i1``: wrapped, or with ``clamp`` held at the edge texels."""
+    if clamp:
+        x = min(max(x, 0.0), n - 1.0)
+        x0 = min(math.floor(x), max(n - 2, 0))
+        i0 = int(x0)
+        return i0, min(i0 + 1, n - 1), x - x0
+    x0 = math.floor(x)
+    i0 = int(x0) % n
+    return i0, (i0 + 1) % n, x - x0
+
+
+@njit_inline
 def bilinear_add(data, offset, h, w, u, v, nc, weight, clamp, out):  # pragma: no cover
     """``out[:nc] += weight * bilinear(level, u, v)`` for the level at row ``offset`` of
     ``data``, ``h x w`` texels; ``clamp`` (:data:`WRAP`, :data:`CLAMP_V`, :data:`CLAMP_UV`, or a
     bool for the first two) says which coordinates stop at the edge texels instead of
     wrapping."""
-    if clamp >= CLAMP_UV:
-        x = min(max(u * w - 0.5, 0.0), w - 1.0)
-        x0 = min(math.floor(x), max(w - 2, 0))
-        j0 = int(x0)
-        j1 = min(j0 + 1, w - 1)
-    else:
-        x = u * w - 0.5
-        x0 = math.floor(x)
-        j0 = int(x0) % w
-        j1 = (j0 + 1) % w
-    fx = x - x0
-    if clamp >= CLAMP_V:
-        y = min(max(v * h - 0.5, 0.0), h - 1.0)
-        y0 = min(math.floor(y), max(h - 2, 0))
-        i0 = int(y0)
-        i1 = min(i0 + 1, h - 1)
-    else:
-        y = v * h - 0.5
-        y0 = math.floor(y)
-        i0 = int(y0) % h
-        i1 = (i0 + 1) % h
-    fy = y - y0
+    j0, j1, fx = _texel_pair(u * w - 0.5, w, clamp >= CLAMP_UV)
+    i0, i1, fy = _texel_pair(v * h - 0.5, h, clamp >= CLAMP_V)
     for c in range(nc):
         a = data[offset + i0 * w + j0, c] * (1 - fx) + data[offset + i0 * w + j1, c] * fx
         b = data[offset + i1 * w + j0, c] * (1 - fx) + data[offset + i1 * w + j1, c] * fx

@@ -21,19 +21,12 @@ import numpy as np
 
 from prefilter.fileio import atomic_path, save_json_atomic, save_npz_atomic
 from prefilter.errors import PrefilterError
-
-_CHANNELS = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]
-
-
-def _uniform(c) -> bool:
-    d = np.diff(c)
-    return bool(np.allclose(d, d[0], rtol=1e-9, atol=1e-12))
-
+from prefilter.ltc.glsl import CHANNELS, uniform_nodes
 
 def texture_params(table) -> dict:
     """The scalars the shader needs (grid sizes and the ranges of the uniform coordinates)."""
     c = table._coords
-    if not all(_uniform(x) for x in c):
+    if not all(uniform_nodes(x) for x in c):
         raise PrefilterError("table axes: the texture layout needs nodes uniform in theta, phi, "
                              "sqrt(alpha) and sqrt(ratio)")
     T, F, A, R = table.shape
@@ -44,7 +37,7 @@ def texture_params(table) -> dict:
 def texture_layout(table, dtype=np.float32) -> np.ndarray:
     """The three RGBA textures ``(3, D, H, W, 4)`` (``D = R * A``, ``H = F``, ``W = T``)."""
     T, F, A, R = table.shape
-    ch = [table.M[..., i, j] for i, j in _CHANNELS] + [table.magnitude, table.fresnel,
+    ch = [table.M[..., i, j] for i, j in CHANNELS] + [table.magnitude, table.fresnel,
                                                        np.zeros(table.shape)]
     x = np.stack(ch, -1)  # (T, F, A, R, 12)
     x = x.transpose(3, 2, 1, 0, 4).reshape(R * A, F, T, 3, 4)  # depth = r * A + a
