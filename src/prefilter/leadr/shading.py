@@ -27,7 +27,7 @@ from prefilter.leadr.envmap import EnvMap, IrradianceMap, sh9_irradiance, texel_
 from prefilter.leadr.kernels import (diffuse_shadow_kernel, env_specular_kernel, grid_slope,
                                      micronormal, slope_cholesky, smith_terms)
 from prefilter.microfacet import fresnel
-from prefilter.microfacet.beckmann import beckmann_lambda, smith_lambda_walter
+from prefilter.microfacet.beckmann import beckmann_lambda, slope_pdf, smith_lambda_walter
 
 #: Bias of the artificial micronormal towards the view, and its weight (supplemental 3.7).
 ARTIFICIAL_EPS = 1.01
@@ -110,11 +110,8 @@ def point_light(wo, wi, mean_slope, slope_cov, *, f0=None, shadowing: bool = Tru
     hz = h[..., 2]
     up = hz > 1e-12
     hzs = np.where(up, hz, 1.0)
-    dx = -h[..., 0] / hzs - mu[..., 0]
-    dy = -h[..., 1] / hzs - mu[..., 1]
-    det = sxx * syy - sxy * sxy
-    q = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
-    d = np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(det) * hzs**4)
+    d = slope_pdf(-h[..., 0] / hzs - mu[..., 0], -h[..., 1] / hzs - mu[..., 1], sxx, syy,
+                  sxy) / hzs**4  # D(h) = P22 / h_z^4
     area = wo[..., 2] - mu[..., 0] * wo[..., 0] - mu[..., 1] * wo[..., 1]
     lam = _lambda(wo, mu, sxx, syy, sxy, lambda_fit)
     if shadowing:

@@ -68,6 +68,14 @@ def smith_lambda_walter(a) -> np.ndarray:
     return np.where(a <= 0.0, np.inf, np.where(mid, fit, 0.0))
 
 
+def slope_pdf(dx, dy, sxx, syy, sxy) -> np.ndarray:
+    """Gaussian slope density ``P22 = N(d; 0, [[sxx, sxy], [sxy, syy]])`` of slope offsets
+    ``d = s - mu = (dx, dy)`` (LEADR supplemental 3.1), arrays broadcast together."""
+    det = sxx * syy - sxy * sxy
+    q = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
+    return np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(det))
+
+
 def _log_ramp_cdf(x, a):
     """``log(a Phi(x) + phi(x))`` for ``x <= a``: the unnormalised CDF of ``(a - x) phi(x)``.
 
@@ -222,12 +230,10 @@ class Beckmann(MicrofacetModel):
         return Beckmann(self.mean_slope[..., None, :], self.slope_cov[..., None, :, :])
 
     def P22(self, s) -> np.ndarray:
-        """Slope density ``N(s; mu, Sigma)`` for slopes ``s (..., 2)``."""
+        """Slope density ``N(s; mu, Sigma)`` for slopes ``s (..., 2)`` (:func:`slope_pdf`)."""
         s = np.asarray(s, dtype=np.float64)
-        dx = s[..., 0] - self.mean_slope[..., 0]
-        dy = s[..., 1] - self.mean_slope[..., 1]
-        q = (self._syy * dx * dx - 2.0 * self._sxy * dx * dy + self._sxx * dy * dy) / self._det
-        return np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(self._det))
+        return slope_pdf(s[..., 0] - self.mean_slope[..., 0], s[..., 1] - self.mean_slope[..., 1],
+                         self._sxx, self._syy, self._sxy)
 
     def D(self, m) -> np.ndarray:
         """NDF ``P22(s(m)) / mz^4`` (LEADR supplemental 3.1), ``(...,)``; 0 for ``mz <= 0``."""
