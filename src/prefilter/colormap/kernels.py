@@ -23,22 +23,21 @@ from prefilter.jit import njit_parallel, njit_serial, prange
 from prefilter.microfacet.beckmann import beckmann_lambda_jit
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
-from prefilter.texture.fetch import (WRAP, bilinear_add, footprint_axes_jit, pack_levels,
-                                     trilinear_add)
+from prefilter.texture.fetch import WRAP, bilinear_add, footprint_axes_jit, trilinear_add
 from prefilter.texture.mip import MipChain
 
 __all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
 
 
 class PackedChain:
-    """A :class:`MipChain` flattened for the kernels (:func:`prefilter.texture.fetch.pack_levels`):
+    """A :class:`MipChain` flattened for the kernels (:attr:`MipChain.packed`):
     ``data (total, C)``, per-level ``offsets``, ``heights``, ``widths``."""
 
     def __init__(self, chain: MipChain):
         if not isinstance(chain, MipChain):
             raise PrefilterError(f"chain: expected a MipChain, got {type(chain).__name__}")
         self.channels = chain.shape[2]
-        self.data, self.offsets, self.heights, self.widths = pack_levels(chain.levels)
+        self.data, self.offsets, self.heights, self.widths = chain.packed
 
 
 @njit_serial
