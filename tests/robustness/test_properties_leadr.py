@@ -113,9 +113,7 @@ def white_env():
 def test_env_specular_of_white_env_is_one(white_env, t, p, mu, cov, n):
     # a constant environment of radiance 1 reflects exactly 1 (normalised weights, F = 1)
     wo = direction(t, p)
-    for backend in ("numba", "numpy"):
-        v = env_specular(white_env, wo, mu, cov, n, backend=backend)
-        assert np.allclose(v, 1.0, atol=1e-9)
+    assert np.allclose(env_specular(white_env, wo, mu, cov, n), 1.0, atol=1e-9)
     sh = np.zeros((9, 3))
     sh[0] = 2.0 * np.sqrt(np.pi)  # L = 1 everywhere: E(m) = pi, diffuse albedo-1 radiance 1
     assert np.allclose(diffuse_sh(sh, wo, mu, cov, n), 1.0, atol=1e-6)
@@ -199,15 +197,13 @@ def test_leadr_rejects_bad_arguments(white_env):
     expect_error(lambda: diffuse_sh(np.zeros((4, 3)), wo, (0, 0), GOOD_COV), "sh_coeffs")
     expect_error(lambda: diffuse_sh(np.full((9, 3), np.nan), wo, (0, 0), GOOD_COV), "sh_coeffs")
     expect_error(lambda: env_specular("env.exr", wo, (0, 0), GOOD_COV), "env")
-    for backend in ("numba", "numpy"):
-        expect_error(lambda: env_specular(white_env, wo, (0, 0), GOOD_COV, f0=2.0,
-                                          backend=backend), "f0")
-        expect_error(lambda: env_specular(white_env, wo, (0, 0), GOOD_COV, lod_bias=np.nan,
-                                          backend=backend), "lod_bias")
-        expect_error(lambda: env_specular(white_env, wo, (0, 0), GOOD_COV, to_world=np.eye(2),
-                                          backend=backend), "to_world")
-        expect_error(lambda: env_specular(white_env, np.tile(wo, (3, 1)), np.zeros((4, 2)),
-                                          GOOD_COV, backend=backend), "mean_slope")
+    expect_error(lambda: env_specular(white_env, wo, (0, 0), GOOD_COV, f0=2.0), "f0")
+    expect_error(lambda: env_specular(white_env, wo, (0, 0), GOOD_COV, lod_bias=np.nan),
+                 "lod_bias")
+    expect_error(lambda: env_specular(white_env, wo, (0, 0), GOOD_COV, to_world=np.eye(2)),
+                 "to_world")
+    expect_error(lambda: env_specular(white_env, np.tile(wo, (3, 1)), np.zeros((4, 2)),
+                                      GOOD_COV), "mean_slope")
     expect_error(lambda: gaussian_grid(0), "n")
     expect_error(lambda: gaussian_grid(3, "wide"), "spacing")
     expect_error(lambda: moments(np.zeros((4, 4)), base_roughness=-1.0), "base_roughness")
@@ -227,10 +223,9 @@ def test_integer_normal_maps_are_not_taken_for_normals(dtype):
     expect_error(lambda: moments(rgb), "decode_normals")
 
 
-@pytest.mark.parametrize("backend", ["numba", "numpy"])
-def test_empty_batches(white_env, backend):
-    # an empty batch of views gives an empty result (the NumPy path returned None.reshape)
+def test_empty_batches(white_env):
+    # an empty batch of views gives an empty result
     e3 = np.zeros((0, 3))
-    assert env_specular(white_env, e3, (0, 0), GOOD_COV, backend=backend).shape == (0, 3)
+    assert env_specular(white_env, e3, (0, 0), GOOD_COV).shape == (0, 3)
     assert diffuse_sh(np.zeros((9, 3)), e3, (0, 0), GOOD_COV).shape == (0, 3)
     assert point_light(e3, e3, (0, 0), GOOD_COV).shape == (0,)

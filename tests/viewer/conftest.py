@@ -5,10 +5,16 @@ the browser tests are skipped with the reason).
 """
 
 import os
+import sys
 
 import pytest
 
 from prefilter.viewer.browser import CHROMEDRIVER, CHROMIUM
+
+# the NumPy twins of the exported GLSL (tests/ltc/glsl_numpy.py) under --import-mode=importlib
+_twins = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "ltc")
+if _twins not in sys.path:
+    sys.path.insert(0, _twins)
 
 
 @pytest.fixture(scope="module")

@@ -19,7 +19,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-from scipy.special import erfc, erfcx, log_ndtr
+from scipy.special import erfcx, log_ndtr
 
 from prefilter.validation import (
     as_directions,
@@ -30,6 +30,7 @@ from prefilter.validation import (
 )
 from prefilter.colormap.table import as_table
 from prefilter.errors import PrefilterError
+from prefilter.microfacet.beckmann import beckmann_lambda
 
 __all__ = [
     "FIT_LAMBDA_MAX",
@@ -45,7 +46,6 @@ __all__ = [
     "height_moments_approx",
     "height_moments_exact",
     "mean_visibility",
-    "naive_height",
     "smith_lambda",
     "smith_lambda_direction",
 ]
@@ -98,10 +98,8 @@ def smith_lambda(cot_theta, sigma_s) -> np.ndarray:
                              f"not grazing), got min {np.nanmin(c)!r}")
     if np.any(s <= 0.0):
         raise PrefilterError(f"sigma_s: expected slope standard deviations > 0, got {s.min()!r}")
-    a = c / s
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        lam = _INV_SQRT_2PI / a * np.exp(-0.5 * a * a) - 0.5 * erfc(a / np.sqrt(2.0))
-    return np.where(np.isfinite(a), np.maximum(lam, 0.0), 0.0)
+    with np.errstate(over="ignore"):
+        return beckmann_lambda(c / (s * np.sqrt(2.0)))
 
 
 def _slope_std_along(w: np.ndarray, slope_cov: np.ndarray) -> np.ndarray:
@@ -348,15 +346,6 @@ def filter_height(table, wo, wi, slope_cov, sigma_h=1.0, *, noise_mean=0.0, nois
     mr = as_float_array(noise_mean, "noise_mean")
     sr = _as_noise_sigma(noise_sigma)
     return vbar[..., None] * table.lookup(mu + mr, np.sqrt(sd * sd + sr * sr))
-
-
-def naive_height(table, sigma_h=1.0, *, noise_mean=0.0, noise_sigma=0.0) -> np.ndarray:
-    """View-independent filtering of a height colour map (the Gaussian height distribution, no
-    visibility): the "texture filtering" baseline of Heitz et al. 2013, fig. 8."""
-    as_table(table)
-    sh = _as_sigma_h(sigma_h)
-    sr = _as_noise_sigma(noise_sigma)
-    return table.lookup(as_float_array(noise_mean, "noise_mean"), np.sqrt(sh * sh + sr * sr))
 
 
 # -- footprints smaller than the whole surface (our extension) -------------------------------------

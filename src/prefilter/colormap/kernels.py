@@ -20,48 +20,24 @@ import numpy as np
 
 from prefilter.colormap.table import kernel_args, lookup_one
 from prefilter.jit import njit_parallel, njit_serial, prange
+from prefilter.microfacet.beckmann import beckmann_lambda_jit
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
-from prefilter.texture.fetch import bilinear_add, pack_levels, trilinear_add
+from prefilter.texture.fetch import WRAP, bilinear_add, footprint_axes_jit, trilinear_add
 from prefilter.texture.mip import MipChain
 
 __all__ = ["PackedChain", "shade_height", "shade_noise", "shade_texture"]
 
 
 class PackedChain:
-    """A :class:`MipChain` flattened for the kernels (:func:`prefilter.texture.fetch.pack_levels`):
+    """A :class:`MipChain` flattened for the kernels (:attr:`MipChain.packed`):
     ``data (total, C)``, per-level ``offsets``, ``heights``, ``widths``."""
 
     def __init__(self, chain: MipChain):
         if not isinstance(chain, MipChain):
             raise PrefilterError(f"chain: expected a MipChain, got {type(chain).__name__}")
         self.channels = chain.shape[2]
-        self.data, self.offsets, self.heights, self.widths = pack_levels(chain.levels)
-
-
-@njit_serial
-def _footprint(j00, j01, j10, j11, w, h):  # pragma: no cover - compiled
-    """Major / minor axis (texels) and unit major direction (texel space) of the footprint."""
-    a00, a01, a10, a11 = j00 * w, j01 * w, j10 * h, j11 * h
-    p = a00 * a00 + a01 * a01
-    r = a10 * a10 + a11 * a11
-    q = a00 * a10 + a01 * a11
-    mid = 0.5 * (p + r)
-    disc = math.sqrt(max(0.25 * (p - r) ** 2 + q * q, 0.0))
-    l1 = mid + disc
-    l2 = max(mid - disc, 0.0)
-    v1x, v1y = q, l1 - p
-    v2x, v2y = l1 - r, q
-    if v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y:
-        dx, dy = v1x, v1y
-    else:
-        dx, dy = v2x, v2y
-    nrm = math.sqrt(dx * dx + dy * dy)
-    if nrm > 0:
-        dx, dy = dx / nrm, dy / nrm
-    else:
-        dx, dy = 1.0, 0.0
-    return math.sqrt(l1), math.sqrt(l2), dx, dy
+        self.data, self.offsets, self.heights, self.widths = chain.packed
 
 
 @njit_serial
@@ -73,7 +49,7 @@ def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, ou
     averaged over the taps (``texture.footprint_stats``)."""
     w = ws[0]
     h = hs[0]
-    major, minor, dx, dy = _footprint(j00, j01, j10, j11, w, h)
+    major, minor, dx, dy = footprint_axes_jit(h, w, j00, j01, j10, j11)
     for k in range(c):
         out[k] = 0.0
     area_lod = 0.5 * math.log2(max(major * minor, 1.0))
@@ -97,18 +73,18 @@ def _fetch(data, offs, hs, ws, u, v, j00, j01, j10, j11, aniso, max_aniso, c, ou
     for i in range(taps):
         o = (i + 0.5) / taps - 0.5 if aniso else 0.0
         if not want:
-            trilinear_add(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, False,
+            trilinear_add(data, offs, hs, ws, u + o * au, v + o * av, lod, c, 1.0 / taps, WRAP,
                           out)
             continue
         # the trilinear lookup by hand, keeping the unweighted level-0 moments of the tap
         ivar[1] = 0.0
         ivar[2] = 0.0
-        bilinear_add(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, False,
+        bilinear_add(data, offs[0], hs[0], ws[0], u + o * au, v + o * av, 2, 1.0, WRAP,
                      ivar[1:3])
         out[0] += (1.0 - t) / taps * ivar[1]
         out[1] += (1.0 - t) / taps * ivar[2]
         if t > 0.0:
-            bilinear_add(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, False,
+            bilinear_add(data, offs[1], hs[1], ws[1], u + o * au, v + o * av, 2, t / taps, WRAP,
                          out)
         ivar[0] += (ivar[2] - ivar[1] * ivar[1]) / taps
     return lod, area_lod
@@ -156,15 +132,14 @@ _INV_SQRT_2PI = 0.3989422804014327
 
 @njit_serial
 def _lambda(wx, wy, wz, cxx, cxy, cyy):  # pragma: no cover - compiled
-    """Smith Lambda of a Gaussian surface (Heitz et al. 2013, eq. 3)."""
+    """Smith Lambda of a centred Gaussian surface (Heitz et al. 2013, eq. 3) for ``w`` with
+    ``w_z > 0``: ``a = cot(theta) / (sqrt(2) sigma_s)``."""
     r = math.sqrt(wx * wx + wy * wy)
     if r <= 0.0:
         return 0.0
     cx, cy = wx / r, wy / r
     s = math.sqrt(cxx * cx * cx + 2 * cxy * cx * cy + cyy * cy * cy)
-    a = wz / r / s
-    return max(_INV_SQRT_2PI / a * math.exp(-0.5 * a * a) - 0.5 * math.erfc(a / math.sqrt(2.0)),
-               0.0)
+    return beckmann_lambda_jit(wz / r / (s * math.sqrt(2.0)))
 
 
 @njit_serial

@@ -39,7 +39,7 @@ from prefilter.validation import (
 from prefilter.colormap.table import gaussian_operator
 from prefilter.errors import PrefilterError
 
-__all__ = ["SlopeColormapTable", "as_slope_colormap", "filter_slope", "slope_density",
+__all__ = ["SlopeColormapTable", "filter_slope", "slope_density",
            "slope_distribution", "slope_prefilter_table"]
 
 _SQRT_2_OVER_PI = 0.7978845608028654
@@ -119,23 +119,16 @@ def slope_distribution(wo, mean, cov) -> tuple[np.ndarray, np.ndarray]:
 
 def slope_density(s, wo, mean, cov) -> np.ndarray:
     """The exact ``D_s(s) = max(0, w_z - s . w_xy) N(s; mu, Sigma) / E[max(0, t)]`` (eq. 20),
-    shape ``(...)`` (``s (..., 2)``; ``Sigma`` must be positive definite)."""
-    from scipy.special import ndtr
+    shape ``(...)`` (``s (..., 2)``; ``Sigma`` must be positive definite): the visible-slope
+    density of the non-centred Beckmann lobe (:class:`prefilter.microfacet.Beckmann`)."""
+    from prefilter.microfacet import Beckmann
 
     w = as_upper_directions(wo, "wo")
     mu, c = _as_mean_cov(mean, cov)
     s = as_float_array(s, "s", ndim_min=1, last_dim=2)
-    _, m_t, _, v_t = _ramp_weight(w, mu, c)
-    sd = np.sqrt(v_t)
-    z = m_t / np.where(sd > 0, sd, 1.0)
-    norm_t = np.where(sd > 0, m_t * ndtr(z) + sd * np.exp(-0.5 * z * z) / np.sqrt(2 * np.pi),
-                      np.maximum(m_t, 0.0))
-    d = s - mu
-    ci = np.linalg.inv(c)
-    q = np.einsum("...i,...ij,...j->...", d, ci, d)
-    gauss = np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(np.linalg.det(c)))
+    lobe = Beckmann(mu, c)
     ramp = np.maximum(0.0, w[..., 2] - np.einsum("...i,...i->...", s, w[..., :2]))
-    return ramp * gauss / norm_t
+    return ramp * lobe.P22(s) / lobe.projected_area(w)
 
 
 def _sym_eig(c):
@@ -281,12 +274,3 @@ def filter_slope(table: SlopeColormapTable, wo, mean, cov, n_taps: int = 7) -> n
     m, c = slope_distribution(wo, mean, cov)
     return table.lookup(m, c, n_taps)
 
-
-def as_slope_colormap(fn, extent: float = 1.0, n: int = 128) -> np.ndarray:
-    """Sample a slope colour map ``fn(s (..., 2)) -> (..., C)`` at the ``n x n`` texel centres of
-    ``[-extent, extent]^2``; returns ``(n, n, C)``."""
-    n = as_positive_int(n, "n", lo=2)
-    x = -extent + (np.arange(n) + 0.5) * 2.0 * extent / n
-    sx, sy = np.meshgrid(x, x)
-    out = as_float_array(fn(np.stack([sx, sy], -1)), "fn(s)")
-    return out[..., None] if out.ndim == 2 else out

@@ -2,8 +2,8 @@
 
 The surface is the bilinear interpolation ``z = h(x, y)`` of a periodic height grid (texel
 units, texel ``(i, j)`` at ``x = j, y = i``). Its slopes are the bilinear patches' gradients, whose
-moments over a cell are closed-form, so LEADR statistics of any block of cells are exact
-(:func:`block_moments`; moments are linear, so a block is the box average of its cells).
+moments over a cell are closed-form (:func:`cell_moments`), so LEADR statistics of any block of
+cells are exact (moments are linear: a block is the box average of its cells).
 
 :func:`displaced_radiance` averages, over parallel view rays through a uniform grid of points of a
 block of the mean plane (radiance per projected area, as LEADR defines it), the radiance of the
@@ -98,16 +98,6 @@ def cell_moments(height) -> np.ndarray:
     d = r(c, 1, 1)
     return np.stack([(a + b) / 2, (c + d) / 2, (a * a + a * b + b * b) / 3,
                      (c * c + c * d + d * d) / 3, (a + b) * (c + d) / 4], -1)
-
-
-def block_moments(height, block: int) -> np.ndarray:
-    """Moments ``(H / block, W / block, 5)`` of aligned ``block x block`` cell blocks."""
-    m = cell_moments(height)
-    hh, ww = m.shape[:2]
-    if hh % block or ww % block:
-        raise PrefilterError(
-            f"block: expected a divisor of the map size {m.shape[:2]}, got {block}")
-    return m.reshape(hh // block, block, ww // block, block, 5).mean(axis=(1, 3))
 
 
 def block_points(i0: int, j0: int, block: int, k: int):
@@ -309,6 +299,46 @@ def env_estimates(env, sampler, wo, n, spp, rng, sigma_b, albedo, specular, visi
     return out / half
 
 
+def _first_hits(height, x, y, wo, step):
+    """March the view rays through the mean-plane points ``x, y (P,)`` towards ``wo``: the
+    height ``h``, the views ``(P, 3)``, ``hit (P,)`` and the hit points ``(px, py, pz)``."""
+    h = np.ascontiguousarray(as_float_array(height, "height", ndim_min=2))
+    x = np.asarray(x, np.float64).ravel()
+    y = np.asarray(y, np.float64).ravel()
+    wo = np.ascontiguousarray(np.broadcast_to(as_directions(wo, "wo"), (x.size, 3)))
+    if np.any(wo[:, 2] <= 0.05):
+        raise PrefilterError("wo: expected views above the mean plane (z > 0.05), got "
+                             f"min z = {wo[:, 2].min():.3g}")
+    hmax, hmin = float(h.max()), float(h.min())
+    # Start each ray above every height, on the line through the mean-plane point along wo.
+    t_up = (hmax + 1e-6) / wo[:, 2]
+    ox, oy, oz = x + t_up * wo[:, 0], y + t_up * wo[:, 1], np.full(x.shape, hmax + 1e-6)
+    d = np.ascontiguousarray(-wo)
+    dn = step / float(np.min(np.maximum(np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])))) \
+        if x.size else step
+    t = march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
+               np.ascontiguousarray(d[:, 2]), hmin, hmax + 1e-3, dn, _max_steps(h, step))
+    hit = np.isfinite(t)
+    return h, wo, hit, tuple((o + t * d[:, k])[hit] for k, o in enumerate((ox, oy, oz)))
+
+
+def _max_steps(h, step) -> int:
+    return int(4 * (h.shape[0] + h.shape[1]) / step) + 16
+
+
+def _shadow_rays_escape(h, px, py, pz, wi, step) -> np.ndarray:
+    """``(Q,)``: whether the shadow rays from the hit points ``p`` towards ``wi (Q, 3)`` leave
+    the height field ``h``."""
+    eps = 1e-4
+    dn_i = step / np.maximum(np.hypot(wi[:, 0], wi[:, 1]), np.abs(wi[:, 2]))
+    # one step length for all rays: the smallest (safe) one
+    ts = march(h, px + eps * wi[:, 0], py + eps * wi[:, 1], pz + eps * wi[:, 2],
+               np.ascontiguousarray(wi[:, 0]), np.ascontiguousarray(wi[:, 1]),
+               np.ascontiguousarray(wi[:, 2]), float(h.min()) - 1.0, float(h.max()),
+               float(dn_i.min()), _max_steps(h, step))
+    return ~np.isfinite(ts)
+
+
 def displaced_env_points(height, x, y, wo, env, *, rot=None, spp: int = 8,
                          sigma_b: float = 0.1, albedo: float = 1.0, specular: bool = True,
                          shadowing: bool = True, step: float = 0.1, seed: int = 0) -> np.ndarray:
@@ -325,39 +355,15 @@ def displaced_env_points(height, x, y, wo, env, *, rot=None, spp: int = 8,
 
     if not isinstance(env, EnvMap):
         raise PrefilterError(f"env: expected a prefilter.leadr.envmap.EnvMap, got {type(env)}")
-    h = np.ascontiguousarray(as_float_array(height, "height", ndim_min=2))
-    x = np.asarray(x, np.float64).ravel()
-    y = np.asarray(y, np.float64).ravel()
-    wo = np.broadcast_to(as_directions(wo, "wo"), (x.size, 3))
-    if np.any(wo[:, 2] <= 0.05):
-        raise PrefilterError("wo: expected views above the mean plane (z > 0.05), got "
-                             f"min z = {wo[:, 2].min():.3g}")
     spp = as_positive_int(spp, "spp", lo=2)
     rng = np.random.default_rng(seed)
-    hmax, hmin = float(h.max()), float(h.min())
-    # Start each ray above every height, on the line through the mean-plane point along wo.
-    t_up = (hmax + 1e-6) / wo[:, 2]
-    ox, oy, oz = x + t_up * wo[:, 0], y + t_up * wo[:, 1], np.full(x.shape, hmax + 1e-6)
-    d = np.ascontiguousarray(-wo)
-    dn = step / float(np.min(np.maximum(np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2]))))
-    max_steps = int(4 * (h.shape[0] + h.shape[1]) / step) + 16
-    t = march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
-               np.ascontiguousarray(d[:, 2]), hmin, hmax + 1e-3, dn, max_steps)
-    hit = np.isfinite(t)
-    px, py, pz = (ox + t * d[:, 0])[hit], (oy + t * d[:, 1])[hit], (oz + t * d[:, 2])[hit]
+    h, wo, hit, (px, py, pz) = _first_hits(height, x, y, wo, step)
     n = normals(gradient(h, px, py))
 
     def visible(q, wi):
-        eps = 1e-4
-        sx, sy, sz = px[q] + eps * wi[:, 0], py[q] + eps * wi[:, 1], pz[q] + eps * wi[:, 2]
-        dn_i = step / np.maximum(np.hypot(wi[:, 0], wi[:, 1]), np.abs(wi[:, 2]))
-        # one step length for all rays: the smallest (safe) one
-        ts = march(h, sx, sy, sz, np.ascontiguousarray(wi[:, 0]),
-                    np.ascontiguousarray(wi[:, 1]), np.ascontiguousarray(wi[:, 2]),
-                    hmin - 1.0, hmax, float(dn_i.min()), max_steps)
-        return ~np.isfinite(ts)
+        return _shadow_rays_escape(h, px[q], py[q], pz[q], wi, step)
 
-    out = np.zeros((x.size, env.levels[0].shape[2]))
+    out = np.zeros((hit.size, env.levels[0].shape[2]))
     out[hit] = env_estimates(env, EnvSampler(env), wo[hit], n, spp, rng, sigma_b, albedo,
                               specular, visible if shadowing else None,
                               None if rot is None else np.asarray(rot, np.float64))
@@ -426,41 +432,16 @@ def trace_points(height, x, y, wo, wi=None, *, shadowing: bool = True, step: flo
     everywhere if ``wi`` is ``None`` or ``shadowing`` is off). Directions below the mean plane are
     never lit (a shadow ray going down always meets the periodic height field).
     """
-    h = np.ascontiguousarray(as_float_array(height, "height", ndim_min=2))
-    x = np.asarray(x, np.float64).ravel()
-    y = np.asarray(y, np.float64).ravel()
-    wo = np.ascontiguousarray(np.broadcast_to(as_directions(wo, "wo"), (x.size, 3)))
-    if np.any(wo[:, 2] <= 0.05):
-        raise PrefilterError("wo: expected views above the mean plane (z > 0.05), got "
-                             f"min z = {wo[:, 2].min():.3g}")
-    hmax, hmin = float(h.max()), float(h.min())
-    t_up = (hmax + 1e-6) / wo[:, 2]
-    ox, oy, oz = x + t_up * wo[:, 0], y + t_up * wo[:, 1], np.full(x.shape, hmax + 1e-6)
-    d = np.ascontiguousarray(-wo)
-    dn = step / float(np.min(np.maximum(np.hypot(d[:, 0], d[:, 1]), np.abs(d[:, 2])))) \
-        if x.size else step
-    max_steps = int(4 * (h.shape[0] + h.shape[1]) / step) + 16
-    t = march(h, ox, oy, oz, np.ascontiguousarray(d[:, 0]), np.ascontiguousarray(d[:, 1]),
-               np.ascontiguousarray(d[:, 2]), hmin, hmax + 1e-3, dn, max_steps)
-    hit = np.isfinite(t)
-    n = np.zeros((x.size, 3))
-    px, py = ox[hit] + t[hit] * d[hit, 0], oy[hit] + t[hit] * d[hit, 1]
-    pz = oz[hit] + t[hit] * d[hit, 2]
+    h, wo, hit, (px, py, pz) = _first_hits(height, x, y, wo, step)
+    n = np.zeros((hit.size, 3))
     n[hit] = normals(gradient(h, px, py))
-    lit = np.ones(x.size, bool)
+    lit = np.ones(hit.size, bool)
     if wi is not None and shadowing:
-        wi = np.broadcast_to(as_directions(wi, "wi"), (x.size, 3))[hit]
+        wi = np.broadcast_to(as_directions(wi, "wi"), (hit.size, 3))[hit]
         up = wi[:, 2] > 0.0
         lit_h = np.zeros(len(wi), bool)
         if np.any(up):
-            w = np.ascontiguousarray(wi[up])
-            eps = 1e-4
-            dn_i = step / np.maximum(np.hypot(w[:, 0], w[:, 1]), np.abs(w[:, 2]))
-            ts = march(h, px[up] + eps * w[:, 0], py[up] + eps * w[:, 1], pz[up] + eps * w[:, 2],
-                        np.ascontiguousarray(w[:, 0]), np.ascontiguousarray(w[:, 1]),
-                        np.ascontiguousarray(w[:, 2]), hmin - 1.0, hmax, float(dn_i.min()),
-                        max_steps)
-            lit_h[up] = ~np.isfinite(ts)
+            lit_h[up] = _shadow_rays_escape(h, px[up], py[up], pz[up], wi[up], step)
         lit[hit] = lit_h
     return hit, n, lit
 

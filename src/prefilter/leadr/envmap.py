@@ -20,7 +20,7 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 from prefilter.jit import njit_inline
-from prefilter.texture.fetch import pack_levels, trilinear
+from prefilter.texture.fetch import CLAMP_V, pack_levels, trilinear
 from prefilter.validation import as_directions, as_float_array, as_positive_int, broadcast_batch
 
 #: World (y up) -> lat-long map coordinates of scene environment lights (rows: map x, y, z).
@@ -65,7 +65,7 @@ def latlong_resample(image, rows: int) -> np.ndarray:
     v = (np.arange(rows) + 0.5) / rows
     u = (np.arange(2 * rows) + 0.5) / (2 * rows)
     uv = np.stack(np.broadcast_arrays(u[None, :], v[:, None]), -1)
-    return trilinear(pack_levels([a]), uv, 0.0, clamp_v=True)
+    return trilinear(pack_levels([a]), uv, 0.0, clamp=CLAMP_V)
 
 
 def env_from_image(image, scale: float = 1.0) -> EnvMap:
@@ -148,7 +148,7 @@ class EnvMap:
             raise PrefilterError("lod: expected mip levels (numbers or +-inf), got NaN")
         uv = direction_to_uv(w)
         broadcast_batch(w=uv.shape[:-1], lod=lod.shape)
-        return trilinear(self.packed, uv, lod, clamp_v=True)
+        return trilinear(self.packed, uv, lod, clamp=CLAMP_V)
 
 
 # -- order-2 spherical harmonics ---------------------------------------------------------------

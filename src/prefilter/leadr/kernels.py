@@ -18,8 +18,9 @@ import numpy as np
 
 from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange
 from prefilter.leadr.envmap import latlong_uv_jit
+from prefilter.microfacet.beckmann import beckmann_lambda_jit
 from prefilter.microfacet.fresnel import schlick_jit
-from prefilter.texture.fetch import trilinear_add
+from prefilter.texture.fetch import CLAMP_V, WRAP, trilinear_add
 
 # -- formulas shared with the array code of prefilter.leadr.shading (arrays or scalars) --------
 
@@ -64,7 +65,7 @@ def _lookup(flat, offsets, heights, widths, wx, wy, wz, lod, out):  # pragma: no
     for c in range(out.size):
         out[c] = 0.0
     u, v = latlong_uv_jit(wx, wy, wz)
-    trilinear_add(flat, offsets, heights, widths, u, v, lod, out.size, 1.0, True, out)
+    trilinear_add(flat, offsets, heights, widths, u, v, lod, out.size, 1.0, CLAMP_V, out)
 
 
 @njit_serial
@@ -80,8 +81,7 @@ def _lambda_a(wx, wy, wz, mx, my, sxx, syy, sxy):  # pragma: no cover - compiled
     if a > 5.0:
         # Lambda(5) = 1.6e-14: skip exp / erfc (most directions of a smooth surface)
         return 0.0
-    lam = 0.5 * (math.exp(-a * a) / (a * 1.7724538509055159) - math.erfc(a))
-    return max(lam, 0.0)
+    return beckmann_lambda_jit(a)
 
 
 @njit_serial
@@ -235,7 +235,7 @@ def box_moments_kernel(flat, offsets, heights, widths, uv, dudv, major, max_taps
                 ox = (j + 0.5) / t - 0.5
                 u = uv[q, 0] + dudv[q, 0, 0] * ox + dudv[q, 0, 1] * oy
                 v = uv[q, 1] + dudv[q, 1, 0] * ox + dudv[q, 1, 1] * oy
-                trilinear_add(flat, offsets, heights, widths, u, v, lod, nc, 1.0, False, acc)
+                trilinear_add(flat, offsets, heights, widths, u, v, lod, nc, 1.0, WRAP, acc)
         for c in range(nc):
             out[q, c] = acc[c] / (t * t)
     return out

@@ -28,7 +28,6 @@ the micro roughness only, i.e. without the meso-scale slope covariance.
 
 from __future__ import annotations
 
-import weakref
 
 import numpy as np
 
@@ -65,25 +64,20 @@ POINT_FOOTPRINT_TAPS = FOOTPRINT_TAPS
 POINT_SHADOWING = True
 
 
-_PACKED = weakref.WeakKeyDictionary()
-
-
 def footprint_moments(chain, uv, dudv, max_taps: int | None = None) -> np.ndarray:
     """Box-filtered moments ``(N, C)`` of a mip chain over pixel footprints ``uv (N, 2)``,
     ``dudv (N, 2, 2)``: ``T x T`` taps, ``T = clip(ceil(major / 2), 1, max_taps)`` with
     ``major`` the footprint's major axis in texels (:data:`FOOTPRINT_TAPS`), compiled
-    (:func:`prefilter.leadr.kernels.box_moments_kernel`); objects without ``levels``
-    (precomputed moments) answer ``lookup_footprint`` themselves."""
+    (:func:`prefilter.leadr.kernels.box_moments_kernel`); objects other than a
+    :class:`~prefilter.texture.MipChain` (precomputed moments) answer ``lookup_footprint``
+    themselves."""
     from prefilter.leadr.kernels import box_moments_kernel
-    from prefilter.texture.fetch import pack_levels
     from prefilter.texture.mip import footprint_axes
 
     max_taps = FOOTPRINT_TAPS if max_taps is None else int(max_taps)
-    if max_taps <= 1 or not hasattr(chain, "levels"):
+    if max_taps <= 1 or not hasattr(chain, "packed"):
         return chain.lookup_footprint(uv, dudv)
-    if chain not in _PACKED:
-        _PACKED[chain] = pack_levels(chain.levels)
-    flat, offsets, heights, widths = _PACKED[chain]
+    flat, offsets, heights, widths = chain.packed
     uv = np.ascontiguousarray(uv, dtype=np.float64)
     dudv = np.ascontiguousarray(dudv, dtype=np.float64)
     major = np.ascontiguousarray(footprint_axes(dudv, chain.shape[:2])[0], dtype=np.float64)

@@ -27,7 +27,7 @@ from prefilter.leadr.envmap import EnvMap, IrradianceMap, sh9_irradiance, texel_
 from prefilter.leadr.kernels import (diffuse_shadow_kernel, env_specular_kernel, grid_slope,
                                      micronormal, slope_cholesky, smith_terms)
 from prefilter.microfacet import fresnel
-from prefilter.microfacet.beckmann import beckmann_lambda, smith_lambda_walter
+from prefilter.microfacet.beckmann import beckmann_lambda, slope_pdf, smith_lambda_walter
 
 #: Bias of the artificial micronormal towards the view, and its weight (supplemental 3.7).
 ARTIFICIAL_EPS = 1.01
@@ -110,11 +110,8 @@ def point_light(wo, wi, mean_slope, slope_cov, *, f0=None, shadowing: bool = Tru
     hz = h[..., 2]
     up = hz > 1e-12
     hzs = np.where(up, hz, 1.0)
-    dx = -h[..., 0] / hzs - mu[..., 0]
-    dy = -h[..., 1] / hzs - mu[..., 1]
-    det = sxx * syy - sxy * sxy
-    q = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
-    d = np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(det) * hzs**4)
+    d = slope_pdf(-h[..., 0] / hzs - mu[..., 0], -h[..., 1] / hzs - mu[..., 1], sxx, syy,
+                  sxy) / hzs**4  # D(h) = P22 / h_z^4
     area = wo[..., 2] - mu[..., 0] * wo[..., 0] - mu[..., 1] * wo[..., 1]
     lam = _lambda(wo, mu, sxx, syy, sxy, lambda_fit)
     if shadowing:
@@ -249,10 +246,10 @@ def _rotate(to_world, v):
     return v if to_world is None else np.einsum("...ij,...j->...i", to_world, v)
 
 
-def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
-    """``sum W S_ F L / sum W S_`` (Simplified Algorithms 1 and 3) with the artificial
-    micronormal; ``radiance_fn(m, wi, J, cell, to_world) -> (..., K, C)``."""
-    shape, wo, mu, cov, to_world, f0 = _batch(wo, mean, cov, to_world, f0)
+def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, to_world):
+    """``sum W S_ L / sum W S_`` (Simplified Algorithm 3) with the artificial micronormal;
+    ``radiance_fn(m, wi, J, cell, to_world) -> (..., K, C)``."""
+    shape, wo, mu, cov, to_world, _ = _batch(wo, mean, cov, to_world)
     k = n * n
     step = max(1, CHUNK // k)
     out = None
@@ -272,8 +269,6 @@ def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
         wi = _reflect(ob, m)
         jac = 4.0 * np.abs(dot) * np.abs(m[..., 2]) ** 3
         rad = radiance_fn(m, wi, jac, cell[:, None], tw)
-        if f0 is not None:
-            rad = rad * fresnel.schlick(f0[sl, None], dot)[..., None]
         ws = w * proj
         num = np.einsum("pk,pkc->pc", ws, rad)
         den = ws.sum(axis=1)
@@ -286,11 +281,10 @@ def _grid_integrate(wo, mean, cov, n, spacing, radiance_fn, f0, to_world):
 
 
 def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0=None,
-                 lod_bias: float = 0.0, to_world=None, backend: str = "numba",
-                 shadowing: bool = False) -> np.ndarray:
+                 lod_bias: float = 0.0, to_world=None, shadowing: bool = False) -> np.ndarray:
     """Rough specular microfacets under an environment map: Simplified Algorithm 1, or with
     ``shadowing`` the paper's Algorithm 1 (each sample weighted by ``G2 / G1``, 0 below the
-    geometric plane; compiled only).
+    geometric plane), by the compiled :func:`prefilter.leadr.kernels.env_specular_kernel`.
 
     Each grid micronormal reflects ``wo``; the radiance is read at the mip level whose texel solid
     angle matches the sample's: ``Omega = J * cell``, ``J = 4 |m.wo| |m.z|^3`` (supplemental eqs.
@@ -303,8 +297,6 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     wo : (..., 3); mean_slope : (..., 2); slope_cov : (..., 2, 2)
     n : int
         Grid size per axis (n^2 samples).
-    backend : {"numba", "numpy"}
-        Compiled kernel (:mod:`prefilter.leadr.kernels`) or the vectorised NumPy path.
 
     Returns
     -------
@@ -314,28 +306,7 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
         raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
     n = as_positive_int(n, "n")
     lod_bias = float(as_float_array(lod_bias, "lod_bias"))
-    texel = env.texel_solid_angle
-    if backend not in ("numba", "numpy"):
-        raise PrefilterError(f"backend: expected 'numba' or 'numpy', got {backend!r}")
-    if backend == "numba":
-        return _env_specular_compiled(env, wo, mean_slope, slope_cov, n, spacing, f0, lod_bias,
-                                      to_world, bool(shadowing))
-    if shadowing:
-        raise PrefilterError("backend: the NumPy path of env_specular has no shadowing; use "
-                             "backend='numba'")
-
-    def radiance(m, wi, jac, cell, tw):
-        with np.errstate(divide="ignore"):
-            lod = 0.5 * np.log2(np.maximum(jac * cell, 1e-300) / texel) + lod_bias
-        return env.lookup(_rotate(tw[:, None] if tw is not None else None, wi), lod)
-
-    return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, f0, to_world)
-
-
-def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_world,
-                           shadowing=False):
-
-    shape, wo, mu, cov, rot, f0a = _batch(wo, mean, cov, to_world, f0)
+    shape, wo, mu, cov, rot, f0a = _batch(wo, mean_slope, slope_cov, to_world, f0)
     if rot is None:
         rot = np.ascontiguousarray(np.broadcast_to(np.eye(3), (len(wo), 3, 3)))
     p, w, h = gaussian_grid(n, spacing)
@@ -343,7 +314,7 @@ def _env_specular_compiled(env, wo, mean, cov, n, spacing, f0, lod_bias, to_worl
     out = np.empty((len(wo), flat.shape[1]))
     env_specular_kernel(flat, offsets, heights, widths, env.texel_solid_angle, wo, mu, cov, rot,
                         p, w, h, np.zeros(len(wo)) if f0a is None else f0a, f0a is not None,
-                        float(lod_bias), ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, shadowing, out)
+                        lod_bias, ARTIFICIAL_EPS, ARTIFICIAL_WEIGHT, bool(shadowing), out)
     return out.reshape(shape + (flat.shape[1],))
 
 
@@ -362,7 +333,7 @@ def diffuse_sh(sh_coeffs, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None
     def radiance(m, wi, jac, cell, tw):
         return sh9_irradiance(c, _rotate(tw[:, None] if tw is not None else None, m)) / np.pi
 
-    return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, None, to_world)
+    return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, to_world)
 
 
 def diffuse_irradiance(irradiance, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None,
@@ -379,7 +350,7 @@ def diffuse_irradiance(irradiance, wo, mean_slope, slope_cov, n: int = 5, *, spa
     def radiance(m, wi, jac, cell, tw):
         return irradiance.lookup(_rotate(tw[:, None] if tw is not None else None, m)) / np.pi
 
-    return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, None, to_world)
+    return _grid_integrate(wo, mean_slope, slope_cov, n, spacing, radiance, to_world)
 
 
 def shadowing_ratio(wo, wi, mean_slope, slope_cov) -> np.ndarray:
@@ -481,6 +452,6 @@ def diffuse_directional(wo, wl, mean_slope, slope_cov, n: int = 5, *, spacing=No
     for s in range(0, out.size, step):
         sl = slice(s, s + step)
         wl_b = wl_all[sl, None, :]
-        out[sl] = _grid_integrate(wo_all[sl], mu[sl], cov[sl], n, spacing, radiance, None,
+        out[sl] = _grid_integrate(wo_all[sl], mu[sl], cov[sl], n, spacing, radiance,
                                   None)[..., 0]
     return out.reshape(shape)

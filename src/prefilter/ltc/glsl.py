@@ -25,19 +25,22 @@ import numpy as np
 from prefilter.fileio import atomic_path, save_json_atomic
 from prefilter.errors import PrefilterError
 
-__all__ = ["GLSL", "export_all", "glsl_source", "glsl_twin", "texture_layout", "texture_params"]
+__all__ = ["CHANNELS", "GLSL", "export_all", "glsl_source", "texture_layout", "texture_params",
+           "uniform_nodes"]
 
-_CHANNELS = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]
+#: The entries ``(row, column)`` of ``M`` in the order the texture channels hold them.
+CHANNELS = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]
 
 
-def _uniform(c) -> bool:
+def uniform_nodes(c) -> bool:
+    """Whether the table axis ``c`` is uniform (the GPU interpolates its index linearly)."""
     d = np.diff(c)
     return bool(np.allclose(d, d[0], rtol=1e-9, atol=1e-12))
 
 
 def texture_params(table) -> dict:
     """Grid sizes and axis ranges the shader needs (axes must be uniform: ``t`` from 0)."""
-    if not (_uniform(table.axis_t) and _uniform(table.axis_r) and table.axis_t[0] == 0.0):
+    if not (uniform_nodes(table.axis_t) and uniform_nodes(table.axis_r) and table.axis_t[0] == 0.0):
         raise PrefilterError("table axes: the texture layout needs nodes uniform in "
                              "sqrt(1 - cos theta) (from 0) and sqrt(alpha)")
     return {"T": len(table.axis_t), "R": len(table.axis_r), "t_max": float(table.axis_t[-1]),
@@ -46,7 +49,7 @@ def texture_params(table) -> dict:
 
 def texture_layout(table, dtype=np.float32) -> np.ndarray:
     """The three RGBA textures ``(3, H, W, 4)`` (``H = R`` rows of roughness, ``W = T``)."""
-    ch = [table.M[..., i, j] for i, j in _CHANNELS] + [table.magnitude, table.fresnel,
+    ch = [table.M[..., i, j] for i, j in CHANNELS] + [table.magnitude, table.fresnel,
                                                        np.zeros(table.magnitude.shape)]
     x = np.stack(ch, -1).reshape(len(table.axis_t), len(table.axis_r), 3, 4)  # (T, R, 3, 4)
     return np.ascontiguousarray(x.transpose(2, 1, 0, 3)).astype(dtype)
@@ -174,35 +177,6 @@ vec3 ltcQuad(vec3 Q[4], vec3 qn, vec3 L, vec3 pos, vec3 t, vec3 b, vec3 n, mat3 
 def glsl_source(table) -> str:
     """:data:`GLSL` with the table's constants filled in."""
     return GLSL.format(**texture_params(table))
-
-
-def glsl_twin(tex, params, wo, alpha):
-    """:data:`GLSL`'s ``ltcIsoLookup`` in NumPy (float64), line by line, vectorised over ``(...)``.
-
-    ``tex (3, R, T, 4)`` from :func:`texture_layout` (any float dtype), ``params`` from
-    :func:`texture_params`. Returns ``(M (..., 3, 3), n, f5)`` with ``M`` in the local frame (the
-    shader goes on to its adjugate).
-    """
-    tex = np.asarray(tex, np.float64)
-    T, R = int(params["T"]), int(params["R"])
-    wo = np.asarray(wo, np.float64)
-    sa_min = params["sqrt_alpha_min"]
-    ft = np.clip(np.sqrt(np.maximum(0.0, 1.0 - wo[..., 2])) / params["t_max"], 0, 1) * (T - 1)
-    sa = np.sqrt(np.clip(np.asarray(alpha, np.float64), sa_min * sa_min, 1.0))
-    fr = np.clip((sa - sa_min) / (1.0 - sa_min), 0, 1) * (R - 1)
-    i = np.minimum(np.floor(ft).astype(np.intp), T - 2)
-    j = np.minimum(np.floor(fr).astype(np.intp), R - 2)
-    a, b = (ft - i)[..., None, None], (fr - j)[..., None, None]
-    t = np.moveaxis(tex, 0, -2)  # (R, T, 3, 4)
-    x = ((1 - a) * (1 - b) * t[j, i] + a * (1 - b) * t[j, i + 1] + (1 - a) * b * t[j + 1, i]
-         + a * b * t[j + 1, i + 1]).reshape(ft.shape + (12,))
-    M = x[..., :9].reshape(ft.shape + (3, 3))
-    rho = np.hypot(wo[..., 0], wo[..., 1])
-    safe = np.where(rho > 0, rho, 1.0)
-    c, s = np.where(rho > 0, wo[..., 0] / safe, 1.0), np.where(rho > 0, wo[..., 1] / safe, 0.0)
-    Rz = np.zeros(ft.shape + (3, 3))
-    Rz[..., 0, 0], Rz[..., 0, 1], Rz[..., 1, 0], Rz[..., 1, 1], Rz[..., 2, 2] = c, -s, s, c, 1
-    return Rz @ M @ np.swapaxes(Rz, -1, -2), x[..., 9], x[..., 10]
 
 
 def export_all(table, out_dir) -> list[Path]:

@@ -1,10 +1,9 @@
 """Acceptance test of an LTC table against Monte Carlo integrals of the BRDF over quad lights.
 
 Configurations are (view, roughness, quad) triples; the reference is an unbiased Monte Carlo
-estimate of ``integral_P f(wo, wi) cos(theta_i) dwi`` with multiple importance sampling (balance
-heuristic, Veach 1997 eq. 9.15) of the BRDF lobe (visible normals, ``pdf_reflect``) and the light
-(uniform area sampling converted to solid angle). The functions are generic in the model (anything
-with ``eval``, ``sample_vndf`` and ``pdf_reflect``) so other LTC tables can reuse them.
+estimate of ``integral_P f(wo, wi) cos(theta_i) dwi`` by the renderer's multiple importance
+sampling of the lobe and the light (:mod:`prefilter.render.estimator`). The functions are generic
+in the lobe so other LTC tables can reuse them.
 """
 
 from __future__ import annotations
@@ -14,7 +13,6 @@ import numpy as np
 from prefilter.validation import as_float_array, as_positive_int, as_rng, as_upper_directions
 from prefilter.errors import PrefilterError
 from prefilter.ltc.polygon import clip_to_horizon  # noqa: F401  (re-exported for callers)
-from prefilter.microfacet import reflect
 
 #: References below this value (cosine-weighted reflectance) are reported separately: their
 #: relative error is dominated by the lobe's far tails and says little about shading quality.
@@ -103,73 +101,40 @@ def random_configurations(
     return {"wo": wo, "alpha": a, "quad": quads[perm], "straddle": straddle[perm]}
 
 
-def _polygon_frame(quad):
-    n = np.cross(quad[1] - quad[0], quad[2] - quad[0])
-    area2 = np.linalg.norm(n)
-    if area2 < 1e-14:
-        raise PrefilterError("quad: expected a non-degenerate planar polygon")
-    return n / area2
-
-
 def reference_quad_integral(model, wo, quad, n_samples: int, rng) -> tuple[float, float]:
-    """Monte Carlo ``integral over the polygon of model.eval(wo, wi) dwi``, with standard error.
+    """Monte Carlo ``integral over the quad of model.eval(wo, wi) dwi``, with standard error.
 
-    MIS with the balance heuristic between the model's visible-normal reflection sampling
-    (``sample_vndf`` + ``pdf_reflect``) and uniform area sampling of the polygon (``pdf = r^2 /
-    (A |cos|)`` in solid angle), ``n_samples // 2`` samples each. Parts of the polygon below the
-    horizon contribute nothing (``eval`` is zero there).
+    The renderer's MIS estimator (:func:`prefilter.render.estimator.mis_quad`: balance heuristic
+    between the lobe's samples and uniform area samples of the quad), ``n_samples // 2`` pairs.
+    Parts of the quad below the horizon contribute nothing (``eval`` is zero there).
 
     Parameters
     ----------
-    model : microfacet model with scalar parameters.
+    model : a :class:`~prefilter.lobe.Lobe` (a microfacet model) with scalar parameters.
     wo : (3,) view above the surface.
-    quad : (k, 3) vertices of a planar convex polygon (any winding), shading point at the origin.
+    quad : (4, 3) corners of a planar convex quad (either winding), shading point at the origin.
     n_samples : total number of samples (>= 2).
 
     Returns
     -------
     (estimate, standard_error)
     """
+    from prefilter.render.estimator import mis_quad
+    from prefilter.render.lights import QuadLight
+
     wo = as_upper_directions(wo, "wo")
     quad = as_float_array(quad, "quad", ndim_min=2, last_dim=3)
     n = as_positive_int(n_samples, "n_samples", lo=2) // 2
     rng = as_rng(rng)
-    nq = _polygon_frame(quad)
-    d = float(nq @ quad[0])
-    if abs(d) < 1e-12:
-        raise PrefilterError("quad: expected a polygon whose plane misses the shading point")
-    # triangle fan from vertex 0
-    v0, v1, v2 = quad[0], quad[1:-1], quad[2:]
-    tri_area = 0.5 * np.linalg.norm(np.cross(v1 - v0, v2 - v0), axis=-1)
-    area = tri_area.sum()
-
-    def pdf_light(w):
-        cos = w @ nq
-        t = np.where(np.abs(cos) > 1e-12, d / np.where(np.abs(cos) > 1e-12, cos, 1.0), -1.0)
-        p = t[:, None] * w
-        edges = np.roll(quad, -1, axis=0) - quad
-        inside = np.ones(len(w), bool)
-        for e, v in zip(edges, quad):
-            inside &= (np.cross(e, p - v) @ nq) >= 0.0
-        hit = (t > 0) & inside
-        return np.where(hit, t * t / (area * np.maximum(np.abs(cos), 1e-300)), 0.0)
-
-    # BRDF samples
-    wi_b = reflect(wo, model.sample_vndf(wo, rng.random((n, 2))))
-    pl_b = pdf_light(wi_b)
-    pb_b = model.pdf_reflect(wo, wi_b)
-    f_b = np.where(pl_b > 0, model.eval(wo, wi_b), 0.0)
-    # light samples: triangle by area, then uniform in the triangle
-    k = rng.choice(len(tri_area), size=n, p=tri_area / area)
-    u = rng.random((n, 2))
-    su = np.sqrt(u[:, :1])
-    pts = (1 - su) * v0 + su * (1 - u[:, 1:]) * v1[k] + su * u[:, 1:] * v2[k]
-    r = np.linalg.norm(pts, axis=-1)
-    wi_l = pts / r[:, None]
-    pl_l = r * r / (area * np.maximum(np.abs(wi_l @ nq), 1e-300))
-    pb_l = model.pdf_reflect(wo, wi_l)
-    f_l = model.eval(wo, wi_l)
-    z = f_b / np.maximum(pb_b + pl_b, 1e-300) + f_l / np.maximum(pb_l + pl_l, 1e-300)
+    light = QuadLight(quad, np.ones(3))
+    if abs(float(light.normal @ light.vertices[0])) < 1e-12:
+        raise PrefilterError("quad: expected a quad whose plane misses the shading point")
+    if light.normal @ light.vertices[0] > 0.0:  # facing away: the same quad seen from its front
+        light = QuadLight(quad[::-1], np.ones(3))
+    frame = np.broadcast_to(np.eye(3)[:, None, :], (3, n, 3))  # t, b, n of the local frame
+    terms, _ = mis_quad(model, light, np.zeros((n, 3)), *frame, np.broadcast_to(wo, (n, 3)),
+                        rng.random((n, 4)))
+    z = terms.sum(axis=1)
     return float(z.mean()), float(z.std(ddof=1) / np.sqrt(n))
 
 

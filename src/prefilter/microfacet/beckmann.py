@@ -9,9 +9,12 @@ area is ``A(w) = w_z - mu . w_xy``; Smith's identity then reads
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from scipy import special
 
+from prefilter.jit import njit_inline, njit_serial
 from prefilter.validation import as_directions, as_float_array, as_roughness, as_uniform
 from prefilter.errors import PrefilterError
 from prefilter.microfacet.base import MicrofacetModel
@@ -21,23 +24,35 @@ _SQRT_PI = np.sqrt(np.pi)
 _LOG_SQRT_2PI = 0.5 * np.log(2.0 * np.pi)
 
 
-def beckmann_lambda(a) -> np.ndarray:
-    """Exact Smith ``Lambda = (exp(-a^2) / (a sqrt(pi)) - erfc(a)) / 2`` for Gaussian slopes.
+@njit_inline
+def beckmann_lambda_jit(a):
+    """Smith ``Lambda = (exp(-a^2) / (a sqrt(pi)) - erfc(a)) / 2`` for Gaussian slopes and one
+    ``a > 0`` (Smith 1967; Walter et al. 2007 eq. 27; LEADR supplemental 3.2), in kernels and
+    behind :func:`beckmann_lambda`. The difference loses about ``2 a^2`` ulps to cancellation
+    (1e-13 relative at a = 10); rounding below 0 gives 0, and both terms underflow to the exact
+    limit 0 beyond a ~ 27 and at ``a = +inf``."""
+    return max(0.5 * (math.exp(-a * a) / (a * _SQRT_PI) - math.erfc(a)), 0.0)
 
-    Smith 1967; Walter et al. 2007 eq. 27; LEADR supplemental 3.2. Written as
-    ``exp(-a^2) (1 / (a sqrt(pi)) - erfcx(a)) / 2`` so no term overflows; the bracket loses about
-    ``a^2`` ulps to cancellation (1e-13 relative at a = 10) and ``exp(-a^2)`` underflows to the
-    exact limit 0 beyond a ~ 27. ``a <= 0`` means the direction sees only the back of the mean
-    surface: ``Lambda = +inf`` (``G1 = 0``), the limit of ``Lambda ~ 1 / (2 a sqrt(pi))`` as
-    ``a -> 0+``. ``a = +inf`` (normal incidence) gives 0. Never NaN for non-NaN input.
+
+@njit_serial
+def _beckmann_lambda_kernel(a, out):  # pragma: no cover - compiled
+    for i in range(a.size):
+        out[i] = beckmann_lambda_jit(a[i])
+
+
+def beckmann_lambda(a) -> np.ndarray:
+    """Exact Smith ``Lambda(a)`` for Gaussian slopes, ``(...)`` (:func:`beckmann_lambda_jit`).
+
+    ``a <= 0`` means the direction sees only the back of the mean surface: ``Lambda = +inf``
+    (``G1 = 0``), the limit of ``Lambda ~ 1 / (2 a sqrt(pi))`` as ``a -> 0+``. ``a = +inf``
+    (normal incidence) gives 0. Never NaN for non-NaN input.
     """
     a = np.asarray(a, dtype=np.float64)
     pos = a > 0.0
-    ap = np.where(pos, a, 1.0)
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        lam = 0.5 * np.exp(-ap * ap) * (1.0 / (ap * _SQRT_PI) - special.erfcx(ap))
-    lam = np.where(np.isfinite(ap) & (lam > 0.0), lam, 0.0)
-    return np.where(pos, lam, np.inf)
+    ap = np.ascontiguousarray(np.where(pos, a, 1.0).reshape(-1))
+    lam = np.empty_like(ap)
+    _beckmann_lambda_kernel(ap, lam)
+    return np.where(pos, lam.reshape(a.shape), np.inf)
 
 
 def smith_lambda_walter(a) -> np.ndarray:
@@ -51,6 +66,14 @@ def smith_lambda_walter(a) -> np.ndarray:
     am = np.where(mid, a, 1.0)
     fit = (1.0 - 1.259 * am + 0.396 * am * am) / (3.535 * am + 2.181 * am * am)
     return np.where(a <= 0.0, np.inf, np.where(mid, fit, 0.0))
+
+
+def slope_pdf(dx, dy, sxx, syy, sxy) -> np.ndarray:
+    """Gaussian slope density ``P22 = N(d; 0, [[sxx, sxy], [sxy, syy]])`` of slope offsets
+    ``d = s - mu = (dx, dy)`` (LEADR supplemental 3.1), arrays broadcast together."""
+    det = sxx * syy - sxy * sxy
+    q = (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
+    return np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(det))
 
 
 def _log_ramp_cdf(x, a):
@@ -207,12 +230,10 @@ class Beckmann(MicrofacetModel):
         return Beckmann(self.mean_slope[..., None, :], self.slope_cov[..., None, :, :])
 
     def P22(self, s) -> np.ndarray:
-        """Slope density ``N(s; mu, Sigma)`` for slopes ``s (..., 2)``."""
+        """Slope density ``N(s; mu, Sigma)`` for slopes ``s (..., 2)`` (:func:`slope_pdf`)."""
         s = np.asarray(s, dtype=np.float64)
-        dx = s[..., 0] - self.mean_slope[..., 0]
-        dy = s[..., 1] - self.mean_slope[..., 1]
-        q = (self._syy * dx * dx - 2.0 * self._sxy * dx * dy + self._sxx * dy * dy) / self._det
-        return np.exp(-0.5 * q) / (2.0 * np.pi * np.sqrt(self._det))
+        return slope_pdf(s[..., 0] - self.mean_slope[..., 0], s[..., 1] - self.mean_slope[..., 1],
+                         self._sxx, self._syy, self._sxy)
 
     def D(self, m) -> np.ndarray:
         """NDF ``P22(s(m)) / mz^4`` (LEADR supplemental 3.1), ``(...,)``; 0 for ``mz <= 0``."""

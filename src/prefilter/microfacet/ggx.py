@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.jit import njit_inline
+from prefilter.jit import njit_inline, njit_parallel, prange, serial
 from prefilter.validation import as_directions, as_roughness, as_uniform
 from prefilter.microfacet.base import MicrofacetModel
 
@@ -35,9 +35,9 @@ ggx_lambda_jit = njit_inline(ggx_lambda_formula)
 
 @njit_inline
 def ggx_sample_vndf_jit(ax, ay, wox, woy, woz, u1, u2):
-    """:meth:`GGX.sample_vndf` for one view ``(wox, woy, woz)`` in kernels: the visible normal
-    ``(mx, my, mz)`` for uniforms ``u1, u2`` (Heitz 2018, listing 1; the same steps and
-    guards as the array method)."""
+    """The visible normal ``(mx, my, mz)`` for one view ``(wox, woy, woz)`` and uniforms
+    ``u1, u2`` (Heitz 2018, listing 1: stretch, sample the projected hemisphere, unstretch), in
+    kernels and behind :meth:`GGX.sample_vndf`."""
     vx, vy, vz = ax * wox, ay * woy, woz
     vn = np.sqrt(vx * vx + vy * vy + vz * vz)
     vx, vy, vz = vx / vn, vy / vn, vz / vn
@@ -62,6 +62,14 @@ def ggx_sample_vndf_jit(ax, ay, wox, woy, woz, u1, u2):
     mz = max(1e-12, p1 * t1z + p2 * t2z + p3 * vz)
     mn = np.sqrt(mx * mx + my * my + mz * mz)
     return mx / mn, my / mn, mz / mn
+
+
+@njit_parallel
+def _sample_vndf_kernel(ax, ay, wo, u, out):  # pragma: no cover - compiled
+    for q in prange(wo.shape[0]):
+        out[q, 0], out[q, 1], out[q, 2] = ggx_sample_vndf_jit(
+            ax[q], ay[q], wo[q, 0], wo[q, 1], wo[q, 2], u[q, 0], u[q, 1])
+    return out
 
 
 class GGX(MicrofacetModel):
@@ -107,34 +115,16 @@ class GGX(MicrofacetModel):
         """
         wo = as_directions(wo, "wo")
         u = as_uniform(u, "u", last_dim=2)
-        ax, ay = self.alpha_x, self.alpha_y
-        vh = np.stack(np.broadcast_arrays(ax * wo[..., 0], ay * wo[..., 1], wo[..., 2]), -1)
-        vh = vh / np.linalg.norm(vh, axis=-1, keepdims=True)
-        lensq = vh[..., 0] ** 2 + vh[..., 1] ** 2
-        safe = lensq > 1e-14
-        inv = 1.0 / np.sqrt(np.where(safe, lensq, 1.0))
-        t1 = np.stack(
-            [
-                np.where(safe, -vh[..., 1] * inv, 1.0),
-                np.where(safe, vh[..., 0] * inv, 0.0),
-                np.zeros_like(lensq),
-            ],
-            -1,
-        )
-        t2 = np.cross(vh, t1)
-        r = np.sqrt(u[..., 0])
-        phi = 2.0 * np.pi * u[..., 1]
-        p1 = r * np.cos(phi)
-        p2 = r * np.sin(phi)
-        s = 0.5 * (1.0 + vh[..., 2])
-        p2 = (1.0 - s) * np.sqrt(np.maximum(0.0, 1.0 - p1 * p1)) + s * p2
-        p3 = np.sqrt(np.maximum(0.0, 1.0 - p1 * p1 - p2 * p2))
-        nh = p1[..., None] * t1 + p2[..., None] * t2 + p3[..., None] * vh
-        m = np.stack(
-            np.broadcast_arrays(ax * nh[..., 0], ay * nh[..., 1], np.maximum(1e-12, nh[..., 2])),
-            -1,
-        )
-        return m / np.linalg.norm(m, axis=-1, keepdims=True)
+        shape = np.broadcast_shapes(self.alpha_x.shape, self.alpha_y.shape, wo.shape[:-1],
+                                    u.shape[:-1])
+
+        def flat(a, tail=()):
+            return np.ascontiguousarray(np.broadcast_to(a, shape + tail).reshape((-1,) + tail))
+
+        out = np.empty(flat(wo, (3,)).shape)
+        serial(_sample_vndf_kernel, len(out))(flat(self.alpha_x), flat(self.alpha_y),
+                                               flat(wo, (3,)), flat(u, (2,)), out)
+        return out.reshape(shape + (3,))
 
     def albedo(self, wo) -> np.ndarray:
         """Directional albedo ``integral eval(wo, wi) dwi = E_vndf[G2 / G1]`` for ``wo (..., 3)``.

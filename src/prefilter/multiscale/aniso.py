@@ -85,6 +85,7 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
     from prefilter.multiscale.convolution import _alpha_total
     from prefilter.multiscale.render import footprint_read
     from prefilter.render.driver import shading_frame, surface_attributes
+    from prefilter.texture.mip import moments_to_stats
 
     if combine not in COMBINE:
         from prefilter.errors import PrefilterError
@@ -104,13 +105,9 @@ def aniso_attributes(scene, g, *, combine: str = "lean", anisotropic_footprint: 
             mean = np.zeros((cnt, 2))
             cov_meso = np.zeros((cnt, 2, 2))
         else:
-            mom = footprint_read(chain, uv, dudv * 2.0 ** lod_bias, anisotropic_footprint,
-                                 max_aniso)
-            mean = mom[:, :2]
-            cxx = np.maximum(mom[:, 2] - mean[:, 0] ** 2, 0.0)
-            cyy = np.maximum(mom[:, 3] - mean[:, 1] ** 2, 0.0)
-            cxy = mom[:, 4] - mean[:, 0] * mean[:, 1]
-            cov_meso = np.stack([np.stack([cxx, cxy], -1), np.stack([cxy, cyy], -1)], -2)
+            mean, cov_meso = moments_to_stats(
+                footprint_read(chain, uv, dudv * 2.0 ** lod_bias, anisotropic_footprint,
+                               max_aniso))
         if combine == "lean":
             cov = GGX_PER_BECKMANN ** 2 * cov_meso
             cov[:, 0, 0] += mx

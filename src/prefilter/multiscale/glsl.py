@@ -12,7 +12,6 @@ and its anisotropic taps of near, elongated footprints (``taps``, ``taps_below``
 ``taps_normalize``) are read from their signatures (:func:`footprint_bias`,
 :func:`footprint_taps`), so the shader follows the Python defaults; the viewer's
 ``viewer.frag.glsl`` (``footprintMs``) reads the normal map with them.
-:func:`alpha_meso_twin` is the shader's ``alphaMeso`` in NumPy.
 """
 
 from __future__ import annotations
@@ -23,7 +22,7 @@ import numpy as np
 
 from prefilter.fileio import atomic_path
 
-__all__ = ["ALPHA_MESO_WIDTH", "GLSL", "alpha_meso_nodes", "alpha_meso_twin", "export_all",
+__all__ = ["ALPHA_MESO_WIDTH", "GLSL", "alpha_meso_nodes", "export_all",
            "footprint_bias", "footprint_taps", "glsl_source"]
 
 #: Texels per row of the ``alpha_meso`` node texture (WebGL2 guarantees 2048).
@@ -137,17 +136,6 @@ def glsl_source() -> str:
                        bias=bias, start=start, abias=abias, astart=astart, taps=taps,
                        below=_glsl_float(below), ratio=_glsl_float(ratio),
                        norm="true" if norm else "false")
-
-
-def alpha_meso_twin(nodes, r) -> np.ndarray:
-    """``alphaMeso(r)`` of :data:`GLSL` on ``nodes`` (from :func:`alpha_meso_nodes`), ``(...)``."""
-    from prefilter.multiscale.meso import _A_NODES
-
-    flat = np.asarray(nodes, np.float64).reshape(-1)
-    n = len(_A_NODES)
-    x = np.sqrt(np.clip(3.0 * (1.0 - np.asarray(r, np.float64)), 0.0, 1.0)) * (n - 1)
-    k = np.minimum(np.floor(x).astype(np.intp), n - 2)
-    return flat[k] + (x - k) * (flat[k + 1] - flat[k])
 
 
 def export_all(out_dir) -> list[Path]:

@@ -13,12 +13,14 @@ v (v3 - v0)``; ``u`` along image columns, ``v`` along rows (as :class:`prefilter
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
 
 from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
+from prefilter.texture.fetch import CLAMP_UV, pack_levels, trilinear
 
 __all__ = ["LightTexture", "TexturedQuad", "split_lights", "texture_uv"]
 
@@ -60,37 +62,19 @@ class LightTexture:
     def shape(self) -> tuple[int, int, int]:
         return self.levels[0].shape
 
-    def _bilinear(self, level: int, uv: np.ndarray) -> np.ndarray:
-        tex = self.levels[level]
-        h, w = tex.shape[:2]
-        x = np.clip(uv[:, 0], 0.0, 1.0) * w - 0.5
-        y = np.clip(uv[:, 1], 0.0, 1.0) * h - 0.5
-        x0, y0 = np.floor(x), np.floor(y)
-        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-        j0 = np.clip(x0.astype(np.int64), 0, w - 1)
-        i0 = np.clip(y0.astype(np.int64), 0, h - 1)
-        j1, i1 = np.minimum(j0 + 1, w - 1), np.minimum(i0 + 1, h - 1)
-        top = tex[i0, j0] * (1 - fx) + tex[i0, j1] * fx
-        bottom = tex[i1, j0] * (1 - fx) + tex[i1, j1] * fx
-        return top * (1 - fy) + bottom * fy
+    @functools.cached_property
+    def packed(self):
+        """The levels packed for compiled lookups (:func:`prefilter.texture.fetch.pack_levels`)."""
+        return pack_levels(self.levels)
 
     def lookup(self, uv, sigma_texels) -> np.ndarray:
         """Filtered texture ``(N, C)`` at ``uv (N, 2)`` (clamped to the light) with a Gaussian of
         ``sigma_texels (N,)``: ``lod = 1 + log2(sigma)``, linear between levels (0 below 0.5)."""
         uv = as_float_array(uv, "uv", ndim_min=2, last_dim=2).reshape(-1, 2)
         s = np.broadcast_to(as_float_array(sigma_texels, "sigma_texels"), uv.shape[:1])
-        top = len(self.levels) - 1
         # sigma 0.5 -> level 0 (a texel), 1 -> level 1, doubling per level
-        lod = np.clip(np.log2(np.maximum(s, 1e-300) * 2.0), 0.0, top)
-        l0 = np.minimum(np.floor(lod).astype(np.int64), max(top - 1, 0))
-        t = (lod - l0)[:, None]
-        out = np.zeros((uv.shape[0], self.shape[2]))
-        for level in np.unique(l0):  # a loop over levels, not texels
-            m = l0 == level
-            lo = self._bilinear(int(level), uv[m])
-            hi = self._bilinear(int(level) + 1, uv[m]) if top > 0 else lo
-            out[m] = lo * (1 - t[m]) + hi * t[m]
-        return out
+        lod = np.log2(np.maximum(s, 1e-300) * 2.0)
+        return trilinear(self.packed, uv, lod, clamp=CLAMP_UV)
 
 
 @dataclass(frozen=True)

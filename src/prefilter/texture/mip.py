@@ -13,10 +13,14 @@ Texture coordinates: ``u`` along columns, ``v`` along rows, texel ``(i, j)`` cen
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
+from prefilter.jit import serial
+from prefilter.texture.fetch import footprint_axes_kernel, pack_levels, trilinear
 
 __all__ = ["MipChain", "footprint_axes", "lod_from_footprint", "moment_chain", "moments_to_stats"]
 
@@ -64,22 +68,14 @@ class MipChain:
     def __repr__(self) -> str:
         return f"MipChain(shape={self.shape}, n_levels={self.n_levels})"
 
-    def _bilinear(self, level: int, uv: np.ndarray) -> np.ndarray:
-        tex = self.levels[level]
-        h, w = tex.shape[:2]
-        x = uv[..., 0] * w - 0.5
-        y = uv[..., 1] * h - 0.5
-        x0, y0 = np.floor(x), np.floor(y)
-        fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-        i0 = np.mod(y0.astype(np.int64), h)
-        j0 = np.mod(x0.astype(np.int64), w)
-        i1, j1 = np.mod(i0 + 1, h), np.mod(j0 + 1, w)
-        top = tex[i0, j0] * (1 - fx) + tex[i0, j1] * fx
-        bottom = tex[i1, j0] * (1 - fx) + tex[i1, j1] * fx
-        return top * (1 - fy) + bottom * fy
+    @functools.cached_property
+    def packed(self):
+        """The levels packed for compiled lookups (:func:`prefilter.texture.fetch.pack_levels`)."""
+        return pack_levels(self.levels)
 
     def lookup(self, uv, lod=0.0) -> np.ndarray:
-        """Trilinear lookup: bilinear in the two levels around ``lod``, linear between them.
+        """Trilinear lookup: bilinear in the two levels around ``lod``, linear between them
+        (:func:`prefilter.texture.fetch.trilinear`).
 
         Parameters
         ----------
@@ -93,21 +89,8 @@ class MipChain:
         numpy.ndarray, shape (..., C)
         """
         uv = as_float_array(uv, "uv", ndim_min=1, last_dim=2)
-        lod = np.clip(as_float_array(lod, "lod"), 0.0, self.n_levels - 1)
-        lod = np.broadcast_to(lod, uv.shape[:-1])
-        l0 = np.minimum(np.floor(lod).astype(np.int64), self.n_levels - 2) if self.n_levels > 1 \
-            else np.zeros(lod.shape, np.int64)
-        t = (lod - l0)[..., None]
-        out = np.zeros(uv.shape[:-1] + (self.shape[2],))
-        for level in np.unique(l0):  # a loop over levels, not texels
-            m = l0 == level
-            lo = self._bilinear(int(level), uv[m])
-            if self.n_levels > 1:
-                hi = self._bilinear(int(level) + 1, uv[m])
-                out[m] = lo * (1 - t[m]) + hi * t[m]
-            else:
-                out[m] = lo
-        return out
+        lod = np.broadcast_to(as_float_array(lod, "lod"), uv.shape[:-1])
+        return trilinear(self.packed, uv, lod)
 
     def lookup_footprint(self, uv, dudv, *, anisotropic: bool = False, max_aniso: int = 8):
         """Filtered lookup over a pixel footprint given by the Jacobian ``dudv = d(uv)/d(pixel)``.
@@ -155,7 +138,8 @@ def footprint_axes(dudv, shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
     The Jacobian in texel units ``J = diag(W, H) dudv`` maps the unit pixel to a parallelogram;
     its singular values are the major and minor axis lengths of the footprint ellipse, and the
-    left singular vector of the largest one is the major direction (in texel space).
+    left singular vector of the largest one is the major direction (in texel space); computed by
+    :func:`prefilter.texture.fetch.footprint_axes_jit`, which kernels call.
 
     Parameters
     ----------
@@ -171,21 +155,11 @@ def footprint_axes(dudv, shape) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     if j.shape[-2:] != (2, 2):
         raise PrefilterError(f"dudv: expected shape (..., 2, 2), got {j.shape}")
     h, w = shape
-    j = j * np.array([w, h], float)[:, None]
-    # eigen-decomposition of J J^T = [[p, q], [q, r]] in closed form
-    p = j[..., 0, 0] ** 2 + j[..., 0, 1] ** 2
-    r = j[..., 1, 0] ** 2 + j[..., 1, 1] ** 2
-    q = j[..., 0, 0] * j[..., 1, 0] + j[..., 0, 1] * j[..., 1, 1]
-    mean = 0.5 * (p + r)
-    disc = np.sqrt(np.maximum(0.25 * (p - r) ** 2 + q * q, 0.0))
-    l1, l2 = mean + disc, np.maximum(mean - disc, 0.0)
-    # eigenvector of l1: (q, l1 - p) or (l1 - r, q), whichever is longer (stable)
-    v1 = np.stack([q, l1 - p], -1)
-    v2 = np.stack([l1 - r, q], -1)
-    v = np.where((np.sum(v1 * v1, -1) >= np.sum(v2 * v2, -1))[..., None], v1, v2)
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
-    v = np.where(norm > 0, v / np.where(norm > 0, norm, 1.0), np.array([1.0, 0.0]))
-    return np.sqrt(l1), np.sqrt(l2), v
+    flat = np.ascontiguousarray(j.reshape(-1, 2, 2))
+    out = np.empty((flat.shape[0], 4))
+    serial(footprint_axes_kernel, len(out))(int(h), int(w), flat, out)
+    out = out.reshape(j.shape[:-2] + (4,))
+    return out[..., 0], out[..., 1], out[..., 2:]
 
 
 def lod_from_footprint(dudv, shape, *, anisotropic: bool = False, max_aniso: int = 8):

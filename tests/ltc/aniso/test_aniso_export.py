@@ -4,14 +4,9 @@ import numpy as np
 import pytest
 
 from prefilter.errors import PrefilterError
-from prefilter.ltc.aniso.export import (
-    export_all,
-    glsl_source,
-    glsl_twin,
-    load_layout,
-    texture_layout,
-    texture_params,
-)
+from glsl_numpy import aniso_glsl_twin as glsl_twin
+from glsl_numpy import load_layout
+from prefilter.ltc.aniso.export import export_all, glsl_source, texture_layout, texture_params
 from prefilter.ltc.polygon import clip_to_horizon, polygon_integral, polygon_integral_minv
 from prefilter.ltc.validate import random_quads
 

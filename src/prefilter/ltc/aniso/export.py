@@ -1,4 +1,4 @@
-"""Engine layouts of the anisotropic LTC table, the GLSL lookup and its Python twin.
+"""Engine layouts of the anisotropic LTC table and the GLSL lookup.
 
 Anisotropic-LTC paper, section 9 ("Storage", "Run time"). The 4D table becomes three RGBA 3D
 textures of size ``W x H x D = T x F x (R * A)`` (theta fastest, then phi, then depth ``r * A +
@@ -9,9 +9,8 @@ ratio slices by hand (6 fetches). Channels::
 
 with ``M`` the stored (aligned, unit third column) matrix, ``n`` the magnitude and ``f5`` the
 Fresnel scalar. :data:`GLSL` folds the view with the symmetries, fetches, unfolds and inverts
-``M`` (adjugate; the determinant cancels in the LTC integral), and :func:`glsl_twin` is the same
-program line by line in NumPy, with GL's ``LINEAR`` filtering and ``CLAMP_TO_EDGE`` emulated (real
-GPUs quantise the filter weights, typically to 8 bits; the twin does not).
+``M`` (adjugate; the determinant cancels in the LTC integral); the tests check it through the
+same program line by line in NumPy (``tests/ltc/glsl_numpy.py``).
 """
 
 from __future__ import annotations
@@ -22,19 +21,12 @@ import numpy as np
 
 from prefilter.fileio import atomic_path, save_json_atomic, save_npz_atomic
 from prefilter.errors import PrefilterError
-
-_CHANNELS = [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]
-
-
-def _uniform(c) -> bool:
-    d = np.diff(c)
-    return bool(np.allclose(d, d[0], rtol=1e-9, atol=1e-12))
-
+from prefilter.ltc.glsl import CHANNELS, uniform_nodes
 
 def texture_params(table) -> dict:
     """The scalars the shader needs (grid sizes and the ranges of the uniform coordinates)."""
     c = table._coords
-    if not all(_uniform(x) for x in c):
+    if not all(uniform_nodes(x) for x in c):
         raise PrefilterError("table axes: the texture layout needs nodes uniform in theta, phi, "
                              "sqrt(alpha) and sqrt(ratio)")
     T, F, A, R = table.shape
@@ -45,7 +37,7 @@ def texture_params(table) -> dict:
 def texture_layout(table, dtype=np.float32) -> np.ndarray:
     """The three RGBA textures ``(3, D, H, W, 4)`` (``D = R * A``, ``H = F``, ``W = T``)."""
     T, F, A, R = table.shape
-    ch = [table.M[..., i, j] for i, j in _CHANNELS] + [table.magnitude, table.fresnel,
+    ch = [table.M[..., i, j] for i, j in CHANNELS] + [table.magnitude, table.fresnel,
                                                        np.zeros(table.shape)]
     x = np.stack(ch, -1)  # (T, F, A, R, 12)
     x = x.transpose(3, 2, 1, 0, 4).reshape(R * A, F, T, 3, 4)  # depth = r * A + a
@@ -130,74 +122,5 @@ def glsl_source(table) -> str:
     return GLSL.format(**texture_params(table))
 
 
-def _texture(tex, uvw):
-    """GL ``texture()`` with LINEAR filtering and CLAMP_TO_EDGE: ``tex (D, H, W, 4)``."""
-    D, H, W = tex.shape[:3]
-    out = 0.0
-    xs = []
-    for k, size in enumerate((W, H, D)):
-        x = uvw[..., k] * size - 0.5
-        i0 = np.floor(x)
-        t = x - i0
-        i0 = i0.astype(np.intp)
-        xs.append((np.clip(i0, 0, size - 1), np.clip(i0 + 1, 0, size - 1), t))
-    for c in range(8):
-        w = 1.0
-        idx = []
-        for k in range(3):
-            lo, hi, t = xs[k]
-            b = (c >> k) & 1
-            idx.append(hi if b else lo)
-            w = w * (t if b else 1.0 - t)
-        out = out + w[..., None] * tex[idx[2], idx[1], idx[0]]
-    return out
-
-
-def glsl_twin(tex, params, wo, alpha_x, alpha_y):
-    """:data:`GLSL`'s ``ltcAnisoLookup`` in NumPy, line by line (vectorised over ``(...)``).
-
-    ``tex (3, D, H, W, 4)`` from :func:`texture_layout` (any float dtype; computed in float64),
-    ``params`` from :func:`texture_params`. Returns ``(Minv (..., 3, 3), n, f5)``.
-    """
-    tex = np.asarray(tex, np.float64)
-    T, F, A, R = (float(params[k]) for k in "TFAR")
-    wo = np.asarray(wo, np.float64)
-    ax, ay = np.broadcast_arrays(np.asarray(alpha_x, float), np.asarray(alpha_y, float))
-    swp = ay > ax
-    alpha = np.maximum(ax, ay)
-    ratio = np.minimum(ax, ay) / alpha
-    w = np.where(swp[..., None], wo[..., [1, 0, 2]], wo)
-    s = np.stack([np.where(w[..., 0] < 0, -1.0, 1.0), np.where(w[..., 1] < 0, -1.0, 1.0)], -1)
-    w = np.concatenate([np.abs(w[..., :2]), w[..., 2:]], -1)
-    ft = np.clip(np.arccos(np.clip(w[..., 2], 0, 1)) / params["theta_max"], 0, 1) * (T - 1)
-    fp = np.clip(np.arctan2(w[..., 1], w[..., 0]) / 1.5707963268, 0, 1) * (F - 1)
-    fa = np.clip((np.sqrt(alpha) - params["sqrt_alpha_min"]) / (1 - params["sqrt_alpha_min"]),
-                 0, 1) * (A - 1)
-    fr = np.clip((np.sqrt(ratio) - params["sqrt_ratio_min"]) / (1 - params["sqrt_ratio_min"]),
-                 0, 1) * (R - 1)
-    r0 = np.minimum(np.floor(fr), R - 2)
-    tr = (fr - r0)[..., None]
-    u, v = (ft + 0.5) / T, (fp + 0.5) / F
-    uvw_a = np.stack([u, v, (r0 * A + fa + 0.5) / (A * R)], -1)
-    uvw_b = np.stack([u, v, ((r0 + 1) * A + fa + 0.5) / (A * R)], -1)
-    t = [(1 - tr) * _texture(tex[k], uvw_a) + tr * _texture(tex[k], uvw_b) for k in range(3)]
-    rows = np.stack([t[0][..., :3], np.stack([t[0][..., 3], t[1][..., 0], t[1][..., 1]], -1),
-                     np.stack([t[1][..., 2], t[1][..., 3], t[2][..., 0]], -1)], -2)
-    sv = np.concatenate([s, np.ones(s.shape[:-1] + (1,))], -1)
-    rows = rows * sv[..., :, None] * sv[..., None, :]
-    rows = np.where(swp[..., None, None], rows[..., [1, 0, 2], :][..., :, [1, 0, 2]], rows)
-    M = rows
-    c0, c1, c2 = M[..., :, 0], M[..., :, 1], M[..., :, 2]
-    # adjugate, as in the shader: row i of det(M) M^-1 is (column i+1) x (column i+2)
-    Minv = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], -2)
-    return Minv, t[2][..., 1], t[2][..., 2]
-
-
-def load_layout(path) -> np.ndarray:
-    """``tex`` from a ``ggx_aniso_f32.npz`` / ``_f16.npz`` file."""
-    with np.load(path) as z:
-        return z["tex"]
-
-
-__all__ = ["GLSL", "export_all", "glsl_source", "glsl_twin", "load_layout", "texture_layout",
+__all__ = ["GLSL", "export_all", "glsl_source", "texture_layout",
            "texture_params"]
