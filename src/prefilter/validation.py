@@ -205,11 +205,11 @@ _UNITS = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40, "P": 1 
 def format_bytes(n: float) -> str:
     """``n`` bytes in binary units (``"7.3 TiB"``)."""
     n = float(n)
-    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if n < 1024.0 or unit == "PiB":
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024.0:
             return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
         n /= 1024.0
-    return f"{n:.1f} PiB"  # pragma: no cover
+    return f"{n:.1f} PiB" if n < 1e4 else f"{n:.2e} PiB"
 
 
 def memory_budget() -> int:

@@ -30,9 +30,21 @@ __all__ = ["NoiseStd", "filter_noise", "filter_texture", "footprint_stats", "mom
            "naive_texture", "texture_stats"]
 
 
+#: Largest magnitude of the values of :func:`moments_mip` (their squares must be finite).
+VALUE_MAX = 1e150
+
+
 def moments_mip(data) -> MipChain:
-    """Mip chain of ``E[f], E[f^2]`` of a scalar map ``(H, W)`` (section 4.2)."""
-    return moment_chain(data)
+    """Mip chain of ``E[f], E[f^2]`` of a scalar map ``(H, W)`` (section 4.2): values of magnitude
+    at most :data:`VALUE_MAX`, power-of-two sides."""
+    a = as_float_array(data, "data", ndim_min=2)
+    if a.ndim > 3 or a.shape[0] & (a.shape[0] - 1) or a.shape[1] & (a.shape[1] - 1):
+        raise PrefilterError(f"data: expected an (H, W) map with power-of-two sides (mips), got "
+                             f"shape {a.shape}")
+    if np.any(np.abs(a) > VALUE_MAX):
+        raise PrefilterError(f"data: expected values of magnitude <= {VALUE_MAX:g}, got max "
+                             f"{np.abs(a).max():.4g}")
+    return moment_chain(a)
 
 
 def footprint_stats(chain: MipChain, uv, dudv, *, anisotropic: bool = False,
