@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.validation import as_float_array
+from prefilter.validation import as_float_array, check_scalar
 from prefilter.colormap.table import as_table
 from prefilter.errors import PrefilterError
 from prefilter.texture.mip import (
@@ -190,9 +190,7 @@ class NoiseStd:
         if sigma is None:
             s2 = v[0]
         else:
-            s = float(as_float_array(sigma, "sigma"))
-            if s < 0.0:
-                raise PrefilterError(f"sigma: expected a noise std >= 0, got {sigma!r}")
+            s = check_scalar(sigma, "sigma", lo=0.0, hi=1e150)  # s^2 finite
             s2 = s * s
         self.variance = np.maximum(s2 - v, 0.0)  # within-footprint variance per level
 

@@ -32,9 +32,9 @@ from prefilter.render.scene import Scene, load_scene
 from prefilter.texture.procedural import slopes_to_normals
 from prefilter.validation import as_float_array, as_positive_int, check_memory
 
-__all__ = ["estimate_render_bytes", "footprint_lookup", "render", "render_positions", "render_samples", "row_rng",
-           "shading_frame", "stratified_offsets", "supported_lights", "surface_attributes",
-           "two_sided_frame", "with_settings"]
+__all__ = ["estimate_render_bytes", "footprint_lookup", "render", "render_positions",
+           "render_samples", "row_rng", "shading_frame", "stratified_offsets", "supported_lights",
+           "surface_attributes", "two_sided_frame", "with_settings"]
 
 
 def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0.0, 0.0),
