@@ -61,15 +61,10 @@ def _is_number(v) -> bool:
         return False
 
 
-def _span(lo, hi, lo_open=False) -> str:
-    """`` in [lo, hi]`` / `` >= lo`` / `` with magnitude <= hi`` for error messages."""
-    if (lo, hi) == (-np.inf, np.inf):
-        return ""
-    if hi == np.inf:
-        return f" {'>' if lo_open else '>='} {lo:g}"
-    if lo == -hi:
-        return f" of magnitude <= {hi:g}"
-    return f" in {'(' if lo_open else '['}{lo:g}, {hi:g}]"
+def _beyond(at: str, limit: float, given) -> PrefilterError:
+    """The error of a value outside the scene domain (docs/scenes.md, "Ranges")."""
+    return PrefilterError(f"{at}: expected magnitudes <= {limit:g} (the scene domain), got "
+                          f"{_got(given)}")
 
 
 class _Obj:
@@ -94,12 +89,19 @@ class _Obj:
             return default
         return self.d[key]
 
-    def number(self, key, default=..., lo=-np.inf, hi=np.inf, lo_open=False) -> float:
+    def number(self, key, default=..., lo=-np.inf, hi=np.inf, lo_open=False,
+               limit=np.inf) -> float:
+        """A finite number in ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``) of magnitude at most
+        ``limit`` (the scene domain, reported on its own)."""
         v = self.raw(key, default)
         ok = _is_number(v) and (lo < v if lo_open else lo <= v) and v <= hi
         if not ok:
-            raise PrefilterError(
-                f"{self.at(key)}: expected a number{_span(lo, hi, lo_open)}, got {_got(v)}")
+            rng = "" if (lo, hi) == (-np.inf, np.inf) else (
+                f" in {'(' if lo_open else '['}{lo:g}, {hi:g}]" if hi < np.inf else
+                f" {'>' if lo_open else '>='} {lo:g}")
+            raise PrefilterError(f"{self.at(key)}: expected a number{rng}, got {_got(v)}")
+        if abs(v) > limit:
+            raise _beyond(self.at(key), limit, v)
         return float(v)
 
     def integer(self, key, default=..., lo=1, hi=1 << 16) -> int:
@@ -109,20 +111,22 @@ class _Obj:
                 f"{self.at(key)}: expected an integer in [{lo}, {hi}], got {_got(v)}")
         return v
 
-    def vector(self, key, n, default=..., lo=-np.inf, hi=np.inf, scalar_ok=False) -> np.ndarray:
-        """A list of ``n`` finite numbers in ``[lo, hi]`` (``hi`` alone: magnitudes at most
-        ``hi`` when ``lo`` is ``-inf``)."""
+    def vector(self, key, n, default=..., lo=-np.inf, scalar_ok=False,
+               limit=np.inf) -> np.ndarray:
+        """A list of ``n`` finite numbers ``>= lo`` of magnitude at most ``limit`` (the scene
+        domain, reported on its own); with ``scalar_ok`` one number stands for all ``n``."""
         v = given = self.raw(key, default)
         if scalar_ok and isinstance(v, (int, float)) and not isinstance(v, bool):
             v = [v] * n
-        lo_ = -hi if lo == -np.inf else lo
         ok = (isinstance(v, (list, tuple)) and len(v) == n
-              and all(_is_number(x) and lo_ <= x <= hi for x in v))
+              and all(_is_number(x) and x >= lo for x in v))
         if not ok:
-            what = f"a list of {n} numbers" + _span(lo_, hi)
+            what = f"a list of {n} numbers" + (f" >= {lo:g}" if lo > -np.inf else "")
             if scalar_ok:
                 what += " (or one number)"
             raise PrefilterError(f"{self.at(key)}: expected {what}, got {_got(given)}")
+        if any(abs(x) > limit for x in v):
+            raise _beyond(self.at(key), limit, given)
         return np.array(v, dtype=np.float64)
 
     def unit(self, key, default=...) -> np.ndarray:
@@ -138,7 +142,7 @@ class _Obj:
 
     def point(self, key, default=...) -> np.ndarray:
         """A position: 3 numbers of magnitude at most :data:`EXTENT_MAX`."""
-        return self.vector(key, 3, default, hi=EXTENT_MAX)
+        return self.vector(key, 3, default, limit=EXTENT_MAX)
 
     def choice(self, key, options, default=...) -> str:
         v = self.raw(key, default)
@@ -273,7 +277,7 @@ def _texture(value, path: str, role: str, base: Path) -> TextureRef:
                                         if k not in ("procedural", "size", "seed", "scale")})
         except PrefilterError as exc:
             raise PrefilterError(f"{path}.{exc}") from None
-        scale = (o.number("scale", 1.0, lo=0.0, hi=HEIGHT_SCALE_MAX) if role == "height_map"
+        scale = (o.number("scale", 1.0, lo=0.0, limit=HEIGHT_SCALE_MAX) if role == "height_map"
                  else 1.0)
         spec = {k: v for k, v in value.items() if k != "scale"}
         return TextureRef(role, spec, path, None, scale=scale)
@@ -291,8 +295,8 @@ def _texture(value, path: str, role: str, base: Path) -> TextureRef:
     srgb = o.raw("srgb", role in ("color_map", "light_texture") and full.suffix.lower() == ".png")
     if not isinstance(srgb, bool):
         raise PrefilterError(f"{o.at('srgb')}: expected true or false, got {_got(srgb)}")
-    scale = o.number("scale", 1.0, lo=0.0, hi=HEIGHT_SCALE_MAX if role == "height_map" else
-                     LIGHT_MAX)
+    scale = o.number("scale", 1.0, lo=0.0,
+                     limit=HEIGHT_SCALE_MAX if role == "height_map" else LIGHT_MAX)
     return TextureRef(role, value, path, full, conv, srgb, scale)
 
 
@@ -441,9 +445,9 @@ def _material(v, path, base) -> Material:
     ay = o.number("alpha_y", ax if "alpha_x" in o.d else a, lo=0.001, hi=1.0)
     tex = {k: _texture(o.d[k], o.at(k), k, base) if o.d.get(k) is not None else None
            for k in ("normal_map", "height_map", "color_map")}
-    return Material(ax, ay, o.vector("base_color", 3, [0.0] * 3, lo=0.0, hi=REFLECTANCE_MAX,
-                                     scalar_ok=True),
-                    o.vector("f0", 3, [1.0] * 3, lo=0.0, hi=REFLECTANCE_MAX, scalar_ok=True),
+    return Material(ax, ay, o.vector("base_color", 3, [0.0] * 3, lo=0.0, scalar_ok=True,
+                                     limit=REFLECTANCE_MAX),
+                    o.vector("f0", 3, [1.0] * 3, lo=0.0, scalar_ok=True, limit=REFLECTANCE_MAX),
                     **tex)
 
 
@@ -457,12 +461,12 @@ def _object(v, path, base):
         t = t - (t @ n) * n
         if np.linalg.norm(t) < 1e-6:
             raise PrefilterError(f"{o.at('tangent')}: expected a vector not parallel to the normal")
-        size = o.vector("size", 2, [1.0, 1.0], hi=EXTENT_MAX, scalar_ok=True)
+        size = o.vector("size", 2, [1.0, 1.0], scalar_ok=True, limit=EXTENT_MAX)
         if np.any(size <= 0):
             raise PrefilterError(
                 f"{o.at('size')}: expected positive sizes, got {_got(size.tolist())}")
         return Plane(o.point("center", [0.0] * 3), n, t / np.linalg.norm(t), size,
-                     o.vector("uv_scale", 2, [1.0, 1.0], hi=UV_SCALE_MAX, scalar_ok=True),
+                     o.vector("uv_scale", 2, [1.0, 1.0], scalar_ok=True, limit=UV_SCALE_MAX),
                      _material(o.raw("material", {}), o.at("material"), base))
     o = _Obj(v, path, ("type", "center", "radius", "pole", "axis_x", "uv_scale", "material"))
     pole = o.unit("pole", [0.0, 1.0, 0.0])
@@ -471,9 +475,9 @@ def _object(v, path, base):
     if np.linalg.norm(ax) < 1e-6:
         raise PrefilterError(f"{o.at('axis_x')}: expected a vector not parallel to the pole")
     return Sphere(o.point("center", [0.0] * 3),
-                  o.number("radius", lo=0.0, hi=EXTENT_MAX, lo_open=True),
+                  o.number("radius", lo=0.0, lo_open=True, limit=EXTENT_MAX),
                   pole, ax / np.linalg.norm(ax),
-                  o.vector("uv_scale", 2, [1.0, 1.0], hi=UV_SCALE_MAX, scalar_ok=True),
+                  o.vector("uv_scale", 2, [1.0, 1.0], scalar_ok=True, limit=UV_SCALE_MAX),
                   _material(o.raw("material", {}), o.at("material"), base))
 
 
@@ -489,7 +493,7 @@ def _light(v, path, base):
         vo = _Obj({str(i): c for i, c in enumerate(verts)}, o.at("vertices"), tuple("0123"))
         vs = np.stack([vo.point(str(i)) for i in range(4)])
         tex = o.raw("texture", None)
-        spec = QuadLightSpec(vs, o.vector("radiance", 3, lo=0.0, hi=LIGHT_MAX, scalar_ok=True),
+        spec = QuadLightSpec(vs, o.vector("radiance", 3, lo=0.0, scalar_ok=True, limit=LIGHT_MAX),
                              None if tex is None else
                              _texture(tex, o.at("texture"), "light_texture", base))
         try:  # planarity / convexity checks live with the shading light type
@@ -502,15 +506,15 @@ def _light(v, path, base):
     if kind == "point":
         o = _Obj(v, path, ("type", "position", "intensity"))
         return PointLightSpec(o.point("position"),
-                              o.vector("intensity", 3, lo=0.0, hi=LIGHT_MAX, scalar_ok=True))
+                              o.vector("intensity", 3, lo=0.0, scalar_ok=True, limit=LIGHT_MAX))
     if kind == "directional":
         o = _Obj(v, path, ("type", "direction", "irradiance"))
         return DirectionalLightSpec(o.unit("direction"),
-                                    o.vector("irradiance", 3, lo=0.0, hi=LIGHT_MAX,
-                                             scalar_ok=True))
+                                    o.vector("irradiance", 3, lo=0.0, scalar_ok=True,
+                                             limit=LIGHT_MAX))
     o = _Obj(v, path, ("type", "image", "scale"))
     return EnvironmentLight(_texture(o.raw("image"), o.at("image"), "environment", base),
-                            o.number("scale", 1.0, lo=0.0, hi=LIGHT_MAX))
+                            o.number("scale", 1.0, lo=0.0, limit=LIGHT_MAX))
 
 
 def _read_scene_file(p: Path):
