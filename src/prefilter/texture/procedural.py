@@ -303,8 +303,9 @@ def _scratch_slopes(n: int, rng: np.random.Generator, p: dict) -> np.ndarray:
 
 
 def _flake_values(n: int, p: dict) -> tuple[float, float]:
-    """``flake_size`` (texels) and ``rms_slope`` of a flakes map."""
-    return (_positive(p["flake_size"], "flake_size", lo=1.0, hi=float(n)),
+    """``flake_size`` (texels; larger than the map: one flake) and ``rms_slope`` of a flakes
+    map."""
+    return (_positive(p["flake_size"], "flake_size", lo=1.0, hi=LENGTH_MAX),
             _positive(p["rms_slope"], "rms_slope", lo=0.0, closed=True, hi=RMS_SLOPE_MAX))
 
 
@@ -343,8 +344,9 @@ def normal_map(kind: str = "gaussian", size: int = 512, seed=0, **params) -> np.
         ``scratches``: ``count`` (60) random line grooves of Gaussian profile, ``width`` (texels,
         1), ``depth`` (texels, 1), ``length`` (max length as a fraction of the texture, 0.3) on a
         flat base (or a Gaussian base with ``base_rms_slope`` > 0).
-        ``flakes``: Voronoi cells of mean diameter ``flake_size`` (texels, 8), each flat with a
-        random slope drawn from ``N(0, rms_slope^2 / 2 I)`` (so ``E|s|^2 = rms_slope^2``).
+        ``flakes``: Voronoi cells of mean diameter ``flake_size`` (texels, 8; one cell when it
+        exceeds ``size``), each flat with a random slope drawn from ``N(0, rms_slope^2 / 2 I)``
+        (so ``E|s|^2 = rms_slope^2``).
     size : int
         Side in texels (row index = v = y, column index = u = x).
     seed : int or numpy.random.Generator
