@@ -53,7 +53,7 @@ def scene_with(path, value):
     x = d
     for k in keys:
         x = x[k]
-    x[last] = value
+    x[int(last) if isinstance(x, list) else last] = value
     return d
 
 
@@ -87,7 +87,7 @@ BAD_FIELDS = [
     (("objects", 1, "radius"), 1e300),
     (("objects", 0, "size"), [1e300, 1.0]),
     (("lights", 1, "intensity"), 1e200),
-    (("lights", 0, "vertices", 2), [1, 1e300, 1]),
+    (("lights", 0, "vertices", "2"), [1, 1e300, 1]),   # corners are named vertices.0 .. .3
     (("objects", 1, "material", "base_color"), 1e300),
 ]
 
@@ -120,13 +120,11 @@ def test_uv_scale_1e160_render_exits_2_in_one_line(tmp_path):
 @example(("objects", 1, "uv_scale"), 1e160)
 @example(("lights", 1, "position"), 10**400)
 def test_scene_magnitudes_load_inside_the_domain_or_name_the_field(path, x):
-    n = len(SCENE[path[0]][path[1]][path[2]]) if len(path) == 3 and isinstance(
-        SCENE[path[0]][path[1]].get(path[2]), list) else 3
-    value = x if path[-1] in ("radius", "radiance", "intensity", "uv_scale") else [x] * n
+    value = x if path[-1] in ("radius", "radiance", "intensity", "uv_scale") else [x, 1.0, 2.0]
     try:
         s = load_scene(scene_with(path, value))
     except PrefilterError as err:
-        assert str(err.value).startswith(field_name(path) + ":"), str(err.value)
+        assert str(err).startswith(field_name(path) + ":"), str(err)
         return
     # accepted: every magnitude is inside the documented domain
     for obj in s.objects:

@@ -45,6 +45,9 @@ HEIGHT_SCALE_MAX = 1e4
 def _got(v: Any) -> str:
     if isinstance(v, int) and not isinstance(v, bool) and abs(v) >= 10**30:
         return f"an integer of {len(str(abs(v)))} digits"
+    if isinstance(v, list) and any(isinstance(x, int) and abs(x) >= 10**30 for x in v
+                                   if not isinstance(x, bool)):
+        return "[" + ", ".join(map(_got, v)) + "]"
     try:
         return json.dumps(v)
     except (TypeError, ValueError):
@@ -130,15 +133,18 @@ class _Obj:
         return np.array(v, dtype=np.float64)
 
     def unit(self, key, default=...) -> np.ndarray:
-        """A direction (any finite non-zero length), normalised; scaled by its largest component
-        first so that neither 1e300 nor 1e-300 components over- or underflow."""
+        """A direction (any finite length >= 1e-12), normalised (components so large that the
+        squared length overflows are scaled by the largest one first)."""
         v = self.vector(key, 3, default)
-        big = np.max(np.abs(v))
-        if not big >= 1e-12:
+        with np.errstate(over="ignore"):
+            n = np.linalg.norm(v)
+        if not np.isfinite(n):  # |v|^2 overflowed
+            v = v / np.max(np.abs(v))
+            n = np.linalg.norm(v)
+        if n < 1e-12:
             raise PrefilterError(
                 f"{self.at(key)}: expected a non-zero vector, got {_got(v.tolist())}")
-        v = v / big
-        return v / np.linalg.norm(v)
+        return v / n
 
     def point(self, key, default=...) -> np.ndarray:
         """A position: 3 numbers of magnitude at most :data:`EXTENT_MAX`."""
