@@ -146,6 +146,13 @@ NOTES = {  # hand-written notes for specific patterns (substring of the rendered
     "r: expected lengths in [0, 1]": "The length of an averaged unit normal is at most 1 (up to "
     "1e-6 rounding); longer vectors mean the normals were not unit length.",
     "PyTorch": "Install the optional fit dependencies: pip install 'prefilter[fit]'.",
+    "more than the memory budget": "The request (image size x samples per pixel, map size, "
+    "table size) would need more memory than the budget: by default half the machine's memory, "
+    "or PREFILTER_MEMORY_BUDGET (bytes, or 8G, 512M). Ask for less, or raise the budget if the "
+    "machine has the memory.",
+    "(the scene domain)": "Scene magnitudes have a documented domain (docs/scenes.md, Ranges): "
+    "coordinates and lengths up to 1e6, uv_scale up to 1e6, light values up to 1e12. Rescale "
+    "the scene's units.",
 }
 
 MODULE_TITLES = OrderedDict([

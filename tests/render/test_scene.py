@@ -97,11 +97,10 @@ def test_broken_scenes_name_the_field(path, value, message):
     assert message in str(e.value)
 
 
-def test_procedural_values_checked_on_first_use_with_path():
+def test_procedural_values_checked_at_load_with_path():
     d = _broken("objects.0.material.normal_map.rms_slope", -3)
-    s = load_scene(d)  # lazily: names were fine
-    with pytest.raises(PrefilterError, match=r"objects\[0\]\.material\.normal_map: rms_slope"):
-        s.objects[0].material.normal_map.load()
+    with pytest.raises(PrefilterError, match=r"objects\[0\]\.material\.normal_map\.rms_slope"):
+        load_scene(d)  # before any render, not on first use
 
 
 def test_file_errors(tmp_path):

@@ -305,3 +305,38 @@ def test_height_fit_checks_its_grid_and_beats_the_paper():
     expect_error(lambda: fit_height_params(-1.0), "lam_max")
     expect_error(lambda: fit_height_params(10.0, 0), "n")
     expect_error(lambda: fit_height_params(10.0, 2.5), "n")
+
+
+# Inputs that raised TypeError / ValueError / OverflowError (or were accepted: the string "0.5")
+# instead of a PrefilterError naming the argument.
+BAD_CALLS = [
+    ("sigma None", lambda: gaussian_operator(8, None), "sigma"),
+    ("sigma dict", lambda: gaussian_operator(8, {"a": 1}), "sigma"),
+    ("sigma complex", lambda: gaussian_operator(8, 1 + 2j), "sigma"),
+    ("sigma string", lambda: gaussian_operator(8, "0.5"), "sigma"),
+    ("sigma list", lambda: gaussian_operator(8, [0.1, 0.2]), "sigma"),
+    ("sigma 10**400", lambda: gaussian_operator(8, 10**400), "sigma"),
+    ("sigma_max array", lambda: prefilter_table(CMAP, sigma_max=np.array([0.1, 0.2])),
+     "sigma_max"),
+    ("sigma_max string", lambda: prefilter_table(CMAP, sigma_max="0.25"), "sigma_max"),
+    ("slope sigma_max array",
+     lambda: slope_prefilter_table(np.zeros((4, 4, 3)), sigma_max=np.array([0.1, 0.2])),
+     "sigma_max"),
+    ("slope extent string", lambda: slope_prefilter_table(np.zeros((4, 4, 3)), extent="1"),
+     "extent"),
+    ("n_taps 10**30", lambda: filter_slope(SLOPE_TABLE, [0, 0, 1.0], (0, 0), np.eye(2) * 0.1,
+                                           n_taps=10**30), "n_taps"),
+    ("moments_mip 6x6", lambda: moments_mip(np.zeros((6, 6))), "data"),
+    ("moments_mip 1e200", lambda: moments_mip(np.full((4, 4), 1e200)), "data"),
+    ("moments_mip ragged", lambda: moments_mip([[0.1, 0.2], [0.3]]), "data"),
+    ("lam_max array", lambda: fit_height_params(np.array([10.0, 20.0]), 8), "lam_max"),
+    ("fit n 10**12", lambda: fit_height_params(10.0, 10**12), "n"),
+    ("NoiseStd sigma string", lambda: NoiseStd([1.0, 0.5], sigma="0.5"), "sigma"),
+]
+
+
+@pytest.mark.parametrize("what,fn,name", BAD_CALLS, ids=[c[0] for c in BAD_CALLS])
+def test_public_api_raises_prefilter_errors_naming_the_argument(what, fn, name):
+    with pytest.raises(PrefilterError) as err:
+        fn()
+    assert str(err.value).startswith(name + ":"), str(err.value)

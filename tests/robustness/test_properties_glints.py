@@ -164,3 +164,11 @@ def test_integer_normal_maps_need_decoding():
     # the decoded map is accepted and close to the float one (8-bit quantisation)
     s, _ = elements(decode_normals(rgb, "directx"))
     assert np.abs(s - ELEM[0]).max() < 2.0 / 255 + 1e-9
+
+
+def test_samplers_reject_negative_seeds(glints_map):
+    # was NumPy's "expected non-negative integer" ValueError
+    from prefilter.glints import sample_s, sample_wi
+
+    expect_error(lambda: sample_s(glints_map, [0, 0], 1.0, -3), "rng")
+    expect_error(lambda: sample_wi(glints_map, [0, 0], 1.0, [0, 0, 1.0], -3), "rng")

@@ -17,6 +17,7 @@ from prefilter.leadr import (
     grid_normals,
     moments,
     point_light,
+    procedural_env,
     schlick,
     shading_stats,
     slopes_from_height,
@@ -229,3 +230,42 @@ def test_empty_batches(white_env):
     assert env_specular(white_env, e3, (0, 0), GOOD_COV).shape == (0, 3)
     assert diffuse_sh(np.zeros((9, 3)), e3, (0, 0), GOOD_COV).shape == (0, 3)
     assert point_light(e3, e3, (0, 0), GOOD_COV).shape == (0,)
+
+
+# Inputs that raised TypeError, ValueError, ZeroDivisionError or OverflowError (or were accepted:
+# the string "0.5" as a number) instead of a PrefilterError naming the argument.
+_ENV = EnvMap(procedural_env(8))
+_WO, _H = np.array([0.0, 0.0, 1.0]), np.zeros((4, 4))
+BAD_CALLS = [(f"procedural_env({s!r:.10})", lambda s=s: procedural_env(s), "size")
+             for s in (None, 0, -1, 1.5, "64", True, [4], np.nan)] + [
+    ("procedural_env(10**30)", lambda: procedural_env(10**30), "size"),
+    ("procedural_env(10**9)", lambda: procedural_env(10**9), "size"),  # memory
+    ("lod_bias array", lambda: env_specular(_ENV, _WO, (0, 0), GOOD_COV, lod_bias=np.ones(2)),
+     "lod_bias"),
+    ("lod_bias string", lambda: env_specular(_ENV, _WO, (0, 0), GOOD_COV, lod_bias="0.5"),
+     "lod_bias"),
+    ("lod_bias 1e300", lambda: env_specular(_ENV, _WO, (0, 0), GOOD_COV, lod_bias=1e300),
+     "lod_bias"),
+    ("cov 1e300", lambda: grid_normals((0, 0), np.full((2, 2), 1e300), 3), "slope_cov"),
+    ("cov overflowing det", lambda: point_light(_WO, _WO, (0, 0), np.diag([1e200, 1e200])),
+     "slope_cov"),
+    ("mean slope 1e300", lambda: env_specular(_ENV, _WO, (1e300, 0), GOOD_COV), "mean_slope"),
+    ("moments ragged", lambda: moments([[0.1, 0.2], [0.3]]), "data"),
+    ("moments texel_size string", lambda: moments(_H, texel_size="0.5"), "texel_size"),
+    ("moments base_roughness string", lambda: moments(_H, base_roughness="0.5"),
+     "base_roughness"),
+    ("moments 6x6", lambda: moments(np.zeros((6, 6))), "data"),
+    ("moments slopes 1e200", lambda: moments(np.full((4, 4, 2), 1e200)), "data"),
+    ("slopes_from_height string", lambda: slopes_from_height(_H, "0.5"), "texel_size"),
+    ("gaussian_grid string", lambda: gaussian_grid(3, "0.5"), "spacing"),
+    ("gaussian_grid 1e300", lambda: gaussian_grid(3, 1e300), "spacing"),
+    ("shading_stats string", lambda: shading_stats(np.zeros(5), "0.5"), "base_roughness"),
+    ("shading_stats array", lambda: shading_stats(np.zeros(5), np.ones(2)), "base_roughness"),
+]
+
+
+@pytest.mark.parametrize("what,fn,name", BAD_CALLS, ids=[c[0] for c in BAD_CALLS])
+def test_public_api_raises_prefilter_errors_naming_the_argument(what, fn, name):
+    with pytest.raises(PrefilterError) as err:
+        fn()
+    assert str(err.value).startswith(name + ":"), str(err.value)

@@ -275,3 +275,9 @@ def test_beckmann_sample_lobe_terminates(t, p, mu, cov, seed):
         return
     assert wi.shape == (16, 3) and np.allclose(np.linalg.norm(wi, axis=-1), 1.0)
     assert np.all(wi[:, 2] > 0.0)
+
+
+@pytest.mark.parametrize("model", [GGX(0.3), Beckmann.isotropic(0.3)], ids=["ggx", "beckmann"])
+def test_sample_lobe_rejects_negative_seeds(model):
+    # was NumPy's "expected non-negative integer" ValueError
+    expect_error(lambda: model.sample_lobe([0.0, 0.0, 1.0], 4, -3), "rng")

@@ -143,3 +143,15 @@ def test_fit_polynomial_rejects_bad_grids():
     expect_error(lambda: fit_polynomial(small), "grid['alpha_ml']")
     expect_error(lambda: fit_polynomial(grid, "cubic"), "form")
     expect_error(lambda: convolution_grid([0.1, 1.5], [0.1], 64), "alpha_micro")
+
+
+@pytest.mark.parametrize("args,name", [
+    ((np.array([0.1, 0.2]), 0.1, 10, 0), "alpha_micro"),   # was TypeError
+    ((0.1, np.array([0.1, 0.2]), 10, 0), "alpha_meso"),
+    (("0.1", 0.1, 10, 0), "alpha_micro"),
+    ((0.1, 0.1, 10, -3), "rng"),                           # was NumPy's ValueError
+])
+def test_convolve_samples_rejects_arrays_strings_and_negative_seeds(args, name):
+    with pytest.raises(PrefilterError) as err:
+        convolve_samples(*args)
+    assert str(err.value).startswith(name + ":"), str(err.value)

@@ -215,3 +215,20 @@ def test_procedural_rejects_bad_parameters():
     expect_error(lambda: noise(8, 0, sigma=np.inf), "sigma")
     expect_error(lambda: noise_level_variance(12), "size")
     expect_error(lambda: slopes_to_normals([np.nan, 0.0]), "slopes")
+
+
+@pytest.mark.parametrize("fn,name", [
+    (lambda: normal_map("gaussian", 8, -1), "seed"),                     # was NumPy's ValueError
+    (lambda: normal_map("gaussian", 8, 0, rms_slope="0.3"), "rms_slope"),  # was accepted
+    (lambda: normal_map("gaussian", 8, 0, corr_length=1e9), "corr_length"),  # NaN slopes
+    (lambda: height_map("brushed", 8, 0, length=1e300, width=1e300), "length"),
+    (lambda: height_map("anisotropic", 8, 0, cov=[[1e300, 0], [0, 1]]), "cov"),
+    (lambda: normal_map("scratches", 8, 0, width=1e9), "width"),         # a 4e9^2 box
+    (lambda: normal_map("scratches", 8, 0, count=10**9), "count"),
+    (lambda: noise(8, 0, corr_length=1e200), "corr_length"),             # LinAlgError
+    (lambda: noise(8, 0, sigma=True), "sigma"),
+    (lambda: noise(8, -2), "seed"),
+], ids=["seed-1", "rms-string", "corr-1e9", "brushed-1e300", "cov-1e300", "scratch-width",
+        "scratch-count", "noise-corr", "noise-bool", "noise-seed"])
+def test_procedural_parameters_have_a_domain(fn, name):
+    expect_error(fn, name)

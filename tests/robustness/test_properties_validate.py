@@ -95,3 +95,14 @@ def test_integers_seeds_and_batches():
         expect_error(lambda: as_rng(bad, "seed"), "seed")
     assert broadcast_batch(a=(3, 1), b=(4,)) == (3, 4)
     expect_error(lambda: broadcast_batch(a=(3,), b=(4,)), "a, b")
+
+
+@pytest.mark.parametrize("seed", [-1, -3, np.int64(-7), -(10**30)])
+def test_negative_seeds_are_refused(seed):
+    expect_error(lambda: as_rng(seed, "seed"), "seed")
+
+
+def test_integer_upper_bounds():
+    assert as_positive_int(5, "n", hi=5) == 5
+    expect_error(lambda: as_positive_int(10**30, "n_taps", hi=100), "n_taps")
+    expect_error(lambda: as_positive_int(6, "n", hi=5), "n")

@@ -27,6 +27,7 @@ from prefilter.validation import (
     as_positive_int,
     as_upper_directions,
     broadcast_batch,
+    check_scalar,
 )
 from prefilter.colormap.table import as_table
 from prefilter.errors import PrefilterError
@@ -241,12 +242,14 @@ def height_moments_approx(lam, sigma_h=1.0, params: HeightParams = PAPER_PARAMS)
     return mu, sd
 
 
+#: Most grid points of the fits (:func:`fit_height_params`, :func:`height_fit_errors`).
+FIT_N_MAX = 1_000_000
+
+
 def _fit_grid(lam_max, n) -> np.ndarray:
     """``n`` values of ``L`` uniform in ``log(1 + L)`` over ``[0, lam_max]``."""
-    top = float(as_float_array(lam_max, "lam_max"))
-    if not top > 0.0:
-        raise PrefilterError(f"lam_max: expected a number > 0, got {lam_max!r}")
-    n = as_positive_int(n, "n", lo=2)
+    top = check_scalar(lam_max, "lam_max", lo=0.0, lo_open=True)
+    n = as_positive_int(n, "n", lo=2, hi=FIT_N_MAX)
     return np.expm1(np.linspace(0.0, np.log1p(top), n))
 
 

@@ -31,10 +31,12 @@ import numpy as np
 from scipy.special import erfcx
 
 from prefilter.validation import (
+    SLOPE_MAX,
     as_float_array,
     as_positive_int,
     as_upper_directions,
     broadcast_batch,
+    check_scalar,
 )
 from prefilter.colormap.table import gaussian_operator
 from prefilter.errors import PrefilterError
@@ -43,6 +45,9 @@ __all__ = ["SlopeColormapTable", "filter_slope", "slope_density",
            "slope_distribution", "slope_prefilter_table"]
 
 _SQRT_2_OVER_PI = 0.7978845608028654
+#: Most Gauss-Hermite taps of :meth:`SlopeColormapTable.lookup` (beyond ~100 the outer weights
+#: underflow and the node computation grows as n^2).
+N_TAPS_MAX = 100
 
 
 def _as_mean_cov(mean, cov):
@@ -197,7 +202,8 @@ class SlopeColormapTable:
         mean : array_like, shape (..., 2)
         cov : array_like, shape (..., 2, 2)
         n_taps : int
-            Gauss-Hermite nodes along the major axis (1 = isotropic approximation).
+            Gauss-Hermite nodes along the major axis (1 = isotropic approximation), at most
+            :data:`N_TAPS_MAX`.
 
         Returns
         -------
@@ -207,7 +213,7 @@ class SlopeColormapTable:
         batch = np.broadcast_shapes(mu.shape[:-1], c.shape[:-2])
         mu, c = np.broadcast_to(mu, batch + (2,)), np.broadcast_to(c, batch + (2, 2))
         l1, l2, e1 = _sym_eig(c)
-        nt = as_positive_int(n_taps, "n_taps")
+        nt = as_positive_int(n_taps, "n_taps", hi=N_TAPS_MAX)
         x, wts = np.polynomial.hermite_e.hermegauss(nt)
         wts = wts / wts.sum()
         r = np.sqrt(np.maximum(l1 - l2, 0.0))[..., None] * e1
@@ -249,11 +255,8 @@ def slope_prefilter_table(colormap, extent: float = 1.0, sigma_max: float = 0.5,
     if c.ndim != 3 or c.shape[0] != c.shape[1] or c.shape[0] < 2:
         raise PrefilterError(f"colormap: expected a square (n, n, C) slope colour map, got "
                              f"shape {c.shape}")
-    e = float(as_float_array(extent, "extent"))
-    smax = float(as_float_array(sigma_max, "sigma_max"))
-    if not (e > 0 and smax > 0):
-        raise PrefilterError(f"extent, sigma_max: expected numbers > 0, got {extent!r}, "
-                             f"{sigma_max!r}")
+    e = check_scalar(extent, "extent", lo=0.0, hi=SLOPE_MAX, lo_open=True)
+    smax = check_scalar(sigma_max, "sigma_max", lo=0.0, lo_open=True)
     nl = as_positive_int(n_levels, "n_levels", lo=2)
     n = c.shape[0]
     levels = []
@@ -271,6 +274,7 @@ def filter_slope(table: SlopeColormapTable, wo, mean, cov, n_taps: int = 7) -> n
     from prefilter.colormap.table import as_table
 
     as_table(table, SlopeColormapTable)
+    as_positive_int(n_taps, "n_taps", hi=N_TAPS_MAX)  # before the distribution's work
     m, c = slope_distribution(wo, mean, cov)
     return table.lookup(m, c, n_taps)
 

@@ -31,7 +31,8 @@ from pathlib import Path
 import numpy as np
 from scipy.special import ndtr
 
-from prefilter.validation import as_float_array, as_positive_int, broadcast_batch
+from prefilter.validation import (as_float_array, as_positive_int, broadcast_batch, check_memory,
+                                  check_scalar)
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 from prefilter.errors import PrefilterError, TableFileError
 
@@ -132,9 +133,10 @@ def gaussian_operator(n: int, sigma: float, edge: str = "clamp", n_out: int | No
     n = as_positive_int(n, "n", lo=2)
     n_out = n if n_out is None else as_positive_int(n_out, "n_out", lo=1)
     edge = _edge(edge)
-    sigma = float(sigma)
-    if not (np.isfinite(sigma) and sigma >= 0.0):
-        raise PrefilterError(f"sigma: expected a finite number >= 0, got {sigma!r}")
+    sigma = check_scalar(sigma, "sigma", lo=0.0)
+    # the operator and the kernel (its reach grows with sigma), float64
+    check_memory(8 * (n_out * (n + 2 * _REACH * sigma * n + 4) + 2 * _REACH * sigma * n),
+                 f"sigma: a Gaussian operator of {n} samples at sigma {sigma:g}")
     if n_out != n:
         return _resampling_operator(n, sigma, edge, n_out)
     reach = int(np.ceil(_REACH * sigma * n)) + 1
@@ -457,9 +459,12 @@ def prefilter_table(colormap, value_range=(0.0, 1.0), sigma_max: float = 0.25, s
     lo, hi = _value_range(value_range)
     size = as_positive_int(size, "size", lo=2)
     n_sigma = size if n_sigma is None else as_positive_int(n_sigma, "n_sigma", lo=2)
-    smax = float(as_float_array(sigma_max, "sigma_max"))
-    if not smax > 0.0:
-        raise PrefilterError(f"sigma_max: expected a number > 0, got {sigma_max!r}")
+    smax = check_scalar(sigma_max, "sigma_max", lo=0.0, lo_open=True)
+    # the table (up to 4 channels) and the widest row's kernel and temporaries (prefilter_rows),
+    # float64; the kernel spans 2 _REACH sigma_max / (v1 - v0) value ranges of `size` samples
+    check_memory(8 * (4 * n_sigma * size + 8 * (2 * _REACH * smax / (hi - lo) * size + 3)),
+                 f"sigma_max: a {n_sigma} x {size} table with sigma_max {smax:g} over the value "
+                 f"range [{lo:g}, {hi:g}]")
     edge = _edge(edge)
     c = as_colormap(colormap, (lo, hi), size)
     n = c.shape[0]

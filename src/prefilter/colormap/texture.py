@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.validation import as_float_array
+from prefilter.validation import as_float_array, check_scalar
 from prefilter.colormap.table import as_table
 from prefilter.errors import PrefilterError
 from prefilter.texture.mip import (
@@ -30,9 +30,21 @@ __all__ = ["NoiseStd", "filter_noise", "filter_texture", "footprint_stats", "mom
            "naive_texture", "texture_stats"]
 
 
+#: Largest magnitude of the values of :func:`moments_mip` (their squares must be finite).
+VALUE_MAX = 1e150
+
+
 def moments_mip(data) -> MipChain:
-    """Mip chain of ``E[f], E[f^2]`` of a scalar map ``(H, W)`` (section 4.2)."""
-    return moment_chain(data)
+    """Mip chain of ``E[f], E[f^2]`` of a scalar map ``(H, W)`` (section 4.2): values of magnitude
+    at most :data:`VALUE_MAX`, power-of-two sides."""
+    a = as_float_array(data, "data", ndim_min=2)
+    if a.ndim > 3 or a.shape[0] & (a.shape[0] - 1) or a.shape[1] & (a.shape[1] - 1):
+        raise PrefilterError(f"data: expected an (H, W) map with power-of-two sides (mips), got "
+                             f"shape {a.shape}")
+    if np.any(np.abs(a) > VALUE_MAX):
+        raise PrefilterError(f"data: expected values of magnitude <= {VALUE_MAX:g}, got max "
+                             f"{np.abs(a).max():.4g}")
+    return moment_chain(a)
 
 
 def footprint_stats(chain: MipChain, uv, dudv, *, anisotropic: bool = False,
@@ -178,9 +190,7 @@ class NoiseStd:
         if sigma is None:
             s2 = v[0]
         else:
-            s = float(as_float_array(sigma, "sigma"))
-            if s < 0.0:
-                raise PrefilterError(f"sigma: expected a noise std >= 0, got {sigma!r}")
+            s = check_scalar(sigma, "sigma", lo=0.0, hi=1e150)  # s^2 finite
             s2 = s * s
         self.variance = np.maximum(s2 - v, 0.0)  # within-footprint variance per level
 

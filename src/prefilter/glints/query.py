@@ -33,9 +33,30 @@ from prefilter.glints.pyramid import (RESAMPLE_Q_MIN, RESAMPLE_TRUNCATION, inter
 from prefilter.glints.store import PREFIX_MAX, GlintsMap, code_levels
 
 INTERP = ("trilinear", "resample")
+#: Footprint centres (texels) are used as given up to this magnitude, where float64 still
+#: resolves 2^-20 texel; beyond it (up to any finite value) they are reduced modulo the map size
+#: before any kernel: the map tiles, so the footprint is the same, and the kernels' integer texel
+#: indices stay far from int64 overflow (which begins near 9.2e18 texels).
+CENTER_EXACT = 2.0**32
 #: Query kernels run serially below this many items: their work per item is ~1-10 us, and on the
 #: shared 2-core machine waking the thread pool made a frame's few hundred queries cost ~20 ms.
 SERIAL_BELOW = 1 << 15
+
+
+def wrap_centers(center, shape) -> np.ndarray:
+    """Footprint centres ``(..., 2)`` (x, y in texels) of a periodic map of ``shape = (height,
+    width)`` texels: coordinates beyond :data:`CENTER_EXACT` in magnitude reduced modulo the
+    map's width (x) or height (y) in float64, the others returned unchanged."""
+    c = np.asarray(center, dtype=np.float64)
+    far = np.abs(c) >= CENTER_EXACT
+    if not np.any(far):
+        return c
+    period = np.array([float(shape[1]), float(shape[0])])
+    return np.where(far, np.mod(c, period), c)
+
+
+def _map_shape(gm) -> tuple[int, int]:
+    return gm.pyramid.height, gm.pyramid.width
 
 
 def _check_map(gm):
@@ -60,7 +81,7 @@ def weights(gm: GlintsMap, center, sigma_p, *, interp: str = "trilinear"):
     :func:`prefilter.glints.pyramid.resample_min_sigma` or at/above the top level)."""
     _check_map(gm)
     check_interp(interp)
-    c = as_float_array(center, "center", ndim_min=2, last_dim=2)
+    c = wrap_centers(as_float_array(center, "center", ndim_min=2, last_dim=2), _map_shape(gm))
     sp = as_sigma_p(sigma_p)
     if c.ndim != 2 or sp.shape != c.shape[:1]:
         raise PrefilterError(f"center, sigma_p: expected shapes (N, 2) and (N,), got {c.shape} "
@@ -160,7 +181,7 @@ def point_flat(gm: GlintsMap, center, sigma_p, s, *, interp: str = "trilinear",
     in place, factor values shared by the taps of a CP group); the rest as :func:`point`."""
     _check_map(gm)
     check_interp(interp)
-    c = np.ascontiguousarray(center, dtype=np.float64)
+    c = np.ascontiguousarray(wrap_centers(center, _map_shape(gm)))
     sp = np.ascontiguousarray(sigma_p, dtype=np.float64)
     q = np.ascontiguousarray(s, dtype=np.float64)
     out = np.zeros(sp.shape[0])
@@ -198,7 +219,7 @@ def _prepare(gm: GlintsMap, center, sigma_p, *points, interp="trilinear"):
     _check_map(gm)
     if interp is not None:
         check_interp(interp)
-    c = as_float_array(center, "center", ndim_min=1, last_dim=2)
+    c = wrap_centers(as_float_array(center, "center", ndim_min=1, last_dim=2), _map_shape(gm))
     sp = as_sigma_p(sigma_p)
     pts = [as_float_array(p, name, ndim_min=1, last_dim=2) for p, name in points]
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape,
@@ -362,7 +383,8 @@ def _group_ranks(gm):
 def point(gm: GlintsMap, center, sigma_p, s, *, interp: str = "trilinear",
           bilinear: bool = False) -> np.ndarray:
     """NDF value (density w.r.t. ``s``) of footprints ``(center (..., 2), sigma_p (...))`` at
-    ``s (..., 2)``; all broadcast. Zero outside the image support. ``interp``: see the module
+    ``s (..., 2)``; all broadcast. Zero outside the image support. Centres may take any finite
+    value (the map tiles; see :func:`wrap_centers`). ``interp``: see the module
     docstring; ``bilinear``: interpolate between NDF pixel centres (the stored images are pixel
     averages; the default returns the pixel's value, what :mod:`prefilter.glints.sample`
     samples)."""

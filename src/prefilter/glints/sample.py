@@ -39,7 +39,7 @@ from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_footprints, choose_te
                                    element_density, element_draw, element_gaussian,
                                    footprint_weights, footprint_window, pndf, wide_limit2)
 from prefilter.glints.pyramid import interp_weights
-from prefilter.glints.query import kernel_args, point
+from prefilter.glints.query import kernel_args, point, wrap_centers
 from prefilter.glints.store import GlintsMap
 from prefilter.glints.surface import GlintSurface, as_surface
 
@@ -125,12 +125,22 @@ def n_uniforms(gm: GlintsMap) -> int:
     return 3 + int(math.ceil(math.log2(max(gm.block, 1)))) if gm.block > 1 else 3
 
 
+def _period(surf) -> tuple[int, int]:
+    """``(height, width)`` in texels of the tiling of a GlintsMap or GlintSurface."""
+    if isinstance(surf, GlintsMap):
+        return surf.pyramid.height, surf.pyramid.width
+    if surf.normal_map is not None:
+        return surf.normal_map.shape[:2]
+    return surf.gm.pyramid.height, surf.gm.pyramid.width
+
+
 def _prep(gm, center, sigma_p):
     if not isinstance(gm, GlintsMap):
         raise PrefilterError(f"gm: expected a GlintsMap (prefilter.glints.load), got "
                              f"{type(gm).__name__}")
     c, sp, shape = as_footprints(center, sigma_p)
-    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    c = np.broadcast_to(wrap_centers(c, (gm.pyramid.height, gm.pyramid.width)), shape + (2,))
+    c = c.reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     idx, w = interp_weights(gm.pyramid, c, sp)
     arrs = kernel_args(gm)[0]
@@ -232,6 +242,8 @@ def sample_wi(gm, center, sigma_p, wo, rng=0, *, u=None):
     """
     wo = as_directions(wo, "wo")
     c, sp, shape = as_footprints(center, sigma_p, wo=wo.shape[:-1])
+    if isinstance(gm, (GlintSurface, GlintsMap)):  # others are refused below
+        c = wrap_centers(c, _period(gm))
     c = np.broadcast_to(c, shape + (2,))
     sp = np.broadcast_to(sp, shape)
     if isinstance(gm, GlintSurface):
@@ -282,7 +294,7 @@ def pdf_wi(surf, center, sigma_p, wo, wi) -> np.ndarray:
     wo = as_directions(wo, "wo")
     wi = as_directions(wi, "wi")
     c, sp, shape = as_footprints(center, sigma_p, wo=wo.shape[:-1], wi=wi.shape[:-1])
-    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
+    c = np.broadcast_to(wrap_centers(c, _period(surf)), shape + (2,)).reshape(-1, 2)
     sp = np.broadcast_to(sp, shape).reshape(-1)
     wo = np.broadcast_to(wo, shape + (3,)).reshape(-1, 3)
     wi = np.broadcast_to(wi, shape + (3,)).reshape(-1, 3)
@@ -335,6 +347,7 @@ def sample_s_direct(surf, center, sigma_p, rng=0, *, u=None):
     if surf.normal_map is None:
         raise PrefilterError("surf: direct sampling needs the normal map (surface(gm, normal_map))")
     c, sp, shape = as_footprints(center, sigma_p)
+    c = wrap_centers(c, _period(surf))
     cf = np.ascontiguousarray(np.broadcast_to(c, shape + (2,)).reshape(-1, 2))
     spf = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1), dtype=np.float64)
     if u is None:

@@ -21,7 +21,14 @@ import numpy as np
 from prefilter.errors import PrefilterError
 from prefilter.jit import njit_inline
 from prefilter.texture.fetch import CLAMP_V, pack_levels, trilinear
-from prefilter.validation import as_directions, as_float_array, as_positive_int, broadcast_batch
+from prefilter.validation import (
+    as_directions,
+    as_float_array,
+    as_positive_int,
+    broadcast_batch,
+    check_memory,
+    check_scalar,
+)
 
 #: World (y up) -> lat-long map coordinates of scene environment lights (rows: map x, y, z).
 ENV_FROM_WORLD = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
@@ -75,6 +82,7 @@ def env_from_image(image, scale: float = 1.0) -> EnvMap:
     are resampled bilinearly up to the next power-of-two height (``>= max(H, W / 2)``).
     """
     a = as_float_array(image, "image", ndim_min=2)
+    scale = check_scalar(scale, "scale", lo=0.0)
     if a.ndim == 2:
         a = a[..., None]
     if a.ndim != 3 or a.shape[2] not in (1, 2, 3, 4) or min(a.shape[:2]) < 1:
@@ -86,7 +94,12 @@ def env_from_image(image, scale: float = 1.0) -> EnvMap:
     rows = 1 << max(1, int(np.ceil(np.log2(max(h, w / 2.0)))))
     if (h, w) != (rows, 2 * rows):
         a = latlong_resample(a, rows)
-    return EnvMap(a * float(scale))
+    with np.errstate(over="ignore"):
+        a = a * scale
+    if not np.all(np.isfinite(a)):
+        raise PrefilterError(f"scale: expected finite radiance times the scale, got inf with "
+                             f"scale {scale:g}")
+    return EnvMap(a)
 
 
 class EnvMap:
@@ -282,8 +295,12 @@ class IrradianceMap:
 def procedural_env(size: int = 64) -> np.ndarray:
     """A test environment ``(size, 2 size, 3)``: sky gradient, warm sun, ground, window stripes.
 
-    Deterministic, with sharp features (sun, stripes) so that prefiltering matters.
+    Deterministic, with sharp features (sun, stripes) so that prefiltering matters. ``size``: an
+    integer >= 1 whose arrays fit :func:`prefilter.validation.check_memory`.
     """
+    size = as_positive_int(size, "size")
+    # directions, solid angles and about ten rgb temporaries, float64
+    check_memory(2 * size * size * 8 * 40, f"size: a procedural {size} x {2 * size} environment")
     d, _ = texel_directions(size, 2 * size)
     z = d[..., 2]
     sky = np.stack([0.3 + 0.2 * z, 0.45 + 0.25 * z, 0.8 + 0.2 * z], -1) * (z[..., None] > 0)

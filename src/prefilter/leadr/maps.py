@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from prefilter.validation import as_float_array, broadcast_batch
+from prefilter.validation import SLOPE_MAX, as_float_array, broadcast_batch, check_scalar
 from prefilter.errors import PrefilterError
 from prefilter.texture.mip import MipChain
 
@@ -30,14 +30,7 @@ MIN_BASE_ROUGHNESS = 1e-3
 
 
 def _positive_float(x, name: str, *, lo: float = 0.0, closed: bool = False) -> float:
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise PrefilterError(f"{name}: expected a number, got {x!r}") from None
-    if not np.isfinite(v) or v < lo or (v == lo and not closed):
-        op = ">=" if closed else ">"
-        raise PrefilterError(f"{name}: expected a finite number {op} {lo}, got {x!r}")
-    return v
+    return check_scalar(x, name, lo=lo, lo_open=not closed)
 
 
 def slopes_from_height(height, texel_size: float = 1.0) -> np.ndarray:
@@ -120,12 +113,14 @@ def moments(data, texel_size: float = 1.0, base_roughness: float = 0.0) -> Leadr
         E[xy]``.
     """
     r = _positive_float(base_roughness, "base_roughness", closed=True)
+    name = "data"
     if hasattr(data, "slopes") and hasattr(data, "height"):
-        s = as_float_array(data.slopes, "height_map.slopes", ndim_min=3, last_dim=2)
+        name = "height_map.slopes"
+        s = as_float_array(data.slopes, name, ndim_min=3, last_dim=2)
     else:
-        if np.ndim(data) == 3 and np.shape(data)[-1] == 3:
-            _not_colours(data, "data")
         a = as_float_array(data, "data", ndim_min=2)
+        if a.ndim == 3 and a.shape[-1] == 3:
+            _not_colours(data, "data")
         if a.ndim == 2 or (a.ndim == 3 and a.shape[2] == 1):
             s = slopes_from_height(a, texel_size)
         elif a.ndim == 3 and a.shape[2] == 2:
@@ -137,6 +132,13 @@ def moments(data, texel_size: float = 1.0, base_roughness: float = 0.0) -> Leadr
                 "data: expected heights (H, W), slopes (H, W, 2) or normals (H, W, 3), got "
                 f"{a.shape}"
             )
+    h, w = s.shape[:2]
+    if s.ndim != 3 or h & (h - 1) or w & (w - 1):
+        raise PrefilterError(f"{name}: expected power-of-two height and width (mips), got "
+                             f"{h} x {w}")
+    if np.any(np.abs(s) > SLOPE_MAX):  # the moments (squares) must stay finite
+        raise PrefilterError(f"{name}: expected slopes of magnitude <= {SLOPE_MAX:g}, got max "
+                             f"{np.abs(s).max():.4g}")
     x, y = s[..., 0], s[..., 1]
     chain = MipChain(np.stack([x, y, x * x, y * y, x * y], axis=-1))
     return LeadrMaps(chain, r)

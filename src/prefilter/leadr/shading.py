@@ -16,11 +16,14 @@ import numpy as np
 from scipy import optimize
 
 from prefilter.validation import (
+    SLOPE_MAX,
     as_directions,
     as_float_array,
     as_positive_int,
+    as_slope_covariance,
     as_unit_interval,
     broadcast_batch,
+    check_scalar,
 )
 from prefilter.errors import PrefilterError
 from prefilter.leadr.envmap import EnvMap, IrradianceMap, sh9_irradiance, texel_directions
@@ -32,6 +35,10 @@ from prefilter.microfacet.beckmann import beckmann_lambda, slope_pdf, smith_lamb
 #: Bias of the artificial micronormal towards the view, and its weight (supplemental 3.7).
 ARTIFICIAL_EPS = 1.01
 ARTIFICIAL_WEIGHT = 1e-5
+#: Largest grid spacing of :func:`gaussian_grid` (in standard deviations).
+SPACING_MAX = 10.0
+#: Largest ``|lod_bias|`` of :func:`env_specular` (more levels than any mip chain has).
+LOD_BIAS_MAX = 64.0
 #: Grid samples processed per chunk (memory bound of the vectorised integrators).
 CHUNK = 1 << 20
 
@@ -40,20 +47,16 @@ CHUNK = 1 << 20
 
 
 def _stats(mean, cov):
+    """Mean slopes of magnitude at most :data:`prefilter.validation.SLOPE_MAX` and positive
+    definite covariances of variances at most its square (finite determinants), the domain of
+    every integrator and kernel here (:func:`prefilter.validation.as_slope_covariance`;
+    ``leadr.shading_stats`` adds the base roughness that makes a map's covariance definite)."""
     mu = as_float_array(mean, "mean_slope", ndim_min=1, last_dim=2)
-    c = as_float_array(cov, "slope_cov", ndim_min=2)
-    if c.shape[-2:] != (2, 2):
-        raise PrefilterError(f"slope_cov: expected shape (..., 2, 2), got {c.shape}")
-    sxx, syy, sxy = c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
-    if np.any(np.abs(c[..., 0, 1] - c[..., 1, 0]) > 1e-9 * np.maximum(np.abs(sxx), np.abs(syy))):
-        raise PrefilterError("slope_cov: expected symmetric covariances, got different "
-                             "off-diagonal entries")
-    if np.any(sxx <= 0) or np.any(syy <= 0) or np.any(sxx * syy - sxy * sxy <= 0):
-        raise PrefilterError(
-            "slope_cov: expected positive definite covariances (leadr.shading_stats adds the "
-            "base roughness), got a singular or indefinite one"
-        )
-    return mu, sxx, syy, sxy
+    if np.any(np.abs(mu) > SLOPE_MAX):
+        raise PrefilterError(f"mean_slope: expected slopes of magnitude <= {SLOPE_MAX:g}, got "
+                             f"max {np.abs(mu).max():.4g}")
+    c = as_slope_covariance(cov, "slope_cov")
+    return mu, c[..., 0, 0], c[..., 1, 1], c[..., 0, 1]
 
 
 def _lambda(w, mu, sxx, syy, sxy, fit: str):
@@ -153,13 +156,8 @@ def gaussian_grid(n: int, spacing: float | None = None) -> tuple[np.ndarray, np.
     n = as_positive_int(n, "n", lo=1)
     if spacing is None:
         h = _grid_spacing(n) if n > 1 else 1.0
-    else:
-        try:
-            h = float(spacing)
-        except (TypeError, ValueError):
-            raise PrefilterError(f"spacing: expected a positive number, got {spacing!r}") from None
-        if not (np.isfinite(h) and h > 0):
-            raise PrefilterError(f"spacing: expected a positive number, got {spacing!r}")
+    else:  # nodes beyond ~38 std have weight 0 (exp underflows): larger spacings mean nothing
+        h = check_scalar(spacing, "spacing", lo=0.0, hi=SPACING_MAX, lo_open=True)
     p = (np.arange(n) - (n - 1) / 2) * h
     w = np.exp(-0.5 * p * p)
     return p, w / w.sum(), h
@@ -305,7 +303,7 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     if not isinstance(env, EnvMap):
         raise PrefilterError(f"env: expected a prefilter.leadr.EnvMap, got {type(env).__name__}")
     n = as_positive_int(n, "n")
-    lod_bias = float(as_float_array(lod_bias, "lod_bias"))
+    lod_bias = check_scalar(lod_bias, "lod_bias", lo=-LOD_BIAS_MAX, hi=LOD_BIAS_MAX)
     shape, wo, mu, cov, rot, f0a = _batch(wo, mean_slope, slope_cov, to_world, f0)
     if rot is None:
         rot = np.ascontiguousarray(np.broadcast_to(np.eye(3), (len(wo), 3, 3)))

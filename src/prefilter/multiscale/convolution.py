@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.validation import as_directions, as_float_array, as_positive_int, as_rng
+from prefilter.validation import (as_directions, as_float_array, as_positive_int, as_rng,
+                                  check_scalar)
 from prefilter.errors import PrefilterError
 from prefilter.multiscale.meso import _alpha_from_r, _mrl
 from prefilter.sphere.sampling import cosine_hemisphere, frame_from_normal, to_world
@@ -103,8 +104,8 @@ def convolve_samples(alpha_micro: float, alpha_meso: float, n: int, rng) -> np.n
     ``z`` to ``b`` (its azimuth is irrelevant since ``m'`` is isotropic). Some samples may fall
     below the horizon (``m_z < 0``). ``rng``: a Generator or an integer seed.
     """
-    a_mi = float(_as_alpha(alpha_micro, "alpha_micro"))
-    a_me = float(_as_alpha(alpha_meso, "alpha_meso"))
+    a_mi = check_scalar(alpha_micro, "alpha_micro", lo=0.0, hi=1.0)
+    a_me = check_scalar(alpha_meso, "alpha_meso", lo=0.0, hi=1.0)
     n = as_positive_int(n, "n")
     u = as_rng(rng).random((n, 4))
     return _convolve(a_mi, _meso_frames(a_me, u[:, 0:2]), u[:, 2:4])

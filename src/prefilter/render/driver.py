@@ -30,11 +30,11 @@ from prefilter.render.camera import gbuffer_at
 from prefilter.render.methods import RenderSettings, check_params, get_method
 from prefilter.render.scene import Scene, load_scene
 from prefilter.texture.procedural import slopes_to_normals
-from prefilter.validation import as_float_array, as_positive_int
+from prefilter.validation import as_float_array, as_positive_int, check_memory
 
-__all__ = ["footprint_lookup", "render", "render_positions", "render_samples", "row_rng",
-           "shading_frame", "stratified_offsets", "supported_lights", "surface_attributes",
-           "two_sided_frame", "with_settings"]
+__all__ = ["estimate_render_bytes", "footprint_lookup", "render", "render_positions",
+           "render_samples", "row_rng", "shading_frame", "stratified_offsets", "supported_lights",
+           "surface_attributes", "two_sided_frame", "with_settings"]
 
 
 def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0.0, 0.0),
@@ -82,8 +82,30 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
                               jitter=(float(j[0]), float(j[1])), progress=bool(progress),
                               chunk_samples=as_positive_int(chunk_samples, "chunk_samples"),
                               table=table, params=check_params(method, params))
+    cam = scene.camera
+    check_memory(estimate_render_bytes(cam.width, cam.height, settings.spp,
+                                       settings.chunk_samples),
+                 f"render: a {cam.width} x {cam.height} image at {settings.spp} spp")
     image = get_method(method)(scene, settings)
     return np.asarray(image, dtype=np.float32)
+
+
+#: Bytes per pixel of the whole-image arrays of a render (about four float64 rgb images: the
+#: driver's accumulator, a method's own, the float32 result and its temporaries).
+IMAGE_BYTES_PER_PIXEL = 96
+#: Bytes per shading sample in flight: G-buffer, frames, material and radiance arrays of one
+#: chunk (measured peaks 1.2-2.0 KB per sample with tracemalloc for ltc, ltc-multiscale and
+#: reference).
+SAMPLE_BYTES = 2048
+
+
+def estimate_render_bytes(width: int, height: int, spp: int, chunk_samples: int) -> int:
+    """The memory a render needs, in bytes: the whole-image arrays plus one chunk of samples
+    (:func:`render_positions` processes whole rows, at least one: ``max(chunk_samples,
+    width * spp)`` samples, at most the image's)."""
+    w, h, s = int(width), int(height), int(spp)
+    per_chunk = min(max(int(chunk_samples), w * s), w * h * s)
+    return IMAGE_BYTES_PER_PIXEL * w * h + SAMPLE_BYTES * per_chunk
 
 
 def with_settings(settings: RenderSettings, **changes) -> RenderSettings:
@@ -266,6 +288,10 @@ def shading_frame(frame_t, frame_b, frame_n, normal_ts=None):
     return ts, bs, ns
 
 
+#: Largest texture coordinate :func:`footprint_lookup` accepts (texture periods).
+UV_MAX = 2.0**40
+
+
 def footprint_lookup(chain, uv, dudv) -> np.ndarray:
     """``chain.lookup_footprint(uv, dudv)`` (isotropic trilinear) by a Numba kernel.
 
@@ -277,9 +303,14 @@ def footprint_lookup(chain, uv, dudv) -> np.ndarray:
     data, info = pack_mip(chain)
     c = chain.shape[2]
     uv = np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2)
+    j = np.ascontiguousarray(dudv, dtype=np.float64).reshape(-1, 2, 2)
+    # the kernel's texel indices are integers: keep it inside its domain (scenes give |uv| <=
+    # prefilter.render.scene.UV_SCALE_MAX)
+    if not (np.all(np.abs(uv) <= UV_MAX) and np.all(np.isfinite(j))):
+        raise PrefilterError(f"uv, dudv: expected finite texture coordinates of magnitude <= "
+                             f"{UV_MAX:g} and finite derivatives")
     out = np.empty((len(uv), c))
-    serial(footprint_lookup_kernel, len(uv))(data, info, c, uv,
-                            np.ascontiguousarray(dudv, dtype=np.float64).reshape(-1, 2, 2), out)
+    serial(footprint_lookup_kernel, len(uv))(data, info, c, uv, j, out)
     return out
 
 

@@ -29,11 +29,46 @@ __all__ = ["DirectionalLightSpec", "EnvironmentLight", "Material", "Plane", "Poi
 # -- field validation ------------------------------------------------------------------------------
 
 
+#: The domain of scene magnitudes (docs/scenes.md, "Ranges"), checked when a scene is loaded so
+#: that every kernel works well inside the float range: coordinates of points (camera, centres,
+#: vertices, light positions) and lengths (sizes, radii) at most :data:`EXTENT_MAX` in magnitude,
+#: texture repeats ``uv_scale`` at most :data:`UV_SCALE_MAX`, light values (radiance,
+#: intensity, irradiance, environment scale) at most :data:`LIGHT_MAX`, reflectances
+#: (``base_color``, ``f0``) at most :data:`REFLECTANCE_MAX`, height-map scales at most
+#: :data:`HEIGHT_SCALE_MAX`.
+EXTENT_MAX = 1e6
+UV_SCALE_MAX = 1e6
+LIGHT_MAX = 1e12
+REFLECTANCE_MAX = 1e3
+HEIGHT_SCALE_MAX = 1e4
+
+
 def _got(v: Any) -> str:
+    if isinstance(v, int) and not isinstance(v, bool) and abs(v) >= 10**30:
+        return f"an integer of {len(str(abs(v)))} digits"
+    if isinstance(v, list) and any(isinstance(x, int) and abs(x) >= 10**30 for x in v
+                                   if not isinstance(x, bool)):
+        return "[" + ", ".join(map(_got, v)) + "]"
     try:
         return json.dumps(v)
     except (TypeError, ValueError):
         return repr(v)
+
+
+def _is_number(v) -> bool:
+    """A JSON number that is a finite float (integers beyond the float range are not)."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return False
+    try:
+        return bool(np.isfinite(float(v)))
+    except OverflowError:  # a JSON integer such as 10**400
+        return False
+
+
+def _beyond(at: str, limit: float, given) -> PrefilterError:
+    """The error of a value outside the scene domain (docs/scenes.md, "Ranges")."""
+    return PrefilterError(f"{at}: expected magnitudes <= {limit:g} (the scene domain), got "
+                          f"{_got(given)}")
 
 
 class _Obj:
@@ -58,15 +93,19 @@ class _Obj:
             return default
         return self.d[key]
 
-    def number(self, key, default=..., lo=-np.inf, hi=np.inf, lo_open=False) -> float:
+    def number(self, key, default=..., lo=-np.inf, hi=np.inf, lo_open=False,
+               limit=np.inf) -> float:
+        """A finite number in ``[lo, hi]`` (``(lo, hi]`` if ``lo_open``) of magnitude at most
+        ``limit`` (the scene domain, reported on its own)."""
         v = self.raw(key, default)
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
-        ok = ok and (lo < v if lo_open else lo <= v) and v <= hi
+        ok = _is_number(v) and (lo < v if lo_open else lo <= v) and v <= hi
         if not ok:
             rng = "" if (lo, hi) == (-np.inf, np.inf) else (
                 f" in {'(' if lo_open else '['}{lo:g}, {hi:g}]" if hi < np.inf else
                 f" {'>' if lo_open else '>='} {lo:g}")
             raise PrefilterError(f"{self.at(key)}: expected a number{rng}, got {_got(v)}")
+        if abs(v) > limit:
+            raise _beyond(self.at(key), limit, v)
         return float(v)
 
     def integer(self, key, default=..., lo=1, hi=1 << 16) -> int:
@@ -76,27 +115,41 @@ class _Obj:
                 f"{self.at(key)}: expected an integer in [{lo}, {hi}], got {_got(v)}")
         return v
 
-    def vector(self, key, n, default=..., lo=-np.inf, scalar_ok=False) -> np.ndarray:
-        v = self.raw(key, default)
+    def vector(self, key, n, default=..., lo=-np.inf, scalar_ok=False,
+               limit=np.inf) -> np.ndarray:
+        """A list of ``n`` finite numbers ``>= lo`` of magnitude at most ``limit`` (the scene
+        domain, reported on its own); with ``scalar_ok`` one number stands for all ``n``."""
+        v = given = self.raw(key, default)
         if scalar_ok and isinstance(v, (int, float)) and not isinstance(v, bool):
             v = [v] * n
-        ok = (isinstance(v, (list, tuple)) and len(v) == n and all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x) and x >= lo
-            for x in v))
+        ok = (isinstance(v, (list, tuple)) and len(v) == n
+              and all(_is_number(x) and x >= lo for x in v))
         if not ok:
             what = f"a list of {n} numbers" + (f" >= {lo:g}" if lo > -np.inf else "")
             if scalar_ok:
                 what += " (or one number)"
-            raise PrefilterError(f"{self.at(key)}: expected {what}, got {_got(v)}")
+            raise PrefilterError(f"{self.at(key)}: expected {what}, got {_got(given)}")
+        if any(abs(x) > limit for x in v):
+            raise _beyond(self.at(key), limit, given)
         return np.array(v, dtype=np.float64)
 
     def unit(self, key, default=...) -> np.ndarray:
+        """A direction (any finite length >= 1e-12), normalised (components so large that the
+        squared length overflows are scaled by the largest one first)."""
         v = self.vector(key, 3, default)
-        n = np.linalg.norm(v)
+        with np.errstate(over="ignore"):
+            n = np.linalg.norm(v)
+        if not np.isfinite(n):  # |v|^2 overflowed
+            v = v / np.max(np.abs(v))
+            n = np.linalg.norm(v)
         if n < 1e-12:
             raise PrefilterError(
                 f"{self.at(key)}: expected a non-zero vector, got {_got(v.tolist())}")
         return v / n
+
+    def point(self, key, default=...) -> np.ndarray:
+        """A position: 3 numbers of magnitude at most :data:`EXTENT_MAX`."""
+        return self.vector(key, 3, default, limit=EXTENT_MAX)
 
     def choice(self, key, options, default=...) -> str:
         v = self.raw(key, default)
@@ -122,8 +175,8 @@ class TextureRef:
     """A texture by file path or procedural spec; :meth:`load` reads/generates it once (cached).
 
     ``spec``: the procedural spec or the file entry as written; ``where``: its field path (for
-    errors); ``path``: the resolved file (``None`` for procedural textures). Procedural parameter
-    names are checked when the scene is loaded, their values when the texture is first loaded.
+    errors); ``path``: the resolved file (``None`` for procedural textures). Procedural parameters
+    (names and values) are checked when the scene is loaded.
     """
 
     role: str
@@ -214,7 +267,7 @@ def _load_mip(*key):
 def _texture(value, path: str, role: str, base: Path) -> TextureRef:
     from prefilter.texture import HEIGHT_KINDS, NORMAL_KINDS
     from prefilter.texture.io import IMAGE_SUFFIXES
-    from prefilter.texture.procedural import PARAMS
+    from prefilter.texture.procedural import PARAMS, check_params
 
     if isinstance(value, str):
         value = {"path": value}
@@ -224,9 +277,15 @@ def _texture(value, path: str, role: str, base: Path) -> TextureRef:
         allowed = ("procedural", "size", "seed") + PARAMS[kind] + (
             ("scale",) if role == "height_map" else ())
         o = _Obj(value, path, allowed)
-        o.integer("size", 512, lo=4, hi=8192)
+        size = o.integer("size", 512, lo=4, hi=8192)
         o.integer("seed", 0, lo=0, hi=2**63 - 1)
-        scale = o.number("scale", 1.0, lo=0.0) if role == "height_map" else 1.0
+        try:  # the values too, before any render (the generators check them the same way)
+            check_params(kind, size, **{k: v for k, v in value.items()
+                                        if k not in ("procedural", "size", "seed", "scale")})
+        except PrefilterError as exc:
+            raise PrefilterError(f"{path}.{exc}") from None
+        scale = (o.number("scale", 1.0, lo=0.0, limit=HEIGHT_SCALE_MAX) if role == "height_map"
+                 else 1.0)
         spec = {k: v for k, v in value.items() if k != "scale"}
         return TextureRef(role, spec, path, None, scale=scale)
     o = _Obj(value, path, ("path", "convention", "srgb", "scale"))
@@ -243,7 +302,8 @@ def _texture(value, path: str, role: str, base: Path) -> TextureRef:
     srgb = o.raw("srgb", role in ("color_map", "light_texture") and full.suffix.lower() == ".png")
     if not isinstance(srgb, bool):
         raise PrefilterError(f"{o.at('srgb')}: expected true or false, got {_got(srgb)}")
-    scale = o.number("scale", 1.0, lo=0.0)
+    scale = o.number("scale", 1.0, lo=0.0,
+                     limit=HEIGHT_SCALE_MAX if role == "height_map" else LIGHT_MAX)
     return TextureRef(role, value, path, full, conv, srgb, scale)
 
 
@@ -371,7 +431,7 @@ class Scene:
 
 def _camera(v, path) -> Camera:
     o = _Obj(v, path, ("origin", "target", "up", "fov", "width", "height"))
-    origin, target = o.vector("origin", 3), o.vector("target", 3)
+    origin, target = o.point("origin"), o.point("target")
     up = o.unit("up", [0.0, 1.0, 0.0])
     if np.linalg.norm(target - origin) < 1e-9:
         raise PrefilterError(f"{o.at('target')}: expected a point different from the origin")
@@ -392,8 +452,10 @@ def _material(v, path, base) -> Material:
     ay = o.number("alpha_y", ax if "alpha_x" in o.d else a, lo=0.001, hi=1.0)
     tex = {k: _texture(o.d[k], o.at(k), k, base) if o.d.get(k) is not None else None
            for k in ("normal_map", "height_map", "color_map")}
-    return Material(ax, ay, o.vector("base_color", 3, [0.0] * 3, lo=0.0, scalar_ok=True),
-                    o.vector("f0", 3, [1.0] * 3, lo=0.0, scalar_ok=True), **tex)
+    return Material(ax, ay, o.vector("base_color", 3, [0.0] * 3, lo=0.0, scalar_ok=True,
+                                     limit=REFLECTANCE_MAX),
+                    o.vector("f0", 3, [1.0] * 3, lo=0.0, scalar_ok=True, limit=REFLECTANCE_MAX),
+                    **tex)
 
 
 def _object(v, path, base):
@@ -406,12 +468,12 @@ def _object(v, path, base):
         t = t - (t @ n) * n
         if np.linalg.norm(t) < 1e-6:
             raise PrefilterError(f"{o.at('tangent')}: expected a vector not parallel to the normal")
-        size = o.vector("size", 2, [1.0, 1.0], scalar_ok=True)
+        size = o.vector("size", 2, [1.0, 1.0], scalar_ok=True, limit=EXTENT_MAX)
         if np.any(size <= 0):
             raise PrefilterError(
                 f"{o.at('size')}: expected positive sizes, got {_got(size.tolist())}")
-        return Plane(o.vector("center", 3, [0.0] * 3), n, t / np.linalg.norm(t), size,
-                     o.vector("uv_scale", 2, [1.0, 1.0], scalar_ok=True),
+        return Plane(o.point("center", [0.0] * 3), n, t / np.linalg.norm(t), size,
+                     o.vector("uv_scale", 2, [1.0, 1.0], scalar_ok=True, limit=UV_SCALE_MAX),
                      _material(o.raw("material", {}), o.at("material"), base))
     o = _Obj(v, path, ("type", "center", "radius", "pole", "axis_x", "uv_scale", "material"))
     pole = o.unit("pole", [0.0, 1.0, 0.0])
@@ -419,9 +481,10 @@ def _object(v, path, base):
     ax = ax - (ax @ pole) * pole
     if np.linalg.norm(ax) < 1e-6:
         raise PrefilterError(f"{o.at('axis_x')}: expected a vector not parallel to the pole")
-    return Sphere(o.vector("center", 3, [0.0] * 3), o.number("radius", lo=0.0, lo_open=True),
-                  pole, ax / np.linalg.norm(ax), o.vector("uv_scale", 2, [1.0, 1.0],
-                                                          scalar_ok=True),
+    return Sphere(o.point("center", [0.0] * 3),
+                  o.number("radius", lo=0.0, lo_open=True, limit=EXTENT_MAX),
+                  pole, ax / np.linalg.norm(ax),
+                  o.vector("uv_scale", 2, [1.0, 1.0], scalar_ok=True, limit=UV_SCALE_MAX),
                   _material(o.raw("material", {}), o.at("material"), base))
 
 
@@ -435,9 +498,9 @@ def _light(v, path, base):
             raise PrefilterError(f"{o.at('vertices')}: expected a list of 4 corners [x, y, z], "
                                  f"got {_got(verts)}")
         vo = _Obj({str(i): c for i, c in enumerate(verts)}, o.at("vertices"), tuple("0123"))
-        vs = np.stack([vo.vector(str(i), 3) for i in range(4)])
+        vs = np.stack([vo.point(str(i)) for i in range(4)])
         tex = o.raw("texture", None)
-        spec = QuadLightSpec(vs, o.vector("radiance", 3, lo=0.0, scalar_ok=True),
+        spec = QuadLightSpec(vs, o.vector("radiance", 3, lo=0.0, scalar_ok=True, limit=LIGHT_MAX),
                              None if tex is None else
                              _texture(tex, o.at("texture"), "light_texture", base))
         try:  # planarity / convexity checks live with the shading light type
@@ -449,15 +512,16 @@ def _light(v, path, base):
         return spec
     if kind == "point":
         o = _Obj(v, path, ("type", "position", "intensity"))
-        return PointLightSpec(o.vector("position", 3),
-                              o.vector("intensity", 3, lo=0.0, scalar_ok=True))
+        return PointLightSpec(o.point("position"),
+                              o.vector("intensity", 3, lo=0.0, scalar_ok=True, limit=LIGHT_MAX))
     if kind == "directional":
         o = _Obj(v, path, ("type", "direction", "irradiance"))
         return DirectionalLightSpec(o.unit("direction"),
-                                    o.vector("irradiance", 3, lo=0.0, scalar_ok=True))
+                                    o.vector("irradiance", 3, lo=0.0, scalar_ok=True,
+                                             limit=LIGHT_MAX))
     o = _Obj(v, path, ("type", "image", "scale"))
     return EnvironmentLight(_texture(o.raw("image"), o.at("image"), "environment", base),
-                            o.number("scale", 1.0, lo=0.0))
+                            o.number("scale", 1.0, lo=0.0, limit=LIGHT_MAX))
 
 
 def _json_int(text: str) -> int:

@@ -23,7 +23,13 @@ from typing import NamedTuple
 
 import numpy as np
 
-from prefilter.validation import as_float_array, as_positive_int, as_rng
+from prefilter.validation import (
+    as_float_array,
+    as_positive_int,
+    as_rng,
+    check_memory,
+    check_scalar,
+)
 from prefilter.errors import PrefilterError
 
 __all__ = [
@@ -31,6 +37,7 @@ __all__ = [
     "NORMAL_KINDS",
     "PARAMS",
     "HEIGHT_KINDS",
+    "check_params",
     "height_map",
     "normal_map",
     "noise",
@@ -50,16 +57,27 @@ class HeightMap(NamedTuple):
 # -- validation helpers -----------------------------------------------------------------------
 
 
+#: Upper bounds of the procedural parameters without a natural one (lengths in texels, depths,
+#: standard deviations): beyond them the spectra and slopes leave the float range.
+LENGTH_MAX = 1e6
+#: Largest rms slope (a normal 84 degrees from the surface normal on average).
+RMS_SLOPE_MAX = 10.0
+#: Most scratches of one ``scratches`` map (one vectorised pass each).
+SCRATCHES_MAX = 100_000
+#: Bytes per texel of the generators (white noise, its complex spectrum, the height, slope and
+#: normal arrays and their temporaries) for the memory estimate.
+BYTES_PER_TEXEL = 160
+
+
 def _positive(x, name: str, *, lo: float = 0.0, hi: float = np.inf, closed: bool = False) -> float:
-    try:
-        v = float(x)
-    except (TypeError, ValueError):
-        raise PrefilterError(f"{name}: expected a number, got {x!r}") from None
-    ok = (lo <= v if closed else lo < v) and v <= hi and np.isfinite(v)
-    if not ok:
-        lb = "[" if closed else "("
-        raise PrefilterError(f"{name}: expected a number in {lb}{lo}, {hi}], got {x!r}")
-    return v
+    return check_scalar(x, name, lo=lo, hi=hi, lo_open=not closed)
+
+
+def _size(size) -> int:
+    """The side of a procedural map (>= 4 texels) whose arrays fit the memory budget."""
+    n = as_positive_int(size, "size", lo=4)
+    check_memory(BYTES_PER_TEXEL * n * n, f"size: a procedural {n} x {n} map")
+    return n
 
 
 def _check_params(kind: str, params: dict, allowed: dict) -> dict:
@@ -76,6 +94,9 @@ def _slope_cov(cov, name: str = "cov") -> np.ndarray:
     c = as_float_array(cov, name)
     if c.shape != (2, 2) or not np.allclose(c, c.T, rtol=0, atol=1e-12):
         raise PrefilterError(f"{name}: expected a symmetric 2x2 matrix, got {c.tolist()!r}")
+    if np.any(np.abs(c) > RMS_SLOPE_MAX**2):
+        raise PrefilterError(f"{name}: expected entries of magnitude <= {RMS_SLOPE_MAX**2:g} "
+                             f"(rms slope {RMS_SLOPE_MAX:g}), got {c.tolist()!r}")
     if np.linalg.eigvalsh(c)[0] <= 0.0:
         raise PrefilterError(f"{name}: expected a positive definite covariance, got {c.tolist()!r}")
     return c
@@ -159,27 +180,44 @@ _BRUSHED = {"rms_slope": 0.2, "length": 64.0, "width": 1.5}
 HEIGHT_KINDS = ("gaussian", "anisotropic", "brushed")
 
 
-def _height(kind: str, n: int, rng: np.random.Generator, params: dict) -> HeightMap:
+#: Longest correlation length of a Gaussian surface, in map sizes: at ``corr_length / size = 8``
+#: the slope spectrum of the torus underflows (slopes would be NaN); at 4 it is 1e-69.
+CORR_LENGTH_MAX = 4
+
+
+def _corr_length(x, n: int, name: str = "corr_length") -> float:
+    """A correlation length in (0.5, CORR_LENGTH_MAX * n] texels."""
+    return _positive(x, name, lo=0.5, hi=float(CORR_LENGTH_MAX * n))
+
+
+def _height_values(kind: str, n: int, params: dict) -> tuple[np.ndarray, float]:
+    """The slope covariance and correlation length of a Gaussian height kind, its parameters
+    checked."""
     if kind == "gaussian":
         p = _check_params(kind, params, _GAUSSIAN)
-        a = _positive(p["rms_slope"], "rms_slope", hi=10.0)
-        cov = np.eye(2) * a * a / 2.0
-        return _gaussian_surface(n, rng, cov, _positive(p["corr_length"], "corr_length", lo=0.5))
+        a = _positive(p["rms_slope"], "rms_slope", hi=RMS_SLOPE_MAX)
+        return np.eye(2) * a * a / 2.0, _corr_length(p["corr_length"], n)
     if kind == "anisotropic":
         p = _check_params(kind, params, _ANISO)
-        cov = _slope_cov(p["cov"])
-        return _gaussian_surface(n, rng, cov, _positive(p["corr_length"], "corr_length", lo=0.5))
+        return _slope_cov(p["cov"]), _corr_length(p["corr_length"], n)
     if kind == "brushed":
         # Grooves along x: long correlation along x, short across y. Slope covariance is
         # diag(l_y^2, l_x^2) * const (Sigma = 2 sigma_h^2 Q with Q = diag(1/l_x^2, 1/l_y^2)).
         p = _check_params(kind, params, _BRUSHED)
-        a = _positive(p["rms_slope"], "rms_slope", hi=10.0)
-        lx = _positive(p["length"], "length", lo=0.5)
-        ly = _positive(p["width"], "width", lo=0.5)
+        a = _positive(p["rms_slope"], "rms_slope", hi=RMS_SLOPE_MAX)
+        lx = _positive(p["length"], "length", lo=0.5, hi=LENGTH_MAX)
+        ly = _positive(p["width"], "width", lo=0.5, hi=LENGTH_MAX)
+        if min(lx, ly) > CORR_LENGTH_MAX * n:  # as _corr_length, for one of the two axes
+            raise PrefilterError(f"width: expected length or width <= {CORR_LENGTH_MAX * n} "
+                                 f"({CORR_LENGTH_MAX} x size), got length {lx:g} and width "
+                                 f"{ly:g}")
         w = np.array([ly * ly, lx * lx])
-        cov = np.diag(a * a * w / w.sum())
-        return _gaussian_surface(n, rng, cov, np.sqrt(lx * ly))
+        return np.diag(a * a * w / w.sum()), float(np.sqrt(lx * ly))
     raise PrefilterError(f"kind: expected one of {', '.join(HEIGHT_KINDS)}, got {kind!r}")
+
+
+def _height(kind: str, n: int, rng: np.random.Generator, params: dict) -> HeightMap:
+    return _gaussian_surface(n, rng, *_height_values(kind, n, params))
 
 
 def height_map(kind: str = "gaussian", size: int = 512, seed=0, **params) -> HeightMap:
@@ -188,12 +226,14 @@ def height_map(kind: str = "gaussian", size: int = 512, seed=0, **params) -> Hei
     Parameters
     ----------
     kind : {"gaussian", "anisotropic", "brushed"}
-        ``gaussian``: isotropic, ``rms_slope`` (= Beckmann alpha, default 0.3) and ``corr_length``
-        (texels, default 8). ``anisotropic``: slope covariance ``cov`` (2x2, default
-        ``diag(0.09, 0.01)``) and geometric-mean ``corr_length``. ``brushed``: ``rms_slope``,
-        ``length`` (correlation length along x, default 64) and ``width`` (across y, default 1.5).
+        ``gaussian``: isotropic, ``rms_slope`` (= Beckmann alpha, default 0.3, at most
+        :data:`RMS_SLOPE_MAX`) and ``corr_length`` (texels, default 8, in (0.5, 4 size]).
+        ``anisotropic``: slope covariance ``cov`` (2x2, default ``diag(0.09, 0.01)``, entries
+        at most ``RMS_SLOPE_MAX^2``) and geometric-mean ``corr_length``. ``brushed``:
+        ``rms_slope``, ``length`` (correlation length along x, default 64) and ``width`` (across
+        y, default 1.5), each in (0.5, :data:`LENGTH_MAX`], the shorter at most ``4 size``.
     size : int
-        Side in texels.
+        Side in texels (its arrays must fit :func:`prefilter.validation.check_memory`).
     seed : int or numpy.random.Generator
 
     Returns
@@ -202,7 +242,7 @@ def height_map(kind: str = "gaussian", size: int = 512, seed=0, **params) -> Hei
         ``height (size, size)`` in texel units (row = y, column = x) and
         ``slopes (size, size, 2)`` = ``(dh/dx, dh/dy)``, float64.
     """
-    n = as_positive_int(size, "size", lo=4)
+    n = _size(size)
     return _height(kind, n, as_rng(seed, "seed"), dict(params))
 
 
@@ -218,17 +258,24 @@ PARAMS = {k: tuple(p) for k, p in (("gaussian", _GAUSSIAN), ("anisotropic", _ANI
                                    ("flakes", _FLAKES), ("noise", _NOISE))}
 
 
+def _scratch_values(n: int, p: dict) -> tuple[int, float, float, float, float]:
+    """``count, width, depth, length`` (texels) and ``base_rms_slope`` of a scratches map."""
+    count = as_positive_int(p["count"], "count", lo=0, hi=SCRATCHES_MAX)
+    w = _positive(p["width"], "width", lo=0.1, hi=float(n))
+    depth = _positive(p["depth"], "depth", lo=0.0, closed=True, hi=LENGTH_MAX)
+    length = _positive(p["length"], "length", hi=1.0) * n
+    base = _positive(p["base_rms_slope"], "base_rms_slope", lo=0.0, closed=True,
+                     hi=RMS_SLOPE_MAX)
+    return count, w, depth, length, base
+
+
 def _scratch_slopes(n: int, rng: np.random.Generator, p: dict) -> np.ndarray:
     """Slopes of a sum of Gaussian-profile grooves along random segments (periodic).
 
     A groove ``h = -depth exp(-d^2 / (2 width^2))`` with ``d`` the distance to the segment has the
     gradient ``depth exp(-d^2 / (2 width^2)) (p - c) / width^2`` (``c`` the closest point).
     """
-    count = as_positive_int(p["count"], "count", lo=0)
-    w = _positive(p["width"], "width", lo=0.1)
-    depth = _positive(p["depth"], "depth", lo=0.0, closed=True)
-    length = _positive(p["length"], "length", hi=1.0) * n
-    base = _positive(p["base_rms_slope"], "base_rms_slope", lo=0.0, closed=True, hi=10.0)
+    count, w, depth, length, base = _scratch_values(n, p)
     # Draw all scratch parameters up front so the stream does not depend on the loop below.
     centre = rng.uniform(0.0, n, (count, 2))
     angle = rng.uniform(0.0, np.pi, count)
@@ -255,10 +302,16 @@ def _scratch_slopes(n: int, rng: np.random.Generator, p: dict) -> np.ndarray:
     return slopes
 
 
+def _flake_values(n: int, p: dict) -> tuple[float, float]:
+    """``flake_size`` (texels; larger than the map: one flake) and ``rms_slope`` of a flakes
+    map."""
+    return (_positive(p["flake_size"], "flake_size", lo=1.0, hi=LENGTH_MAX),
+            _positive(p["rms_slope"], "rms_slope", lo=0.0, closed=True, hi=RMS_SLOPE_MAX))
+
+
 def _flake_slopes(n: int, rng: np.random.Generator, p: dict) -> np.ndarray:
     """Voronoi cells (one jittered site per grid cell), each with a Gaussian random slope."""
-    cell = _positive(p["flake_size"], "flake_size", lo=1.0, hi=n)
-    a = _positive(p["rms_slope"], "rms_slope", lo=0.0, closed=True, hi=10.0)
+    cell, a = _flake_values(n, p)
     g = max(1, int(round(n / cell)))
     cs = n / g  # cell size adjusted so the grid tiles the texture exactly
     site = rng.uniform(0.0, 1.0, (g, g, 2))
@@ -291,8 +344,9 @@ def normal_map(kind: str = "gaussian", size: int = 512, seed=0, **params) -> np.
         ``scratches``: ``count`` (60) random line grooves of Gaussian profile, ``width`` (texels,
         1), ``depth`` (texels, 1), ``length`` (max length as a fraction of the texture, 0.3) on a
         flat base (or a Gaussian base with ``base_rms_slope`` > 0).
-        ``flakes``: Voronoi cells of mean diameter ``flake_size`` (texels, 8), each flat with a
-        random slope drawn from ``N(0, rms_slope^2 / 2 I)`` (so ``E|s|^2 = rms_slope^2``).
+        ``flakes``: Voronoi cells of mean diameter ``flake_size`` (texels, 8; one cell when it
+        exceeds ``size``), each flat with a random slope drawn from ``N(0, rms_slope^2 / 2 I)``
+        (so ``E|s|^2 = rms_slope^2``).
     size : int
         Side in texels (row index = v = y, column index = u = x).
     seed : int or numpy.random.Generator
@@ -302,7 +356,7 @@ def normal_map(kind: str = "gaussian", size: int = 512, seed=0, **params) -> np.
     numpy.ndarray
         ``(size, size, 3)`` float64 unit vectors.
     """
-    n = as_positive_int(size, "size", lo=4)
+    n = _size(size)
     rng = as_rng(seed, "seed")
     params = dict(params)
     if kind in HEIGHT_KINDS:
@@ -326,6 +380,11 @@ def _noise_power(n: int, corr_length: float) -> np.ndarray:
     return p / p.sum()
 
 
+def _noise_values(corr_length, sigma) -> tuple[float, float]:
+    return (_positive(corr_length, "corr_length", lo=0.25, hi=LENGTH_MAX),
+            _positive(sigma, "sigma", lo=0.0, closed=True, hi=LENGTH_MAX))
+
+
 def noise(size: int = 512, seed=0, corr_length: float = 4.0, sigma: float = 1.0) -> np.ndarray:
     """Periodic zero-mean Gaussian noise ``(size, size)`` with variance ``sigma^2``.
 
@@ -333,10 +392,9 @@ def noise(size: int = 512, seed=0, corr_length: float = 4.0, sigma: float = 1.0)
     sampled on the torus; the variance of every texel of every box-filtered mip level is given by
     :func:`noise_level_variance`.
     """
-    n = as_positive_int(size, "size", lo=4)
+    n = _size(size)
     rng = as_rng(seed, "seed")
-    l = _positive(corr_length, "corr_length", lo=0.25)
-    s = _positive(sigma, "sigma", lo=0.0, closed=True)
+    l, s = _noise_values(corr_length, sigma)
     # fft of unit white noise has E|W|^2 = N; with p summing to 1, ifft gives unit variance.
     amp = np.sqrt(_noise_power(n, l) * n * n)
     return s * np.fft.ifft2(np.fft.fft2(rng.standard_normal((n, n))) * amp).real
@@ -373,11 +431,10 @@ def noise_level_variance(size: int = 512, corr_length: float = 4.0, sigma: float
     numpy.ndarray
         ``(log2(size) + 1,)`` variances, level 0 first (``Var_0 = sigma^2``).
     """
-    n = as_positive_int(size, "size", lo=4)
+    n = _size(size)
     if n & (n - 1):
         raise PrefilterError(f"size: expected a power of two for mip levels, got {n}")
-    l = _positive(corr_length, "corr_length", lo=0.25)
-    s = _positive(sigma, "sigma", lo=0.0, closed=True)
+    l, s = _noise_values(corr_length, sigma)
     p = _noise_power(n, l)
     k = 2.0 * np.pi * np.fft.fftfreq(n)
     out = []
@@ -387,3 +444,23 @@ def noise_level_variance(size: int = 512, corr_length: float = 4.0, sigma: float
             b = np.where(k == 0.0, 1.0, np.sin(m * k / 2.0) / (m * np.sin(k / 2.0)))
         out.append(s * s * np.sum(p * (b[None, :] * b[:, None]) ** 2))
     return np.array(out)
+
+
+def check_params(kind: str, size: int, **params) -> None:
+    """Check a procedural texture's parameters without generating it (a PrefilterError naming
+    the parameter, as the generators give): ``kind`` one of :data:`NORMAL_KINDS`,
+    :data:`HEIGHT_KINDS` or ``"noise"``; ``size`` the side in texels."""
+    n = _size(size)
+    params = dict(params)
+    if kind in HEIGHT_KINDS:
+        _height_values(kind, n, params)
+    elif kind == "scratches":
+        _scratch_values(n, _check_params(kind, params, _SCRATCHES))
+    elif kind == "flakes":
+        _flake_values(n, _check_params(kind, params, _FLAKES))
+    elif kind == "noise":
+        p = _check_params(kind, params, _NOISE)
+        _noise_values(p["corr_length"], p["sigma"])
+    else:
+        raise PrefilterError(f"kind: expected one of {', '.join(NORMAL_KINDS + ('noise',))}, "
+                             f"got {kind!r}")
