@@ -1,0 +1,379 @@
+"""Triangle meshes: loading (OBJ, PLY, glTF 2.0 through trimesh), tangents, Embree intersection
+and ray-differential footprints.
+
+Conventions (``docs/meshes.md``):
+
+- Texture coordinates follow the renderer's texture space (``v`` down the image rows, row 0 at
+  ``v = 0``): trimesh reads every format into the OBJ convention (``v`` up the image, glTF
+  flipped on load), so ``uv = (u_file, 1 - v_obj)``; glTF coordinates come out as stored.
+- Vertex normals come from the file where it has them, else trimesh's area-weighted face
+  normals. The G-buffer normal of a mesh hit is the interpolated vertex normal (smooth shading).
+- Tangents ``(V, 4) = (t, w)`` are computed from the UVs per vertex the way MikkTSpace does
+  (:func:`vertex_tangents`); the bitangent is ``b = w (n x t)``, pointing along ``+v``, so
+  ``t x b = w n``: the frame is right-handed (``w = 1``) unless the UVs are mirrored.
+- Footprints: Igehy 1999 ray differentials on the triangle's plane (its first-order surface),
+  UV Jacobian from the barycentric gradients (:func:`triangle_differentials`).
+
+Embree (``embreex``, through :class:`trimesh.ray.ray_pyembree.RayMeshIntersector`) finds the
+nearest triangle in float32; the hit is then recomputed in float64 on that triangle
+(Moeller-Trumbore), so a mesh plane and the analytic plane agree to rounding.
+"""
+
+from __future__ import annotations
+
+import functools
+import weakref
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from prefilter.errors import PrefilterError
+
+__all__ = ["MESH_SUFFIXES", "Mesh", "MeshData", "intersect_mesh", "load_mesh", "trace_objects",
+           "transform_matrix", "triangle_differentials", "vertex_tangents"]
+
+MESH_SUFFIXES = (".obj", ".ply", ".gltf", ".glb")
+_EPS = 1e-9  # smallest ray parameter of a hit (as the analytic kernels)
+
+
+@dataclass(frozen=True, eq=False)
+class MeshData:
+    """World-space triangles: ``vertices (V, 3)``, ``faces (F, 3)`` int64, ``normals (V, 3)``
+    unit, ``uv (V, 2)`` (renderer texture space) or ``None``, ``tangents (V, 4)`` (unit ``t``,
+    handedness ``w = +-1``; from an arbitrary ``t`` orthogonal to ``n`` when there are no UVs)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    uv: np.ndarray | None
+    tangents: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A scene object: the triangles of ``file`` under ``transform (4, 4)`` with ``material``
+    (a :class:`prefilter.render.scene.Material`); ``data`` holds the world-space arrays."""
+
+    file: Path
+    transform: np.ndarray
+    material: object
+    data: MeshData
+    type: str = "mesh"
+
+
+# -- loading ---------------------------------------------------------------------------------------
+
+
+def transform_matrix(translate=(0.0, 0.0, 0.0), rotate=(0.0, 0.0, 0.0), scale=1.0) -> np.ndarray:
+    """``(4, 4)`` matrix ``T R S``: scale, then rotate about x, y, z (degrees, in that order),
+    then translate."""
+    rx, ry, rz = np.radians(np.asarray(rotate, dtype=np.float64))
+
+    def rot(a, i, j):
+        m = np.eye(3)
+        m[i, i] = m[j, j] = np.cos(a)
+        m[i, j], m[j, i] = -np.sin(a), np.sin(a)
+        return m
+
+    m = np.eye(4)
+    m[:3, :3] = rot(rz, 0, 1) @ rot(ry, 2, 0) @ rot(rx, 1, 2) @ np.diag(
+        np.broadcast_to(np.asarray(scale, dtype=np.float64), 3))
+    m[:3, 3] = translate
+    return m
+
+
+def _read(path: Path):
+    """``(vertices, faces, normals, uv or None)`` of a mesh file (trimesh; uv in the OBJ
+    convention). A glTF scene's meshes are placed by their node transforms and concatenated."""
+    import trimesh
+
+    try:
+        # force="mesh" would drop the file's vertex normals: concatenate here instead
+        loaded = trimesh.load(str(path), process=False)
+        parts = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
+    except Exception as exc:  # trimesh raises many types for a bad file
+        raise PrefilterError(f"{path}: unreadable mesh file ({type(exc).__name__}: {exc})") \
+            from None
+    parts = [m for m in parts if isinstance(m, trimesh.Trimesh) and len(m.faces)]
+    if not parts:
+        raise PrefilterError(f"{path}: expected a mesh with triangles, got none")
+    vs, fs, ns, uvs, offset = [], [], [], [], 0
+    for m in parts:
+        v = np.asarray(m.vertices, dtype=np.float64)
+        vs.append(v)
+        fs.append(np.asarray(m.faces, dtype=np.int64) + offset)
+        ns.append(np.asarray(m.vertex_normals, dtype=np.float64))
+        uv = getattr(m.visual, "uv", None)
+        uvs.append(None if uv is None or len(uv) != len(v) else np.asarray(uv, np.float64))
+        offset += len(v)
+    uv = None if any(u is None for u in uvs) else np.concatenate(uvs)
+    return np.concatenate(vs), np.concatenate(fs), np.concatenate(ns), uv
+
+
+def _unit(a, fallback=None):
+    n = np.linalg.norm(a, axis=-1, keepdims=True)
+    out = a / np.maximum(n, 1e-300)
+    if fallback is not None:
+        out = np.where(n > 1e-20, out, fallback)
+    return out
+
+
+def _any_perpendicular(n):
+    """Unit vectors ``(..., 3)`` orthogonal to unit ``n (..., 3)`` (Duff et al. 2017)."""
+    s = np.where(n[..., 2] >= 0.0, 1.0, -1.0)
+    a = -1.0 / (s + n[..., 2])
+    b = n[..., 0] * n[..., 1] * a
+    return np.stack([1.0 + s * n[..., 0] ** 2 * a, s * b, -s * n[..., 0]], -1)
+
+
+def vertex_tangents(vertices, faces, normals, uv) -> np.ndarray:
+    """Per-vertex tangents ``(V, 4) = (t, w)`` from UVs, the MikkTSpace way.
+
+    Per triangle the UV derivatives ``dp/du, dp/dv`` (Lengyel 2001: solve
+    ``[e1 e2] = [dp/du dp/dv] [duv1 duv2]``); each vertex accumulates the unit ``dp/du`` and
+    ``dp/dv`` of its triangles weighted by the corner angle (as MikkTSpace), then ``t`` is
+    Gram-Schmidt orthogonalised against the vertex normal and ``w = sign((n x t) . dp/dv)``.
+    Triangles with degenerate UVs add nothing; vertices left without a tangent get one
+    orthogonal to ``n`` (and ``w = 1``). ``uv`` in the renderer's texture space: ``b = w n x t``
+    points along ``+v``.
+    """
+    v, f = np.asarray(vertices, float), np.asarray(faces, np.int64)
+    p0, p1, p2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    t0, t1, t2 = uv[f[:, 0]], uv[f[:, 1]], uv[f[:, 2]]
+    e1, e2 = p1 - p0, p2 - p0
+    d1, d2 = t1 - t0, t2 - t0
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    ok = np.abs(det) > 1e-20
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    dpdu = _unit((e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * inv)
+    dpdv = _unit((e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * inv)
+    tacc = np.zeros_like(v)
+    bacc = np.zeros_like(v)
+    corners = ((0, 1, 2), (1, 2, 0), (2, 0, 1))
+    for i, j, k in corners:
+        a = _unit(v[f[:, j]] - v[f[:, i]])
+        b = _unit(v[f[:, k]] - v[f[:, i]])
+        w = np.arccos(np.clip(np.sum(a * b, -1), -1.0, 1.0))[:, None] * ok[:, None]
+        np.add.at(tacc, f[:, i], w * dpdu)
+        np.add.at(bacc, f[:, i], w * dpdv)
+    n = np.asarray(normals, float)
+    t = tacc - np.sum(tacc * n, -1, keepdims=True) * n
+    t = _unit(t, _any_perpendicular(n))
+    w = np.where(np.sum(np.cross(n, t) * bacc, -1) < 0.0, -1.0, 1.0)
+    return np.concatenate([t, w[:, None]], -1)
+
+
+def _needs_uv(material) -> str | None:
+    """The material field that needs texture coordinates, or ``None``."""
+    for k in ("normal_map", "height_map", "color_map"):
+        if getattr(material, k, None) is not None:
+            return k
+    if getattr(material, "alpha_x", 0.0) != getattr(material, "alpha_y", 0.0):
+        return "alpha_x"  # anisotropy follows the tangent (+u)
+    return None
+
+
+@functools.lru_cache(maxsize=16)
+def _load_cached(path: str, mtime: int, transform: bytes) -> MeshData:
+    p = Path(path)
+    v, f, n, uv = _read(p)
+    if not np.all(np.isfinite(v)):
+        raise PrefilterError(f"{p}: expected finite vertex positions, got NaN or inf")
+    if f.min() < 0 or f.max() >= len(v):
+        raise PrefilterError(f"{p}: expected face indices in [0, {len(v)}), got "
+                             f"[{f.min()}, {f.max()}]")
+    m = np.frombuffer(transform, dtype=np.float64).reshape(4, 4)
+    v = v @ m[:3, :3].T + m[:3, 3]
+    # normals transform by the inverse transpose (row vectors: n M^-1)
+    n = n @ np.linalg.inv(m[:3, :3])
+    bad = ~np.all(np.isfinite(n), -1) | (np.linalg.norm(n, axis=-1) < 1e-12)
+    if np.any(bad):  # vertices of degenerate faces only: the area-weighted face normals
+        fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        acc = np.zeros_like(v)
+        for c in range(3):
+            np.add.at(acc, f[:, c], fn)
+        n[bad] = acc[bad]
+    n = _unit(n, np.array([0.0, 0.0, 1.0]))
+    if uv is not None:
+        if not np.all(np.isfinite(uv)):
+            raise PrefilterError(f"{p}: expected finite texture coordinates, got NaN or inf")
+        uv = np.stack([uv[:, 0], 1.0 - uv[:, 1]], -1)  # OBJ convention -> v down the image
+        tan = vertex_tangents(v, f, n, uv)
+    else:
+        tan = np.concatenate([_any_perpendicular(n), np.ones((len(v), 1))], -1)
+    return MeshData(v, f, n, uv, tan)
+
+
+def load_mesh(path, transform=None, material=None, where: str = "") -> MeshData:
+    """World-space :class:`MeshData` of mesh file ``path`` (``.obj``, ``.ply``, ``.gltf``,
+    ``.glb``) under ``transform (4, 4)`` (default identity), cached by path, modification time
+    and transform.
+
+    Raises :class:`PrefilterError` (prefixed with ``where``, a scene field path) for a missing,
+    unreadable or empty file, NaN vertices, or a mesh without UVs whose ``material`` needs them
+    (textures, anisotropic roughness).
+    """
+    p = Path(path)
+    pre = f"{where}: " if where else ""
+    if p.suffix.lower() not in MESH_SUFFIXES:
+        raise PrefilterError(f"{pre}expected a {'/'.join(MESH_SUFFIXES)} file, got {str(p)!r}")
+    if not p.is_file():
+        raise PrefilterError(f"{pre}mesh file not found: {p}")
+    m = np.eye(4) if transform is None else np.asarray(transform, dtype=np.float64)
+    try:
+        data = _load_cached(str(p.resolve()), p.stat().st_mtime_ns, m.tobytes())
+    except PrefilterError as exc:
+        raise PrefilterError(f"{pre}{exc}") from None
+    need = _needs_uv(material)
+    if data.uv is None and need is not None:
+        raise PrefilterError(f"{pre}{p} has no texture coordinates (UVs), but the material's "
+                             f"{need} needs them")
+    return data
+
+
+# -- intersection ----------------------------------------------------------------------------------
+
+_INTERSECTORS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _intersector(data: MeshData):
+    """The Embree scene of ``data`` (built once per mesh)."""
+    it = _INTERSECTORS.get(data)
+    if it is None:
+        import trimesh
+        from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+        it = RayMeshIntersector(trimesh.Trimesh(data.vertices, data.faces, process=False))
+        _INTERSECTORS[data] = it
+    return it
+
+
+def _moller_trumbore(o, d, p0, e1, e2):
+    """Ray parameter and barycentrics ``(t, b1, b2)`` ``(N,)`` of rays ``o + t d`` on the planes
+    of triangles ``p0 + b1 e1 + b2 e2`` (Moeller and Trumbore 1997)."""
+    pv = np.cross(d, e2)
+    det = np.sum(e1 * pv, -1)
+    inv = 1.0 / np.where(np.abs(det) > 1e-300, det, 1e-300)
+    tv = o - p0
+    b1 = np.sum(tv * pv, -1) * inv
+    qv = np.cross(tv, e1)
+    b2 = np.sum(d * qv, -1) * inv
+    t = np.sum(e2 * qv, -1) * inv
+    return t, b1, b2
+
+
+def intersect_mesh(data: MeshData, o, d) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest triangle ``(N,)`` (-1 on misses) and its ray parameter ``(N,)`` (``inf`` on misses)
+    of rays ``o, d (N, 3)`` (unit ``d``): Embree picks the triangle, float64 gives ``t``."""
+    o = np.asarray(o, dtype=np.float64)
+    d = np.asarray(d, dtype=np.float64)
+    tri = np.asarray(_intersector(data).intersects_first(o, d), dtype=np.int64)
+    t = np.full(len(d), np.inf)
+    m = tri >= 0
+    if np.any(m):
+        f = data.faces[tri[m]]
+        p0 = data.vertices[f[:, 0]]
+        tm, _, _ = _moller_trumbore(o[m], d[m], p0, data.vertices[f[:, 1]] - p0,
+                                    data.vertices[f[:, 2]] - p0)
+        ok = tm > _EPS
+        t[np.flatnonzero(m)[ok]] = tm[ok]
+        tri[np.flatnonzero(m)[~ok]] = -1
+    return tri, t
+
+
+def triangle_differentials(o, d, ddx, ddy, p0, e1, e2):
+    """The hit on the triangles ``p0 + b1 e1 + b2 e2`` and its ray differentials.
+
+    Igehy 1999, eq. 10 on the triangle's plane (normal ``nf``): the hit moves as
+    ``dp/dx = t (dd/dx - (nf . dd/dx) / (nf . d) d)``; the barycentrics follow from
+    ``dp = e1 db1 + e2 db2`` (least squares on the plane: ``[db1 db2] = G^-1 [e1 . dp, e2 . dp]``,
+    ``G`` the Gram matrix of ``e1, e2``).
+
+    All inputs ``(N, 3)``. Returns ``t (N,)``, ``b (N, 3)`` barycentrics of the three vertices,
+    ``dpdx, dpdy (N, 3)`` and ``dbdx, dbdy (N, 3)`` (derivatives of ``b``).
+    """
+    t, b1, b2 = _moller_trumbore(o, d, p0, e1, e2)
+    nf = _unit(np.cross(e1, e2))
+    dn = np.sum(d * nf, -1, keepdims=True)
+    dn = np.where(np.abs(dn) > 1e-300, dn, 1e-300)
+    dpdx = t[:, None] * (ddx - np.sum(ddx * nf, -1, keepdims=True) / dn * d)
+    dpdy = t[:, None] * (ddy - np.sum(ddy * nf, -1, keepdims=True) / dn * d)
+    g11, g12, g22 = np.sum(e1 * e1, -1), np.sum(e1 * e2, -1), np.sum(e2 * e2, -1)
+    idet = 1.0 / np.maximum(g11 * g22 - g12 * g12, 1e-300)
+
+    def bary(dp):
+        r1, r2 = np.sum(e1 * dp, -1), np.sum(e2 * dp, -1)
+        db1 = (g22 * r1 - g12 * r2) * idet
+        db2 = (g11 * r2 - g12 * r1) * idet
+        return np.stack([-db1 - db2, db1, db2], -1)
+
+    b = np.stack([1.0 - b1 - b2, b1, b2], -1)
+    return t, b, dpdx, dpdy, bary(dpdx), bary(dpdy)
+
+
+def mesh_hits(data: MeshData, tri, o, d, ddx, ddy) -> dict:
+    """G-buffer fields (as :class:`prefilter.render.camera.GBuffer`, flat ``(N, ...)``) of rays
+    ``o, d, ddx, ddy (N, 3)`` hitting triangles ``tri (N,)`` of ``data``.
+
+    ``normal``: the interpolated vertex normal; ``tangent``: the interpolated vertex tangent
+    Gram-Schmidt orthogonalised against it; ``bitangent = w (normal x tangent)``; ``uv`` and
+    ``dudv`` from the barycentrics and their ray differentials (zero without UVs).
+    """
+    f = data.faces[tri]
+    v = data.vertices
+    p0 = v[f[:, 0]]
+    t, b, dpdx, dpdy, dbdx, dbdy = triangle_differentials(o, d, ddx, ddy, p0, v[f[:, 1]] - p0,
+                                                          v[f[:, 2]] - p0)
+
+    def interp(a, w):
+        return np.einsum("nk,nkc->nc", w, a[f])
+
+    n = _unit(interp(data.normals, b))
+    tg = interp(data.tangents[:, :3], b)
+    tg = _unit(tg - np.sum(tg * n, -1, keepdims=True) * n, _any_perpendicular(n))
+    w = np.where(interp(data.tangents[:, 3:], b)[:, 0] < 0.0, -1.0, 1.0)
+    out = {"position": o + t[:, None] * d, "normal": n, "tangent": tg,
+           "bitangent": w[:, None] * np.cross(n, tg), "dpdx": dpdx, "dpdy": dpdy,
+           "distance": t}
+    if data.uv is None:
+        out["uv"] = np.zeros((len(t), 2))
+        out["dudv"] = np.zeros((len(t), 2, 2))
+    else:
+        out["uv"] = interp(data.uv, b)
+        out["dudv"] = np.stack([interp(data.uv, dbdx), interp(data.uv, dbdy)], -1)
+    return out
+
+
+def trace_objects(objects, o, d, ddx, ddy) -> dict:
+    """Nearest hits of rays ``o, d, ddx, ddy (N, 3)`` with ``objects`` (planes and spheres by the
+    Numba kernel, meshes by Embree): the flat G-buffer fields of
+    :class:`prefilter.render.camera.GBuffer` as a dict, ``object_id`` indexing ``objects``."""
+    from prefilter.render.kernels import gbuffer_rays_kernel, pack_objects, serial
+
+    n = len(d)
+    out = {"hit": np.zeros(n, bool), "object_id": np.full(n, -1, np.int32),
+           "position": np.zeros((n, 3)), "normal": np.zeros((n, 3)),
+           "tangent": np.zeros((n, 3)), "bitangent": np.zeros((n, 3)), "uv": np.zeros((n, 2)),
+           "dudv": np.zeros((n, 2, 2)), "dpdx": np.zeros((n, 3)), "dpdy": np.zeros((n, 3)),
+           "distance": np.full(n, np.inf), "view": -d, "direction": d.copy()}
+    analytic = [i for i, obj in enumerate(objects) if obj.type != "mesh"]
+    if analytic:
+        types, params = pack_objects([objects[i] for i in analytic])
+        order = ("hit", "object_id", "position", "normal", "tangent", "bitangent", "uv", "dudv",
+                 "dpdx", "dpdy", "distance", "view", "direction")
+        serial(gbuffer_rays_kernel, n)(o, d, ddx, ddy, types, params, *(out[k] for k in order))
+        h = out["hit"]
+        out["object_id"][h] = np.asarray(analytic, np.int32)[out["object_id"][h]]
+    for i, obj in enumerate(objects):
+        if obj.type != "mesh":
+            continue
+        tri, t = intersect_mesh(obj.data, o, d)
+        m = (tri >= 0) & (t < out["distance"])
+        if not np.any(m):
+            continue
+        for k, val in mesh_hits(obj.data, tri[m], o[m], d[m], ddx[m], ddy[m]).items():
+            out[k][m] = val
+        out["hit"][m] = True
+        out["object_id"][m] = i
+    return out
