@@ -89,21 +89,27 @@ def _read(path: Path):
     import trimesh
 
     try:
-        # force="mesh" would drop the file's vertex normals: concatenate here instead
         loaded = trimesh.load(str(path), process=False)
-        parts = loaded.dump() if isinstance(loaded, trimesh.Scene) else [loaded]
+        if isinstance(loaded, trimesh.Scene):
+            # the scene's meshes where its nodes place them (Scene.dump would drop the normals)
+            parts = [(loaded.geometry[name], mat) for mat, name in
+                     (loaded.graph[node] for node in loaded.graph.nodes_geometry)]
+        else:
+            parts = [(loaded, np.eye(4))]
     except Exception as exc:  # trimesh raises many types for a bad file
         raise PrefilterError(f"{path}: unreadable mesh file ({type(exc).__name__}: {exc})") \
             from None
-    parts = [m for m in parts if isinstance(m, trimesh.Trimesh) and len(m.faces)]
+    parts = [(m, a) for m, a in parts if isinstance(m, trimesh.Trimesh) and len(m.faces)]
     if not parts:
         raise PrefilterError(f"{path}: expected a mesh with triangles, got none")
     vs, fs, ns, uvs, offset = [], [], [], [], 0
-    for m in parts:
-        v = np.asarray(m.vertices, dtype=np.float64)
+    for m, a in parts:
+        a = np.asarray(a, dtype=np.float64)
+        v = np.asarray(m.vertices, dtype=np.float64) @ a[:3, :3].T + a[:3, 3]
         vs.append(v)
         fs.append(np.asarray(m.faces, dtype=np.int64) + offset)
-        ns.append(np.asarray(m.vertex_normals, dtype=np.float64))
+        with np.errstate(all="ignore"):  # NaN vertices are reported by the caller
+            ns.append(np.asarray(m.vertex_normals, dtype=np.float64) @ np.linalg.inv(a[:3, :3]))
         uv = getattr(m.visual, "uv", None)
         uvs.append(None if uv is None or len(uv) != len(v) else np.asarray(uv, np.float64))
         offset += len(v)
