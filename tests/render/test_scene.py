@@ -70,7 +70,7 @@ def _broken(path, value):
      'objects[0].material.alpha_x: expected a number in [0.001, 1], got "a"'),
     ("objects.1.material.alpha", 2.0, "objects[1].material.alpha: expected a number in [0.001, 1]"),
     ("objects.1.radius", -1, "objects[1].radius: expected a number > 0, got -1"),
-    ("objects.0.type", "cube", 'objects[0].type: expected one of "plane", "sphere", got "cube"'),
+    ("objects.0.type", "cube", 'objects[0].type: expected one of "plane", "sphere", "mesh", got "cube"'),
     ("objects.0.colour", 1, "objects[0].colour: unknown field"),
     ("camera.fov", KeyError, "camera.fov: required field is missing"),
     ("camera.width", 12.5, "camera.width: expected an integer"),
