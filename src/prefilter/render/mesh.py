@@ -22,6 +22,7 @@ nearest triangle in float32; the hit is then recomputed in float64 on that trian
 from __future__ import annotations
 
 import functools
+import math
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,9 +30,10 @@ from pathlib import Path
 import numpy as np
 
 from prefilter.errors import PrefilterError
+from prefilter.jit import njit_parallel, prange, serial
 
-__all__ = ["MESH_SUFFIXES", "Mesh", "MeshData", "intersect_mesh", "load_mesh", "trace_objects",
-           "transform_matrix", "triangle_differentials", "vertex_tangents"]
+__all__ = ["MESH_SUFFIXES", "Mesh", "MeshData", "load_mesh", "mesh_hits_kernel", "trace_objects",
+           "transform_matrix", "vertex_tangents"]
 
 MESH_SUFFIXES = (".obj", ".ply", ".gltf", ".glb")
 _EPS = 1e-9  # smallest ray parameter of a hit (as the analytic kernels)
@@ -255,107 +257,98 @@ def _intersector(data: MeshData):
     return it
 
 
-def _moller_trumbore(o, d, p0, e1, e2):
-    """Ray parameter and barycentrics ``(t, b1, b2)`` ``(N,)`` of rays ``o + t d`` on the planes
-    of triangles ``p0 + b1 e1 + b2 e2`` (Moeller and Trumbore 1997)."""
-    pv = np.cross(d, e2)
-    det = np.sum(e1 * pv, -1)
-    inv = 1.0 / np.where(np.abs(det) > 1e-300, det, 1e-300)
-    tv = o - p0
-    b1 = np.sum(tv * pv, -1) * inv
-    qv = np.cross(tv, e1)
-    b2 = np.sum(d * qv, -1) * inv
-    t = np.sum(e2 * qv, -1) * inv
-    return t, b1, b2
+@njit_parallel
+def mesh_hits_kernel(o, d, ddx, ddy, tri, object_id, vertices, faces, normals, tangents, uvs,
+                     hit, oid, pos, nrm, tan, bit, uv, dudv, dpdx, dpdy, dist):
+    """Rays ``o, d, ddx, ddy (N, 3)`` on triangles ``tri (N,)`` (-1: no hit) of one mesh: where
+    the hit is nearer than ``dist``, write its G-buffer row (as
+    :class:`prefilter.render.camera.GBuffer`) with ``oid = object_id``.
 
-
-def intersect_mesh(data: MeshData, o, d) -> tuple[np.ndarray, np.ndarray]:
-    """Nearest triangle ``(N,)`` (-1 on misses) and its ray parameter ``(N,)`` (``inf`` on misses)
-    of rays ``o, d (N, 3)`` (unit ``d``): Embree picks the triangle, float64 gives ``t``."""
-    o = np.asarray(o, dtype=np.float64)
-    d = np.asarray(d, dtype=np.float64)
-    tri = np.asarray(_intersector(data).intersects_first(o, d), dtype=np.int64)
-    t = np.full(len(d), np.inf)
-    m = tri >= 0
-    if np.any(m):
-        f = data.faces[tri[m]]
-        p0 = data.vertices[f[:, 0]]
-        tm, _, _ = _moller_trumbore(o[m], d[m], p0, data.vertices[f[:, 1]] - p0,
-                                    data.vertices[f[:, 2]] - p0)
-        ok = tm > _EPS
-        t[np.flatnonzero(m)[ok]] = tm[ok]
-        tri[np.flatnonzero(m)[~ok]] = -1
-    return tri, t
-
-
-def triangle_differentials(o, d, ddx, ddy, p0, e1, e2):
-    """The hit on the triangles ``p0 + b1 e1 + b2 e2`` and its ray differentials.
-
-    Igehy 1999, eq. 10 on the triangle's plane (normal ``nf``): the hit moves as
-    ``dp/dx = t (dd/dx - (nf . dd/dx) / (nf . d) d)``; the barycentrics follow from
-    ``dp = e1 db1 + e2 db2`` (least squares on the plane: ``[db1 db2] = G^-1 [e1 . dp, e2 . dp]``,
-    ``G`` the Gram matrix of ``e1, e2``).
-
-    All inputs ``(N, 3)``. Returns ``t (N,)``, ``b (N, 3)`` barycentrics of the three vertices,
-    ``dpdx, dpdy (N, 3)`` and ``dbdx, dbdy (N, 3)`` (derivatives of ``b``).
+    The hit in float64 (Moeller and Trumbore 1997); its ray differentials by Igehy 1999, eq. 10,
+    on the triangle's plane (normal ``nf``): ``dp/dx = t (dd/dx - (nf . dd/dx) / (nf . d) d)``;
+    the barycentrics' derivatives solve ``dp = e1 db1 + e2 db2`` on that plane (the Gram matrix
+    of ``e1, e2``); ``d uv / d pixel = sum_i uv_i d b_i / d pixel``. Normal: the interpolated
+    vertex normal; tangent: the interpolated tangent made orthogonal to it; bitangent
+    ``w (n x t)``, ``w`` the sign of the interpolated handedness.
     """
-    t, b1, b2 = _moller_trumbore(o, d, p0, e1, e2)
-    nf = _unit(np.cross(e1, e2))
-    dn = np.sum(d * nf, -1, keepdims=True)
-    dn = np.where(np.abs(dn) > 1e-300, dn, 1e-300)
-    dpdx = t[:, None] * (ddx - np.sum(ddx * nf, -1, keepdims=True) / dn * d)
-    dpdy = t[:, None] * (ddy - np.sum(ddy * nf, -1, keepdims=True) / dn * d)
-    g11, g12, g22 = np.sum(e1 * e1, -1), np.sum(e1 * e2, -1), np.sum(e2 * e2, -1)
-    idet = 1.0 / np.maximum(g11 * g22 - g12 * g12, 1e-300)
-
-    def bary(dp):
-        r1, r2 = np.sum(e1 * dp, -1), np.sum(e2 * dp, -1)
-        db1 = (g22 * r1 - g12 * r2) * idet
-        db2 = (g11 * r2 - g12 * r1) * idet
-        return np.stack([-db1 - db2, db1, db2], -1)
-
-    b = np.stack([1.0 - b1 - b2, b1, b2], -1)
-    return t, b, dpdx, dpdy, bary(dpdx), bary(dpdy)
-
-
-def mesh_hits(data: MeshData, tri, o, d, ddx, ddy) -> dict:
-    """G-buffer fields (as :class:`prefilter.render.camera.GBuffer`, flat ``(N, ...)``) of rays
-    ``o, d, ddx, ddy (N, 3)`` hitting triangles ``tri (N,)`` of ``data``.
-
-    ``normal``: the interpolated vertex normal; ``tangent``: the interpolated vertex tangent
-    Gram-Schmidt orthogonalised against it; ``bitangent = w (normal x tangent)``; ``uv`` and
-    ``dudv`` from the barycentrics and their ray differentials (zero without UVs).
-    """
-    f = data.faces[tri]
-    v = data.vertices
-    p0 = v[f[:, 0]]
-    t, b, dpdx, dpdy, dbdx, dbdy = triangle_differentials(o, d, ddx, ddy, p0, v[f[:, 1]] - p0,
-                                                          v[f[:, 2]] - p0)
-
-    def interp(a, w):
-        return np.einsum("nk,nkc->nc", w, a[f])
-
-    n = _unit(interp(data.normals, b))
-    tg = interp(data.tangents[:, :3], b)
-    tg = _unit(tg - np.sum(tg * n, -1, keepdims=True) * n, _any_perpendicular(n))
-    w = np.where(interp(data.tangents[:, 3:], b)[:, 0] < 0.0, -1.0, 1.0)
-    out = {"position": o + t[:, None] * d, "normal": n, "tangent": tg,
-           "bitangent": w[:, None] * np.cross(n, tg), "dpdx": dpdx, "dpdy": dpdy,
-           "distance": t}
-    if data.uv is None:
-        out["uv"] = np.zeros((len(t), 2))
-        out["dudv"] = np.zeros((len(t), 2, 2))
-    else:
-        out["uv"] = interp(data.uv, b)
-        out["dudv"] = np.stack([interp(data.uv, dbdx), interp(data.uv, dbdy)], -1)
-    return out
+    for i in prange(tri.shape[0]):
+        f = tri[i]
+        if f < 0:
+            continue
+        i0, i1, i2 = faces[f, 0], faces[f, 1], faces[f, 2]
+        p0x, p0y, p0z = vertices[i0, 0], vertices[i0, 1], vertices[i0, 2]
+        e1x, e1y, e1z = vertices[i1, 0] - p0x, vertices[i1, 1] - p0y, vertices[i1, 2] - p0z
+        e2x, e2y, e2z = vertices[i2, 0] - p0x, vertices[i2, 1] - p0y, vertices[i2, 2] - p0z
+        dx, dy, dz = d[i, 0], d[i, 1], d[i, 2]
+        pvx, pvy, pvz = dy * e2z - dz * e2y, dz * e2x - dx * e2z, dx * e2y - dy * e2x
+        det = e1x * pvx + e1y * pvy + e1z * pvz
+        if not abs(det) > 1e-300:
+            continue
+        inv = 1.0 / det
+        tvx, tvy, tvz = o[i, 0] - p0x, o[i, 1] - p0y, o[i, 2] - p0z
+        b1 = (tvx * pvx + tvy * pvy + tvz * pvz) * inv
+        qvx, qvy, qvz = tvy * e1z - tvz * e1y, tvz * e1x - tvx * e1z, tvx * e1y - tvy * e1x
+        b2 = (dx * qvx + dy * qvy + dz * qvz) * inv
+        t = (e2x * qvx + e2y * qvy + e2z * qvz) * inv
+        if not (t > _EPS and t < dist[i]):
+            continue
+        nfx, nfy, nfz = e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+        dn = dx * nfx + dy * nfy + dz * nfz  # the scale of nf cancels in the ratios
+        fx = (ddx[i, 0] * nfx + ddx[i, 1] * nfy + ddx[i, 2] * nfz) / dn
+        fy = (ddy[i, 0] * nfx + ddy[i, 1] * nfy + ddy[i, 2] * nfz) / dn
+        ax, ay, az = t * (ddx[i, 0] - fx * dx), t * (ddx[i, 1] - fx * dy), t * (ddx[i, 2] - fx * dz)
+        bx, by, bz = t * (ddy[i, 0] - fy * dx), t * (ddy[i, 1] - fy * dy), t * (ddy[i, 2] - fy * dz)
+        g11 = e1x * e1x + e1y * e1y + e1z * e1z
+        g12 = e1x * e2x + e1y * e2y + e1z * e2z
+        g22 = e2x * e2x + e2y * e2y + e2z * e2z
+        idet = 1.0 / max(g11 * g22 - g12 * g12, 1e-300)
+        r1, r2 = e1x * ax + e1y * ay + e1z * az, e2x * ax + e2y * ay + e2z * az
+        c1x, c2x = (g22 * r1 - g12 * r2) * idet, (g11 * r2 - g12 * r1) * idet
+        r1, r2 = e1x * bx + e1y * by + e1z * bz, e2x * bx + e2y * by + e2z * bz
+        c1y, c2y = (g22 * r1 - g12 * r2) * idet, (g11 * r2 - g12 * r1) * idet
+        w0 = 1.0 - b1 - b2
+        n0 = w0 * normals[i0, 0] + b1 * normals[i1, 0] + b2 * normals[i2, 0]
+        n1 = w0 * normals[i0, 1] + b1 * normals[i1, 1] + b2 * normals[i2, 1]
+        n2 = w0 * normals[i0, 2] + b1 * normals[i1, 2] + b2 * normals[i2, 2]
+        ln = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+        n0, n1, n2 = n0 / ln, n1 / ln, n2 / ln
+        t0 = w0 * tangents[i0, 0] + b1 * tangents[i1, 0] + b2 * tangents[i2, 0]
+        t1 = w0 * tangents[i0, 1] + b1 * tangents[i1, 1] + b2 * tangents[i2, 1]
+        t2 = w0 * tangents[i0, 2] + b1 * tangents[i1, 2] + b2 * tangents[i2, 2]
+        hw = w0 * tangents[i0, 3] + b1 * tangents[i1, 3] + b2 * tangents[i2, 3]
+        tn = t0 * n0 + t1 * n1 + t2 * n2
+        t0, t1, t2 = t0 - tn * n0, t1 - tn * n1, t2 - tn * n2
+        lt = math.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        if lt > 1e-12:
+            t0, t1, t2 = t0 / lt, t1 / lt, t2 / lt
+        else:  # any unit vector orthogonal to n (Duff et al. 2017)
+            sg = 1.0 if n2 >= 0.0 else -1.0
+            a = -1.0 / (sg + n2)
+            t0, t1, t2 = 1.0 + sg * n0 * n0 * a, sg * n0 * n1 * a, -sg * n0
+        hand = -1.0 if hw < 0.0 else 1.0
+        hit[i] = True
+        oid[i] = object_id
+        dist[i] = t
+        pos[i, 0], pos[i, 1], pos[i, 2] = o[i, 0] + t * dx, o[i, 1] + t * dy, o[i, 2] + t * dz
+        nrm[i, 0], nrm[i, 1], nrm[i, 2] = n0, n1, n2
+        tan[i, 0], tan[i, 1], tan[i, 2] = t0, t1, t2
+        bit[i, 0] = hand * (n1 * t2 - n2 * t1)
+        bit[i, 1] = hand * (n2 * t0 - n0 * t2)
+        bit[i, 2] = hand * (n0 * t1 - n1 * t0)
+        dpdx[i, 0], dpdx[i, 1], dpdx[i, 2] = ax, ay, az
+        dpdy[i, 0], dpdy[i, 1], dpdy[i, 2] = bx, by, bz
+        for c in range(2):
+            u0, u1, u2 = uvs[i0, c], uvs[i1, c], uvs[i2, c]
+            uv[i, c] = w0 * u0 + b1 * u1 + b2 * u2
+            dudv[i, c, 0] = (u1 - u0) * c1x + (u2 - u0) * c2x
+            dudv[i, c, 1] = (u1 - u0) * c1y + (u2 - u0) * c2y
 
 
 def trace_objects(objects, o, d, ddx, ddy) -> dict:
     """Nearest hits of rays ``o, d, ddx, ddy (N, 3)`` with ``objects`` (planes and spheres by the
     Numba kernel, meshes by Embree): the flat G-buffer fields of
     :class:`prefilter.render.camera.GBuffer` as a dict, ``object_id`` indexing ``objects``."""
-    from prefilter.render.kernels import gbuffer_rays_kernel, pack_objects, serial
+    from prefilter.render.kernels import gbuffer_rays_kernel, pack_objects
 
     n = len(d)
     out = {"hit": np.zeros(n, bool), "object_id": np.full(n, -1, np.int32),
@@ -374,12 +367,12 @@ def trace_objects(objects, o, d, ddx, ddy) -> dict:
     for i, obj in enumerate(objects):
         if obj.type != "mesh":
             continue
-        tri, t = intersect_mesh(obj.data, o, d)
-        m = (tri >= 0) & (t < out["distance"])
-        if not np.any(m):
-            continue
-        for k, val in mesh_hits(obj.data, tri[m], o[m], d[m], ddx[m], ddy[m]).items():
-            out[k][m] = val
-        out["hit"][m] = True
-        out["object_id"][m] = i
+        data = obj.data
+        tri = np.asarray(_intersector(data).intersects_first(o, d), dtype=np.int64)
+        uvs = data.uv if data.uv is not None else np.zeros((len(data.vertices), 2))
+        serial(mesh_hits_kernel, n)(o, d, ddx, ddy, tri, i, data.vertices, data.faces,
+                                    data.normals, data.tangents, uvs, out["hit"],
+                                    out["object_id"], out["position"], out["normal"],
+                                    out["tangent"], out["bitangent"], out["uv"], out["dudv"],
+                                    out["dpdx"], out["dpdy"], out["distance"])
     return out
