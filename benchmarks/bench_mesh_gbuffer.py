@@ -1,6 +1,7 @@
 """Mesh G-buffer throughput: 512 x 512 primary rays (Mrays/s) on a tessellated UV sphere
 (128 x 256 segments, 65k triangles; Embree picks the triangles, a Numba kernel computes the
-float64 hits and ray-differential footprints) and on the analytic sphere (the Numba kernel), in one run, and their ratio.
+float64 hits and ray-differential footprints) and on the analytic sphere (the Numba kernel), in
+one run, and their ratio.
 
 Best of 3 runs after a warm-up (JIT, Embree scene build); the mesh file is written to a
 temporary directory by the tests' asset writer. No assertions (the machine is shared and noisy).

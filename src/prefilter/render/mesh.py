@@ -6,13 +6,13 @@ Conventions (``docs/meshes.md``):
 - Texture coordinates follow the renderer's texture space (``v`` down the image rows, row 0 at
   ``v = 0``): trimesh reads every format into the OBJ convention (``v`` up the image, glTF
   flipped on load), so ``uv = (u_file, 1 - v_obj)``; glTF coordinates come out as stored.
-- Vertex normals come from the file where it has them, else trimesh's area-weighted face
+- Vertex normals come from the file where it has them, else trimesh's averaged face
   normals. The G-buffer normal of a mesh hit is the interpolated vertex normal (smooth shading).
 - Tangents ``(V, 4) = (t, w)`` are computed from the UVs per vertex the way MikkTSpace does
   (:func:`vertex_tangents`); the bitangent is ``b = w (n x t)``, pointing along ``+v``, so
   ``t x b = w n``: the frame is right-handed (``w = 1``) unless the UVs are mirrored.
 - Footprints: Igehy 1999 ray differentials on the triangle's plane (its first-order surface),
-  UV Jacobian from the barycentric gradients (:func:`triangle_differentials`).
+  UV Jacobian from the barycentric gradients (:func:`mesh_hits_kernel`).
 
 Embree (``embreex``, through :class:`trimesh.ray.ray_pyembree.RayMeshIntersector`) finds the
 nearest triangle in float32; the hit is then recomputed in float64 on that triangle
