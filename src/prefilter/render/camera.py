@@ -210,6 +210,12 @@ def intersect(scene, rays: Rays) -> GBuffer:
     def flat(a):
         return np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), d.shape)).reshape(-1, 3)
 
+    if any(obj.type == "mesh" for obj in scene.objects):
+        from prefilter.render.mesh import trace_objects
+
+        out = trace_objects(scene.objects, flat(rays.origin), flat(d), flat(rays.ddx),
+                            flat(rays.ddy))
+        return _finish({k: out[k] for k in _ORDER}, shape)
     types, params = pack_objects(scene.objects)
     out = _empty_gbuffer(shape)
     kernel = serial(gbuffer_rays_kernel, len(out["hit"]))
@@ -229,6 +235,8 @@ def _gbuffer_camera(scene, cam: Camera, xy: np.ndarray) -> GBuffer:
     """Rays through ``xy (..., 2)`` and their G-buffer in one Numba pass (no ray arrays)."""
     from prefilter.render.kernels import gbuffer_camera_kernel, pack_objects, serial
 
+    if any(obj.type == "mesh" for obj in scene.objects):  # Embree traces the meshes
+        return intersect(scene, rays_at(cam, xy))
     shape = xy.shape[:-1]
     types, params = pack_objects(scene.objects)
     out = _empty_gbuffer(shape)

@@ -432,12 +432,15 @@ def level0_read(n_objects: int) -> np.ndarray:
 
 def pack_materials(objects):
     """Materials and their textures for :func:`surface_sample`, or ``None`` when a texture
-    has too few channels for the fused path (normal maps need 3, height maps 2).
+    has too few channels for the fused path (normal maps need 3, height maps 2) or an object is
+    a mesh (Embree traces meshes outside Numba: the staged path).
 
     Returns ``(mat_f (K, 8), mat_i (K, 3) texture indices of normal / height / colour map or -1,
     data (total,), info (L, 3) = offset, height, width per level, tex (T, 3) = first level,
     level count, channels)``.
     """
+    if any(obj.type == "mesh" for obj in objects):
+        return None
     mat_f = np.zeros((len(objects), MAT_WIDTH))
     mat_i = np.full((len(objects), 3), -1, np.int64)
     datas, infos, texs = [], [], []

@@ -460,7 +460,9 @@ def _material(v, path, base) -> Material:
 
 def _object(v, path, base):
     kind = _Obj(v, path, tuple(v) if isinstance(v, dict) else ()).choice(
-        "type", ("plane", "sphere"))
+        "type", ("plane", "sphere", "mesh"))
+    if kind == "mesh":
+        return _mesh_object(v, path, base)
     if kind == "plane":
         o = _Obj(v, path, ("type", "center", "normal", "tangent", "size", "uv_scale", "material"))
         n = o.unit("normal", [0.0, 1.0, 0.0])
@@ -486,6 +488,45 @@ def _object(v, path, base):
                   pole, ax / np.linalg.norm(ax),
                   o.vector("uv_scale", 2, [1.0, 1.0], scalar_ok=True, limit=UV_SCALE_MAX),
                   _material(o.raw("material", {}), o.at("material"), base))
+
+
+def _transform(v, path) -> np.ndarray:
+    """A mesh transform: a 4 x 4 row-major matrix (last row ``[0, 0, 0, 1]``) or
+    ``{"translate": [x, y, z], "rotate": [rx, ry, rz] degrees, "scale": s or [sx, sy, sz]}``."""
+    from prefilter.render.mesh import transform_matrix
+
+    if isinstance(v, list):
+        if len(v) != 4:
+            raise PrefilterError(f"{path}: expected a 4 x 4 matrix (4 rows of 4 numbers) or an "
+                                 f"object with translate, rotate, scale, got {_got(v)}")
+        rows = _Obj({str(i): r for i, r in enumerate(v)}, path, tuple("0123"))
+        m = np.stack([rows.vector(str(i), 4) for i in range(4)])
+        if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0]):
+            raise PrefilterError(f"{path}[3]: expected [0, 0, 0, 1] (an affine transform), got "
+                                 f"{_got(m[3].tolist())}")
+    else:
+        o = _Obj(v, path, ("translate", "rotate", "scale"))
+        scale = o.vector("scale", 3, [1.0, 1.0, 1.0], scalar_ok=True)
+        m = transform_matrix(o.vector("translate", 3, [0.0] * 3),
+                             o.vector("rotate", 3, [0.0] * 3), scale)
+    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        raise PrefilterError(f"{path}: expected an invertible transform, got a singular one")
+    return m
+
+
+def _mesh_object(v, path, base):
+    """``{"type": "mesh", "file", "transform", "material"}``: a triangle mesh read from an
+    OBJ, PLY or glTF 2.0 file relative to the scene (:mod:`prefilter.render.mesh`)."""
+    from prefilter.render.mesh import Mesh, load_mesh
+
+    o = _Obj(v, path, ("type", "file", "transform", "material"))
+    f = o.raw("file")
+    if not isinstance(f, str) or not f:
+        raise PrefilterError(f"{o.at('file')}: expected a file path string, got {_got(f)}")
+    m = _transform(o.raw("transform", {}), o.at("transform"))
+    mat = _material(o.raw("material", {}), o.at("material"), base)
+    full = (base / f).resolve()
+    return Mesh(full, m, mat, load_mesh(full, m, mat, where=o.at("file")))
 
 
 def _light(v, path, base):
