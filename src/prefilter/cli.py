@@ -57,6 +57,7 @@ TOP_COMMANDS = {
     "multiscale-fit": "prefilter.multiscale.commands:multiscale_fit",
     "view": "prefilter.viewer.commands:view",
     "export": "prefilter.viewer.commands:export",
+    "cache": "prefilter.cache:cache_command",
 }
 
 
