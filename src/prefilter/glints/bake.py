@@ -368,9 +368,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
 
             def write_row(yo, images, arr=arr, below=below, d2=d2):
                 arr.write_rows(yo, images[None])
-                p = below.read(2 * yo, 2 * yo + 1, step=2)[0].astype(np.float64)
-                c = images.astype(np.float64)
-                d2 += [np.einsum("...,...->", c - p, c - p), np.einsum("...,...->", c, c)]
+                c = images.astype(np.float64).ravel()
+                d = c - below.read(2 * yo, 2 * yo + 1, step=2).astype(np.float64).ravel()
+                d2 += [np.dot(d, d), np.dot(c, c)]
 
             next_level_rows(lambda y, below=below: below.read(y, y + 1)[0], below.shape[:2],
                             pyr.sigma0 / pyr.stride0, write_row, (R, R))
