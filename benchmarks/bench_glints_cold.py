@@ -81,6 +81,17 @@ def run(cmd: list[str], env: dict, log: Path, watch: list[tuple[Path, bool]] = (
                 temp=peak[0])
 
 
+def stages(log: str) -> list[str]:
+    """The bake's messages and the last state of each of its progress bars in a render's
+    stderr (tqdm redraws a bar after carriage returns)."""
+    last: dict[str, str] = {}
+    for seg in re.split(r"[\r\n]+", log):
+        seg = seg.strip()
+        if seg.startswith("glints bake:") or re.match(r"^[\w ,.]+: +\d+%", seg):
+            last[seg.split(":")[0] if "%" in seg else seg] = seg
+    return list(last.values())
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", type=Path, help="scene JSON [default: the docs' example]")
@@ -90,7 +101,7 @@ def main() -> None:
     from prefilter import jit
 
     kernels = jit.cache_dir()
-    warm_kernels = kernels is not None and any(kernels.glob("*.nbi"))
+    warm_kernels = kernels is not None and any(kernels.rglob("*.nbi"))
     root = Path(tempfile.mkdtemp(prefix="bench-glints-cold-"))
     scene = a.scene or root / "scene.json"
     if a.scene is None:
@@ -100,7 +111,7 @@ def main() -> None:
     tmp.mkdir()
     env = dict(os.environ, PREFILTER_GLINTS_CACHE=str(cache), TMPDIR=str(tmp))
     cmd = [sys.executable, "-c", "from prefilter.cli import main; main()", "render", str(scene),
-           "--method", "glints", "--quiet", "-o"]
+           "--method", "glints", "--out"]
     print(f"scene {a.scene or 'docs/scenes.md example'}; Numba cache "
           f"{'held' if warm_kernels else 'did not hold'} this source version's kernels; "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
@@ -115,6 +126,9 @@ def main() -> None:
     print(f"warm cache: {warm['wall']:.1f} s wall, {warm['cpu']:.1f} s CPU, peak RSS "
           f"{warm['rss']:.0f} MiB")
     print(f"load average after: {os.getloadavg()[0]:.1f}")
+    print("the cold render's bake stages (the last state of each progress bar):")
+    for line in stages((root / "cold.log").read_text(errors="replace")):
+        print("  " + line)
     if a.keep:
         print(f"kept {root}")
     else:
