@@ -19,7 +19,7 @@ def test_bake_reports_what_where_and_each_stage(tmp_path, capsys):
     assert "glints bake: normal map 16x16" in err and f"-> {out}" in err
     assert f"{out}.parts" in err  # where the resumable parts go
     for stage in ("level 0 NDF images", "coarser levels", "CP fit at rank 2",
-                  "CP refit, encoding", "MiB -> "):
+                  "CP refit, encoding", "KiB -> "):
         assert stage in err, stage
 
 

@@ -595,6 +595,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     if not keep_parts:
         ck.clear()
     if progress:
+        size = Path(out).stat().st_size
         tqdm.write(f"glints bake: {time.perf_counter() - t_start:.0f} s, "
-                   f"{Path(out).stat().st_size / 2**20:.1f} MiB -> {out}", file=sys.stderr)
+                   + (f"{size / 2**20:.1f} MiB" if size >= 2**20 else f"{size / 2**10:.1f} KiB")
+                   + f" -> {out}", file=sys.stderr)
     return summary
