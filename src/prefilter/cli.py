@@ -63,6 +63,7 @@ TOP_COMMANDS = {
     "view": "prefilter.viewer.commands:view",
     "export": "prefilter.viewer.commands:export",
     "examples": "prefilter.examples.commands:examples",
+    "cache": "prefilter.cache:cache_command",
 }
 
 

@@ -7,7 +7,8 @@ from maps import sinusoid
 from prefilter.errors import PrefilterError
 from prefilter.glints import pndf_image
 from prefilter.glints.cp import cut_blocks, nn_cp, nn_cp_batch, prefix_sums, reconstruct
-from prefilter.glints.pyramid import interp_weights, level_difference, next_level, plan
+from prefilter.glints.pyramid import (interp_weights, level_difference, next_level, next_level_rows,
+                                     plan)
 
 
 def test_filtered_levels_equal_the_direct_pndf():
@@ -20,6 +21,27 @@ def test_filtered_levels_equal_the_direct_pndf():
         level = next_level(level, 1.0)
         direct = pndf_image(nm, pyr.centers(lv), pyr.sigma(lv), R, S)
         assert np.linalg.norm(level - direct) / np.linalg.norm(direct) < 1e-3
+
+
+@pytest.mark.parametrize("ny, nx, sos", [(16, 8, 1.0), (4, 6, 1.0), (8, 8, 0.5)])
+def test_next_level_rows_is_next_level_bit_for_bit(ny, nx, sos):
+    """The streamed filter (rows read one at a time, few of them in memory) gives the same
+    float32 images as the whole-level one, also when the filter wraps around the grid."""
+    rng = np.random.default_rng(ny + nx)
+    level = (rng.random((ny, nx, 5, 5)) ** 4).astype(np.float32)
+    got = np.full((ny // 2, nx // 2, 5, 5), np.nan, np.float32)
+    reads = []
+
+    def read_row(y):
+        reads.append(y)
+        return level[y]
+
+    def write_row(yo, images):
+        got[yo] = images
+
+    next_level_rows(read_row, (ny, nx), sos, write_row, (5, 5))
+    np.testing.assert_array_equal(got, next_level(level, sos))
+    assert len(reads) <= ny + 15  # each row once, the wrapped ones at most once more
 
 
 def test_interp_weights_hit_the_samples_and_sum_to_one():

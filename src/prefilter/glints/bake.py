@@ -33,6 +33,7 @@ import hashlib
 import json
 import math
 import os
+import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager
@@ -47,7 +48,8 @@ from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
                                    as_ndf_truncation, as_normal_map, as_support, elements,
                                    map_digest, pndf_image)
-from prefilter.glints.pyramid import level_difference, next_level, plan
+from prefilter.glints.levels import LevelFile
+from prefilter.glints.pyramid import next_level_rows, plan
 from prefilter.glints.store import CODE_BITS, GlintsMap, decode, encode, pack_mask, save
 
 LEVEL0_CHUNK = 0
@@ -148,19 +150,6 @@ def bilinear_bake_roughness(intrinsic_roughness: float, support: float, ndf_res:
     sr = as_intrinsic_roughness(intrinsic_roughness)
     hh = float(support) / int(ndf_res)
     return max(math.sqrt(max(sr * sr - hh * hh, 0.0)), 0.5 * sr)
-
-
-def _memmap(path, shape):
-    """The float32 array at ``path``, reopened if present (partial results of a killed bake are
-    kept; which chunks are valid is recorded by the checkpoints), else created."""
-    if path.exists():
-        try:
-            arr = np.load(path, mmap_mode="r+")
-            if arr.shape == tuple(shape) and arr.dtype == np.float32:
-                return arr
-        except (ValueError, OSError, EOFError):
-            pass  # killed while the file was being created: start it again
-    return np.lib.format.open_memmap(path, mode="w+", dtype=np.float32, shape=shape)
 
 
 @contextmanager
@@ -339,32 +328,53 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         str(levels_dir).removesuffix(".parts"),
         dict({k: settings[k] for k in ndf_keys}, map_sha1=digest, shape=[H, W]))
     el = elements(nm)
+    if progress:
+        tqdm.write(f"glints bake: normal map {H}x{W} (sha1 {digest[:12]}) -> {out}\n"
+                   f"  {pyr.shape(0)[0] * pyr.shape(0)[1]} level-0 NDF images of {R}^2 "
+                   f"(the longest stage), up to {pyr.n_levels - 1} coarser levels, CP per "
+                   f"{B}^2 block group at a mean rank {rank}; resumable parts in {ck.dir}",
+                   file=sys.stderr)
 
-    # 1. level 0, one row of cells per chunk
+    # 1. level 0, one row of cells per chunk, computed a row of centres at a time (the float64
+    # images of a whole chunk took 1 GB at 512^2)
     ny0, nx0 = pyr.shape(0)
     rows_per_chunk = cell // pyr.stride0
     n_chunks = ny0 // rows_per_chunk
-    levels = [_memmap(lk.dir / "level0.npy", (ny0, nx0, R, R))]
+    levels = [LevelFile(lk.dir / "level0.npy", (ny0, nx0, R, R))]
     centers0 = pyr.centers(0)
-    for ch in tqdm(range(n_chunks), desc="level 0 NDF images", disable=not progress):
-        if lk.done(LEVEL0_CHUNK + ch):
-            continue
-        rows = slice(ch * rows_per_chunk, (ch + 1) * rows_per_chunk)
-        levels[0][rows] = pndf_image(nm, centers0[rows], pyr.sigma(0), R, S, sr, elements_=el,
-                                     ndf_truncation=nt, footprint_truncation=ft)
-        levels[0].flush()
-        lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
+    with tqdm(total=ny0 * nx0, desc="level 0 NDF images", unit="img", disable=not progress,
+              file=sys.stderr) as bar:
+        for ch in range(n_chunks):
+            if not lk.done(LEVEL0_CHUNK + ch):
+                for y in range(ch * rows_per_chunk, (ch + 1) * rows_per_chunk):
+                    levels[0].write_rows(y, pndf_image(
+                        nm, centers0[y:y + 1], pyr.sigma(0), R, S, sr, elements_=el,
+                        ndf_truncation=nt, footprint_truncation=ft))
+                    bar.update(nx0)
+                lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
+            else:
+                bar.update(rows_per_chunk * nx0)
     lk.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))
 
-    # 2. upper levels by filtering
+    # 2. upper levels by filtering, streamed row by row (pyramid.next_level_rows)
     diffs = []
-    for lv in range(1, pyr.n_levels):
+    for lv in tqdm(range(1, pyr.n_levels), desc="coarser levels", unit="level",
+                   disable=not progress, file=sys.stderr):
         key = LEVEL_CHUNK + lv
-        arr = _memmap(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R))
+        below = levels[-1]
+        arr = LevelFile(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R))
         if not lk.done(key):
-            next_level(levels[-1], pyr.sigma0 / pyr.stride0, out=arr)
-            arr.flush()
-            lk.save(key, diff=np.array(level_difference(levels[-1], arr)))
+            d2 = np.zeros(2)  # squared norms of (level - level below at its centres), level
+
+            def write_row(yo, images, arr=arr, below=below, d2=d2):
+                arr.write_rows(yo, images[None])
+                c = images.astype(np.float64).ravel()
+                d = c - below.read(2 * yo, 2 * yo + 1, step=2).astype(np.float64).ravel()
+                d2 += [np.dot(d, d), np.dot(c, c)]
+
+            next_level_rows(lambda y, below=below: below.read(y, y + 1)[0], below.shape[:2],
+                            pyr.sigma0 / pyr.stride0, write_row, (R, R))
+            lk.save(key, diff=np.array(math.sqrt(d2[0]) / max(math.sqrt(d2[1]), 1e-300)))
         levels.append(arr)
         diffs.append(float(lk.load(key)["diff"]))
         if diffs[-1] < converge:
@@ -399,8 +409,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         lv = mem[0][0]
         iy = np.array([m[1] for m in mem])
         ix = np.array([m[2] for m in mem])
-        imgs = np.asarray(levels[lv][iy.min():iy.max() + 1, ix.min():ix.max() + 1],
-                          dtype=np.float64)[iy - iy.min(), ix - ix.min()]
+        imgs = levels[lv].read(iy.min(), iy.max() + 1, ix.min(), ix.max() + 1).astype(
+            np.float64)[iy - iy.min(), ix - ix.min()]
         blocks = cpmod.cut_blocks(imgs, B)  # (n, nb, nb, B, B)
         blank = cpmod.blank_mask(blocks, imgs.max(axis=(1, 2)), blank_tol)
         tensors, where = [], []
@@ -484,12 +494,12 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         workers = max(1, min(os.cpu_count() or 1, len(pending)))
         with cpmod.single_threaded_blas(), ThreadPoolExecutor(workers) as pool, \
                 tqdm(total=len(cids), initial=len(cids) - len(pending), desc=desc,
-                     disable=not progress) as bar:
+                     unit="cell", disable=not progress, file=sys.stderr) as bar:
             for _ in pool.map(fn, pending):
                 bar.update(1)
 
     t_cp = time.perf_counter()
-    run(fit_cell, range(n_cells), f"CP rank {base}")
+    run(fit_cell, range(n_cells), f"CP fit at rank {base}")
     t_cp1 = time.perf_counter()
     # allocation: predicted error drop per byte over all groups of the map (cp.allocate_ranks)
     if not ck.done(ALLOC_CHUNK):
@@ -511,7 +521,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                                           level_rank)
         ck.save(ALLOC_CHUNK, ranks=np.where(counts > 0, ranks_, 0).astype(np.int64))
     alloc = ck.load(ALLOC_CHUNK)["ranks"]
-    run(refit_cell, range(n_cells), "CP refit")
+    run(refit_cell, range(n_cells), "CP refit, encoding")
     t_cp2 = time.perf_counter()
 
     # 4. assemble
@@ -584,4 +594,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     save(out, gm, enc)
     if not keep_parts:
         ck.clear()
+    if progress:
+        size = Path(out).stat().st_size
+        tqdm.write(f"glints bake: {time.perf_counter() - t_start:.0f} s, "
+                   + (f"{size / 2**20:.1f} MiB" if size >= 2**20 else f"{size / 2**10:.1f} KiB")
+                   + f" -> {out}", file=sys.stderr)
     return summary

@@ -120,6 +120,16 @@ def _decimate_axis1(src, w, taps, out):
                 out[y, xo, i, j] = acc[i, j]
 
 
+def filter_taps(sigma_over_stride: float) -> tuple[np.ndarray, np.ndarray]:
+    """Taps ``(T,)`` (offsets in strides) and weights ``(T,)`` (summing to 1) of the periodic
+    Gaussian of std ``sqrt(3) sigma_over_stride`` strides that makes level ``l + 1`` from level
+    ``l``, cut at 4 stds."""
+    std = math.sqrt(3.0) * sigma_over_stride
+    taps = np.arange(-math.ceil(4 * std), math.ceil(4 * std) + 1)
+    w = np.exp(-0.5 * (taps / std) ** 2)
+    return taps, w / w.sum()
+
+
 def next_level(images: np.ndarray, sigma_over_stride: float, out: np.ndarray | None = None,
                chunk: int = 8) -> np.ndarray:
     """Level ``l + 1`` images ``(ny/2, nx/2, R, R)`` from level ``l`` images ``(ny, nx, R, R)``.
@@ -127,14 +137,12 @@ def next_level(images: np.ndarray, sigma_over_stride: float, out: np.ndarray | N
     Periodic separable Gaussian filter of std ``sqrt(3) sigma_l`` (in strides:
     ``sqrt(3) * sigma_over_stride``) sampled at the even centres; weights normalised to sum 1.
     ``images`` may be a float32 memory map; ``chunk`` is unused (kept for callers).
+    :func:`next_level_rows` computes the same values from the level read row by row.
     """
     ny, nx = images.shape[:2]
     if ny % 2 or nx % 2:
         raise PrefilterError(f"images: expected an even centre grid, got {ny}x{nx}")
-    std = math.sqrt(3.0) * sigma_over_stride
-    taps = np.arange(-math.ceil(4 * std), math.ceil(4 * std) + 1)
-    w = np.exp(-0.5 * (taps / std) ** 2)
-    w /= w.sum()
+    taps, w = filter_taps(sigma_over_stride)
     src = np.asarray(images)
     if src.dtype != np.float32:
         src = src.astype(np.float32)
@@ -147,6 +155,64 @@ def next_level(images: np.ndarray, sigma_over_stride: float, out: np.ndarray | N
     _decimate_axis1(tmp.transpose(1, 0, 2, 3), w, taps, res)
     out[...] = res.transpose(1, 0, 2, 3)
     return out
+
+
+@njit_parallel
+def _combine_rows(rows, slots, w, out):
+    """``out[x] = sum_t w[t] rows[slots[t], x]`` over images ``(..., R, R)``, accumulated in
+    float64 in the order of ``t`` (the sums of :func:`_decimate_axis1`, term for term)."""
+    R0, R1 = rows.shape[2], rows.shape[3]
+    for x in prange(out.shape[0]):
+        acc = np.zeros((R0, R1))
+        for t in range(slots.shape[0]):
+            wt = w[t]
+            for i in range(R0):
+                for j in range(R1):
+                    acc[i, j] += wt * rows[slots[t], x, i, j]
+        for i in range(R0):
+            for j in range(R1):
+                out[x, i, j] = acc[i, j]
+
+
+def next_level_rows(read_row, shape: tuple[int, int], sigma_over_stride: float, write_row,
+                    image_shape: tuple[int, int]) -> None:
+    """:func:`next_level` streamed: the level below is read one row of centres at a time
+    (``read_row(y) -> (nx, R, R)`` float32) and each output row is handed to
+    ``write_row(yo, (nx/2, R, R) float32)`` in order, so memory holds the filter's window of
+    x-filtered rows (``T (nx/2) R^2`` floats, ``T`` taps) instead of whole levels. The values are
+    :func:`next_level`'s bit for bit (the same float64 sums in the same order).
+
+    Parameters
+    ----------
+    shape : ``(ny, nx)`` centres of the level below (even).
+    image_shape : ``(R, R)``.
+    """
+    ny, nx = shape
+    if ny % 2 or nx % 2:
+        raise PrefilterError(f"images: expected an even centre grid, got {ny}x{nx}")
+    taps, w = filter_taps(sigma_over_stride)
+    n_slots = min(len(taps), ny)
+    ring = np.empty((n_slots, nx // 2) + tuple(image_shape), np.float32)
+    slot_of: dict[int, int] = {}  # input row -> slot of its x-filtered images
+    last_use = np.full(n_slots, -1)
+    out = np.empty((nx // 2,) + tuple(image_shape), np.float32)
+    for yo in range(ny // 2):
+        need = [(2 * yo + int(t)) % ny for t in taps]
+        for y in need:
+            if y in slot_of:
+                continue
+            # the slot whose row is not needed now and was used longest ago
+            busy = {slot_of[r] for r in need if r in slot_of}
+            free = [k for k in range(n_slots) if k not in busy]
+            k = min(free, key=lambda k: last_use[k])
+            slot_of = {r: s for r, s in slot_of.items() if s != k}
+            _decimate_axis1(np.asarray(read_row(y), np.float32)[None], w, taps,
+                            ring[k:k + 1])
+            slot_of[y] = k
+        slots = np.array([slot_of[y] for y in need], np.int64)
+        last_use[slots] = yo
+        _combine_rows(ring, slots, w, out)
+        write_row(yo, out)
 
 
 def level_difference(prev: np.ndarray, cur: np.ndarray) -> float:

@@ -82,6 +82,8 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
     then kept in memory. ``settings`` override :data:`prefilter.glints.bake.BAKE_SETTINGS`.
 
     ``direct=True`` returns a surface without the compressed map (``glints-direct``).
+    ``progress``: a bake reports what it bakes, where and how far it is on stderr
+    (:func:`prefilter.glints.bake.bake`); a map found in the cache is loaded silently.
     """
     # the renderer passes the same (cached) texture array every frame: skip validating and
     # hashing it again (~20 ms per frame for a 128^2 map)
@@ -446,7 +448,7 @@ def _mis_light_pdf(surf, c, sp, wo, h, D, M, fallback_truncation):
 
 
 def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
-                 use_range: bool | None = None) -> np.ndarray:
+                 use_range: bool | None = None, progress: bool = False) -> np.ndarray:
     """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's lights.
 
     ``mode``: ``"compressed"`` or ``"direct"``; ``sigma`` overrides the footprint stds (the
@@ -454,7 +456,8 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
     (point query). Quad lights: :func:`quad_range` where valid (``use_range``, default for the
     compressed mode), else :func:`quad_mis` with the uniforms ``u (N, n_quads * QUAD_MIS * 11)``;
     the diffuse term by Lambert's polygon formula. Environment lights: see
-    :func:`environment_radiance` (uniforms after the quads')."""
+    :func:`environment_radiance` (uniforms after the quads'). ``progress``: a map baked on
+    first use reports its bake on stderr (:func:`baked_surface`)."""
     from prefilter.ltc import clamped_cosine_integral
 
     lights = scene.light_set()
@@ -471,7 +474,8 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
         if mat.normal_map is None:
             raise PrefilterError(f"objects[{int(k)}].material.normal_map: the glints methods "
                                  "expected a normal map (the microstructure), got none")
-        surf = baked_surface(mat.normal_map.load(), direct=(mode == "direct"))
+        surf = baked_surface(mat.normal_map.load(), direct=(mode == "direct"),
+                             progress=progress)
         c, sp = footprints(g.select(m), surf.shape, spp)
         if sigma is not None:
             sp = np.broadcast_to(sigma, m.shape)[m]
@@ -607,7 +611,8 @@ def _render(scene, settings, mode, name):
     spp = settings.spp
     k = random_dims(scene)
     return render_samples(scene, settings,
-                          lambda g, u: shade_glints(scene, g, mode=mode, spp=spp, u=u),
+                          lambda g, u: shade_glints(scene, g, mode=mode, spp=spp, u=u,
+                                                    progress=settings.progress),
                           random_dims=k, stratified=spp > 1, desc=name)
 
 

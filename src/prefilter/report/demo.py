@@ -537,7 +537,7 @@ def _glints_section(report, settings: DemoSettings, seed: int, log) -> None:
     with tempfile.TemporaryDirectory(prefix="prefilter-demo-glints-") as tmp:
         summary = bake(nm, Path(tmp) / "glints.npz", rank=settings.glints_rank, ndf_res=res,
                        block=8 if res % 8 == 0 else res, cell=cell, n_iter_max=30, seed=seed,
-                       progress=False)
+                       progress=True)
         gm = load(Path(tmp) / "glints.npz")
     report.add_text(
         f"A {size}^2 flakes normal map (flake size 6 texels) baked on the fly: NDF images "
@@ -586,7 +586,7 @@ def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> No
     for d in settings.glints_render_distances:
         sc = load_scene(measurement_scene(d, "flakes", size, width=w, height=h))
         t0 = time.perf_counter()
-        render(sc, "glints", seed=seed)  # the bake (disk cache) and compilation, not timed below
+        render(sc, "glints", seed=seed, progress=True)  # the bake (disk cache), compilation
         t_first = time.perf_counter() - t0
         if t_first > 5.0:
             log(f"glints: first frame (bake or cache load, compilation) {t_first:.1f} s; "

@@ -1,0 +1,90 @@
+"""A bake's uncompressed pyramid level on disk: a float32 ``.npy`` of NDF images
+``(ny, nx, R, R)`` read and written by rows of centres with ``pread`` / ``pwrite``.
+
+A memory map of a level (4.3 GB at level 0 of a 256^2 map with 512^2 images) counts every page
+the bake touched in its resident memory until the map is closed; file I/O keeps the bake's memory
+at the rows it holds (the page cache is the kernel's to reclaim).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+
+class LevelFile:
+    """The images of one pyramid level in the ``.npy`` file ``path`` (created, or reopened when
+    its header matches ``shape``: a resumed bake keeps the rows its checkpoints mark done)."""
+
+    def __init__(self, path: str | os.PathLike, shape: tuple[int, ...]):
+        self.path = Path(path)
+        self.shape = tuple(int(n) for n in shape)
+        self.row_items = int(np.prod(self.shape[1:]))
+        self.image_items = int(np.prod(self.shape[2:]))
+        self.offset = self._reopen()
+        if self.offset is None:
+            self.offset = self._create()
+
+    def _reopen(self):
+        try:
+            with open(self.path, "rb") as fh:
+                version = np.lib.format.read_magic(fh)
+                read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                               else np.lib.format.read_array_header_2_0)
+                shape, fortran, dtype = read_header(fh)
+                offset = fh.tell()
+        except (OSError, ValueError, EOFError):
+            return None  # missing, or killed while the file was being created
+        if shape != self.shape or fortran or dtype != np.float32:
+            return None
+        if self.path.stat().st_size != offset + 4 * self.row_items * self.shape[0]:
+            return None
+        return offset
+
+    def _create(self) -> int:
+        header = {"descr": np.lib.format.dtype_to_descr(np.dtype(np.float32)),
+                  "fortran_order": False, "shape": self.shape}
+        with open(self.path, "wb") as fh:
+            np.lib.format.write_array_header_1_0(fh, header)
+            offset = fh.tell()
+            fh.truncate(offset + 4 * self.row_items * self.shape[0])  # sparse until written
+        return offset
+
+    def write_rows(self, y0: int, images: np.ndarray) -> None:
+        """Write rows ``y0 ..`` of centres: ``images (n, nx, R, R)``."""
+        data = np.ascontiguousarray(images, dtype=np.float32)
+        fd = os.open(self.path, os.O_WRONLY)
+        try:
+            view, pos = memoryview(data).cast("B"), self.offset + 4 * self.row_items * y0
+            while view.nbytes:
+                n = os.pwrite(fd, view, pos)
+                view, pos = view[n:], pos + n
+        finally:
+            os.close(fd)
+
+    def read(self, y0: int, y1: int, x0: int = 0, x1: int | None = None,
+             step: int = 1) -> np.ndarray:
+        """Images ``(y1 - y0, len(range(x0, x1, step)), R, R)`` float32 of rows ``y0 .. y1 - 1``
+        and columns ``x0, x0 + step, .. < x1`` (a copy)."""
+        x1 = self.shape[1] if x1 is None else x1
+        xs = range(x0, x1, step)
+        out = np.empty((y1 - y0, len(xs)) + self.shape[2:], np.float32)
+        fd = os.open(self.path, os.O_RDONLY)
+        try:
+            for i, y in enumerate(range(y0, y1)):
+                row = self.offset + 4 * self.row_items * y
+                # contiguous columns in one read, strided ones image by image
+                runs = ([(x0, out[i])] if step == 1 else
+                        [(x, out[i, k]) for k, x in enumerate(xs)])
+                for x, buf in runs:
+                    view, pos = memoryview(buf).cast("B"), row + 4 * self.image_items * x
+                    while view.nbytes:
+                        n = os.preadv(fd, [view], pos)
+                        if n == 0:
+                            raise EOFError(f"{self.path}: truncated level file")
+                        view, pos = view[n:], pos + n
+        finally:
+            os.close(fd)
+        return out

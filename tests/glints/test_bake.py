@@ -1,0 +1,130 @@
+"""The bake's progress on stderr (command, render cache) and its memory and temporary disk."""
+
+import threading
+
+import numpy as np
+from maps import sinusoid
+
+from prefilter.glints import bake as gbake
+from prefilter.glints.bake import bake
+from prefilter.glints.levels import LevelFile
+
+SMALL = dict(rank=4, ndf_res=16, block=8, support=0.4, cell=8, n_iter_max=10)
+
+
+def test_bake_reports_what_where_and_each_stage(tmp_path, capsys):
+    out = tmp_path / "m.npz"
+    bake(sinusoid(16, px=16, py=8), out, progress=True, **SMALL)
+    err = capsys.readouterr().err
+    assert "glints bake: normal map 16x16" in err and f"-> {out}" in err
+    assert f"{out}.parts" in err  # where the resumable parts go
+    for stage in ("level 0 NDF images", "coarser levels", "CP fit at rank 2",
+                  "CP refit, encoding", "KiB -> "):
+        assert stage in err, stage
+
+
+def test_quiet_bake_is_silent(tmp_path, capsys):
+    bake(sinusoid(16, px=16, py=8), tmp_path / "m.npz", progress=False, **SMALL)
+    assert capsys.readouterr().err == ""
+
+
+def test_render_cache_bake_reports_its_file_then_loads_silently(tmp_path, monkeypatch, capsys):
+    from prefilter.glints.render import baked_surface
+
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path / "cache"))
+    nm = sinusoid(16, px=16, py=8)
+    small = dict(rank=4, ndf_res=16, block=8, n_iter_max=10)
+    baked_surface(nm, settings=small, progress=True)
+    err = capsys.readouterr().err
+    assert "glints bake: normal map 16x16" in err and str(tmp_path / "cache") in err
+    baked_surface(nm.copy(), settings=small, progress=True)  # from the cache
+    assert capsys.readouterr().err == ""
+
+
+def test_render_passes_its_progress_to_the_bake(monkeypatch):
+    """``glints`` renders hand the render's ``progress`` (``--quiet``) to ``baked_surface``."""
+    from prefilter.glints import render as grender
+    from prefilter.render.scene import load_scene
+
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def spy(normal_map, *, direct=False, settings=None, progress=False):
+        seen.append(progress)
+        raise Stop
+
+    monkeypatch.setattr(grender, "baked_surface", spy)
+    scene = load_scene(grender.measurement_scene(2.0, "flakes", 16, width=4, height=3))
+    for progress in (True, False):
+        try:
+            grender.render_glints(scene, _settings(progress))
+        except Stop:
+            pass
+    assert seen == [True, False]
+
+
+def _settings(progress):
+    from prefilter.render.methods import RenderSettings
+
+    return RenderSettings(spp=1, seed=0, jitter=(0.0, 0.0), progress=progress)
+
+
+def test_bake_maps_no_level_and_reads_at_most_a_cell_or_row(tmp_path, monkeypatch):
+    """Levels are read by rows of centres or cells and never memory-mapped (a map's pages count
+    in the process's memory), so the bake's memory does not grow with the map."""
+    largest = [0]
+    read = LevelFile.read
+
+    def counted(self, *args, **kwargs):
+        out = read(self, *args, **kwargs)
+        largest[0] = max(largest[0], out.shape[0] * out.shape[1])
+        return out
+
+    def no_map(*args, **kwargs):
+        raise AssertionError("a level was memory-mapped")
+
+    monkeypatch.setattr(LevelFile, "read", counted)
+    monkeypatch.setattr(np.lib.format, "open_memmap", no_map)
+    monkeypatch.setattr(np, "memmap", no_map)
+    nm = sinusoid(32, px=16, py=8)
+    bake(nm, tmp_path / "m.npz", progress=False, **SMALL)
+    # level 0 has 8 x 8 centres; a cell holds (cell / stride0)^2 = 4 of them, a row 8
+    assert 0 < largest[0] <= 8
+
+
+def test_temporary_disk_is_the_uncompressed_pyramid_at_most(tmp_path, monkeypatch):
+    """Peak bytes of the parts folder (polled while the bake runs, and at its end) stay within
+    the uncompressed pyramid plus the checkpoints; none are left behind."""
+    out = tmp_path / "m.npz"
+    parts = tmp_path / "m.npz.parts"
+    peak, done = [0], threading.Event()
+
+    def usage():
+        return sum(f.stat().st_blocks * 512 for f in parts.glob("*") if f.is_file())
+
+    def poll():
+        while not done.is_set():
+            try:
+                peak[0] = max(peak[0], usage())
+            except OSError:
+                pass
+            done.wait(0.01)
+
+    save = gbake.save
+
+    def at_end(*args, **kwargs):  # the parts are complete just before the output is written
+        peak[0] = max(peak[0], usage())
+        return save(*args, **kwargs)
+
+    monkeypatch.setattr(gbake, "save", at_end)
+    t = threading.Thread(target=poll)
+    t.start()
+    try:
+        s = bake(sinusoid(32, px=16, py=8), out, progress=False, **SMALL)
+    finally:
+        done.set()
+        t.join()
+    assert 0 < peak[0] <= 1.1 * s["raw_bytes"] + 400_000
+    assert not parts.exists()
