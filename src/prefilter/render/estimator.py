@@ -360,8 +360,10 @@ def mis_quad(lobe: Lobe, light, position, ts, bs, ns, wo, u, *, heuristic: str =
 
 
 @njit_inline
-def material_eval_pdf(wox, woy, woz, lam_o, wix, wiy, wiz, ax, ay, base, f0, p_spec, f_out):
-    """Writes :meth:`MaterialLobe.eval` (rgb) into ``f_out``; returns :meth:`MaterialLobe.pdf`.
+def material_eval_pdf(wox, woy, woz, lam_o, wix, wiy, wiz, ax, ay, base, f0, p_spec):
+    """:meth:`MaterialLobe.eval` (rgb) and :meth:`MaterialLobe.pdf`: ``(f_r, f_g, f_b, pdf)``
+    (scalars, not an output array: stores to an array that may alias the inputs make the
+    compiler reload them).
     ``lam_o``: Smith's ``Lambda`` of the view (per shading point, not per direction)."""
     hx, hy, hz = wox + wix, woy + wiy, woz + wiz
     hn = np.sqrt(hx * hx + hy * hy + hz * hz)
@@ -375,14 +377,16 @@ def material_eval_pdf(wox, woy, woz, lam_o, wix, wiy, wiz, ax, ay, base, f0, p_s
         spec = d / (1.0 + lam_o + ggx_lambda_jit(ax, ay, wix, wiy, wiz)) / (4.0 * woz)
     c = min(max(wix * hx + wiy * hy + wiz * hz, 0.0), 1.0)
     cos_i = max(wiz, 0.0)
-    for k in range(3):
-        f_out[k] = base[k] / np.pi * cos_i + schlick_jit(f0[k], c) * spec
+    d_cos = cos_i / np.pi
     # density of a reflected visible normal (GGX.pdf_reflect) and of the cosine lobe
     doth = wox * hx + woy * hy + woz * hz
     p_s = 0.0
     if doth > 1e-12 and woz > 0.0:
         p_s = (d * doth / (1.0 + lam_o) / woz) / (4.0 * doth)
-    return p_spec * p_s + (1.0 - p_spec) * cos_i / np.pi
+    return (base[0] * d_cos + schlick_jit(f0[0], c) * spec,
+            base[1] * d_cos + schlick_jit(f0[1], c) * spec,
+            base[2] * d_cos + schlick_jit(f0[2], c) * spec,
+            p_spec * p_s + (1.0 - p_spec) * d_cos)
 
 
 @njit_inline
@@ -411,8 +415,7 @@ def specular_probability_jit(woz, base, f0):
 
 @njit_inline
 def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base, f0, p_spec,
-                      verts, normal, area, p1, d_plane, rect, sr, u0, u1, u2, u3, power, f, term,
-                      pt):
+                      verts, normal, area, p1, d_plane, rect, sr, u0, u1, u2, u3, power):
     """One light/lobe sample pair of :func:`mis_quad` for :class:`MaterialLobe` at the shading
     point ``(px, py, pz)`` with frame ``ts, bs, ns (3,)``, view ``wo`` in that frame, its Smith
     ``lam_o`` and the lobe choice probability ``p_spec`` (:func:`specular_probability_jit`); the
@@ -421,17 +424,14 @@ def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base
     ``sr`` (:func:`prefilter.render.lights.quad_setup_jit`); uniforms ``u0, u1`` (light sample),
     ``u2, u3`` (lobe direction).
 
-    Writes ``term (2, 3)``: the light-sample and lobe-sample terms (rgb, before the light's
-    radiance; 0 where a sample adds nothing) and ``pt (2, 3)``: their points on the light (the
-    shading point where the lobe's ray misses it). ``f (3,)``: scratch.
+    Returns 12 scalars: the light-sample term (rgb, before the light's radiance; 0 where the
+    sample adds nothing), the lobe-sample term (rgb), and their points on the light (the shading
+    point where the lobe's ray misses it).
     """
-    for q in range(2):
-        for k in range(3):
-            term[q, k] = 0.0
+    tl0 = tl1 = tl2 = tb0 = tb1 = tb2 = 0.0
     # -- light sample (lights.light_sample) --
     dx, dy, dz, pl, lx, ly, lz = quad_sample_jit(px, py, pz, verts, normal, area, p1, rect, sr,
                                                  u0, u1)
-    pt[0, 0], pt[0, 1], pt[0, 2] = lx, ly, lz
     if pl > 0.0:
         wx = dx * ts[0] + dy * ts[1] + dz * ts[2]
         wy = dx * bs[0] + dy * bs[1] + dz * bs[2]
@@ -439,10 +439,10 @@ def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base
         wn = np.sqrt(wx * wx + wy * wy + wz * wz)
         wx, wy, wz = wx / wn, wy / wn, wz / wn
         if wz > 0.0:  # below the shading horizon the lobe is 0
-            pb = material_eval_pdf(wox, woy, woz, lam_o, wx, wy, wz, ax, ay, base, f0, p_spec, f)
+            f_r, f_g, f_b, pb = material_eval_pdf(wox, woy, woz, lam_o, wx, wy, wz, ax, ay, base,
+                                                  f0, p_spec)
             w = mis_over(pl, pb, power)
-            for k in range(3):
-                term[0, k] = f[k] * w
+            tl0, tl1, tl2 = f_r * w, f_g * w, f_b * w
     # -- lobe sample: GGX visible normal reflected, or cosine (sample_brdf) --
     if u2 < p_spec:
         ua = min(u2 / p_spec, 1.0 - 2.0**-53)
@@ -457,12 +457,12 @@ def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base
     wy = bx * ts[1] + by * bs[1] + bz * ns[1]
     wz = bx * ts[2] + by * bs[2] + bz * ns[2]
     plb, hx, hy, hz = quad_pdf_jit(px, py, pz, wx, wy, wz, verts, normal, area, d_plane, sr)
-    pt[1, 0], pt[1, 1], pt[1, 2] = hx, hy, hz
     if plb > 0.0 and bz > 0.0:
-        pb = material_eval_pdf(wox, woy, woz, lam_o, bx, by, bz, ax, ay, base, f0, p_spec, f)
+        f_r, f_g, f_b, pb = material_eval_pdf(wox, woy, woz, lam_o, bx, by, bz, ax, ay, base, f0,
+                                              p_spec)
         w = mis_over(pb, plb, power)
-        for k in range(3):
-            term[1, k] = f[k] * w
+        tb0, tb1, tb2 = f_r * w, f_g * w, f_b * w
+    return tl0, tl1, tl2, tb0, tb1, tb2, lx, ly, lz, hx, hy, hz
 
 
 @njit_parallel
@@ -479,26 +479,24 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
     npairs = u.shape[1]
     p1, d_plane = quad_constants(verts, normal, area)
     for i in prange(n):
-        scratch = np.empty((5, 3))  # f, term (2, 3), pt (2, 3)
-        f, term, pt = scratch[0], scratch[1:3], scratch[3:5]
         p_spec = specular_probability_jit(wo[i, 2], base[i], f0[i])
         lam_o = ggx_lambda_jit(ax[i], ay[i], wo[i, 0], wo[i, 1], wo[i, 2])
         sr = quad_setup_jit(pos[i, 0], pos[i, 1], pos[i, 2], rect, is_rect)
         for k in range(3):
             acc[i, k] = 0.0
         for j in range(npairs):
-            material_mis_pair(pos[i, 0], pos[i, 1], pos[i, 2], ts[i], bs[i], ns[i], wo[i, 0],
-                              wo[i, 1], wo[i, 2], lam_o, ax[i], ay[i], base[i], f0[i], p_spec,
-                              verts, normal, area, p1, d_plane, rect, sr, u[i, j, 0], u[i, j, 1],
-                              u[i, j, 2], u[i, j, 3], power, f, term, pt)
+            r = material_mis_pair(pos[i, 0], pos[i, 1], pos[i, 2], ts[i], bs[i], ns[i], wo[i, 0],
+                                  wo[i, 1], wo[i, 2], lam_o, ax[i], ay[i], base[i], f0[i],
+                                  p_spec, verts, normal, area, p1, d_plane, rect, sr, u[i, j, 0],
+                                  u[i, j, 1], u[i, j, 2], u[i, j, 3], power)
             for k in range(3):
-                acc[i, k] += term[0, k]
-                acc[i, k] += term[1, k]
+                acc[i, k] += r[k]
+                acc[i, k] += r[3 + k]
             if keep:
                 for q in range(2):
                     for k in range(3):
-                        out[i, j, q, k] = term[q, k]
-                        hit[i, j, q, k] = pt[q, k]
+                        out[i, j, q, k] = r[3 * q + k]
+                        hit[i, j, q, k] = r[6 + 3 * q + k]
 
 
 @njit_inline

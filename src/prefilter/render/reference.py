@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, prange, serial
+from prefilter.jit import njit_parallel, prange
 from prefilter.render.camera import camera_params, gbuffer_at
 from prefilter.render.driver import render_positions, surface_attributes, with_settings
 from prefilter.microfacet.ggx import ggx_lambda_jit
@@ -208,8 +208,6 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
         tx = np.empty((2, 4))
         geo = np.empty((5, 3))
         mat = np.empty(7)
-        scratch = np.empty((5, 3))  # f, term (2, 3), pt (2, 3)
-        f, term, pt = scratch[0], scratch[1:3], scratch[3:5]
         # the scrambles of the current pixel's sets: (light, lobe) per quad light
         seeds = np.empty((2 * nq, 2), np.int64)
         shuffle = np.empty(2 * nq, np.int64)
@@ -241,25 +239,28 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
                 last = pixel
             first = (i % npos) * npairs
             for q in range(nq):
-                sr = quad_setup_jit(px, py, pz, qrect[q], qis_rect[q])
+                # views taken once per light, not per pair (each view costs reference counting)
+                vq, nq_, rq = qv[q], qn[q], qrect[q]
+                sl, sb = seeds[2 * q], seeds[2 * q + 1]
+                shl, shb = shuffle[2 * q], shuffle[2 * q + 1]
+                p1, d_plane = qc[q, 0], qc[q, 1]
+                sr = quad_setup_jit(px, py, pz, rq, qis_rect[q])
                 a0 = a1 = a2 = 0.0
                 for j in range(npairs):
-                    kl = owen_sobol_index(first + j, shuffle[2 * q], m)
-                    kb = owen_sobol_index(first + j, shuffle[2 * q + 1], m)
-                    material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay,
-                                      base_color, f0, p_spec, qv[q], qn[q], qarea[q], qc[q, 0],
-                                      qc[q, 1], qrect[q], sr,
-                                      owen_sobol_coord(base, kl, 0, seeds[2 * q]),
-                                      owen_sobol_coord(base, kl, 1, seeds[2 * q]),
-                                      owen_sobol_coord(base, kb, 0, seeds[2 * q + 1]),
-                                      owen_sobol_coord(base, kb, 1, seeds[2 * q + 1]), power, f,
-                                      term, pt)
-                    a0 += term[0, 0]
-                    a0 += term[1, 0]
-                    a1 += term[0, 1]
-                    a1 += term[1, 1]
-                    a2 += term[0, 2]
-                    a2 += term[1, 2]
+                    kl = owen_sobol_index(first + j, shl, m)
+                    kb = owen_sobol_index(first + j, shb, m)
+                    r = material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay,
+                                          base_color, f0, p_spec, vq, nq_, qarea[q], p1, d_plane,
+                                          rq, sr, owen_sobol_coord(base, kl, 0, sl),
+                                          owen_sobol_coord(base, kl, 1, sl),
+                                          owen_sobol_coord(base, kb, 0, sb),
+                                          owen_sobol_coord(base, kb, 1, sb), power)
+                    a0 += r[0]
+                    a0 += r[3]
+                    a1 += r[1]
+                    a1 += r[4]
+                    a2 += r[2]
+                    a2 += r[5]
                 rad[i, 0] += a0 * (qrad[q, 0] / npairs)
                 rad[i, 1] += a1 * (qrad[q, 1] / npairs)
                 rad[i, 2] += a2 * (qrad[q, 2] / npairs)
@@ -299,7 +300,9 @@ def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance"):
         keys = np.array([sobol_key(seed, b) for q in range(len(quads)) for b in pair_blocks(q)],
                         dtype=np.int64)
         rad = np.empty((len(xy), 3))
-        serial(reference_samples_kernel, len(xy) * len(quads) * k)(
+        # always the parallel kernel, never its serial twin (jit.serial): the two compilations
+        # can round differently (seen at 1e-15), and images must not depend on the chunk size
+        reference_samples_kernel(
             cam, xy, types, params, *packed, read, qv, qn, qa, qrect, qis, qr,
             sobol_base(m, 2), m, keys, pixels, k, power, VIEW_Z_MIN, rad)
         return rad
