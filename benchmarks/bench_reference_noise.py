@@ -10,7 +10,8 @@ plane normal-mapped. For each, in the same run:
   positions, one independent uniform MIS light/BRDF pair per position, area-sampled light,
   5 uniforms per pair) at ``--spp`` samples per pixel;
 * the new ``reference`` at powers of two, then at the sample count whose time matches the old
-  one's (within 2 %); every time is the best of 3 calls, the old and the new estimator's calls
+  one's (the largest of up to four tries, steered from either side, that is not more than 2 %
+  slower); every time is the best of 3 calls, the old and the new estimator's calls
   alternating (other jobs on a shared machine slow both alike);
 * relative MSE of each (:func:`prefilter.render.metrics.relmse`), the equal-time ratio
   ``relMSE_old / relMSE_new`` and the efficiency ratio ``relMSE_old t_old / (relMSE_new t_new)``;
@@ -334,13 +335,21 @@ def main() -> None:
         below = [r for r in rows if r[1] <= t_old] or rows[:1]
         s0, t0 = below[-1][:2]
         spp_eq = max(4, int(s0 * t_old / t0) // 4 * 4)
-        while True:
-            img, t_new, t_o = timed(lambda: new(scene, spp_eq, 1),
-                                    lambda: render_old(scene, args.spp, 1))
+        # steer the sample count towards the old estimator's time from either side (timings
+        # on a shared machine jump), keeping the largest count that is not slower (within 2 %)
+        best = None
+        for _ in range(4):
+            img, t, t_o = timed(lambda: new(scene, spp_eq, 1),
+                                lambda: render_old(scene, args.spp, 1))
             t_old = min(t_old, t_o)
-            if t_new <= t_old * 1.02 or spp_eq <= 4:
+            if t <= t_old * 1.02 and (best is None or spp_eq > best[0]):
+                best = (spp_eq, t, img)
+            if abs(t / t_old - 1.0) <= 0.02 or (spp_eq <= 4 and t > t_old):
                 break
-            spp_eq = max(4, int(spp_eq * t_old / t_new * 0.97) // 4 * 4)
+            spp_eq = max(4, int(spp_eq * t_old / t * 0.99) // 4 * 4)
+        if best is None:
+            best = (spp_eq, t, img)
+        spp_eq, t_new, img = best
         spp_new, e_new = spp_eq, relmse(img, truth)
         print(f"  {name}:")
         print(f"    old  {args.spp:6d} spp  {t_old:6.3f} s  relMSE {e_old:.3e}")
