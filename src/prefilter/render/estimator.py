@@ -1,8 +1,9 @@
 """Monte Carlo estimation of the radiance a lobe reflects from a quad light: one MIS estimator
 fed by scrambled Sobol points.
 
-Estimator (Veach 1997, eq. 9.13, one sample per strategy): a light sample ``w_l`` (uniform on the
-quad's area, :func:`prefilter.render.lights.quad_light_sample`) and a lobe sample ``w_b``
+Estimator (Veach 1997, eq. 9.13, one sample per strategy): a light sample ``w_l`` (uniform in the
+solid angle of a rectangle, Urena et al. 2013, else on the quad's area:
+:func:`prefilter.render.lights.light_sample`) and a lobe sample ``w_b``
 (:meth:`prefilter.lobe.Lobe.sample`), combined with the balance heuristic
 ``f(w) L(w) / (p_light(w) + p_lobe(w))`` or the power heuristic
 ``f(w) L(w) p_s(w) / (p_light(w)^2 + p_lobe(w)^2)`` (Veach 1997, eq. 9.14, beta = 2):
@@ -16,9 +17,10 @@ nested-uniform (Owen) scrambled per pixel with the hash of Laine and Karras as i
 Vegdahl 2021). Each point stays uniform on
 ``[0, 1)^d`` (the estimator is unbiased) while each pixel's set keeps the Sobol stratification
 (errors fall faster than ``n^-1/2`` for integrands of bounded variation). Every sample block
-(sub-pixel position; light and lobe of one quad light) uses the first Sobol dimensions with its
-own scramble ("padding", Burley 2020 section 4), and aligned runs of ``2^k`` shuffled points are
-themselves nets, so the ``k`` light/lobe pairs shaded at one sub-pixel position are stratified too.
+(sub-pixel position; the light sample of one quad light; its lobe sample) uses the first two
+Sobol dimensions, a (0, 2)-sequence, with its own scramble ("padding", Burley 2020 section 4), and
+aligned runs of ``2^k`` shuffled points are themselves nets, so the ``k`` light/lobe pairs shaded
+at one sub-pixel position are stratified too (each strategy's ``k`` points in its own square).
 """
 
 from __future__ import annotations
@@ -32,7 +34,15 @@ from prefilter.lobe import Lobe, sample_weight
 from prefilter.microfacet import GGX, reflect
 from prefilter.microfacet.fresnel import schlick, schlick_jit
 from prefilter.microfacet.ggx import ggx_d_jit, ggx_lambda_jit, ggx_sample_vndf_jit
-from prefilter.render.lights import quad_light_pdf, quad_light_sample, sample_quad_area
+from prefilter.render.lights import (
+    light_pdf,
+    light_sample,
+    quad_arrays,
+    quad_constants,
+    quad_pdf_jit,
+    quad_sample_jit,
+    quad_setup_jit,
+)
 from prefilter.render.shading import brdf_cos
 from prefilter.sphere.sampling import cosine_hemisphere, to_local, to_world
 
@@ -307,21 +317,22 @@ def mis_directions(lobe: Lobe, wo, wl, p_light, light_pdf_at, u_lobe, *,
 
 
 def mis_quad(lobe: Lobe, light, position, ts, bs, ns, wo, u, *, heuristic: str = "balance"):
-    """:func:`mis_directions` for a quad light sampled uniformly on its area.
+    """:func:`mis_directions` for a quad light sampled by
+    :func:`prefilter.render.lights.light_sample` (uniform in solid angle for rectangles, else on
+    the area).
 
     Parameters
     ----------
     lobe : Lobe
         Any lobe, batched over the ``N`` shading points (``eval (N,)`` or ``(N, C)``).
     light : QuadLight
-        The quad's geometry (:attr:`vertices`, :attr:`normal`, :attr:`area`); its radiance is
-        not applied.
+        The quad's geometry; its radiance is not applied.
     position, ts, bs, ns : (N, 3)
         Shading points and their shading frames.
     wo : (N, 3)
         View directions in the shading frame.
     u : (N, 4)
-        Uniforms: light point (2), lobe direction (2).
+        Uniforms: light sample (2), lobe direction (2).
 
     Returns
     -------
@@ -331,51 +342,51 @@ def mis_quad(lobe: Lobe, light, position, ts, bs, ns, wo, u, *, heuristic: str =
         Their points on the light (the shading point where a lobe sample misses the light), to
         read a light texture at.
     """
-    wl, pl = quad_light_sample(light, position, u[:, 0:2])
+    wl, pl, pt_l = light_sample(light, position, u[:, 0:2])
     wl_loc = to_local(wl, ts, bs, ns)
     wl_loc /= np.linalg.norm(wl_loc, axis=-1, keepdims=True)
-    t_l, wb_loc, t_b = mis_directions(
-        lobe, wo, wl_loc, pl, lambda w: quad_light_pdf(light, position, to_world(w, ts, bs, ns)),
-        u[:, 2:4], heuristic=heuristic)
-    terms = np.stack([t_l, t_b], axis=1)
-    # the point the light sample drew (same uniforms, same warp) and the lobe ray's hit
-    wb = to_world(wb_loc, ts, bs, ns)
-    n = light.normal
-    cos_l = -(wb @ n)
-    hit = quad_light_pdf(light, position, wb) > 0.0
-    t = np.where(hit, ((light.vertices[0] - position) @ n) / np.where(hit, -cos_l, 1.0), 0.0)
-    points = np.stack([sample_quad_area(light.vertices, u[:, 0:2]),
-                       position + t[:, None] * wb], axis=1)
-    return terms, points
+    hits = {}
+
+    def pdf_at(w):
+        p, hits["pt"] = light_pdf(light, position, to_world(w, ts, bs, ns))
+        return p
+
+    t_l, wb_loc, t_b = mis_directions(lobe, wo, wl_loc, pl, pdf_at, u[:, 2:4],
+                                      heuristic=heuristic)
+    return np.stack([t_l, t_b], axis=1), np.stack([pt_l, hits["pt"]], axis=1)
 
 
 # --------------------------------------------------------------- the material lobe in Numba
 
 
 @njit_inline
-def material_eval_pdf(wox, woy, woz, wix, wiy, wiz, ax, ay, base, f0, p_spec, f_out):
-    """Writes :meth:`MaterialLobe.eval` (rgb) into ``f_out``; returns :meth:`MaterialLobe.pdf`."""
+def material_eval_pdf(wox, woy, woz, lam_o, wix, wiy, wiz, ax, ay, base, f0, p_spec):
+    """:meth:`MaterialLobe.eval` (rgb) and :meth:`MaterialLobe.pdf`: ``(f_r, f_g, f_b, pdf)``
+    (scalars, not an output array: stores to an array that may alias the inputs make the
+    compiler reload them).
+    ``lam_o``: Smith's ``Lambda`` of the view (per shading point, not per direction)."""
     hx, hy, hz = wox + wix, woy + wiy, woz + wiz
     hn = np.sqrt(hx * hx + hy * hy + hz * hz)
     if hn > 1e-12:
         hx, hy, hz = hx / hn, hy / hn, hz / hn
     else:
         hx, hy, hz = 0.0, 0.0, 1.0
-    lam_o = ggx_lambda_jit(ax, ay, wox, woy, woz)
     d = ggx_d_jit(ax, ay, hx, hy, hz) if hz > 0.0 else 0.0
     spec = 0.0
     if woz > 0.0 and wiz > 0.0:
         spec = d / (1.0 + lam_o + ggx_lambda_jit(ax, ay, wix, wiy, wiz)) / (4.0 * woz)
     c = min(max(wix * hx + wiy * hy + wiz * hz, 0.0), 1.0)
     cos_i = max(wiz, 0.0)
-    for k in range(3):
-        f_out[k] = base[k] / np.pi * cos_i + schlick_jit(f0[k], c) * spec
+    d_cos = cos_i / np.pi
     # density of a reflected visible normal (GGX.pdf_reflect) and of the cosine lobe
     doth = wox * hx + woy * hy + woz * hz
     p_s = 0.0
     if doth > 1e-12 and woz > 0.0:
         p_s = (d * doth / (1.0 + lam_o) / woz) / (4.0 * doth)
-    return p_spec * p_s + (1.0 - p_spec) * cos_i / np.pi
+    return (base[0] * d_cos + schlick_jit(f0[0], c) * spec,
+            base[1] * d_cos + schlick_jit(f0[1], c) * spec,
+            base[2] * d_cos + schlick_jit(f0[2], c) * spec,
+            p_spec * p_s + (1.0 - p_spec) * d_cos)
 
 
 @njit_inline
@@ -403,70 +414,36 @@ def specular_probability_jit(woz, base, f0):
 
 
 @njit_inline
-def quad_constants(verts, normal, area):
-    """``(p1, d)`` of a quad light ``verts (4, 3)``: the probability of its first triangle
-    ``(v0, v1, v2)`` in :func:`prefilter.render.lights.sample_quad_area` and its plane's offset
-    ``normal . v0``."""
-    tri1 = 0.5 * np.sqrt(
-        ((verts[1, 1] - verts[0, 1]) * (verts[2, 2] - verts[0, 2])
-         - (verts[1, 2] - verts[0, 2]) * (verts[2, 1] - verts[0, 1])) ** 2
-        + ((verts[1, 2] - verts[0, 2]) * (verts[2, 0] - verts[0, 0])
-           - (verts[1, 0] - verts[0, 0]) * (verts[2, 2] - verts[0, 2])) ** 2
-        + ((verts[1, 0] - verts[0, 0]) * (verts[2, 1] - verts[0, 1])
-           - (verts[1, 1] - verts[0, 1]) * (verts[2, 0] - verts[0, 0])) ** 2)
-    return tri1 / area, verts[0, 0] * normal[0] + verts[0, 1] * normal[1] + verts[0, 2] * normal[2]
-
-
-@njit_inline
-def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, ax, ay, base, f0, p_spec, verts,
-                      normal, area, p1, d_plane, u0, u1, u2, u3, power, f, term, pt):
+def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base, f0, p_spec,
+                      verts, normal, area, p1, d_plane, rect, sr, u0, u1, u2, u3, power):
     """One light/lobe sample pair of :func:`mis_quad` for :class:`MaterialLobe` at the shading
-    point ``(px, py, pz)`` with frame ``ts, bs, ns (3,)``, view ``wo`` in that frame and lobe
-    choice probability ``p_spec`` (:func:`specular_probability_jit`); the quad light
-    ``verts (4, 3)``, ``normal (3,)``, ``area`` with :func:`quad_constants` ``p1, d_plane``;
-    uniforms ``u0, u1`` (light point), ``u2, u3`` (lobe direction).
+    point ``(px, py, pz)`` with frame ``ts, bs, ns (3,)``, view ``wo`` in that frame, its Smith
+    ``lam_o`` and the lobe choice probability ``p_spec`` (:func:`specular_probability_jit`); the
+    quad light ``verts (4, 3)``, ``normal (3,)``, ``area``, ``rect`` with
+    :func:`prefilter.render.lights.quad_constants` ``p1, d_plane`` and the point's sampling state
+    ``sr`` (:func:`prefilter.render.lights.quad_setup_jit`); uniforms ``u0, u1`` (light sample),
+    ``u2, u3`` (lobe direction).
 
-    Writes ``term (2, 3)``: the light-sample and lobe-sample terms (rgb, before the light's
-    radiance; 0 where a sample adds nothing) and ``pt (2, 3)``: their points on the light (the
-    shading point where the lobe's ray misses it). ``f (3,)``: scratch.
+    Returns 12 scalars: the light-sample term (rgb, before the light's radiance; 0 where the
+    sample adds nothing), the lobe-sample term (rgb), and their points on the light (the shading
+    point where the lobe's ray misses it).
     """
-    for q in range(2):
-        for k in range(3):
-            term[q, k] = 0.0
-    # -- light sample: uniform on the area (sample_quad_area) --
-    if u0 < p1:
-        u0 = u0 / p1
-        b_i, c_i = 1, 2
-    else:
-        u0 = (u0 - p1) / (1.0 - p1) if p1 < 1.0 else 0.0
-        b_i, c_i = 2, 3
-    u0 = min(max(u0, 0.0), 1.0)
-    su = np.sqrt(u0)
-    b1 = u1 * su
-    b2 = su - b1
-    lx = verts[0, 0] + b1 * (verts[c_i, 0] - verts[0, 0]) + b2 * (verts[b_i, 0] - verts[0, 0])
-    ly = verts[0, 1] + b1 * (verts[c_i, 1] - verts[0, 1]) + b2 * (verts[b_i, 1] - verts[0, 1])
-    lz = verts[0, 2] + b1 * (verts[c_i, 2] - verts[0, 2]) + b2 * (verts[b_i, 2] - verts[0, 2])
-    pt[0, 0], pt[0, 1], pt[0, 2] = lx, ly, lz
-    dx, dy, dz = lx - px, ly - py, lz - pz
-    dist2 = dx * dx + dy * dy + dz * dz
-    dist = np.sqrt(dist2)
-    if dist > 1e-12:
-        dx, dy, dz = dx / dist, dy / dist, dz / dist
-        cos_l = -(dx * normal[0] + dy * normal[1] + dz * normal[2])
-        if cos_l > 1e-12:
-            pl = dist2 / (area * cos_l)
-            wx = dx * ts[0] + dy * ts[1] + dz * ts[2]
-            wy = dx * bs[0] + dy * bs[1] + dz * bs[2]
-            wz = dx * ns[0] + dy * ns[1] + dz * ns[2]
-            wn = np.sqrt(wx * wx + wy * wy + wz * wz)
-            wx, wy, wz = wx / wn, wy / wn, wz / wn
-            pb = material_eval_pdf(wox, woy, woz, wx, wy, wz, ax, ay, base, f0, p_spec, f)
+    tl0 = tl1 = tl2 = tb0 = tb1 = tb2 = 0.0
+    # -- light sample (lights.light_sample) --
+    dx, dy, dz, pl, lx, ly, lz = quad_sample_jit(px, py, pz, verts, normal, area, p1, rect, sr,
+                                                 u0, u1)
+    if pl > 0.0:
+        wx = dx * ts[0] + dy * ts[1] + dz * ts[2]
+        wy = dx * bs[0] + dy * bs[1] + dz * bs[2]
+        wz = dx * ns[0] + dy * ns[1] + dz * ns[2]
+        wn = np.sqrt(wx * wx + wy * wy + wz * wz)
+        wx, wy, wz = wx / wn, wy / wn, wz / wn
+        if wz > 0.0:  # below the shading horizon the lobe is 0
+            f_r, f_g, f_b, pb = material_eval_pdf(wox, woy, woz, lam_o, wx, wy, wz, ax, ay, base,
+                                                  f0, p_spec)
             w = mis_over(pl, pb, power)
-            for k in range(3):
-                term[0, k] = f[k] * w
+            tl0, tl1, tl2 = f_r * w, f_g * w, f_b * w
     # -- lobe sample: GGX visible normal reflected, or cosine (sample_brdf) --
-    pt[1, 0], pt[1, 1], pt[1, 2] = px, py, pz
     if u2 < p_spec:
         ua = min(u2 / p_spec, 1.0 - 2.0**-53)
         mx, my, mz = ggx_sample_vndf_jit(ax, ay, wox, woy, woz, ua, u3)
@@ -475,38 +452,22 @@ def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, ax, ay, base, f0, p
     else:
         ua = min((u2 - p_spec) / (1.0 - p_spec), 1.0 - 2.0**-53)
         bx, by, bz = cosine_hemisphere_jit(ua, u3)
-    # world direction and its hit on the front of the quad (quad_light_pdf)
+    # world direction and its hit on the front of the quad (lights.light_pdf)
     wx = bx * ts[0] + by * bs[0] + bz * ns[0]
     wy = bx * ts[1] + by * bs[1] + bz * ns[1]
     wz = bx * ts[2] + by * bs[2] + bz * ns[2]
-    cos_l = -(wx * normal[0] + wy * normal[1] + wz * normal[2])
-    if cos_l > 1e-12:
-        t = (d_plane - (px * normal[0] + py * normal[1] + pz * normal[2])) / (-cos_l)
-        if t > 0.0:
-            hx, hy, hz = px + t * wx, py + t * wy, pz + t * wz
-            inside = True
-            for k in range(4):
-                k1 = (k + 1) % 4
-                ex = verts[k1, 0] - verts[k, 0]
-                ey = verts[k1, 1] - verts[k, 1]
-                ez = verts[k1, 2] - verts[k, 2]
-                qx, qy, qz = hx - verts[k, 0], hy - verts[k, 1], hz - verts[k, 2]
-                cr = ((ey * qz - ez * qy) * normal[0] + (ez * qx - ex * qz) * normal[1]
-                      + (ex * qy - ey * qx) * normal[2])
-                if cr < 0.0:
-                    inside = False
-            if inside:
-                pt[1, 0], pt[1, 1], pt[1, 2] = hx, hy, hz
-                plb = t * t / (area * cos_l)
-                pb = material_eval_pdf(wox, woy, woz, bx, by, bz, ax, ay, base, f0, p_spec, f)
-                w = mis_over(pb, plb, power)
-                for k in range(3):
-                    term[1, k] = f[k] * w
+    plb, hx, hy, hz = quad_pdf_jit(px, py, pz, wx, wy, wz, verts, normal, area, d_plane, sr)
+    if plb > 0.0 and bz > 0.0:
+        f_r, f_g, f_b, pb = material_eval_pdf(wox, woy, woz, lam_o, bx, by, bz, ax, ay, base, f0,
+                                              p_spec)
+        w = mis_over(pb, plb, power)
+        tb0, tb1, tb2 = f_r * w, f_g * w, f_b * w
+    return tl0, tl1, tl2, tb0, tb1, tb2, lx, ly, lz, hx, hy, hz
 
 
 @njit_parallel
-def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, u, power,
-                        keep, acc, out, hit):
+def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, rect,
+                        is_rect, u, power, keep, acc, out, hit):
     """:func:`mis_quad` for :class:`MaterialLobe` over ``K`` sample pairs per shading point
     (:func:`material_mis_pair` each).
 
@@ -518,24 +479,24 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
     npairs = u.shape[1]
     p1, d_plane = quad_constants(verts, normal, area)
     for i in prange(n):
-        scratch = np.empty((5, 3))  # f, term (2, 3), pt (2, 3)
-        f, term, pt = scratch[0], scratch[1:3], scratch[3:5]
         p_spec = specular_probability_jit(wo[i, 2], base[i], f0[i])
+        lam_o = ggx_lambda_jit(ax[i], ay[i], wo[i, 0], wo[i, 1], wo[i, 2])
+        sr = quad_setup_jit(pos[i, 0], pos[i, 1], pos[i, 2], rect, is_rect)
         for k in range(3):
             acc[i, k] = 0.0
         for j in range(npairs):
-            material_mis_pair(pos[i, 0], pos[i, 1], pos[i, 2], ts[i], bs[i], ns[i], wo[i, 0],
-                              wo[i, 1], wo[i, 2], ax[i], ay[i], base[i], f0[i], p_spec, verts,
-                              normal, area, p1, d_plane, u[i, j, 0], u[i, j, 1], u[i, j, 2],
-                              u[i, j, 3], power, f, term, pt)
+            r = material_mis_pair(pos[i, 0], pos[i, 1], pos[i, 2], ts[i], bs[i], ns[i], wo[i, 0],
+                                  wo[i, 1], wo[i, 2], lam_o, ax[i], ay[i], base[i], f0[i],
+                                  p_spec, verts, normal, area, p1, d_plane, rect, sr, u[i, j, 0],
+                                  u[i, j, 1], u[i, j, 2], u[i, j, 3], power)
             for k in range(3):
-                acc[i, k] += term[0, k]
-                acc[i, k] += term[1, k]
+                acc[i, k] += r[k]
+                acc[i, k] += r[3 + k]
             if keep:
                 for q in range(2):
                     for k in range(3):
-                        out[i, j, q, k] = term[q, k]
-                        hit[i, j, q, k] = pt[q, k]
+                        out[i, j, q, k] = r[3 * q + k]
+                        hit[i, j, q, k] = r[6 + 3 * q + k]
 
 
 @njit_inline
@@ -574,7 +535,6 @@ def material_mis(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, 
     serial(material_mis_kernel, n * k)(
         c(position, (n, 3)), c(ts, (n, 3)), c(bs, (n, 3)), c(ns, (n, 3)), c(wo, (n, 3)),
         c(alpha_x, (n,)), c(alpha_y, (n,)), c(base_color, (n, 3)), c(f0, (n, 3)),
-        np.ascontiguousarray(light.vertices, dtype=np.float64),
-        np.ascontiguousarray(light.normal, dtype=np.float64), float(light.area),
-        c(u, (n, k, DIMS_PER_QUAD)), heuristic == "power", keep, total, terms, points)
+        *quad_arrays(light), c(u, (n, k, DIMS_PER_QUAD)), heuristic == "power", keep, total,
+        terms, points)
     return (total, terms, points) if keep else (total, None, None)

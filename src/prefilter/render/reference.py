@@ -2,12 +2,13 @@
 
 Per pixel, sub-pixel positions are traced with the G-buffer code and shaded with full-resolution
 textures (level 0, bilinear). Each quad light is integrated by the MIS estimator of
-:mod:`prefilter.render.estimator` (one light sample, uniform on its area, and one BRDF sample, GGX
-visible normals or cosine, per pair; balance heuristic, Veach 1997, eq. 9.13), using the true GGX
-BRDF with Schlick Fresnel (:func:`prefilter.render.shading.brdf_cos`): no LTC. ``spp`` is the
-number of light/BRDF sample pairs per pixel; they are shaded in groups of :func:`pairs_per_position`
-at ``spp / pairs`` sub-pixel positions (tracing and texture reads cost more than a pair). All
-uniforms (positions, and each light's pairs) are per-pixel Owen-scrambled Sobol points
+:mod:`prefilter.render.estimator` (one light sample, uniform in solid angle on rectangles and on
+the area of other quads, and one BRDF sample, GGX visible normals or cosine, per pair; balance
+heuristic, Veach 1997, eq. 9.13), using the true GGX BRDF with Schlick Fresnel
+(:func:`prefilter.render.shading.brdf_cos`): no LTC. ``spp`` is the number of light/BRDF sample
+pairs per pixel; they are shaded in groups of :func:`pairs_per_position` at ``spp / pairs``
+sub-pixel positions (tracing and texture reads cost more than a pair). All uniforms (positions,
+and each light's light and BRDF samples) are per-pixel Owen-scrambled Sobol points
 (:func:`prefilter.render.estimator.owen_sobol`), so the estimator is unbiased and its error falls
 faster than ``O(spp^-1/2)``; ``benchmarks/bench_reference_noise.py`` measures it.
 
@@ -32,11 +33,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, prange, serial
+from prefilter.jit import njit_parallel, prange
 from prefilter.render.camera import camera_params, gbuffer_at
 from prefilter.render.driver import render_positions, surface_attributes, with_settings
+from prefilter.microfacet.ggx import ggx_lambda_jit
 from prefilter.render.estimator import (
-    DIMS_PER_QUAD,
     HEURISTICS,
     MaterialLobe,
     material_mis,
@@ -46,7 +47,6 @@ from prefilter.render.estimator import (
     owen_sobol_coord,
     owen_sobol_index,
     owen_sobol_pixel,
-    quad_constants,
     sobol_base,
     sobol_key,
     specular_probability_jit,
@@ -58,7 +58,14 @@ from prefilter.render.kernels import (
     pack_objects,
     surface_sample,
 )
-from prefilter.render.lights import LightSet, QuadLight
+from prefilter.render.lights import (
+    RECT_WIDTH,
+    LightSet,
+    QuadLight,
+    quad_constants,
+    quad_rectangle,
+    quad_setup_jit,
+)
 from prefilter.render.shading import VIEW_Z_MIN, local_view, shade_delta_lights
 
 #: Light/BRDF sample pairs shaded per traced sub-pixel position at high sample counts
@@ -173,19 +180,22 @@ BLOCK = 256
 
 @njit_parallel
 def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, read, qv, qn,
-                             qarea, qrad, base, m, keys, pixels, npairs, power, view_z_min, rad):
+                             qarea, qrect, qis_rect, qrad, base, m, keys, pixels, npairs, power,
+                             view_z_min, rad):
     """:func:`shade_reference` for untextured quad lights fused with the surface of each
     sub-pixel position, without intermediate arrays: the surface seen through ``xy (N, 2)``
     (:func:`prefilter.render.kernels.surface_sample`, ``read`` at level 0), the view in its
     shading frame (:func:`prefilter.render.shading.local_view`), then per quad light
-    ``qv (Q, 4, 3)``, ``qn (Q, 3)``, ``qarea (Q,)``, ``qrad (Q, 3)`` its ``K = npairs`` MIS pairs
+    ``qv (Q, 4, 3)``, ``qn (Q, 3)``, ``qarea (Q,)``, ``qrect (Q, RECT_WIDTH)``, ``qis_rect (Q,)``,
+    ``qrad (Q, 3)`` its ``K = npairs`` MIS pairs
     (:func:`prefilter.render.estimator.material_mis_pair`, as
     :func:`prefilter.render.estimator.material_mis_kernel`).
 
     The pairs' uniforms are those of :func:`prefilter.render.estimator.owen_sobol` (Sobol table
-    ``base (2^m, 4)``, light ``q``'s key ``keys[q]``), drawn here: position ``i`` is position
-    ``i % S`` of pixel ``pixels[i // S]`` (``S = N / len(pixels)``), and its pair ``j`` is point
-    ``(i % S) K + j`` of the pixel's set. Writes ``rad (N, 3)`` (0 on misses)."""
+    ``base (2^m, 2)``; light ``q``'s light samples keyed ``keys[2 q]``, its lobe samples
+    ``keys[2 q + 1]``), drawn here: position ``i`` is position ``i % S`` of pixel
+    ``pixels[i // S]`` (``S = N / len(pixels)``), and its pair ``j`` is point ``(i % S) K + j`` of
+    the pixel's sets. Writes ``rad (N, 3)`` (0 on misses)."""
     n_pts = xy.shape[0]
     nq = qv.shape[0]
     npos = n_pts // pixels.shape[0]
@@ -198,9 +208,10 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
         tx = np.empty((2, 4))
         geo = np.empty((5, 3))
         mat = np.empty(7)
-        scratch = np.empty((5, 3))  # f, term (2, 3), pt (2, 3)
-        f, term, pt = scratch[0], scratch[1:3], scratch[3:5]
-        seeds = np.empty(DIMS_PER_QUAD, np.int64)
+        # the scrambles of the current pixel's sets: (light, lobe) per quad light
+        seeds = np.empty((2 * nq, 2), np.int64)
+        shuffle = np.empty(2 * nq, np.int64)
+        last = -1
         for i in range(blk * BLOCK, min(n_pts, (blk + 1) * BLOCK)):
             rad[i, 0] = 0.0
             rad[i, 1] = 0.0
@@ -210,6 +221,7 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
             if not hit:
                 continue
             ts, bs, ns = geo[1], geo[2], geo[3]
+            px, py, pz = geo[0, 0], geo[0, 1], geo[0, 2]
             # local_view: the view in the shading frame, clamped to z >= view_z_min
             wox = geo[4, 0] * ts[0] + geo[4, 1] * ts[1] + geo[4, 2] * ts[2]
             woy = geo[4, 0] * bs[0] + geo[4, 1] * bs[1] + geo[4, 2] * bs[2]
@@ -219,25 +231,36 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
             base_color, f0 = mat[1:4], mat[4:7]
             ax, ay = mat_f[o, 0], mat_f[o, 1]
             p_spec = specular_probability_jit(woz, base_color, f0)
+            lam_o = ggx_lambda_jit(ax, ay, wox, woy, woz)
             pixel = pixels[i // npos]
+            if pixel != last:
+                for b in range(2 * nq):
+                    shuffle[b] = owen_sobol_pixel(keys[b], pixel, seeds[b])
+                last = pixel
             first = (i % npos) * npairs
             for q in range(nq):
-                shuffle = owen_sobol_pixel(keys[q], pixel, seeds)
+                # views taken once per light, not per pair (each view costs reference counting)
+                vq, nq_, rq = qv[q], qn[q], qrect[q]
+                sl, sb = seeds[2 * q], seeds[2 * q + 1]
+                shl, shb = shuffle[2 * q], shuffle[2 * q + 1]
+                p1, d_plane = qc[q, 0], qc[q, 1]
+                sr = quad_setup_jit(px, py, pz, rq, qis_rect[q])
                 a0 = a1 = a2 = 0.0
                 for j in range(npairs):
-                    k = owen_sobol_index(first + j, shuffle, m)
-                    material_mis_pair(geo[0, 0], geo[0, 1], geo[0, 2], ts, bs, ns, wox, woy, woz,
-                                      ax, ay, base_color, f0, p_spec, qv[q], qn[q], qarea[q],
-                                      qc[q, 0], qc[q, 1], owen_sobol_coord(base, k, 0, seeds),
-                                      owen_sobol_coord(base, k, 1, seeds),
-                                      owen_sobol_coord(base, k, 2, seeds),
-                                      owen_sobol_coord(base, k, 3, seeds), power, f, term, pt)
-                    a0 += term[0, 0]
-                    a0 += term[1, 0]
-                    a1 += term[0, 1]
-                    a1 += term[1, 1]
-                    a2 += term[0, 2]
-                    a2 += term[1, 2]
+                    kl = owen_sobol_index(first + j, shl, m)
+                    kb = owen_sobol_index(first + j, shb, m)
+                    r = material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay,
+                                          base_color, f0, p_spec, vq, nq_, qarea[q], p1, d_plane,
+                                          rq, sr, owen_sobol_coord(base, kl, 0, sl),
+                                          owen_sobol_coord(base, kl, 1, sl),
+                                          owen_sobol_coord(base, kb, 0, sb),
+                                          owen_sobol_coord(base, kb, 1, sb), power)
+                    a0 += r[0]
+                    a0 += r[3]
+                    a1 += r[1]
+                    a1 += r[4]
+                    a2 += r[2]
+                    a2 += r[5]
                 rad[i, 0] += a0 * (qrad[q, 0] / npairs)
                 rad[i, 1] += a1 * (qrad[q, 1] / npairs)
                 rad[i, 2] += a2 * (qrad[q, 2] / npairs)
@@ -261,6 +284,10 @@ def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance"):
     qv = np.ascontiguousarray([q.vertices for q in quads], dtype=np.float64).reshape(-1, 4, 3)
     qn = np.ascontiguousarray([q.normal for q in quads], dtype=np.float64).reshape(-1, 3)
     qa = np.ascontiguousarray([q.area for q in quads], dtype=np.float64)
+    rects = [quad_rectangle(q.vertices) for q in quads]
+    qrect = np.ascontiguousarray([np.zeros(RECT_WIDTH) if r is None else r for r in rects],
+                                 dtype=np.float64).reshape(-1, RECT_WIDTH)
+    qis = np.array([r is not None for r in rects], dtype=np.bool_)
     qr = np.ascontiguousarray([np.broadcast_to(q.radiance, 3) for q in quads],
                               dtype=np.float64).reshape(-1, 3)
     cam = camera_params(scene.camera)
@@ -270,12 +297,14 @@ def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance"):
         xy = np.ascontiguousarray(xy, dtype=np.float64)
         pixels = np.ascontiguousarray(pixels, dtype=np.int64)
         m = max(0, int(np.ceil(np.log2(max(n, 1)))))
-        keys = np.array([sobol_key(seed, POSITION_BLOCK + 1 + q) for q in range(len(quads))],
+        keys = np.array([sobol_key(seed, b) for q in range(len(quads)) for b in pair_blocks(q)],
                         dtype=np.int64)
         rad = np.empty((len(xy), 3))
-        serial(reference_samples_kernel, len(xy) * len(quads) * k)(
-            cam, xy, types, params, *packed, read, qv, qn, qa, qr,
-            sobol_base(m, DIMS_PER_QUAD), m, keys, pixels, k, power, VIEW_Z_MIN, rad)
+        # always the parallel kernel, never its serial twin (jit.serial): the two compilations
+        # can round differently (seen at 1e-15), and images must not depend on the chunk size
+        reference_samples_kernel(
+            cam, xy, types, params, *packed, read, qv, qn, qa, qrect, qis, qr,
+            sobol_base(m, 2), m, keys, pixels, k, power, VIEW_Z_MIN, rad)
         return rad
 
     return shade
@@ -291,9 +320,14 @@ def pairs_per_position(spp: int, pairs: int = PAIRS_PER_POSITION) -> int:
     return k
 
 
-#: Sample blocks of :func:`prefilter.render.estimator.owen_sobol`: sub-pixel positions, then one
-#: per quad light.
+#: Sample blocks of :func:`prefilter.render.estimator.owen_sobol`: sub-pixel positions, then two
+#: per quad light (:func:`pair_blocks`).
 POSITION_BLOCK = 0
+
+
+def pair_blocks(q: int) -> tuple[int, int]:
+    """The sample blocks of quad light ``q``'s light samples and lobe samples."""
+    return POSITION_BLOCK + 1 + 2 * q, POSITION_BLOCK + 2 + 2 * q
 
 
 def render_reference(scene, settings, *, pairs: int | None = None,
@@ -333,9 +367,9 @@ def render_reference(scene, settings, *, pairs: int | None = None,
 
     def pair_uniforms(pixels):
         """``(P npos, Q, K, 4)``: pair ``j`` of position ``i`` is point ``i K + j`` of the
-        pixel's set (aligned runs of ``K``)."""
-        return np.stack([owen_sobol(pixels, npos * k, DIMS_PER_QUAD, settings.seed,
-                                    POSITION_BLOCK + 1 + q).reshape(-1, k, DIMS_PER_QUAD)
+        pixel's light-sample and lobe-sample sets (aligned runs of ``K``)."""
+        return np.stack([np.concatenate([owen_sobol(pixels, npos * k, 2, settings.seed, b)
+                                         for b in pair_blocks(q)], axis=-1).reshape(-1, k, 4)
                          for q in range(nq)], axis=1)
 
     shade = fused_shader(scene, lights, textured, heuristic) if fused else None
