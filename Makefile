@@ -5,7 +5,7 @@ PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 PYTEST_ARGS ?=
 
-.PHONY: demo test test-all bench lint clean clean-cache browser
+.PHONY: demo test test-all bench lint clean clean-cache browser node_modules
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,10 +29,20 @@ browser:
 	  || { $$SUDO apt-get update -q >/dev/null && \
 	       $$SUDO env DEBIAN_FRONTEND=noninteractive apt-get install -y -q chromium chromium-driver >/dev/null; }; fi
 
-test: $(STAMP) browser
+# three.js for the client page of tests/viewer/test_threejs.py, at the version its lock file pins
+# (npm's own record of the install is the stamp; without npm that test is skipped).
+THREEJS := clients/threejs/node_modules/.package-lock.json
+$(THREEJS): clients/threejs/package-lock.json
+	@if command -v npm >/dev/null; then cd clients/threejs && npm ci --no-audit --no-fund -q \
+	  && touch node_modules/.package-lock.json; \
+	else echo "npm missing: the three.js client test will be skipped"; fi
+
+node_modules: $(THREEJS)
+
+test: $(STAMP) browser node_modules
 	$(PY) -m pytest -n 2 $(PYTEST_ARGS)
 
-test-all: $(STAMP) browser
+test-all: $(STAMP) browser node_modules
 	$(PY) -m pytest -n 2 -m "" $(PYTEST_ARGS)
 
 bench: $(STAMP)

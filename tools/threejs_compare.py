@@ -6,7 +6,7 @@ the same scene.
 
 Run (from the repository, after ``npm ci --prefix clients/threejs``)::
 
-    PYTHONPATH=src python tools/threejs_compare.py [--width 160 --height 120 --spp 256]
+    PYTHONPATH=src python tools/threejs_compare.py [--width 160 --height 120 --spp 4096]
 
 It prints one row per (roughness, tables): the relative RMSE over the plane's pixels,
 ``sqrt(mean((x - ref)^2)) / sqrt(mean(ref^2))`` over all pixels and the three channels (each
@@ -148,42 +148,59 @@ def rel_rmse(img, ref) -> float:
     return float(np.sqrt(np.mean((img - ref) ** 2)) / np.sqrt(np.mean(ref ** 2)))
 
 
-def compare(driver, tables_dir, roughnesses=ROUGHNESSES, width: int = 160, height: int = 120,
-            spp: int = 256, supersample: int = 4, seed: int = 0) -> list[dict]:
-    """One row per roughness: relative RMSE against the ``reference`` render (``spp`` samples)
-    of three.js with its stock tables (``stock``) and with the exported ones (``prefilter``),
-    with three's shader (``*_sphere``) and with the polygon clipped at the horizon
-    (``*_clip``), and of the project's own ``ltc`` method (``ltc``: same table, exact clipping,
-    Python); ``noise``: the reference against a second reference of another seed (its Monte
-    Carlo noise times sqrt(2), a floor for the others)."""
+def compare(driver, tables_dir, *args, **kwargs) -> list:
+    """:func:`compare_open` on the client page served with the exported tables in
+    ``tables_dir``."""
+    with served_client(tables_dir) as url:
+        open_client(driver, url)
+        return compare_open(driver, *args, **kwargs)
+
+
+def compare_open(driver, roughnesses=ROUGHNESSES, width: int = 160, height: int = 120,
+                 spp: int = 4096, supersample: int = 4, seed: int = 0,
+                 extras: bool = True) -> list:
+    """One row (a dict) per roughness: relative RMSE against the ``reference`` render (``spp``
+    samples) of three.js on the open client page (:func:`open_client`) with its stock tables
+    (``stock``) and with the exported ones (``prefilter``), with three's shader (``*_sphere``)
+    and with the polygon
+    clipped at the horizon (``*_clip``); with ``extras``, also the project's own ``ltc`` method
+    (``ltc``: same table, exact clipping, Python) and ``noise``: the reference against a second
+    one of another seed (sqrt(2) times its Monte Carlo noise, a floor for the others).
+
+    ``row[name]``: over all channels; ``row["channels"][name]``: per channel, i.e. per ``F0``
+    of :data:`F0`; ``row["images"]``: the ``(H, W, 3)`` images."""
     from prefilter.render import render
 
     rows = []
-    with served_client(tables_dir) as url:
-        open_client(driver, url)
-        for r in roughnesses:
-            sc = reference_scene(r, width, height)
-            t0 = time.perf_counter()
-            ref = render(sc, "reference", spp=spp, seed=seed).astype(np.float64)
-            ref2 = render(sc, "reference", spp=spp, seed=seed + 1).astype(np.float64)
-            t_ref = time.perf_counter() - t0
-            ltc = render(sc, "ltc", spp=supersample * supersample).astype(np.float64)
-            opts = client_options(r, width, height)
-            imgs = {f"{k}_{h}": render_three(driver, opts, k, supersample, h)
-                    for h in HORIZONS for k in TABLES}
-            rows.append({"roughness": r, "alpha": r * r,
-                         **{k: rel_rmse(v, ref) for k, v in imgs.items()},
-                         "ltc": rel_rmse(ltc, ref), "noise": rel_rmse(ref2, ref),
-                         "ref_mean": float(ref.mean()), "seconds_reference": t_ref,
-                         "images": {"reference": ref, "ltc": ltc, **imgs}})
+    for r in roughnesses:
+        sc = reference_scene(r, width, height)
+        ref = render(sc, "reference", spp=spp, seed=seed).astype(np.float64)
+        opts = client_options(r, width, height)
+        imgs = {f"{k}_{h}": render_three(driver, opts, k, supersample, h)
+                for h in HORIZONS for k in TABLES}
+        if extras:
+            imgs["ltc"] = render(sc, "ltc", spp=supersample * supersample).astype(np.float64)
+            imgs["noise"] = render(sc, "reference", spp=spp, seed=seed + 1).astype(np.float64)
+        rows.append({"roughness": r, "alpha": r * r,
+                     **{k: rel_rmse(v, ref) for k, v in imgs.items()},
+                     "channels": {k: tuple(rel_rmse(v[..., c], ref[..., c]) for c in range(3))
+                                  for k, v in imgs.items()},
+                     "images": {"reference": ref, **imgs}})
     return rows
+
+
+LABELS = {"stock_sphere": "three.js, stock tables",
+          "prefilter_sphere": "three.js, prefilter tables",
+          "stock_clip": "three.js clipped, stock tables",
+          "prefilter_clip": "three.js clipped, prefilter tables",
+          "ltc": "prefilter `ltc` (Python)", "noise": "reference vs reference (seed 1)"}
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--width", type=int, default=160)
     ap.add_argument("--height", type=int, default=120)
-    ap.add_argument("--spp", type=int, default=256, help="reference samples per pixel")
+    ap.add_argument("--spp", type=int, default=4096, help="reference samples per pixel")
     ap.add_argument("--supersample", type=int, default=4)
     ap.add_argument("--roughness", type=float, nargs="+", default=list(ROUGHNESSES))
     ap.add_argument("--save", type=Path, help="write the images of each row to this .npz")
@@ -194,6 +211,7 @@ def main(argv=None) -> int:
     from prefilter.ltc.export import export_preset
     from prefilter.viewer.browser import chromium
 
+    t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as tables:
         export_preset("threejs", tables)  # = prefilter export-ltc --preset threejs -o DIR
         driver = chromium()
@@ -203,15 +221,16 @@ def main(argv=None) -> int:
             revision = driver.execute_script("return window.threejsClient.revision;")
         finally:
             driver.quit()
-    print(f"three.js r{revision}, {args.width} x {args.height} px (x{args.supersample}^2 "
-          f"sub-pixels), reference {args.spp} spp, F0 = {F0}")
-    print("| roughness (alpha) | stock tables | prefilter tables | stock tables, clipped "
-          "| prefilter tables, clipped | `ltc` (Python) | reference noise |")
-    print("|---|---|---|---|---|---|---|")
-    keys = ("stock_sphere", "prefilter_sphere", "stock_clip", "prefilter_clip", "ltc", "noise")
+    print(f"three.js r{revision}, {args.width} x {args.height} px ({args.supersample}^2 "
+          f"sub-pixels), reference {args.spp} spp, {time.perf_counter() - t0:.0f} s")
+    f0 = " | ".join(f"F0 = {f:g}" for f in F0)
+    print(f"| roughness (alpha) | image | all channels | {f0} |")
+    print("|---|---|---|" + "---|" * len(F0))
     for r in rows:
-        print(f"| {r['roughness']:g} ({r['alpha']:.4g}) | "
-              + " | ".join(f"{100 * r[k]:.2f} %" for k in keys) + " |")
+        for k, label in LABELS.items():
+            ch = " | ".join(f"{100 * e:.2f} %" for e in r["channels"][k])
+            print(f"| {r['roughness']:g} ({r['alpha']:.4g}) | {label} | {100 * r[k]:.2f} % | "
+                  f"{ch} |")
     if args.save:
         np.savez_compressed(args.save, **{f"r{r['roughness']:g}_{k}": v for r in rows
                                           for k, v in r["images"].items()})
