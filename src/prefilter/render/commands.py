@@ -134,7 +134,16 @@ def methods_epilog(width: int = 76) -> str:
             "descriptions):\n" + "\n".join(lines))
 
 
-@click.command("render", epilog=methods_epilog())
+class _RenderCommand(click.Command):
+    """``render``: the method list in its help is read from the registry when the help is shown,
+    so methods registered after import (plugins, tests) are listed too."""
+
+    def format_epilog(self, ctx, formatter):
+        self.epilog = methods_epilog()
+        super().format_epilog(ctx, formatter)
+
+
+@click.command("render", cls=_RenderCommand)
 @click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))  # or example:NAME
 @click.option("--method", default="ltc", show_default=True,
               help="Shading method: one of the methods listed below.")
