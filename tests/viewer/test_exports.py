@@ -203,3 +203,20 @@ def test_export_height_chains_for_leadr(tmp_path):
         np.testing.assert_allclose(lv[..., :2], slopes, rtol=1e-6, atol=1e-6)
         np.testing.assert_allclose(lv[..., 4], slopes[..., 0] * slopes[..., 1], rtol=1e-5,
                                    atol=1e-6)
+
+
+def test_mesh_scene_is_refused_with_the_field(tmp_path):
+    import trimesh
+
+    from prefilter.viewer.export import viewer_scene
+
+    quad = trimesh.Trimesh([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], [[0, 2, 1], [0, 3, 2]],
+                           visual=trimesh.visual.TextureVisuals(uv=[[0, 0], [1, 0], [1, 1], [0, 1]]))
+    quad.export(str(tmp_path / "q.obj"))
+    scene = load_scene({
+        "camera": {"origin": [0, 2, 3], "target": [0, 0, 0], "fov": 40, "width": 8,
+                   "height": 6},
+        "objects": [{"type": "mesh", "file": str(tmp_path / "q.obj")}],
+        "lights": [{"type": "point", "position": [0, 2, 0], "intensity": 1.0}]})
+    with pytest.raises(PrefilterError, match=r"objects\[0\]\.type: the viewer shows planes"):
+        viewer_scene(scene)

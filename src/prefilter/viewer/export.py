@@ -94,6 +94,9 @@ def viewer_scene(scene, map_index=None, color_chain=None, height_chain=None) -> 
     c = scene.camera
     objs = []
     for i, o in enumerate(scene.objects):
+        if o.type not in ("plane", "sphere"):  # the page ray-casts analytic planes and spheres
+            raise PrefilterError(f"objects[{i}].type: the viewer shows planes and spheres only, "
+                                 f"got {o.type!r} (render it with `prefilter render`)")
         m = o.material
         row = {"type": 0 if o.type == "plane" else 1, "center": o.center.tolist(),
                "uv_scale": o.uv_scale.tolist(),
