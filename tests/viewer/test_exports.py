@@ -211,7 +211,8 @@ def test_mesh_scene_is_refused_with_the_field(tmp_path):
     from prefilter.viewer.export import viewer_scene
 
     quad = trimesh.Trimesh([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], [[0, 2, 1], [0, 3, 2]],
-                           visual=trimesh.visual.TextureVisuals(uv=[[0, 0], [1, 0], [1, 1], [0, 1]]))
+                           visual=trimesh.visual.TextureVisuals(
+                               uv=[[0, 0], [1, 0], [1, 1], [0, 1]]))
     quad.export(str(tmp_path / "q.obj"))
     scene = load_scene({
         "camera": {"origin": [0, 2, 3], "target": [0, 0, 0], "fov": 40, "width": 8,
