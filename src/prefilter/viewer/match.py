@@ -147,7 +147,7 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
 
 
 @contextlib.contextmanager
-def _session(scenes: dict, driver=None, builtin_maps=False):
+def _served_pages(scenes: dict, driver=None, builtin_maps=False):
     """Export ``scenes`` (name -> dict) under one served folder; yields ``(driver, url_of)``."""
     from prefilter.viewer.browser import chromium
     from prefilter.viewer.server import serve
@@ -156,7 +156,7 @@ def _session(scenes: dict, driver=None, builtin_maps=False):
         root = Path(tmp)
         for name, sc in scenes.items():
             export_scene(sc, root / name, builtin_maps=builtin_maps)
-        (root / "index.html").write_text("prefilter viewer sessions\n")
+        (root / "index.html").write_text("prefilter viewer pages\n")
         server, url = serve(root)
         own = driver is None
         drv = chromium(root / "profile") if own else driver
@@ -197,7 +197,7 @@ def pixel_match(scenes=SCENES, methods=METHODS, precisions=("f32", "f16"), *, wi
 
     dicts = {s: scene(s, width, height) for s in scenes}
     rows = []
-    with _session(dicts, driver) as (drv, url_of):
+    with _served_pages(dicts, driver) as (drv, url_of):
         for s, sc in dicts.items():
             open_viewer(drv, url_of(s))
             for m in methods:
@@ -226,20 +226,20 @@ def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> l
     sc = scene if scene is not None else default_scene(width, height)
     loaded = sc if isinstance(sc, Scene) else load_scene(sc)
     c = loaded.camera
-    sessions = {"shots": sc}
+    pages = {"shots": sc}
     # modes the scene cannot show are shot on the pixel-match scene made for them
     where = {m: "shots" for m in METHODS}
     for m, name in (("leadr-point", "leadr"), ("colormap-filtered", "colormap"),
                     ("colormap-naive", "colormap")):
         if not applies(loaded, m) or (m == "leadr-point" and not any(
                 x.type in ("point", "directional") for x in loaded.lights)):
-            sessions[name] = named_scene(name, c.width, c.height)
+            pages[name] = named_scene(name, c.width, c.height)
             where[m] = name
     paths = []
     show = ("const v = window.prefilterViewer.viewer;"
             "Object.assign(v.params, {methodLeft: arguments[0], methodRight: arguments[0], "
             "split: -1});")
-    with _session(sessions, driver) as (drv, url_of):
+    with _served_pages(pages, driver) as (drv, url_of):
         current = None
         for m in METHODS:
             if where[m] != current:
@@ -264,7 +264,7 @@ def frame_time(width: int = 512, height: int = 512, method: str = "ltc", frames:
     from prefilter.viewer.browser import open_viewer
 
     sc = scene("leadr", width, height) if method == "leadr-point" else default_scene(width, height)
-    with _session({"timing": sc}, driver) as (drv, url_of):
+    with _served_pages({"timing": sc}, driver) as (drv, url_of):
         open_viewer(drv, url_of("timing"))
         drv.execute_script("const v = window.prefilterViewer.viewer;"
                            "Object.assign(v.params, {methodLeft: arguments[0], "
