@@ -15,6 +15,7 @@ from prefilter.render.estimator import (
     owen_sobol,
 )
 from prefilter.render.lights import QuadLight
+from quadrature import parallelogram_rule  # tests/render/quadrature.py
 
 # A 1 x 0.6 rectangle at height 1.2, shifted sideways, emitting downwards.
 RECT = np.array([[0.2, -0.3, 1.2], [0.2, 0.3, 1.2], [1.2, 0.3, 1.2], [1.2, -0.3, 1.2]])
@@ -35,20 +36,10 @@ def lambert_form_factor(vertices) -> float:
 
 def ggx_quadrature(light, wo, ax, ay, panels=48, order=8) -> float:
     """Composite Gauss-Legendre over the (parallelogram) light of ``GGX.eval cos_l / d^2``."""
-    x, w = np.polynomial.legendre.leggauss(order)
-    edges = np.linspace(0.0, 1.0, panels + 1)
-    half = (edges[1:, None] - edges[:-1, None]) / 2
-    s = ((edges[:-1, None] + edges[1:, None]) / 2 + half * x).ravel()
-    ws = (half * w).ravel()
-    S, T = np.meshgrid(s, s, indexing="ij")
-    W = np.outer(ws, ws).ravel()
-    v = light.vertices
-    y = v[0] + S.ravel()[:, None] * (v[1] - v[0]) + T.ravel()[:, None] * (v[3] - v[0])
-    d2 = np.sum(y * y, axis=-1)
-    wi = y / np.sqrt(d2)[:, None]
-    cos_l = np.maximum(0.0, -(wi @ light.normal))
+    wi, weight = parallelogram_rule(light.vertices, normal=light.normal, panels=panels,
+                                    order=order)
     f = GGX(ax, ay).eval(np.broadcast_to(wo, wi.shape), wi)
-    return float(np.sum(f * cos_l / d2 * W) * light.area)
+    return float(np.sum(f * weight))
 
 
 def _replicates(lobe, light, wo, n, reps, heuristic="balance"):

@@ -18,6 +18,7 @@ from prefilter.render.lights import (
     solid_angle,
 )
 from prefilter.sphere import chi2_sphere, lobe_cap, uniform_sphere
+from quadrature import parallelogram_rule  # tests/render/quadrature.py
 
 # A 1 x 0.6 rectangle at height 1.2, shifted sideways, emitting downwards.
 RECT = np.array([[0.2, -0.3, 1.2], [0.2, 0.3, 1.2], [1.2, 0.3, 1.2], [1.2, -0.3, 1.2]])
@@ -35,21 +36,8 @@ POINTS = {
 
 def quadrature_solid_angle(vertices, o, panels=64, order=8) -> float:
     """Composite Gauss-Legendre over the (parallelogram) light of ``cos_l / d^2`` dA."""
-    x, w = np.polynomial.legendre.leggauss(order)
-    edges = np.linspace(0.0, 1.0, panels + 1)
-    half = (edges[1:, None] - edges[:-1, None]) / 2
-    s = ((edges[:-1, None] + edges[1:, None]) / 2 + half * x).ravel()
-    ws = (half * w).ravel()
-    S, T = np.meshgrid(s, s, indexing="ij")
-    W = np.outer(ws, ws).ravel()
-    v = np.asarray(vertices, float)
-    e1, e3 = v[1] - v[0], v[3] - v[0]
-    y = v[0] + S.ravel()[:, None] * e1 + T.ravel()[:, None] * e3 - o
-    d2 = np.sum(y * y, axis=-1)
-    n = np.cross(e1, e3)
-    area = np.linalg.norm(n)
-    cos_l = np.maximum(0.0, -(y @ (n / area)) / np.sqrt(d2))
-    return float(np.sum(cos_l / d2 * W) * area)
+    _, weight = parallelogram_rule(vertices, o, panels=panels, order=order)
+    return float(np.sum(weight))
 
 
 def test_rectangles_are_recognised():

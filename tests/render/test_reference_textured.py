@@ -14,6 +14,7 @@ from prefilter.render.lights import LightSet, QuadLight
 from prefilter.render.lighttex import LightTexture, TexturedQuad
 from prefilter.render.reference import estimate_quad, estimate_quad_fast, shade_reference
 from prefilter.render.shading import brdf_cos
+from quadrature import parallelogram_rule  # tests/render/quadrature.py
 
 # 1 x 0.6 rectangle at height 1.2, shifted sideways, emitting downwards; v1 - v0 runs along y
 # (texture u, columns), v3 - v0 along x (texture v, rows).
@@ -24,24 +25,11 @@ RADIANCE = np.array([1.0, 2.0, 0.5])
 def _quadrature(vertices, radiance, wo, ax, ay, base, f0, panels=48, order=8):
     """Composite Gauss-Legendre over a parallelogram light seen from the origin (frame = world):
     the integral of ``f cos L cos_l / d^2`` over its area."""
-    x, w = np.polynomial.legendre.leggauss(order)
-    edges = np.linspace(0.0, 1.0, panels + 1)
-    half = (edges[1:, None] - edges[:-1, None]) / 2
-    s = ((edges[:-1, None] + edges[1:, None]) / 2 + half * x).ravel()
-    ws = (half * w).ravel()
-    S, T = np.meshgrid(s, s, indexing="ij")
-    W = np.outer(ws, ws).ravel()
-    v = np.asarray(vertices, float)
-    y = v[0] + S.ravel()[:, None] * (v[1] - v[0]) + T.ravel()[:, None] * (v[3] - v[0])
-    normal = np.cross(v[1] - v[0], v[3] - v[0])
-    area = np.linalg.norm(normal)
-    d2 = np.sum(y * y, axis=-1)
-    wi = y / np.sqrt(d2)[:, None]
-    cos_l = np.maximum(0.0, -(wi @ (normal / area)))
-    n = len(y)
+    wi, weight = parallelogram_rule(vertices, panels=panels, order=order)
+    n = len(wi)
     f = brdf_cos(np.tile(wo, (n, 1)), wi, np.full(n, ax), np.full(n, ay), np.tile(base, (n, 1)),
                  np.tile(f0, (n, 1)))
-    return np.sum(f * (cos_l / d2 * area * W)[:, None], axis=0) * radiance
+    return np.sum(f * weight[:, None], axis=0) * radiance
 
 
 def _args(n, wo, ax, ay, base, f0):
