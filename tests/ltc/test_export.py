@@ -373,6 +373,52 @@ def test_unity_hdrp_source(exported, table):
     check_convention(table, texels, None, node_tol=F16_TOL, lookup=hdrp_lookup)
 
 
+def unreal_lookup(mat, amp, roughness, cos_theta):
+    """As ``RectGGXApproxLTC`` (RectLightIntegrate.ush): ``uv = (Roughness, sqrt(1 - NoV)) *
+    63/64 + 0.5/64``; ``LTC = float3x3(float3(x, 0, z), float3(0, 1, 0), float3(y, 0, w))``
+    (HLSL rows) applied to the rect; ``SpecularColor = y + (x - y) F0`` from ``LTCAmp.xy``."""
+    u = roughness * (SIZE - 1) / SIZE + 0.5 / SIZE
+    v = np.sqrt(1.0 - cos_theta) * (SIZE - 1) / SIZE + 0.5 / SIZE
+    t = sample_linear(np.asarray(mat, float), u, v)
+    a = sample_linear(np.asarray(amp, float), u, v)
+    Minv = np.zeros(t.shape[:-1] + (3, 3))
+    Minv[..., 0, 0], Minv[..., 0, 2] = t[..., 0], t[..., 2]
+    Minv[..., 2, 0], Minv[..., 2, 2] = t[..., 1], t[..., 3]
+    Minv[..., 1, 1] = 1.0
+    # the shader's InvLTC (forward matrix, for the light texture's direction) from the same texel
+    det = t[..., 0] * t[..., 3] - t[..., 1] * t[..., 2]
+    inv = t / det[..., None]
+    fwd = np.zeros_like(Minv)
+    fwd[..., 0, 0], fwd[..., 0, 2], fwd[..., 1, 1] = inv[..., 3], -inv[..., 2], 1.0
+    fwd[..., 2, 0], fwd[..., 2, 2] = -inv[..., 1], inv[..., 0]
+    assert np.allclose(fwd @ Minv, np.eye(3), atol=1e-9)
+    return Minv, a[..., :2]
+
+
+def test_unreal_header(exported, table, reference_texels, tmp_path):
+    src = exported["unreal"][0]
+    values = cxx_output(f"""#include <cstdio>
+#include "{src}"
+int main() {{
+  static_assert(LTC_Size == 64, "size");
+  // FSystemTextures: texel (x, y) channel k <- [4 * (x + y * LTC_Size) + k]
+  for (int y = 0; y < LTC_Size; ++y) for (int x = 0; x < LTC_Size; ++x)
+    for (int k = 0; k < 4; ++k) printf("%.9g ", LTC_Mat[4 * (x + y * LTC_Size) + k]);
+  for (int y = 0; y < LTC_Size; ++y) for (int x = 0; x < LTC_Size; ++x)
+    for (int k = 0; k < 2; ++k) printf("%.9g ", LTC_Amp[4 * (x + y * LTC_Size) + k]);
+  printf("%d %d", (int)(sizeof(LTC_Mat) / sizeof(float)), (int)(sizeof(LTC_Amp) / sizeof(float)));
+}}
+""", tmp_path)
+    n = SIZE * SIZE
+    assert list(values[-2:]) == [4 * n, 4 * n]
+    mat = values[:4 * n].reshape(SIZE, SIZE, 4)
+    amp = values[4 * n:6 * n].reshape(SIZE, SIZE, 2)
+    assert np.array_equal(np.float32(mat), reference_texels[0].astype(np.float32))
+    # the engine stores both as half floats (PF_FloatRGBA, PF_G16R16F)
+    mat16, amp16 = mat.astype(np.float16), amp.astype(np.float16)
+    check_convention(table, mat16, amp16, node_tol=F16_TOL, lookup=unreal_lookup)
+
+
 def test_bevy_ktx2(exported, table, reference_texels):
     pytest.importorskip("zstandard")
     h, dfd, _, level = read_ktx2(exported["bevy"][0].read_bytes())

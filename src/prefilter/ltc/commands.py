@@ -94,7 +94,7 @@ def _median_rel_se(se, ref):
 @click.command("export-ltc")
 @click.option("--preset", required=True, help="Engine layout (docs/ltc-export.md).",
               type=click.Choice(["ltc_code", "threejs", "babylon", "godot", "blender", "unity-hdrp",
-                                 "bevy", "compact"]))
+                                 "unreal", "bevy", "compact"]))
 @click.option("-o", "--out", "out_dir", required=True, type=click.Path(file_okay=False),
               help="Output directory (created if missing).")
 @click.option("--table", "table_path", type=click.Path(dir_okay=False), default=None,

@@ -59,6 +59,15 @@ class BakeSettings:
     polish_samples: int = 256
     polish_lr: float = 0.003
     polish_check: int = 2048
+    #: Warm start: a baked table file whose fits before alignment (``diag_M_unaligned``) start
+    #: every entry instead of the identity (empty: the identity). With ``sw.steps = 0`` the SW
+    #: fit is skipped and only the polish runs from these fits; the polish is kept only where it
+    #: lowers the L1 distance of the starting fit, so no entry gets worse than its start.
+    init: str = ""
+    #: With ``init``: also try the fits of the grid neighbours (one step along each axis) as
+    #: starts, and polish from whichever has the lowest L1 distance at the entry (``polish_check``
+    #: samples): an entry stuck in a poor local minimum restarts from a neighbour's basin.
+    init_neighbours: bool = False
 
     def axes(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Nodes: theta and phi uniform, alpha and ratio uniform in their square roots."""
@@ -75,7 +84,63 @@ class BakeSettings:
                 np.linspace(np.sqrt(self.ratio_min), 1.0, self.res_ratio) ** 2)
 
     def to_dict(self) -> dict:
-        return {"version": TABLE_VERSION, **asdict(self)}
+        d = {"version": TABLE_VERSION, **asdict(self)}
+        if self.init:  # the start determines the bytes: key checkpoints by its content
+            d["init_sha256"] = _sha256(self.init)
+        return d
+
+
+def _sha256(path) -> str:
+    import hashlib
+
+    try:
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    except OSError as exc:
+        raise PrefilterError(f"init: expected a readable table file, got {str(path)!r} "
+                             f"({exc.strerror})") from None
+
+
+def initial_fits(settings: BakeSettings, entries) -> np.ndarray | None:
+    """``(E, 3, 3)`` starting matrices of ``entries`` from ``settings.init`` (``None``: identity).
+
+    The init table must have the same axes as ``settings`` and its ``diag_M_unaligned``.
+    """
+    if not settings.init:
+        return None
+    table = AnisoGGXTable.load(settings.init)
+    M0 = table.diagnostics.get("M_unaligned")
+    if M0 is None or any(len(a) != len(b) or not np.allclose(a, b)
+                         for a, b in zip(table.axes, settings.axes())):
+        raise PrefilterError(f"init: expected a baked table with the bake's axes and the "
+                             f"diagnostic M_unaligned, got {settings.init!r}")
+    i = entries["index"]
+    own = np.asarray(M0[i[:, 0], i[:, 1], i[:, 2], i[:, 3]], np.float64)
+    if not settings.init_neighbours:
+        return own
+    shape = np.array(M0.shape[:4])
+    cands = [own]
+    for axis in range(4):
+        for step in (-1, 1):
+            j = i.copy()
+            j[:, axis] += step
+            ok = np.all((j >= 0) & (j < shape), axis=1)
+            j[~ok] = i[~ok]  # no neighbour across the border: the entry's own fit again
+            cands.append(np.asarray(M0[j[:, 0], j[:, 1], j[:, 2], j[:, 3]], np.float64))
+    return np.stack(cands, 1)  # (E, 9, 3, 3): own fit first
+
+
+def best_start(M0, wo, alpha_x, alpha_y, n: int, seed: int) -> np.ndarray:
+    """Per entry the candidate of ``M0 (B, C, 3, 3)`` with the lowest L1 distance -> (B, 3, 3).
+
+    Every candidate is scored with the same random numbers (common samples), so the comparison
+    is not decided by Monte Carlo noise between candidates.
+    """
+    M0 = np.asarray(M0, np.float64)
+    M0 = M0 / np.linalg.norm(M0[..., :, 2], axis=-1)[..., None, None]
+    d = np.stack([l1_distance(M0[:, c], wo, alpha_x, alpha_y, n, np.random.default_rng(seed))
+                  for c in range(M0.shape[1])], 1)
+    d[~np.isfinite(d)] = np.inf
+    return M0[np.arange(len(M0)), np.argmin(d, axis=1)]
 
 
 def grid_entries(settings: BakeSettings) -> dict[str, np.ndarray]:
@@ -104,15 +169,28 @@ def _fill(settings, entries, values):
 
 
 def fit_entries(wo, alpha_x, alpha_y, settings: BakeSettings, chunk: int = 0, *,
-                progress: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+                progress: Callable[[int], None] | None = None,
+                M0=None) -> dict[str, np.ndarray]:
     """The bake's per-entry fit (before alignment): SW fit, then the L1 polish where it helps.
 
     ``wo (B, 3)``, ``alpha_x``, ``alpha_y (B,)``; ``chunk`` seeds the fit as chunk ``chunk`` of a
-    bake (same bytes as the bake for the same entries). Returns ``M (B, 3, 3)`` (unit third
-    column), ``loss (B,)`` (SW) and ``polished (B,)`` (bool: the polish was kept).
+    bake (same bytes as the bake for the same entries); ``M0 (B, 3, 3)`` optional starting fits
+    (default the identity; with ``settings.sw.steps = 0`` the SW fit is skipped), or
+    ``(B, C, 3, 3)`` candidates of which the one with the lowest L1 distance starts. Returns
+    ``M (B, 3, 3)`` (unit third column), ``loss (B,)`` (SW; NaN when skipped) and
+    ``polished (B,)`` (bool: the polish was kept).
     """
     sw = replace(settings.sw, seed=settings.sw.seed * 100_003 + chunk)
-    res = fit_sw(wo, alpha_x, alpha_y, sw, progress=progress)
+    if M0 is not None and np.ndim(M0) == 4:  # candidates per entry (neighbour warm starts)
+        M0 = best_start(M0, wo, alpha_x, alpha_y, settings.polish_check, sw.seed + 11)
+    if sw.steps > 0:
+        res = fit_sw(wo, alpha_x, alpha_y, sw, M0=M0, progress=progress)
+    elif M0 is None:
+        raise PrefilterError("steps: expected >= 1 without starting fits (init), got 0")
+    else:
+        M0 = np.asarray(M0, np.float64)
+        res = {"M": M0 / np.linalg.norm(M0[..., :, 2], axis=-1)[..., None, None],
+               "loss": np.full(len(wo), np.nan)}
     M, polished = res["M"], np.zeros(len(wo), bool)
     if settings.polish_steps:
         pol = fit_pointwise(wo, alpha_x, alpha_y, steps=settings.polish_steps,
@@ -146,8 +224,9 @@ def bake_table(out=None, settings: BakeSettings | None = None, *, progress: bool
     if not isinstance(settings, BakeSettings):
         raise PrefilterError(f"settings: expected BakeSettings, got {type(settings).__name__}")
     # checked before any work (the fit would otherwise run, or fail deep inside)
-    as_positive_int(settings.sw.steps, "steps")
+    as_positive_int(settings.sw.steps, "steps", lo=0 if settings.init else 1)
     as_positive_int(settings.sw.seed, "seed", lo=0)
+    settings.to_dict()  # a missing init file fails here, before any work
     _torch()  # the fit needs PyTorch: say so before any file (lock, checkpoints) is made
     out = Path(out) if out is not None else user_table_path()
     with bake_lock(out, wait=wait):
@@ -158,6 +237,7 @@ def _bake_locked(out: Path, settings: BakeSettings, progress: bool,
                  on_chunk: Callable[[int], None] | None) -> Path:
     entries = grid_entries(settings)
     E = len(entries["wo"])
+    M_init = initial_fits(settings, entries)
     chunk = as_positive_int(settings.chunk, "chunk")
     n_chunks = -(-E // chunk)
     ck = Checkpoints(out, settings.to_dict())
@@ -166,8 +246,10 @@ def _bake_locked(out: Path, settings: BakeSettings, progress: bool,
     if progress:
         from tqdm import tqdm
 
-        bar = tqdm(total=n_chunks * settings.sw.steps, initial=(n_chunks - len(todo))
-                   * settings.sw.steps, desc="ltc-aniso SW fit", unit="step")
+        per = max(1, settings.sw.steps)  # without SW steps the bar counts chunks
+        bar = tqdm(total=n_chunks * per, initial=(n_chunks - len(todo)) * per,
+                   desc="ltc-aniso SW fit" if settings.sw.steps else "ltc-aniso polish",
+                   unit="step" if settings.sw.steps else "chunk")
     try:
         for c in todo:
             sl = slice(c * chunk, min(E, (c + 1) * chunk))
@@ -179,9 +261,12 @@ def _bake_locked(out: Path, settings: BakeSettings, progress: bool,
                 done[0] = step
 
             wo, ax, ay = entries["wo"][sl], entries["alpha_x"][sl], entries["alpha_y"][sl]
-            res = fit_entries(wo, ax, ay, settings, c, progress=tick)
+            res = fit_entries(wo, ax, ay, settings, c, progress=tick,
+                              M0=None if M_init is None else M_init[sl])
             M, polished = res["M"], res["polished"]
             ck.save(c, M=M, loss=res["loss"], polished=polished)
+            if bar is not None and not settings.sw.steps:
+                bar.update(1)
             if on_chunk is not None:
                 on_chunk(c)
     finally:

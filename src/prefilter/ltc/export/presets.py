@@ -1,6 +1,6 @@
 """Engine-layout files of the isotropic GGX LTC table (one writer per engine preset).
 
-The reference code, three.js, Babylon.js, Blender and the Bevy preset store the texels of
+The reference code, three.js, Babylon.js, Blender, Unreal and the Bevy preset store the texels of
 :func:`prefilter.ltc.export.layout.ltc_code_textures` (``u = sqrt(alpha)``,
 ``v = sqrt(1 - cos theta)``, 64 x 64 nodes at texel centres, inverse matrix divided by its middle
 entry, ``ltc_2 = (n, f5, 0, sphere)``) in the container and element order each loader expects;
@@ -249,6 +249,40 @@ def _unity_hdrp(table, out: Path) -> list[Path]:
     return [path]
 
 
+_UNREAL_HEADER = """\
+// {header}
+// Replaces Engine/Source/Runtime/Renderer/Private/LTC.h. FSystemTextures uploads LTC_Mat to the
+// 64 x 64 PF_FloatRGBA texture LTCMat and channels 0-1 of LTC_Amp to the PF_G16R16F texture
+// LTCAmp, texel (x, y) <- [4 * (x + y * LTC_Size) + k] (x = Roughness = sqrt(alpha),
+// y = sqrt(1 - NoV), nodes at i / 63, sampled at uv * 63/64 + 0.5/64). LTC_Mat = (m00, m20, m02,
+// m22) of M^-1 / (M^-1)_11, the matrix RectGGXApproxLTC applies to the rect (HLSL rows (x, 0, z),
+// (0, 1, 0), (y, 0, w)); the shader inverts it to the forward matrix M (its InvLTC).
+// LTC_Amp = (magnitude, fresnel, 0, sphere): SpecularColor = y + (x - y) * F0; z, w unread.
+#pragma once
+
+const int LTC_Size = 64;
+
+static const float LTC_Mat[LTC_Size * LTC_Size * 4] = {{
+{mat}
+}};
+
+static const float LTC_Amp[LTC_Size * LTC_Size * 4] = {{
+{amp}
+}};
+"""
+
+
+def _unreal(table, out: Path) -> list[Path]:
+    """``LTC.h``: Unreal's ``LTC_Mat`` (the reference code's ``ltc_1`` texels, inverse matrix)
+    and ``LTC_Amp`` (``ltc_2``), ``[4 * (x + y * 64) + k]``, as ``FSystemTextures`` uploads them."""
+    ltc_1, ltc_2 = ltc_code_textures(table)
+    path = out / "LTC.h"
+    _write_text(path, _UNREAL_HEADER.format(header=_header("unreal", table),
+                                            mat=_floats(ltc_1, 8, suffix="f"),
+                                            amp=_floats(ltc_2, 8, suffix="f")))
+    return [path]
+
+
 def _bevy(table, out: Path) -> list[Path]:
     """``ltc_ggx.ktx2``: one 2-layer RGBA16F texture array (``ltc_1``, ``ltc_2``), Zstandard
     supercompressed."""
@@ -291,6 +325,8 @@ PRESETS: dict[str, Preset] = {
     "blender": Preset(_blender, "Blender EEVEE: ltc_mat_ggx[64][64][4], ltc_mag_ggx[64][64][2]"),
     "unity-hdrp": Preset(_unity_hdrp, "Unity HDRP: LtcData.BRDF_GGX.cs (binary16 M^-1 / m22, "
                                       "no magnitude)"),
+    "unreal": Preset(_unreal, "Unreal Engine: LTC.h (LTC_Mat inverse-matrix texels, LTC_Amp "
+                              "magnitude / fresnel; uploaded as half floats)"),
     "bevy": Preset(_bevy, "KTX2 (zstd) 2-layer RGBA16F array in the reference layout (no "
                           "upstream Bevy reader)"),
     "compact": Preset(_compact, "the table's own grid as binary16 texels and as Chebyshev "
