@@ -34,6 +34,7 @@ import numpy as np
 
 from prefilter.cliparams import SEED, OutputDir
 from prefilter.errors import PrefilterError
+from prefilter.report.roughness import roughness_section
 
 
 #: (shape, view angle from the normal (deg), texels per world unit, label): near and far on a
@@ -753,6 +754,13 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "paper eq. 1) against `glints-direct` (the exact P-NDF summed over the footprint's "
         "texels). Their FLIP difference is the compression error alone.",
         lambda r: _glints_render_section(r, settings, seed, log), log)
+    _section(
+        report, status, "Roughness mip chains from a normal map",
+        "`prefilter bake roughness`: the GGX roughness per mip level that keeps a normal map's "
+        "highlights when the level's averaged normal is shaded (Toksvig, LEAN variance, "
+        "multi-scale LTC `alpha_total`; docs/roughness.md). Images: the baked levels of the "
+        "built-in flakes map; table: the far-field error of each choice on the built-in maps.",
+        lambda r: roughness_section(r, 64 if quick else 256, seed, log), log)
     _section(
         report, status, "Real-time viewer: WebGL2 against Python",
         "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "
