@@ -150,6 +150,47 @@ def test_bake_is_resumable(tmp_path):
     assert not (tmp_path / "b.npz.parts").exists()
 
 
+def test_warm_started_bake_is_resumable_and_keyed_by_its_start(tmp_path):
+    pytest.importorskip("torch")
+    from dataclasses import replace
+
+    from prefilter.errors import PrefilterError
+    from prefilter.ltc.aniso.bake import BakeSettings, bake_table
+    from prefilter.ltc.aniso.fit import SWSettings
+
+    s = BakeSettings(res_theta=2, res_phi=2, res_alpha=2, res_ratio=3, chunk=4, l1_samples=0,
+                     moment_nodes=16, polish_steps=3, polish_samples=32, polish_check=64,
+                     sw=SWSettings(steps=6, pool=256, n_samples=32, n_dirs=4))
+    start = bake_table(tmp_path / "start.npz", s, progress=False)
+    with pytest.raises(PrefilterError, match="steps"):  # no SW steps and nothing to start from
+        bake_table(tmp_path / "x.npz", replace(s, sw=replace(s.sw, steps=0)), progress=False)
+    warm = replace(s, init=str(start), init_neighbours=True, sw=replace(s.sw, steps=0))
+    full = bake_table(tmp_path / "a.npz", warm, progress=False)
+
+    class Kill(Exception):
+        pass
+
+    def kill(i):
+        if i == 1:
+            raise Kill
+
+    with pytest.raises(Kill):
+        bake_table(tmp_path / "b.npz", warm, progress=False, on_chunk=kill)
+    calls = []
+    bake_table(tmp_path / "b.npz", warm, progress=False, on_chunk=calls.append)
+    assert calls == [2, 3, 4]
+    a, b = AnisoGGXTable.load(full), AnisoGGXTable.load(tmp_path / "b.npz")
+    np.testing.assert_array_equal(a.M, b.M)
+    assert a.settings["init_sha256"] and a.settings["init_neighbours"] is True
+    # a different start file under the same name must not reuse the parts of the first
+    with pytest.raises(Kill):
+        bake_table(tmp_path / "c.npz", warm, progress=False, on_chunk=kill)
+    bake_table(start, replace(s, sw=replace(s.sw, seed=1)), progress=False)
+    calls = []
+    bake_table(tmp_path / "c.npz", warm, progress=False, on_chunk=calls.append)
+    assert calls == [0, 1, 2, 3, 4]
+
+
 def test_bake_command(tmp_path):
     pytest.importorskip("torch")
     from click.testing import CliRunner
