@@ -20,6 +20,7 @@ SECTIONS = (
     "Colour-map filtering: cases a-d",
     "Glints (part 1): NDF images of footprints",
     "Glints (part 2): rendered frames, compressed vs direct",
+    "Colour-map filtering under lights (colormap-lit)",
     "Real-time viewer: WebGL2 against Python",
     "Summary",
 )

@@ -150,11 +150,15 @@ def format_rows(rows) -> str:
     return "\n".join(lines)
 
 
+def _srgb8(img) -> np.ndarray:
+    from prefilter.render.metrics import linear_to_srgb
+
+    return np.round(linear_to_srgb(np.clip(img, 0.0, 1.0)) * 255.0).astype(np.uint8)
+
+
 def colormap_lit_section(report, settings, seed: int, log) -> None:
     """The demo report's section: lit colour maps of every driver on the grazing plane under
     the ``sun`` rig, and one driver under the quad and environment rigs, with their errors."""
-    from prefilter.report.demo import _srgb8
-
     n = settings.colormap_size
     images: dict = {}
     plane = (("plane", 70.0, 1500.0, "far"),)

@@ -754,6 +754,16 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "texels). Their FLIP difference is the compression error alone.",
         lambda r: _glints_render_section(r, settings, seed, log), log)
     _section(
+        report, status, "Colour-map filtering under lights (colormap-lit)",
+        "The colour map as the diffuse albedo of a Gaussian microsurface on the grazing plane, "
+        "far away, under a directional and a point light (every driver and the section-6 "
+        "combinations), a quad light and an environment map (heights): `filtered` (the colour "
+        "of the visible and lit microfacets), `naive` (C(mean)) and `reference` "
+        f"({settings.colormap_nref} x {settings.colormap_nref} jittered samples per pixel of eq. "
+        "1, the same lit shading). Displayed as sRGB without tone mapping (`docs/colormap.md`).",
+        lambda r: __import__("prefilter.report.colormap_lit", fromlist=["colormap_lit_section"])
+        .colormap_lit_section(r, settings, seed, log), log)
+    _section(
         report, status, "Real-time viewer: WebGL2 against Python",
         "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "
         "Chromium: a screenshot per mode and the pixel match against the Python renderer, "
