@@ -36,7 +36,7 @@ TARGETS = {"texture": 0.25, "noise": 0.25, "height": 0.5, "slope": 0.5, "linear"
 
 def driver_specs(size: int = 256) -> dict:
     """``extras.colormap`` of each driver of :data:`DRIVERS` on ``size^2`` textures."""
-    from prefilter.studies.colormap import (_slope_samples, height_colormap, noise_colormap)
+    from prefilter.studies.colormap import height_colormap, noise_colormap, slope_colormap
 
     noise = {"procedural": "noise", "size": size, "seed": 0, "corr_length": 3.0}
     surface = {"procedural": "gaussian", "size": size, "seed": 1, "rms_slope": 0.5,
@@ -45,7 +45,9 @@ def driver_specs(size: int = 256) -> dict:
           "range": [-4, 4], "sigma_max": 1.5}
     height = {"driver": "height", "texture": surface, "range": [-4.5, 4.5], "sigma_max": 1.5,
               "colors": height_colormap(np.linspace(-4.5, 4.5, 64)).tolist()}
-    slope = {"driver": "slope", "texture": surface, "colors": _slope_samples(32, 2.0).tolist(),
+    x = -2.0 + (np.arange(32) + 0.5) * 4.0 / 32  # texel centres of [-2, 2]
+    grid = np.stack(np.meshgrid(x, x), -1)  # row = s_y, column = s_x
+    slope = {"driver": "slope", "texture": surface, "colors": slope_colormap(grid).tolist(),
              "extent": 2.0, "sigma_max": 1.0}
     return {"texture": {"driver": "texture", **c0}, "noise": {"driver": "noise", **c0},
             "height": height, "slope": slope,
