@@ -113,7 +113,7 @@ def _err(key, what, got):
     return PrefilterError(f"extras.colormap.{key}: expected {what}, got {got!r}")
 
 
-def _surface(spec, base: Path, key: str) -> Surface:
+def _surface(spec, base: Path) -> Surface:
     h, s, _ = _driving_texture(spec, "height", base)
     h = (h - h.mean()) / max(float(h.std()), 1e-12)
     cov = np.cov(s.reshape(-1, 2).T, bias=True)
@@ -146,7 +146,7 @@ def _slope_table(spec: dict, surface: Surface, base: Path, key: str) -> SlopeCol
     return slope_prefilter_table(c, float(extent), float(sigma_max), size)
 
 
-def _term(spec, base: Path, key: str, drivers: tuple):
+def _term(spec, key: str, drivers: tuple):
     if not isinstance(spec, dict) or spec.get("driver") not in drivers:
         raise _err(f"{key}driver", f"one of {', '.join(drivers)}",
                    spec.get("driver") if isinstance(spec, dict) else spec)
@@ -164,11 +164,11 @@ def _build(key: str, base: str) -> LitColormap:
     if driver in ("texture", "noise", "height"):
         d = colormap_driver(spec, base_dir=base_dir)
         if driver == "height":
-            return LitColormap("height", height=d, surface=_surface(spec["texture"], base_dir, ""))
+            return LitColormap("height", height=d, surface=_surface(spec["texture"], base_dir))
         return LitColormap(driver, c0=d, c0_level0=_level0(spec, base_dir))
     if driver == "slope":
-        _term(spec, base_dir, "", ("slope",))
-        surface = _surface(spec["texture"], base_dir, "")
+        _term(spec, "", ("slope",))
+        surface = _surface(spec["texture"], base_dir)
         return LitColormap("slope", slope=_slope_table(spec, surface, base_dir, ""),
                            surface=surface)
     if driver != "combine":
@@ -189,7 +189,7 @@ def _build(key: str, base: str) -> LitColormap:
         raise _err("c0", "at least one term among c0, height, slope", None)
     c0 = h = s = surface = lvl0 = None
     if "c0" in terms:
-        c0 = colormap_driver(_term(terms["c0"], base_dir, "c0.", ("texture", "noise")),
+        c0 = colormap_driver(_term(terms["c0"], "c0.", ("texture", "noise")),
                              base_dir=base_dir)
         lvl0 = _level0(terms["c0"], base_dir)
     if "height" in terms and "slope" in terms and (
@@ -197,12 +197,12 @@ def _build(key: str, base: str) -> LitColormap:
         raise _err("slope.texture", "the height term's surface (height and slope terms "
                    "colour one microsurface)", terms["slope"].get("texture"))
     if "height" in terms:
-        h = colormap_driver(_term(terms["height"], base_dir, "height.", ("height",)),
+        h = colormap_driver(_term(terms["height"], "height.", ("height",)),
                             base_dir=base_dir)
-        surface = _surface(terms["height"]["texture"], base_dir, "height.")
+        surface = _surface(terms["height"]["texture"], base_dir)
     if "slope" in terms:
-        _term(terms["slope"], base_dir, "slope.", ("slope",))
-        surface = surface or _surface(terms["slope"]["texture"], base_dir, "slope.")
+        _term(terms["slope"], "slope.", ("slope",))
+        surface = surface or _surface(terms["slope"]["texture"], base_dir)
         s = _slope_table(terms["slope"], surface, base_dir, "slope.")
     return LitColormap(mode, c0=c0, height=h, slope=s, kappa=tuple(float(x) for x in k),
                        surface=surface, c0_level0=lvl0)
