@@ -21,6 +21,7 @@ SECTIONS = (
     "Glints (part 1): NDF images of footprints",
     "Glints (part 2): rendered frames, compressed vs direct",
     "Roughness mip chains from a normal map",
+    "Colour-map filtering under lights (colormap-lit)",
     "Real-time viewer: WebGL2 against Python",
     "Summary",
 )

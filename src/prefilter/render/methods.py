@@ -78,6 +78,7 @@ _REGISTRY: dict[str, Method | str] = {
     "ltc-aniso": "prefilter.ltc.aniso.render:render_ltc_aniso",
     "colormap-filtered": "prefilter.colormap.render:render_colormap_filtered",
     "colormap-naive": "prefilter.colormap.render:render_colormap_naive",
+    "colormap-lit": "prefilter.colormap.lit:render_colormap_lit",
     "glints": "prefilter.glints.render:render_glints",
     "glints-direct": "prefilter.glints.render:render_glints_direct",
     "glints-reference": "prefilter.glints.render:render_glints_reference",
@@ -112,6 +113,10 @@ _DESCRIPTIONS: dict[str, str] = {
     "colormap-filtered": "colour-map filtering (Heitz et al. 2013): the filtered colour term of a "
                          "texture / noise / height colour map (scene extras.colormap), unlit",
     "colormap-naive": "naive counterpart of colormap-filtered: C(mean), times V_bar for heights",
+    "colormap-lit": "colour-map filtering (Heitz et al. 2013) shaded under every light: the "
+                    "colour of visible and lit microfacets (texture / noise / height / slope "
+                    "drivers and section 6 combinations); filter=naive: C(mean); "
+                    "filter=reference: 32 x 32 supersampling of eq. 1",
     "glints": "glints: compressed footprint P-NDF (point query); quad lights by range queries "
               "where valid, else MIS; environment maps by SG prefiltering",
     "glints-direct": "glints: direct P-NDF of every footprint (Yan et al. 2016); quad and "
@@ -130,6 +135,7 @@ _PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
     "leadr-env-naive": {"algorithm": ("full", "simplified")},
     "leadr-irradiance": {"algorithm": ("full", "simplified")},
     "leadr-irradiance-naive": {"algorithm": ("full", "simplified")},
+    "colormap-lit": {"filter": ("filtered", "naive", "reference")},
 }
 
 

@@ -34,6 +34,7 @@ import numpy as np
 
 from prefilter.cliparams import SEED, OutputDir
 from prefilter.errors import PrefilterError
+from prefilter.report.colormap_lit import colormap_lit_section
 from prefilter.report.roughness import roughness_section
 
 
@@ -761,6 +762,15 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "multi-scale LTC `alpha_total`; docs/roughness.md). Images: the baked levels of the "
         "built-in flakes map; table: the far-field error of each choice on the built-in maps.",
         lambda r: roughness_section(r, 64 if quick else 256, seed, log), log)
+    _section(
+        report, status, "Colour-map filtering under lights (colormap-lit)",
+        "The colour map as the diffuse albedo of a Gaussian microsurface on the grazing plane, "
+        "far away, under a directional and a point light (every driver and the section-6 "
+        "combinations), a quad light and an environment map (heights): `filtered` (the colour "
+        "of the visible and lit microfacets), `naive` (C(mean)) and `reference` "
+        f"({settings.colormap_nref} x {settings.colormap_nref} jittered samples per pixel of eq. "
+        "1, the same lit shading). Displayed as sRGB without tone mapping (`docs/colormap.md`).",
+        lambda r: colormap_lit_section(r, settings, seed, log), log)
     _section(
         report, status, "Real-time viewer: WebGL2 against Python",
         "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "
