@@ -30,6 +30,7 @@ from __future__ import annotations
 import os
 import pickle
 import uuid
+import warnings
 from collections.abc import Callable, Iterable, Sequence
 
 from prefilter.errors import PrefilterError
@@ -80,13 +81,13 @@ class Engine:
     """
 
     def __init__(self, scheduler: str | None = None, *, workers: int | None = None,
-                 timeout: float = CONNECT_TIMEOUT):
+                 timeout: float | None = None):
         self.scheduler = resolve_scheduler(scheduler, workers)
         if workers is not None and self.scheduler not in (LOCAL, SYNCHRONOUS):
             raise PrefilterError(f"workers: applies to the local cluster only, got {workers} "
                                  f"with scheduler {self.scheduler!r}")
         self.workers = workers
-        self.timeout = float(timeout)
+        self.timeout = float(CONNECT_TIMEOUT if timeout is None else timeout)
         self.client = None
         self._cluster = None
 
@@ -103,8 +104,11 @@ class Engine:
 
         if self.scheduler == LOCAL:
             n = self.workers or os.cpu_count() or 1
-            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                         dashboard_address=None, silence_logs=logging.ERROR)
+            with warnings.catch_warnings():
+                # workers move their status page to a free port when 8787 is taken: no news
+                warnings.filterwarnings("ignore", message="Port .* is already in use")
+                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                             dashboard_address=None, silence_logs=logging.ERROR)
             self.client = Client(self._cluster)
             return self
         try:
