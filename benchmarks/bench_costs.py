@@ -11,19 +11,23 @@ bake (``resource.getrusage`` high-water marks) and the bytes written:
 - ``colormap``: ``prefilter bake colormap``'s work (checkpointed rows, then the EXR and its JSON)
   for N x N tables of a 256-sample map, sigma_max 0.25, N = 128..2048.
 
-A power law ``cost = a size^b`` is fitted to each column (least squares in log-log) and
-extrapolated to 4096^2 and 8192^2 (LTC tables: 64^2 and 128^2 entries). Results:
-``out/bench/costs.json``, the Markdown table on stdout, the plot ``docs/img/distributed_costs.png``
-(``--no-plot`` to skip it).
+A power law ``cost = a size^b`` is fitted to each column over the three largest sizes (least
+squares in log-log; the smaller sizes measure start-up costs) and extrapolated to 4096^2 and
+8192^2 (LTC tables: 64^2 and 128^2 entries). Results: ``out/bench/costs.json``, the Markdown
+table on stdout, the plot ``docs/img/distributed_costs.png`` (``--no-plot`` to skip it).
 
-``--scaling``-only runs (``--only scaling``) and the default run also time the distributed tasks
+``--only scaling`` and the default run also time the distributed tasks
 on a local cluster of 1 and of 2 worker processes (clusters started and warmed first, start-up
 timed apart): an LTC table of 8^2 entries (8 row tasks) and a reference render of the
 ``plane-and-sphere`` example at 160 x 90, 64 spp (bands of 8 rows); speed-up = t1 / t2,
 efficiency = speed-up / 2. On a machine shared with other jobs these ratios understate what
 two idle cores give: rerun on an idle machine.
 
-Options: ``--only costs|scaling``, ``--sizes 128,256`` (map sizes), ``--ltc-sizes 4,8``.
+``--only overheads``: the engine's own cost per task (an empty task on 2 local workers) and per
+checkpoint part written by the client.
+
+Options: ``--only costs|scaling|overheads``, ``--sizes 128,256`` (map sizes),
+``--ltc-sizes 4,8``.
 """
 
 from __future__ import annotations
@@ -106,9 +110,16 @@ def measure(kind: str, n: int) -> dict:
         return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+#: Points of the power-law fits: the largest sizes (small ones measure fixed start-up costs).
+FIT_POINTS = 3
+
+
 def power_law(sizes, values) -> tuple[float, float]:
-    """``(a, b)`` of ``value = a size^b`` (least squares on the logs of the positive values)."""
-    x, y = np.log(np.asarray(sizes, float)), np.asarray(values, float)
+    """``(a, b)`` of ``value = a size^b``: least squares on the logs of the positive values of
+    the :data:`FIT_POINTS` largest sizes."""
+    order = np.argsort(sizes)[-FIT_POINTS:]
+    x = np.log(np.asarray(sizes, float)[order])
+    y = np.asarray(values, float)[order]
     ok = y > 0
     b, log_a = np.polyfit(x[ok], np.log(y[ok]), 1)
     return float(np.exp(log_a)), float(b)
@@ -211,6 +222,32 @@ def scaling() -> list[dict]:
     return out
 
 
+def overheads() -> dict:
+    """Per-task costs of the engine itself: an empty task through a local cluster of 2 workers
+    (submit, schedule, run, gather), and the client's atomic write of one checkpoint part of a
+    16 x 1920 band of RGB float32 (fsync included)."""
+    import operator
+
+    from prefilter.distributed import Engine
+    from prefilter.fileio import Checkpoints
+
+    n = 400
+    with Engine("local", workers=2) as engine:
+        engine.map(operator.add, [(1, 2)] * 4)
+        t0 = time.perf_counter()
+        engine.map(operator.add, [(i, 1) for i in range(n)])
+        per_task = (time.perf_counter() - t0) / n
+    band = np.zeros((16, 1920, 3), np.float32)
+    with tempfile.TemporaryDirectory() as tmp:
+        ck = Checkpoints(Path(tmp) / "img.exr", {"bench": 1})
+        t0 = time.perf_counter()
+        for i in range(20):
+            ck.save(i, image=band)
+        per_write = (time.perf_counter() - t0) / 20
+    return {"empty_task_ms": 1e3 * per_task, "part_write_ms": 1e3 * per_write,
+            "part_bytes": band.nbytes}
+
+
 def scaling_table(rows: list[dict]) -> str:
     lines = ["| job | tasks | 1 worker (s) | 2 workers (s) | speed-up | efficiency |",
              "|---|---|---|---|---|---|"]
@@ -230,16 +267,24 @@ def main() -> None:
         print(json.dumps(child(sys.argv[2], int(sys.argv[3]), Path(sys.argv[4]))))
         return
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--only", choices=("costs", "scaling"))
+    p.add_argument("--only", choices=("costs", "scaling", "overheads"))
     p.add_argument("--sizes", default=",".join(map(str, MAP_SIZES)))
     p.add_argument("--ltc-sizes", default=",".join(map(str, LTC_SIZES)))
     p.add_argument("--no-plot", action="store_true")
+    p.add_argument("--replot", action="store_true",
+                   help="table and plot from out/bench/costs.json, measuring nothing")
     args = p.parse_args()
     out_dir = ROOT / "out" / "bench"
     out_dir.mkdir(parents=True, exist_ok=True)
+    if args.replot:
+        rows = json.loads((out_dir / "costs.json").read_text())["costs"]
+        table, laws = cost_table(rows)
+        print(table)
+        plot(rows, laws, ROOT / "docs" / "img" / "distributed_costs.png")
+        return
     result = {}
     print(f"machine: {os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
-    if args.only != "scaling":
+    if args.only in (None, "costs"):
         rows = []
         for kind, sizes in (("ltc-iso", args.ltc_sizes), ("leadr", args.sizes),
                             ("colormap", args.sizes)):
@@ -252,10 +297,16 @@ def main() -> None:
         result.update(costs=rows, laws=laws)
         if not args.no_plot:
             plot(rows, laws, ROOT / "docs" / "img" / "distributed_costs.png")
-    if args.only != "costs":
+    if args.only in (None, "scaling"):
         sc = scaling()
         print(scaling_table(sc))
-        result["scaling"] = sc
+        result.update(scaling=sc)
+    if args.only in (None, "scaling", "overheads"):
+        oh = overheads()
+        print(f"engine overhead: {oh['empty_task_ms']:.2f} ms per empty task (2 workers), "
+              f"{oh['part_write_ms']:.2f} ms per checkpoint part of {oh['part_bytes'] / 1e3:.0f} "
+              f"kB written by the client")
+        result.update(overheads=oh)
     (out_dir / "costs.json").write_text(json.dumps(result, indent=1))
 
 
