@@ -16,12 +16,12 @@ squares in log-log; the smaller sizes measure start-up costs) and extrapolated t
 8192^2 (LTC tables: 64^2 and 128^2 entries). Results: ``out/bench/costs.json``, the Markdown
 table on stdout, the plot ``docs/img/distributed_costs.png`` (``--no-plot`` to skip it).
 
-``--only scaling`` and the default run also time the distributed tasks
-on a local cluster of 1 and of 2 worker processes (clusters started and warmed first, start-up
-timed apart): an LTC table of 8^2 entries (8 row tasks) and a reference render of the
-``plane-and-sphere`` example at 160 x 90, 64 spp (bands of 8 rows); speed-up = t1 / t2,
-efficiency = speed-up / 2. On a machine shared with other jobs these ratios understate what
-two idle cores give: rerun on an idle machine.
+``--only scaling`` and the default run also time the distributed tasks on a local cluster of 1
+and of 2 worker processes (clusters started and warmed first, start-up timed apart; the workers'
+Numba kernels on one thread each): an LTC table of 8^2 entries (8 row tasks) and a reference
+render of the ``plane-and-sphere`` example at 160 x 90, 64 spp (bands of 8 rows); speed-up =
+t1 / t2, efficiency = speed-up / 2. On a machine shared with other jobs these ratios understate
+what two idle cores give: rerun on an idle machine.
 
 ``--only overheads``: the engine's own cost per task (an empty task on 2 local workers) and per
 checkpoint part written by the client.
@@ -187,7 +187,9 @@ def plot(rows: list[dict], laws: dict, path: Path) -> None:
 
 
 def scaling() -> list[dict]:
-    """1 vs 2 workers on the LTC rows and the reference bands (this process is the client)."""
+    """1 vs 2 workers on the LTC rows and the reference bands (this process is the client).
+    Each worker runs its Numba kernels on one thread, so that 1 worker is one core."""
+    os.environ["NUMBA_NUM_THREADS"] = "1"  # inherited by the workers the engine spawns
     from prefilter.distributed import Engine
     from prefilter.ltc.fit_iso import FitSettings, fit_row
     from prefilter.render.scene import load_scene
@@ -307,7 +309,10 @@ def main() -> None:
               f"{oh['part_write_ms']:.2f} ms per checkpoint part of {oh['part_bytes'] / 1e3:.0f} "
               f"kB written by the client")
         result.update(overheads=oh)
-    (out_dir / "costs.json").write_text(json.dumps(result, indent=1))
+    # a partial run (--only) keeps the other parts of the last full one
+    path = out_dir / "costs.json"
+    previous = json.loads(path.read_text()) if path.is_file() else {}
+    path.write_text(json.dumps({**previous, **result}, indent=1))
 
 
 if __name__ == "__main__":
