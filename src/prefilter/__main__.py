@@ -2,4 +2,6 @@
 
 from prefilter.cli import main
 
-main()
+# guarded: worker processes of a local cluster import this module again (spawn)
+if __name__ == "__main__":
+    main()

@@ -18,7 +18,7 @@ import click
 
 from prefilter.errors import PrefilterError
 
-__all__ = ["SEED", "SEED_MAX", "OutputDir", "OutputFile", "check_writable"]
+__all__ = ["SEED", "SEED_MAX", "OutputDir", "OutputFile", "check_writable", "scheduler_options"]
 
 #: The largest seed the commands take.
 SEED_MAX = 2**63 - 1
@@ -99,3 +99,19 @@ class OutputDir(click.Path):
         except PrefilterError as exc:
             self.fail(str(exc), param, ctx)
         return value
+
+
+def scheduler_options(command):
+    """``--scheduler`` and ``--workers`` (alias ``-j``, ``--processes``) of a command whose work
+    runs as independent tasks (:class:`prefilter.distributed.Engine`); the command receives
+    ``scheduler`` and ``workers`` (``None`` when not given)."""
+    command = click.option(
+        "--workers", "-j", "--processes", "workers", type=click.IntRange(1, 4096), default=None,
+        help="Worker processes of a local cluster on this machine (--scheduler local; "
+             "default: the cores); more than 1 without --scheduler starts one.")(command)
+    return click.option(
+        "--scheduler", default=None, metavar="ADDRESS",
+        help="Where the tasks run: 'synchronous' (this process), 'local' (a local Dask cluster) "
+             "or a dask.distributed scheduler address such as tcp://host:8786 (default: "
+             "$DASK_SCHEDULER_ADDRESS, else this process). Results are checkpointed: rerun "
+             "to resume.")(command)

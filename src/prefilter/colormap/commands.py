@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import click
 
-from prefilter.cliparams import OutputFile
+from prefilter.cliparams import OutputFile, scheduler_options
 
 
 def load_colormap_image(path, *, srgb: bool = True):
@@ -32,16 +32,27 @@ def load_colormap_image(path, *, srgb: bool = True):
     return np.ascontiguousarray(c)
 
 
+def table_rows(c, sigmas, edge: str) -> dict:
+    """One task of :func:`bake_table`: ``{"rows": prefilter_rows(c, sigmas, edge)}``."""
+    from prefilter.colormap.table import prefilter_rows
+
+    return {"rows": prefilter_rows(c, sigmas, edge)}
+
+
 def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigma=None,
-               out, chunk: int = 32):
+               out, chunk: int = 32, scheduler: str | None = None, workers: int | None = None,
+               progress: bool = False):
     """:func:`~prefilter.colormap.table.prefilter_table`, computed ``chunk`` sigma rows at a time
     with each chunk checkpointed in ``<out>.parts/`` (a large table takes minutes; a killed bake
     resumes). The rows are the same computation as ``prefilter_table`` (``prefilter_rows``
-    computes each row on its own), so the table is bit-identical to it."""
+    computes each row on its own), so the table is bit-identical to it. The chunks are
+    independent tasks (:func:`table_rows`) run by :class:`prefilter.distributed.Engine` on
+    ``scheduler`` / ``workers``."""
     import numpy as np
 
+    from prefilter.distributed import Engine
     from prefilter.fileio import Checkpoints, array_digest
-    from prefilter.colormap.table import ColormapTable, prefilter_rows, prefilter_table
+    from prefilter.colormap.table import ColormapTable, prefilter_table
 
     # two rows validate the arguments and resample the map exactly as the full table does
     head = prefilter_table(colormap, value_range, sigma_max, size=size, edge=edge, n_sigma=2)
@@ -52,12 +63,10 @@ def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigm
     ck = Checkpoints(out, {"format": "colormap-rows", "colormap_sha256": array_digest({"c": c}),
                            "range": [lo, hi], "sigma_max": head.sigma_max, "edge": head.edge,
                            "size": size, "n_sigma": n_sigma, "chunk": chunk})
-    rows = []
-    for k, start in enumerate(range(0, n_sigma, chunk)):
-        if not ck.done(k):
-            ck.save(k, rows=prefilter_rows(c, sig[start:start + chunk], head.edge))
-        rows.append(ck.load(k)["rows"])
-    table = np.concatenate(rows)
+    tasks = [(c, sig[start:start + chunk], head.edge) for start in range(0, n_sigma, chunk)]
+    with Engine(scheduler, workers=workers) as engine:
+        engine.run(table_rows, tasks, ck, progress=progress, desc="colormap rows")
+    table = np.concatenate([ck.load(k)["rows"] for k in range(len(tasks))])
     table[0] = c  # the sigma = 0 row is the colour map itself, bit for bit (as prefilter_table)
     return ColormapTable(table, (lo, hi), head.sigma_max, head.edge), ck
 
@@ -83,8 +92,9 @@ def bake_table(colormap, value_range, sigma_max, *, size: int, edge: str, n_sigm
 @click.option("--wait", is_flag=True,
               help="If another bake is writing the same output, wait for it (default: fail at "
                    "once, naming it).")
+@scheduler_options
 def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear, out, glsl_out,
-                  wait):
+                  wait, scheduler, workers):
     """Pre-convolve COLORMAP (an image) with Gaussians of std 0..SIGMA_MAX (Heitz et al. 2013,
     eq. 10). Writes the table (rows = sigma, columns = mean) and TABLE.json with its layout,
     switched together (a killed bake leaves the previous pair or the new one)."""
@@ -98,7 +108,7 @@ def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear,
     digest = hashlib.sha256(Path(colormap).read_bytes()).hexdigest()
     with bake_lock(out, wait=wait):
         table, ck = bake_table(c, value_range, sigma_max, size=size, edge=edge,
-                               n_sigma=n_sigma, out=out)
+                               n_sigma=n_sigma, out=out, scheduler=scheduler, workers=workers)
         out, side = table.save(out, meta=dict(source=str(colormap), source_sha256=digest,
                                               source_encoding="linear" if linear else "srgb"))
         ck.clear()

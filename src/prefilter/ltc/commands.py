@@ -11,7 +11,7 @@ import time
 
 import click
 
-from prefilter.cliparams import SEED, OutputFile
+from prefilter.cliparams import SEED, OutputFile, scheduler_options
 
 
 @click.command("ltc-iso")
@@ -21,8 +21,6 @@ from prefilter.cliparams import SEED, OutputFile
               help="Seed of the fixed stratified fitting samples.")
 @click.option("--samples", "n_fit", default=32, show_default=True, type=click.IntRange(2, 512),
               help="Stratified samples per axis of each fitting sample set.")
-@click.option("-j", "--processes", default=1, show_default=True, type=click.IntRange(1, 64),
-              help="Worker processes (rows are fitted independently).")
 @click.option("-o", "--out", type=OutputFile(), default=None,
               help="Output .npz (default: the user table, $PREFILTER_DATA/ggx_iso.npz or "
                    "~/.local/share/prefilter/ggx_iso.npz, which renders then use instead of "
@@ -36,15 +34,20 @@ from prefilter.cliparams import SEED, OutputFile
 @click.option("--wait", is_flag=True,
               help="If another bake is writing the same output, wait for it (default: fail at "
                    "once, naming it).")
+@scheduler_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-def bake_ltc_iso(res, seed, n_fit, processes, out, objective, power, wait, quiet):
-    """Fit the isotropic GGX LTC table (resumable: rerun the same command after a kill)."""
+def bake_ltc_iso(res, seed, n_fit, out, objective, power, wait, scheduler, workers, quiet):
+    """Fit the isotropic GGX LTC table (resumable: rerun the same command after a kill).
+
+    Each view angle's row is a task: --scheduler / --workers spread them over processes or a
+    Dask cluster (docs/distributed.md), with the same bytes as one process."""
     from prefilter.ltc.fit_iso import FitSettings, bake_table, user_table_path
 
     settings = FitSettings(res_theta=res, res_alpha=res, n_fit=n_fit, seed=seed,
                            objective=objective, power=power)
     t0 = time.perf_counter()
-    path = bake_table(out, settings, processes=processes, progress=not quiet, wait=wait)
+    path = bake_table(out, settings, processes=workers or 1, scheduler=scheduler,
+                      progress=not quiet, wait=wait)
     click.echo(f"wrote {path} ({res}x{res}) in {time.perf_counter() - t0:.1f} s")
     if out is None:
         click.echo(f"renders now use this user table instead of the shipped one; delete "

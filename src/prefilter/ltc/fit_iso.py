@@ -26,12 +26,12 @@ import json
 import os
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 from scipy.optimize import minimize
 
+from prefilter.distributed import Engine
 from prefilter.fileio import Checkpoints, bake_lock, save_npz_atomic, user_data_dir
 from prefilter.validation import as_positive_int, as_roughness
 from prefilter.errors import PrefilterError
@@ -371,11 +371,6 @@ def fit_row(t: float, settings: FitSettings, row: int = 0) -> dict[str, np.ndarr
     return out
 
 
-def _row_job(args):
-    i, t, settings = args
-    return i, fit_row(t, settings, i)
-
-
 #: File name of the table, in the package data and in the user data folder.
 TABLE_NAME = "ggx_iso.npz"
 
@@ -403,6 +398,7 @@ def bake_table(
     settings: FitSettings | None = None,
     *,
     processes: int = 1,
+    scheduler: str | None = None,
     progress: bool = True,
     on_row: Callable[[int], None] | None = None,
     wait: bool = False,
@@ -410,8 +406,12 @@ def bake_table(
     """Fit the whole table row by row (resumable) and write it atomically to ``out`` (default:
     :func:`user_table_path`, which ``GGXTable.load()`` then prefers to the shipped table).
 
-    Each finished row is checkpointed in ``<out>.parts/``; rerunning with the same settings
-    resumes from there and gives the same bytes as an uninterrupted bake. The bake holds
+    Each row (:func:`fit_row`, one view angle) is an independent task run by
+    :class:`prefilter.distributed.Engine` on ``scheduler`` (``None``: ``$DASK_SCHEDULER_ADDRESS``
+    or this process; ``"local"``; a cluster's address), or on a local cluster of ``processes``
+    workers when ``processes > 1``. Each finished row is checkpointed in ``<out>.parts/``;
+    rerunning with the same settings resumes from there and gives the same bytes as an
+    uninterrupted bake, wherever the rows ran. The bake holds
     :func:`prefilter.fileio.bake_lock` on ``out``: while another bake of ``out`` runs it raises
     a PrefilterError naming that bake (``wait=True``: waits for it). ``on_row(i)`` is called
     after row ``i`` is saved (tests use it to interrupt a bake).
@@ -422,40 +422,17 @@ def bake_table(
     as_positive_int(processes, "processes")
     out = Path(out) if out is not None else user_table_path()
     with bake_lock(out, wait=wait):
-        return _bake_locked(out, settings, processes, progress, on_row)
+        with Engine(scheduler, workers=processes if processes > 1 else None) as engine:
+            return _bake_locked(out, settings, engine, progress, on_row)
 
 
-def _bake_locked(out: Path, settings: FitSettings, processes: int, progress: bool,
+def _bake_locked(out: Path, settings: FitSettings, engine: Engine, progress: bool,
                  on_row: Callable[[int], None] | None) -> Path:
     axis_t, axis_r = settings.axes()
     key = {"version": TABLE_VERSION, **asdict(settings)}
     ck = Checkpoints(out, key)
-    todo = [(i, float(axis_t[i]), settings) for i in range(len(axis_t)) if not ck.done(i)]
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(axis_t), initial=len(axis_t) - len(todo), desc="ltc-iso rows",
-                   unit="row")
-
-    def finish(i, row):
-        ck.save(i, **row)
-        if bar is not None:
-            bar.update(1)
-        if on_row is not None:
-            on_row(i)
-
-    try:
-        if processes > 1 and len(todo) > 1:
-            with get_context("spawn").Pool(min(processes, len(todo))) as pool:
-                for i, row in pool.imap_unordered(_row_job, todo):
-                    finish(i, row)
-        else:
-            for job in todo:
-                finish(*_row_job(job))
-    finally:
-        if bar is not None:
-            bar.close()
+    engine.run(fit_row, [(float(t), settings, i) for i, t in enumerate(axis_t)], ck,
+               progress=progress, desc="ltc-iso rows", on_done=on_row)
     rows = [ck.load(i) for i in range(len(axis_t))]
     save_npz_atomic(
         out,

@@ -10,7 +10,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from prefilter.cliparams import SEED, OutputFile
+from prefilter.cliparams import SEED, OutputFile, scheduler_options
 from prefilter.errors import PrefilterError
 
 # ------------------------------------------------------------------------------------- compare
@@ -162,24 +162,41 @@ class _RenderCommand(click.Command):
 @click.option("--param", "params", multiple=True, metavar="KEY=VALUE",
               help="A variant setting of the method (repeatable), e.g. footprint=paper for "
                    "ltc-multiscale; `prefilter.render.methods.method_params(name)` lists them.")
+@click.option("--tile-rows", type=click.IntRange(1), default=None,
+              help="Render in bands of this many image rows, each a task checkpointed beside "
+                   "--out (a killed render resumes); default with --scheduler/--workers: "
+                   "16. Methods on the driver's row chunks only (e.g. reference).")
+@scheduler_options
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path | None,
            jitter: tuple[float, float], table_path: Path | None, params: tuple[str, ...],
+           tile_rows: int | None, scheduler: str | None, workers: int | None,
            quiet: bool) -> None:
     """Render SCENE (JSON, see docs/scenes.md; `example:NAME` for a shipped example, see
-    `prefilter examples`) with a shading method to an EXR image."""
+    `prefilter examples`) with a shading method to an EXR image.
+
+    With --scheduler, --workers or --tile-rows the image is rendered by bands of rows, each an
+    independent task on a local or Dask cluster (docs/distributed.md), with the same bytes."""
     import time
 
+    from prefilter.distributed import SYNCHRONOUS, resolve_scheduler
     from prefilter.render.methods import check_params
     from prefilter.render.driver import render as render_image
     from prefilter.texture.io import write_image
 
     params = check_params(method, params)  # fail on bad input before loading the scene
     t0 = time.perf_counter()
-    image = render_image(scene, method, spp=spp, seed=seed, jitter=jitter, progress=not quiet,
-                         table=table_path, params=params)
+    if tile_rows is not None or resolve_scheduler(scheduler, workers) != SYNCHRONOUS:
+        from prefilter.render.tiles import TILE_ROWS, render_tiled
+
+        image = render_tiled(scene, method, out=out, spp=spp, seed=seed, jitter=jitter,
+                             table=table_path, params=params, tile_rows=tile_rows or TILE_ROWS,
+                             scheduler=scheduler, workers=workers, progress=not quiet)
+    else:
+        image = render_image(scene, method, spp=spp, seed=seed, jitter=jitter,
+                             progress=not quiet, table=table_path, params=params)
+        write_image(out, image)
     seconds = time.perf_counter() - t0
-    write_image(out, image)
     click.echo(f"{method}: {image.shape[1]}x{image.shape[0]}, {spp} spp, {seconds:.2f} s -> {out}")
     if png is not None:
         write_image(png, image, srgb=True)

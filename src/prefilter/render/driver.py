@@ -39,7 +39,7 @@ __all__ = ["estimate_render_bytes", "footprint_lookup", "render", "render_positi
 
 def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0.0, 0.0),
            progress: bool = False, table=None, chunk_samples: int = 1 << 18,
-           params=None) -> np.ndarray:
+           params=None, rows=None) -> np.ndarray:
     """Render ``scene`` (a :class:`Scene`, a JSON path or a dict) with the named method.
 
     Parameters
@@ -61,10 +61,14 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
     params : dict or None
         The method's variant settings (:func:`prefilter.render.methods.method_params`), e.g.
         ``{"footprint": "paper"}`` for ``ltc-multiscale``.
+    rows : (int, int) or None
+        Only the image rows ``[r0, r1)``: the same bytes as those rows of the whole image (every
+        row's random numbers are its own); methods that do not run on :func:`render_positions`
+        render whole images only.
 
     Returns
     -------
-    numpy.ndarray, shape (H, W, 3), float32
+    numpy.ndarray, shape (H, W, 3) (``(r1 - r0, W, 3)`` with ``rows``), float32
         Linear radiance.
     """
     if not isinstance(scene, Scene):
@@ -78,15 +82,25 @@ def render(scene, method: str = "ltc", *, spp: int = 1, seed: int = 0, jitter=(0
                                   or callable(getattr(table, "lookup", None))):
         raise PrefilterError("table: expected an LTC table file, a table object (with a lookup "
                              f"method) or None, got {type(table).__name__}")
+    cam = scene.camera
+    if rows is not None:
+        ok = (len(rows) == 2 and all(isinstance(r, (int, np.integer)) for r in rows)
+              and 0 <= rows[0] < rows[1] <= cam.height)
+        if not ok:
+            raise PrefilterError(f"rows: expected (r0, r1) with 0 <= r0 < r1 <= {cam.height} "
+                                 f"(the image height), got {rows!r}")
+        rows = (int(rows[0]), int(rows[1]))
     settings = RenderSettings(spp=as_positive_int(spp, "spp"), seed=int(seed),
                               jitter=(float(j[0]), float(j[1])), progress=bool(progress),
                               chunk_samples=as_positive_int(chunk_samples, "chunk_samples"),
-                              table=table, params=check_params(method, params))
-    cam = scene.camera
+                              table=table, params=check_params(method, params), rows=rows)
     check_memory(estimate_render_bytes(cam.width, cam.height, settings.spp,
                                        settings.chunk_samples),
                  f"render: a {cam.width} x {cam.height} image at {settings.spp} spp")
     image = get_method(method)(scene, settings)
+    if rows is not None and np.shape(image)[0] != rows[1] - rows[0]:
+        raise PrefilterError(f"rows: method {method!r} renders whole images only, expected no "
+                             f"rows")
     return np.asarray(image, dtype=np.float32)
 
 
@@ -203,23 +217,26 @@ def render_positions(scene: Scene, settings: RenderSettings, radiance, *, random
     Returns
     -------
     numpy.ndarray, shape (H, W, 3), float64
+        (``(r1 - r0, W, 3)`` when ``settings.rows = (r0, r1)``.)
     """
     cam = scene.camera
     h, w = cam.height, cam.width
     s = settings.spp if per_pixel is None else int(per_pixel)
     rows_per_chunk = max(1, settings.chunk_samples // (w * s))
-    image = np.zeros((h, w, 3))
-    with tqdm(total=h, desc=desc, unit="row", delay=1.0, leave=False,
+    lo, hi = settings.rows or (0, h)
+    image = np.zeros((hi - lo, w, 3))
+    with tqdm(total=hi - lo, desc=desc, unit="row", delay=1.0, leave=False,
               disable=not settings.progress) as bar:
-        for r0 in range(0, h, rows_per_chunk):
-            rows = range(r0, min(h, r0 + rows_per_chunk))
+        # the chunks of the whole image, cut to the band: a band is its rows of the whole image
+        for r0 in range(lo - lo % rows_per_chunk, hi, rows_per_chunk):
+            rows = range(max(r0, lo), min(hi, r0 + rows_per_chunk))
             if positions is None:
                 xy, us = chunk_positions(settings, rows, w, stratified, random_dims)
             else:
                 xy, us = positions(rows, w)
             rad = radiance(xy.reshape(-1, 2), us).reshape(len(rows), w, s, 3)
             # the mean of one sample is that sample: skip the reduction
-            image[r0:r0 + len(rows)] = rad[:, :, 0] if s == 1 else rad.mean(axis=2)
+            image[rows.start - lo:rows.stop - lo] = rad[:, :, 0] if s == 1 else rad.mean(axis=2)
             bar.update(len(rows))
     return image
 

@@ -48,6 +48,10 @@ class RenderSettings:
     params : dict of str to str
         The method's variant settings (``--param key=value``), checked against the choices the
         method registered (:func:`register`); a method reads them with :meth:`param`.
+    rows : (int, int) or None
+        Render only the image rows ``[r0, r1)`` (a band of a tiled render,
+        :mod:`prefilter.render.tiles`); ``None``: the whole image. Honoured by the methods that
+        run on :func:`prefilter.render.driver.render_positions`.
     """
 
     spp: int = 1
@@ -57,6 +61,7 @@ class RenderSettings:
     chunk_samples: int = 1 << 18
     table: object | None = None
     params: dict = field(default_factory=dict)
+    rows: tuple[int, int] | None = None
 
     def param(self, key: str, default: str) -> str:
         """The value of variant setting ``key`` (``default`` when not given)."""
