@@ -1,5 +1,6 @@
 """The bake's progress on stderr (command, render cache) and its memory and temporary disk."""
 
+import copy
 import threading
 
 import numpy as np
@@ -56,6 +57,7 @@ def test_render_passes_its_progress_to_the_bake(monkeypatch):
         raise Stop
 
     monkeypatch.setattr(grender, "baked_surface", spy)
+    monkeypatch.setattr(grender, "bake_maps", lambda scene, progress=False: None)
     scene = load_scene(grender.measurement_scene(2.0, "flakes", 16, width=4, height=3))
     for progress in (True, False):
         try:
@@ -63,6 +65,37 @@ def test_render_passes_its_progress_to_the_bake(monkeypatch):
         except Stop:
             pass
     assert seen == [True, False]
+
+
+def test_render_bakes_every_map_before_loading_one(monkeypatch):
+    """A render bakes the scene's missing maps first, then loads them: the bakes' memory does not
+    add to loaded maps'."""
+    from prefilter.glints import render as grender
+    from prefilter.render.scene import load_scene
+
+    events = []
+
+    class Stop(Exception):
+        pass
+
+    def bake_spy(normal_map, out, **kwargs):
+        events.append("bake")
+        return True
+
+    def load_spy(*args, **kwargs):
+        events.append("load")
+        raise Stop
+
+    monkeypatch.setattr(grender, "bake_if_missing", bake_spy)
+    monkeypatch.setattr(grender, "load", load_spy)
+    doc = grender.measurement_scene(2.0, "flakes", 16, width=4, height=3)
+    doc["objects"].append(copy.deepcopy(doc["objects"][0]))
+    scene = load_scene(doc)
+    try:
+        grender.render_glints(scene, _settings(False))
+    except Stop:
+        pass
+    assert events.count("bake") >= 2 and events.index("load") >= 2  # both maps, then a load
 
 
 def _settings(progress):
