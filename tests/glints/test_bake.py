@@ -4,6 +4,7 @@ import copy
 import threading
 
 import numpy as np
+import pytest
 from maps import sinusoid
 
 from prefilter.glints import bake as gbake
@@ -161,3 +162,46 @@ def test_temporary_disk_is_the_uncompressed_pyramid_at_most(tmp_path, monkeypatc
         t.join()
     assert 0 < peak[0] <= 1.1 * s["raw_bytes"] + 400_000
     assert not parts.exists()
+
+
+def _pickled_map(fn, *iterables):
+    """``map`` through pickle, as a cluster's workers run tasks: the task and its arguments
+    must be picklable (top-level functions, no closures)."""
+    import pickle
+
+    return [pickle.loads(pickle.dumps(fn))(*pickle.loads(pickle.dumps(args)))
+            for args in zip(*iterables)]
+
+
+KW_EXACT = dict(SMALL, exact_from_level=1, exact_cell=1, code_bits=16, c_bits=8)
+
+
+def test_tasks_through_any_map_give_the_same_bytes(tmp_path):
+    """The bake's tasks (level-0 chunks, CP cells) run through ``map_fn`` as pickled top-level
+    functions, in any order of execution, give the default bake's bytes."""
+    nm = sinusoid(32, px=16, py=8)
+    bake(nm, tmp_path / "a.npz", progress=False, **KW_EXACT)
+    calls = []
+
+    def reversed_map(fn, *iterables):  # runs the tasks last to first, returns them in order
+        args = list(zip(*iterables))
+        calls.append((fn.__name__, len(args)))
+        out = _pickled_map(fn, *zip(*args[::-1])) if args else []
+        return out[::-1]
+
+    bake(nm, tmp_path / "b.npz", progress=False, map_fn=reversed_map, **KW_EXACT)
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    assert [c[0] for c in calls] == ["level0_task", "fit_cell_task", "refit_cell_task"]
+    assert all(n > 1 for _, n in calls)
+
+
+@pytest.mark.slow
+def test_tasks_on_a_process_pool_give_the_same_bytes(tmp_path):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    nm = sinusoid(32, px=16, py=8)
+    bake(nm, tmp_path / "a.npz", progress=False, **KW_EXACT)
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        bake(nm, tmp_path / "b.npz", progress=False, map_fn=pool.map, **KW_EXACT)
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
