@@ -51,7 +51,7 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_in
                                    as_ndf_truncation, as_normal_map, as_support, elements,
                                    map_digest, pndf_image)
 from prefilter.glints.levels import LevelFile
-from prefilter.glints.pyramid import Pyramid, next_level_rows, plan
+from prefilter.glints.pyramid import Pyramid, next_level_rows, filter_taps, plan, strip_plan
 from prefilter.glints.store import CODE_BITS, GlintsMap, decode, encode, pack_mask, save
 
 LEVEL0_CHUNK = 0
@@ -103,6 +103,21 @@ BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
                      code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1)
+#: Bytes of the window of x-filtered rows that building a coarser level holds
+#: (:func:`prefilter.glints.pyramid.next_level_rows`); wider levels are built in column strips.
+LEVEL_RING_BYTES = 512 << 20
+
+
+def strip_width(ny: int, R: int, cap: int, sigma_over_stride: float = 1.0) -> int:
+    """Output columns per strip of a coarser level built from a level of ``ny`` rows of
+    ``R^2`` images, so that the filter's window of rows (one row per tap, at most ``ny``) holds
+    at most ``cap`` bytes (at least one column); ``sigma_over_stride`` sets the filter's taps
+    (:func:`prefilter.glints.pyramid.filter_taps`)."""
+    taps, _ = filter_taps(sigma_over_stride)
+    slots = min(len(taps), ny)
+    return max(1, cap // (slots * R * R * 4) - (len(taps) // 2 + 1))
+
+
 #: Spatial cell of a group at level 0 (texels), at most the map's side.
 CELL = 32
 
@@ -556,7 +571,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         _run(map_fn or map, level0_task, job, pending, bar, step=rows_per_chunk * nx0)
     lk.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))
 
-    # 2. upper levels by filtering, streamed row by row (pyramid.next_level_rows)
+    # 2. upper levels by filtering, streamed row by row (pyramid.next_level_rows), in column
+    # strips when the filter's window of rows would exceed LEVEL_RING_BYTES (pyramid.strip_plan)
     diffs = []
     for lv in tqdm(range(1, pyr.n_levels), desc="coarser levels", unit="level",
                    disable=not progress, file=sys.stderr):
@@ -565,15 +581,25 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         arr = LevelFile(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R))
         if not lk.done(key):
             d2 = np.zeros(2)  # squared norms of (level - level below at its centres), level
+            ny, nx = below.shape[:2]
+            for xo0, xo1, start in strip_plan(nx, pyr.sigma0 / pyr.stride0,
+                                              strip_width(ny, R, LEVEL_RING_BYTES,
+                                                          pyr.sigma0 / pyr.stride0)):
+                n_in = nx if xo1 - xo0 == nx // 2 else 2 * (xo1 - xo0 + 2 * xo0 - start)
+                off = xo0 - start // 2
 
-            def write_row(yo, images, arr=arr, below=below, d2=d2):
-                arr.write_rows(yo, images[None])
-                c = images.astype(np.float64).ravel()
-                d = c - below.read(2 * yo, 2 * yo + 1, step=2).astype(np.float64).ravel()
-                d2 += [np.dot(d, d), np.dot(c, c)]
+                def write_row(yo, images, arr=arr, below=below, d2=d2, xo0=xo0, xo1=xo1,
+                              off=off):
+                    images = images[off:off + xo1 - xo0]
+                    arr.write_columns(yo, xo0, images)
+                    c = images.astype(np.float64).ravel()
+                    d = c - below.read(2 * yo, 2 * yo + 1, 2 * xo0, 2 * xo1,
+                                       step=2).astype(np.float64).ravel()
+                    d2 += [np.dot(d, d), np.dot(c, c)]
 
-            next_level_rows(lambda y, below=below: below.read(y, y + 1)[0], below.shape[:2],
-                            pyr.sigma0 / pyr.stride0, write_row, (R, R))
+                next_level_rows(lambda y, below=below, start=start, n_in=n_in:
+                                below.read_periodic(y, start, n_in), (ny, n_in),
+                                pyr.sigma0 / pyr.stride0, write_row, (R, R))
             lk.save(key, diff=np.array(math.sqrt(d2[0]) / max(math.sqrt(d2[1]), 1e-300)))
         levels.append(arr)
         diffs.append(float(lk.load(key)["diff"]))
