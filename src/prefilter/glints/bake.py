@@ -16,6 +16,10 @@ Stages, each resumable through :class:`prefilter.fileio.Checkpoints` (``<out>.pa
    loader decodes;
 4. the final ``.npz`` written atomically, then the parts removed.
 
+Stages 1 and 3 run as tasks (:func:`level0_task`, :func:`fit_cell_task`,
+:func:`refit_cell_task`) through ``bake(map_fn=...)``: any ``map`` (threads, processes, a
+cluster) gives the same bytes.
+
 A bake holds an exclusive lock on ``<out>.lock`` (and on a shared ``levels_dir``) while it runs:
 a second process baking the same output waits, then bakes again (``bake``) or finds the output
 and returns (``bake_if_missing``, what the renderer's cache uses).
