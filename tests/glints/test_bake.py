@@ -1,8 +1,10 @@
 """The bake's progress on stderr (command, render cache) and its memory and temporary disk."""
 
+import copy
 import threading
 
 import numpy as np
+import pytest
 from maps import sinusoid
 
 from prefilter.glints import bake as gbake
@@ -56,6 +58,7 @@ def test_render_passes_its_progress_to_the_bake(monkeypatch):
         raise Stop
 
     monkeypatch.setattr(grender, "baked_surface", spy)
+    monkeypatch.setattr(grender, "bake_maps", lambda scene, progress=False: None)
     scene = load_scene(grender.measurement_scene(2.0, "flakes", 16, width=4, height=3))
     for progress in (True, False):
         try:
@@ -63,6 +66,37 @@ def test_render_passes_its_progress_to_the_bake(monkeypatch):
         except Stop:
             pass
     assert seen == [True, False]
+
+
+def test_render_bakes_every_map_before_loading_one(monkeypatch):
+    """A render bakes the scene's missing maps first, then loads them: the bakes' memory does not
+    add to loaded maps'."""
+    from prefilter.glints import render as grender
+    from prefilter.render.scene import load_scene
+
+    events = []
+
+    class Stop(Exception):
+        pass
+
+    def bake_spy(normal_map, out, **kwargs):
+        events.append("bake")
+        return True
+
+    def load_spy(*args, **kwargs):
+        events.append("load")
+        raise Stop
+
+    monkeypatch.setattr(grender, "bake_if_missing", bake_spy)
+    monkeypatch.setattr(grender, "load", load_spy)
+    doc = grender.measurement_scene(2.0, "flakes", 16, width=4, height=3)
+    doc["objects"].append(copy.deepcopy(doc["objects"][0]))
+    scene = load_scene(doc)
+    try:
+        grender.render_glints(scene, _settings(False))
+    except Stop:
+        pass
+    assert events.count("bake") >= 2 and events.index("load") >= 2  # both maps, then a load
 
 
 def _settings(progress):
@@ -128,3 +162,64 @@ def test_temporary_disk_is_the_uncompressed_pyramid_at_most(tmp_path, monkeypatc
         t.join()
     assert 0 < peak[0] <= 1.1 * s["raw_bytes"] + 400_000
     assert not parts.exists()
+
+
+def _pickled_map(fn, *iterables):
+    """``map`` through pickle, as a cluster's workers run tasks: the task and its arguments
+    must be picklable (top-level functions, no closures)."""
+    import pickle
+
+    return [pickle.loads(pickle.dumps(fn))(*pickle.loads(pickle.dumps(args)))
+            for args in zip(*iterables)]
+
+
+KW_EXACT = dict(SMALL, exact_from_level=1, exact_cell=1, code_bits=16, c_bits=8)
+
+
+def test_tasks_through_any_map_give_the_same_bytes(tmp_path):
+    """The bake's tasks (level-0 chunks, CP cells) run through ``map_fn`` as pickled top-level
+    functions, in any order of execution, give the default bake's bytes."""
+    nm = sinusoid(32, px=16, py=8)
+    bake(nm, tmp_path / "a.npz", progress=False, **KW_EXACT)
+    calls = []
+
+    def reversed_map(fn, *iterables):  # runs the tasks last to first, returns them in order
+        args = list(zip(*iterables))
+        calls.append((fn.__name__, len(args)))
+        out = _pickled_map(fn, *zip(*args[::-1])) if args else []
+        return out[::-1]
+
+    bake(nm, tmp_path / "b.npz", progress=False, map_fn=reversed_map, **KW_EXACT)
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    assert [c[0] for c in calls] == ["level0_task", "fit_cell_task", "refit_cell_task"]
+    assert all(n > 1 for _, n in calls)
+
+
+@pytest.mark.slow
+def test_tasks_on_a_process_pool_give_the_same_bytes(tmp_path):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    nm = sinusoid(32, px=16, py=8)
+    bake(nm, tmp_path / "a.npz", progress=False, **KW_EXACT)
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        bake(nm, tmp_path / "b.npz", progress=False, map_fn=pool.map, **KW_EXACT)
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+
+
+def test_coarser_levels_in_column_strips_are_the_same_images(tmp_path, monkeypatch):
+    """A level built in column strips (the filter's window of rows over a byte cap) holds the
+    images of the whole-row build bit for bit, and the bake the same codes."""
+    from prefilter.glints.store import load
+
+    nm = sinusoid(64, px=16, py=8)
+    kw = dict(SMALL, keep_parts=True, progress=False)
+    bake(nm, tmp_path / "rows.npz", **kw)
+    monkeypatch.setattr(gbake, "LEVEL_RING_BYTES", 16 * 16 * 4 * 15 * 3)  # one-column strips
+    bake(nm, tmp_path / "strips.npz", **kw)
+    for lv in range(3):
+        a = np.load(tmp_path / "rows.npz.parts" / f"level{lv}.npy")
+        b = np.load(tmp_path / "strips.npz.parts" / f"level{lv}.npy")
+        assert np.array_equal(a, b), lv
+    ga, gb = load(tmp_path / "rows.npz"), load(tmp_path / "strips.npz")
+    assert all(np.array_equal(ga.codes[k], gb.codes[k]) for k in ga.codes)

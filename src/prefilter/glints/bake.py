@@ -16,6 +16,10 @@ Stages, each resumable through :class:`prefilter.fileio.Checkpoints` (``<out>.pa
    loader decodes;
 4. the final ``.npz`` written atomically, then the parts removed.
 
+Stages 1 and 3 run as tasks (:func:`level0_task`, :func:`fit_cell_task`,
+:func:`refit_cell_task`) through ``bake(map_fn=...)``: any ``map`` (threads, processes, a
+cluster) gives the same bytes.
+
 A bake holds an exclusive lock on ``<out>.lock`` (and on a shared ``levels_dir``) while it runs:
 a second process baking the same output waits, then bakes again (``bake``) or finds the output
 and returns (``bake_if_missing``, what the renderer's cache uses).
@@ -28,6 +32,7 @@ blocks dominated and the upper levels had ~10 % error). Measurements in docs/gli
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import hashlib
 import json
@@ -37,11 +42,12 @@ import sys
 import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from prefilter.fileio import Checkpoints, bake_lock, exclusive_lock
+from prefilter.fileio import Checkpoints, atomic_path, bake_lock, exclusive_lock
 from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
@@ -49,7 +55,7 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_in
                                    as_ndf_truncation, as_normal_map, as_support, elements,
                                    map_digest, pndf_image)
 from prefilter.glints.levels import LevelFile
-from prefilter.glints.pyramid import next_level_rows, plan
+from prefilter.glints.pyramid import Pyramid, next_level_rows, filter_taps, plan, strip_plan
 from prefilter.glints.store import CODE_BITS, GlintsMap, decode, encode, pack_mask, save
 
 LEVEL0_CHUNK = 0
@@ -101,6 +107,21 @@ BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
                      code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1)
+#: Bytes of the window of x-filtered rows that building a coarser level holds
+#: (:func:`prefilter.glints.pyramid.next_level_rows`); wider levels are built in column strips.
+LEVEL_RING_BYTES = 512 << 20
+
+
+def strip_width(ny: int, R: int, cap: int, sigma_over_stride: float = 1.0) -> int:
+    """Output columns per strip of a coarser level built from a level of ``ny`` rows of
+    ``R^2`` images, so that the filter's window of rows (one row per tap, at most ``ny``) holds
+    at most ``cap`` bytes (at least one column); ``sigma_over_stride`` sets the filter's taps
+    (:func:`prefilter.glints.pyramid.filter_taps`)."""
+    taps, _ = filter_taps(sigma_over_stride)
+    slots = min(len(taps), ny)
+    return max(1, cap // (slots * R * R * 4) - (len(taps) // 2 + 1))
+
+
 #: Spatial cell of a group at level 0 (texels), at most the map's side.
 CELL = 32
 
@@ -185,6 +206,193 @@ def bake_if_missing(normal_map, out, **kwargs) -> bool:
     return True
 
 
+# ---------------------------------------------------------------------------------------------
+# the bake's tasks: top-level, picklable, deterministic functions of a BakeJob and a chunk or
+# cell number, each writing its result as a checkpoint part (so any map may run them: in this
+# process, in threads, or on a cluster's workers sharing the parts folder)
+
+
+@dataclass(frozen=True)
+class BakeJob:
+    """What a bake's tasks share: the checkpoint folders (``ck``: the bake's, ``lk``: the
+    levels'), the pyramid, the NDF and CP settings and the cells. No arrays but ``cells``; the
+    normal map is read from ``lk.dir / "normal_map.npy"``."""
+
+    ck: Checkpoints
+    lk: Checkpoints
+    pyr: Pyramid
+    R: int
+    S: float
+    sr: float
+    nt: float
+    ft: float
+    B: int
+    blank_tol: float
+    base: int
+    n_iter_max: int
+    tol: float
+    seed: int
+    code_bits: int
+    c_bits: int
+    rows_per_chunk: int
+    exact_from_level: int | None
+    #: ``(n_cells, 5)`` int64: level, rows ``y0:y1`` and columns ``x0:x1`` of centres per cell
+    cells: np.ndarray
+
+    @property
+    def nb(self) -> int:
+        return self.R // self.B
+
+    def level(self, lv: int) -> LevelFile:
+        return LevelFile(self.lk.dir / f"level{lv}.npy", self.pyr.shape(lv) + (self.R, self.R))
+
+    def exact(self, lv: int) -> bool:
+        return self.exact_from_level is not None and lv >= self.exact_from_level
+
+
+def cell_bounds(pyr: Pyramid, k_sides) -> np.ndarray:
+    """Cells ``(n, 5)`` int64 ``(level, y0, y1, x0, x1)``: squares of ``k_sides[level]`` centres
+    per side, in row-major order per level; the last row and column of cells take the centres
+    left over (a level with fewer centres than ``k`` per side is one cell)."""
+    out = []
+    for lv in range(pyr.n_levels):
+        k = int(k_sides[lv])
+        ny, nx = pyr.shape(lv)
+        ncy, ncx = max(1, ny // k), max(1, nx // k)
+        for cy in range(ncy):
+            for cx in range(ncx):
+                out.append((lv, cy * k, ny if cy == ncy - 1 else (cy + 1) * k,
+                            cx * k, nx if cx == ncx - 1 else (cx + 1) * k))
+    return np.array(out, np.int64).reshape(-1, 5)
+
+
+def level0_task(job: BakeJob, ch: int) -> int:
+    """Level-0 NDF images of chunk ``ch`` (a row of cells), a row of centres per
+    :func:`prefilter.glints.pndf.pndf_image` call (the float64 images of a whole chunk took 1 GB
+    at 512^2), written into the level file; then its checkpoint part."""
+    if job.lk.done(LEVEL0_CHUNK + ch):
+        return ch
+    nm = np.load(job.lk.dir / "normal_map.npy")
+    el = elements(nm)
+    lev, centers = job.level(0), job.pyr.centers(0)
+    for y in range(ch * job.rows_per_chunk, (ch + 1) * job.rows_per_chunk):
+        lev.write_rows(y, pndf_image(nm, centers[y:y + 1], job.pyr.sigma(0), job.R, job.S,
+                                     job.sr, elements_=el, ndf_truncation=job.nt,
+                                     footprint_truncation=job.ft))
+    job.lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
+    return ch
+
+
+def cell_tensors(job: BakeJob, cid: int):
+    """Images ``(n, R, R)`` float64 of cell ``cid`` (row-major centres), their blocks
+    ``(n, nb, nb, B, B)``, the blank mask ``(n, nb, nb)``, one ``(B, B, K_g)`` tensor of the kept
+    blocks per group ``g = bi nb + bj`` and the images ``(K_g,)`` they come from."""
+    lv, y0, y1, x0, x1 = (int(v) for v in job.cells[cid])
+    imgs = job.level(lv).read(y0, y1, x0, x1).astype(np.float64).reshape(-1, job.R, job.R)
+    blocks = cpmod.cut_blocks(imgs, job.B)
+    blank = cpmod.blank_mask(blocks, imgs.max(axis=(1, 2)), job.blank_tol)
+    tensors, where = [], []
+    for bi in range(job.nb):
+        for bj in range(job.nb):
+            keep = np.flatnonzero(~blank[:, bi, bj])
+            where.append(keep)
+            tensors.append(np.ascontiguousarray(blocks[keep, bi, bj].transpose(1, 2, 0)))
+    return imgs, blocks, blank, tensors, where
+
+
+def fit_cell_task(job: BakeJob, cid: int) -> int:
+    """Pass 1 of cell ``cid``: every fitted group at rank ``base``; its error drives the
+    allocation (the groups stored exactly are not fitted)."""
+    if job.ck.done(CELL_CHUNK + cid):
+        return cid
+    nb, B, base = job.nb, job.B, job.base
+    imgs, blocks, blank, tensors, where = cell_tensors(job, cid)
+    live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
+    exact = job.exact(int(job.cells[cid, 0]))
+    fit = [] if exact else live
+    res = dict(zip(fit, cpmod.nn_cp_batch([tensors[g] for g in fit], base,
+                                          n_iter_max=job.n_iter_max, tol=job.tol,
+                                          seed=job.seed + cid)))
+    rows = np.concatenate([[0], np.cumsum([len(w) for w in where])]).astype(np.int64)
+    local = np.full(blank.shape, -1, np.int32)
+    width = 0 if exact else base  # no factors to keep for the exact groups
+    a = np.zeros((nb * nb, width, B), np.float32)
+    b = np.zeros_like(a)
+    c = np.zeros((rows[-1], width), np.float32)
+    err2_g = np.zeros(nb * nb)
+    for g in live:
+        bi, bj = divmod(g, nb)
+        local[where[g], bi, bj] = rows[g] + np.arange(len(where[g]), dtype=np.int32)
+    for g, (ag, bg, cg, e) in res.items():
+        a[g], b[g], c[rows[g]:rows[g + 1]] = ag.T, bg.T, cg
+        err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g])
+    mass = imgs.sum(axis=(1, 2)) * (2 * job.S / job.R) ** 2
+    job.ck.save(CELL_CHUNK + cid, a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g,
+                blank2=np.array(np.einsum("nabij,nabij->", blocks,
+                                          blocks * blank[..., None, None])),
+                norm2=np.array(np.einsum("nij,nij->", imgs, imgs)),
+                kept=np.array((~blank).sum()), mass=mass)
+    return cid
+
+
+def refit_cell_task(job: BakeJob, cid: int) -> int:
+    """Pass 2 of cell ``cid``: the groups given a larger rank (the allocation part), warm-started
+    from pass 1, and those stored exactly; encoding; the error measured on what the loader
+    decodes."""
+    if job.ck.done(FINAL_CHUNK + cid):
+        return cid
+    nb, B, base = job.nb, job.B, job.base
+    _, _, _, tensors, _ = cell_tensors(job, cid)
+    p1 = job.ck.load(CELL_CHUNK + cid)
+    rows = p1["rows"]
+    r_cell = job.ck.load(ALLOC_CHUNK)["ranks"][cid * nb * nb:(cid + 1) * nb * nb]
+    first = {g: (p1["a"][g].T.astype(np.float64), p1["b"][g].T.astype(np.float64),
+                 p1["c"][rows[g]:rows[g + 1]].astype(np.float64)) for g in range(nb * nb)}
+    fits = dict(first)
+    for g in np.flatnonzero(r_cell == EXACT):
+        fits[g] = cpmod.exact_cp(tensors[g])[:3]
+    for r in sorted(set(r_cell.tolist()) - {0, base, EXACT}):
+        gs = [g for g in range(nb * nb) if r_cell[g] == r]
+        out = cpmod.nn_cp_batch([tensors[g] for g in gs], int(r), n_iter_max=job.n_iter_max,
+                                tol=job.tol, seed=job.seed + cid, init=[first[g] for g in gs])
+        fits.update({g: o[:3] for g, o in zip(gs, out)})
+    groups = [(fits[g][0].T, fits[g][1].T, fits[g][2]) if r_cell[g] else
+              (np.zeros((0, B)), np.zeros((0, B)), np.zeros((rows[g + 1] - rows[g], 0)))
+              for g in range(nb * nb)]
+    enc = encode(groups, job.code_bits, job.c_bits)
+    A_, B_, C_ = decode(**enc, group_rows=rows)
+    a_s, b_s = np.diff(A_.astype(np.float64), axis=2), np.diff(B_.astype(np.float64), axis=2)
+    err2_g = np.zeros(nb * nb)
+    # the fit's own error too (before the codes' rounding): with 8-bit c codes the rounding
+    # dominates the stored error while no rendered frame shows it
+    fit2_g = np.zeros(nb * nb)
+    for g in range(nb * nb):
+        if rows[g + 1] > rows[g]:
+            d = cpmod.reconstruct(a_s[g].T, b_s[g].T,
+                                  C_[rows[g]:rows[g + 1]].astype(np.float64)) - tensors[g]
+            err2_g[g] = np.einsum("ijk,ijk->", d, d)
+            a, b, c = groups[g]
+            d = cpmod.reconstruct(a.T, b.T, c) - tensors[g]
+            fit2_g[g] = np.einsum("ijk,ijk->", d, d)
+    job.ck.save(FINAL_CHUNK + cid, **enc, err2_g=err2_g, fit2_g=fit2_g)
+    return cid
+
+
+def thread_map(fn, *iterables):
+    """``map(fn, *iterables)`` on a pool of ``os.cpu_count()`` threads, results in order: the
+    CP kernels release the GIL (the default map of the bake's CP passes)."""
+    args = list(zip(*iterables))
+    with ThreadPoolExecutor(max(1, min(os.cpu_count() or 1, len(args)))) as pool:
+        yield from pool.map(lambda a: fn(*a), args)
+
+
+def _run(map_fn, fn, job: BakeJob, ids, bar, step: int = 1) -> None:
+    """``map_fn(fn, [job] * n, ids)``, counting ``step`` on ``bar`` per finished task."""
+    ids = [int(i) for i in ids]
+    for _ in map_fn(fn, [job] * len(ids), ids):
+        bar.update(step)
+
+
 def split_budget(err2, unit, group_level, rank, base, candidates, level_rank="global"):
     """Ranks ``(G,)`` of the groups under the budget of ``rank`` per byte on average
     (:func:`prefilter.glints.cp.allocate_ranks`), over the whole map or per pyramid level
@@ -212,7 +420,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
          ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
          code_bits: int = 8, c_bits: int | None = None,
-         exact_from_level: int | None = None, exact_cell: int | None = None) -> dict:
+         exact_from_level: int | None = None, exact_cell: int | None = None,
+         map_fn=None) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -256,6 +465,15 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     non-zero pixels, rows or columns over its ``K`` images (``min(B^2, B K)``), and a query reads
     all of it: ``exact_cell=1`` (one image per group) bounds it by ``B`` instead of ``B^2``, at
     the cost of ``a``, ``b`` factors per image instead of per cell.
+
+    ``map_fn``: runs the bake's independent tasks, ``map_fn(task, jobs, ids)`` with the
+    semantics of ``builtins.map`` (results in order): the level-0 chunks (:func:`level0_task`),
+    then each CP pass's cells (:func:`fit_cell_task`, :func:`refit_cell_task`). The tasks are
+    top-level functions of a picklable :class:`BakeJob` and an int, deterministic, and write
+    their results as checkpoint parts (workers must share the parts folder), so a pool of
+    processes or a cluster's ``map`` gives the same bytes. Default: the level-0 chunks one after
+    the other in this process (their kernel is parallel), the cells on a pool of threads
+    (:func:`thread_map`).
     """
     from tqdm import tqdm
 
@@ -327,7 +545,6 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     lk = ck if levels_dir is None else Checkpoints(
         str(levels_dir).removesuffix(".parts"),
         dict({k: settings[k] for k in ndf_keys}, map_sha1=digest, shape=[H, W]))
-    el = elements(nm)
     if progress:
         tqdm.write(f"glints bake: normal map {H}x{W} (sha1 {digest[:12]}) -> {out}\n"
                    f"  {pyr.shape(0)[0] * pyr.shape(0)[1]} level-0 NDF images of {R}^2 "
@@ -335,28 +552,31 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                    f"{B}^2 block group at a mean rank {rank}; resumable parts in {ck.dir}",
                    file=sys.stderr)
 
-    # 1. level 0, one row of cells per chunk, computed a row of centres at a time (the float64
-    # images of a whole chunk took 1 GB at 512^2)
+    # 1. level 0, one row of cells per chunk (level0_task); the normal map is stored beside the
+    # levels for tasks run in other processes
+    map_file = lk.dir / "normal_map.npy"
+    if not map_file.exists():
+        with atomic_path(map_file, suffix=".npy") as tmp:
+            np.save(tmp, nm)
     ny0, nx0 = pyr.shape(0)
     rows_per_chunk = cell // pyr.stride0
     n_chunks = ny0 // rows_per_chunk
     levels = [LevelFile(lk.dir / "level0.npy", (ny0, nx0, R, R))]
-    centers0 = pyr.centers(0)
-    with tqdm(total=ny0 * nx0, desc="level 0 NDF images", unit="img", disable=not progress,
+    job = BakeJob(ck=ck, lk=lk, pyr=pyr, R=R, S=S, sr=sr, nt=nt, ft=ft, B=B,
+                  blank_tol=blank_tol, base=base, n_iter_max=n_iter_max, tol=tol, seed=seed,
+                  code_bits=code_bits, c_bits=c_bits, rows_per_chunk=rows_per_chunk,
+                  exact_from_level=exact_from_level, cells=np.zeros((0, 5), np.int64))
+    pending = [ch for ch in range(n_chunks) if not lk.done(LEVEL0_CHUNK + ch)]
+    with tqdm(total=ny0 * nx0, initial=(n_chunks - len(pending)) * rows_per_chunk * nx0,
+              desc="level 0 NDF images", unit="img", disable=not progress,
               file=sys.stderr) as bar:
-        for ch in range(n_chunks):
-            if not lk.done(LEVEL0_CHUNK + ch):
-                for y in range(ch * rows_per_chunk, (ch + 1) * rows_per_chunk):
-                    levels[0].write_rows(y, pndf_image(
-                        nm, centers0[y:y + 1], pyr.sigma(0), R, S, sr, elements_=el,
-                        ndf_truncation=nt, footprint_truncation=ft))
-                    bar.update(nx0)
-                lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
-            else:
-                bar.update(rows_per_chunk * nx0)
+        # the level-0 kernel is itself parallel (and Numba's default threading layer is not
+        # thread-safe): in this process the chunks run one after the other
+        _run(map_fn or map, level0_task, job, pending, bar, step=rows_per_chunk * nx0)
     lk.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))
 
-    # 2. upper levels by filtering, streamed row by row (pyramid.next_level_rows)
+    # 2. upper levels by filtering, streamed row by row (pyramid.next_level_rows), in column
+    # strips when the filter's window of rows would exceed LEVEL_RING_BYTES (pyramid.strip_plan)
     diffs = []
     for lv in tqdm(range(1, pyr.n_levels), desc="coarser levels", unit="level",
                    disable=not progress, file=sys.stderr):
@@ -365,15 +585,25 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         arr = LevelFile(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R))
         if not lk.done(key):
             d2 = np.zeros(2)  # squared norms of (level - level below at its centres), level
+            ny, nx = below.shape[:2]
+            for xo0, xo1, start in strip_plan(nx, pyr.sigma0 / pyr.stride0,
+                                              strip_width(ny, R, LEVEL_RING_BYTES,
+                                                          pyr.sigma0 / pyr.stride0)):
+                n_in = nx if xo1 - xo0 == nx // 2 else 2 * (xo1 - xo0 + 2 * xo0 - start)
+                off = xo0 - start // 2
 
-            def write_row(yo, images, arr=arr, below=below, d2=d2):
-                arr.write_rows(yo, images[None])
-                c = images.astype(np.float64).ravel()
-                d = c - below.read(2 * yo, 2 * yo + 1, step=2).astype(np.float64).ravel()
-                d2 += [np.dot(d, d), np.dot(c, c)]
+                def write_row(yo, images, arr=arr, below=below, d2=d2, xo0=xo0, xo1=xo1,
+                              off=off):
+                    images = images[off:off + xo1 - xo0]
+                    arr.write_columns(yo, xo0, images)
+                    c = images.astype(np.float64).ravel()
+                    d = c - below.read(2 * yo, 2 * yo + 1, 2 * xo0, 2 * xo1,
+                                       step=2).astype(np.float64).ravel()
+                    d2 += [np.dot(d, d), np.dot(c, c)]
 
-            next_level_rows(lambda y, below=below: below.read(y, y + 1)[0], below.shape[:2],
-                            pyr.sigma0 / pyr.stride0, write_row, (R, R))
+                next_level_rows(lambda y, below=below, start=start, n_in=n_in:
+                                below.read_periodic(y, start, n_in), (ny, n_in),
+                                pyr.sigma0 / pyr.stride0, write_row, (R, R))
             lk.save(key, diff=np.array(math.sqrt(d2[0]) / max(math.sqrt(d2[1]), 1e-300)))
         levels.append(arr)
         diffs.append(float(lk.load(key)["diff"]))
@@ -386,120 +616,20 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     # (k = cell / stride0, i.e. cell * 2^l texels at level l), so every group holds blocks of
     # footprints of the same size and about the same number of them at every level; a level's fit
     # is not dominated by the sharper, higher-energy blocks of the levels below it.
-    def exact_level(lv):
-        return exact_from_level is not None and lv >= exact_from_level
+    k_sides = [exact_cell if job.exact(lv) and exact_cell is not None else cell // pyr.stride0
+               for lv in range(pyr.n_levels)]
+    job = dataclasses.replace(job, pyr=pyr, cells=cell_bounds(pyr, k_sides))
+    n_cells = len(job.cells)
 
-    members = []  # (level, iy, ix) per cell
-    for lv in range(pyr.n_levels):
-        k_side = (exact_cell if exact_level(lv) and exact_cell is not None
-                  else cell // pyr.stride0)
-        ny, nx = pyr.shape(lv)
-        ncy, ncx = max(1, ny // k_side), max(1, nx // k_side)
-        iy, ix = np.meshgrid(np.arange(ny), np.arange(nx), indexing="ij")
-        cid = np.minimum(iy // k_side, ncy - 1) * ncx + np.minimum(ix // k_side, ncx - 1)
-        order = np.argsort(cid.ravel(), kind="stable")
-        bounds = np.searchsorted(cid.ravel()[order], np.arange(ncy * ncx + 1))
-        for c0 in range(ncy * ncx):
-            sel = order[bounds[c0]:bounds[c0 + 1]]
-            members.append([(lv, int(y), int(x)) for y, x in zip(iy.ravel()[sel], ix.ravel()[sel])])
-    n_cells = len(members)
-
-    def cell_tensors(cid):
-        mem = members[cid]
-        lv = mem[0][0]
-        iy = np.array([m[1] for m in mem])
-        ix = np.array([m[2] for m in mem])
-        imgs = levels[lv].read(iy.min(), iy.max() + 1, ix.min(), ix.max() + 1).astype(
-            np.float64)[iy - iy.min(), ix - ix.min()]
-        blocks = cpmod.cut_blocks(imgs, B)  # (n, nb, nb, B, B)
-        blank = cpmod.blank_mask(blocks, imgs.max(axis=(1, 2)), blank_tol)
-        tensors, where = [], []
-        for bi in range(nb):
-            for bj in range(nb):
-                keep = np.flatnonzero(~blank[:, bi, bj])
-                where.append(keep)
-                tensors.append(np.ascontiguousarray(blocks[keep, bi, bj].transpose(1, 2, 0)))
-        return imgs, blocks, blank, tensors, where
-
-    def fit_cell(cid):
-        """Pass 1: every fitted group of the cell at rank ``base``; its error drives the
-        allocation (the groups stored exactly are not fitted)."""
-        imgs, blocks, blank, tensors, where = cell_tensors(cid)
-        live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
-        exact = exact_level(members[cid][0][0])
-        fit = [] if exact else live
-        res = dict(zip(fit, cpmod.nn_cp_batch([tensors[g] for g in fit], base,
-                                              n_iter_max=n_iter_max, tol=tol, seed=seed + cid)))
-        rows = np.concatenate([[0], np.cumsum([len(w) for w in where])]).astype(np.int64)
-        local = np.full(blank.shape, -1, np.int32)
-        width = 0 if exact else base  # no factors to keep for the exact groups
-        a = np.zeros((nb * nb, width, B), np.float32)
-        b = np.zeros_like(a)
-        c = np.zeros((rows[-1], width), np.float32)
-        err2_g = np.zeros(nb * nb)
-        for g in live:
-            bi, bj = divmod(g, nb)
-            local[where[g], bi, bj] = rows[g] + np.arange(len(where[g]), dtype=np.int32)
-        for g, (ag, bg, cg, e) in res.items():
-            a[g], b[g], c[rows[g]:rows[g + 1]] = ag.T, bg.T, cg
-            err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g])
-        mass = imgs.sum(axis=(1, 2)) * (2 * S / R) ** 2
-        ck.save(CELL_CHUNK + cid, a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g,
-                blank2=np.array(np.einsum("nabij,nabij->", blocks,
-                                          blocks * blank[..., None, None])),
-                norm2=np.array(np.einsum("nij,nij->", imgs, imgs)), kept=np.array((~blank).sum()),
-                mass=mass)
-        return cid
-
-    def refit_cell(cid):
-        """Pass 2: the groups given a larger rank, warm-started from pass 1, and those stored
-        exactly; encoding; the error measured on what the loader decodes."""
-        _, _, _, tensors, _ = cell_tensors(cid)
-        p1 = ck.load(CELL_CHUNK + cid)
-        rows, r_cell = p1["rows"], alloc[cid * nb * nb:(cid + 1) * nb * nb]
-        first = {g: (p1["a"][g].T.astype(np.float64), p1["b"][g].T.astype(np.float64),
-                     p1["c"][rows[g]:rows[g + 1]].astype(np.float64)) for g in range(nb * nb)}
-        fits = dict(first)
-        for g in np.flatnonzero(r_cell == EXACT):
-            fits[g] = cpmod.exact_cp(tensors[g])[:3]
-        for r in sorted(set(r_cell.tolist()) - {0, base, EXACT}):
-            gs = [g for g in range(nb * nb) if r_cell[g] == r]
-            out = cpmod.nn_cp_batch([tensors[g] for g in gs], int(r), n_iter_max=n_iter_max,
-                                    tol=tol, seed=seed + cid, init=[first[g] for g in gs])
-            fits.update({g: o[:3] for g, o in zip(gs, out)})
-        groups = [(fits[g][0].T, fits[g][1].T, fits[g][2]) if r_cell[g] else
-                  (np.zeros((0, B)), np.zeros((0, B)), np.zeros((rows[g + 1] - rows[g], 0)))
-                  for g in range(nb * nb)]
-        enc = encode(groups, code_bits, c_bits)
-        A_, B_, C_ = decode(**enc, group_rows=rows)
-        a_s, b_s = np.diff(A_.astype(np.float64), axis=2), np.diff(B_.astype(np.float64), axis=2)
-        err2_g = np.zeros(nb * nb)
-        # the fit's own error too (before the codes' rounding): with 8-bit c codes the rounding
-        # dominates the stored error while no rendered frame shows it
-        fit2_g = np.zeros(nb * nb)
-        for g in range(nb * nb):
-            if rows[g + 1] > rows[g]:
-                d = cpmod.reconstruct(a_s[g].T, b_s[g].T,
-                                      C_[rows[g]:rows[g + 1]].astype(np.float64)) - tensors[g]
-                err2_g[g] = np.einsum("ijk,ijk->", d, d)
-                a, b, c = groups[g]
-                d = cpmod.reconstruct(a.T, b.T, c) - tensors[g]
-                fit2_g[g] = np.einsum("ijk,ijk->", d, d)
-        ck.save(FINAL_CHUNK + cid, **enc, err2_g=err2_g, fit2_g=fit2_g)
-        return cid
-
-    def run(fn, cids, desc):
-        pending = [c for c in cids if not ck.done((CELL_CHUNK if fn is fit_cell else FINAL_CHUNK)
-                                                  + c)]
-        workers = max(1, min(os.cpu_count() or 1, len(pending)))
-        with cpmod.single_threaded_blas(), ThreadPoolExecutor(workers) as pool, \
-                tqdm(total=len(cids), initial=len(cids) - len(pending), desc=desc,
-                     unit="cell", disable=not progress, file=sys.stderr) as bar:
-            for _ in pool.map(fn, pending):
-                bar.update(1)
+    def run(fn, chunk, desc):
+        pending = [c for c in range(n_cells) if not ck.done(chunk + c)]
+        with cpmod.single_threaded_blas(), \
+                tqdm(total=n_cells, initial=n_cells - len(pending), desc=desc, unit="cell",
+                     disable=not progress, file=sys.stderr) as bar:
+            _run(map_fn or thread_map, fn, job, pending, bar)
 
     t_cp = time.perf_counter()
-    run(fit_cell, range(n_cells), f"CP fit at rank {base}")
+    run(fit_cell_task, CELL_CHUNK, f"CP fit at rank {base}")
     t_cp1 = time.perf_counter()
     # allocation: predicted error drop per byte over all groups of the map (cp.allocate_ranks)
     if not ck.done(ALLOC_CHUNK):
@@ -510,7 +640,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
             counts.append(np.diff(p1["rows"]))
         counts = np.concatenate(counts)
         unit = np.where(counts > 0, c_bytes * counts + unit_bytes_group, 0.0)
-        group_level = np.repeat([m[0][0] for m in members], nb * nb)
+        group_level = np.repeat(job.cells[:, 0], nb * nb)
         # the budget is the fitted groups' (the exact ones were not fitted: no error to weigh)
         fitted = (group_level < exact_from_level if exact_from_level is not None
                   else np.ones(len(unit), bool))
@@ -520,8 +650,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                                           group_level[fitted], rank, base, candidates,
                                           level_rank)
         ck.save(ALLOC_CHUNK, ranks=np.where(counts > 0, ranks_, 0).astype(np.int64))
-    alloc = ck.load(ALLOC_CHUNK)["ranks"]
-    run(refit_cell, range(n_cells), "CP refit, encoding")
+    run(refit_cell_task, FINAL_CHUNK, "CP refit, encoding")
     t_cp2 = time.perf_counter()
 
     # 4. assemble
@@ -535,9 +664,9 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     fit2 = 0.0
     for cid in range(n_cells):
         p1, part = ck.load(CELL_CHUNK + cid), ck.load(FINAL_CHUNK + cid)
-        lv = members[cid][0][0]
-        flat = np.array([offsets[lv] + iy * pyr.shape(lv)[1] + ix for _, iy, ix in members[cid]],
-                        dtype=np.int64)
+        lv, y0, y1, x0, x1 = (int(v) for v in job.cells[cid])
+        iy, ix = np.meshgrid(np.arange(y0, y1), np.arange(x0, x1), indexing="ij")
+        flat = offsets[lv] + iy.ravel() * pyr.shape(lv)[1] + ix.ravel()
         loc = p1["local"]
         block_index[flat] = np.where(loc >= 0, loc + k0, -1)
         image_cell[flat] = cid

@@ -64,6 +64,29 @@ class LevelFile:
         finally:
             os.close(fd)
 
+    def write_columns(self, y: int, x0: int, images: np.ndarray) -> None:
+        """Write images ``(n, R, R)`` at row ``y``, columns ``x0 .. x0 + n - 1``."""
+        data = np.ascontiguousarray(images, dtype=np.float32)
+        fd = os.open(self.path, os.O_WRONLY)
+        try:
+            view = memoryview(data).cast("B")
+            pos = self.offset + 4 * (self.row_items * y + self.image_items * x0)
+            while view.nbytes:
+                n = os.pwrite(fd, view, pos)
+                view, pos = view[n:], pos + n
+        finally:
+            os.close(fd)
+
+    def read_periodic(self, y: int, x0: int, n: int) -> np.ndarray:
+        """Images ``(n, R, R)`` of row ``y``, columns ``x0, x0 + 1, ..`` modulo the level's
+        width (the pyramid is periodic)."""
+        nx = self.shape[1]
+        cols = (x0 + np.arange(n)) % nx
+        # runs of consecutive columns, each one read
+        cuts = np.flatnonzero(np.diff(cols) != 1) + 1
+        return np.concatenate([self.read(y, y + 1, int(r[0]), int(r[-1]) + 1)[0]
+                               for r in np.split(cols, cuts)])
+
     def read(self, y0: int, y1: int, x0: int = 0, x1: int | None = None,
              step: int = 1) -> np.ndarray:
         """Images ``(y1 - y0, len(range(x0, x1, step)), R, R)`` float32 of rows ``y0 .. y1 - 1``

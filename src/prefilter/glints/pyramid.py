@@ -215,6 +215,23 @@ def next_level_rows(read_row, shape: tuple[int, int], sigma_over_stride: float, 
         write_row(yo, out)
 
 
+def strip_plan(nx: int, sigma_over_stride: float, width: int) -> list[tuple[int, int, int]]:
+    """Column strips of :func:`next_level_rows` on a level of ``nx`` centres per row: per strip
+    ``(xo0, xo1, start)``, its output columns ``xo0 .. xo1 - 1`` of the next level and the
+    first input column ``start`` (periodic) of the ``2 (xo1 - xo0 + p)`` input columns it reads,
+    ``p`` the filter's reach in taps rounded up to even. Run on those columns as a level of
+    their own, :func:`next_level_rows` gives the strip's outputs at its columns
+    ``p / 2 .. p / 2 + xo1 - xo0 - 1`` without wrapping, the same sums term for term. One strip
+    of all columns (``start`` 0) when ``width >= nx / 2``."""
+    taps, _ = filter_taps(sigma_over_stride)
+    reach = int(np.max(np.abs(taps)))
+    p = reach + reach % 2
+    half = nx // 2
+    if width >= half:
+        return [(0, half, 0)]
+    return [(x, min(x + width, half), 2 * x - p) for x in range(0, half, width)]
+
+
 def level_difference(prev: np.ndarray, cur: np.ndarray) -> float:
     """Relative L2 difference of level ``l`` images from level ``l - 1`` at the same centres."""
     p = np.asarray(prev[::2, ::2], dtype=np.float64)
