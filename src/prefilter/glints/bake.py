@@ -212,7 +212,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
          ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
          code_bits: int = 8, c_bits: int | None = None,
-         exact_from_level: int | None = None, exact_cell: int | None = None) -> dict:
+         exact_from_level: int | None = None, exact_cell: int | None = None,
+         level0=None) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -256,6 +257,12 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     non-zero pixels, rows or columns over its ``K`` images (``min(B^2, B K)``), and a query reads
     all of it: ``exact_cell=1`` (one image per group) bounds it by ``B`` instead of ``B^2``, at
     the cost of ``a``, ``b`` factors per image instead of per cell.
+
+    ``level0``: a callable ``level0(y, centers (1, nx, 2), sigma) -> (1, nx, R, R)`` giving the
+    images of level-0 row ``y`` instead of the direct P-NDF of ``normal_map`` (which then gives
+    only the map's size and digest); its string attribute ``key`` names what it computes (it
+    keys the checkpoints and is recorded as ``settings["level0"]``). Used for the colour
+    channels of wave-optics NDFs (:mod:`prefilter.glints.wave.bake`).
     """
     from tqdm import tqdm
 
@@ -318,11 +325,13 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["exact_from_level"] = exact_from_level
     if exact_cell is not None:
         settings["exact_cell"] = exact_cell
+    if level0 is not None:
+        settings["level0"] = str(level0.key)
     digest = map_digest(nm)
     # parts made by another version of the fit or budget rule are not resumed from
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], **code_versions(settings)))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
-                "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation")
+                "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation", "level0")
                                       if k in settings)
     lk = ck if levels_dir is None else Checkpoints(
         str(levels_dir).removesuffix(".parts"),
@@ -349,7 +358,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                 for y in range(ch * rows_per_chunk, (ch + 1) * rows_per_chunk):
                     levels[0].write_rows(y, pndf_image(
                         nm, centers0[y:y + 1], pyr.sigma(0), R, S, sr, elements_=el,
-                        ndf_truncation=nt, footprint_truncation=ft))
+                        ndf_truncation=nt, footprint_truncation=ft) if level0 is None
+                        else level0(y, centers0[y:y + 1], pyr.sigma(0)))
                     bar.update(nx0)
                 lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
             else:
