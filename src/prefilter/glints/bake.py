@@ -331,8 +331,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     # parts made by another version of the fit or budget rule are not resumed from
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], **code_versions(settings)))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
-                "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation", "level0")
-                                      if k in settings)
+                "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation",
+                                                  "level0") if k in settings)
     lk = ck if levels_dir is None else Checkpoints(
         str(levels_dir).removesuffix(".parts"),
         dict({k: settings[k] for k in ndf_keys}, map_sha1=digest, shape=[H, W]))

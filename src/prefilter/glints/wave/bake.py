@@ -68,12 +68,13 @@ class _Channel:
 def bake_wave(hf: Heightfield, out, *, rank: int = 16, ndf_res: int = 64, support: float = 0.25,
               block: int = 16, stride0: int = 4, sigma0: float | None = None, cell: int = 32,
               wavelengths=WAVELENGTHS, progress: bool = True, levels_dir=None,
-              **bake_kwargs) -> dict:
+              keep_parts: bool = False, **bake_kwargs) -> dict:
     """Bake heightfield ``hf`` into ``channel_paths(out)``; returns the summary (per channel:
     :func:`prefilter.glints.bake.bake`'s; totals: bytes, ratio, relative L2 error, seconds).
 
     ``levels_dir``: keep each channel's uncompressed pyramid in ``<levels_dir>.<c>.parts``
-    (shared by bakes at several ranks and by the joint-compression study). Other keywords go to
+    (shared by bakes at several ranks and by the joint-compression study). ``keep_parts``: keep
+    the checkpoints (level-0 images, each channel's). Other keywords go to
     :func:`prefilter.glints.bake.bake` (``max_rank``, ``code_bits``, ``n_iter_max`` ...).
     """
     from tqdm import tqdm
@@ -104,8 +105,9 @@ def bake_wave(hf: Heightfield, out, *, rank: int = 16, ndf_res: int = 64, suppor
         centers0 = pyr.centers(0)
         t_l0 = time.perf_counter()
         if progress:
+            files = ", ".join(map(str, channel_paths(out)))
             tqdm.write(f"glints-wave bake: heightfield {H}x{W} ({hf.texel_size * 1e6:g} um "
-                       f"texels, sha1 {hf.digest[:12]}) -> {', '.join(map(str, channel_paths(out)))}"
+                       f"texels, sha1 {hf.digest[:12]}) -> {files}"
                        f"\n  {ny0 * nx0} level-0 RGB NDF images of {R}^2 ({lams.size} "
                        f"wavelengths); resumable parts in {ck.dir}", file=sys.stderr)
         with tqdm(total=ny0 * nx0, desc="level 0 wave NDF images", unit="img",
@@ -125,8 +127,10 @@ def bake_wave(hf: Heightfield, out, *, rank: int = 16, ndf_res: int = 64, suppor
             summary["channels"][CHANNELS[c]] = bake(
                 nm, path, rank=rank, ndf_res=R, block=block, support=support,
                 stride0=pyr.stride0, sigma0=pyr.sigma0, cell=cell, progress=progress,
-                levels_dir=ldir, level0=_Channel(rgb, c, key), **bake_kwargs)
-        ck.clear()
+                levels_dir=ldir, level0=_Channel(rgb, c, key), keep_parts=keep_parts,
+                **bake_kwargs)
+        if not keep_parts:
+            ck.clear()
     ch = list(summary["channels"].values())
     summary["raw_bytes"] = sum(s["raw_bytes"] for s in ch)
     summary["compressed_bytes"] = sum(s["compressed_bytes"] for s in ch)
