@@ -34,6 +34,7 @@ import numpy as np
 
 from prefilter.cliparams import SEED, OutputDir
 from prefilter.errors import PrefilterError
+from prefilter.report.glints_wave import glints_wave_section
 
 
 #: (shape, view angle from the normal (deg), texels per world unit, label): near and far on a
@@ -753,6 +754,13 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "paper eq. 1) against `glints-direct` (the exact P-NDF summed over the footprint's "
         "texels). Their FLIP difference is the compression error alone.",
         lambda r: _glints_render_section(r, settings, seed, log), log)
+    _section(
+        report, status, "Glints under wave optics",
+        "A flat panel of isotropic height noise under a small point light: the compressed RGB "
+        "diffraction NDF (`glints-wave`), the same model uncompressed (`glints-wave-direct`) and "
+        "the geometric glints of the same surface (`glints-direct`), measured now "
+        "(`docs/glints-wave.md`).",
+        lambda r: glints_wave_section(r, settings, seed, log), log)
     _section(
         report, status, "Real-time viewer: WebGL2 against Python",
         "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "
