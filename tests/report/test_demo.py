@@ -22,6 +22,7 @@ SECTIONS = (
     "Glints (part 2): rendered frames, compressed vs direct",
     "Roughness mip chains from a normal map",
     "Colour-map filtering under lights (colormap-lit)",
+    "Glints under wave optics",
     "Real-time viewer: WebGL2 against Python",
     "Summary",
 )

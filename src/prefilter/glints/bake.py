@@ -238,6 +238,8 @@ class BakeJob:
     exact_from_level: int | None
     #: ``(n_cells, 5)`` int64: level, rows ``y0:y1`` and columns ``x0:x1`` of centres per cell
     cells: np.ndarray
+    #: the bake's ``level0`` callable (None: the direct P-NDF of the stored normal map)
+    level0: object = None
 
     @property
     def nb(self) -> int:
@@ -272,13 +274,15 @@ def level0_task(job: BakeJob, ch: int) -> int:
     at 512^2), written into the level file; then its checkpoint part."""
     if job.lk.done(LEVEL0_CHUNK + ch):
         return ch
-    nm = np.load(job.lk.dir / "normal_map.npy")
-    el = elements(nm)
-    lev, centers = job.level(0), job.pyr.centers(0)
+    lev, centers, sigma = job.level(0), job.pyr.centers(0), job.pyr.sigma(0)
+    if job.level0 is None:
+        nm = np.load(job.lk.dir / "normal_map.npy")
+        el = elements(nm)
     for y in range(ch * job.rows_per_chunk, (ch + 1) * job.rows_per_chunk):
-        lev.write_rows(y, pndf_image(nm, centers[y:y + 1], job.pyr.sigma(0), job.R, job.S,
-                                     job.sr, elements_=el, ndf_truncation=job.nt,
-                                     footprint_truncation=job.ft))
+        lev.write_rows(y, pndf_image(nm, centers[y:y + 1], sigma, job.R, job.S, job.sr,
+                                     elements_=el, ndf_truncation=job.nt,
+                                     footprint_truncation=job.ft) if job.level0 is None
+                       else job.level0(y, centers[y:y + 1], sigma))
     job.lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
     return ch
 
@@ -421,7 +425,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
          code_bits: int = 8, c_bits: int | None = None,
          exact_from_level: int | None = None, exact_cell: int | None = None,
-         map_fn=None) -> dict:
+         map_fn=None, level0=None) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -474,6 +478,12 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     processes or a cluster's ``map`` gives the same bytes. Default: the level-0 chunks one after
     the other in this process (their kernel is parallel), the cells on a pool of threads
     (:func:`thread_map`).
+
+    ``level0``: a callable ``level0(y, centers (1, nx, 2), sigma) -> (1, nx, R, R)`` giving the
+    images of level-0 row ``y`` instead of the direct P-NDF of ``normal_map`` (which then gives
+    only the map's size and digest); its string attribute ``key`` names what it computes (it
+    keys the checkpoints and is recorded as ``settings["level0"]``). Used for the colour
+    channels of wave-optics NDFs (:mod:`prefilter.glints.wave.bake`).
     """
     from tqdm import tqdm
 
@@ -536,12 +546,14 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["exact_from_level"] = exact_from_level
     if exact_cell is not None:
         settings["exact_cell"] = exact_cell
+    if level0 is not None:
+        settings["level0"] = str(level0.key)
     digest = map_digest(nm)
     # parts made by another version of the fit or budget rule are not resumed from
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], **code_versions(settings)))
     ndf_keys = ("ndf_res", "support", "intrinsic_roughness", "stride0", "sigma0", "converge",
-                "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation")
-                                      if k in settings)
+                "max_levels") + tuple(k for k in ("ndf_truncation", "footprint_truncation",
+                                                  "level0") if k in settings)
     lk = ck if levels_dir is None else Checkpoints(
         str(levels_dir).removesuffix(".parts"),
         dict({k: settings[k] for k in ndf_keys}, map_sha1=digest, shape=[H, W]))
@@ -565,7 +577,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     job = BakeJob(ck=ck, lk=lk, pyr=pyr, R=R, S=S, sr=sr, nt=nt, ft=ft, B=B,
                   blank_tol=blank_tol, base=base, n_iter_max=n_iter_max, tol=tol, seed=seed,
                   code_bits=code_bits, c_bits=c_bits, rows_per_chunk=rows_per_chunk,
-                  exact_from_level=exact_from_level, cells=np.zeros((0, 5), np.int64))
+                  exact_from_level=exact_from_level, cells=np.zeros((0, 5), np.int64),
+                  level0=level0)
     pending = [ch for ch in range(n_chunks) if not lk.done(LEVEL0_CHUNK + ch)]
     with tqdm(total=ny0 * nx0, initial=(n_chunks - len(pending)) * rows_per_chunk * nx0,
               desc="level 0 NDF images", unit="img", disable=not progress,

@@ -88,6 +88,8 @@ _REGISTRY: dict[str, Method | str] = {
     "glints-direct": "prefilter.glints.render:render_glints_direct",
     "glints-reference": "prefilter.glints.render:render_glints_reference",
     "glints-wang": "prefilter.glints.wang_render:render_glints_wang",
+    "glints-wave": "prefilter.glints.wave.render:render_glints_wave",
+    "glints-wave-direct": "prefilter.glints.wave.render:render_glints_wave_direct",
 }
 _DESCRIPTIONS: dict[str, str] = {
     "ltc": "area lights by the isotropic LTC table, normal and colour from the footprint's mip "
@@ -130,6 +132,11 @@ _DESCRIPTIONS: dict[str, str] = {
                         "quad and environment lights by Monte Carlo",
     "glints-wang": "glints on the implicit Wang tiling of the normal map (the exemplar): per-tile "
                    "CP-compressed footprint pyramids, constant storage; point/directional lights",
+    "glints-wave": "glints under wave optics: compressed RGB pyramid of the diffraction NDF of "
+                   "the heightfield in extras.glints_wave (Yan et al. 2018, 8 wavelengths); "
+                   "point/directional lights",
+    "glints-wave-direct": "glints under wave optics, direct: uncompressed coherence-area images "
+                          "with the footprint's exact weights; point/directional lights",
 }
 
 

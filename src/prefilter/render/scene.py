@@ -393,7 +393,8 @@ class EnvironmentLight:
 
 
 #: Optional features under the scene field ``extras`` and the modules that validate their content.
-EXTRAS = ("colormap",)  # prefilter.colormap.render: the colour-map methods' driver
+EXTRAS = ("colormap",  # prefilter.colormap.render: the colour-map methods' driver
+          "glints_wave")  # prefilter.glints.wave.render: the heightfield of the wave glints
 
 
 @dataclass(frozen=True)

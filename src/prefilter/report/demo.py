@@ -36,6 +36,7 @@ from prefilter.cliparams import SEED, OutputDir
 from prefilter.errors import PrefilterError
 from prefilter.report.colormap_lit import colormap_lit_section
 from prefilter.report.roughness import roughness_section
+from prefilter.report.glints_wave import glints_wave_section
 
 
 #: (shape, view angle from the normal (deg), texels per world unit, label): near and far on a
@@ -771,6 +772,13 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         f"({settings.colormap_nref} x {settings.colormap_nref} jittered samples per pixel of eq. "
         "1, the same lit shading). Displayed as sRGB without tone mapping (`docs/colormap.md`).",
         lambda r: colormap_lit_section(r, settings, seed, log), log)
+    _section(
+        report, status, "Glints under wave optics",
+        "A flat panel of isotropic height noise under a small point light: the compressed RGB "
+        "diffraction NDF (`glints-wave`), the same model uncompressed (`glints-wave-direct`) and "
+        "the geometric glints of the same surface (`glints-direct`), measured now "
+        "(`docs/glints-wave.md`).",
+        lambda r: glints_wave_section(r, settings, seed, log), log)
     _section(
         report, status, "Real-time viewer: WebGL2 against Python",
         "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "

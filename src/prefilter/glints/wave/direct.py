@@ -1,0 +1,103 @@
+"""Direct wave-optics NDF of footprints: the model itself, without pyramid or compression.
+
+A footprint ``(c, sigma_p)`` is the incoherent sum of the coherence areas (level-0 windows, std
+``sigma0``, on the lattice ``k stride0 + 0.5``) around it (Yan et al. 2018's footprint of many
+coherence areas; :mod:`prefilter.glints.wave.ndf`):
+
+    D(c, sigma_p; s) = sum_k w_k I_k(s) / sum_k w_k,
+    w_k = exp(-|c_k - c|^2 / (2 v)),   v = sigma_p^2 - sigma0^2,
+
+``I_k`` the coherent RGB image of area ``k`` (computed once per heightfield, uncompressed). Where
+``v < (stride0 / 2)^2`` (footprints about the size of a coherence area or smaller) the weights
+are the bilinear ones of the four nearest areas, as the pyramid's level 0 blends them. Weights
+are cut at ``TRUNCATION`` stds; the images are looked up bilinearly between pixel centres (as
+the ``glints-wave`` method's).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from prefilter.jit import njit_parallel, prange
+from prefilter.glints.pyramid import plan
+from prefilter.glints.wave.heightfield import Heightfield
+from prefilter.glints.wave.ndf import rgb_images
+
+TRUNCATION = 4.0
+
+
+class DirectWave:
+    """Level-0 RGB images ``(ny, nx, 3, R, R)`` float32 of a heightfield's coherence areas."""
+
+    def __init__(self, hf: Heightfield, ndf_res: int = 64, support: float = 0.25,
+                 stride0: int = 4, sigma0: float | None = None, images=None):
+        self.pyr = plan(*hf.shape, stride0, sigma0)
+        self.R, self.S = int(ndf_res), float(support)
+        c = self.pyr.centers(0)
+        self.images = (images if images is not None else
+                       rgb_images(hf, c, self.pyr.sigma(0), self.R, self.S).astype(np.float32))
+
+    def point(self, center, sigma_p, s) -> np.ndarray:
+        """RGB NDF ``(N, 3)`` of footprints ``center (N, 2)``, ``sigma_p (N,)`` at ``s (N, 2)``."""
+        c = np.ascontiguousarray(center, np.float64).reshape(-1, 2)
+        sp = np.ascontiguousarray(np.broadcast_to(sigma_p, c.shape[:1]), np.float64)
+        s = np.ascontiguousarray(s, np.float64).reshape(-1, 2)
+        out = np.zeros((len(c), 3))
+        _direct_points(self.images, float(self.pyr.stride0), float(self.pyr.sigma(0)),
+                       c, sp, s, -self.S, 2.0 * self.S / self.R, TRUNCATION, out)
+        return out
+
+
+@njit_parallel
+def _direct_points(img, stride, sigma0, c, sp, s, lo, h, trunc, out):  # pragma: no cover
+    ny, nx, _, R, _ = img.shape
+    vmin = 0.25 * stride * stride
+    for q in prange(c.shape[0]):
+        v = sp[q] * sp[q] - sigma0 * sigma0
+        tent = v < vmin
+        r = stride if tent else trunc * math.sqrt(v)
+        # bilinear between pixel centres: pixel coordinate of s, zero beyond the outer centres
+        fx = (s[q, 0] - lo) / h - 0.5
+        fy = (s[q, 1] - lo) / h - 0.5
+        if fx < 0.0 or fy < 0.0 or fx > R - 1 or fy > R - 1:
+            continue
+        ix = min(int(fx), R - 2)
+        iy = min(int(fy), R - 2)
+        tx = fx - ix
+        ty = fy - iy
+        # lattice centres k stride + 0.5 within r of the footprint centre (periodic)
+        kx0 = int(math.ceil((c[q, 0] - 0.5 - r) / stride))
+        kx1 = int(math.floor((c[q, 0] - 0.5 + r) / stride))
+        ky0 = int(math.ceil((c[q, 1] - 0.5 - r) / stride))
+        ky1 = int(math.floor((c[q, 1] - 0.5 + r) / stride))
+        wsum = 0.0
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        for ky in range(ky0, ky1 + 1):
+            dy = ky * stride + 0.5 - c[q, 1]
+            yy = ky % ny
+            for kx in range(kx0, kx1 + 1):
+                dx = kx * stride + 0.5 - c[q, 0]
+                if tent:
+                    w = max(0.0, 1.0 - abs(dx) / stride) * max(0.0, 1.0 - abs(dy) / stride)
+                else:
+                    w = math.exp(-(dx * dx + dy * dy) / (2.0 * v))
+                xx = kx % nx
+                wsum += w
+                for ch in range(3):
+                    p = img[yy, xx, ch]
+                    val = ((1 - ty) * ((1 - tx) * p[iy, ix] + tx * p[iy, ix + 1])
+                           + ty * ((1 - tx) * p[iy + 1, ix] + tx * p[iy + 1, ix + 1]))
+                    if ch == 0:
+                        a0 += w * val
+                    elif ch == 1:
+                        a1 += w * val
+                    else:
+                        a2 += w * val
+        if wsum > 0:
+            out[q, 0] = a0 / wsum
+            out[q, 1] = a1 / wsum
+            out[q, 2] = a2 / wsum

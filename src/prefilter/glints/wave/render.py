@@ -1,0 +1,163 @@
+"""Render methods ``glints-wave`` and ``glints-wave-direct``: glints under wave optics.
+
+The microstructure is a heightfield named by the scene field ``extras.glints_wave``::
+
+    "extras": {"glints_wave": {"heightfield": "procedural:noise:128:0", "texel_size": 2.5e-7}}
+
+(``heightfield``: ``procedural:KIND[:SIZE[:SEED]]`` or an image / ``.npy`` of heights in metres;
+``texel_size``: metres per texel, required for files, default the procedural one's). Every object
+is shaded with its RGB glint lobe over the pixel footprint (footprints as the geometric methods',
+:func:`prefilter.glints.render.footprints`, in texels of the heightfield) plus Lambert
+``base_color``; ``f0`` is the material's. Point and directional lights.
+
+* ``glints-wave``: the compressed RGB pyramid (:mod:`prefilter.glints.wave.bake`, baked on first
+  use into the glints cache, keyed by the heightfield's digest and the settings), point queries
+  with the geometric method's Gaussian resampling and bilinear NDF lookup
+  (:mod:`prefilter.glints.wave.lobe`).
+* ``glints-wave-direct``: the model without pyramid or compression
+  (:class:`prefilter.glints.wave.direct.DirectWave`: the coherence areas' exact weights), its
+  level-0 images cached on disk.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from prefilter.errors import PrefilterError
+from prefilter.fileio import atomic_path, bake_lock
+from prefilter.glints.bake import cache_dir
+from prefilter.glints.brdf import brdf_cos_from_ndf, half
+from prefilter.glints.render import footprints
+from prefilter.glints.wave.bake import (WAVE_SETTINGS, WAVE_VERSION, as_heightfield_spec,
+                                        bake_wave, channel_paths, load_wave)
+from prefilter.glints.wave.direct import DirectWave
+from prefilter.glints.wave.lobe import point_rgb
+from prefilter.render.shading import point_incoming, shading_frames
+from prefilter.sphere.sampling import to_local
+
+_MAPS: dict = {}
+_DIRECT: dict = {}
+_KEYS = ("heightfield", "texel_size")
+
+
+def scene_heightfield(scene):
+    """The heightfield of ``scene.extras.glints_wave`` (see the module docstring)."""
+    spec = (getattr(scene, "extras", None) or {}).get("glints_wave")
+    if not isinstance(spec, dict) or "heightfield" not in spec:
+        raise PrefilterError("extras.glints_wave: the glints-wave methods expected an object "
+                             "with 'heightfield' (and 'texel_size' for files), got "
+                             f"{spec!r}")
+    extra = sorted(set(spec) - set(_KEYS))
+    if extra:
+        raise PrefilterError(f"extras.glints_wave: unknown field {extra[0]!r} (expected "
+                             f"{', '.join(_KEYS)})")
+    path = str(spec["heightfield"])
+    if not path.startswith("procedural:") and not Path(path).is_absolute():
+        path = str(Path(getattr(scene, "base_dir", ".") or ".") / path)
+    return as_heightfield_spec(path, spec.get("texel_size"))
+
+
+def wave_map(hf, settings: dict | None = None, progress: bool = False):
+    """The baked :class:`~prefilter.glints.wave.bake.WaveMap` of ``hf`` (glints cache)."""
+    st = dict(WAVE_SETTINGS, **(settings or {}))
+    key = json.dumps(dict(st, heights=hf.digest, version=WAVE_VERSION), sort_keys=True)
+    if key not in _MAPS:
+        import hashlib
+
+        out = cache_dir() / f"wave-{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if not all(p.exists() for p in channel_paths(out)):
+            bake_wave(hf, out, progress=progress, **st)
+        _MAPS[key] = load_wave(out)
+    return _MAPS[key]
+
+
+def direct_model(hf, settings: dict | None = None) -> DirectWave:
+    """The :class:`DirectWave` of ``hf`` (level-0 images cached in the glints cache)."""
+    st = dict(WAVE_SETTINGS, **(settings or {}))
+    args = dict(ndf_res=st["ndf_res"], support=st["support"], stride0=st["stride0"])
+    key = json.dumps(dict(args, heights=hf.digest, version=WAVE_VERSION), sort_keys=True)
+    if key not in _DIRECT:
+        import hashlib
+
+        path = cache_dir() / f"wave-direct-{hashlib.sha1(key.encode()).hexdigest()[:16]}.npy"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with bake_lock(path, wait=True):
+            if path.exists():
+                dw = DirectWave(hf, images=np.load(path), **args)
+            else:
+                dw = DirectWave(hf, **args)
+                with atomic_path(path, suffix=".npy") as tmp:
+                    np.save(tmp, dw.images)
+        _DIRECT[key] = dw
+    return _DIRECT[key]
+
+
+def brdf_cos_from_rgb(wo, wi, h, D, f0) -> np.ndarray:
+    """``F G D_c / (4 wo_z)`` per channel ``(N, 3)`` from RGB NDF values ``D (N, 3)``."""
+    f0 = np.broadcast_to(np.asarray(f0, np.float64), (3,))
+    return np.stack([brdf_cos_from_ndf(wo, wi, h, D[:, c], f0[c:c + 1])[:, 0]
+                     for c in range(3)], axis=-1)
+
+
+def shade_wave(scene, g, *, mode: str, spp: int = 1, progress: bool = False) -> np.ndarray:
+    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point / directional lights;
+    ``mode``: ``"compressed"`` or ``"direct"``."""
+    hf = scene_heightfield(scene)
+    if mode == "compressed":
+        wm = wave_map(hf, progress=progress)
+
+        def ndf(c, sp, s):
+            return point_rgb(wm, c, sp, s)
+    else:
+        dw = direct_model(hf)
+        ndf = dw.point
+    t, b, n, wo = shading_frames(g)
+    c, sp = footprints(g, hf.shape, spp)
+    out = np.zeros((len(wo), 3))
+    for k in np.unique(g.object_id):
+        m = g.object_id == k
+        mat = scene.objects[int(k)].material
+        base = np.asarray(mat.base_color, dtype=np.float64)
+        f0 = np.broadcast_to(np.asarray(mat.f0, dtype=np.float64), (3,))
+        for w, e in point_incoming(scene.light_set(), g.position[m]):
+            wi = to_local(w, t[m], b[m], n[m])
+            wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
+            h = half(wo[m], wi)
+            D = ndf(c[m], sp[m], h[:, :2])
+            spec = brdf_cos_from_rgb(wo[m], wi, h, D, f0)
+            out[m] += (spec + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * e
+    return out
+
+
+def _check_lights(scene, name):
+    for i, light in enumerate(scene.lights):
+        if light.type not in ("point", "directional"):
+            raise PrefilterError(f"lights[{i}]: method {name!r} expected point or directional "
+                                 f"lights, got {light.type!r}")
+
+
+def _render(scene, settings, mode, name):
+    from prefilter.render.driver import render_samples
+
+    _check_lights(scene, name)
+    scene_heightfield(scene)  # a bad heightfield fails before any work
+    spp = settings.spp
+    return render_samples(scene, settings,
+                          lambda g, u: shade_wave(scene, g, mode=mode, spp=spp,
+                                                  progress=settings.progress),
+                          stratified=spp > 1, desc=name)
+
+
+def render_glints_wave(scene, settings) -> np.ndarray:
+    """The ``glints-wave`` method: compressed RGB wave-optics footprint NDF (point queries)."""
+    return _render(scene, settings, "compressed", "glints-wave")
+
+
+def render_glints_wave_direct(scene, settings) -> np.ndarray:
+    """The ``glints-wave-direct`` method: the wave-optics footprint NDF from the uncompressed
+    coherence-area images with exact weights."""
+    return _render(scene, settings, "direct", "glints-wave-direct")
