@@ -68,6 +68,7 @@ Method = Callable[..., object]
 _REGISTRY: dict[str, Method | str] = {
     "ltc": "prefilter.ltc.render:render_ltc",
     "reference": "prefilter.render.reference:render_reference",
+    "path": "prefilter.render.pathtrace:render_path",
     "ltc-multiscale": "prefilter.multiscale.render:render_multiscale",
     "ltc-multiscale-aniso": "prefilter.multiscale.aniso:render_multiscale_aniso",
     "leadr-point": "prefilter.leadr.render:render_leadr_point",
@@ -88,6 +89,9 @@ _DESCRIPTIONS: dict[str, str] = {
            "level (the naive method)",
     "reference": "ground truth: stratified supersampling, full-resolution textures, MIS Monte "
                  "Carlo of the true GGX BRDF",
+    "path": "path tracer: next-event estimation with MIS for quad, point, directional and "
+            "environment lights, shadow rays, Russian roulette; bounces=N vertices per path "
+            "(1: direct light)",
     "ltc-multiscale": "multi-scale LTC (Tao et al. 2021): roughness from the length of the "
                       "footprint's averaged normal; footprint=fit: exact eq. 4 inverse, refitted "
                       "eq. 7, biased LOD and anisotropic taps; paper: the paper's eqs. 5 and 7 "
@@ -125,6 +129,7 @@ _DESCRIPTIONS: dict[str, str] = {
 
 #: Variant settings each method accepts: name -> {key: (allowed values, first = default)}.
 _PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
+    "path": {"bounces": ("4", "1", "2", "3", "5", "6", "8", "12", "16")},
     "ltc-multiscale": {"footprint": ("fit", "paper", "mrl")},
     "leadr-env": {"algorithm": ("full", "simplified")},
     "leadr-env-naive": {"algorithm": ("full", "simplified")},
