@@ -117,9 +117,11 @@ _DESCRIPTIONS: dict[str, str] = {
                          "texture / noise / height colour map (scene extras.colormap), unlit",
     "colormap-naive": "naive counterpart of colormap-filtered: C(mean), times V_bar for heights",
     "glints": "glints: compressed footprint P-NDF (point query); quad lights by range queries "
-              "where valid, else MIS; environment maps by SG prefiltering",
+              "where valid, else MIS; environment maps by SG prefiltering; bounces=N > 1: "
+              "path-traced, the pyramid queried with each vertex's enlarged footprint",
     "glints-direct": "glints: direct P-NDF of every footprint (Yan et al. 2016); quad and "
-                     "environment lights by Monte Carlo (MIS, SG sampling)",
+                     "environment lights by Monte Carlo (MIS, SG sampling); bounces=N > 1: "
+                     "path-traced, the direct P-NDF at every vertex",
     "glints-reference": "glints ground truth: footprint supersampling, point P-NDF of the map; "
                         "quad and environment lights by Monte Carlo",
     "glints-wang": "glints on the implicit Wang tiling of the normal map (the exemplar): per-tile "
@@ -130,6 +132,8 @@ _DESCRIPTIONS: dict[str, str] = {
 #: Variant settings each method accepts: name -> {key: (allowed values, first = default)}.
 _PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
     "path": {"bounces": ("4", "1", "2", "3", "5", "6", "8", "12", "16")},
+    "glints": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
+    "glints-direct": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
     "ltc-multiscale": {"footprint": ("fit", "paper", "mrl")},
     "leadr-env": {"algorithm": ("full", "simplified")},
     "leadr-env-naive": {"algorithm": ("full", "simplified")},

@@ -147,6 +147,7 @@ def material_surface(scene):
 def equirect_direction(u, v) -> np.ndarray:
     """World directions ``(..., 3)`` of equirectangular coordinates (``docs/scenes.md``):
     ``(-sin(pi v) sin(2 pi u), cos(pi v), sin(pi v) cos(2 pi u))``."""
+    u, v = np.broadcast_arrays(np.asarray(u, np.float64), np.asarray(v, np.float64))
     st = np.sin(np.pi * v)
     return np.stack([-st * np.sin(2 * np.pi * u), np.cos(np.pi * v),
                      st * np.cos(2 * np.pi * u)], -1)

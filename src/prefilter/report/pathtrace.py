@@ -1,0 +1,185 @@
+"""Path-traced scenes of the glint paper's set-ups, built procedurally (nothing downloaded), and
+the demo report's path-tracing section.
+
+* :func:`kettle_scene` (the paper's fig. 10): a kettle-like body of revolution in brushed metal
+  (a brushed normal map running around it, as a lathe leaves it) on a glossy floor that reflects
+  it, two small quad lights and a sky environment.
+* :func:`panel_scene` (its car, direct light): a curved panel (a section of a cylinder) with a
+  flakes normal map under the sky and a point light.
+* :func:`room_scene` (its elevator): a box of brushed walls, open towards the camera, lit by
+  three quad lights under the ceiling.
+
+The meshes and the sky are written next to the scene (``kettle.obj``, ``panel.obj``,
+``sky.npy``) by :func:`write_assets`.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from prefilter.render.lathe import lathe, smooth_profile, write_obj
+from prefilter.render.pathtrace import equirect_direction
+
+__all__ = ["KETTLE_PROFILE", "kettle_scene", "panel_scene", "pathtrace_section", "room_scene",
+           "sky_image", "write_assets"]
+
+#: Radius and height (metres) of the kettle's profile, bottom pole to the lid's knob.
+KETTLE_PROFILE = [(0.0, 0.0), (0.085, 0.0), (0.1, 0.012), (0.112, 0.05), (0.113, 0.1),
+                  (0.104, 0.15), (0.082, 0.19), (0.055, 0.205), (0.05, 0.215), (0.018, 0.22),
+                  (0.014, 0.24), (0.0, 0.245)]
+
+
+def sky_image(height: int = 32) -> np.ndarray:
+    """A smooth equirectangular sky ``(H, 2H, 3)`` (``docs/scenes.md`` convention): bluish
+    zenith 0.5, bright horizon 1.2, dark ground 0.08, and a soft warm sun-like lobe."""
+    v = (np.arange(height) + 0.5) / height
+    u = (np.arange(2 * height) + 0.5) / (2 * height)
+    cos_t = np.cos(np.pi * v)[:, None]
+    up = np.clip(cos_t, 0.0, 1.0)
+    sky = np.stack([0.5 + 0.7 * (1 - up), 0.6 + 0.6 * (1 - up), 0.9 + 0.3 * (1 - up)], -1)
+    ground = np.full(3, 0.08)
+    img = np.where(cos_t[..., None] > 0, sky, ground) * np.ones((1, 2 * height, 1))
+    d = equirect_direction(u[None, :], v[:, None])
+    sun = np.array([0.5, 0.6, 0.62]) / np.linalg.norm([0.5, 0.6, 0.62])
+    img += np.exp(40.0 * (d @ sun - 1.0))[..., None] * np.array([6.0, 5.0, 3.5])
+    return img
+
+
+def write_assets(directory) -> Path:
+    """Write ``kettle.obj``, ``panel.obj`` and ``sky.npy`` into ``directory`` (unchanged files
+    are not rewritten); returns the directory."""
+    d = Path(directory)
+    d.mkdir(parents=True, exist_ok=True)
+    prof = smooth_profile(KETTLE_PROFILE, 40)
+    write_obj(d / "kettle.obj", *lathe(prof, segments=96, u_repeat=16.0, v_repeat=4.0))
+    write_obj(d / "panel.obj", *_panel())
+    sky = sky_image()
+    p = d / "sky.npy"
+    if not (p.exists() and np.array_equal(np.load(p), sky)):
+        tmp = d / f"sky.{os.getpid()}.tmp.npy"
+        np.save(tmp, sky)
+        os.replace(tmp, p)
+    return d
+
+
+def _panel(n_u: int = 48, n_v: int = 8, radius: float = 1.2, angle: float = 0.9,
+           length: float = 1.0):
+    """A curved panel: the part ``|phi| < angle / 2`` of a cylinder of ``radius`` about the
+    ``x`` axis (a car's bonnet, bulging up), ``length`` along ``x``, ``u`` along ``x`` (4 repeats
+    per metre), ``v`` around (the flakes are isotropic)."""
+    x = np.linspace(-length / 2, length / 2, n_v + 1)
+    phi = np.linspace(-angle / 2, angle / 2, n_u + 1)
+    X, P = np.meshgrid(x, phi, indexing="ij")
+    verts = np.stack([X, radius * np.cos(P) - radius, -radius * np.sin(P)], -1).reshape(-1, 3)
+    normals = np.stack([np.zeros_like(X), np.cos(P), -np.sin(P)], -1).reshape(-1, 3)
+    uv = np.stack([(X + length / 2) * 4.0, (P + angle / 2) * radius * 4.0], -1).reshape(-1, 2)
+    a = (np.arange(n_v)[:, None] * (n_u + 1) + np.arange(n_u)[None]).reshape(-1)
+    b = a + n_u + 1
+    f = np.concatenate([np.stack([a, a + 1, b + 1], -1), np.stack([a, b + 1, b], -1)])
+    e = np.cross(verts[f[:, 1]] - verts[f[:, 0]], verts[f[:, 2]] - verts[f[:, 0]])
+    flip = np.sum(e * normals[f].sum(1), -1) < 0
+    f[flip] = f[flip][:, ::-1]
+    return verts, f, normals, uv
+
+
+def _square_light(center, target, half: float, radiance) -> dict:
+    """A square quad light of side ``2 half`` at ``center`` facing ``target``."""
+    c = np.asarray(center, dtype=np.float64)
+    n = np.asarray(target, dtype=np.float64) - c
+    n /= np.linalg.norm(n)
+    a = np.cross(n, [0.0, 1.0, 0.0])
+    if np.linalg.norm(a) < 1e-6:
+        a = np.array([1.0, 0.0, 0.0])
+    a /= np.linalg.norm(a)
+    b = np.cross(n, a)
+    v = [c - half * a - half * b, c + half * a - half * b, c + half * a + half * b,
+         c - half * a + half * b]
+    if np.dot(np.cross(v[1] - v[0], v[2] - v[0]), n) < 0:
+        v = v[::-1]
+    return {"type": "quad", "vertices": [[round(float(x), 6) for x in p] for p in v],
+            "radiance": [float(radiance)] * 3}
+
+
+def kettle_scene(width: int = 96, height: int = 64, map_size: int = 64) -> dict:
+    """The kettle (glints paper, fig. 10): brushed-metal body of revolution (normal map
+    ``brushed`` of ``map_size`` texels, 16 repeats around, 4 along the profile) on a glossy floor
+    (GGX alpha 0.08) reflecting it, two small quad lights and the sky (files of
+    :func:`write_assets`, relative to the scene)."""
+    return {
+        "camera": {"origin": [0.0, 0.2, 0.8], "target": [0.0, 0.07, 0.0], "up": [0, 1, 0],
+                   "fov": 28, "width": width, "height": height},
+        "objects": [
+            {"type": "mesh", "file": "kettle.obj",
+             "material": {"alpha": 0.05, "base_color": 0.0, "f0": [0.95, 0.93, 0.88],
+                          "normal_map": {"procedural": "brushed", "size": map_size, "seed": 1}}},
+            {"type": "plane", "center": [0, 0, 0], "size": [4, 4], "uv_scale": [4, 4],
+             "material": {"alpha": 0.08, "base_color": 0.04, "f0": 0.5}}],
+        "lights": [_square_light([-0.35, 0.5, 0.4], [0, 0.12, 0], 0.04, 80.0),
+                   _square_light([0.45, 0.4, 0.15], [0, 0.12, 0], 0.03, 80.0),
+                   {"type": "environment", "image": "sky.npy", "scale": 0.5}]}
+
+
+def panel_scene(width: int = 96, height: int = 64, map_size: int = 64) -> dict:
+    """The car-like panel: a curved panel with a flakes normal map (``map_size`` texels) under
+    the sky and a point light (direct light only in the paper)."""
+    return {
+        "camera": {"origin": [0.0, 0.55, 1.1], "target": [0.0, -0.05, -0.15], "up": [0, 1, 0],
+                   "fov": 40, "width": width, "height": height},
+        "objects": [
+            {"type": "mesh", "file": "panel.obj",
+             "material": {"alpha": 0.1, "base_color": [0.05, 0.01, 0.01], "f0": 0.9,
+                          "normal_map": {"procedural": "flakes", "size": map_size, "seed": 1}}}],
+        "lights": [{"type": "point", "position": [0.3, 1.2, 0.6], "intensity": 2.0},
+                   {"type": "environment", "image": "sky.npy", "scale": 0.3}]}
+
+
+def room_scene(width: int = 96, height: int = 64, map_size: int = 64) -> dict:
+    """The elevator-like room: a 2 x 2.4 x 2 box (floor, ceiling, three walls; open towards the
+    camera) whose walls are brushed metal (normal map ``brushed``, vertical brushing) and whose
+    floor is a glossy dark plane, lit by three quad lights under the ceiling."""
+    wall = {"alpha": 0.1, "base_color": 0.02, "f0": [0.9, 0.88, 0.85],
+            "normal_map": {"procedural": "brushed", "size": map_size, "seed": 2}}
+    floor = {"alpha": 0.15, "base_color": 0.1, "f0": 0.3}
+    ceiling = {"alpha": 0.6, "base_color": 0.6, "f0": 0.04}
+    lights = [_square_light([x, 2.35, -1.0], [x, 0.0, -1.0], 0.12, 25.0)
+              for x in (-0.6, 0.0, 0.6)]
+    return {
+        "camera": {"origin": [0.0, 1.3, 1.6], "target": [0.0, 1.0, -1.0], "up": [0, 1, 0],
+                   "fov": 55, "width": width, "height": height},
+        "objects": [
+            {"type": "plane", "center": [0, 0, -1], "size": [2, 2], "uv_scale": [2, 2],
+             "material": floor},
+            {"type": "plane", "center": [0, 2.4, -1], "normal": [0, -1, 0], "size": [2, 2],
+             "material": ceiling},
+            {"type": "plane", "center": [0, 1.2, -2], "normal": [0, 0, 1], "tangent": [0, 1, 0],
+             "size": [2.4, 2], "uv_scale": [24, 20], "material": wall},
+            {"type": "plane", "center": [-1, 1.2, -1], "normal": [1, 0, 0], "tangent": [0, 1, 0],
+             "size": [2.4, 2], "uv_scale": [24, 20], "material": wall},
+            {"type": "plane", "center": [1, 1.2, -1], "normal": [-1, 0, 0], "tangent": [0, 1, 0],
+             "size": [2.4, 2], "uv_scale": [24, 20], "material": wall}],
+        "lights": lights}
+
+
+def pathtrace_section(report, settings, seed: int, log, directory) -> None:
+    """The demo report's section: the three scenes by ``path`` (direct only and 4 vertices) and
+    the kettle's indirect glints by ``glints`` against ``glints-direct``."""
+    from prefilter.render.driver import render
+    from prefilter.render.scene import load_scene
+
+    w, h = settings.section_width, settings.section_height
+    write_assets(directory)
+    rows = []
+    for name, build in (("kettle", kettle_scene), ("panel", panel_scene), ("room", room_scene)):
+        scene = load_scene(build(w, h), base_dir=directory)
+        for bounces in ("1", "4"):
+            t0 = time.perf_counter()
+            img = render(scene, "path", spp=16, seed=seed, params={"bounces": bounces})
+            dt = time.perf_counter() - t0
+            report.add_image(img, f"{name}: path, bounces={bounces}, 16 spp ({dt:.1f} s)")
+            rows.append([name, f"path bounces={bounces}", f"{dt:.1f}"])
+            log(f"pathtrace {name} bounces={bounces}: {dt:.1f} s")
+    report.add_table(["scene", "method", "time (s)"], rows)
