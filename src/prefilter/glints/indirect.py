@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter.glints.brdf import FALLBACK_TRUNCATION, glint_brdf_cos
+from prefilter.glints import render as direct_render
 from prefilter.glints.render import baked_surface, footprints
 from prefilter.glints.sample import n_uniforms, pdf_wi, sample_wi
 from prefilter.lobe import Lobe, sample_weight
@@ -24,7 +25,8 @@ from prefilter.render.pathtrace import (LobeUnion, PathOptions, PathStats, mater
                                         path_options, render_paths)
 from prefilter.sphere.sampling import cosine_hemisphere
 
-__all__ = ["FootprintGlintLobe", "glint_surface", "render_glints_paths"]
+__all__ = ["FootprintGlintLobe", "glint_surface", "render_glints", "render_glints_direct",
+           "render_glints_paths"]
 
 
 class FootprintGlintLobe(Lobe):
@@ -130,3 +132,21 @@ def render_glints_paths(scene, settings, mode: str, name: str, *,
     img = render_paths(scene, settings, glint_surface(scene, mode), opts, desc=name, stats=stats,
                        min_depth=min_depth)
     return img.astype(np.float32)
+
+
+def render_glints(scene, settings) -> np.ndarray:
+    """The ``glints`` method: :func:`prefilter.glints.render.render_glints` (direct light), or
+    with ``bounces > 1`` :func:`render_glints_paths` with the compressed pyramid."""
+    if settings.param("bounces", "1") == "1":
+        return direct_render.render_glints(scene, settings)
+    direct_render.check_lights(scene, "glints")
+    return render_glints_paths(scene, settings, "compressed", "glints")
+
+
+def render_glints_direct(scene, settings) -> np.ndarray:
+    """The ``glints-direct`` method: :func:`prefilter.glints.render.render_glints_direct`, or
+    with ``bounces > 1`` :func:`render_glints_paths` with the direct P-NDF."""
+    if settings.param("bounces", "1") == "1":
+        return direct_render.render_glints_direct(scene, settings)
+    direct_render.check_lights(scene, "glints-direct")
+    return render_glints_paths(scene, settings, "direct", "glints-direct")

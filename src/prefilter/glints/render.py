@@ -608,10 +608,6 @@ def _render(scene, settings, mode, name):
     from prefilter.render.driver import render_samples
 
     check_lights(scene, name)
-    if settings.param("bounces", "1") != "1":  # global illumination: the path tracer
-        from prefilter.glints.indirect import render_glints_paths
-
-        return render_glints_paths(scene, settings, mode, name)
     spp = settings.spp
     k = random_dims(scene)
     return render_samples(scene, settings,

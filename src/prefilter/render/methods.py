@@ -79,8 +79,8 @@ _REGISTRY: dict[str, Method | str] = {
     "ltc-aniso": "prefilter.ltc.aniso.render:render_ltc_aniso",
     "colormap-filtered": "prefilter.colormap.render:render_colormap_filtered",
     "colormap-naive": "prefilter.colormap.render:render_colormap_naive",
-    "glints": "prefilter.glints.render:render_glints",
-    "glints-direct": "prefilter.glints.render:render_glints_direct",
+    "glints": "prefilter.glints.indirect:render_glints",
+    "glints-direct": "prefilter.glints.indirect:render_glints_direct",
     "glints-reference": "prefilter.glints.render:render_glints_reference",
     "glints-wang": "prefilter.glints.wang_render:render_glints_wang",
 }

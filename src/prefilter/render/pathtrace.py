@@ -92,7 +92,10 @@ class PathOptions:
 
 class LobeUnion(Lobe):
     """Several batched lobes, each over the points of a mask: ``parts = [(mask (N,), lobe)]``,
-    the masks disjoint and covering the ``N`` points; results rgb ``(N, 3)``."""
+    the masks disjoint and covering the ``N`` points; results rgb ``(N, 3)``. ``clock``: a dict
+    that, when set, accumulates the seconds spent in each part by the part's class name."""
+
+    clock: dict | None = None
 
     def __init__(self, parts, n: int):
         self.parts = [(np.asarray(m, bool), lobe) for m, lobe in parts]
@@ -104,23 +107,31 @@ class LobeUnion(Lobe):
         v = np.asarray(v, dtype=np.float64)
         return np.broadcast_to(v[:, None], (k, 3)) if v.ndim == 1 else v
 
+    def _run(self, lobe, name, *a):
+        t0 = time.perf_counter()
+        r = getattr(lobe, name)(*a)
+        if self.clock is not None:
+            key = type(lobe).__name__
+            self.clock[key] = self.clock.get(key, 0.0) + time.perf_counter() - t0
+        return r
+
     def eval(self, wo, wi):
         out = np.zeros((self.n, 3))
         for m, lobe in self.parts:
-            out[m] = self._rgb(lobe.eval(wo[m], wi[m]), int(m.sum()))
+            out[m] = self._rgb(self._run(lobe, "eval", wo[m], wi[m]), int(m.sum()))
         return out
 
     def pdf(self, wo, wi):
         out = np.zeros(self.n)
         for m, lobe in self.parts:
-            out[m] = lobe.pdf(wo[m], wi[m])
+            out[m] = self._run(lobe, "pdf", wo[m], wi[m])
         return out
 
     def sample(self, wo, u):
         wi = np.zeros((self.n, 3))
         wgt = np.zeros((self.n, 3))
         for m, lobe in self.parts:
-            w, s = lobe.sample(wo[m], u[m][:, :lobe.n_uniforms])
+            w, s = self._run(lobe, "sample", wo[m], u[m][:, :lobe.n_uniforms])
             wi[m] = w
             wgt[m] = self._rgb(s, int(m.sum()))
         return wi, wgt
@@ -327,15 +338,18 @@ def _emission(spec, points) -> np.ndarray:
 @dataclass
 class PathStats:
     """Seconds spent in the surface callback and its lobe per path vertex (index 0: the first
-    hit), and vertices shaded per depth."""
+    hit), vertices shaded per depth, and for :class:`LobeUnion` lobes the seconds per lobe class
+    per depth (``by_lobe[depth][name]``)."""
 
     lobe_seconds: list = field(default_factory=list)
     vertices: list = field(default_factory=list)
+    by_lobe: list = field(default_factory=list)
 
     def add(self, depth: int, seconds: float, n: int = 0):
         while len(self.lobe_seconds) <= depth:
             self.lobe_seconds.append(0.0)
             self.vertices.append(0)
+            self.by_lobe.append({})
         self.lobe_seconds[depth] += seconds
         self.vertices[depth] += n
 
@@ -413,6 +427,8 @@ def trace_paths(scene, xy, uniforms, surface, options: PathOptions = PathOptions
         lobe, (ts, bs, ns) = surface(g, spp)
         if stats is not None:
             stats.add(depth, time.perf_counter() - t0, idx.size)
+            if isinstance(lobe, LobeUnion):
+                lobe.clock = stats.by_lobe[depth]
         lobe = _Vertex(lobe, stats, depth)
         wo = local_view(g.view, ts, bs, ns)
         pos, ng = g.position, g.normal
