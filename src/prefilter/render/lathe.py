@@ -5,20 +5,16 @@ A profile ``(r_k, y_k)`` (radius and height, from the bottom pole to the top) is
 the ``y`` axis: ``u`` runs around (``u_repeat`` times over the circumference, so a brushed normal
 map along ``+u`` is brushed around the body, as on a lathe), ``v`` along the profile's arc length
 (``v_repeat`` times). Normals are the profile's exact ones (the seam and the rings stay smooth).
-Files are Wavefront OBJ with ``v``, ``vt`` (OBJ convention: ``vt = (u, 1 - v)``, so the loader's
-``v`` runs down the image as ``docs/scenes.md`` says) and ``vn``.
+:func:`prefilter.render.mitsuba_export.write_ply` writes them as PLY files.
 """
 
 from __future__ import annotations
-
-import os
-from pathlib import Path
 
 import numpy as np
 
 from prefilter.errors import PrefilterError
 
-__all__ = ["lathe", "smooth_profile", "write_obj"]
+__all__ = ["lathe", "smooth_profile"]
 
 
 def smooth_profile(points, n: int = 48) -> np.ndarray:
@@ -81,22 +77,3 @@ def lathe(profile, segments: int = 64, u_repeat: float = 1.0, v_repeat: float = 
     flip = np.sum(e * normals[f].sum(1), -1) < 0
     f[flip] = f[flip][:, ::-1]
     return verts, f, normals, uv
-
-
-def write_obj(path, vertices, faces, normals, uv) -> Path:
-    """Write a Wavefront OBJ (atomically) with positions, texture coordinates (OBJ convention,
-    ``vt = (u, 1 - v)``) and normals; returns the path."""
-    path = Path(path)
-    lines = ["# body of revolution written by prefilter.render.lathe"]
-    lines += [f"v {a:.7g} {b:.7g} {c:.7g}" for a, b, c in vertices]
-    lines += [f"vt {a:.7g} {1.0 - b:.7g}" for a, b in uv]
-    lines += [f"vn {a:.7g} {b:.7g} {c:.7g}" for a, b, c in normals]
-    lines += ["f " + " ".join(f"{i + 1}/{i + 1}/{i + 1}" for i in tri) for tri in faces]
-    text = "\n".join(lines) + "\n"
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.exists() and path.read_text() == text:
-        return path
-    tmp = path.with_suffix(path.suffix + f".{os.getpid()}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-    return path

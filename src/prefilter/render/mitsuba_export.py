@@ -34,6 +34,7 @@ Conventions (``docs/pathtracing.md``, "Mitsuba export"):
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -46,7 +47,8 @@ __all__ = ["export_mitsuba", "write_ply"]
 
 def write_ply(path, vertices, faces, normals=None, uv=None) -> Path:
     """A binary little-endian PLY with ``vertices (V, 3)``, optional ``normals (V, 3)`` and
-    ``uv (V, 2)`` (as ``u, v``), triangles ``faces (F, 3)``."""
+    ``uv (V, 2)`` (as ``u, v``), triangles ``faces (F, 3)``; written atomically, and not at all
+    when the file already holds the same bytes."""
     v = np.asarray(vertices, np.float32)
     props = [("x", v[:, 0]), ("y", v[:, 1]), ("z", v[:, 2])]
     if normals is not None:
@@ -63,12 +65,13 @@ def write_ply(path, vertices, faces, normals=None, uv=None) -> Path:
     frec = np.zeros(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
     frec["n"] = 3
     frec["i"] = f
+    data = (("\n".join(head) + "\n").encode("ascii") + vrec.tobytes() + frec.tobytes())
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "wb") as fh:
-        fh.write(("\n".join(head) + "\n").encode("ascii"))
-        fh.write(vrec.tobytes())
-        fh.write(frec.tobytes())
+    if not (path.is_file() and path.read_bytes() == data):  # shipped files stay untouched
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
     return path
 
 

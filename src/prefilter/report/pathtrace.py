@@ -9,7 +9,7 @@ the demo report's path-tracing section.
 * :func:`room_scene` (its elevator): a box of brushed walls, open towards the camera, lit by
   three quad lights under the ceiling.
 
-The meshes and the sky are written next to the scene (``kettle.obj``, ``panel.obj``,
+The meshes and the sky are written next to the scene (``kettle.ply``, ``panel.ply``,
 ``sky.npy``) by :func:`write_assets`.
 """
 
@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.render.lathe import lathe, smooth_profile, write_obj
+from prefilter.render.lathe import lathe, smooth_profile
+from prefilter.render.mitsuba_export import write_ply
 from prefilter.render.pathtrace import equirect_direction
 
 __all__ = ["KETTLE_PROFILE", "kettle_scene", "panel_scene", "pathtrace_section", "room_scene",
@@ -50,13 +51,15 @@ def sky_image(height: int = 32) -> np.ndarray:
 
 
 def write_assets(directory) -> Path:
-    """Write ``kettle.obj``, ``panel.obj`` and ``sky.npy`` into ``directory`` (unchanged files
-    are not rewritten); returns the directory."""
+    """Write ``kettle.ply``, ``panel.ply`` and ``sky.npy`` into ``directory`` (the sky only when
+    it changed); returns the directory."""
     d = Path(directory)
     d.mkdir(parents=True, exist_ok=True)
-    prof = smooth_profile(KETTLE_PROFILE, 40)
-    write_obj(d / "kettle.obj", *lathe(prof, segments=96, u_repeat=16.0, v_repeat=4.0))
-    write_obj(d / "panel.obj", *_panel())
+    prof = smooth_profile(KETTLE_PROFILE, 32)
+    for name, (v, f, n, uv) in (("kettle", lathe(prof, segments=64, u_repeat=16.0,
+                                                 v_repeat=4.0)), ("panel", _panel())):
+        # PLY texture coordinates in the OBJ convention (v up the image), as the loader reads
+        write_ply(d / f"{name}.ply", v, f, n, np.stack([uv[:, 0], 1.0 - uv[:, 1]], -1))
     sky = sky_image()
     p = d / "sky.npy"
     if not (p.exists() and np.array_equal(np.load(p), sky)):
@@ -113,7 +116,7 @@ def kettle_scene(width: int = 96, height: int = 64, map_size: int = 64) -> dict:
         "camera": {"origin": [0.0, 0.2, 0.8], "target": [0.0, 0.07, 0.0], "up": [0, 1, 0],
                    "fov": 28, "width": width, "height": height},
         "objects": [
-            {"type": "mesh", "file": "kettle.obj",
+            {"type": "mesh", "file": "kettle.ply",
              "material": {"alpha": 0.05, "base_color": 0.0, "f0": [0.95, 0.93, 0.88],
                           "normal_map": {"procedural": "brushed", "size": map_size, "seed": 1}}},
             {"type": "plane", "center": [0, 0, 0], "size": [4, 4], "uv_scale": [4, 4],
@@ -130,7 +133,7 @@ def panel_scene(width: int = 96, height: int = 64, map_size: int = 64) -> dict:
         "camera": {"origin": [0.0, 0.55, 1.1], "target": [0.0, -0.05, -0.15], "up": [0, 1, 0],
                    "fov": 40, "width": width, "height": height},
         "objects": [
-            {"type": "mesh", "file": "panel.obj",
+            {"type": "mesh", "file": "panel.ply",
              "material": {"alpha": 0.1, "base_color": [0.05, 0.01, 0.01], "f0": 0.9,
                           "normal_map": {"procedural": "flakes", "size": map_size, "seed": 1}}}],
         "lights": [{"type": "point", "position": [0.3, 1.2, 0.6], "intensity": 2.0},
