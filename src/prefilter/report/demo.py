@@ -33,6 +33,7 @@ import click
 import numpy as np
 
 from prefilter.cliparams import SEED, OutputDir
+from prefilter.report.pathtrace import pathtrace_section
 from prefilter.errors import PrefilterError
 
 
@@ -753,6 +754,13 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "paper eq. 1) against `glints-direct` (the exact P-NDF summed over the footprint's "
         "texels). Their FLIP difference is the compression error alone.",
         lambda r: _glints_render_section(r, settings, seed, log), log)
+    _section(
+        report, status, "Path tracing: the glint paper's scenes and indirect glints",
+        "The shipped `kettle`, `flake-panel` and `brushed-room` examples by the `path` method "
+        "(docs/pathtracing.md), direct light and 4 vertices per path; then the kettle's glints "
+        "seen in the glossy floor, whose footprints the floor's bounce enlarges: `glints` "
+        "(compressed pyramid) against `glints-direct` (exact P-NDF) on the same paths.",
+        lambda r: pathtrace_section(r, settings, seed, log), log)
     _section(
         report, status, "Real-time viewer: WebGL2 against Python",
         "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "
