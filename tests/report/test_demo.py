@@ -20,6 +20,7 @@ SECTIONS = (
     "Colour-map filtering: cases a-d",
     "Glints (part 1): NDF images of footprints",
     "Glints (part 2): rendered frames, compressed vs direct",
+    "Path tracing: the glint paper's scenes and indirect glints",
     "Real-time viewer: WebGL2 against Python",
     "Summary",
 )
