@@ -23,7 +23,8 @@ EXAMPLE_DIR = REPO / "src" / "prefilter" / "examples"
 METHOD = {"showcase": "ltc", "showcase-far": "ltc-multiscale", "brushed-metal": "ltc-aniso",
           "multiscale-brushed": "ltc-multiscale", "multiscale-flakes": "ltc-multiscale",
           "leadr": "leadr-point", "colormap": "colormap-filtered", "glints": "glints",
-          "plane-and-sphere": "ltc"}
+          "plane-and-sphere": "ltc", "kettle": "path", "flake-panel": "path",
+          "brushed-room": "path"}
 
 
 def _generator():

@@ -30,6 +30,7 @@ def scenes() -> dict:
     from prefilter.glints.render import measurement_scene
     from prefilter.ltc.aniso.demo import demo_scene
     from prefilter.report.demo import MULTISCALE_MAPS, DemoSettings, leadr_scene, showcase_scene
+    from prefilter.report.pathtrace import kettle_scene, panel_scene, room_scene
     from prefilter.viewer.match import scene as match_scene
 
     s = DemoSettings()
@@ -47,6 +48,9 @@ def scenes() -> dict:
         "colormap": match_scene("colormap", w, h),
         "glints": measurement_scene(2.0, "flakes", s.glints_render_map, width=128, height=96),
         "plane-and-sphere": docs_example(),
+        "kettle": kettle_scene(192, 128, 128),
+        "flake-panel": panel_scene(192, 128, 128),
+        "brushed-room": room_scene(192, 128, 128),
     }
 
 
@@ -100,6 +104,9 @@ def main() -> int:
         for n in extra:
             print(f"not an example: {OUT / n}")
         return 1 if stale or extra else 0
+    from prefilter.report.pathtrace import write_assets
+
+    write_assets(OUT)  # the meshes and sky the path-tracing examples read
     for n in stale:
         (OUT / f"{n}.json").write_text(files[n], encoding="utf-8")
         print(f"wrote {OUT / n}.json")

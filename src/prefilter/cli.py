@@ -56,6 +56,7 @@ BAKE_COMMANDS = {
 TOP_COMMANDS = {
     "render": "prefilter.render.commands:render",
     "compare": "prefilter.render.commands:compare",
+    "export-mitsuba": "prefilter.render.commands:export_mitsuba",
     "demo": "prefilter.report.demo:demo",
     "validate": "prefilter.ltc.commands:validate",
     "export-ltc": "prefilter.ltc.commands:export_ltc",

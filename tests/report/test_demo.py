@@ -23,6 +23,7 @@ SECTIONS = (
     "Roughness mip chains from a normal map",
     "Colour-map filtering under lights (colormap-lit)",
     "Glints under wave optics",
+    "Path tracing: the glint paper's scenes and indirect glints",
     "Real-time viewer: WebGL2 against Python",
     "Summary",
 )

@@ -38,6 +38,12 @@ EXAMPLES = {
               "glints-direct; the first render bakes its pyramid, ~1-2 min)",
     "plane-and-sphere": "the example of docs/scenes.md: bumpy copper plane and a flaked sphere, "
                         "quad and directional light (ltc, ltc-multiscale, reference)",
+    "kettle": "brushed-metal body of revolution on a glossy floor that reflects it, two small "
+              "quad lights and a sky (path, glints / glints-direct with bounces=2)",
+    "flake-panel": "curved flake-coated panel (a car's bonnet) under a sky and a point light "
+                   "(path, glints)",
+    "brushed-room": "box of brushed-metal walls under three ceiling quad lights (path with "
+                    "bounces=4, glints with bounces=2)",
 }
 
 _DIR = Path(__file__).resolve().parent

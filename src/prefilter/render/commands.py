@@ -1,6 +1,6 @@
 """Command-line entry points of ``prefilter.render`` (loaded lazily by ``prefilter.cli``).
 
-Commands: ``compare`` (image metrics).
+Commands: ``compare`` (image metrics), ``render``, ``export-mitsuba`` (a Mitsuba 3 scene).
 """
 
 from __future__ import annotations
@@ -201,3 +201,22 @@ def render(scene: Path, method: str, spp: int, seed: int, out: Path, png: Path |
     if png is not None:
         write_image(png, image, srgb=True)
         click.echo(f"sRGB preview: {png}")
+
+
+# ------------------------------------------------------------------------------ export-mitsuba
+
+
+@click.command("export-mitsuba")
+@click.argument("scene", type=click.Path(dir_okay=False, path_type=Path))  # or example:NAME
+@click.option("--out", "out", required=True, type=click.Path(file_okay=False, path_type=Path),
+              help="Directory for scene.xml, meshes/*.ply and env*.exr.")
+@click.option("--spp", type=int, default=64, show_default=True, help="Mitsuba's samples per pixel.")
+@click.option("--bounces", type=int, default=4, show_default=True,
+              help="Path vertices (as `path --param bounces=N`; Mitsuba's max_depth is N + 1).")
+def export_mitsuba(scene: Path, out: Path, spp: int, bounces: int) -> None:
+    """Write SCENE as a Mitsuba 3 scene (XML, meshes as PLY); conventions in
+    docs/pathtracing.md. Render it with `mitsuba OUT/scene.xml` or `mi.load_file`."""
+    from prefilter.render.mitsuba_export import export_mitsuba as export
+
+    path = export(str(scene), out, spp=spp, bounces=bounces)
+    click.echo(f"Mitsuba scene: {path}")

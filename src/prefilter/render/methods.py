@@ -73,6 +73,7 @@ Method = Callable[..., object]
 _REGISTRY: dict[str, Method | str] = {
     "ltc": "prefilter.ltc.render:render_ltc",
     "reference": "prefilter.render.reference:render_reference",
+    "path": "prefilter.render.pathtrace:render_path",
     "ltc-multiscale": "prefilter.multiscale.render:render_multiscale",
     "ltc-multiscale-aniso": "prefilter.multiscale.aniso:render_multiscale_aniso",
     "leadr-point": "prefilter.leadr.render:render_leadr_point",
@@ -84,8 +85,8 @@ _REGISTRY: dict[str, Method | str] = {
     "colormap-filtered": "prefilter.colormap.render:render_colormap_filtered",
     "colormap-naive": "prefilter.colormap.render:render_colormap_naive",
     "colormap-lit": "prefilter.colormap.lit:render_colormap_lit",
-    "glints": "prefilter.glints.render:render_glints",
-    "glints-direct": "prefilter.glints.render:render_glints_direct",
+    "glints": "prefilter.glints.indirect:render_glints",
+    "glints-direct": "prefilter.glints.indirect:render_glints_direct",
     "glints-reference": "prefilter.glints.render:render_glints_reference",
     "glints-wang": "prefilter.glints.wang_render:render_glints_wang",
     "glints-wave": "prefilter.glints.wave.render:render_glints_wave",
@@ -96,6 +97,9 @@ _DESCRIPTIONS: dict[str, str] = {
            "level (the naive method)",
     "reference": "ground truth: stratified supersampling, full-resolution textures, MIS Monte "
                  "Carlo of the true GGX BRDF",
+    "path": "path tracer: next-event estimation with MIS for quad, point, directional and "
+            "environment lights, shadow rays, Russian roulette; bounces=N vertices per path "
+            "(1: direct light)",
     "ltc-multiscale": "multi-scale LTC (Tao et al. 2021): roughness from the length of the "
                       "footprint's averaged normal; footprint=fit: exact eq. 4 inverse, refitted "
                       "eq. 7, biased LOD and anisotropic taps; paper: the paper's eqs. 5 and 7 "
@@ -125,9 +129,11 @@ _DESCRIPTIONS: dict[str, str] = {
                     "drivers and section 6 combinations); filter=naive: C(mean); "
                     "filter=reference: 32 x 32 supersampling of eq. 1",
     "glints": "glints: compressed footprint P-NDF (point query); quad lights by range queries "
-              "where valid, else MIS; environment maps by SG prefiltering",
+              "where valid, else MIS; environment maps by SG prefiltering; bounces=N > 1: "
+              "path-traced, the pyramid queried with each vertex's enlarged footprint",
     "glints-direct": "glints: direct P-NDF of every footprint (Yan et al. 2016); quad and "
-                     "environment lights by Monte Carlo (MIS, SG sampling)",
+                     "environment lights by Monte Carlo (MIS, SG sampling); bounces=N > 1: "
+                     "path-traced, the direct P-NDF at every vertex",
     "glints-reference": "glints ground truth: footprint supersampling, point P-NDF of the map; "
                         "quad and environment lights by Monte Carlo",
     "glints-wang": "glints on the implicit Wang tiling of the normal map (the exemplar): per-tile "
@@ -142,6 +148,9 @@ _DESCRIPTIONS: dict[str, str] = {
 
 #: Variant settings each method accepts: name -> {key: (allowed values, first = default)}.
 _PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
+    "path": {"bounces": ("4", "1", "2", "3", "5", "6", "8", "12", "16")},
+    "glints": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
+    "glints-direct": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
     "ltc-multiscale": {"footprint": ("fit", "paper", "mrl")},
     "leadr-env": {"algorithm": ("full", "simplified")},
     "leadr-env-naive": {"algorithm": ("full", "simplified")},

@@ -35,8 +35,9 @@ import numpy as np
 from prefilter.cliparams import SEED, OutputDir
 from prefilter.errors import PrefilterError
 from prefilter.report.colormap_lit import colormap_lit_section
-from prefilter.report.roughness import roughness_section
 from prefilter.report.glints_wave import glints_wave_section
+from prefilter.report.pathtrace import pathtrace_section
+from prefilter.report.roughness import roughness_section
 
 
 #: (shape, view angle from the normal (deg), texels per world unit, label): near and far on a
@@ -779,6 +780,13 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "the geometric glints of the same surface (`glints-direct`), measured now "
         "(`docs/glints-wave.md`).",
         lambda r: glints_wave_section(r, settings, seed, log), log)
+    _section(
+        report, status, "Path tracing: the glint paper's scenes and indirect glints",
+        "The shipped `kettle`, `flake-panel` and `brushed-room` examples by the `path` method "
+        "(docs/pathtracing.md), direct light and 4 vertices per path; then the kettle's glints "
+        "seen in the glossy floor, whose footprints the floor's bounce enlarges: `glints` "
+        "(compressed pyramid) against `glints-direct` (exact P-NDF) on the same paths.",
+        lambda r: pathtrace_section(r, settings, seed, log), log)
     _section(
         report, status, "Real-time viewer: WebGL2 against Python",
         "The `prefilter view` page (WebGL2, the exported tables and GLSL snippets) in headless "
