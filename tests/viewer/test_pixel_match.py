@@ -14,9 +14,9 @@ from prefilter.viewer.match import scene
 
 TOL = 0.01
 LIT = ("delta", "textured", "near-grazing")
-CASES = [(s, m) for s in LIT for m in METHODS
-         if m != "leadr-point" and not m.startswith("colormap-")] + [
-    ("leadr", "leadr-point"), ("colormap", "colormap-filtered"), ("colormap", "colormap-naive")]
+CASES = [(s, m) for s in LIT for m in METHODS if m.startswith("ltc")] + [
+    ("leadr", "leadr-point"), ("colormap", "colormap-filtered"), ("colormap", "colormap-naive"),
+    ("leadr-env", "leadr-env"), ("leadr-env", "leadr-irradiance")]
 
 
 @pytest.fixture(scope="module")
@@ -26,6 +26,8 @@ def rows(browser):
             + pixel_match(scenes=("leadr",), methods=("leadr-point",), driver=browser, width=96,
                           height=72)
             + pixel_match(scenes=("colormap",), methods=("colormap-filtered", "colormap-naive"),
+                          driver=browser, width=96, height=72)
+            + pixel_match(scenes=("leadr-env",), methods=("leadr-env", "leadr-irradiance"),
                           driver=browser, width=96, height=72))
 
 
@@ -62,6 +64,20 @@ def test_leadr_differs_from_naive_by_more_than_the_tolerance():
     naive = render_samples(sc, RenderSettings(),
                            lambda g, _u: shade_leadr_delta(sc, g, lights, meso=False))
     assert _rel(naive, render(sc, "leadr-point")) > 10 * TOL
+
+
+@pytest.mark.parametrize("method", ["leadr-env", "leadr-irradiance"])
+def test_leadr_env_differs_from_naive_and_simplified_by_more_than_the_tolerance(method):
+    """On the ``leadr-env`` scene the environment modes differ from their naive counterparts
+    (no meso-scale covariance; 49 % and 2.9 % apart) and from ``algorithm=simplified`` (no
+    self-shadowing, SH irradiance; 12 % and 5.2 %) by more than the 1 % bound: the bound checks
+    the page's covariance, shadowing and irradiance map."""
+    from prefilter.render.scene import load_scene
+
+    sc = load_scene(scene("leadr-env", 96, 72))
+    ref = render(sc, method)
+    assert _rel(render(sc, method + "-naive"), ref) > 2 * TOL
+    assert _rel(render(sc, method, params={"algorithm": "simplified"}), ref) > 3 * TOL
 
 
 @pytest.mark.slow

@@ -27,7 +27,7 @@ __all__ = ["BUILTIN_MAPS", "MAX_OBJECTS", "MAX_QUADS", "METHODS", "default_scene
 
 #: Render methods the page implements (GLSL names in ``static/shaders/viewer.frag.glsl``).
 METHODS = ("ltc", "ltc-multiscale", "ltc-aniso", "ltc-multiscale-aniso", "leadr-point",
-           "colormap-filtered", "colormap-naive")
+           "colormap-filtered", "colormap-naive", "leadr-env", "leadr-irradiance")
 MAX_OBJECTS = 4
 MAX_QUADS = 4
 #: Texels per row of the texture atlas.
@@ -72,10 +72,11 @@ def _check_supported(scene) -> None:
                              f"{len(scene.objects)}")
     count = {"quad": 0, "point": 0, "directional": 0}
     for i, light in enumerate(scene.lights):
-        if light.type == "environment" or getattr(light, "texture", None) is not None:
-            what = "textured quad" if light.type == "quad" else light.type
-            raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad, point and "
-                                 f"directional lights, got a {what} light")
+        if light.type == "environment":  # the leadr-env / leadr-irradiance modes read them
+            continue
+        if getattr(light, "texture", None) is not None:
+            raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad, point, "
+                                 "directional and environment lights, got a textured quad light")
         count[light.type] += 1
     for kind, n in count.items():
         if n > MAX_QUADS:
@@ -191,6 +192,29 @@ def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
             "chain": chain, "driver": None if driver is None else driver.driver}
 
 
+def _leadr_env(scene, data: Path) -> dict:
+    """The scene's environment lights (summed, :func:`prefilter.leadr.render.scene_environment`)
+    for the ``leadr-env`` / ``leadr-irradiance`` modes: the exported ``leadr_env.glsl``, the
+    radiance mip levels in ``env_f32.bin`` (RGBA float32, level after level) and the irradiance
+    map's nodes in ``irradiance_f32.bin``."""
+    from prefilter.leadr import glsl_env
+    from prefilter.leadr.render import scene_environment
+
+    glsl_env.export_all(data)
+    tex = glsl_env.env_textures(scene_environment(scene))
+    levels, offset = [], 0
+    for a in tex["levels"]:
+        levels.append({"width": a.shape[1], "height": a.shape[0], "offset": offset})
+        offset += a.size
+    _write(data / "env_f32.bin", np.concatenate([a.reshape(-1) for a in tex["levels"]])
+           .astype("<f4").tobytes())
+    irr = tex["irradiance"]
+    _write(data / "irradiance_f32.bin", irr.astype("<f4").tobytes())
+    return {"glsl": "leadr_env.glsl", "env": "env_f32.bin", "levels": levels,
+            "present": tex["present"], "texel": tex["texel"], "irradiance": "irradiance_f32.bin",
+            "irradiance_width": irr.shape[1], "irradiance_height": irr.shape[0]}
+
+
 def _write(path: Path, data: bytes) -> None:
     with atomic_path(path, suffix=path.suffix) as tmp:
         tmp.write_bytes(data)
@@ -290,6 +314,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
                        "height": int(ms_glsl.alpha_meso_nodes().shape[0])},
         "leadr": {"glsl": "leadr.glsl"},
         "colormap": colormap,
+        "leadr_env": _leadr_env(scene, data),
         "atlas": {"f32": "atlas_f32.bin", "f16": "atlas_f16.bin", "width": ATLAS_WIDTH,
                   "height": max(1, -(-atlas.size // ATLAS_WIDTH)),
                   "levels": "levels_i32.bin", "n_levels": max(1, len(atlas.levels))},

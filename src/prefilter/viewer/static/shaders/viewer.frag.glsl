@@ -12,6 +12,8 @@
 #define METHOD_LEADR_POINT 4
 #define METHOD_COLORMAP_FILTERED 5
 #define METHOD_COLORMAP_NAIVE 6
+#define METHOD_LEADR_ENV 7
+#define METHOD_LEADR_IRRADIANCE 8
 
 uniform highp sampler2D uAtlas;     // mip chains, RGBA32F, uAtlasWidth texels per row
 uniform highp sampler2D uAtlas16;   // the same atlas in RGBA16F (LEADR's f16 moment maps)
@@ -415,8 +417,13 @@ vec3 shadeColormap(Hit h, bool filtered) {
     return colormapFiltered(M.x, sigma);
 }
 
+// leadr-env / leadr-irradiance: shaders/leadr_env.frag.glsl
+vec3 shadeLeadrEnv(Hit h, vec3 view, bool diffuseOnly);
+
 vec3 shade(Hit h, vec3 view, int method) {
     if (method == METHOD_LEADR_POINT) return shadeLeadr(h, view);
+    if (method == METHOD_LEADR_ENV || method == METHOD_LEADR_IRRADIANCE)
+        return shadeLeadrEnv(h, view, method == METHOD_LEADR_IRRADIANCE);
     if (method == METHOD_COLORMAP_FILTERED || method == METHOD_COLORMAP_NAIVE)
         return shadeColormap(h, method == METHOD_COLORMAP_FILTERED);
     int k = h.id;
