@@ -16,7 +16,9 @@ TOL = 0.01
 LIT = ("delta", "textured", "near-grazing")
 CASES = [(s, m) for s in LIT for m in METHODS if m.startswith("ltc")] + [
     ("leadr", "leadr-point"), ("colormap", "colormap-filtered"), ("colormap", "colormap-naive"),
-    ("leadr-env", "leadr-env"), ("leadr-env", "leadr-irradiance")]
+    ("leadr-env", "leadr-env"), ("leadr-env", "leadr-irradiance")] + [
+    (s, m) for s in ("colormap-noise", "colormap-height")
+    for m in ("colormap-filtered", "colormap-naive")]
 
 
 @pytest.fixture(scope="module")
@@ -25,8 +27,9 @@ def rows(browser):
                         driver=browser, width=96, height=72)
             + pixel_match(scenes=("leadr",), methods=("leadr-point",), driver=browser, width=96,
                           height=72)
-            + pixel_match(scenes=("colormap",), methods=("colormap-filtered", "colormap-naive"),
-                          driver=browser, width=96, height=72)
+            + pixel_match(scenes=("colormap", "colormap-noise", "colormap-height"),
+                          methods=("colormap-filtered", "colormap-naive"), driver=browser,
+                          width=96, height=72)
             + pixel_match(scenes=("leadr-env",), methods=("leadr-env", "leadr-irradiance"),
                           driver=browser, width=96, height=72))
 
@@ -86,9 +89,19 @@ def test_other_scenes_all_methods(browser):
         assert r["rel_rmse"] <= TOL, r
 
 
-def test_colormap_filtered_differs_from_naive_by_more_than_the_tolerance():
-    sc = scene("colormap", 96, 72)
+@pytest.mark.parametrize("name", ["colormap", "colormap-noise", "colormap-height"])
+def test_colormap_filtered_differs_from_naive_by_more_than_the_tolerance(name):
+    sc = scene(name, 96, 72)
     assert _rel(render(sc, "colormap-naive"), render(sc, "colormap-filtered")) > 10 * TOL
+
+
+def test_colormap_height_light_matters():
+    """The ``colormap-height`` scene's sun changes the image by far more than 1 % (60 %): the
+    page's light and Smith ``Lambda`` towards it are checked."""
+    sc = scene("colormap-height", 96, 72)
+    lit = render(sc, "colormap-filtered")
+    sc["lights"] = [x for x in sc["lights"] if x["type"] != "directional"]
+    assert _rel(render(sc, "colormap-filtered"), lit) > 10 * TOL
 
 
 # -- ltc-multiscale's anisotropic taps on near, grazing footprints -----------------------------

@@ -164,19 +164,40 @@ class _Levels:
         self.shape = self.levels[0].shape
 
 
+#: ``viewer.json`` ``colormap.driver_code`` (``uColormapDriver`` in ``viewer.frag.glsl``).
+COLORMAP_DRIVERS = {"texture": 0, "noise": 1, "height": 2}
+
+
+def _colormap_light(scene, driver) -> list[float]:
+    """The height driver's light as ``prefilter.colormap.render`` picks it: the driver's own,
+    else the scene's first directional light; ``[x, y, z, 1]`` (world, towards the light) or
+    ``[0, 0, 1, 0]`` without (lit everywhere)."""
+    if driver.light is not None:
+        return [*np.asarray(driver.light, float).tolist(), 1.0]
+    for light in scene.lights:
+        if light.type == "directional":
+            return [*(-np.asarray(light.direction, float)).tolist(), 1.0]
+    return [0.0, 0.0, 1.0, 0.0]
+
+
 def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
-    """The scene's colour-map driver (``extras.colormap``, texture driver) for the
-    ``colormap-*`` modes: the exported snippet and table, and the moments chain in the atlas."""
+    """The scene's colour-map driver (``extras.colormap``: texture, noise or height) for the
+    ``colormap-*`` modes: the exported snippet (table lookup and the drivers' GLSL) and table,
+    and the driving chain in the atlas (noise: its mean chain; else ``(E[f], E[f^2])``)."""
     from prefilter.colormap.glsl import GLSL_WRAP, glsl_snippet
+    from prefilter.colormap.glsl_drivers import driver_glsl
     from prefilter.colormap.render import colormap_driver
     from prefilter.colormap.table import ColormapTable
 
     spec = (getattr(scene, "extras", None) or {}).get("colormap")
-    driver = None
-    if spec is not None and spec.get("driver") == "texture":
+    driver, light = None, [0.0, 0.0, 1.0, 0.0]
+    if spec is not None and spec.get("driver") in COLORMAP_DRIVERS:
         driver = colormap_driver(spec, base_dir=getattr(scene, "base_dir", "."))
-        table, chain = driver.table, atlas.add(_Levels(driver.moments_chain))
-    else:  # no texture-driven colour map: a placeholder table, the modes draw black
+        packed = driver.mean_chain if driver.driver == "noise" else driver.moments_chain
+        table, chain = driver.table, atlas.add(_Levels(packed))
+        if driver.driver == "height":
+            light = _colormap_light(scene, driver)
+    else:  # no colour map the page draws: a placeholder table, the modes draw black
         table = ColormapTable(np.zeros((2, 2, 3)), (0.0, 1.0), 1.0)
         chain = [-1, 0]
     img = np.concatenate([table.table, np.ones(table.table.shape[:2] + (1,))], -1)
@@ -184,12 +205,14 @@ def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
     # glsl_snippet writes an integer-valued sigma_max as an int literal ("= 2;"), which GLSL ES
     # does not convert to float: add the ".0" (reported to the colormap package)
     src = re.sub(r"(const float kSigmaMax\s*=\s*)(-?\d+);", r"\1\2.0;",
-                 glsl_snippet(table.metadata()))
+                 glsl_snippet(table.metadata())) + driver_glsl(driver)
     with atomic_path(data / "colormap.glsl", suffix=".glsl") as tmp:
         tmp.write_text(src)
     return {"glsl": "colormap.glsl", "f32": "colormap_f32.bin", "width": table.n_mean,
             "height": table.n_sigma, "wrap_s": GLSL_WRAP[table.edge].removeprefix("GL_"),
-            "chain": chain, "driver": None if driver is None else driver.driver}
+            "chain": chain, "driver": None if driver is None else driver.driver,
+            "driver_code": -1 if driver is None else COLORMAP_DRIVERS[driver.driver],
+            "light": light}
 
 
 def _leadr_env(scene, data: Path) -> dict:

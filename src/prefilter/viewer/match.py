@@ -43,7 +43,8 @@ def _camera(width, height):
 #: texture-driven colour map (``colormap-*``), and a bump-mapped plane seen from just above it
 #: (``near-grazing``: near, elongated footprints, where ``ltc-multiscale`` reads anisotropic taps).
 SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr",
-          "leadr-grazing", "colormap", "near-grazing", "leadr-env")
+          "leadr-grazing", "colormap", "near-grazing", "leadr-env", "colormap-noise",
+          "colormap-height")
 
 
 def applies(sc, method: str) -> bool:
@@ -51,7 +52,7 @@ def applies(sc, method: str) -> bool:
     ``leadr-point`` takes point and directional lights only (quad lights raise)."""
     if method.startswith("colormap-"):
         extras = sc.get("extras", {}) if isinstance(sc, dict) else sc.extras
-        return (extras or {}).get("colormap", {}).get("driver") == "texture"
+        return (extras or {}).get("colormap", {}).get("driver") in ("texture", "noise", "height")
     lights = sc["lights"] if isinstance(sc, dict) else [{"type": x.type} for x in sc.lights]
     kinds = {x["type"] for x in lights}
     if method in ("leadr-env", "leadr-irradiance"):
@@ -145,6 +146,22 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
                 "lights": [_quad(y0=0.2, y1=1.0)],
                 "objects": [_plane({"alpha": 0.1, "base_color": 0.02, "f0": 0.9,
                                     "normal_map": dict(BUILTIN_MAPS["gaussian"])}, uv=2.0)]}
+    if name == "colormap-noise":
+        # the colormap scene driven by procedural noise (its std per LOD from the generator)
+        sc = scene("colormap", width, height)
+        sc["extras"]["colormap"].update(driver="noise", texture={
+            "procedural": "noise", "size": 64, "seed": 3, "corr_length": 1.5})
+        return sc
+    if name == "colormap-height":
+        # heights driving the colour map, lit by a low sun (the scene's first directional
+        # light): V_bar and the height filtering depend on the view and the light
+        sc = scene("colormap", width, height)
+        sc["extras"]["colormap"].update(driver="height", range=[-4.5, 4.5], texture={
+            "procedural": "gaussian", "size": 64, "seed": 1, "rms_slope": 0.5,
+            "corr_length": 3.0})
+        sc["lights"].append({"type": "directional", "direction": [-0.95, -0.15, -0.2],
+                             "irradiance": 1.0})
+        return sc
     if name == "leadr-env":
         # the leadr objects under prefilter.leadr.envmap.procedural_env (sharp sun and window
         # stripes: the per-sample LOD matters) and a point light (leadr-env, leadr-irradiance)

@@ -195,6 +195,8 @@ export class Viewer {
     }));
     this._u('uMapsHalf', 'uniform1i', this.precision === 'f16' ? 1 : 0);
     this._u('uColormapChain', 'uniform2iv', m.colormap.chain);
+    this._u('uColormapDriver', 'uniform1i', m.colormap.driver_code);
+    this._u('uColormapLight', 'uniform4fv', m.colormap.light);
     bindLeadrEnv(this, this.leadrEnv);
     const quads = S.lights.map(q => this._light(q));
     this._u('uNumQuads', 'uniform1i', quads.length);
