@@ -116,7 +116,6 @@ def test_export_folder(tmp_path):
 @pytest.mark.parametrize("change, field", [
     (lambda d: d["lights"].append({**d["lights"][0], "texture": {"procedural": "noise",
                                                                   "size": 16}}), "lights[1]"),
-    (lambda d: d["lights"].append({"type": "environment", "image": "ENV"}), "lights[1]"),
     (lambda d: d["objects"].extend([d["objects"][1]] * 3), "objects"),
 ])
 def test_unsupported_features_are_named(tmp_path, change, field):

@@ -14,9 +14,11 @@ from prefilter.viewer.match import scene
 
 TOL = 0.01
 LIT = ("delta", "textured", "near-grazing")
-CASES = [(s, m) for s in LIT for m in METHODS
-         if m != "leadr-point" and not m.startswith("colormap-")] + [
-    ("leadr", "leadr-point"), ("colormap", "colormap-filtered"), ("colormap", "colormap-naive")]
+CASES = [(s, m) for s in LIT for m in METHODS if m.startswith("ltc")] + [
+    ("leadr", "leadr-point"), ("colormap", "colormap-filtered"), ("colormap", "colormap-naive"),
+    ("leadr-env", "leadr-env"), ("leadr-env", "leadr-irradiance")] + [
+    (s, m) for s in ("colormap-noise", "colormap-height")
+    for m in ("colormap-filtered", "colormap-naive")]
 
 
 @pytest.fixture(scope="module")
@@ -25,7 +27,10 @@ def rows(browser):
                         driver=browser, width=96, height=72)
             + pixel_match(scenes=("leadr",), methods=("leadr-point",), driver=browser, width=96,
                           height=72)
-            + pixel_match(scenes=("colormap",), methods=("colormap-filtered", "colormap-naive"),
+            + pixel_match(scenes=("colormap", "colormap-noise", "colormap-height"),
+                          methods=("colormap-filtered", "colormap-naive"), driver=browser,
+                          width=96, height=72)
+            + pixel_match(scenes=("leadr-env",), methods=("leadr-env", "leadr-irradiance"),
                           driver=browser, width=96, height=72))
 
 
@@ -64,15 +69,39 @@ def test_leadr_differs_from_naive_by_more_than_the_tolerance():
     assert _rel(naive, render(sc, "leadr-point")) > 10 * TOL
 
 
+@pytest.mark.parametrize("method", ["leadr-env", "leadr-irradiance"])
+def test_leadr_env_differs_from_naive_and_simplified_by_more_than_the_tolerance(method):
+    """On the ``leadr-env`` scene the environment modes differ from their naive counterparts
+    (no meso-scale covariance; 49 % and 2.9 % apart) and from ``algorithm=simplified`` (no
+    self-shadowing, SH irradiance; 12 % and 5.2 %) by more than the 1 % bound: the bound checks
+    the page's covariance, shadowing and irradiance map."""
+    from prefilter.render.scene import load_scene
+
+    sc = load_scene(scene("leadr-env", 96, 72))
+    ref = render(sc, method)
+    assert _rel(render(sc, method + "-naive"), ref) > 2 * TOL
+    assert _rel(render(sc, method, params={"algorithm": "simplified"}), ref) > 3 * TOL
+
+
 @pytest.mark.slow
 def test_other_scenes_all_methods(browser):
     for r in pixel_match(scenes=("flat", "brushed", "bumps-sphere", "horizon"), driver=browser):
         assert r["rel_rmse"] <= TOL, r
 
 
-def test_colormap_filtered_differs_from_naive_by_more_than_the_tolerance():
-    sc = scene("colormap", 96, 72)
+@pytest.mark.parametrize("name", ["colormap", "colormap-noise", "colormap-height"])
+def test_colormap_filtered_differs_from_naive_by_more_than_the_tolerance(name):
+    sc = scene(name, 96, 72)
     assert _rel(render(sc, "colormap-naive"), render(sc, "colormap-filtered")) > 10 * TOL
+
+
+def test_colormap_height_light_matters():
+    """The ``colormap-height`` scene's sun changes the image by far more than 1 % (60 %): the
+    page's light and Smith ``Lambda`` towards it are checked."""
+    sc = scene("colormap-height", 96, 72)
+    lit = render(sc, "colormap-filtered")
+    sc["lights"] = [x for x in sc["lights"] if x["type"] != "directional"]
+    assert _rel(render(sc, "colormap-filtered"), lit) > 10 * TOL
 
 
 # -- ltc-multiscale's anisotropic taps on near, grazing footprints -----------------------------

@@ -653,6 +653,8 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
                     + pixel_match(scenes=("leadr",), methods=("leadr-point",), width=mw,
                                   height=mh, driver=driver)
                     + pixel_match(scenes=("colormap",), methods=cmap, precisions=("f32",),
+                                  width=mw, height=mh, driver=driver)
+                    + pixel_match(scenes=("leadr-env",), methods=("leadr-env", "leadr-irradiance"),
                                   width=mw, height=mh, driver=driver))
             t_match = time.perf_counter() - t0
         finally:
@@ -666,7 +668,9 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         "plane, anisotropic sphere, one quad light) per method, `split` = ltc-multiscale | ltc; "
         "`leadr-point` on the pixel-match `leadr` scene (height-mapped plane and sphere, two "
         "point lights and a directional light), the unlit `colormap-*` modes on its `colormap` "
-        f"scene (a colour-mapped noise texture). Taken in {t_shots:.1f} s.")
+        "scene (a colour-mapped noise texture), `leadr-env` / `leadr-irradiance` on its "
+        "`leadr-env` scene (the leadr objects under a procedural sky with a sun and a point "
+        f"light, at most 256 x 192). Taken in {t_shots:.1f} s.")
     report.add_table(
         ["scene", "method", "tables / maps", "relative RMSE", "max abs error",
          "max error / max radiance"],

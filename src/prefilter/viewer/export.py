@@ -27,7 +27,7 @@ __all__ = ["BUILTIN_MAPS", "MAX_OBJECTS", "MAX_QUADS", "METHODS", "default_scene
 
 #: Render methods the page implements (GLSL names in ``static/shaders/viewer.frag.glsl``).
 METHODS = ("ltc", "ltc-multiscale", "ltc-aniso", "ltc-multiscale-aniso", "leadr-point",
-           "colormap-filtered", "colormap-naive")
+           "colormap-filtered", "colormap-naive", "leadr-env", "leadr-irradiance")
 MAX_OBJECTS = 4
 MAX_QUADS = 4
 #: Texels per row of the texture atlas.
@@ -72,10 +72,11 @@ def _check_supported(scene) -> None:
                              f"{len(scene.objects)}")
     count = {"quad": 0, "point": 0, "directional": 0}
     for i, light in enumerate(scene.lights):
-        if light.type == "environment" or getattr(light, "texture", None) is not None:
-            what = "textured quad" if light.type == "quad" else light.type
-            raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad, point and "
-                                 f"directional lights, got a {what} light")
+        if light.type == "environment":  # the leadr-env / leadr-irradiance modes read them
+            continue
+        if getattr(light, "texture", None) is not None:
+            raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad, point, "
+                                 "directional and environment lights, got a textured quad light")
         count[light.type] += 1
     for kind, n in count.items():
         if n > MAX_QUADS:
@@ -163,19 +164,40 @@ class _Levels:
         self.shape = self.levels[0].shape
 
 
+#: ``viewer.json`` ``colormap.driver_code`` (``uColormapDriver`` in ``viewer.frag.glsl``).
+COLORMAP_DRIVERS = {"texture": 0, "noise": 1, "height": 2}
+
+
+def _colormap_light(scene, driver) -> list[float]:
+    """The height driver's light as ``prefilter.colormap.render`` picks it: the driver's own,
+    else the scene's first directional light; ``[x, y, z, 1]`` (world, towards the light) or
+    ``[0, 0, 1, 0]`` without (lit everywhere)."""
+    if driver.light is not None:
+        return [*np.asarray(driver.light, float).tolist(), 1.0]
+    for light in scene.lights:
+        if light.type == "directional":
+            return [*(-np.asarray(light.direction, float)).tolist(), 1.0]
+    return [0.0, 0.0, 1.0, 0.0]
+
+
 def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
-    """The scene's colour-map driver (``extras.colormap``, texture driver) for the
-    ``colormap-*`` modes: the exported snippet and table, and the moments chain in the atlas."""
+    """The scene's colour-map driver (``extras.colormap``: texture, noise or height) for the
+    ``colormap-*`` modes: the exported snippet (table lookup and the drivers' GLSL) and table,
+    and the driving chain in the atlas (noise: its mean chain; else ``(E[f], E[f^2])``)."""
     from prefilter.colormap.glsl import GLSL_WRAP, glsl_snippet
+    from prefilter.colormap.glsl_drivers import driver_glsl
     from prefilter.colormap.render import colormap_driver
     from prefilter.colormap.table import ColormapTable
 
     spec = (getattr(scene, "extras", None) or {}).get("colormap")
-    driver = None
-    if spec is not None and spec.get("driver") == "texture":
+    driver, light = None, [0.0, 0.0, 1.0, 0.0]
+    if spec is not None and spec.get("driver") in COLORMAP_DRIVERS:
         driver = colormap_driver(spec, base_dir=getattr(scene, "base_dir", "."))
-        table, chain = driver.table, atlas.add(_Levels(driver.moments_chain))
-    else:  # no texture-driven colour map: a placeholder table, the modes draw black
+        packed = driver.mean_chain if driver.driver == "noise" else driver.moments_chain
+        table, chain = driver.table, atlas.add(_Levels(packed))
+        if driver.driver == "height":
+            light = _colormap_light(scene, driver)
+    else:  # no colour map the page draws: a placeholder table, the modes draw black
         table = ColormapTable(np.zeros((2, 2, 3)), (0.0, 1.0), 1.0)
         chain = [-1, 0]
     img = np.concatenate([table.table, np.ones(table.table.shape[:2] + (1,))], -1)
@@ -183,12 +205,37 @@ def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
     # glsl_snippet writes an integer-valued sigma_max as an int literal ("= 2;"), which GLSL ES
     # does not convert to float: add the ".0" (reported to the colormap package)
     src = re.sub(r"(const float kSigmaMax\s*=\s*)(-?\d+);", r"\1\2.0;",
-                 glsl_snippet(table.metadata()))
+                 glsl_snippet(table.metadata())) + driver_glsl(driver)
     with atomic_path(data / "colormap.glsl", suffix=".glsl") as tmp:
         tmp.write_text(src)
     return {"glsl": "colormap.glsl", "f32": "colormap_f32.bin", "width": table.n_mean,
             "height": table.n_sigma, "wrap_s": GLSL_WRAP[table.edge].removeprefix("GL_"),
-            "chain": chain, "driver": None if driver is None else driver.driver}
+            "chain": chain, "driver": None if driver is None else driver.driver,
+            "driver_code": -1 if driver is None else COLORMAP_DRIVERS[driver.driver],
+            "light": light}
+
+
+def _leadr_env(scene, data: Path) -> dict:
+    """The scene's environment lights (summed, :func:`prefilter.leadr.render.scene_environment`)
+    for the ``leadr-env`` / ``leadr-irradiance`` modes: the exported ``leadr_env.glsl``, the
+    radiance mip levels in ``env_f32.bin`` (RGBA float32, level after level) and the irradiance
+    map's nodes in ``irradiance_f32.bin``."""
+    from prefilter.leadr import glsl_env
+    from prefilter.leadr.render import scene_environment
+
+    glsl_env.export_all(data)
+    tex = glsl_env.env_textures(scene_environment(scene))
+    levels, offset = [], 0
+    for a in tex["levels"]:
+        levels.append({"width": a.shape[1], "height": a.shape[0], "offset": offset})
+        offset += a.size
+    _write(data / "env_f32.bin", np.concatenate([a.reshape(-1) for a in tex["levels"]])
+           .astype("<f4").tobytes())
+    irr = tex["irradiance"]
+    _write(data / "irradiance_f32.bin", irr.astype("<f4").tobytes())
+    return {"glsl": "leadr_env.glsl", "env": "env_f32.bin", "levels": levels,
+            "present": tex["present"], "texel": tex["texel"], "irradiance": "irradiance_f32.bin",
+            "irradiance_width": irr.shape[1], "irradiance_height": irr.shape[0]}
 
 
 def _write(path: Path, data: bytes) -> None:
@@ -290,6 +337,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
                        "height": int(ms_glsl.alpha_meso_nodes().shape[0])},
         "leadr": {"glsl": "leadr.glsl"},
         "colormap": colormap,
+        "leadr_env": _leadr_env(scene, data),
         "atlas": {"f32": "atlas_f32.bin", "f16": "atlas_f16.bin", "width": ATLAS_WIDTH,
                   "height": max(1, -(-atlas.size // ATLAS_WIDTH)),
                   "levels": "levels_i32.bin", "n_levels": max(1, len(atlas.levels))},

@@ -43,7 +43,8 @@ def _camera(width, height):
 #: texture-driven colour map (``colormap-*``), and a bump-mapped plane seen from just above it
 #: (``near-grazing``: near, elongated footprints, where ``ltc-multiscale`` reads anisotropic taps).
 SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr",
-          "leadr-grazing", "colormap", "near-grazing")
+          "leadr-grazing", "colormap", "near-grazing", "leadr-env", "colormap-noise",
+          "colormap-height")
 
 
 def applies(sc, method: str) -> bool:
@@ -51,11 +52,13 @@ def applies(sc, method: str) -> bool:
     ``leadr-point`` takes point and directional lights only (quad lights raise)."""
     if method.startswith("colormap-"):
         extras = sc.get("extras", {}) if isinstance(sc, dict) else sc.extras
-        return (extras or {}).get("colormap", {}).get("driver") == "texture"
-    if method != "leadr-point":
-        return True
+        return (extras or {}).get("colormap", {}).get("driver") in ("texture", "noise", "height")
     lights = sc["lights"] if isinstance(sc, dict) else [{"type": x.type} for x in sc.lights]
     kinds = {x["type"] for x in lights}
+    if method in ("leadr-env", "leadr-irradiance"):
+        return bool(kinds) and kinds <= {"environment", "point", "directional"}
+    if method != "leadr-point":
+        return "environment" not in kinds
     return bool(kinds) and kinds <= {"point", "directional"}
 
 
@@ -143,7 +146,43 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
                 "lights": [_quad(y0=0.2, y1=1.0)],
                 "objects": [_plane({"alpha": 0.1, "base_color": 0.02, "f0": 0.9,
                                     "normal_map": dict(BUILTIN_MAPS["gaussian"])}, uv=2.0)]}
+    if name == "colormap-noise":
+        # the colormap scene driven by procedural noise (its std per LOD from the generator)
+        sc = scene("colormap", width, height)
+        sc["extras"]["colormap"].update(driver="noise", texture={
+            "procedural": "noise", "size": 64, "seed": 3, "corr_length": 1.5})
+        return sc
+    if name == "colormap-height":
+        # heights driving the colour map, lit by a low sun (the scene's first directional
+        # light): V_bar and the height filtering depend on the view and the light
+        sc = scene("colormap", width, height)
+        sc["extras"]["colormap"].update(driver="height", range=[-4.5, 4.5], texture={
+            "procedural": "gaussian", "size": 64, "seed": 1, "rms_slope": 0.5,
+            "corr_length": 3.0})
+        sc["lights"].append({"type": "directional", "direction": [-0.95, -0.15, -0.2],
+                             "irradiance": 1.0})
+        return sc
+    if name == "leadr-env":
+        # the leadr objects under prefilter.leadr.envmap.procedural_env (sharp sun and window
+        # stripes: the per-sample LOD matters) and a point light (leadr-env, leadr-irradiance)
+        sc = scene("leadr", width, height)
+        sc["lights"] = [{"type": "environment", "image": str(_procedural_env_file())},
+                        {"type": "point", "position": [-1.0, 1.2, 0.5], "intensity": 1.0}]
+        return sc
     raise PrefilterError(f"scene: expected one of {', '.join(SCENES)}, got {name!r}")
+
+
+def _procedural_env_file(size: int = 64) -> Path:
+    """:func:`prefilter.leadr.envmap.procedural_env` as a ``.npy`` file in the temporary
+    directory (scenes reference environment images by path)."""
+    from prefilter.fileio import atomic_path
+    from prefilter.leadr.envmap import procedural_env
+
+    path = Path(tempfile.gettempdir()) / f"prefilter-procedural-env-{size}.npy"
+    if not path.exists():
+        with atomic_path(path, suffix=".npy") as tmp:
+            np.save(tmp, procedural_env(size))
+    return path
 
 
 @contextlib.contextmanager
@@ -217,7 +256,9 @@ def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> l
     ``scene`` defaults to :func:`default_scene` at ``width x height``; ``leadr-point`` (point and
     directional lights only) is shot on the ``leadr`` scene of :func:`scene` at the same size
     when ``scene`` has no point or directional light (or has quad lights), the ``colormap-*``
-    modes on the ``colormap`` scene when ``scene`` has no texture-driven ``extras.colormap``."""
+    modes on the ``colormap`` scene when ``scene`` has no texture-driven ``extras.colormap``,
+    ``leadr-env`` / ``leadr-irradiance`` on the ``leadr-env`` scene (at most 256 x 192) when
+    ``scene`` has no environment light (or has quad lights)."""
     from prefilter.render.scene import Scene, load_scene
     from prefilter.viewer.browser import open_viewer, screenshot
     from prefilter.viewer.match import scene as named_scene  # shadowed by the argument
@@ -230,10 +271,16 @@ def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> l
     # modes the scene cannot show are shot on the pixel-match scene made for them
     where = {m: "shots" for m in METHODS}
     for m, name in (("leadr-point", "leadr"), ("colormap-filtered", "colormap"),
-                    ("colormap-naive", "colormap")):
+                    ("colormap-naive", "colormap"), ("leadr-env", "leadr-env"),
+                    ("leadr-irradiance", "leadr-env")):
         if not applies(loaded, m) or (m == "leadr-point" and not any(
-                x.type in ("point", "directional") for x in loaded.lights)):
-            pages[name] = named_scene(name, c.width, c.height)
+                x.type in ("point", "directional") for x in loaded.lights)) or (
+                m.startswith("leadr-") and m != "leadr-point"
+                and not any(x.type == "environment" for x in loaded.lights)):
+            # the environment modes cost ~0.35 ms per pixel on SwiftShader: at most 256 x 192
+            w, h = (min(c.width, 256), min(c.height, 192)) if name == "leadr-env" else (
+                c.width, c.height)
+            pages[name] = named_scene(name, w, h)
             where[m] = name
     paths = []
     show = ("const v = window.prefilterViewer.viewer;"
@@ -260,10 +307,12 @@ def frame_time(width: int = 512, height: int = 512, method: str = "ltc", frames:
                driver=None) -> float:
     """Mean frame time in ms of the default scene at ``width x height`` drawn by ``method``
     (synchronised by a one-pixel read-back per frame); ``leadr-point`` draws the ``leadr`` scene
-    (the default one has no point or directional light)."""
+    (the default one has no point or directional light), ``leadr-env`` and ``leadr-irradiance``
+    the ``leadr-env`` scene."""
     from prefilter.viewer.browser import open_viewer
 
-    sc = scene("leadr", width, height) if method == "leadr-point" else default_scene(width, height)
+    own = {"leadr-point": "leadr", "leadr-env": "leadr-env", "leadr-irradiance": "leadr-env"}
+    sc = scene(own[method], width, height) if method in own else default_scene(width, height)
     with _served_pages({"timing": sc}, driver) as (drv, url_of):
         open_viewer(drv, url_of("timing"))
         drv.execute_script("const v = window.prefilterViewer.viewer;"
@@ -284,7 +333,10 @@ def _main() -> None:
         print(f"| {r['scene']} | {r['method']} | {r['precision']} | {r['rel_rmse']:.2e} | "
               f"{r['max_abs']:.2e} | {r['max_rel']:.2e} |")
     for m in METHODS:
-        print(f"frame time 512x512 {m}: {frame_time(method=m):.1f} ms")
+        if m in ("leadr-env", "leadr-irradiance"):  # ~20 s a frame at 256 x 256 on SwiftShader
+            print(f"frame time 256x256 {m}: {frame_time(256, 256, m, frames=1):.1f} ms")
+        else:
+            print(f"frame time 512x512 {m}: {frame_time(method=m):.1f} ms")
 
 
 if __name__ == "__main__":

@@ -2,8 +2,10 @@
 // compiles the exported GLSL snippets with shaders/viewer.frag.glsl, draws one frame.
 // No dependencies; see docs/viewer.md for the data formats.
 
+import {LEADR_ENV_METHODS, bindLeadrEnv, leadrEnvUnits, loadLeadrEnv} from './leadr_env.js';
+
 export const METHODS = ['ltc', 'ltc-multiscale', 'ltc-aniso', 'ltc-multiscale-aniso', 'leadr-point',
-  'colormap-filtered', 'colormap-naive'];
+  'colormap-filtered', 'colormap-naive', ...LEADR_ENV_METHODS];
 
 async function fetchOk(url, kind) {
   const r = await fetch(url);
@@ -82,16 +84,17 @@ export class Viewer {
     this.manifest = m;
     this.scene = m.scene;
     this.camera = JSON.parse(JSON.stringify(m.scene.camera));
-    const [iso, aniso, ms, leadr, cmap, vert, frag] = await Promise.all([
+    const [iso, aniso, ms, leadr, cmap, vert, frag, leadrEnv, leadrEnvFrag] = await Promise.all([
       fetchOk(base + m.ltc_iso.glsl, 'text'), fetchOk(base + m.ltc_aniso.glsl, 'text'),
       fetchOk(base + m.alpha_meso.glsl, 'text'), fetchOk(base + m.leadr.glsl, 'text'),
       fetchOk(base + m.colormap.glsl, 'text'),
-      fetchOk('shaders/viewer.vert.glsl', 'text'), fetchOk('shaders/viewer.frag.glsl', 'text')]);
+      fetchOk('shaders/viewer.vert.glsl', 'text'), fetchOk('shaders/viewer.frag.glsl', 'text'),
+      fetchOk(base + m.leadr_env.glsl, 'text'), fetchOk('shaders/leadr_env.frag.glsl', 'text')]);
     const head = '#version 300 es\nprecision highp float;\nprecision highp int;\n' +
       'precision highp sampler2D;\nprecision highp sampler3D;\nprecision highp isampler2D;\n';
     const prog = gl.createProgram();
     gl.attachShader(prog, compile(gl, gl.VERTEX_SHADER, head + vert));
-    gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, [head, iso, aniso, ms, leadr, cmap, frag].join('\n')));
+    gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, [head, iso, aniso, ms, leadr, leadrEnv, cmap, frag, leadrEnvFrag].join('\n')));
     gl.linkProgram(prog);
     if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error('link: ' + gl.getProgramInfoLog(prog));
     this.prog = prog;
@@ -121,6 +124,7 @@ export class Viewer {
     for (const [k, v] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
                           [gl.TEXTURE_WRAP_S, gl[m.colormap.wrap_s]]])
       gl.texParameteri(gl.TEXTURE_2D, k, v);
+    this.leadrEnv = await loadLeadrEnv(gl, base, m.leadr_env, fetchOk);
     const lv = await fetchOk(base + m.atlas.levels);
     this.levels = texture2D(gl, m.atlas.n_levels, 1, lv, false, gl.RGBA32I, gl.RGBA_INTEGER);
     this.uniforms = {};
@@ -149,6 +153,7 @@ export class Viewer {
       units.push([`ltcIso${k}`, gl.TEXTURE_2D, t.iso[k]]);
       units.push([`ltcAniso${k}`, gl.TEXTURE_3D, t.aniso[k]]);
     }
+    units.push(...leadrEnvUnits(gl, this.leadrEnv));
     units.forEach(([name, target, tex], i) => {
       gl.activeTexture(gl.TEXTURE0 + i);
       gl.bindTexture(target, tex);
@@ -190,6 +195,9 @@ export class Viewer {
     }));
     this._u('uMapsHalf', 'uniform1i', this.precision === 'f16' ? 1 : 0);
     this._u('uColormapChain', 'uniform2iv', m.colormap.chain);
+    this._u('uColormapDriver', 'uniform1i', m.colormap.driver_code);
+    this._u('uColormapLight', 'uniform4fv', m.colormap.light);
+    bindLeadrEnv(this, this.leadrEnv);
     const quads = S.lights.map(q => this._light(q));
     this._u('uNumQuads', 'uniform1i', quads.length);
     if (quads.length) {

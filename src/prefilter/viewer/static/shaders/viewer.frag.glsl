@@ -12,6 +12,8 @@
 #define METHOD_LEADR_POINT 4
 #define METHOD_COLORMAP_FILTERED 5
 #define METHOD_COLORMAP_NAIVE 6
+#define METHOD_LEADR_ENV 7
+#define METHOD_LEADR_IRRADIANCE 8
 
 uniform highp sampler2D uAtlas;     // mip chains, RGBA32F, uAtlasWidth texels per row
 uniform highp sampler2D uAtlas16;   // the same atlas in RGBA16F (LEADR's f16 moment maps)
@@ -32,6 +34,10 @@ uniform ivec4 uMatMap[MAX_OBJECTS];       // normal chain (first level, levels),
 uniform ivec4 uMatColor[MAX_OBJECTS];     // colour chain (first level, levels, channels)
 uniform ivec2 uMatHeight[MAX_OBJECTS];    // height map's slope-moment chain (leadr-point)
 uniform ivec2 uColormapChain;             // colour-map driver's (E[f], E[f^2]) chain, or -1
+uniform int uColormapDriver;              // 0 texture, 1 noise (its mean chain), 2 height
+uniform vec4 uColormapLight;              // height driver: world direction to the light, w = 1
+#define COLORMAP_NOISE 1
+#define COLORMAP_HEIGHT 2
 uniform int uNumQuads;
 uniform vec3 uQuadV[4 * MAX_QUADS], uQuadN[MAX_QUADS], uQuadL[MAX_QUADS];
 uniform int uNumPoints, uNumDirs;
@@ -366,11 +372,13 @@ vec3 shadeLeadr(Hit h, vec3 view) {
     return L;
 }
 
-// colormap-filtered / -naive (prefilter.colormap.render, texture driver; kernels._fetch and
-// _texture_kernel): the driver's moments over the anisotropic footprint (up to 8 trilinear taps
-// along the major axis), the level-0 interpolation variance removed under magnification, then
-// the exported snippet's table lookup. Unlit: the colour term itself.
-vec3 shadeColormap(Hit h, bool filtered) {
+// colormap-filtered / -naive (prefilter.colormap.render; kernels._fetch and the _texture /
+// _noise / _height kernels): the driver's chain over the anisotropic footprint (up to 8
+// trilinear taps along the major axis), for moments the level-0 interpolation variance removed
+// under magnification, then the exported snippet: the table lookup (texture), the noise std at
+// the area LOD (noise), the height filtering towards the view and the light (height). Unlit:
+// the colour term itself.
+vec3 shadeColormap(Hit h, vec3 view, bool filtered) {
     ivec2 ch = uColormapChain;
     if (ch.x < 0) return vec3(0.0);
     ivec4 L0 = texelFetch(uLevels, ivec2(ch.x, 0), 0);
@@ -380,9 +388,10 @@ vec3 shadeColormap(Hit h, bool filtered) {
     footprintAxes(ch, h.dudv, major, minor, dir);
     int taps = minor > 0.0 ? int(min(max(ceil(major / minor), 1.0), 8.0)) : 8;
     float lod = log2(max(max(minor, major / 8.0), 1.0));
+    float areaLod = 0.5 * log2(max(major * minor, 1.0));
     vec2 axis = dir * major / vec2(w, hh);
     int n = ch.y;
-    bool want = filtered && lod < 1.0;
+    bool want = filtered && lod < 1.0 && uColormapDriver != COLORMAP_NOISE;
     float t = n > 1 ? max(lod, 0.0) : 0.0, iv = 0.0;
     float tl = clamp(lod, 0.0, float(n - 1));
     int l0 = n > 1 ? min(int(floor(tl)), n - 2) : 0;
@@ -406,19 +415,35 @@ vec3 shadeColormap(Hit h, bool filtered) {
         if (t > 0.0) bilinearAdd(ch.x + 1, uv, t * wt, M, B);
         iv += (m0.y - m0.x * m0.x) * wt;
     }
-    float sigma = 0.0;
-    if (filtered) {
-        float var = M.y - M.x * M.x;
-        if (lod < 1.0) var -= (1.0 - max(lod, 0.0)) * iv;
-        sigma = sqrt(max(var, 0.0));
+    if (uColormapDriver == COLORMAP_NOISE)
+        return colormapFiltered(M.x, filtered ? colormapNoiseSigma(areaLod) : 0.0);
+    float var = M.y - M.x * M.x;
+    if (lod < 1.0) var -= (1.0 - max(lod, 0.0)) * iv;
+    if (uColormapDriver == COLORMAP_HEIGHT) {
+        // two-sided: seen from behind, the frame flips (n, b -> -n, -b); grazing and
+        // back-facing directions just above the horizon, as the Python method
+        float s = dot(view, h.n) < 0.0 ? -1.0 : 1.0;
+        vec3 gt = h.t, gb = s * h.b, gn = s * h.n;
+        vec3 wo = vec3(dot(view, gt), dot(view, gb), max(dot(view, gn), 1e-3));
+        vec3 l = uColormapLight.xyz;
+        vec3 wi = uColormapLight.w > 0.0
+            ? vec3(dot(l, gt), dot(l, gb), max(dot(l, gn), 1e-3)) : vec3(0.0, 0.0, 1.0);
+        float lo = colormapLambda(normalize(wo)), li = colormapLambda(normalize(wi));
+        return filtered ? colormapHeightFootprint(M.x, var, lo, li)
+                        : colormapHeightNaive(M.x, lo, li);
     }
-    return colormapFiltered(M.x, sigma);
+    return colormapFiltered(M.x, filtered ? sqrt(max(var, 0.0)) : 0.0);
 }
+
+// leadr-env / leadr-irradiance: shaders/leadr_env.frag.glsl
+vec3 shadeLeadrEnv(Hit h, vec3 view, bool diffuseOnly);
 
 vec3 shade(Hit h, vec3 view, int method) {
     if (method == METHOD_LEADR_POINT) return shadeLeadr(h, view);
+    if (method == METHOD_LEADR_ENV || method == METHOD_LEADR_IRRADIANCE)
+        return shadeLeadrEnv(h, view, method == METHOD_LEADR_IRRADIANCE);
     if (method == METHOD_COLORMAP_FILTERED || method == METHOD_COLORMAP_NAIVE)
-        return shadeColormap(h, method == METHOD_COLORMAP_FILTERED);
+        return shadeColormap(h, view, method == METHOD_COLORMAP_FILTERED);
     int k = h.id;
     ivec4 map = uMatMap[k];
     vec3 gn = h.n, gt = h.t, gb = h.b;
