@@ -415,7 +415,17 @@ vec3 shadeColormap(Hit h, bool filtered) {
     return colormapFiltered(M.x, sigma);
 }
 
+#ifdef GLINTS
+// the glints modes (shaders/glints.frag.glsl, compiled only into the glints program)
+vec3 shadeGlints(Hit h, vec3 view, bool smoothLobe);
+#endif
+
 vec3 shade(Hit h, vec3 view, int method) {
+#ifdef GLINTS
+    // the glints program shades nothing else (its samplers would exceed the 16 units WebGL2
+    // guarantees next to the other methods')
+    return shadeGlints(h, view, method == METHOD_GLINTS_SMOOTH);
+#endif
     if (method == METHOD_LEADR_POINT) return shadeLeadr(h, view);
     if (method == METHOD_COLORMAP_FILTERED || method == METHOD_COLORMAP_NAIVE)
         return shadeColormap(h, method == METHOD_COLORMAP_FILTERED);
