@@ -64,17 +64,34 @@ DISTANCES = {"near": 0.5, "mid": 2.0, "far": 8.0}
 
 
 def glints_scene(kind: str, distance: str = "mid", lights: str = "point", width: int = 96,
-                 height: int = 72) -> dict:
+                 height: int = 72, shape: str = "plane") -> dict:
     """The glints measurement plane (:func:`prefilter.glints.render.measurement_scene`) with
-    built-in map ``kind`` (:data:`GLINT_MAPS`) seen from ``distance`` (:data:`DISTANCES`)."""
+    built-in map ``kind`` (:data:`GLINT_MAPS`) seen from ``distance`` (:data:`DISTANCES`).
+
+    ``lights``: ``"point"``, ``"quad"`` (as ``measurement_scene``) or ``"directional"`` (from the
+    point light's direction, irradiance 5); ``shape``: ``"plane"`` or ``"sphere"`` (radius
+    ``0.25 d`` at the origin, about as many texels per unit length as the plane)."""
     from prefilter.glints.render import measurement_scene
 
     if distance not in DISTANCES:
         raise PrefilterError(f"distance: expected one of {sorted(DISTANCES)}, got {distance!r}")
+    if shape not in ("plane", "sphere"):
+        raise PrefilterError(f"shape: expected 'plane' or 'sphere', got {shape!r}")
     glint_normal_map(kind)  # validates the kind
-    sc = measurement_scene(DISTANCES[distance], kind, size=GLINT_MAPS[kind]["size"],
-                           width=width, height=height, lights=lights)
-    sc["objects"][0]["material"]["normal_map"] = dict(GLINT_MAPS[kind])
+    d = DISTANCES[distance]
+    sc = measurement_scene(d, kind, size=GLINT_MAPS[kind]["size"], width=width, height=height,
+                           lights="point" if lights == "directional" else lights)
+    if lights == "directional":
+        p = sc["lights"][0]["position"]
+        sc["lights"] = [{"type": "directional", "direction": [-x for x in p],
+                         "irradiance": [5.0] * 3}]
+    obj = sc["objects"][0]
+    obj["material"]["normal_map"] = dict(GLINT_MAPS[kind])
+    if shape == "sphere":
+        r = 0.25 * d
+        sc["objects"] = [{"type": "sphere", "center": [0, 0, 0], "radius": r,
+                          "uv_scale": [8 * math.pi * r, 4 * math.pi * r],
+                          "material": obj["material"]}]
     return sc
 
 
@@ -123,8 +140,8 @@ def select_glints(driver, kind: str, codes: str = "f32") -> None:
 
 
 def glints_pixel_match(kinds=tuple(GLINT_MAPS), distances=tuple(DISTANCES), codes=("f32",), *,
-                       lights: str = "point", width: int = 96, height: int = 72,
-                       driver=None) -> list[dict]:
+                       lights: str = "point", shape: str = "plane", width: int = 96,
+                       height: int = 72, driver=None) -> list[dict]:
     """The page's ``glints`` mode against ``prefilter.render.render(scene, "glints")`` on
     :func:`glints_scene` for every map, distance and code variant: rows ``{map, distance,
     codes, rel_rmse, max_abs, max_rel, covered}`` (as :func:`prefilter.viewer.pixel_match`)."""
@@ -132,7 +149,7 @@ def glints_pixel_match(kinds=tuple(GLINT_MAPS), distances=tuple(DISTANCES), code
     from prefilter.viewer.browser import open_viewer, render_linear
     from prefilter.viewer.match import _errors
 
-    scenes = {f"{k}-{d}": glints_scene(k, d, lights, width, height)
+    scenes = {f"{k}-{d}": glints_scene(k, d, lights, width, height, shape)
               for k in kinds for d in distances}
     rows = []
     with glint_pages(scenes, kinds, codes, driver) as (drv, url_of):
@@ -145,6 +162,7 @@ def glints_pixel_match(kinds=tuple(GLINT_MAPS), distances=tuple(DISTANCES), code
                     select_glints(drv, k, c)
                     img, covered = render_linear(drv, "glints")
                     rows.append({"map": k, "distance": d, "codes": c, "lights": lights,
+                                 "shape": shape,
                                  **_errors(img, ref, covered)})
     return rows
 
@@ -178,3 +196,17 @@ def open_viewer_glints(driver, url: str, kind: str, codes: str = "f32") -> None:
     driver.execute_script("const v = window.prefilterViewer.viewer;"
                           "Object.assign(v.params, {methodLeft: 'glints', "
                           "methodRight: 'glints', split: -1});")
+
+
+def glints_screenshot(path, kind: str = "flakes", distance: str = "mid", *, width: int = 512,
+                      height: int = 384, driver=None) -> Path:
+    """A PNG of the page's canvas in split view: ``glints`` (left) | ``glints-smooth`` (the
+    smooth lobe of the same moments, right) on :func:`glints_scene` (exposure 1/2, sRGB)."""
+    from prefilter.viewer.browser import screenshot
+
+    with glint_pages({"shot": glints_scene(kind, distance, "point", width, height)}, (kind,),
+                     driver=driver) as (drv, url_of):
+        open_viewer_glints(drv, url_of("shot"), kind)
+        drv.execute_script("Object.assign(window.prefilterViewer.viewer.params, "
+                           "{methodRight: 'glints-smooth', split: 0.5, exposure: 0.5});")
+        return screenshot(drv, path)
