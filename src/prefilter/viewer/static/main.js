@@ -17,7 +17,7 @@ function orbit(v, dPhi, dTheta, zoom) {
 
 function bindControls(v) {
   const P = v.params;
-  for (const m of METHODS) $('method').add(new Option(m, m));
+  for (const m of METHODS) if (v.glints || !m.startsWith('glints')) $('method').add(new Option(m, m));
   for (const m of v.mapNames()) $('map').add(new Option(m, m));
   const update = () => {
     P.methodLeft = $('method').value;
