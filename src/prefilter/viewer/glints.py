@@ -201,12 +201,12 @@ def open_viewer_glints(driver, url: str, kind: str, codes: str = "f32") -> None:
 def glints_screenshot(path, kind: str = "flakes", distance: str = "mid", *, width: int = 512,
                       height: int = 384, driver=None) -> Path:
     """A PNG of the page's canvas in split view: ``glints`` (left) | ``glints-smooth`` (the
-    smooth lobe of the same moments, right) on :func:`glints_scene` (exposure 1/2, sRGB)."""
+    smooth lobe of the same moments, right) on :func:`glints_scene` (exposure 1/16, sRGB)."""
     from prefilter.viewer.browser import screenshot
 
     with glint_pages({"shot": glints_scene(kind, distance, "point", width, height)}, (kind,),
                      driver=driver) as (drv, url_of):
         open_viewer_glints(drv, url_of("shot"), kind)
         drv.execute_script("Object.assign(window.prefilterViewer.viewer.params, "
-                           "{methodRight: 'glints-smooth', split: 0.5, exposure: 0.5});")
+                           "{methodRight: 'glints-smooth', split: 0.5, exposure: 0.0625});")
         return screenshot(drv, path)
