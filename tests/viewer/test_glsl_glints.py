@@ -86,7 +86,7 @@ const [src, data, n, entry, done] = [arguments[0], arguments[1], arguments[2], a
 @pytest.fixture(scope="module")
 def surf():
     os.environ.setdefault("PREFILTER_GLINTS_CACHE", CACHE)
-    from prefilter.viewer.glints import glint_surface
+    from prefilter.viewer.glint_maps import glint_surface
 
     return glint_surface("flakes")
 

@@ -204,7 +204,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
     ``builtin_maps``: also pack the :data:`BUILTIN_MAPS` for the page's normal-map choice.
     ``iso_table`` / ``aniso_table``: the tables (default: the shipped ones).
     ``glints``: glint maps for the ``glints`` mode, kinds of
-    :data:`prefilter.viewer.glints.GLINT_MAPS` (baked on first use: minutes each).
+    :data:`prefilter.viewer.glint_maps.GLINT_MAPS` (baked on first use: minutes each).
     """
     from prefilter.leadr import glsl as leadr_glsl
     from prefilter.ltc import glsl as iso_glsl
@@ -299,7 +299,7 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
         "scene": viewer_scene(scene, map_index, colors, heights),
     }
     if glints:
-        from prefilter.viewer.glints import export_glints
+        from prefilter.viewer.glint_maps import export_glints
 
         manifest["glints"] = export_glints(data, tuple(glints))
     save_json_atomic(data / "viewer.json", manifest)
