@@ -74,3 +74,13 @@ def test_glints_differ_from_the_smooth_lobe(browser):
         b, _ = render_linear(drv, "glints-smooth")
     e = (a - b)[cov]
     assert np.sqrt(np.mean(e * e)) / np.sqrt(np.mean(a[cov] ** 2)) > 10 * TOL
+
+
+@pytest.mark.slow
+def test_sphere_under_a_directional_light_matches_python(browser):
+    from prefilter.viewer.glints import glints_pixel_match
+
+    (r,) = glints_pixel_match(kinds=("flakes",), distances=("mid",), lights="directional",
+                              shape="sphere", driver=browser)
+    assert r["covered"] > 0.3 * 96 * 72
+    assert r["rel_rmse"] <= TOL, r
