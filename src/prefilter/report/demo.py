@@ -626,6 +626,7 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
 
     from prefilter.viewer import METHODS, pixel_match, screenshots
     from prefilter.viewer.browser import CHROMEDRIVER, CHROMIUM, chromium
+    from prefilter.viewer.glints import glints_screenshot
 
     if not settings.viewer:
         report.add_text("Skipped (demo settings: `viewer=False`).")
@@ -646,6 +647,8 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         try:
             t0 = time.perf_counter()
             shots = screenshots(Path(tmp) / "shots", width=w, height=h, driver=driver)
+            glint_shot = glints_screenshot(Path(tmp) / "glints.png", width=w, height=h,
+                                           driver=driver)
             t_shots = time.perf_counter() - t0
             t0 = time.perf_counter()
             rows = (pixel_match(scenes=("bumps-sphere",), methods=ltc, width=mw, height=mh,
@@ -663,6 +666,7 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         half = (len(shots) + 1) // 2
         report.add_image_row("viewer modes", list(zip(names[:half], map(str, shots[:half]))))
         report.add_image_row("viewer modes 2", list(zip(names[half:], map(str, shots[half:]))))
+        report.add_image_row("viewer glints", [("glints | smooth lobe", str(glint_shot))])
     report.add_text(
         f"Canvas screenshots ({w} x {h}, sRGB, exposure 1/2) of the default scene (Gaussian-bump "
         "plane, anisotropic sphere, one quad light) per method, `split` = ltc-multiscale | ltc; "
@@ -670,7 +674,9 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         "point lights and a directional light), the unlit `colormap-*` modes on its `colormap` "
         "scene (a colour-mapped noise texture), `leadr-env` / `leadr-irradiance` on its "
         "`leadr-env` scene (the leadr objects under a procedural sky with a sun and a point "
-        f"light, at most 256 x 192). Taken in {t_shots:.1f} s.")
+        "light, at most 256 x 192); `glints | smooth lobe`: the `glints` mode on the "
+        "64^2 flakes map (`prefilter.viewer.glints.glints_scene`, mid distance, point light) "
+        f"against a Gaussian lobe of the same slope moments. Taken in {t_shots:.1f} s.")
     report.add_table(
         ["scene", "method", "tables / maps", "relative RMSE", "max abs error",
          "max error / max radiance"],

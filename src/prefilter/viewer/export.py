@@ -244,12 +244,14 @@ def _write(path: Path, data: bytes) -> None:
 
 
 def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
-                 iso_table=None, aniso_table=None) -> Path:
+                 iso_table=None, aniso_table=None, glints=()) -> Path:
     """Write the viewer's static folder for ``scene`` (a :class:`Scene`, a JSON path, a dict or
     ``None`` for :func:`default_scene`) to ``out_dir``; returns ``out_dir``.
 
     ``builtin_maps``: also pack the :data:`BUILTIN_MAPS` for the page's normal-map choice.
     ``iso_table`` / ``aniso_table``: the tables (default: the shipped ones).
+    ``glints``: glint maps for the ``glints`` mode, kinds of
+    :data:`prefilter.viewer.glint_maps.GLINT_MAPS` (baked on first use: minutes each).
     """
     from prefilter.leadr import glsl as leadr_glsl
     from prefilter.ltc import glsl as iso_glsl
@@ -344,5 +346,9 @@ def export_scene(scene=None, out_dir="viewer", *, builtin_maps: bool = True,
         "maps": maps,
         "scene": viewer_scene(scene, map_index, colors, heights),
     }
+    if glints:
+        from prefilter.viewer.glint_maps import export_glints
+
+        manifest["glints"] = export_glints(data, tuple(glints))
     save_json_atomic(data / "viewer.json", manifest)
     return out

@@ -1,5 +1,6 @@
 // Page wiring: controls, orbit camera, FPS counter, and `window.prefilterViewer` for tests.
 import {METHODS, Viewer, toBase64} from './viewer.js';
+import {GLINT_CODES, selectGlintMap} from './glints.js';
 
 const $ = (id) => document.getElementById(id);
 const canvas = $('canvas');
@@ -16,11 +17,12 @@ function orbit(v, dPhi, dTheta, zoom) {
 
 function bindControls(v) {
   const P = v.params;
-  for (const m of METHODS) $('method').add(new Option(m, m));
+  for (const m of METHODS) if (v.glints || !m.startsWith('glints')) $('method').add(new Option(m, m));
   for (const m of v.mapNames()) $('map').add(new Option(m, m));
   const update = () => {
     P.methodLeft = $('method').value;
-    P.methodRight = $('split').checked ? 'ltc' : P.methodLeft;
+    const glints = P.methodLeft.startsWith('glints');
+    P.methodRight = $('split').checked ? (glints ? 'glints-smooth' : 'ltc') : P.methodLeft;
     P.split = $('split').checked ? 0.5 : -1;
     v.precision = $('precision').value;
     P.map = $('map').value;
@@ -39,6 +41,13 @@ function bindControls(v) {
   for (const id of ['method', 'split', 'precision', 'map', 'light-x', 'light-y', 'light-size', 'exposure'])
     $(id).addEventListener('input', update);
   for (const id of ['roughness', 'anisotropy']) $(id).addEventListener('input', rough);
+  if (v.glints) {  // glint map and code variant: loaded on first choice
+    for (const k of Object.keys(v.manifest.glints.maps)) $('glint-map').add(new Option(k, k));
+    for (const c of GLINT_CODES) $('glint-codes').add(new Option(c, c));
+    const pick = () => selectGlintMap(v, $('glint-map').value, $('glint-codes').value)
+      .then(() => { dirty = true; }, e => { $('error').textContent = String(e.message || e); });
+    for (const id of ['glint-map', 'glint-codes']) $(id).addEventListener('input', pick);
+  }
   update();
   let drag = null;
   canvas.addEventListener('pointerdown', e => { drag = [e.clientX, e.clientY]; canvas.setPointerCapture(e.pointerId); });
@@ -96,6 +105,8 @@ window.prefilterViewer = {
     return toBase64(px);
   },
   frameTime(n = 10) { return viewer.frameTime(n); },
+  // the glints mode's map and code variant (async: loads its textures on first use)
+  selectGlints(kind, codes = 'f32') { return selectGlintMap(viewer, kind, codes); },
   redraw() { viewer.draw(); viewer.gl.finish(); dirty = false; },
   error() { return $('error').textContent; },
 };

@@ -2,10 +2,11 @@
 // compiles the exported GLSL snippets with shaders/viewer.frag.glsl, draws one frame.
 // No dependencies; see docs/viewer.md for the data formats.
 
+import {GLINT_METHODS, bindGlintMode, loadGlintMode} from './glints.js';
 import {LEADR_ENV_METHODS, bindLeadrEnv, leadrEnvUnits, loadLeadrEnv} from './leadr_env.js';
 
 export const METHODS = ['ltc', 'ltc-multiscale', 'ltc-aniso', 'ltc-multiscale-aniso', 'leadr-point',
-  'colormap-filtered', 'colormap-naive', ...LEADR_ENV_METHODS];
+  'colormap-filtered', 'colormap-naive', ...LEADR_ENV_METHODS, ...GLINT_METHODS];
 
 async function fetchOk(url, kind) {
   const r = await fetch(url);
@@ -98,6 +99,8 @@ export class Viewer {
     gl.linkProgram(prog);
     if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error('link: ' + gl.getProgramInfoLog(prog));
     this.prog = prog;
+    this.progUniforms = null;
+    if (m.glints) this.glints = await loadGlintMode(this, base, compile, head, vert, [iso, aniso, ms, leadr, cmap], frag, METHODS);
     this.vao = gl.createVertexArray();
     this.tables = {};
     for (const p of ['f32', 'f16']) {
@@ -134,6 +137,7 @@ export class Viewer {
       const name = info.name.replace(/\[0\]$/, '');
       this.uniforms[name] = gl.getUniformLocation(prog, info.name);
     }
+    this.progUniforms = this.uniforms;
     return this;
   }
 
@@ -143,7 +147,9 @@ export class Viewer {
 
   _bind(width, height) {
     const gl = this.gl, P = this.params, S = this.scene, m = this.manifest;
-    gl.useProgram(this.prog);
+    const glints = this.glints && [P.methodLeft, P.methodRight].some(x => GLINT_METHODS.includes(x));
+    this.uniforms = glints ? this.glints.uniforms : this.progUniforms;
+    gl.useProgram(glints ? this.glints.prog : this.prog);
     const units = [['uAtlas', gl.TEXTURE_2D, this.atlas], ['uAtlas16', gl.TEXTURE_2D, this.atlas16],
                    ['uLevels', gl.TEXTURE_2D, this.levels],
                    ['uColormapTable', gl.TEXTURE_2D, this.colormapTable],
@@ -159,6 +165,7 @@ export class Viewer {
       gl.bindTexture(target, tex);
       this._u(name, 'uniform1i', i);
     });
+    if (glints) bindGlintMode(this, units.length);
     this._u('uAtlasWidth', 'uniform1i', m.atlas.width);
     const c = this.camera, b = cameraBasis(c);
     this._u('uCamO', 'uniform3fv', c.origin);

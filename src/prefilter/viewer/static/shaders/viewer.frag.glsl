@@ -437,8 +437,17 @@ vec3 shadeColormap(Hit h, vec3 view, bool filtered) {
 
 // leadr-env / leadr-irradiance: shaders/leadr_env.frag.glsl
 vec3 shadeLeadrEnv(Hit h, vec3 view, bool diffuseOnly);
+#ifdef GLINTS
+// the glints modes (shaders/glints.frag.glsl, compiled only into the glints program)
+vec3 shadeGlints(Hit h, vec3 view, bool smoothLobe);
+#endif
 
 vec3 shade(Hit h, vec3 view, int method) {
+#ifdef GLINTS
+    // the glints program shades nothing else (its samplers would exceed the 16 units WebGL2
+    // guarantees next to the other methods')
+    return shadeGlints(h, view, method == METHOD_GLINTS_SMOOTH);
+#endif
     if (method == METHOD_LEADR_POINT) return shadeLeadr(h, view);
     if (method == METHOD_LEADR_ENV || method == METHOD_LEADR_IRRADIANCE)
         return shadeLeadrEnv(h, view, method == METHOD_LEADR_IRRADIANCE);

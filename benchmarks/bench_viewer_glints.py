@@ -1,0 +1,33 @@
+"""Frame time of the viewer's ``glints`` mode in headless Chromium (WebGL2 on SwiftShader) at
+512 x 512 per distance of the glints measurement plane, and the max / min ratio over the
+distances (the constant-cost claim on the GPU path).
+
+    python benchmarks/bench_viewer_glints.py [--kind flakes] [--size 512] [--frames 3]
+        [--rounds 3] [--codes f32]
+
+The 64^2 built-in map is baked on first use (``$PREFILTER_GLINTS_CACHE``). Rounds interleave
+the distances; the best of the rounds is reported.
+"""
+
+import argparse
+
+from prefilter.viewer.glints import DISTANCES, GLINT_MAPS, glints_frame_times
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--kind", default="flakes", choices=sorted(GLINT_MAPS))
+    ap.add_argument("--size", type=int, default=512)
+    ap.add_argument("--frames", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--codes", default="f32", choices=("f32", "f16", "u8"))
+    a = ap.parse_args()
+    t = glints_frame_times(a.kind, tuple(DISTANCES), width=a.size, height=a.size,
+                           frames=a.frames, rounds=a.rounds, codes=a.codes)
+    for d, ms in t.items():
+        print(f"  {d:5s} (distance {DISTANCES[d]:g}): {ms:9.1f} ms")
+    print(f"max/min over distances: {max(t.values()) / min(t.values()):.2f}")
+
+
+if __name__ == "__main__":
+    main()
