@@ -155,7 +155,7 @@ def test_scheduler_that_does_not_answer_fails_within_the_timeout():
 
 def test_cli_scheduler_that_does_not_answer_is_one_line_exit_2(tmp_path, capsys, monkeypatch):
     from prefilter import distributed as d
-    from prefilter.cli import main
+    from prefilter.cli import cli
 
     monkeypatch.setattr(d, "CONNECT_TIMEOUT", 2.0)
     with pytest.raises(SystemExit) as exc:
@@ -181,3 +181,21 @@ def test_task_map_keeps_order_and_refuses_closures():
     assert task_map(math.pow, [(2, i) for i in range(4)]) == [1.0, 2.0, 4.0, 8.0]
     with pytest.raises(PrefilterError, match="func: expected a top-level function"):
         task_map(lambda x: x, [(1,)])
+
+
+def test_glints_bake_cli_on_two_workers_is_byte_identical(tmp_path, cluster):
+    """``prefilter bake glints --scheduler ADDRESS``: the level-0 chunks and CP cells as tasks
+    on the cluster give the bytes of the bake in this process."""
+    from click.testing import CliRunner
+
+    from prefilter.cli import cli
+
+    args = ["bake", "glints", "procedural:flakes:32:3", "--rank", "4", "--ndf-res", "16",
+            "--block", "8", "--cell", "8", "--iters", "10", "--quiet"]
+    runner = CliRunner()
+    one = runner.invoke(cli, args + ["-o", str(tmp_path / "one.npz")])
+    assert one.exit_code == 0, one.output
+    two = runner.invoke(cli, args + ["-o", str(tmp_path / "two.npz"),
+                                      "--scheduler", cluster.scheduler_address])
+    assert two.exit_code == 0, two.output
+    assert (tmp_path / "one.npz").read_bytes() == (tmp_path / "two.npz").read_bytes()

@@ -187,6 +187,19 @@ class Engine:
                 bar.update(1)
         return results
 
+    def imap(self, func: Callable, *iterables):
+        """``map(func, *iterables)`` on the engine's scheduler: results in order, each yielded
+        as soon as it and those before it are done (the ``map_fn`` of
+        :func:`prefilter.glints.bake.bake`)."""
+        jobs = list(enumerate(zip(*iterables)))
+        done: dict = {}
+        nxt = 0
+        for i, r in self._completed(func, jobs, getattr(func, "__name__", "tasks")):
+            done[i] = r
+            while nxt in done:
+                yield done.pop(nxt)
+                nxt += 1
+
     def run(self, func: Callable, arg_tuples: Sequence[tuple], checkpoints, *,
             progress: bool = False, desc: str = "tasks",
             on_done: Callable[[int], None] | None = None) -> None:

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from prefilter.cliparams import SEED, SEED_MAX, OutputFile
+from prefilter.cliparams import SEED, SEED_MAX, OutputFile, scheduler_options
 from prefilter.errors import PrefilterError
 from prefilter.fileio import bake_lock
 from prefilter.glints.bake import BAKE_SETTINGS, CELL, bake, bake_settings, cache_path
@@ -172,9 +172,11 @@ _D = BAKE_SETTINGS
                    "cell / stride0); 1 makes every image a group (exact ranks <= block instead "
                    "of block^2: faster queries).")
 @shared_options(iters=_D["n_iter_max"], seed=_D["seed"], wait=False, quiet=False)
+@scheduler_options
 def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
                 stride0, sigma0, cell, converge, blank_tol, ndf_truncation, footprint_truncation,
-                code_bits, c_bits, exact_from_level, exact_cell, iters, seed, wait, quiet):
+                code_bits, c_bits, exact_from_level, exact_cell, iters, seed, wait, quiet,
+                scheduler, workers):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
@@ -199,8 +201,15 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
     if out is None:
         out = cache_path(nm, st)
         Path(out).parent.mkdir(parents=True, exist_ok=True)
-    with bake_lock(out, wait=wait):
-        summary = bake(nm, out, progress=not quiet, **st)
+    from prefilter.distributed import Engine
+
+    # the tasks (level-0 chunks, CP cells) share the checkpoint folder beside OUT: workers on
+    # other machines need it on a shared file system
+    with bake_lock(out, wait=wait), Engine(scheduler, workers=workers) as engine:
+        if not quiet and not engine.synchronous:
+            click.echo(f"glints bake: tasks on {engine.describe()}", err=True)
+        summary = bake(nm, out, progress=not quiet,
+                       map_fn=None if engine.synchronous else engine.imap, **st)
     s = summary
     click.echo(f"images {s['n_images']}, blocks kept {s['blocks_kept']}/{s['blocks_total']}")
     click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "
