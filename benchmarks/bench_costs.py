@@ -19,7 +19,8 @@ table on stdout, the plot ``docs/img/distributed_costs.png`` (``--no-plot`` to s
 ``--only scaling`` and the default run also time the distributed tasks on a local cluster of 1
 and of 2 worker processes (clusters started and warmed first, start-up timed apart; the workers'
 Numba kernels on one thread each): an LTC table of 8^2 entries (8 row tasks) and a reference
-render of the ``plane-and-sphere`` example at 160 x 90, 64 spp (bands of 8 rows); speed-up =
+render of the ``plane-and-sphere`` example at 160 x 90, 64 spp (bands of 8 rows), and a glint
+bake (``--glint-size``, its level-0 chunks and CP cells as tasks); speed-up =
 t1 / t2, efficiency = speed-up / 2. On a machine shared with other jobs these ratios understate
 what two idle cores give: rerun on an idle machine.
 
@@ -27,7 +28,7 @@ what two idle cores give: rerun on an idle machine.
 checkpoint part written by the client.
 
 Options: ``--only costs|scaling|overheads``, ``--sizes 128,256`` (map sizes),
-``--ltc-sizes 4,8``.
+``--ltc-sizes 4,8``, ``--glint-size 1024`` (the glint bake of the scaling part; default 256).
 """
 
 from __future__ import annotations
@@ -186,9 +187,12 @@ def plot(rows: list[dict], laws: dict, path: Path) -> None:
 # -- scaling -------------------------------------------------------------------------------------
 
 
-def scaling() -> list[dict]:
-    """1 vs 2 workers on the LTC rows and the reference bands (this process is the client).
-    Each worker runs its Numba kernels on one thread, so that 1 worker is one core."""
+def scaling(glint_size: int = 256) -> list[dict]:
+    """1 vs 2 workers on the LTC rows, the reference bands and a glint bake of a
+    ``glint_size``^2 flakes map at the render's settings (this process is the client). Each
+    worker runs its Numba kernels on one thread, so that 1 worker is one core; the glint bake's
+    stages between its task passes (coarser levels, rank allocation) run in the client, also
+    on one thread, and are included in its time."""
     os.environ["NUMBA_NUM_THREADS"] = "1"  # inherited by the workers the engine spawns
     from prefilter.distributed import Engine
     from prefilter.ltc.fit_iso import FitSettings, fit_row
@@ -221,7 +225,35 @@ def scaling() -> list[dict]:
                 engine.map(func, tasks)
                 out.append({"job": name, "workers": workers, "tasks": len(tasks),
                             "seconds": time.perf_counter() - t1, "cluster_start_s": start})
+            if glint_size:
+                out.append(_glint_bake_timed(engine, glint_size, workers, start))
     return out
+
+
+def _glint_bake_timed(engine, size: int, workers: int, start: float) -> dict:
+    """A whole glint bake (:data:`prefilter.glints.bake.BAKE_SETTINGS`) on ``engine``, from
+    nothing, into a temporary folder; the number of tasks counted through ``map_fn``."""
+    from prefilter.glints.bake import BAKE_SETTINGS, bake, bake_settings
+    from prefilter.texture.procedural import normal_map
+
+    nm = normal_map("flakes", size, seed=1)
+    n_tasks = 0
+
+    def counted(fn, *iterables):
+        nonlocal n_tasks
+        args = list(zip(*iterables))
+        n_tasks += len(args)
+        return engine.imap(fn, *zip(*args)) if args else iter(())
+
+    with tempfile.TemporaryDirectory() as tmp:
+        t1 = time.perf_counter()
+        bake(nm, Path(tmp) / "map.npz", progress=False, map_fn=counted,
+             **bake_settings(nm.shape, dict(BAKE_SETTINGS)))
+        seconds = time.perf_counter() - t1
+    print(f"  glint bake {size}^2 on {workers} worker(s): {seconds:.1f} s", file=sys.stderr,
+          flush=True)
+    return {"job": f"glint bake ({size}^2 flakes, render settings)", "workers": workers,
+            "tasks": n_tasks, "seconds": seconds, "cluster_start_s": start}
 
 
 def overheads() -> dict:
@@ -272,6 +304,9 @@ def main() -> None:
     p.add_argument("--only", choices=("costs", "scaling", "overheads"))
     p.add_argument("--sizes", default=",".join(map(str, MAP_SIZES)))
     p.add_argument("--ltc-sizes", default=",".join(map(str, LTC_SIZES)))
+    p.add_argument("--glint-size", type=int, default=256,
+                   help="side of the normal map of the glint bake timed on 1 and 2 workers "
+                        "(0: skip it)")
     p.add_argument("--no-plot", action="store_true")
     p.add_argument("--replot", action="store_true",
                    help="table and plot from out/bench/costs.json, measuring nothing")
@@ -300,7 +335,7 @@ def main() -> None:
         if not args.no_plot:
             plot(rows, laws, ROOT / "docs" / "img" / "distributed_costs.png")
     if args.only in (None, "scaling"):
-        sc = scaling()
+        sc = scaling(args.glint_size)
         print(scaling_table(sc))
         result.update(scaling=sc)
     if args.only in (None, "scaling", "overheads"):

@@ -19,7 +19,8 @@ import pytest
 REPO = Path(__file__).resolve().parents[2]
 SRC = REPO / "src"
 #: Import name -> distribution, where they differ (llvmlite is numba's own dependency).
-DISTRIBUTION = {"PIL": "pillow", "flip_evaluator": "flip-evaluator", "llvmlite": "numba"}
+DISTRIBUTION = {"PIL": "pillow", "flip_evaluator": "flip-evaluator", "llvmlite": "numba",
+                "distributed": "dask"}
 #: Third-party modules only the `fit` extra provides, and the one file that imports each.
 FIT_ONLY = {"torch": "prefilter.ltc.aniso.fit"}
 

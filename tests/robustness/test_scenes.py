@@ -279,7 +279,8 @@ def test_every_method_renders_some_fuzzed_scene(assets):
             "objects": [{"type": "plane", "size": 4.0, "material": {
                 "alpha": 0.3, "base_color": 0.2, "normal_map": NORMAL_MAPS[1],
                 "height_map": HEIGHT_MAPS[1]}}],
-            "extras": {"colormap": COLORMAPS[0]}}
+            "extras": {"colormap": COLORMAPS[0],
+                       "glints_wave": {"heightfield": "procedural:noise:16:0"}}}
     families = [[{"type": "quad", "vertices": UP_QUAD[::-1], "radiance": 2.0}],
                 [{"type": "point", "position": POINTS["above"], "intensity": 2.0}],
                 [{"type": "environment", "image": "env_sun.exr"}]]

@@ -63,6 +63,9 @@ def scene_heightfield(scene):
 def wave_map(hf, settings: dict | None = None, progress: bool = False):
     """The baked :class:`~prefilter.glints.wave.bake.WaveMap` of ``hf`` (glints cache)."""
     st = dict(WAVE_SETTINGS, **(settings or {}))
+    if "cell" not in (settings or {}):
+        # as the geometric bake_settings: a heightfield smaller than the default cell is one cell
+        st["cell"] = min(st["cell"], *hf.shape)
     key = json.dumps(dict(st, heights=hf.digest, version=WAVE_VERSION), sort_keys=True)
     if key not in _MAPS:
         import hashlib
