@@ -155,7 +155,7 @@ def test_scheduler_that_does_not_answer_fails_within_the_timeout():
 
 def test_cli_scheduler_that_does_not_answer_is_one_line_exit_2(tmp_path, capsys, monkeypatch):
     from prefilter import distributed as d
-    from prefilter.cli import cli
+    from prefilter.cli import main
 
     monkeypatch.setattr(d, "CONNECT_TIMEOUT", 2.0)
     with pytest.raises(SystemExit) as exc:

@@ -449,8 +449,11 @@ vec3 shade(Hit h, vec3 view, int method) {
     return shadeGlints(h, view, method == METHOD_GLINTS_SMOOTH);
 #endif
     if (method == METHOD_LEADR_POINT) return shadeLeadr(h, view);
+#ifndef GLINTS
+    // the environment modes' program part (shaders/leadr_env.frag.glsl) is not in the glints one
     if (method == METHOD_LEADR_ENV || method == METHOD_LEADR_IRRADIANCE)
         return shadeLeadrEnv(h, view, method == METHOD_LEADR_IRRADIANCE);
+#endif
     if (method == METHOD_COLORMAP_FILTERED || method == METHOD_COLORMAP_NAIVE)
         return shadeColormap(h, view, method == METHOD_COLORMAP_FILTERED);
     int k = h.id;
