@@ -19,9 +19,7 @@ value relative to the ``glints-direct`` frame maximum.
 ``"exact_from_level": L`` (a bake key) stores every group of pyramid levels
 ``>= L`` as its exact non-negative CP (:func:`prefilter.glints.cp.exact_cp`; ranks up to 192 on
 this map). ``L = 0`` is lossless up to the codes' rounding: its FLIP is what the query (pyramid
-resampling, bilinear NDF lookup, blank blocks) costs without compression error. (Session 8's
-rows were made with a patch that split the budget over the fitted groups only; the bake option
-gives the fitted groups the ranks they get without it.) Bakes go to
+resampling, bilinear NDF lookup, blank blocks) costs without compression error. Bakes go to
 ``$PREFILTER_GLINTS_CACHE``; set it to a scratch directory.
 """
 

@@ -112,5 +112,5 @@ def test_image_level_specular_leadr_beats_naive():
                      log=lambda r: None)
     spec = next(r for r in rows if r["shading"] == "specular")
     assert 12.0 < spec["texels/pixel"] < 20.0
-    # "leadr" includes self-shadowing since session 3 (was the "leadr shadowed" column)
+    # "leadr" includes self-shadowing
     assert spec["rmse leadr"] < 0.7 * spec["rmse naive"], spec
