@@ -155,3 +155,35 @@ def test_bad_transforms(tmp_path, transform, match):
     p = write_quad(tmp_path / "q.obj")
     with pytest.raises(PrefilterError, match=match):
         scene({"type": "mesh", "file": str(p), "transform": transform})
+
+
+def test_non_manifold_mesh_is_named(tmp_path):
+    """Three triangles on one edge (a fin): one error naming the file and the edge."""
+    (tmp_path / "fin.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\n"
+                                      "f 1 2 3\nf 2 1 4\nf 1 2 5\n")
+    with pytest.raises(PrefilterError, match=r"objects\[0\]\.file: .*fin\.obj: expected a "
+                                             r"manifold mesh, got 1 edge\(s\) shared by more "
+                                             r"than two triangles \(the first between "
+                                             r"vertices 0 and 1\)"):
+        scene({"type": "mesh", "file": str(tmp_path / "fin.obj")})
+    from prefilter.render.mesh import non_manifold_edges
+
+    assert non_manifold_edges(np.array([[0, 1, 2], [1, 0, 3]])).shape == (0, 2)
+
+
+def test_huge_mesh_is_refused_before_reading(tmp_path, monkeypatch):
+    """A PLY header of 10^9 triangles is refused from its header, naming the budget; with a
+    small budget an ordinary file is refused from its size before trimesh reads it."""
+    (tmp_path / "huge.ply").write_bytes(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 500000000\nproperty float x\n"
+        b"property float y\nproperty float z\nelement face 1000000000\n"
+        b"property list uchar int vertex_indices\nend_header\n")
+    with pytest.raises(PrefilterError, match=r"huge\.ply: a mesh of 1,000,000,000 triangles "
+                                             r"\(its PLY header\): needs about .* more than "
+                                             r"the memory budget"):
+        scene({"type": "mesh", "file": str(tmp_path / "huge.ply")})
+    p = write_quad(tmp_path / "q.obj")
+    monkeypatch.setenv("PREFILTER_MEMORY_BUDGET", "64")
+    with pytest.raises(PrefilterError, match=r"q\.obj: reading a mesh file of .* MiB: needs "
+                                             r"about .* more than the memory budget"):
+        scene({"type": "mesh", "file": str(p)})

@@ -31,8 +31,10 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 from prefilter.jit import njit_parallel, prange, serial
+from prefilter.validation import check_memory
 
-__all__ = ["MESH_SUFFIXES", "Mesh", "MeshData", "load_mesh", "mesh_hits_kernel", "trace_objects",
+__all__ = ["BYTES_PER_TRIANGLE", "MESH_SUFFIXES", "Mesh", "MeshData", "check_mesh_memory",
+           "load_mesh", "non_manifold_edges", "mesh_hits_kernel", "trace_objects",
            "transform_matrix", "vertex_tangents"]
 
 MESH_SUFFIXES = (".obj", ".ply", ".gltf", ".glb")
@@ -182,15 +184,76 @@ def _needs_uv(material) -> str | None:
     return None
 
 
+#: Memory of a loaded mesh per triangle (bytes): the arrays of :class:`MeshData` (faces 24 B,
+#: about half a vertex of position, normal, uv and tangent each, 48 B), trimesh's copies while
+#: reading and Embree's float32 scene and BVH, with margin (docs/meshes.md, "Large meshes").
+BYTES_PER_TRIANGLE = 400
+#: Memory while reading per byte of file, before the triangles are counted: binary formats hold
+#: about 30 B a triangle (PLY, GLB), text about 80 B (OBJ, glTF with external buffers counted as
+#: text by their JSON only: their .bin is read by trimesh and checked after).
+_BYTES_PER_FILE_BYTE = {".ply": 14, ".glb": 14, ".obj": 5, ".gltf": 14}
+
+
+def _ply_counts(path: Path) -> tuple[int, int] | None:
+    """``(vertices, faces)`` declared by a PLY header, or None where the header does not say."""
+    with open(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    end = head.find(b"end_header")
+    if not head.startswith(b"ply") or end < 0:
+        return None
+    counts = {}
+    for line in head[:end].decode("ascii", "replace").splitlines():
+        parts = line.split()
+        if len(parts) == 3 and parts[0] == "element" and parts[2].isdigit():
+            counts[parts[1]] = int(parts[2])
+    return counts.get("vertex", 0), counts.get("face", 0)
+
+
+def check_mesh_memory(p: Path) -> None:
+    """Refuse, before reading, a mesh file whose triangles would not fit the memory budget
+    (:func:`prefilter.validation.check_memory`): the PLY header's face count, else an estimate
+    from the file's size."""
+    counts = _ply_counts(p) if p.suffix.lower() == ".ply" else None
+    if counts is not None:
+        check_memory(counts[1] * BYTES_PER_TRIANGLE + counts[0] * 64,
+                     f"{p}: a mesh of {counts[1]:,} triangles (its PLY header)")
+    else:
+        size = p.stat().st_size
+        check_memory(size * _BYTES_PER_FILE_BYTE.get(p.suffix.lower(), 14),
+                     f"{p}: reading a mesh file of {size / 2**20:.1f} MiB")
+
+
+def non_manifold_edges(faces) -> np.ndarray:
+    """Edges ``(K, 2)`` (vertex indices, sorted) shared by more than two of ``faces (F, 3)``."""
+    f = np.asarray(faces, dtype=np.int64)
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    key = e[:, 0] * (int(f.max()) + 1) + e[:, 1]
+    u, counts = np.unique(key, return_counts=True)
+    bad = u[counts > 2]
+    n = int(f.max()) + 1
+    return np.stack([bad // n, bad % n], axis=1)
+
+
 @functools.lru_cache(maxsize=16)
 def _load_cached(path: str, mtime: int, transform: bytes) -> MeshData:
     p = Path(path)
+    check_mesh_memory(p)
     v, f, n, uv = _read(p)
+    # the file's own count, for the formats whose size alone estimated it
+    check_memory(len(f) * BYTES_PER_TRIANGLE, f"{p}: a mesh of {len(f):,} triangles")
     if not np.all(np.isfinite(v)):
         raise PrefilterError(f"{p}: expected finite vertex positions, got NaN or inf")
     if f.min() < 0 or f.max() >= len(v):
         raise PrefilterError(f"{p}: expected face indices in [0, {len(v)}), got "
                              f"[{f.min()}, {f.max()}]")
+    bad = non_manifold_edges(f)
+    if len(bad):
+        # an edge of three or more triangles has no one side: the smooth normals and the
+        # UV tangents averaged across it (and the ray differentials built on them) are undefined
+        raise PrefilterError(
+            f"{p}: expected a manifold mesh, got {len(bad)} edge(s) shared by more than two "
+            f"triangles (the first between vertices {bad[0, 0]} and {bad[0, 1]}); split them "
+            f"into separate surfaces (e.g. separate objects or duplicated vertices)")
     m = np.frombuffer(transform, dtype=np.float64).reshape(4, 4)
     v = v @ m[:3, :3].T + m[:3, 3]
     # normals transform by the inverse transpose (row vectors: n M^-1)
@@ -219,8 +282,9 @@ def load_mesh(path, transform=None, material=None, where: str = "") -> MeshData:
     and transform.
 
     Raises :class:`PrefilterError` (prefixed with ``where``, a scene field path) for a missing,
-    unreadable or empty file, NaN vertices, or a mesh without UVs whose ``material`` needs them
-    (textures, anisotropic roughness).
+    unreadable or empty file, a file too large for the memory budget (checked before reading),
+    NaN vertices, a non-manifold mesh (an edge of more than two triangles), or a mesh without
+    UVs whose ``material`` needs them (textures, anisotropic roughness).
     """
     p = Path(path)
     pre = f"{where}: " if where else ""
