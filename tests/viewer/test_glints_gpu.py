@@ -1,12 +1,10 @@
 """The viewer's ``glints`` mode against ``prefilter.render.render(scene, "glints")``: the glints
 measurement plane (``prefilter.viewer.glints.glints_scene``, 64^2 built-in maps baked at the
-render's settings, cached under ``$PREFILTER_GLINTS_CACHE``, default
-``/tmp/prefilter-glints-gpu``) at near / mid / far under a point light, relative RMSE over hit
-pixels <= 1 % with float32 codes; float16 and 8-bit codes are reported (their quantisation is
-not the Python method's). The default run checks flakes at mid distance; the four maps at three
-distances are slow (a bake per map on first use)."""
-
-import os
+render's settings, cached under ``$PREFILTER_GLINTS_CACHE``, see tests/conftest.py) at near /
+mid / far under a point light, relative RMSE over hit pixels <= 1 % with float32 codes; float16
+and 8-bit codes are reported (their quantisation is not the Python method's). The default run
+checks flakes at mid distance; the four maps at three distances are slow (a bake per map on
+first use)."""
 
 import numpy as np
 import pytest
@@ -14,7 +12,6 @@ import pytest
 from prefilter.viewer.glints import DISTANCES, GLINT_MAPS
 
 TOL = 0.01
-os.environ.setdefault("PREFILTER_GLINTS_CACHE", "/tmp/prefilter-glints-gpu")
 
 
 def _check(rows, kind, distance):

@@ -6,7 +6,6 @@ trilinear-clamped above the top level and at level 0 below it), ``glintNdf`` aga
 ``glRangeQuery`` against ``query.range_multi`` on the resampling weights, and
 ``glintBrdfCos`` against ``brdf.glint_brdf_cos``."""
 
-import os
 import shutil
 from pathlib import Path
 
@@ -18,7 +17,6 @@ from prefilter.glints.gpu import GLSL_FILES, export_surface, glsl_source, write_
 from prefilter.glints.query import point_flat, range_multi, weights
 
 STATIC = Path(__file__).resolve().parents[2] / "src" / "prefilter" / "viewer" / "static"
-CACHE = os.environ.get("PREFILTER_GLINTS_CACHE", "/tmp/prefilter-glints-gpu")
 
 _MAIN = """
 uniform highp sampler2D uIn;
@@ -85,7 +83,6 @@ const [src, data, n, entry, done] = [arguments[0], arguments[1], arguments[2], a
 
 @pytest.fixture(scope="module")
 def surf():
-    os.environ.setdefault("PREFILTER_GLINTS_CACHE", CACHE)
     from prefilter.viewer.glint_maps import glint_surface
 
     return glint_surface("flakes")
