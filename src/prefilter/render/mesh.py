@@ -184,14 +184,14 @@ def _needs_uv(material) -> str | None:
     return None
 
 
-#: Memory of a loaded mesh per triangle (bytes): the arrays of :class:`MeshData` (faces 24 B,
-#: about half a vertex of position, normal, uv and tangent each, 48 B), trimesh's copies while
-#: reading and Embree's float32 scene and BVH, with margin (docs/meshes.md, "Large meshes").
-BYTES_PER_TRIANGLE = 400
-#: Memory while reading per byte of file, before the triangles are counted: binary formats hold
-#: about 30 B a triangle (PLY, GLB), text about 80 B (OBJ, glTF with external buffers counted as
-#: text by their JSON only: their .bin is read by trimesh and checked after).
-_BYTES_PER_FILE_BYTE = {".ply": 14, ".glb": 14, ".obj": 5, ".gltf": 14}
+#: Peak memory of loading and first tracing a mesh, per triangle (bytes): :class:`MeshData`,
+#: trimesh's copies while reading and Embree's scene and BVH; measured 392-526 B on UV spheres
+#: of 1M-10M triangles (benchmarks/bench_mesh_large.py, docs/meshes.md "Large meshes").
+BYTES_PER_TRIANGLE = 550
+#: Memory per byte of file, before the triangles are counted: a binary PLY holds 33 B a
+#: triangle (measured), so 550 / 33; OBJ text about 80 B a triangle. A .gltf is counted by its
+#: JSON only (its .bin buffers are checked by the triangle count after reading).
+_BYTES_PER_FILE_BYTE = {".ply": 17, ".glb": 17, ".obj": 7, ".gltf": 17}
 
 
 def _ply_counts(path: Path) -> tuple[int, int] | None:
@@ -219,7 +219,7 @@ def check_mesh_memory(p: Path) -> None:
                      f"{p}: a mesh of {counts[1]:,} triangles (its PLY header)")
     else:
         size = p.stat().st_size
-        check_memory(size * _BYTES_PER_FILE_BYTE.get(p.suffix.lower(), 14),
+        check_memory(size * _BYTES_PER_FILE_BYTE.get(p.suffix.lower(), 17),
                      f"{p}: reading a mesh file of {size / 2**20:.1f} MiB")
 
 
