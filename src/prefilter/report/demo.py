@@ -165,13 +165,15 @@ MULTISCALE_MAPS = {
 MULTISCALE_METHODS = ("ltc", "ltc-multiscale", "ltc-multiscale footprint=paper")
 
 
-#: Registered methods the showcase leaves out: ground-truth evaluators, whose cost grows with the
-#: footprint (``glints-direct`` ran for more than 10 minutes at distance x4 of the quick
-#: showcase; the glints section compares them with ``glints``), and ``glints`` itself, whose
-#: pyramid bake for the showcase's 256^2 normal map adds ~6 minutes to a fresh demo (the glint
-#: look is not what the showcase's area-light comparison is about), and ``glints-wang`` (its
-#: per-tile bake takes ~9 minutes).
-SHOWCASE_EXCLUDE = ("reference", "glints", "glints-direct", "glints-reference", "glints-wang")
+#: Registered methods the showcase leaves out: ground-truth evaluators (``reference``, the path
+#: tracer ``path``, which has its own section), whose cost grows with the footprint
+#: (``glints-direct`` ran for more than 10 minutes at distance x4 of the quick showcase; the
+#: glints section compares them with ``glints``), and ``glints`` itself, whose pyramid bake for
+#: the showcase's 256^2 normal map adds ~6 minutes to a fresh demo (the glint look is not what
+#: the showcase's area-light comparison is about), and ``glints-wang`` (its per-tile bake takes
+#: ~9 minutes).
+SHOWCASE_EXCLUDE = ("reference", "path", "glints", "glints-direct", "glints-reference",
+                    "glints-wang")
 
 
 def _available_methods() -> list[str]:
