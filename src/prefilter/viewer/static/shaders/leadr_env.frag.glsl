@@ -5,19 +5,10 @@
 // Included after viewer.frag.glsl (which declares it).
 vec3 shadeLeadrEnv(Hit h, vec3 view, bool diffuseOnly) {
     int k = h.id;
-    vec3 gn = h.n, gt = h.t, gb = h.b;
-    if (dot(view, gn) < 0.0) { gn = -gn; gb = -gb; }
-    vec4 A = vec4(0.0), B = vec4(0.0);
-    ivec2 hc = uMatHeight[k];
-    if (hc.x >= 0) {
-        gHalf = uMapsHalf == 1;
-        footprintBox(hc, h.uv, h.dudv, A, B);
-        gHalf = false;
-    }
+    vec3 gn, gt, gb, wo;
     vec2 mu;
     vec3 cov;
-    leadrStats(A, B.x, uMatAlpha[k], mu, cov);
-    vec3 wo = normalize(vec3(dot(view, gt), dot(view, gb), dot(view, gn)));
+    leadrFootprint(h, view, gt, gb, gn, wo, mu, cov);
     mat3 toMap = LEADR_ENV_FROM_WORLD * mat3(gt, gb, gn);
     vec3 base = uMatBase[k], f0 = uMatF0[k];
     vec3 L = vec3(0.0), E = vec3(0.0);  // E: the diffuse layer's light (albedo 1)

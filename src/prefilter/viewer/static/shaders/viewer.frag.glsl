@@ -335,25 +335,34 @@ vec3 shadeDelta(vec3 pos, vec3 ts, vec3 bs, vec3 ns, vec3 wo, float ax, float ay
     return L;
 }
 
+// the geometric frame (two-sided: seen from behind, n and b flip), the height map's slope
+// moments box-filtered over the footprint and their LEADR statistics with the micro roughness,
+// and the view in that frame: what leadr-point and the environment modes share
+void leadrFootprint(Hit h, vec3 view, out vec3 gt, out vec3 gb, out vec3 gn, out vec3 wo,
+                    out vec2 mu, out vec3 cov) {
+    gn = h.n; gt = h.t; gb = h.b;
+    if (dot(view, gn) < 0.0) { gn = -gn; gb = -gb; }
+    vec4 A = vec4(0.0), B = vec4(0.0);
+    ivec2 hc = uMatHeight[h.id];
+    if (hc.x >= 0) {
+        gHalf = uMapsHalf == 1;
+        footprintBox(hc, h.uv, h.dudv, A, B);
+        gHalf = false;
+    }
+    leadrStats(A, B.x, uMatAlpha[h.id], mu, cov);
+    wo = normalize(vec3(dot(view, gt), dot(view, gb), dot(view, gn)));
+}
+
 // leadr-point (prefilter.leadr.render.shade_leadr_delta): the height map's slope moments
 // box-filtered over the footprint, LEADR statistics with the micro roughness, geometric frame,
 // diffuse with self-shadowing (G2 / G1, in leadrDelta); colour and
 // normal maps are not read (as the Python method); quad lights are not shaded.
 vec3 shadeLeadr(Hit h, vec3 view) {
     int k = h.id;
-    vec3 gn = h.n, gt = h.t, gb = h.b;
-    if (dot(view, gn) < 0.0) { gn = -gn; gb = -gb; }
-    vec4 A = vec4(0.0), B = vec4(0.0);
-    ivec2 hc = uMatHeight[k];
-    if (hc.x >= 0) {
-        gHalf = uMapsHalf == 1;
-        footprintBox(hc, h.uv, h.dudv, A, B);
-        gHalf = false;
-    }
+    vec3 gn, gt, gb, wo;
     vec2 mu;
     vec3 cov;
-    leadrStats(A, B.x, uMatAlpha[k], mu, cov);
-    vec3 wo = normalize(vec3(dot(view, gt), dot(view, gb), dot(view, gn)));
+    leadrFootprint(h, view, gt, gb, gn, wo, mu, cov);
     vec3 L = vec3(0.0);
     for (int q = 0; q < MAX_QUADS; ++q) {
         if (q >= uNumPoints) break;
