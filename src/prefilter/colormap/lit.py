@@ -58,7 +58,8 @@ from scipy.special import log_ndtr
 
 from prefilter.colormap.height import mean_visibility, smith_lambda_direction
 from prefilter.colormap.kernels import shade_height, shade_noise, shade_texture
-from prefilter.colormap.render import ColormapDriver, _driving_texture, colormap_driver
+from prefilter.colormap.render import (ColormapDriver, _driving_texture, colormap_driver,
+                                       scene_colormap_spec)
 from prefilter.colormap.slope import SlopeColormapTable, filter_slope, slope_prefilter_table
 from prefilter.colormap.texture import footprint_stats
 from prefilter.errors import PrefilterError
@@ -455,13 +456,8 @@ def _render_reference(scene, settings, lit: LitColormap, sources: Sources) -> np
 def _scene_lit(scene, driver) -> LitColormap:
     if isinstance(driver, LitColormap):
         return driver
-    if driver is None:
-        extras = getattr(scene, "extras", None) or {}
-        driver = extras.get("colormap") if isinstance(extras, dict) else None
-        if driver is None:
-            raise PrefilterError("extras.colormap: the colour-map methods need a driver (scene "
-                                 "field extras.colormap, or the driver argument)")
-    return lit_colormap(driver, base_dir=getattr(scene, "base_dir", "."))
+    return lit_colormap(scene_colormap_spec(scene, driver),
+                        base_dir=getattr(scene, "base_dir", "."))
 
 
 def render_colormap_lit(scene, settings, driver=None) -> np.ndarray:

@@ -43,7 +43,7 @@ from prefilter.colormap.texture import NoiseStd
 from prefilter.errors import PrefilterError
 
 __all__ = ["DRIVERS", "ColormapDriver", "colormap_driver", "render_colormap_filtered",
-           "render_colormap_naive"]
+           "render_colormap_naive", "scene_colormap_spec"]
 
 DRIVERS = ("texture", "noise", "height")
 _KEYS = ("driver", "texture", "colors", "range", "sigma_max", "edge", "size", "light")
@@ -175,16 +175,23 @@ def colormap_driver(spec: dict, *, base_dir=".") -> ColormapDriver:
     return _build(key, str(Path(base_dir).resolve()))
 
 
-def _scene_driver(scene, driver) -> ColormapDriver:
-    if isinstance(driver, ColormapDriver):
-        return driver
+def scene_colormap_spec(scene, driver):
+    """``driver`` if given, else the scene's ``extras.colormap`` (a PrefilterError where neither
+    is): the colour-map specification every colour-map method reads."""
     if driver is None:
         extras = getattr(scene, "extras", None) or {}
         driver = extras.get("colormap") if isinstance(extras, dict) else None
         if driver is None:
             raise PrefilterError("extras.colormap: the colour-map methods need a driver (scene "
                                  "field extras.colormap, or the driver argument)")
-    return colormap_driver(driver, base_dir=getattr(scene, "base_dir", "."))
+    return driver
+
+
+def _scene_driver(scene, driver) -> ColormapDriver:
+    if isinstance(driver, ColormapDriver):
+        return driver
+    return colormap_driver(scene_colormap_spec(scene, driver),
+                           base_dir=getattr(scene, "base_dir", "."))
 
 
 def _light(scene, d: ColormapDriver):
