@@ -60,9 +60,8 @@ def glint_pages(scenes: dict, kinds, codes=("f32",), driver=None):
     """Export ``scenes`` (name -> dict) as viewer pages sharing one copy of the glint maps
     ``kinds`` in ``codes``; yields ``(driver, url_of)`` (``url_of(name)``: the page's URL)."""
     from prefilter.fileio import save_json_atomic
-    from prefilter.viewer.browser import chromium
     from prefilter.viewer.export import export_scene
-    from prefilter.viewer.server import serve
+    from prefilter.viewer.match import browse_pages
 
     with tempfile.TemporaryDirectory(prefix="prefilter-glints-") as tmp:
         root = Path(tmp)
@@ -76,16 +75,8 @@ def glint_pages(scenes: dict, kinds, codes=("f32",), driver=None):
             man["glints"] = entry
             save_json_atomic(page / "data" / "viewer.json", man)
         (root / "index.html").write_text("prefilter glints pages\n")
-        server, url = serve(root)
-        own = driver is None
-        drv = chromium(root / "profile") if own else driver
-        try:
-            yield drv, (lambda name: f"{url}{name}/index.html")
-        finally:
-            if own:
-                drv.quit()
-            server.shutdown()
-            server.server_close()
+        with browse_pages(root, driver) as pages:
+            yield pages
 
 
 def select_glints(driver, kind: str, codes: str = "f32") -> None:

@@ -186,26 +186,37 @@ def _procedural_env_file(size: int = 64) -> Path:
 
 
 @contextlib.contextmanager
-def _served_pages(scenes: dict, driver=None, builtin_maps=False):
-    """Export ``scenes`` (name -> dict) under one served folder; yields ``(driver, url_of)``."""
+def browse_pages(root: Path, driver=None):
+    """Serve folder ``root`` (pages in its subfolders) and yield ``(driver, url_of)``:
+    ``driver`` as given, else a headless Chromium started here and quit on exit; ``url_of(name)``
+    the URL of ``root/name/index.html``."""
     from prefilter.viewer.browser import chromium
     from prefilter.viewer.server import serve
 
-    with tempfile.TemporaryDirectory(prefix="prefilter-viewer-") as tmp:
-        root = Path(tmp)
-        for name, sc in scenes.items():
-            export_scene(sc, root / name, builtin_maps=builtin_maps)
-        (root / "index.html").write_text("prefilter viewer pages\n")
-        server, url = serve(root)
-        own = driver is None
+    server, url = serve(root)
+    own = driver is None
+    try:
         drv = chromium(root / "profile") if own else driver
         try:
             yield drv, (lambda name: f"{url}{name}/index.html")
         finally:
             if own:
                 drv.quit()
-            server.shutdown()
-            server.server_close()
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+@contextlib.contextmanager
+def _served_pages(scenes: dict, driver=None, builtin_maps=False):
+    """Export ``scenes`` (name -> dict) under one served folder; yields ``(driver, url_of)``."""
+    with tempfile.TemporaryDirectory(prefix="prefilter-viewer-") as tmp:
+        root = Path(tmp)
+        for name, sc in scenes.items():
+            export_scene(sc, root / name, builtin_maps=builtin_maps)
+        (root / "index.html").write_text("prefilter viewer pages\n")
+        with browse_pages(root, driver) as pages:
+            yield pages
 
 
 def _errors(img, ref, covered) -> dict:
