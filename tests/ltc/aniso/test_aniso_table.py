@@ -120,22 +120,32 @@ def test_accuracy_acceptance(table):
         assert a["median"] <= b["median"] + 0.01 and a["p90"] <= b["p90"] + 0.01
 
 
-def test_bake_is_resumable(tmp_path):
-    pytest.importorskip("torch")
-    from prefilter.ltc.aniso.bake import BakeSettings, bake_table
+class Kill(Exception):
+    pass
+
+
+def kill(i):
+    """``on_chunk`` of a bake killed after its chunks 0 and 1."""
+    if i == 1:
+        raise Kill
+
+
+def tiny_settings():
+    """Bake settings of a 2 x 2 x 2 x 3 table in chunks of 4 entries (seconds to bake)."""
+    from prefilter.ltc.aniso.bake import BakeSettings
     from prefilter.ltc.aniso.fit import SWSettings
 
-    s = BakeSettings(res_theta=2, res_phi=2, res_alpha=2, res_ratio=3, chunk=4, l1_samples=0,
-                     moment_nodes=16, polish_steps=3, polish_samples=32, polish_check=64,
-                     sw=SWSettings(steps=6, pool=256, n_samples=32, n_dirs=4))
+    return BakeSettings(res_theta=2, res_phi=2, res_alpha=2, res_ratio=3, chunk=4, l1_samples=0,
+                        moment_nodes=16, polish_steps=3, polish_samples=32, polish_check=64,
+                        sw=SWSettings(steps=6, pool=256, n_samples=32, n_dirs=4))
+
+
+def test_bake_is_resumable(tmp_path):
+    pytest.importorskip("torch")
+    from prefilter.ltc.aniso.bake import bake_table
+
+    s = tiny_settings()
     full = bake_table(tmp_path / "a.npz", s, progress=False)
-
-    class Kill(Exception):
-        pass
-
-    def kill(i):
-        if i == 1:
-            raise Kill
 
     with pytest.raises(Kill):
         bake_table(tmp_path / "b.npz", s, progress=False, on_chunk=kill)
@@ -155,24 +165,14 @@ def test_warm_started_bake_is_resumable_and_keyed_by_its_start(tmp_path):
     from dataclasses import replace
 
     from prefilter.errors import PrefilterError
-    from prefilter.ltc.aniso.bake import BakeSettings, bake_table
-    from prefilter.ltc.aniso.fit import SWSettings
+    from prefilter.ltc.aniso.bake import bake_table
 
-    s = BakeSettings(res_theta=2, res_phi=2, res_alpha=2, res_ratio=3, chunk=4, l1_samples=0,
-                     moment_nodes=16, polish_steps=3, polish_samples=32, polish_check=64,
-                     sw=SWSettings(steps=6, pool=256, n_samples=32, n_dirs=4))
+    s = tiny_settings()
     start = bake_table(tmp_path / "start.npz", s, progress=False)
     with pytest.raises(PrefilterError, match="steps"):  # no SW steps and nothing to start from
         bake_table(tmp_path / "x.npz", replace(s, sw=replace(s.sw, steps=0)), progress=False)
     warm = replace(s, init=str(start), init_neighbours=True, sw=replace(s.sw, steps=0))
     full = bake_table(tmp_path / "a.npz", warm, progress=False)
-
-    class Kill(Exception):
-        pass
-
-    def kill(i):
-        if i == 1:
-            raise Kill
 
     with pytest.raises(Kill):
         bake_table(tmp_path / "b.npz", warm, progress=False, on_chunk=kill)
