@@ -226,11 +226,10 @@ def check_mesh_memory(p: Path) -> None:
 def non_manifold_edges(faces) -> np.ndarray:
     """Edges ``(K, 2)`` (vertex indices, sorted) shared by more than two of ``faces (F, 3)``."""
     f = np.asarray(faces, dtype=np.int64)
-    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
-    key = e[:, 0] * (int(f.max()) + 1) + e[:, 1]
-    u, counts = np.unique(key, return_counts=True)
-    bad = u[counts > 2]
     n = int(f.max()) + 1
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    u, counts = np.unique(e[:, 0] * n + e[:, 1], return_counts=True)
+    bad = u[counts > 2]
     return np.stack([bad // n, bad % n], axis=1)
 
 
