@@ -199,3 +199,26 @@ def test_glints_bake_cli_on_two_workers_is_byte_identical(tmp_path, cluster):
                                       "--scheduler", cluster.scheduler_address])
     assert two.exit_code == 0, two.output
     assert (tmp_path / "one.npz").read_bytes() == (tmp_path / "two.npz").read_bytes()
+
+
+def test_leadr_bands_on_two_workers_are_byte_identical(tmp_path, cluster):
+    """``prefilter bake leadr --scheduler ADDRESS``: bands of rows and their mips as tasks on the
+    cluster give the bytes of the bake in this process (every level file and the index)."""
+    from click.testing import CliRunner
+
+    from prefilter.cli import cli
+
+    rng = np.random.default_rng(5)
+    np.save(tmp_path / "h.npy", rng.normal(size=(64, 32)))
+    runner = CliRunner()
+    base = ["bake", "leadr", str(tmp_path / "h.npy"), "--base-roughness", "0.1"]
+    one = runner.invoke(cli, base + ["-o", str(tmp_path / "one")])
+    assert one.exit_code == 0, one.output
+    two = runner.invoke(cli, base + ["-o", str(tmp_path / "two"), "--band-rows", "8",
+                                     "--scheduler", cluster.scheduler_address])
+    assert two.exit_code == 0, two.output
+    dirs = [(tmp_path / d / "leadr.json").resolve().parent for d in ("one", "two")]
+    files = sorted(p.name for p in dirs[0].iterdir())
+    assert len(files) == 8 and files == sorted(p.name for p in dirs[1].iterdir())
+    for name in files:
+        assert (dirs[0] / name).read_bytes() == (dirs[1] / name).read_bytes(), name

@@ -51,6 +51,31 @@ def test_each_mip_is_the_box_average_of_level0(kind):
         np.testing.assert_allclose(maps.chain.levels[lv], _box(level0, lv), rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.parametrize("band_rows", [1, 4, 16, 64])
+def test_banded_levels_are_the_bytes_of_the_whole_map(band_rows):
+    """Bands of rows as independent tasks (``band_rows``, ``map_fn``) give every level bit for
+    bit, including the levels below the bands' depth and a map wider than tall."""
+    rng = np.random.default_rng(2)
+    h = rng.normal(size=(32, 64))
+    whole = moments(h).chain.levels
+    calls = []
+
+    def counting_map(f, *its):
+        calls.append(len(its[0]))
+        return map(f, *its)
+
+    banded = moments(h, band_rows=band_rows, map_fn=counting_map).chain.levels
+    assert len(banded) == len(whole) == 7
+    for a, b in zip(whole, banded):
+        assert a.shape == b.shape and a.tobytes() == b.tobytes()
+    assert calls == ([32 // band_rows] if band_rows < 32 else [])
+
+
+def test_band_rows_must_be_a_power_of_two():
+    with pytest.raises(PrefilterError, match="band_rows: expected a power of two"):
+        moments(np.zeros((16, 16)), band_rows=3)
+
+
 def test_top_level_covariance_matches_the_gaussian_surface():
     from prefilter.texture import height_map
 

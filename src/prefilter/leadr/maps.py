@@ -89,7 +89,8 @@ class LeadrMaps:
         return shading_stats(self.chain.lookup(uv, lod), self.base_roughness)
 
 
-def moments(data, texel_size: float = 1.0, base_roughness: float = 0.0) -> LeadrMaps:
+def moments(data, texel_size: float = 1.0, base_roughness: float = 0.0, *,
+            band_rows: int | None = None, map_fn=map) -> LeadrMaps:
     """LEADR moment maps of a height map, a slope map or a normal map.
 
     Dupuy et al. 2013, section 4 (LEAN mapping, Olano & Baker 2010).
@@ -105,6 +106,12 @@ def moments(data, texel_size: float = 1.0, base_roughness: float = 0.0) -> Leadr
     base_roughness : float
         Standard deviation of the sub-texel slopes per axis, added at shading (``>= 0``; shading
         with 0 is clamped to :data:`MIN_BASE_ROUGHNESS`).
+    band_rows : int, optional
+        Compute the levels in independent tasks of ``band_rows`` rows of level 0 (a power of
+        two; :func:`band_moments`), each run by ``map_fn`` (the built-in ``map``, or
+        :meth:`prefilter.distributed.Engine.imap`). The levels are the same bytes as without
+        bands: a level-``l`` texel only averages level-0 rows of its own band while
+        ``2^l <= band_rows``; the levels below come from the assembled level.
 
     Returns
     -------
@@ -139,9 +146,32 @@ def moments(data, texel_size: float = 1.0, base_roughness: float = 0.0) -> Leadr
     if np.any(np.abs(s) > SLOPE_MAX):  # the moments (squares) must stay finite
         raise PrefilterError(f"{name}: expected slopes of magnitude <= {SLOPE_MAX:g}, got max "
                              f"{np.abs(s).max():.4g}")
+    if band_rows is None or band_rows >= h:
+        return LeadrMaps(MipChain(_moment_texels(s)), r)
+    band_rows = int(band_rows)
+    if band_rows < 1 or band_rows & (band_rows - 1):
+        raise PrefilterError(f"band_rows: expected a power of two >= 1, got {band_rows}")
+    depth = band_rows.bit_length() - 1  # levels 0..depth stay inside a band
+    bands = [(s[i:i + band_rows], depth) for i in range(0, h, band_rows)]
+    parts = list(map_fn(band_moments, *zip(*bands)))
+    levels = [np.concatenate([p[lv] for p in parts]) for lv in range(depth + 1)]
+    return LeadrMaps(MipChain.from_levels(levels), r)
+
+
+def _moment_texels(s: np.ndarray) -> np.ndarray:
+    """Per-texel moments ``(..., 5)`` (:data:`CHANNELS`) of slopes ``(..., 2)``."""
     x, y = s[..., 0], s[..., 1]
-    chain = MipChain(np.stack([x, y, x * x, y * y, x * y], axis=-1))
-    return LeadrMaps(chain, r)
+    return np.stack([x, y, x * x, y * y, x * y], axis=-1)
+
+
+def band_moments(slopes, depth: int) -> list[np.ndarray]:
+    """Moment levels ``0..depth`` of a band of rows of a slope map: one independent task of a
+    banded bake (:func:`moments` with ``band_rows``). Dupuy et al. 2013, section 4.
+
+    ``slopes (B, W, 2)`` with ``B`` a multiple of ``2^depth``; returns levels
+    ``(B >> l, max(W >> l, 1), 5)`` for ``l = 0..depth``.
+    """
+    return MipChain(_moment_texels(np.asarray(slopes, np.float64))).levels[:depth + 1]
 
 
 def shading_stats(m, base_roughness: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

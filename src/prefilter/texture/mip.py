@@ -29,6 +29,18 @@ def _is_pow2(n: int) -> bool:
     return n >= 1 and (n & (n - 1)) == 0
 
 
+def _continue_chain(levels: list) -> list:
+    """``levels`` extended by 2x2 box averages of its last level down to ``1 x 1``."""
+    a = levels[-1]
+    while a.shape[0] > 1 or a.shape[1] > 1:
+        if a.shape[0] > 1:
+            a = 0.5 * (a[0::2] + a[1::2])
+        if a.shape[1] > 1:
+            a = 0.5 * (a[:, 0::2] + a[:, 1::2])
+        levels.append(a)
+    return levels
+
+
 class MipChain:
     """Box-filtered periodic pyramid of an ``(H, W)`` or ``(H, W, C)`` texture (powers of two).
 
@@ -48,13 +60,15 @@ class MipChain:
         h, w = a.shape[:2]
         if not (_is_pow2(h) and _is_pow2(w)):
             raise PrefilterError(f"image: expected power-of-two height and width, got {h} x {w}")
-        self.levels = [a]
-        while a.shape[0] > 1 or a.shape[1] > 1:
-            if a.shape[0] > 1:
-                a = 0.5 * (a[0::2] + a[1::2])
-            if a.shape[1] > 1:
-                a = 0.5 * (a[:, 0::2] + a[:, 1::2])
-            self.levels.append(a)
+        self.levels = _continue_chain([a])
+
+    @classmethod
+    def from_levels(cls, levels) -> "MipChain":
+        """The chain whose first levels are ``levels`` (each the box average of the one before,
+        computed elsewhere, e.g. band by band), continued down to ``1 x 1`` from the last."""
+        chain = cls.__new__(cls)
+        chain.levels = _continue_chain([np.asarray(lv, np.float64) for lv in levels])
+        return chain
 
     @property
     def n_levels(self) -> int:
