@@ -187,9 +187,11 @@ def plot(rows: list[dict], laws: dict, path: Path) -> None:
 # -- scaling -------------------------------------------------------------------------------------
 
 
-def scaling(glint_size: int = 256) -> list[dict]:
+def scaling(glint_size: int = 256, glint_ndf_res: int | None = None) -> list[dict]:
     """1 vs 2 workers on the LTC rows, the reference bands and a glint bake of a
-    ``glint_size``^2 flakes map at the render's settings (this process is the client). Each
+    ``glint_size``^2 flakes map at the render's settings, or with NDF images of
+    ``glint_ndf_res``^2 pixels (blocks 16, rank budget 16: the cost model's settings of
+    ``bench_glints_cost.py``) (this process is the client). Each
     worker runs its Numba kernels on one thread, so that 1 worker is one core; the glint bake's
     stages between its task passes (coarser levels, rank allocation) run in the client, also
     on one thread, and are included in its time."""
@@ -226,13 +228,16 @@ def scaling(glint_size: int = 256) -> list[dict]:
                 out.append({"job": name, "workers": workers, "tasks": len(tasks),
                             "seconds": time.perf_counter() - t1, "cluster_start_s": start})
             if glint_size:
-                out.append(_glint_bake_timed(engine, glint_size, workers, start))
+                out.append(_glint_bake_timed(engine, glint_size, workers, start,
+                                             glint_ndf_res))
     return out
 
 
-def _glint_bake_timed(engine, size: int, workers: int, start: float) -> dict:
-    """A whole glint bake (:data:`prefilter.glints.bake.BAKE_SETTINGS`) on ``engine``, from
-    nothing, into a temporary folder; the number of tasks counted through ``map_fn``."""
+def _glint_bake_timed(engine, size: int, workers: int, start: float,
+                      ndf_res: int | None = None) -> dict:
+    """A whole glint bake (:data:`prefilter.glints.bake.BAKE_SETTINGS`, or the cost model's
+    settings with ``ndf_res``^2 NDF images) on ``engine``, from nothing, into a temporary folder;
+    the number of tasks counted through ``map_fn``."""
     from prefilter.glints.bake import BAKE_SETTINGS, bake, bake_settings
     from prefilter.texture.procedural import normal_map
 
@@ -247,12 +252,16 @@ def _glint_bake_timed(engine, size: int, workers: int, start: float) -> dict:
 
     with tempfile.TemporaryDirectory() as tmp:
         t1 = time.perf_counter()
+        over = dict(BAKE_SETTINGS)
+        if ndf_res:
+            over.update(ndf_res=ndf_res, block=16, rank=16)
         bake(nm, Path(tmp) / "map.npz", progress=False, map_fn=counted,
-             **bake_settings(nm.shape, dict(BAKE_SETTINGS)))
+             **bake_settings(nm.shape, over))
         seconds = time.perf_counter() - t1
     print(f"  glint bake {size}^2 on {workers} worker(s): {seconds:.1f} s", file=sys.stderr,
           flush=True)
-    return {"job": f"glint bake ({size}^2 flakes, render settings)", "workers": workers,
+    what = f"{ndf_res}^2 NDF images, rank 16" if ndf_res else "render settings"
+    return {"job": f"glint bake ({size}^2 flakes, {what})", "workers": workers,
             "tasks": n_tasks, "seconds": seconds, "cluster_start_s": start}
 
 
@@ -307,6 +316,9 @@ def main() -> None:
     p.add_argument("--glint-size", type=int, default=256,
                    help="side of the normal map of the glint bake timed on 1 and 2 workers "
                         "(0: skip it)")
+    p.add_argument("--glint-ndf-res", type=int, default=None,
+                   help="NDF image side of that bake (default: the render's settings; 64: the "
+                        "cost model's, which makes a 1024^2 bake minutes instead of hours)")
     p.add_argument("--no-plot", action="store_true")
     p.add_argument("--replot", action="store_true",
                    help="table and plot from out/bench/costs.json, measuring nothing")
@@ -335,7 +347,7 @@ def main() -> None:
         if not args.no_plot:
             plot(rows, laws, ROOT / "docs" / "img" / "distributed_costs.png")
     if args.only in (None, "scaling"):
-        sc = scaling(args.glint_size)
+        sc = scaling(args.glint_size, args.glint_ndf_res)
         print(scaling_table(sc))
         result.update(scaling=sc)
     if args.only in (None, "scaling", "overheads"):
