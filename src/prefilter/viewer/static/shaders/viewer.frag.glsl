@@ -583,9 +583,12 @@ vec3 shade(Hit h, vec3 view, int method) {
     if (method == METHOD_LEADR_ENV || method == METHOD_LEADR_IRRADIANCE)
         return shadeLeadrEnv(h, view, method == METHOD_LEADR_IRRADIANCE);
 #endif
+#ifndef GLINTS
+    // nor the colour-map modes (the slope stack would be one more sampler there)
     if (method == METHOD_COLORMAP_FILTERED || method == METHOD_COLORMAP_NAIVE)
         return shadeColormap(h, view, method == METHOD_COLORMAP_FILTERED);
     if (method == METHOD_COLORMAP_LIT) return shadeColormapLit(h, view);
+#endif
     int k = h.id;
     ivec4 map = uMatMap[k];
     vec3 gn = h.n, gt = h.t, gb = h.b;
