@@ -20,7 +20,7 @@ CASES = [(s, m) for s in LIT for m in METHODS if m.startswith("ltc")] + [
     (s, m) for s in ("colormap-noise", "colormap-height", "colormap-slope")
     for m in ("colormap-filtered", "colormap-naive")] + [
     (s, "colormap-lit") for s in ("colormap", "colormap-noise", "colormap-height",
-                                  "colormap-slope")]
+                                  "colormap-slope", "colormap-env")]
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +34,9 @@ def rows(browser):
                           methods=("colormap-filtered", "colormap-naive", "colormap-lit"),
                           driver=browser, width=96, height=72)
             + pixel_match(scenes=("leadr-env",), methods=("leadr-env", "leadr-irradiance"),
-                          driver=browser, width=96, height=72))
+                          driver=browser, width=96, height=72)
+            + pixel_match(scenes=("colormap-env",), methods=("colormap-lit",), driver=browser,
+                          width=96, height=72))
 
 
 @pytest.mark.parametrize("precision", ["f32", "f16"])
@@ -111,11 +113,12 @@ def test_colormap_light_matters(name):
 
 @pytest.mark.parametrize("name, kind, least", [
     ("colormap-slope", "point", 0.3), ("colormap-slope", "directional", 0.15),
-    ("colormap-slope", "quad", 0.5), ("colormap-height", "directional", 0.2)])
+    ("colormap-slope", "quad", 0.5), ("colormap-height", "directional", 0.2),
+    ("colormap-env", "environment", 0.5)])
 def test_colormap_lit_each_light_matters(name, kind, least):
     """Each kind of light changes the ``colormap-lit`` image by far more than 1 % (measured
-    39 %, 18 %, 62 % and 26 %): the page's point, directional and quad-patch shading and the
-    slope and height terms towards each light are checked."""
+    39 %, 18 %, 62 %, 26 % and 95 %): the page's point, directional, quad-patch and
+    environment-texel shading and the slope and height terms towards each light are checked."""
     sc = scene(name, 96, 72)
     lit = render(sc, "colormap-lit")
     sc["lights"] = [x for x in sc["lights"] if x["type"] != kind]

@@ -73,7 +73,7 @@ def _check_supported(scene) -> None:
                              f"{len(scene.objects)}")
     count = {"quad": 0, "point": 0, "directional": 0}
     for i, light in enumerate(scene.lights):
-        if light.type == "environment":  # the leadr-env / leadr-irradiance modes read them
+        if light.type == "environment":  # leadr-env / leadr-irradiance / colormap-lit read them
             continue
         if getattr(light, "texture", None) is not None:
             raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad, point, "

@@ -44,20 +44,18 @@ def _camera(width, height):
 #: (``near-grazing``: near, elongated footprints, where ``ltc-multiscale`` reads anisotropic taps).
 SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr",
           "leadr-grazing", "colormap", "near-grazing", "leadr-env", "colormap-noise",
-          "colormap-height", "colormap-slope")
+          "colormap-height", "colormap-slope", "colormap-env")
 
 
 def applies(sc, method: str) -> bool:
     """Whether the Python renderer draws scene ``sc`` (dict or :class:`Scene`) with ``method``:
     ``leadr-point`` takes point and directional lights only (quad lights raise)."""
-    lights = sc["lights"] if isinstance(sc, dict) else [{"type": x.type} for x in sc.lights]
-    kinds = {x["type"] for x in lights}
     if method.startswith("colormap-"):
         extras = sc.get("extras", {}) if isinstance(sc, dict) else sc.extras
-        # the page's colormap-lit shades quad, point and directional lights
         return (extras or {}).get("colormap", {}).get("driver") in (
-            "texture", "noise", "height", "slope") and not (
-            method == "colormap-lit" and "environment" in kinds)
+            "texture", "noise", "height", "slope")
+    lights = sc["lights"] if isinstance(sc, dict) else [{"type": x.type} for x in sc.lights]
+    kinds = {x["type"] for x in lights}
     if method in ("leadr-env", "leadr-irradiance"):
         return bool(kinds) and kinds <= {"environment", "point", "directional"}
     if method != "leadr-point":
@@ -180,6 +178,13 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
             "sigma_max": 1.0, "size": 16,
             "texture": {"procedural": "gaussian", "size": 64, "seed": 1, "rms_slope": 0.5,
                         "corr_length": 3.0}}
+        return sc
+    if name == "colormap-env":
+        # the colormap-slope scene under the leadr-env scene's procedural sky and a point light
+        # (colormap-lit: the environment as the texels of its 8 x 16 level)
+        sc = scene("colormap-slope", width, height)
+        sc["lights"] = [{"type": "environment", "image": str(_procedural_env_file())},
+                        {"type": "point", "position": [-1.0, 1.2, 0.5], "intensity": 1.0}]
         return sc
     if name == "leadr-env":
         # the leadr objects under prefilter.leadr.envmap.procedural_env (sharp sun and window

@@ -501,6 +501,7 @@ vec3 shadeColormap(Hit h, vec3 view, bool filtered) {
     return colormapFlat(s, filtered);
 }
 
+#ifndef GLINTS  // colormap-lit reads the environment texture of leadr_env.glsl
 // colormap-lit, one light: irradiance E at normal incidence from world direction w (unit)
 vec3 colormapLitLight(CmStats s, vec3 w, vec3 E, vec3 gt, vec3 gb, vec3 gn, vec3 cs, float lo) {
     vec3 wl = vec3(dot(w, gt), dot(w, gb), dot(w, gn));
@@ -515,7 +516,8 @@ vec3 colormapLitLight(CmStats s, vec3 w, vec3 E, vec3 gt, vec3 gb, vec3 gn, vec3
 
 // colormap-lit (prefilter.colormap.lit.shade_lit, filter=filtered): the filtered colour of the
 // visible and lit microfacets times the Lambert term, summed over the point and directional
-// lights and the quad lights as 4 x 4 point-like patches (lit.QUAD_PATCHES, _quad_patches)
+// lights, the quad lights as 4 x 4 point-like patches (lit.QUAD_PATCHES, _quad_patches) and the
+// environment as the texels of one mip level (lit.scene_sources)
 vec3 shadeColormapLit(Hit h, vec3 view) {
     if (uColormapChain.x < 0) return vec3(0.0);
     CmStats s = colormapStats(h, true);
@@ -561,8 +563,34 @@ vec3 shadeColormapLit(Hit h, vec3 view) {
             L += colormapLitLight(s, w, area * uQuadL[q] * (cl / d2), gt, gb, gn, cs, lo);
         }
     }
+    // the environment: the texels of its first level with at most 8 rows (lit.ENV_ROWS), each
+    // a directional light of irradiance L Omega (envmap.texel_directions; map -> world by the
+    // transpose of ENV_FROM_WORLD)
+    int el = -1;
+    for (int l = 0; l < 16; ++l) {
+        if (l >= leadrEnvLevels) break;
+        if (textureSize(leadrEnv, l).y <= 8) { el = l; break; }
+    }
+    if (leadrEnvLevels > 0 && el < 0) el = 0;
+    if (el >= 0) {
+        ivec2 es = textureSize(leadrEnv, el);
+        for (int i = 0; i < 64; ++i) {
+            if (i >= es.y) break;
+            float t0 = PI * float(i) / float(es.y), t1 = PI * float(i + 1) / float(es.y);
+            float th = 0.5 * (t0 + t1);
+            float om = (cos(t0) - cos(t1)) * 2.0 * PI / float(es.x);
+            for (int j = 0; j < 128; ++j) {
+                if (j >= es.x) break;
+                float ph = (float(j) + 0.5) * 2.0 * PI / float(es.x);
+                vec3 d = vec3(sin(th) * cos(ph), sin(th) * sin(ph), cos(th));
+                vec3 E = texelFetch(leadrEnv, ivec2(j, i), el).rgb * om;
+                L += colormapLitLight(s, d * LEADR_ENV_FROM_WORLD, E, gt, gb, gn, cs, lo);
+            }
+        }
+    }
     return L;
 }
+#endif
 
 // leadr-env / leadr-irradiance: shaders/leadr_env.frag.glsl
 vec3 shadeLeadrEnv(Hit h, vec3 view, bool diffuseOnly);
