@@ -41,7 +41,10 @@ def _camera(width, height):
 #: and height-mapped objects under point and directional lights only (``leadr-point``; in
 #: ``leadr-grazing`` low lights on a mostly diffuse material, where self-shadowing shows), a
 #: texture-driven colour map (``colormap-*``), and a bump-mapped plane seen from just above it
-#: (``near-grazing``: near, elongated footprints, where ``ltc-multiscale`` reads anisotropic taps).
+#: (``near-grazing``: near, elongated footprints, where ``ltc-multiscale`` reads anisotropic taps),
+#: then the environment scene of ``leadr-env`` / ``leadr-irradiance`` and the colour map driven by
+#: noise, heights and slopes (``colormap-env``: the slope driver under an environment, for
+#: ``colormap-lit``).
 SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr",
           "leadr-grazing", "colormap", "near-grazing", "leadr-env", "colormap-noise",
           "colormap-height", "colormap-slope", "colormap-env")
