@@ -97,7 +97,8 @@ def test_far_filtered_is_closer_to_supersampling_than_naive():
 
 
 @pytest.mark.parametrize("bad, match", [
-    ({"driver": "slope"}, "driver"),
+    ({"driver": "combine"}, "driver"),
+    ({"driver": "slope", "colors": [[[0.0] * 3] * 2] * 2}, "texture"),
     ({"driver": "noise", "texture": "x.png", "colors": COLORS}, "texture"),
     ({"driver": "texture", "texture": TEX, "colors": COLORS, "edge": "wrap"}, "edge"),
     ({"driver": "texture", "texture": TEX, "colors": COLORS, "colour": 1}, "colour"),
@@ -121,3 +122,28 @@ def test_driver_from_scene_extras():
                               "extras": {"colormap": spec}})
     np.testing.assert_array_equal(render_colormap_filtered(with_extras, RenderSettings()),
                                   render_colormap_filtered(scene, RenderSettings(), spec))
+
+
+def test_slope_render_is_the_lit_slope_term_without_the_light():
+    """The slope driver's unlit image is ``V_bar Cs_bar(wo)``: ``colormap-lit`` of the same scene
+    (one directional light, a plane: one cosine) divided by ``E cos / pi``; the naive image
+    differs from the filtered one."""
+    from prefilter.colormap.lit import render_colormap_lit
+
+    g = np.linspace(0.0, 1.0, 6)
+    colors = np.stack([np.broadcast_to(g, (6, 6)), np.broadcast_to(g[:, None], (6, 6)),
+                       0.5 + 0.45 * np.cos(6.0 * np.add.outer(g, g))], -1).tolist()
+    spec = {"driver": "slope", "colors": colors, "extent": 1.5, "sigma_max": 1.0, "size": 8,
+            "texture": {"procedural": "gaussian", "size": 64, "seed": 1, "rms_slope": 0.5,
+                        "corr_length": 3.0}}
+    d = np.array([-0.6, -0.5, -0.2])
+    scene = load_scene({**scene_dict("plane", 50.0, 100.0, 12, 12),
+                        "lights": [{"type": "directional", "direction": d.tolist(),
+                                    "irradiance": 2.0}]})
+    img = render_colormap_filtered(scene, RenderSettings(), spec)
+    naive = render_colormap_naive(scene, RenderSettings(), spec)
+    lit = render_colormap_lit(scene, RenderSettings(), spec)
+    cos = -d[1] / np.linalg.norm(d)
+    hit = gbuffer(scene).hit
+    np.testing.assert_allclose(img[hit] * 2.0 * cos / np.pi, lit[hit], rtol=1e-12, atol=1e-15)
+    assert np.abs(naive[hit] - img[hit]).max() > 0.02

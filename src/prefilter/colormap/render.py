@@ -4,10 +4,14 @@ A scene carries its colour-map driver under ``extras.colormap`` (a scene field t
 adds for optional features; see ``docs/colormap.md``), or the functions take it as an argument.
 The image is the colour term of Heitz et al. 2013 at each sample (unlit, like the acceptance
 images): ``C0_bar`` (eq. 7) for a tabulated texture or procedural noise, ``Ch_bar`` (eq. 14, with
-the Smith visibility towards a directional light) for microsurface heights; the naive method
-shades ``C(mean)`` (times eq. 13's ``V_bar`` for heights). Both use the compiled kernels of
-:mod:`prefilter.colormap.kernels` on every object of the scene, at ``settings.spp`` sub-pixel
-samples per pixel (pixel centres for 1), with the pixel's footprint.
+the Smith visibility towards a directional light) for microsurface heights, ``V_bar Cs_bar(wo)``
+(eq. 19, the slope driver of :mod:`prefilter.colormap.lit` with eq. 13's ``V_bar`` towards the
+same light) for slopes; the naive method shades ``C(mean)`` (times eq. 13's ``V_bar`` for heights
+and slopes). Texture, noise and height use the compiled kernels of
+:mod:`prefilter.colormap.kernels`, slopes :func:`prefilter.colormap.slope.filter_slope` on the
+footprint's slope moments (:func:`prefilter.colormap.texture.footprint_stats`); every object of
+the scene, at ``settings.spp`` sub-pixel samples per pixel (pixel centres for 1), with the
+pixel's footprint.
 
 The driver (a dict, as in a scene file)::
 
@@ -24,7 +28,9 @@ The driver (a dict, as in a scene file)::
                                 # directional light, else the surface normal (V_bar = 1)
 
 Heights are normalised to zero mean and unit std before the colour map reads them (``range`` is
-in units of the height std); their slopes give the Smith ``Lambda`` (eq. 3).
+in units of the height std); their slopes give the Smith ``Lambda`` (eq. 3). The slope driver
+(``"driver": "slope"``) has the fields of :mod:`prefilter.colormap.lit` and takes its light as the
+height driver without its own: the scene's first directional light, else the surface normal.
 """
 
 from __future__ import annotations
@@ -203,9 +209,44 @@ def _light(scene, d: ColormapDriver):
     return None
 
 
+def _slope_shader(scene, spec, filtered: bool):
+    """The slope driver's per-sample colour ``V_bar Cs_bar(wo)`` (filtered) or ``V_bar C(mean)``
+    (naive), ``(N, 3)`` (Heitz et al. 2013, eqs. 13, 19, 20)."""
+    from prefilter.colormap.height import mean_visibility, smith_lambda_direction
+    from prefilter.colormap.lit import _frame, _local, _upper, lit_colormap
+    from prefilter.colormap.slope import filter_slope
+    from prefilter.colormap.texture import footprint_stats
+
+    lit = spec if not isinstance(spec, dict) else lit_colormap(
+        spec, base_dir=getattr(scene, "base_dir", "."))
+    light = next((-np.asarray(x.direction, np.float64) for x in scene.lights
+                  if x.type == "directional"), None)
+    surf = lit.surface
+
+    def shade(g, _u):
+        t, b, n = _frame(g)
+        wo = _upper(_local(g.view, t, b, n))
+        mean, cov = footprint_stats(surf.slope_moments, g.uv, g.dudv, anisotropic=True)
+        cs = filter_slope(lit.slope, wo, mean, cov) if filtered else lit.slope.naive(mean)
+        wi = (np.broadcast_to([0.0, 0.0, 1.0], wo.shape) if light is None
+              else _upper(_local(np.broadcast_to(light, g.view.shape), t, b, n)))
+        vbar = mean_visibility(smith_lambda_direction(wo, surf.slope_cov),
+                               smith_lambda_direction(wi, surf.slope_cov))
+        return cs * vbar[:, None]
+
+    return shade
+
+
 def _shade(scene, settings, driver, filtered: bool) -> np.ndarray:
     from prefilter.render.driver import render_samples
 
+    desc = "colormap-filtered" if filtered else "colormap-naive"
+    if not isinstance(driver, ColormapDriver):
+        spec = scene_colormap_spec(scene, driver)
+        if getattr(spec, "mode", None) == "slope" or (
+                isinstance(spec, dict) and spec.get("driver") == "slope"):
+            return render_samples(scene, settings, _slope_shader(scene, spec, filtered),
+                                  stratified=False, desc=desc)
     d = _scene_driver(scene, driver)
     light = _light(scene, d)
 
@@ -236,18 +277,18 @@ def _shade(scene, settings, driver, filtered: bool) -> np.ndarray:
         return shade_height(d.table, chain, g.uv, g.dudv, wo, wi, d.slope_cov,
                             filtered=filtered)
 
-    return render_samples(scene, settings, shade, stratified=False,
-                          desc="colormap-filtered" if filtered else "colormap-naive")
+    return render_samples(scene, settings, shade, stratified=False, desc=desc)
 
 
 def render_colormap_filtered(scene, settings, driver=None) -> np.ndarray:
-    """Filtered colour-mapped texture / noise / heights (Heitz et al. 2013, eqs. 7, 10, 14),
-    ``(H, W, 3)``. ``driver``: a :class:`ColormapDriver` or its dict; default the scene's
+    """Filtered colour-mapped texture / noise / heights / slopes (Heitz et al. 2013, eqs. 7, 10,
+    14, 19), ``(H, W, 3)``. ``driver``: a :class:`ColormapDriver`, a slope
+    :class:`~prefilter.colormap.lit.LitColormap` or their dict; default the scene's
     ``extras.colormap``."""
     return _shade(scene, settings, driver, True)
 
 
 def render_colormap_naive(scene, settings, driver=None) -> np.ndarray:
-    """The naive counterpart: ``C(mean)`` (times eq. 13's ``V_bar`` for heights),
+    """The naive counterpart: ``C(mean)`` (times eq. 13's ``V_bar`` for heights and slopes),
     ``(H, W, 3)``."""
     return _shade(scene, settings, driver, False)

@@ -673,7 +673,7 @@ def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
         f"Canvas screenshots ({w} x {h}, sRGB, exposure 1/2) of the default scene (Gaussian-bump "
         "plane, anisotropic sphere, one quad light) per method, `split` = ltc-multiscale | ltc; "
         "`leadr-point` on the pixel-match `leadr` scene (height-mapped plane and sphere, two "
-        "point lights and a directional light), the unlit `colormap-*` modes on its `colormap` "
+        "point lights and a directional light), the `colormap-*` modes on its `colormap` "
         "scene (a colour-mapped noise texture), `leadr-env` / `leadr-irradiance` on its "
         "`leadr-env` scene (the leadr objects under a procedural sky with a sun and a point "
         "light, at most 256 x 192); `glints | smooth lobe`: the `glints` mode on the "

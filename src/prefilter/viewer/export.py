@@ -27,7 +27,8 @@ __all__ = ["BUILTIN_MAPS", "MAX_OBJECTS", "MAX_QUADS", "METHODS", "default_scene
 
 #: Render methods the page implements (GLSL names in ``static/shaders/viewer.frag.glsl``).
 METHODS = ("ltc", "ltc-multiscale", "ltc-aniso", "ltc-multiscale-aniso", "leadr-point",
-           "colormap-filtered", "colormap-naive", "leadr-env", "leadr-irradiance")
+           "colormap-filtered", "colormap-naive", "leadr-env", "leadr-irradiance",
+           "colormap-lit")
 MAX_OBJECTS = 4
 MAX_QUADS = 4
 #: Texels per row of the texture atlas.
@@ -72,7 +73,7 @@ def _check_supported(scene) -> None:
                              f"{len(scene.objects)}")
     count = {"quad": 0, "point": 0, "directional": 0}
     for i, light in enumerate(scene.lights):
-        if light.type == "environment":  # the leadr-env / leadr-irradiance modes read them
+        if light.type == "environment":  # leadr-env / leadr-irradiance / colormap-lit read them
             continue
         if getattr(light, "texture", None) is not None:
             raise PrefilterError(f"lights[{i}]: the viewer supports untextured quad, point, "
@@ -165,7 +166,7 @@ class _Levels:
 
 
 #: ``viewer.json`` ``colormap.driver_code`` (``uColormapDriver`` in ``viewer.frag.glsl``).
-COLORMAP_DRIVERS = {"texture": 0, "noise": 1, "height": 2}
+COLORMAP_DRIVERS = {"texture": 0, "noise": 1, "height": 2, "slope": 3}
 
 
 def _colormap_light(scene, driver) -> list[float]:
@@ -181,17 +182,31 @@ def _colormap_light(scene, driver) -> list[float]:
 
 
 def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
-    """The scene's colour-map driver (``extras.colormap``: texture, noise or height) for the
-    ``colormap-*`` modes: the exported snippet (table lookup and the drivers' GLSL) and table,
-    and the driving chain in the atlas (noise: its mean chain; else ``(E[f], E[f^2])``)."""
+    """The scene's colour-map driver (``extras.colormap``: texture, noise, height or slope) for
+    the ``colormap-*`` modes: the exported snippet (table lookup and the drivers' GLSL), the
+    table and the slope stack (``glsl_drivers.slope_texture``), and the driving chain in the
+    atlas (noise: its mean chain; slope: the slope moments ``E[sx], E[sy], E[sx^2], E[sy^2],
+    E[sx sy]``; else ``(E[f], E[f^2])``)."""
+    from types import SimpleNamespace
+
     from prefilter.colormap.glsl import GLSL_WRAP, glsl_snippet
-    from prefilter.colormap.glsl_drivers import driver_glsl
+    from prefilter.colormap.glsl_drivers import driver_glsl, slope_texture
+    from prefilter.colormap.lit import lit_colormap
     from prefilter.colormap.render import colormap_driver
     from prefilter.colormap.table import ColormapTable
 
     spec = (getattr(scene, "extras", None) or {}).get("colormap")
-    driver, light = None, [0.0, 0.0, 1.0, 0.0]
-    if spec is not None and spec.get("driver") in COLORMAP_DRIVERS:
+    driver, light, slope = None, [0.0, 0.0, 1.0, 0.0], None
+    kind = spec.get("driver") if isinstance(spec, dict) else None
+    if kind == "slope":
+        lit = lit_colormap(spec, base_dir=getattr(scene, "base_dir", "."))
+        slope = lit.slope
+        # the driver's GLSL reads the surface's slope covariance (Smith Lambda, V_bar)
+        driver = SimpleNamespace(driver="slope", slope_cov=lit.surface.slope_cov)
+        table = ColormapTable(np.zeros((2, 2, 3)), (0.0, 1.0), 1.0)
+        chain = atlas.add(lit.surface.slope_moments)
+        light = _colormap_light(scene, SimpleNamespace(light=None))
+    elif kind in COLORMAP_DRIVERS:
         driver = colormap_driver(spec, base_dir=getattr(scene, "base_dir", "."))
         packed = driver.mean_chain if driver.driver == "noise" else driver.moments_chain
         table, chain = driver.table, atlas.add(_Levels(packed))
@@ -205,14 +220,18 @@ def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
     # glsl_snippet writes an integer-valued sigma_max as an int literal ("= 2;"), which GLSL ES
     # does not convert to float: add the ".0" (reported to the colormap package)
     src = re.sub(r"(const float kSigmaMax\s*=\s*)(-?\d+);", r"\1\2.0;",
-                 glsl_snippet(table.metadata())) + driver_glsl(driver)
+                 glsl_snippet(table.metadata())) + driver_glsl(driver, slope)
+    stack = slope_texture(slope)
+    _write(data / "colormap_slope_f32.bin", stack.astype("<f4").tobytes())
     with atomic_path(data / "colormap.glsl", suffix=".glsl") as tmp:
         tmp.write_text(src)
     return {"glsl": "colormap.glsl", "f32": "colormap_f32.bin", "width": table.n_mean,
             "height": table.n_sigma, "wrap_s": GLSL_WRAP[table.edge].removeprefix("GL_"),
             "chain": chain, "driver": None if driver is None else driver.driver,
             "driver_code": -1 if driver is None else COLORMAP_DRIVERS[driver.driver],
-            "light": light}
+            "light": light, "slope": {"f32": "colormap_slope_f32.bin",
+                                      "width": int(stack.shape[1]),
+                                      "height": int(stack.shape[0])}}
 
 
 def _leadr_env(scene, data: Path) -> dict:

@@ -41,10 +41,13 @@ def _camera(width, height):
 #: and height-mapped objects under point and directional lights only (``leadr-point``; in
 #: ``leadr-grazing`` low lights on a mostly diffuse material, where self-shadowing shows), a
 #: texture-driven colour map (``colormap-*``), and a bump-mapped plane seen from just above it
-#: (``near-grazing``: near, elongated footprints, where ``ltc-multiscale`` reads anisotropic taps).
+#: (``near-grazing``: near, elongated footprints, where ``ltc-multiscale`` reads anisotropic taps),
+#: then the environment scene of ``leadr-env`` / ``leadr-irradiance`` and the colour map driven by
+#: noise, heights and slopes (``colormap-env``: the slope driver under an environment, for
+#: ``colormap-lit``).
 SCENES = ("flat", "bumps-sphere", "brushed", "horizon", "delta", "textured", "leadr",
           "leadr-grazing", "colormap", "near-grazing", "leadr-env", "colormap-noise",
-          "colormap-height")
+          "colormap-height", "colormap-slope", "colormap-env")
 
 
 def applies(sc, method: str) -> bool:
@@ -52,7 +55,8 @@ def applies(sc, method: str) -> bool:
     ``leadr-point`` takes point and directional lights only (quad lights raise)."""
     if method.startswith("colormap-"):
         extras = sc.get("extras", {}) if isinstance(sc, dict) else sc.extras
-        return (extras or {}).get("colormap", {}).get("driver") in ("texture", "noise", "height")
+        return (extras or {}).get("colormap", {}).get("driver") in (
+            "texture", "noise", "height", "slope")
     lights = sc["lights"] if isinstance(sc, dict) else [{"type": x.type} for x in sc.lights]
     kinds = {x["type"] for x in lights}
     if method in ("leadr-env", "leadr-irradiance"):
@@ -161,6 +165,29 @@ def scene(name: str, width: int = 160, height: int = 120) -> dict:
             "corr_length": 3.0})
         sc["lights"].append({"type": "directional", "direction": [-0.95, -0.15, -0.2],
                              "irradiance": 1.0})
+        return sc
+    if name == "colormap-slope":
+        # slopes driving a 2D colour map (row = s_y, column = s_x), lit by the colormap-height
+        # scene's low sun: the slope distribution depends on the view, V_bar on view and light;
+        # a point light added for colormap-lit (the unlit modes read the sun only)
+        sc = scene("colormap-height", width, height)
+        sc["lights"].append({"type": "point", "position": [-1.0, 1.2, 0.5],
+                             "intensity": [1.5, 1.2, 0.8]})
+        g = np.linspace(0.0, 1.0, 8)
+        colors = np.stack([np.broadcast_to(g, (8, 8)), np.broadcast_to(g[:, None], (8, 8)),
+                           0.5 + 0.45 * np.cos(6.0 * np.add.outer(g, g))], -1)
+        sc["extras"]["colormap"] = {
+            "driver": "slope", "colors": colors.round(4).tolist(), "extent": 1.5,
+            "sigma_max": 1.0, "size": 16,
+            "texture": {"procedural": "gaussian", "size": 64, "seed": 1, "rms_slope": 0.5,
+                        "corr_length": 3.0}}
+        return sc
+    if name == "colormap-env":
+        # the colormap-slope scene under the leadr-env scene's procedural sky and a point light
+        # (colormap-lit: the environment as the texels of its 8 x 16 level)
+        sc = scene("colormap-slope", width, height)
+        sc["lights"] = [{"type": "environment", "image": str(_procedural_env_file())},
+                        {"type": "point", "position": [-1.0, 1.2, 0.5], "intensity": 1.0}]
         return sc
     if name == "leadr-env":
         # the leadr objects under prefilter.leadr.envmap.procedural_env (sharp sun and window
@@ -282,7 +309,8 @@ def screenshots(out_dir, scene=None, *, width=512, height=384, driver=None) -> l
     # modes the scene cannot show are shot on the pixel-match scene made for them
     where = {m: "shots" for m in METHODS}
     for m, name in (("leadr-point", "leadr"), ("colormap-filtered", "colormap"),
-                    ("colormap-naive", "colormap"), ("leadr-env", "leadr-env"),
+                    ("colormap-naive", "colormap"), ("colormap-lit", "colormap"),
+                    ("leadr-env", "leadr-env"),
                     ("leadr-irradiance", "leadr-env")):
         if not applies(loaded, m) or (m == "leadr-point" and not any(
                 x.type in ("point", "directional") for x in loaded.lights)) or (

@@ -6,7 +6,7 @@ import {GLINT_METHODS, bindGlintMode, loadGlintMode} from './glints.js';
 import {LEADR_ENV_METHODS, bindLeadrEnv, leadrEnvUnits, loadLeadrEnv} from './leadr_env.js';
 
 export const METHODS = ['ltc', 'ltc-multiscale', 'ltc-aniso', 'ltc-multiscale-aniso', 'leadr-point',
-  'colormap-filtered', 'colormap-naive', ...LEADR_ENV_METHODS, ...GLINT_METHODS];
+  'colormap-filtered', 'colormap-naive', ...LEADR_ENV_METHODS, ...GLINT_METHODS, 'colormap-lit'];
 
 async function fetchOk(url, kind) {
   const r = await fetch(url);
@@ -95,7 +95,8 @@ export class Viewer {
       'precision highp sampler2D;\nprecision highp sampler3D;\nprecision highp isampler2D;\n';
     const prog = gl.createProgram();
     gl.attachShader(prog, compile(gl, gl.VERTEX_SHADER, head + vert));
-    gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, [head, iso, aniso, ms, leadr, leadrEnv, cmap, frag, leadrEnvFrag].join('\n')));
+    gl.attachShader(prog, compile(gl, gl.FRAGMENT_SHADER, [head, iso, aniso, ms, leadr, leadrEnv, cmap,
+      `#define METHOD_COLORMAP_LIT ${METHODS.indexOf('colormap-lit')}`, frag, leadrEnvFrag].join('\n')));
     gl.linkProgram(prog);
     if (!gl.getProgramParameter(prog, gl.LINK_STATUS)) throw new Error('link: ' + gl.getProgramInfoLog(prog));
     this.prog = prog;
@@ -127,6 +128,9 @@ export class Viewer {
     for (const [k, v] of [[gl.TEXTURE_MIN_FILTER, gl.LINEAR], [gl.TEXTURE_MAG_FILTER, gl.LINEAR],
                           [gl.TEXTURE_WRAP_S, gl[m.colormap.wrap_s]]])
       gl.texParameteri(gl.TEXTURE_2D, k, v);
+    // the slope driver's pre-blurred stack (slope.glsl reads it with texelFetch)
+    const cs = m.colormap.slope;
+    this.colormapSlope = texture2D(gl, cs.width, cs.height, await fetchOk(base + cs.f32), false);
     this.leadrEnv = await loadLeadrEnv(gl, base, m.leadr_env, fetchOk);
     const lv = await fetchOk(base + m.atlas.levels);
     this.levels = texture2D(gl, m.atlas.n_levels, 1, lv, false, gl.RGBA32I, gl.RGBA_INTEGER);
@@ -153,6 +157,7 @@ export class Viewer {
     const units = [['uAtlas', gl.TEXTURE_2D, this.atlas], ['uAtlas16', gl.TEXTURE_2D, this.atlas16],
                    ['uLevels', gl.TEXTURE_2D, this.levels],
                    ['uColormapTable', gl.TEXTURE_2D, this.colormapTable],
+                   ['uCmSlopeStack', gl.TEXTURE_2D, this.colormapSlope],
                    ['alphaMesoNodes', gl.TEXTURE_2D, this.alphaMeso]];
     const t = this.tables[this.precision];
     for (let k = 0; k < 3; ++k) {

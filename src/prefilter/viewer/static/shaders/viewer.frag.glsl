@@ -14,6 +14,9 @@
 #define METHOD_COLORMAP_NAIVE 6
 #define METHOD_LEADR_ENV 7
 #define METHOD_LEADR_IRRADIANCE 8
+#ifndef METHOD_COLORMAP_LIT  // viewer.js defines it (its index in the page's METHODS)
+#define METHOD_COLORMAP_LIT -1
+#endif
 
 uniform highp sampler2D uAtlas;     // mip chains, RGBA32F, uAtlasWidth texels per row
 uniform highp sampler2D uAtlas16;   // the same atlas in RGBA16F (LEADR's f16 moment maps)
@@ -34,10 +37,11 @@ uniform ivec4 uMatMap[MAX_OBJECTS];       // normal chain (first level, levels),
 uniform ivec4 uMatColor[MAX_OBJECTS];     // colour chain (first level, levels, channels)
 uniform ivec2 uMatHeight[MAX_OBJECTS];    // height map's slope-moment chain (leadr-point)
 uniform ivec2 uColormapChain;             // colour-map driver's (E[f], E[f^2]) chain, or -1
-uniform int uColormapDriver;              // 0 texture, 1 noise (its mean chain), 2 height
-uniform vec4 uColormapLight;              // height driver: world direction to the light, w = 1
+uniform int uColormapDriver;              // 0 texture, 1 noise (its mean chain), 2 height, 3 slope
+uniform vec4 uColormapLight;              // height, slope: world direction to the light, w = 1
 #define COLORMAP_NOISE 1
 #define COLORMAP_HEIGHT 2
+#define COLORMAP_SLOPE 3
 uniform int uNumQuads;
 uniform vec3 uQuadV[4 * MAX_QUADS], uQuadN[MAX_QUADS], uQuadL[MAX_QUADS];
 uniform int uNumPoints, uNumDirs;
@@ -381,15 +385,38 @@ vec3 shadeLeadr(Hit h, vec3 view) {
     return L;
 }
 
-// colormap-filtered / -naive (prefilter.colormap.render; kernels._fetch and the _texture /
-// _noise / _height kernels): the driver's chain over the anisotropic footprint (up to 8
-// trilinear taps along the major axis), for moments the level-0 interpolation variance removed
-// under magnification, then the exported snippet: the table lookup (texture), the noise std at
-// the area LOD (noise), the height filtering towards the view and the light (height). Unlit:
-// the colour term itself.
-vec3 shadeColormap(Hit h, vec3 view, bool filtered) {
+// the two-sided tangent frame's view and light directions of the height / slope drivers
+// (grazing and back-facing ones just above the horizon, as the Python methods)
+void colormapViewLight(Hit h, vec3 view, vec3 l, bool hasLight, out vec3 wo, out vec3 wi) {
+    float s = dot(view, h.n) < 0.0 ? -1.0 : 1.0;
+    vec3 gt = h.t, gb = s * h.b, gn = s * h.n;
+    wo = normalize(vec3(dot(view, gt), dot(view, gb), max(dot(view, gn), 1e-3)));
+    wi = hasLight ? normalize(vec3(dot(l, gt), dot(l, gb), max(dot(l, gn), 1e-3)))
+                  : vec3(0.0, 0.0, 1.0);
+}
+
+// the slope driver's footprint covariance (xx, yy, xy) (texture.footprint_stats: moments
+// M = (E[sx], E[sy], E[sx^2], E[sy^2]), B.x = E[sx sy]; the taps' level-0 interpolation
+// covariance ic removed with weight 1 - clamp(lod, 0, 1), then clamped positive semi-definite
+// as texture._psd); the mean slope is M.xy
+vec3 colormapSlopeCov(vec4 M, vec4 B, vec3 ic, float lod) {
+    vec2 mu = M.xy;
+    vec3 c = vec3(max(M.z - mu.x * mu.x, 0.0), max(M.w - mu.y * mu.y, 0.0), B.x - mu.x * mu.y);
+    c -= (1.0 - clamp(lod, 0.0, 1.0)) * ic;
+    float mid = 0.5 * (c.x + c.y);
+    float disc = sqrt(0.25 * (c.x - c.y) * (c.x - c.y) + c.z * c.z);
+    float l1 = max(mid + disc, 0.0), l2 = max(mid - disc, 0.0);
+    float phi = c.z == 0.0 && c.x == c.y ? 0.0 : 0.5 * atan(2.0 * c.z, c.x - c.y);
+    float cs = cos(phi), sn = sin(phi);
+    return vec3(l1 * cs * cs + l2 * sn * sn, l1 * sn * sn + l2 * cs * cs, (l1 - l2) * cs * sn);
+}
+
+// the driver's footprint statistics: M, B the mean moments (slopes: B.x = E[sx sy]), iv / ic
+// the taps' level-0 interpolation variance / slope covariance, lod and the area LOD
+struct CmStats { vec4 M, B; float iv; vec3 ic; float lod, areaLod; };
+
+CmStats colormapStats(Hit h, bool filtered) {
     ivec2 ch = uColormapChain;
-    if (ch.x < 0) return vec3(0.0);
     ivec4 L0 = texelFetch(uLevels, ivec2(ch.x, 0), 0);
     float w = float(L0.z), hh = float(L0.y);
     float major, minor;
@@ -402,6 +429,7 @@ vec3 shadeColormap(Hit h, vec3 view, bool filtered) {
     int n = ch.y;
     bool want = filtered && lod < 1.0 && uColormapDriver != COLORMAP_NOISE;
     float t = n > 1 ? max(lod, 0.0) : 0.0, iv = 0.0;
+    vec3 ic = vec3(0.0);
     float tl = clamp(lod, 0.0, float(n - 1));
     int l0 = n > 1 ? min(int(floor(tl)), n - 2) : 0;
     float tt = n > 1 ? tl - float(l0) : 0.0;
@@ -418,31 +446,151 @@ vec3 shadeColormap(Hit h, vec3 view, bool filtered) {
             }
             continue;
         }
-        vec4 m0 = vec4(0.0);
-        bilinearAdd(ch.x, uv, 1.0, m0, B);
+        vec4 m0 = vec4(0.0), b0 = vec4(0.0);
+        bilinearAdd(ch.x, uv, 1.0, m0, b0);
         M += (1.0 - t) * wt * m0;
+        B += (1.0 - t) * wt * b0;
         if (t > 0.0) bilinearAdd(ch.x + 1, uv, t * wt, M, B);
         iv += (m0.y - m0.x * m0.x) * wt;
+        // slopes: the tap's level-0 covariance (xx, yy, xy), diagonal clamped at 0
+        ic += wt * vec3(max(m0.z - m0.x * m0.x, 0.0), max(m0.w - m0.y * m0.y, 0.0),
+                        b0.x - m0.x * m0.y);
     }
-    if (uColormapDriver == COLORMAP_NOISE)
-        return colormapFiltered(M.x, filtered ? colormapNoiseSigma(areaLod) : 0.0);
-    float var = M.y - M.x * M.x;
-    if (lod < 1.0) var -= (1.0 - max(lod, 0.0)) * iv;
-    if (uColormapDriver == COLORMAP_HEIGHT) {
-        // two-sided: seen from behind, the frame flips (n, b -> -n, -b); grazing and
-        // back-facing directions just above the horizon, as the Python method
-        float s = dot(view, h.n) < 0.0 ? -1.0 : 1.0;
-        vec3 gt = h.t, gb = s * h.b, gn = s * h.n;
-        vec3 wo = vec3(dot(view, gt), dot(view, gb), max(dot(view, gn), 1e-3));
-        vec3 l = uColormapLight.xyz;
-        vec3 wi = uColormapLight.w > 0.0
-            ? vec3(dot(l, gt), dot(l, gb), max(dot(l, gn), 1e-3)) : vec3(0.0, 0.0, 1.0);
-        float lo = colormapLambda(normalize(wo)), li = colormapLambda(normalize(wi));
-        return filtered ? colormapHeightFootprint(M.x, var, lo, li)
-                        : colormapHeightNaive(M.x, lo, li);
-    }
-    return colormapFiltered(M.x, filtered ? sqrt(max(var, 0.0)) : 0.0);
+    return CmStats(M, B, iv, ic, lod, areaLod);
 }
+
+// the height driver's footprint variance (level-0 interpolation variance removed)
+float colormapHeightVar(CmStats s) {
+    float var = s.M.y - s.M.x * s.M.x;
+    if (s.lod < 1.0) var -= (1.0 - max(s.lod, 0.0)) * s.iv;
+    return var;
+}
+
+// texture / noise: the colour of the footprint (no view or light dependence)
+vec3 colormapFlat(CmStats s, bool filtered) {
+    if (uColormapDriver == COLORMAP_NOISE)
+        return colormapFiltered(s.M.x, filtered ? colormapNoiseSigma(s.areaLod) : 0.0);
+    return colormapFiltered(s.M.x, filtered ? sqrt(max(colormapHeightVar(s), 0.0)) : 0.0);
+}
+
+// colormap-filtered / -naive (prefilter.colormap.render; kernels._fetch and the _texture /
+// _noise / _height kernels, texture.footprint_stats for slopes): the driver's chain over the
+// anisotropic footprint (up to 8 trilinear taps along the major axis), for moments the level-0
+// interpolation variance removed under magnification, then the exported snippet: the table
+// lookup (texture), the noise std at the area LOD (noise), the height filtering towards the
+// view and the light (height), the slope filtering towards the view times V_bar (slope).
+// Unlit: the colour term itself.
+vec3 shadeColormap(Hit h, vec3 view, bool filtered) {
+    if (uColormapChain.x < 0) return vec3(0.0);
+    CmStats s = colormapStats(h, filtered);
+    vec3 wo, wi;
+    colormapViewLight(h, view, uColormapLight.xyz, uColormapLight.w > 0.0, wo, wi);
+    if (uColormapDriver == COLORMAP_SLOPE) {
+        // V_bar towards the view and the light (eq. 13) times Cs_bar (eqs. 19, 20) or, naive,
+        // the map at the mean slope (prefilter.colormap.render._slope_shader)
+        float lo = colormapLambda(wo), li = colormapLambda(wi);
+        vec3 col = filtered ? colormapSlope(wo, s.M.xy, colormapSlopeCov(s.M, s.B, s.ic, s.lod))
+                            : colormapSlopeNaive(s.M.xy);
+        return (1.0 + lo) / (1.0 + lo + li) * col;
+    }
+    if (uColormapDriver == COLORMAP_HEIGHT) {
+        float lo = colormapLambda(wo), li = colormapLambda(wi);
+        return filtered ? colormapHeightFootprint(s.M.x, colormapHeightVar(s), lo, li)
+                        : colormapHeightNaive(s.M.x, lo, li);
+    }
+    return colormapFlat(s, filtered);
+}
+
+#ifndef GLINTS  // colormap-lit reads the environment texture of leadr_env.glsl
+// colormap-lit, one light: irradiance E at normal incidence from world direction w (unit)
+vec3 colormapLitLight(CmStats s, vec3 w, vec3 E, vec3 gt, vec3 gb, vec3 gn, vec3 cs, float lo) {
+    vec3 wl = vec3(dot(w, gt), dot(w, gb), dot(w, gn));
+    float c = max(wl.z, 0.0);
+    if (!(c > 0.0)) return vec3(0.0);
+    if (uColormapDriver != COLORMAP_HEIGHT && uColormapDriver != COLORMAP_SLOPE)
+        return E * (c / PI) * cs;
+    float li = colormapLambda(normalize(vec3(wl.xy, max(wl.z, 1e-3))));
+    if (uColormapDriver == COLORMAP_SLOPE) return E * (c / PI) * (1.0 + lo) / (1.0 + lo + li) * cs;
+    return E * (c / PI) * colormapHeightFootprint(s.M.x, colormapHeightVar(s), lo, li);
+}
+
+// colormap-lit (prefilter.colormap.lit.shade_lit, filter=filtered): the filtered colour of the
+// visible and lit microfacets times the Lambert term, summed over the point and directional
+// lights, the quad lights as 4 x 4 point-like patches (lit.QUAD_PATCHES, _quad_patches) and the
+// environment as the texels of one mip level (lit.scene_sources)
+vec3 shadeColormapLit(Hit h, vec3 view) {
+    if (uColormapChain.x < 0) return vec3(0.0);
+    CmStats s = colormapStats(h, true);
+    float sg = dot(view, h.n) < 0.0 ? -1.0 : 1.0;
+    vec3 gt = h.t, gb = sg * h.b, gn = sg * h.n;
+    vec3 wo = normalize(vec3(dot(view, gt), dot(view, gb), max(dot(view, gn), 1e-3)));
+    float lo = 0.0;
+    vec3 cs = vec3(0.0);  // the light-independent colour: C0_bar (texture, noise), Cs_bar (slope)
+    if (uColormapDriver == COLORMAP_SLOPE || uColormapDriver == COLORMAP_HEIGHT)
+        lo = colormapLambda(wo);
+    if (uColormapDriver == COLORMAP_SLOPE)
+        cs = colormapSlope(wo, s.M.xy, colormapSlopeCov(s.M, s.B, s.ic, s.lod));
+    else if (uColormapDriver != COLORMAP_HEIGHT) {
+        cs = colormapFlat(s, true);
+    }
+    vec3 L = vec3(0.0);
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumPoints) break;
+        vec3 d = uPointP[q] - h.p;
+        float d2 = max(dot(d, d), 1e-30);
+        L += colormapLitLight(s, d / sqrt(d2), uPointI[q] / d2, gt, gb, gn, cs, lo);
+    }
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumDirs) break;
+        L += colormapLitLight(s, normalize(-uDirD[q]), uDirE[q], gt, gb, gn, cs, lo);
+    }
+    for (int q = 0; q < MAX_QUADS; ++q) {
+        if (q >= uNumQuads) break;
+        vec3 v0 = uQuadV[4 * q], v1 = uQuadV[4 * q + 1], v2 = uQuadV[4 * q + 2];
+        vec3 v3 = uQuadV[4 * q + 3];
+        for (int k = 0; k < 16; ++k) {
+            float u = (float(k / 4) + 0.5) / 4.0, v = (float(k % 4) + 0.5) / 4.0;
+            vec3 p = (1.0 - u) * (1.0 - v) * v0 + u * (1.0 - v) * v1 + u * v * v2
+                     + (1.0 - u) * v * v3;
+            vec3 du = (1.0 - v) * (v1 - v0) + v * (v2 - v3);
+            vec3 dv = (1.0 - u) * (v3 - v0) + u * (v2 - v1);
+            vec3 a = cross(du, dv) / 16.0;
+            float area = length(a);
+            vec3 d = p - h.p;
+            float d2 = max(dot(d, d), 1e-30);
+            vec3 w = d / sqrt(d2);
+            float cl = max(-dot(w, a / area), 0.0);
+            L += colormapLitLight(s, w, area * uQuadL[q] * (cl / d2), gt, gb, gn, cs, lo);
+        }
+    }
+    // the environment: the texels of its first level with at most 8 rows (lit.ENV_ROWS), each
+    // a directional light of irradiance L Omega (envmap.texel_directions; map -> world by the
+    // transpose of ENV_FROM_WORLD)
+    int el = -1;
+    for (int l = 0; l < 16; ++l) {
+        if (l >= leadrEnvLevels) break;
+        if (textureSize(leadrEnv, l).y <= 8) { el = l; break; }
+    }
+    if (leadrEnvLevels > 0 && el < 0) el = 0;
+    if (el >= 0) {
+        ivec2 es = textureSize(leadrEnv, el);
+        for (int i = 0; i < 64; ++i) {
+            if (i >= es.y) break;
+            float t0 = PI * float(i) / float(es.y), t1 = PI * float(i + 1) / float(es.y);
+            float th = 0.5 * (t0 + t1);
+            float om = (cos(t0) - cos(t1)) * 2.0 * PI / float(es.x);
+            for (int j = 0; j < 128; ++j) {
+                if (j >= es.x) break;
+                float ph = (float(j) + 0.5) * 2.0 * PI / float(es.x);
+                vec3 d = vec3(sin(th) * cos(ph), sin(th) * sin(ph), cos(th));
+                vec3 E = texelFetch(leadrEnv, ivec2(j, i), el).rgb * om;
+                L += colormapLitLight(s, d * LEADR_ENV_FROM_WORLD, E, gt, gb, gn, cs, lo);
+            }
+        }
+    }
+    return L;
+}
+#endif
 
 // leadr-env / leadr-irradiance: shaders/leadr_env.frag.glsl
 vec3 shadeLeadrEnv(Hit h, vec3 view, bool diffuseOnly);
@@ -463,8 +611,12 @@ vec3 shade(Hit h, vec3 view, int method) {
     if (method == METHOD_LEADR_ENV || method == METHOD_LEADR_IRRADIANCE)
         return shadeLeadrEnv(h, view, method == METHOD_LEADR_IRRADIANCE);
 #endif
+#ifndef GLINTS
+    // nor the colour-map modes (the slope stack would be one more sampler there)
     if (method == METHOD_COLORMAP_FILTERED || method == METHOD_COLORMAP_NAIVE)
         return shadeColormap(h, view, method == METHOD_COLORMAP_FILTERED);
+    if (method == METHOD_COLORMAP_LIT) return shadeColormapLit(h, view);
+#endif
     int k = h.id;
     ivec4 map = uMatMap[k];
     vec3 gn = h.n, gt = h.t, gb = h.b;
