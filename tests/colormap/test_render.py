@@ -6,11 +6,8 @@ import pytest
 
 from prefilter.studies.colormap import scene_dict
 from prefilter.colormap.height import filter_height_footprint, smith_lambda_direction
-from prefilter.colormap.render import (
-    colormap_driver,
-    render_colormap_filtered,
-    render_colormap_naive,
-)
+from prefilter.colormap.driver import colormap_driver
+from prefilter.colormap.render import render_colormap_filtered, render_colormap_naive
 from prefilter.colormap.texture import footprint_stats, moments_mip
 from prefilter.errors import PrefilterError
 from prefilter.render import gbuffer, load_scene

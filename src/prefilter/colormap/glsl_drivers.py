@@ -123,7 +123,7 @@ def slope_texture(table=None) -> np.ndarray:
 
 
 def driver_glsl(driver=None, slope_table=None) -> str:
-    """Every driver's snippet for a :class:`prefilter.colormap.render.ColormapDriver`
+    """Every driver's snippet for a :class:`prefilter.colormap.driver.ColormapDriver`
     ``driver`` (its noise std and slope covariance; ``None`` or other drivers: placeholders), and
     the slope stack ``slope_table``: appended to :func:`prefilter.colormap.glsl.glsl_snippet`."""
     noise = getattr(driver, "noise_std", None)

@@ -58,7 +58,7 @@ from scipy.special import log_ndtr
 
 from prefilter.colormap.height import mean_visibility, smith_lambda_direction
 from prefilter.colormap.kernels import shade_height, shade_noise, shade_texture
-from prefilter.colormap.render import (ColormapDriver, _driving_texture, colormap_driver,
+from prefilter.colormap.driver import (ColormapDriver, _driving_texture, colormap_driver,
                                        scene_colormap_spec)
 from prefilter.colormap.slope import SlopeColormapTable, filter_slope, slope_prefilter_table
 from prefilter.colormap.texture import footprint_stats

@@ -192,7 +192,7 @@ def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
     from prefilter.colormap.glsl import GLSL_WRAP, glsl_snippet
     from prefilter.colormap.glsl_drivers import driver_glsl, slope_texture
     from prefilter.colormap.lit import lit_colormap
-    from prefilter.colormap.render import colormap_driver
+    from prefilter.colormap.driver import colormap_driver
     from prefilter.colormap.table import ColormapTable
 
     spec = (getattr(scene, "extras", None) or {}).get("colormap")
