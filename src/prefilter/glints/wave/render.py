@@ -32,7 +32,8 @@ from prefilter.glints.bake import cache_dir
 from prefilter.glints.brdf import brdf_cos_from_ndf, half
 from prefilter.glints.render import footprints
 from prefilter.glints.wave.bake import (WAVE_SETTINGS, WAVE_VERSION, as_heightfield_spec,
-                                        bake_wave, channel_paths, load_wave)
+                                        bake_wave, cache_path, channel_paths, load_wave,
+                                        wave_settings)
 from prefilter.glints.wave.direct import DirectWave
 from prefilter.glints.wave.lobe import point_rgb
 from prefilter.render.shading import point_incoming, shading_frames
@@ -61,16 +62,13 @@ def scene_heightfield(scene):
 
 
 def wave_map(hf, settings: dict | None = None, progress: bool = False):
-    """The baked :class:`~prefilter.glints.wave.bake.WaveMap` of ``hf`` (glints cache)."""
-    st = dict(WAVE_SETTINGS, **(settings or {}))
-    if "cell" not in (settings or {}):
-        # as the geometric bake_settings: a heightfield smaller than the default cell is one cell
-        st["cell"] = min(st["cell"], *hf.shape)
-    key = json.dumps(dict(st, heights=hf.digest, version=WAVE_VERSION), sort_keys=True)
+    """The baked :class:`~prefilter.glints.wave.bake.WaveMap` of ``hf`` (glints cache, at
+    :func:`~prefilter.glints.wave.bake.cache_path`; ``prefilter bake glints-wave`` writes the
+    same file)."""
+    st = wave_settings(hf.shape, settings)
+    out = cache_path(hf, st)
+    key = str(out)
     if key not in _MAPS:
-        import hashlib
-
-        out = cache_dir() / f"wave-{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
         out.parent.mkdir(parents=True, exist_ok=True)
         if not all(p.exists() for p in channel_paths(out)):
             bake_wave(hf, out, progress=progress, **st)
