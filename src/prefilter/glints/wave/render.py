@@ -8,7 +8,9 @@ The microstructure is a heightfield named by the scene field ``extras.glints_wav
 ``texel_size``: metres per texel, required for files, default the procedural one's). Every object
 is shaded with its RGB glint lobe over the pixel footprint (footprints as the geometric methods',
 :func:`prefilter.glints.render.footprints`, in texels of the heightfield) plus Lambert
-``base_color``; ``f0`` is the material's. Point and directional lights.
+``base_color``; ``f0`` is the material's. Point and directional lights, and untextured quads
+(light sampling, :func:`quad_light_rgb`: both methods draw the same light samples, so they
+compare the NDF at the same half vectors; diffuse by Lambert's polygon formula).
 
 * ``glints-wave``: the compressed RGB pyramid (:mod:`prefilter.glints.wave.bake`, baked on first
   use into the glints cache, keyed by the heightfield's digest and the settings), point queries
@@ -104,9 +106,50 @@ def brdf_cos_from_rgb(wo, wi, h, D, f0) -> np.ndarray:
                      for c in range(3)], axis=-1)
 
 
-def shade_wave(scene, g, *, mode: str, spp: int = 1, progress: bool = False) -> np.ndarray:
-    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point / directional lights;
-    ``mode``: ``"compressed"`` or ``"direct"``."""
+#: Quad lights: light samples (uniform on the quad's area) per shading sample and quad; each
+#: takes two uniforms.
+QUAD_SAMPLES = 8
+
+
+def quad_light_rgb(ndf, center, sigma_p, wo, position, frame, light, f0, u) -> np.ndarray:
+    """Specular radiance ``(N, 3)`` of quad ``light`` by light sampling: the mean over the
+    samples ``j`` of ``f(wo, wi_j) cos L / p(wi_j)``, ``wi_j`` uniform on the quad's area
+    (:func:`prefilter.render.lights.quad_light_sample`, ``p`` its solid-angle density), the RGB
+    NDF ``ndf(center, sigma_p, s)`` at the samples' half vectors (one call for all of them).
+
+    Parameters
+    ----------
+    wo : (N, 3) local view directions; position : (N, 3) world shading points; frame :
+    (t, b, n) each (N, 3); u : (N, 2 K) uniforms in ``[0, 1)`` (K samples).
+    """
+    from prefilter.render.lights import quad_light_sample
+
+    N, K = len(wo), u.shape[1] // 2
+    if N == 0 or K == 0:
+        return np.zeros((N, 3))
+    # the K samples of every shading sample at once: rows sample-major (K N)
+    t, b, n = (np.tile(x, (K, 1)) for x in frame)
+    uk = u[:, :2 * K].reshape(N, K, 2).transpose(1, 0, 2).reshape(K * N, 2)
+    w, pdf = quad_light_sample(light, np.tile(position, (K, 1)), uk)
+    wi = to_local(w, t, b, n)
+    wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
+    woK = np.tile(wo, (K, 1))
+    ok = (pdf > 0) & (wi[:, 2] > 0)
+    wi = np.where(ok[:, None], wi, np.array([0.0, 0.0, 1.0]))
+    h = half(woK, wi)
+    D = ndf(np.tile(center, (K, 1)), np.tile(sigma_p, K), h[:, :2])
+    f = brdf_cos_from_rgb(woK, wi, h, D, f0)
+    val = np.where(ok[:, None], f / np.where(ok, pdf, 1.0)[:, None], 0.0).reshape(K, N, 3)
+    return val.mean(axis=0) * np.asarray(light.radiance, dtype=np.float64)
+
+
+def shade_wave(scene, g, *, mode: str, spp: int = 1, u=None,
+               progress: bool = False) -> np.ndarray:
+    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point, directional and quad
+    lights; ``mode``: ``"compressed"`` or ``"direct"``; ``u (N, 2 QUAD_SAMPLES n_quads)``: the
+    quads' uniforms."""
+    from prefilter.ltc import clamped_cosine_integral
+
     hf = scene_heightfield(scene)
     if mode == "compressed":
         wm = wave_map(hf, progress=progress)
@@ -116,6 +159,7 @@ def shade_wave(scene, g, *, mode: str, spp: int = 1, progress: bool = False) -> 
     else:
         dw = direct_model(hf)
         ndf = dw.point
+    lights = scene.light_set()
     t, b, n, wo = shading_frames(g)
     c, sp = footprints(g, hf.shape, spp)
     out = np.zeros((len(wo), 3))
@@ -124,21 +168,30 @@ def shade_wave(scene, g, *, mode: str, spp: int = 1, progress: bool = False) -> 
         mat = scene.objects[int(k)].material
         base = np.asarray(mat.base_color, dtype=np.float64)
         f0 = np.broadcast_to(np.asarray(mat.f0, dtype=np.float64), (3,))
-        for w, e in point_incoming(scene.light_set(), g.position[m]):
+        for w, e in point_incoming(lights, g.position[m]):
             wi = to_local(w, t[m], b[m], n[m])
             wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
             h = half(wo[m], wi)
             D = ndf(c[m], sp[m], h[:, :2])
             spec = brdf_cos_from_rgb(wo[m], wi, h, D, f0)
             out[m] += (spec + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * e
+        frame = (t[m], b[m], n[m])
+        for qi, ql in enumerate(lights.quads):
+            if np.any(base > 0):
+                corners = np.stack([to_local(v - g.position[m], *frame) for v in ql.vertices], 1)
+                out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
+            uq = u[m][:, 2 * QUAD_SAMPLES * qi:2 * QUAD_SAMPLES * (qi + 1)]
+            out[m] += quad_light_rgb(ndf, c[m], sp[m], wo[m], g.position[m], frame, ql, f0, uq)
     return out
 
 
 def _check_lights(scene, name):
     for i, light in enumerate(scene.lights):
-        if light.type not in ("point", "directional"):
-            raise PrefilterError(f"lights[{i}]: method {name!r} expected point or directional "
-                                 f"lights, got {light.type!r}")
+        if light.type not in ("point", "directional", "quad") \
+                or getattr(light, "texture", None) is not None:
+            kind = "a textured quad" if light.type == "quad" else repr(light.type)
+            raise PrefilterError(f"lights[{i}]: method {name!r} expected point, directional or "
+                                 f"untextured quad lights, got {kind}")
 
 
 def _render(scene, settings, mode, name):
@@ -147,10 +200,11 @@ def _render(scene, settings, mode, name):
     _check_lights(scene, name)
     scene_heightfield(scene)  # a bad heightfield fails before any work
     spp = settings.spp
+    k = 2 * QUAD_SAMPLES * len(scene.light_set().quads)
     return render_samples(scene, settings,
-                          lambda g, u: shade_wave(scene, g, mode=mode, spp=spp,
+                          lambda g, u: shade_wave(scene, g, mode=mode, spp=spp, u=u,
                                                   progress=settings.progress),
-                          stratified=spp > 1, desc=name)
+                          random_dims=k, stratified=spp > 1, desc=name)
 
 
 def render_glints_wave(scene, settings) -> np.ndarray:
