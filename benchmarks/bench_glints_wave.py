@@ -1,11 +1,12 @@
 """``glints-wave`` against ``glints-wave-direct``: FLIP and speed-up at near / mid / far.
 
 The geometric methods' measurement plane (:func:`prefilter.glints.render.measurement_scene`,
-point light, 64x48, 1 spp) with the heightfield ``procedural:noise:128:0`` (0.25 um texels, 50 nm
-rms heights, 4-texel correlation) in ``extras.glints_wave``. Each method renders once untimed
-(bake, level-0 images and kernels compiled), then ``--runs`` timed frames (best kept; process CPU
-time with ``--cpu``, all threads). FLIP: HDR-FLIP (:func:`prefilter.render.metrics.flip`), frame
-mean, ``glints-wave`` against ``glints-wave-direct``.
+point light or ``--lights quad``, 64x48, 1 spp) with the heightfield ``procedural:noise:128:0``
+(0.25 um texels, 50 nm rms heights, 4-texel correlation) in ``extras.glints_wave``. Each method
+renders once untimed (bake, level-0 images and kernels compiled), then ``--runs`` timed frames
+(best kept; process CPU time with ``--cpu``, all threads). FLIP: HDR-FLIP
+(:func:`prefilter.render.metrics.flip`), frame mean, ``glints-wave`` against
+``glints-wave-direct``.
 
 ``--split`` also renders the frame from the **uncompressed** pyramid (the direct model's
 coherence-area images filtered into the pyramid levels by
@@ -31,10 +32,11 @@ TARGET = 0.05
 HEIGHTFIELD = "procedural:noise:128:0"
 
 
-def scene(distance: float, width: int = 64, height: int = 48, heightfield: str = HEIGHTFIELD):
+def scene(distance: float, width: int = 64, height: int = 48, heightfield: str = HEIGHTFIELD,
+          lights: str = "point"):
     from prefilter.glints.render import measurement_scene
 
-    sc = measurement_scene(distance, "gaussian", width=width, height=height)
+    sc = measurement_scene(distance, "gaussian", width=width, height=height, lights=lights)
     sc["extras"] = {"glints_wave": {"heightfield": heightfield}}
     return sc
 
@@ -102,6 +104,7 @@ def main(argv=None):
     ap.add_argument("--cpu", action="store_true")
     ap.add_argument("--width", type=int, default=64)
     ap.add_argument("--height", type=int, default=48)
+    ap.add_argument("--lights", choices=["point", "quad"], default="point")
     ap.add_argument("--split", action="store_true")
     ap.add_argument("--settings", default=None)
     ap.add_argument("--json")
@@ -119,7 +122,7 @@ def main(argv=None):
     print(f"map: {wm.compressed_bytes / 2**20:.2f} MiB, settings {settings or 'render defaults'}")
     rows = []
     for name, d in DISTANCES.items():
-        sc = load_scene(scene(d, a.width, a.height))
+        sc = load_scene(scene(d, a.width, a.height, lights=a.lights))
         render(sc, "glints-wave")
         ref = render(sc, "glints-wave-direct")
         tw, img = timed(lambda: render(sc, "glints-wave"), a.runs, a.cpu)
