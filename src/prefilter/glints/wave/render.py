@@ -160,6 +160,10 @@ def shade_wave(scene, g, *, mode: str, spp: int = 1, u=None,
         dw = direct_model(hf)
         ndf = dw.point
     lights = scene.light_set()
+    if lights.quads and (u is None or np.shape(u)[-1] < 2 * QUAD_SAMPLES * len(lights.quads)):
+        raise PrefilterError(f"u: expected {2 * QUAD_SAMPLES * len(lights.quads)} uniforms per "
+                             f"sample for the scene's quad lights, got "
+                             f"{None if u is None else np.shape(u)}")
     t, b, n, wo = shading_frames(g)
     c, sp = footprints(g, hf.shape, spp)
     out = np.zeros((len(wo), 3))
