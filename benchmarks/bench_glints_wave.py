@@ -8,10 +8,10 @@ renders once untimed (bake, level-0 images and kernels compiled), then ``--runs`
 (:func:`prefilter.render.metrics.flip`), frame mean, ``glints-wave`` against
 ``glints-wave-direct``.
 
-``--split`` also renders the frame from the **uncompressed** pyramid (the direct model's
-coherence-area images filtered into the pyramid levels by
-:func:`prefilter.glints.pyramid.next_level`, queried with the same Gaussian resampling weights and
-bilinear NDF lookup as ``glints-wave``) and reports FLIP of it against ``glints-wave-direct``
+``--split`` also renders the frame from the **uncompressed** pyramid
+(:class:`prefilter.glints.wave.direct.PyramidWave`: the direct model's coherence-area images
+filtered into the pyramid levels, queried with the same Gaussian resampling weights and bilinear
+NDF lookup as ``glints-wave``) and reports FLIP of it against ``glints-wave-direct``
 (what the pyramid costs by itself) and of ``glints-wave`` against it (the compression alone).
 ``--settings JSON``: bake settings other than the render's (e.g. ``'{"rank": 32}'``), baked into
 the glints cache.
@@ -49,48 +49,6 @@ def timed(fn, runs: int, cpu: bool):
         out = fn()
         best = min(best, clock() - t0)
     return best, out
-
-
-def _bilinear(img, s, support):
-    """Values ``(N,)`` of images ``(N, R, R)`` at ``s (N, 2)``, bilinear between pixel centres,
-    pixels outside the image 0 (the taps of :func:`prefilter.glints._qkernels.pixel_taps`)."""
-    R = img.shape[-1]
-    g = (s + support) / (2.0 * support / R) - 0.5
-    i0 = np.floor(g).astype(np.int64)
-    t = g - i0
-    out = np.zeros(len(s))
-    n = np.arange(len(s))
-    for dy in (0, 1):
-        for dx in (0, 1):
-            iy, ix = i0[:, 1] + dy, i0[:, 0] + dx
-            ok = (iy >= 0) & (iy < R) & (ix >= 0) & (ix < R)
-            w = (t[:, 1] if dy else 1 - t[:, 1]) * (t[:, 0] if dx else 1 - t[:, 0])
-            out[ok] += w[ok] * img[n[ok], iy[ok], ix[ok]]
-    return out
-
-
-def uncompressed_ndf(hf, pyr):
-    """``ndf(center (N, 2), sigma_p (N,), s (N, 2)) -> (N, 3)`` of the uncompressed pyramid."""
-    from prefilter.glints.pyramid import next_level, resample_weights
-    from prefilter.glints.wave.render import direct_model
-
-    dw = direct_model(hf)
-    flat = []
-    for ch in range(3):
-        lv = [np.ascontiguousarray(dw.images[:, :, ch])]
-        for level in range(1, pyr.n_levels):
-            lv.append(next_level(lv[-1], pyr.sigma(level - 1) / pyr.stride(level - 1)))
-        flat.append(np.concatenate([x.reshape(-1, *x.shape[2:]) for x in lv]))
-
-    def ndf(c, sp, s):
-        idx, w, _ = resample_weights(pyr, c, sp)
-        out = np.zeros((len(c), 3))
-        for ch in range(3):
-            for k in range(idx.shape[1]):
-                out[:, ch] += w[:, k] * _bilinear(flat[ch][idx[:, k]], s, dw.S)
-        return out
-
-    return ndf
 
 
 def main(argv=None):
@@ -146,13 +104,11 @@ def main(argv=None):
                    within_target=fl <= TARGET, mean_ratio=float(img.mean() / ref.mean()))
         msg = ""
         if a.split:
+            from prefilter.glints.wave.direct import PyramidWave
+
             real_direct = wrender.direct_model
-            unc = uncompressed_ndf(hf, wm.pyramid)
-
-            class Unc:
-                point = staticmethod(unc)
-
-            wrender.direct_model = lambda hf_, st=None: Unc
+            unc = PyramidWave(real_direct(hf), wm.pyramid)
+            wrender.direct_model = lambda hf_, st=None: unc
             try:
                 up = render(sc, "glints-wave-direct")
             finally:

@@ -103,3 +103,51 @@ def _direct_points(img, stride, sigma0, c, sp, s, lo, h, trunc, out):  # pragma:
             out[q, 0] = a0 / wsum
             out[q, 1] = a1 / wsum
             out[q, 2] = a2 / wsum
+
+
+class PyramidWave:
+    """The footprint pyramid of a :class:`DirectWave`'s images, uncompressed: per channel the
+    coherence-area images filtered into the levels of ``pyr`` by
+    :func:`prefilter.glints.pyramid.next_level` (float32 ``(n_images, R, R)``, flat in the
+    pyramid's image order), queried as ``glints-wave`` queries its compressed maps (Gaussian
+    resampling weights, :func:`prefilter.glints.pyramid.resample_weights`, and the bilinear
+    lookup of :func:`prefilter.glints._qkernels.pixel_taps`). What the pyramid costs without the
+    compression (``benchmarks/bench_glints_wave.py --split``)."""
+
+    def __init__(self, dw: DirectWave, pyr=None):
+        from prefilter.glints.pyramid import next_level
+
+        self.pyr = dw.pyr if pyr is None else pyr
+        self.R, self.S = dw.R, dw.S
+        self.images = []
+        for ch in range(3):
+            lv = [np.ascontiguousarray(dw.images[:, :, ch])]
+            for level in range(1, self.pyr.n_levels):
+                lv.append(next_level(lv[-1], self.pyr.sigma(level - 1)
+                                     / self.pyr.stride(level - 1)))
+            self.images.append(np.concatenate([x.reshape(-1, *x.shape[2:]) for x in lv]))
+
+    def point(self, center, sigma_p, s) -> np.ndarray:
+        """RGB NDF ``(N, 3)`` of footprints ``center (N, 2)``, ``sigma_p (N,)`` at ``s (N, 2)``."""
+        from prefilter.glints.pyramid import resample_weights
+
+        c = np.asarray(center, np.float64).reshape(-1, 2)
+        sp = np.broadcast_to(np.asarray(sigma_p, np.float64), c.shape[:1])
+        s = np.asarray(s, np.float64).reshape(-1, 2)
+        idx, w, _ = resample_weights(self.pyr, c, sp)
+        # bilinear taps between pixel centres, zero outside the image (as pixel_taps)
+        g = (s + self.S) / (2.0 * self.S / self.R) - 0.5
+        i0 = np.floor(g).astype(np.int64)
+        t = g - i0
+        out = np.zeros((len(c), 3))
+        for dy in (0, 1):
+            for dx in (0, 1):
+                iy, ix = i0[:, 1] + dy, i0[:, 0] + dx
+                ok = (iy >= 0) & (iy < self.R) & (ix >= 0) & (ix < self.R)
+                wt = np.where(ok, (t[:, 1] if dy else 1 - t[:, 1])
+                              * (t[:, 0] if dx else 1 - t[:, 0]), 0.0)
+                iy, ix = np.clip(iy, 0, self.R - 1), np.clip(ix, 0, self.R - 1)
+                for ch in range(3):
+                    v = self.images[ch][idx, iy[:, None], ix[:, None]]  # (N, K)
+                    out[:, ch] += wt * np.sum(w * v, axis=1)
+        return out
