@@ -1,8 +1,9 @@
 """``glints-wave`` against ``glints-wave-direct``: FLIP and speed-up at near / mid / far.
 
 The geometric methods' measurement plane (:func:`prefilter.glints.render.measurement_scene`,
-point light or ``--lights quad``, 64x48, 1 spp) with the heightfield ``procedural:noise:128:0``
-(0.25 um texels, 50 nm rms heights, 4-texel correlation) in ``extras.glints_wave``. Each method
+point light, ``--lights quad`` or ``environment``, 64x48, 1 spp) with the heightfield
+``procedural:noise:128:0`` (0.25 um texels, 50 nm rms heights, 4-texel correlation) in
+``extras.glints_wave``. Each method
 renders once untimed (bake, level-0 images and kernels compiled), then ``--runs`` timed frames
 (best kept; process CPU time with ``--cpu``, all threads). FLIP: HDR-FLIP
 (:func:`prefilter.render.metrics.flip`), frame mean, ``glints-wave`` against
@@ -62,7 +63,7 @@ def main(argv=None):
     ap.add_argument("--cpu", action="store_true")
     ap.add_argument("--width", type=int, default=64)
     ap.add_argument("--height", type=int, default=48)
-    ap.add_argument("--lights", choices=["point", "quad"], default="point")
+    ap.add_argument("--lights", choices=["point", "quad", "environment"], default="point")
     ap.add_argument("--split", action="store_true")
     ap.add_argument("--settings", default=None)
     ap.add_argument("--json")

@@ -1,5 +1,5 @@
-"""Render methods ``glints-wave`` / ``glints-wave-direct``: quad lights by light sampling, the
-lights they accept."""
+"""Render methods ``glints-wave`` / ``glints-wave-direct``: quad and environment lights by light
+sampling, the lights they accept."""
 
 from __future__ import annotations
 
@@ -38,6 +38,40 @@ def test_quad_light_carries_the_point_lights_energy(cache):
     np.testing.assert_array_equal(quad, again)  # deterministic samples
 
 
-def test_environment_lights_are_rejected(cache):
-    with pytest.raises(PrefilterError, match="expected point, directional or untextured quad"):
-        render(_scene("environment"), "glints-wave")
+def test_textured_quads_are_rejected(cache, tmp_path):
+    from prefilter.glints.render import measurement_scene as ms
+
+    sc = ms(2.0, "gaussian", width=8, height=6, lights="quad")
+    np.save(tmp_path / "t.npy", np.ones((4, 4, 3)))
+    sc["lights"][0]["texture"] = str(tmp_path / "t.npy")
+    sc["extras"] = {"glints_wave": {"heightfield": HF}}
+    with pytest.raises(PrefilterError, match="untextured quad or environment lights, got a "
+                                             "textured quad"):
+        render(load_scene(sc), "glints-wave")
+
+
+def test_environment_sampling_integrates_lambert_under_a_constant_sky():
+    """Light sampling of a constant environment (radiance 2) gives Lambert's ``base L`` when the
+    NDF is 0 (the estimator's weights ``cos / p`` integrate the hemisphere): within 4 sigma."""
+    from prefilter.render.pathtrace import EnvironmentSampler
+    from prefilter.glints.wave.render import ENV_SAMPLES, environment_rgb
+
+    rng = np.random.default_rng(0)
+    N = 4000
+    frame = (np.tile([1.0, 0, 0], (N, 1)), np.tile([0, 0, -1.0], (N, 1)),
+             np.tile([0, 1.0, 0], (N, 1)))
+    wo = np.tile([0.0, 0.6, 0.8], (N, 1))
+    env = EnvironmentSampler(np.full((16, 32, 3), 2.0))
+    base = np.array([0.5, 0.25, 0.1])
+    out = environment_rgb(lambda c, sp, s: np.zeros((len(s), 3)), np.zeros((N, 2)),
+                          np.full(N, 4.0), wo, frame, env, 0.04, base,
+                          rng.random((N, 3 * ENV_SAMPLES)))
+    mean, err = out.mean(0), out.std(0) / np.sqrt(N)
+    assert np.all(np.abs(mean - 2.0 * base) < 4 * err + 1e-12), (mean, err)
+
+
+def test_environment_light_renders_both_methods_alike(cache):
+    a = render(_scene("environment", 8.0), "glints-wave-direct")
+    b = render(_scene("environment", 8.0), "glints-wave")
+    assert np.all(np.isfinite(a)) and a.mean() > 0
+    assert b.mean() == pytest.approx(a.mean(), rel=0.03)

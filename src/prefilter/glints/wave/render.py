@@ -8,9 +8,10 @@ The microstructure is a heightfield named by the scene field ``extras.glints_wav
 ``texel_size``: metres per texel, required for files, default the procedural one's). Every object
 is shaded with its RGB glint lobe over the pixel footprint (footprints as the geometric methods',
 :func:`prefilter.glints.render.footprints`, in texels of the heightfield) plus Lambert
-``base_color``; ``f0`` is the material's. Point and directional lights, and untextured quads
-(light sampling, :func:`quad_light_rgb`: both methods draw the same light samples, so they
-compare the NDF at the same half vectors; diffuse by Lambert's polygon formula).
+``base_color``; ``f0`` is the material's. Point and directional lights, untextured quads (light
+sampling, :func:`quad_light_rgb`; diffuse by Lambert's polygon formula) and environment maps
+(light sampling, :func:`environment_rgb`): both methods draw the same light samples, so they
+compare the NDF at the same half vectors.
 
 * ``glints-wave``: the compressed RGB pyramid (:mod:`prefilter.glints.wave.bake`, baked on first
   use into the glints cache, keyed by the heightfield's digest and the settings), point queries
@@ -143,11 +144,70 @@ def quad_light_rgb(ndf, center, sigma_p, wo, position, frame, light, f0, u) -> n
     return val.mean(axis=0) * np.asarray(light.radiance, dtype=np.float64)
 
 
+#: Environment lights: directions drawn from the map (texels by luminance times solid angle,
+#: :class:`prefilter.render.pathtrace.EnvironmentSampler`) per shading sample and environment;
+#: each takes three uniforms.
+ENV_SAMPLES = 16
+_ENV: dict = {}
+
+
+def environment_rgb(ndf, center, sigma_p, wo, frame, sampler, f0, base, u) -> np.ndarray:
+    """Radiance ``(N, 3)`` of an environment light by light sampling: the mean over the samples
+    ``j`` of ``(f(wo, wi_j) + base / pi wi_j.z) L(wi_j) / p(wi_j)`` with ``wi_j`` from
+    ``sampler`` (an :class:`~prefilter.render.pathtrace.EnvironmentSampler`), the RGB NDF
+    ``ndf(center, sigma_p, s)`` at the samples' half vectors (one call); no occlusion.
+
+    Parameters
+    ----------
+    wo : (N, 3) local view directions; frame : (t, b, n) each (N, 3); u : (N, 3 K) uniforms in
+    ``[0, 1)`` (K samples).
+    """
+    N, K = len(wo), u.shape[1] // 3
+    if N == 0 or K == 0:
+        return np.zeros((N, 3))
+    t, b, n = (np.tile(x, (K, 1)) for x in frame)
+    uk = u[:, :3 * K].reshape(N, K, 3).transpose(1, 0, 2).reshape(K * N, 3)
+    w, pdf = sampler.sample(uk)
+    L = sampler.eval(w)
+    wi = to_local(w, t, b, n)
+    wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
+    woK = np.tile(wo, (K, 1))
+    ok = (pdf > 0) & (wi[:, 2] > 0)
+    wi = np.where(ok[:, None], wi, np.array([0.0, 0.0, 1.0]))
+    h = half(woK, wi)
+    D = ndf(np.tile(center, (K, 1)), np.tile(sigma_p, K), h[:, :2])
+    f = brdf_cos_from_rgb(woK, wi, h, D, f0) + base / np.pi * wi[:, 2:3]
+    val = np.where(ok[:, None], f * L / np.where(ok, pdf, 1.0)[:, None], 0.0)
+    return val.reshape(K, N, 3).mean(axis=0)
+
+
+def _environments(scene) -> list:
+    """The :class:`~prefilter.render.pathtrace.EnvironmentSampler` of each environment light of
+    ``scene`` (cached per image and scale)."""
+    from prefilter.render.pathtrace import EnvironmentSampler
+
+    out = []
+    for lt in scene.lights:
+        if lt.type == "environment":
+            key = (lt.image.cache_key(), float(lt.scale))
+            if key not in _ENV:
+                _ENV[key] = EnvironmentSampler.of(lt)
+            out.append(_ENV[key])
+    return out
+
+
+def n_uniforms(scene) -> int:
+    """Uniforms per shading sample of the glints-wave methods: ``2 QUAD_SAMPLES`` per quad
+    light, then ``3 ENV_SAMPLES`` per environment light."""
+    n_env = sum(lt.type == "environment" for lt in scene.lights)
+    return 2 * QUAD_SAMPLES * len(scene.light_set().quads) + 3 * ENV_SAMPLES * n_env
+
+
 def shade_wave(scene, g, *, mode: str, spp: int = 1, u=None,
                progress: bool = False) -> np.ndarray:
-    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point, directional and quad
-    lights; ``mode``: ``"compressed"`` or ``"direct"``; ``u (N, 2 QUAD_SAMPLES n_quads)``: the
-    quads' uniforms."""
+    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point, directional, quad and
+    environment lights; ``mode``: ``"compressed"`` or ``"direct"``; ``u (N, n_uniforms(scene))``:
+    the quads' then the environments' uniforms."""
     from prefilter.ltc import clamped_cosine_integral
 
     hf = scene_heightfield(scene)
@@ -160,10 +220,12 @@ def shade_wave(scene, g, *, mode: str, spp: int = 1, u=None,
         dw = direct_model(hf)
         ndf = dw.point
     lights = scene.light_set()
-    if lights.quads and (u is None or np.shape(u)[-1] < 2 * QUAD_SAMPLES * len(lights.quads)):
-        raise PrefilterError(f"u: expected {2 * QUAD_SAMPLES * len(lights.quads)} uniforms per "
-                             f"sample for the scene's quad lights, got "
-                             f"{None if u is None else np.shape(u)}")
+    envs = _environments(scene)
+    k_u = n_uniforms(scene)
+    if k_u and (u is None or np.shape(u)[-1] < k_u):
+        raise PrefilterError(f"u: expected {k_u} uniforms per sample for the scene's quad and "
+                             f"environment lights, got {None if u is None else np.shape(u)}")
+    q0 = 2 * QUAD_SAMPLES * len(lights.quads)
     t, b, n, wo = shading_frames(g)
     c, sp = footprints(g, hf.shape, spp)
     out = np.zeros((len(wo), 3))
@@ -186,16 +248,19 @@ def shade_wave(scene, g, *, mode: str, spp: int = 1, u=None,
                 out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
             uq = u[m][:, 2 * QUAD_SAMPLES * qi:2 * QUAD_SAMPLES * (qi + 1)]
             out[m] += quad_light_rgb(ndf, c[m], sp[m], wo[m], g.position[m], frame, ql, f0, uq)
+        for j, env in enumerate(envs):
+            ue = u[m][:, q0 + 3 * ENV_SAMPLES * j:q0 + 3 * ENV_SAMPLES * (j + 1)]
+            out[m] += environment_rgb(ndf, c[m], sp[m], wo[m], frame, env, f0, base, ue)
     return out
 
 
 def _check_lights(scene, name):
     for i, light in enumerate(scene.lights):
-        if light.type not in ("point", "directional", "quad") \
+        if light.type not in ("point", "directional", "quad", "environment") \
                 or getattr(light, "texture", None) is not None:
             kind = "a textured quad" if light.type == "quad" else repr(light.type)
-            raise PrefilterError(f"lights[{i}]: method {name!r} expected point, directional or "
-                                 f"untextured quad lights, got {kind}")
+            raise PrefilterError(f"lights[{i}]: method {name!r} expected point, directional, "
+                                 f"untextured quad or environment lights, got {kind}")
 
 
 def _render(scene, settings, mode, name):
@@ -204,7 +269,7 @@ def _render(scene, settings, mode, name):
     _check_lights(scene, name)
     scene_heightfield(scene)  # a bad heightfield fails before any work
     spp = settings.spp
-    k = 2 * QUAD_SAMPLES * len(scene.light_set().quads)
+    k = n_uniforms(scene)
     return render_samples(scene, settings,
                           lambda g, u: shade_wave(scene, g, mode=mode, spp=spp, u=u,
                                                   progress=settings.progress),
