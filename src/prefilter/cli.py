@@ -50,6 +50,7 @@ BAKE_COMMANDS = {
     "leadr": "prefilter.leadr.commands:bake_leadr",
     "glints": "prefilter.glints.commands:bake_glints",
     "glints-wang": "prefilter.glints.commands:bake_glints_wang",
+    "glints-wave": "prefilter.glints.commands:bake_glints_wave",
     "roughness": "prefilter.roughness.commands:bake_roughness_cmd",
 }
 

@@ -1,4 +1,4 @@
-"""``prefilter bake glints`` and ``prefilter bake glints-wang``: thin CLIs over the bakes."""
+"""``prefilter bake glints``, ``glints-wang`` and ``glints-wave``: thin CLIs over the bakes."""
 
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from prefilter.cliparams import SEED, SEED_MAX, OutputFile, scheduler_options
 from prefilter.errors import PrefilterError
 from prefilter.fileio import bake_lock
 from prefilter.glints.bake import BAKE_SETTINGS, CELL, bake, bake_settings, cache_path
+from prefilter.glints.wave.bake import WAVE_SETTINGS
 
 
 def load_normal_map(spec: str) -> np.ndarray:
@@ -288,3 +289,100 @@ def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support,
                   + ", ".join(f"{100 * e:.1f} %" for e in wn.cp_error)))
     click.echo(f"time {summary['seconds']:.1f} s -> {out}")
     click.echo(json.dumps(summary))
+
+
+def load_heightfield(spec: str, texel_size: float | None, units: str = "m"):
+    """The :class:`~prefilter.glints.wave.heightfield.Heightfield` of ``prefilter bake
+    glints-wave``'s HEIGHTFIELD: ``procedural:KIND[:SIZE[:SEED]]`` (``texel_size`` default the
+    built-in's) or a file (``.npy`` or image, first channel; heights in ``units``, metres by
+    default; ``texel_size`` required), as the scene field ``extras.glints_wave`` reads it."""
+    from prefilter.glints.wave.bake import as_heightfield_spec
+    from prefilter.glints.wave.heightfield import UNITS, read_heightfield
+
+    if units not in UNITS:
+        raise PrefilterError(f"--units: expected one of {', '.join(UNITS)}, got {units!r}")
+    if spec.startswith("procedural:"):
+        if units != "m":
+            raise PrefilterError("--units: procedural heightfields are in metres; --units "
+                                 "applies to files")
+        return as_heightfield_spec(spec, texel_size)
+    path = Path(spec)
+    if not path.is_file():
+        raise PrefilterError(f"HEIGHTFIELD: no such file {spec!r}")
+    if texel_size is None:
+        raise PrefilterError(f"--texel-size: expected metres per texel for heightfield {spec!r}, "
+                             "got none")
+    try:
+        return read_heightfield(path, texel_size, units)
+    except PrefilterError as exc:
+        raise PrefilterError(f"{path}: {exc}") from None
+
+
+_W = WAVE_SETTINGS
+
+
+@click.command("glints-wave")
+@click.argument("heightfield")
+@click.option("-o", "--out", default=None, type=OutputFile(),
+              help="Output map: OUT.npz names the three channel files OUT.R.npz, OUT.G.npz, "
+                   "OUT.B.npz (each written atomically; parts in OUT.parts/ make it resumable) "
+                   "[default: the render cache, where the glints-wave render method finds it].")
+@click.option("--texel-size", default=None, type=_POSITIVE,
+              help="Metres per texel (required for files) [default for procedural "
+                   "heightfields: their own, 0.25 um].")
+@click.option("--units", default="m", show_default=True, type=click.Choice(["m", "texel"]),
+              help="Units of a file's heights: metres, or texel units (times --texel-size).")
+@click.option("--rank", default=_W["rank"], show_default=True, type=click.IntRange(1),
+              help="Mean CP rank per group and channel: the storage budget.")
+@shared_options(ndf_res=_W["ndf_res"], block=_W["block"], support=_W["support"])
+@click.option("--stride0", default=_W["stride0"], show_default=True, type=click.IntRange(1),
+              help="Level-0 footprint (coherence area) stride (texels).")
+@click.option("--sigma0", default=None, type=_POSITIVE,
+              help="Level-0 footprint (coherence area) std [default: stride0].")
+@click.option("--cell", default=None, type=click.IntRange(min=1),
+              help=f"Spatial cell of a group at level 0 (texels) [default: {_W['cell']}, at most "
+                   "the heightfield's side].")
+@shared_options(wait=False, quiet=False)
+def bake_glints_wave(heightfield, out, texel_size, units, rank, ndf_res, block, support, stride0,
+                     sigma0, cell, wait, quiet):
+    """Precompute and compress the wave-optics RGB NDF pyramid of HEIGHTFIELD (glint paper sec.
+    4.1 with Yan et al. 2018's NDF; docs/glints-wave.md).
+
+    HEIGHTFIELD is 'procedural:KIND[:SIZE[:SEED]]' (KIND noise or scratches) or a file (.npy or
+    image, first channel) of heights with --texel-size. The defaults make the map the
+    glints-wave render method uses (prefilter.glints.wave.bake.WAVE_SETTINGS); without -o it is
+    written to the render cache, where that method finds it.
+    """
+    import time
+
+    from prefilter.glints.wave.bake import (bake_wave, cache_path, channel_paths, load_wave,
+                                            wave_settings)
+
+    t0 = time.perf_counter()
+    hf = load_heightfield(heightfield, texel_size, units)
+    settings = dict(rank=rank, ndf_res=ndf_res, block=block, support=support, stride0=stride0)
+    if cell is not None:
+        settings["cell"] = cell
+    if sigma0 is not None:
+        settings["sigma0"] = sigma0
+    st = wave_settings(hf.shape, settings)
+    if out is None:
+        out = cache_path(hf, st)
+        Path(out).parent.mkdir(parents=True, exist_ok=True)
+    with bake_lock(out, wait=wait):
+        s = bake_wave(hf, out, progress=not quiet, **st)
+        wm = load_wave(out)  # the three files validated together, as the render loads them
+    H, W = hf.shape
+    click.echo(f"heightfield {H}x{W}, {hf.texel_size * 1e6:g} um texels (sha1 {hf.digest[:12]}), "
+               f"{wm.pyramid.n_levels} levels, NDF images {wm.resolution}^2 over "
+               f"[-{wm.support:g}, {wm.support:g}]^2")
+    for c, path in zip(s["channels"], channel_paths(out)):
+        ch = s["channels"][c]
+        click.echo(f"{c}: compressed {ch['compressed_bytes'] / 2**20:.2f} MiB "
+                   f"({100 * ch['ratio']:.2f} %), relative L2 error "
+                   f"{100 * ch['rel_l2_error']:.2f} % -> {path}")
+    click.echo(f"raw {s['raw_bytes'] / 2**20:.1f} MiB, compressed "
+               f"{s['compressed_bytes'] / 2**20:.2f} MiB, ratio {100 * s['ratio']:.2f} %")
+    click.echo(f"time {time.perf_counter() - t0:.1f} s (level-0 images "
+               f"{s['seconds_level0']:.1f} s)")
+    click.echo(json.dumps(s))

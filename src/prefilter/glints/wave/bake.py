@@ -47,6 +47,29 @@ WAVE_VERSION = 1
 WAVE_SETTINGS = dict(rank=16, ndf_res=64, support=0.25, block=16, stride0=4, cell=32)
 
 
+def wave_settings(shape, settings: dict | None = None) -> dict:
+    """The keyword arguments of :func:`bake_wave` that make the render methods' map of a
+    heightfield of ``shape (H, W)``: :data:`WAVE_SETTINGS` updated by ``settings``, ``cell`` at
+    most the heightfield's side unless given (as the geometric ``bake_settings``)."""
+    st = dict(WAVE_SETTINGS, **(settings or {}))
+    if "cell" not in (settings or {}):
+        st["cell"] = min(st["cell"], int(shape[0]), int(shape[1]))
+    return st
+
+
+def cache_path(hf: Heightfield, settings: dict) -> Path:
+    """Where the render methods keep the map of ``hf`` baked with ``settings`` (the full
+    :func:`wave_settings`): ``wave-<key>.npz`` in the glints cache
+    (:func:`prefilter.glints.bake.cache_dir`), keyed by the heights' digest, the settings and
+    :data:`WAVE_VERSION`; the channels are :func:`channel_paths` of it."""
+    import hashlib
+
+    from prefilter.glints.bake import cache_dir
+
+    key = json.dumps(dict(settings, heights=hf.digest, version=WAVE_VERSION), sort_keys=True)
+    return cache_dir() / f"wave-{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
+
+
 def channel_paths(out) -> list[Path]:
     """The files of the channels of map ``out`` (``x.npz`` -> ``x.R.npz``, ``x.G.npz``,
     ``x.B.npz``)."""

@@ -10,8 +10,10 @@ coherence areas; :mod:`prefilter.glints.wave.ndf`):
 ``I_k`` the coherent RGB image of area ``k`` (computed once per heightfield, uncompressed). Where
 ``v < (stride0 / 2)^2`` (footprints about the size of a coherence area or smaller) the weights
 are the bilinear ones of the four nearest areas, as the pyramid's level 0 blends them. Weights
-are cut at ``TRUNCATION`` stds; the images are looked up bilinearly between pixel centres (as
-the ``glints-wave`` method's).
+are cut at ``TRUNCATION`` stds; the images are looked up bilinearly between pixel centres with
+the compressed lookup's taps (:func:`prefilter.glints._qkernels.pixel_taps`: pixels outside the
+image weigh 0, so values fade to 0 from the outer pixel centres to half a pixel beyond the
+support), as the ``glints-wave`` method's.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import math
 import numpy as np
 
 from prefilter.jit import njit_parallel, prange
+from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints.pyramid import plan
 from prefilter.glints.wave.heightfield import Heightfield
 from prefilter.glints.wave.ndf import rgb_images
@@ -58,15 +61,14 @@ def _direct_points(img, stride, sigma0, c, sp, s, lo, h, trunc, out):  # pragma:
         v = sp[q] * sp[q] - sigma0 * sigma0
         tent = v < vmin
         r = stride if tent else trunc * math.sqrt(v)
-        # bilinear between pixel centres: pixel coordinate of s, zero beyond the outer centres
-        fx = (s[q, 0] - lo) / h - 0.5
-        fy = (s[q, 1] - lo) / h - 0.5
-        if fx < 0.0 or fy < 0.0 or fx > R - 1 or fy > R - 1:
+        # bilinear between pixel centres, taps outside the image weigh 0 (the compressed
+        # lookup's pixel_taps)
+        iy, u0, u1 = pixel_taps((s[q, 1] - lo) / h, R, True)
+        ix, v0, v1 = pixel_taps((s[q, 0] - lo) / h, R, True)
+        if u0 + u1 == 0.0 or v0 + v1 == 0.0:
             continue
-        ix = min(int(fx), R - 2)
-        iy = min(int(fy), R - 2)
-        tx = fx - ix
-        ty = fy - iy
+        iy0, iy1 = max(iy, 0), min(iy + 1, R - 1)
+        ix0, ix1 = max(ix, 0), min(ix + 1, R - 1)
         # lattice centres k stride + 0.5 within r of the footprint centre (periodic)
         kx0 = int(math.ceil((c[q, 0] - 0.5 - r) / stride))
         kx1 = int(math.floor((c[q, 0] - 0.5 + r) / stride))
@@ -89,8 +91,8 @@ def _direct_points(img, stride, sigma0, c, sp, s, lo, h, trunc, out):  # pragma:
                 wsum += w
                 for ch in range(3):
                     p = img[yy, xx, ch]
-                    val = ((1 - ty) * ((1 - tx) * p[iy, ix] + tx * p[iy, ix + 1])
-                           + ty * ((1 - tx) * p[iy + 1, ix] + tx * p[iy + 1, ix + 1]))
+                    val = (u0 * (v0 * p[iy0, ix0] + v1 * p[iy0, ix1])
+                           + u1 * (v0 * p[iy1, ix0] + v1 * p[iy1, ix1]))
                     if ch == 0:
                         a0 += w * val
                     elif ch == 1:
@@ -101,3 +103,51 @@ def _direct_points(img, stride, sigma0, c, sp, s, lo, h, trunc, out):  # pragma:
             out[q, 0] = a0 / wsum
             out[q, 1] = a1 / wsum
             out[q, 2] = a2 / wsum
+
+
+class PyramidWave:
+    """The footprint pyramid of a :class:`DirectWave`'s images, uncompressed: per channel the
+    coherence-area images filtered into the levels of ``pyr`` by
+    :func:`prefilter.glints.pyramid.next_level` (float32 ``(n_images, R, R)``, flat in the
+    pyramid's image order), queried as ``glints-wave`` queries its compressed maps (Gaussian
+    resampling weights, :func:`prefilter.glints.pyramid.resample_weights`, and the bilinear
+    lookup of :func:`prefilter.glints._qkernels.pixel_taps`). What the pyramid costs without the
+    compression (``benchmarks/bench_glints_wave.py --split``)."""
+
+    def __init__(self, dw: DirectWave, pyr=None):
+        from prefilter.glints.pyramid import next_level
+
+        self.pyr = dw.pyr if pyr is None else pyr
+        self.R, self.S = dw.R, dw.S
+        self.images = []
+        for ch in range(3):
+            lv = [np.ascontiguousarray(dw.images[:, :, ch])]
+            for level in range(1, self.pyr.n_levels):
+                lv.append(next_level(lv[-1], self.pyr.sigma(level - 1)
+                                     / self.pyr.stride(level - 1)))
+            self.images.append(np.concatenate([x.reshape(-1, *x.shape[2:]) for x in lv]))
+
+    def point(self, center, sigma_p, s) -> np.ndarray:
+        """RGB NDF ``(N, 3)`` of footprints ``center (N, 2)``, ``sigma_p (N,)`` at ``s (N, 2)``."""
+        from prefilter.glints.pyramid import resample_weights
+
+        c = np.asarray(center, np.float64).reshape(-1, 2)
+        sp = np.broadcast_to(np.asarray(sigma_p, np.float64), c.shape[:1])
+        s = np.asarray(s, np.float64).reshape(-1, 2)
+        idx, w, _ = resample_weights(self.pyr, c, sp)
+        # bilinear taps between pixel centres, zero outside the image (as pixel_taps)
+        g = (s + self.S) / (2.0 * self.S / self.R) - 0.5
+        i0 = np.floor(g).astype(np.int64)
+        t = g - i0
+        out = np.zeros((len(c), 3))
+        for dy in (0, 1):
+            for dx in (0, 1):
+                iy, ix = i0[:, 1] + dy, i0[:, 0] + dx
+                ok = (iy >= 0) & (iy < self.R) & (ix >= 0) & (ix < self.R)
+                wt = np.where(ok, (t[:, 1] if dy else 1 - t[:, 1])
+                              * (t[:, 0] if dx else 1 - t[:, 0]), 0.0)
+                iy, ix = np.clip(iy, 0, self.R - 1), np.clip(ix, 0, self.R - 1)
+                for ch in range(3):
+                    v = self.images[ch][idx, iy[:, None], ix[:, None]]  # (N, K)
+                    out[:, ch] += wt * np.sum(w * v, axis=1)
+        return out

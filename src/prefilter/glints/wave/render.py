@@ -8,7 +8,10 @@ The microstructure is a heightfield named by the scene field ``extras.glints_wav
 ``texel_size``: metres per texel, required for files, default the procedural one's). Every object
 is shaded with its RGB glint lobe over the pixel footprint (footprints as the geometric methods',
 :func:`prefilter.glints.render.footprints`, in texels of the heightfield) plus Lambert
-``base_color``; ``f0`` is the material's. Point and directional lights.
+``base_color``; ``f0`` is the material's. Point and directional lights, untextured quads (light
+sampling, :func:`quad_light_rgb`; diffuse by Lambert's polygon formula) and environment maps
+(light sampling, :func:`environment_rgb`): both methods draw the same light samples, so they
+compare the NDF at the same half vectors.
 
 * ``glints-wave``: the compressed RGB pyramid (:mod:`prefilter.glints.wave.bake`, baked on first
   use into the glints cache, keyed by the heightfield's digest and the settings), point queries
@@ -32,7 +35,8 @@ from prefilter.glints.bake import cache_dir
 from prefilter.glints.brdf import brdf_cos_from_ndf, half
 from prefilter.glints.render import footprints
 from prefilter.glints.wave.bake import (WAVE_SETTINGS, WAVE_VERSION, as_heightfield_spec,
-                                        bake_wave, channel_paths, load_wave)
+                                        bake_wave, cache_path, channel_paths, load_wave,
+                                        wave_settings)
 from prefilter.glints.wave.direct import DirectWave
 from prefilter.glints.wave.lobe import point_rgb
 from prefilter.render.shading import point_incoming, shading_frames
@@ -61,16 +65,13 @@ def scene_heightfield(scene):
 
 
 def wave_map(hf, settings: dict | None = None, progress: bool = False):
-    """The baked :class:`~prefilter.glints.wave.bake.WaveMap` of ``hf`` (glints cache)."""
-    st = dict(WAVE_SETTINGS, **(settings or {}))
-    if "cell" not in (settings or {}):
-        # as the geometric bake_settings: a heightfield smaller than the default cell is one cell
-        st["cell"] = min(st["cell"], *hf.shape)
-    key = json.dumps(dict(st, heights=hf.digest, version=WAVE_VERSION), sort_keys=True)
+    """The baked :class:`~prefilter.glints.wave.bake.WaveMap` of ``hf`` (glints cache, at
+    :func:`~prefilter.glints.wave.bake.cache_path`; ``prefilter bake glints-wave`` writes the
+    same file)."""
+    st = wave_settings(hf.shape, settings)
+    out = cache_path(hf, st)
+    key = str(out)
     if key not in _MAPS:
-        import hashlib
-
-        out = cache_dir() / f"wave-{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
         out.parent.mkdir(parents=True, exist_ok=True)
         if not all(p.exists() for p in channel_paths(out)):
             bake_wave(hf, out, progress=progress, **st)
@@ -106,9 +107,109 @@ def brdf_cos_from_rgb(wo, wi, h, D, f0) -> np.ndarray:
                      for c in range(3)], axis=-1)
 
 
-def shade_wave(scene, g, *, mode: str, spp: int = 1, progress: bool = False) -> np.ndarray:
-    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point / directional lights;
-    ``mode``: ``"compressed"`` or ``"direct"``."""
+#: Quad lights: light samples (uniform on the quad's area) per shading sample and quad; each
+#: takes two uniforms.
+QUAD_SAMPLES = 8
+
+
+def quad_light_rgb(ndf, center, sigma_p, wo, position, frame, light, f0, u) -> np.ndarray:
+    """Specular radiance ``(N, 3)`` of quad ``light`` by light sampling: the mean over the
+    samples ``j`` of ``f(wo, wi_j) cos L / p(wi_j)``, ``wi_j`` uniform on the quad's area
+    (:func:`prefilter.render.lights.quad_light_sample`, ``p`` its solid-angle density), the RGB
+    NDF ``ndf(center, sigma_p, s)`` at the samples' half vectors (one call for all of them).
+
+    Parameters
+    ----------
+    wo : (N, 3) local view directions; position : (N, 3) world shading points; frame :
+    (t, b, n) each (N, 3); u : (N, 2 K) uniforms in ``[0, 1)`` (K samples).
+    """
+    from prefilter.render.lights import quad_light_sample
+
+    N, K = len(wo), u.shape[1] // 2
+    if N == 0 or K == 0:
+        return np.zeros((N, 3))
+    # the K samples of every shading sample at once: rows sample-major (K N)
+    t, b, n = (np.tile(x, (K, 1)) for x in frame)
+    uk = u[:, :2 * K].reshape(N, K, 2).transpose(1, 0, 2).reshape(K * N, 2)
+    w, pdf = quad_light_sample(light, np.tile(position, (K, 1)), uk)
+    wi = to_local(w, t, b, n)
+    wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
+    woK = np.tile(wo, (K, 1))
+    ok = (pdf > 0) & (wi[:, 2] > 0)
+    wi = np.where(ok[:, None], wi, np.array([0.0, 0.0, 1.0]))
+    h = half(woK, wi)
+    D = ndf(np.tile(center, (K, 1)), np.tile(sigma_p, K), h[:, :2])
+    f = brdf_cos_from_rgb(woK, wi, h, D, f0)
+    val = np.where(ok[:, None], f / np.where(ok, pdf, 1.0)[:, None], 0.0).reshape(K, N, 3)
+    return val.mean(axis=0) * np.asarray(light.radiance, dtype=np.float64)
+
+
+#: Environment lights: directions drawn from the map (texels by luminance times solid angle,
+#: :class:`prefilter.render.pathtrace.EnvironmentSampler`) per shading sample and environment;
+#: each takes three uniforms.
+ENV_SAMPLES = 16
+_ENV: dict = {}
+
+
+def environment_rgb(ndf, center, sigma_p, wo, frame, sampler, f0, base, u) -> np.ndarray:
+    """Radiance ``(N, 3)`` of an environment light by light sampling: the mean over the samples
+    ``j`` of ``(f(wo, wi_j) + base / pi wi_j.z) L(wi_j) / p(wi_j)`` with ``wi_j`` from
+    ``sampler`` (an :class:`~prefilter.render.pathtrace.EnvironmentSampler`), the RGB NDF
+    ``ndf(center, sigma_p, s)`` at the samples' half vectors (one call); no occlusion.
+
+    Parameters
+    ----------
+    wo : (N, 3) local view directions; frame : (t, b, n) each (N, 3); u : (N, 3 K) uniforms in
+    ``[0, 1)`` (K samples).
+    """
+    N, K = len(wo), u.shape[1] // 3
+    if N == 0 or K == 0:
+        return np.zeros((N, 3))
+    t, b, n = (np.tile(x, (K, 1)) for x in frame)
+    uk = u[:, :3 * K].reshape(N, K, 3).transpose(1, 0, 2).reshape(K * N, 3)
+    w, pdf = sampler.sample(uk)
+    L = sampler.eval(w)
+    wi = to_local(w, t, b, n)
+    wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
+    woK = np.tile(wo, (K, 1))
+    ok = (pdf > 0) & (wi[:, 2] > 0)
+    wi = np.where(ok[:, None], wi, np.array([0.0, 0.0, 1.0]))
+    h = half(woK, wi)
+    D = ndf(np.tile(center, (K, 1)), np.tile(sigma_p, K), h[:, :2])
+    f = brdf_cos_from_rgb(woK, wi, h, D, f0) + base / np.pi * wi[:, 2:3]
+    val = np.where(ok[:, None], f * L / np.where(ok, pdf, 1.0)[:, None], 0.0)
+    return val.reshape(K, N, 3).mean(axis=0)
+
+
+def _environments(scene) -> list:
+    """The :class:`~prefilter.render.pathtrace.EnvironmentSampler` of each environment light of
+    ``scene`` (cached per image and scale)."""
+    from prefilter.render.pathtrace import EnvironmentSampler
+
+    out = []
+    for lt in scene.lights:
+        if lt.type == "environment":
+            key = (lt.image.cache_key(), float(lt.scale))
+            if key not in _ENV:
+                _ENV[key] = EnvironmentSampler.of(lt)
+            out.append(_ENV[key])
+    return out
+
+
+def n_uniforms(scene) -> int:
+    """Uniforms per shading sample of the glints-wave methods: ``2 QUAD_SAMPLES`` per quad
+    light, then ``3 ENV_SAMPLES`` per environment light."""
+    n_env = sum(lt.type == "environment" for lt in scene.lights)
+    return 2 * QUAD_SAMPLES * len(scene.light_set().quads) + 3 * ENV_SAMPLES * n_env
+
+
+def shade_wave(scene, g, *, mode: str, spp: int = 1, u=None,
+               progress: bool = False) -> np.ndarray:
+    """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's point, directional, quad and
+    environment lights; ``mode``: ``"compressed"`` or ``"direct"``; ``u (N, n_uniforms(scene))``:
+    the quads' then the environments' uniforms."""
+    from prefilter.ltc import clamped_cosine_integral
+
     hf = scene_heightfield(scene)
     if mode == "compressed":
         wm = wave_map(hf, progress=progress)
@@ -118,6 +219,13 @@ def shade_wave(scene, g, *, mode: str, spp: int = 1, progress: bool = False) -> 
     else:
         dw = direct_model(hf)
         ndf = dw.point
+    lights = scene.light_set()
+    envs = _environments(scene)
+    k_u = n_uniforms(scene)
+    if k_u and (u is None or np.shape(u)[-1] < k_u):
+        raise PrefilterError(f"u: expected {k_u} uniforms per sample for the scene's quad and "
+                             f"environment lights, got {None if u is None else np.shape(u)}")
+    q0 = 2 * QUAD_SAMPLES * len(lights.quads)
     t, b, n, wo = shading_frames(g)
     c, sp = footprints(g, hf.shape, spp)
     out = np.zeros((len(wo), 3))
@@ -126,21 +234,33 @@ def shade_wave(scene, g, *, mode: str, spp: int = 1, progress: bool = False) -> 
         mat = scene.objects[int(k)].material
         base = np.asarray(mat.base_color, dtype=np.float64)
         f0 = np.broadcast_to(np.asarray(mat.f0, dtype=np.float64), (3,))
-        for w, e in point_incoming(scene.light_set(), g.position[m]):
+        for w, e in point_incoming(lights, g.position[m]):
             wi = to_local(w, t[m], b[m], n[m])
             wi /= np.linalg.norm(wi, axis=-1, keepdims=True)
             h = half(wo[m], wi)
             D = ndf(c[m], sp[m], h[:, :2])
             spec = brdf_cos_from_rgb(wo[m], wi, h, D, f0)
             out[m] += (spec + base / np.pi * np.maximum(wi[:, 2], 0.0)[:, None]) * e
+        frame = (t[m], b[m], n[m])
+        for qi, ql in enumerate(lights.quads):
+            if np.any(base > 0):
+                corners = np.stack([to_local(v - g.position[m], *frame) for v in ql.vertices], 1)
+                out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
+            uq = u[m][:, 2 * QUAD_SAMPLES * qi:2 * QUAD_SAMPLES * (qi + 1)]
+            out[m] += quad_light_rgb(ndf, c[m], sp[m], wo[m], g.position[m], frame, ql, f0, uq)
+        for j, env in enumerate(envs):
+            ue = u[m][:, q0 + 3 * ENV_SAMPLES * j:q0 + 3 * ENV_SAMPLES * (j + 1)]
+            out[m] += environment_rgb(ndf, c[m], sp[m], wo[m], frame, env, f0, base, ue)
     return out
 
 
 def _check_lights(scene, name):
     for i, light in enumerate(scene.lights):
-        if light.type not in ("point", "directional"):
-            raise PrefilterError(f"lights[{i}]: method {name!r} expected point or directional "
-                                 f"lights, got {light.type!r}")
+        if light.type not in ("point", "directional", "quad", "environment") \
+                or getattr(light, "texture", None) is not None:
+            kind = "a textured quad" if light.type == "quad" else repr(light.type)
+            raise PrefilterError(f"lights[{i}]: method {name!r} expected point, directional, "
+                                 f"untextured quad or environment lights, got {kind}")
 
 
 def _render(scene, settings, mode, name):
@@ -149,10 +269,11 @@ def _render(scene, settings, mode, name):
     _check_lights(scene, name)
     scene_heightfield(scene)  # a bad heightfield fails before any work
     spp = settings.spp
+    k = n_uniforms(scene)
     return render_samples(scene, settings,
-                          lambda g, u: shade_wave(scene, g, mode=mode, spp=spp,
+                          lambda g, u: shade_wave(scene, g, mode=mode, spp=spp, u=u,
                                                   progress=settings.progress),
-                          stratified=spp > 1, desc=name)
+                          random_dims=k, stratified=spp > 1, desc=name)
 
 
 def render_glints_wave(scene, settings) -> np.ndarray:
