@@ -352,8 +352,15 @@ def expect_json_object(data: Mapping[str, np.ndarray], key: str, where: str) -> 
 
 
 def save_json_atomic(path: str | os.PathLike, obj) -> None:
-    with atomic_path(path, suffix=".json") as tmp:
-        tmp.write_text(json.dumps(obj, indent=2, sort_keys=True) + "\n")
+    write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=True) + "\n")
+
+
+def write_text_atomic(path: str | os.PathLike, text: str) -> Path:
+    """Write ``text`` to ``path`` atomically (:func:`atomic_path`); returns ``Path(path)``."""
+    path = Path(path)
+    with atomic_path(path, suffix="".join(path.suffixes) or ".txt") as tmp:
+        tmp.write_text(text)
+    return path
 
 
 #: Folder beside a file set's first file holding its versions (see :func:`atomic_file_set`).

@@ -101,7 +101,7 @@ def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear,
     import hashlib
     from pathlib import Path
 
-    from prefilter.fileio import atomic_path, bake_lock
+    from prefilter.fileio import bake_lock, write_text_atomic
     from prefilter.colormap.glsl import glsl_snippet
 
     c = load_colormap_image(colormap, srgb=not linear)
@@ -116,6 +116,5 @@ def bake_colormap(colormap, sigma_max, value_range, size, n_sigma, edge, linear,
     click.echo(f"wrote {out} ({table.n_sigma} x {table.n_mean} x {table.table.shape[2]}) and "
                f"{side.name}")
     if glsl_out:
-        with atomic_path(glsl_out) as tmp:
-            Path(tmp).write_text(glsl_snippet(meta))
+        write_text_atomic(glsl_out, glsl_snippet(meta))
         click.echo(f"wrote {glsl_out}")

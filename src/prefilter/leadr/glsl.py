@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from prefilter.fileio import atomic_path
+from prefilter.fileio import write_text_atomic
 
 __all__ = ["ERFC_COEFFS", "export_all", "glsl_source"]
 
@@ -175,6 +175,5 @@ def export_all(out_dir) -> list[Path]:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     g = out / "leadr.glsl"
-    with atomic_path(g, suffix=".glsl") as tmp:
-        tmp.write_text(glsl_source())
+    write_text_atomic(g, glsl_source())
     return [g]

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.fileio import atomic_path
+from prefilter.fileio import write_text_atomic
 
 __all__ = ["env_textures", "export_all", "glsl_source"]
 
@@ -313,6 +313,5 @@ def export_all(out_dir) -> list[Path]:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     g = out / "leadr_env.glsl"
-    with atomic_path(g, suffix=".glsl") as tmp:
-        tmp.write_text(glsl_source())
+    write_text_atomic(g, glsl_source())
     return [g]

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.fileio import atomic_path, save_json_atomic
+from prefilter.fileio import atomic_path, save_json_atomic, write_text_atomic
 from prefilter.errors import PrefilterError
 
 __all__ = ["CHANNELS", "GLSL", "export_all", "glsl_source", "texture_layout", "texture_params",
@@ -198,6 +198,5 @@ def export_all(table, out_dir) -> list[Path]:
             "filter": "NEAREST (texelFetch; bilinear in the shader)"}
     save_json_atomic(out / "ggx_iso_layout.json", meta)
     g = out / "ltc_iso.glsl"
-    with atomic_path(g, suffix=".glsl") as tmp:
-        tmp.write_text(glsl_source(table))
+    write_text_atomic(g, glsl_source(table))
     return paths + [out / "ggx_iso_layout.json", g]

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.fileio import atomic_path
+from prefilter.fileio import atomic_path, write_text_atomic
 
 __all__ = ["ALPHA_MESO_WIDTH", "GLSL", "alpha_meso_nodes", "export_all",
            "footprint_bias", "footprint_taps", "glsl_source"]
@@ -146,6 +146,5 @@ def export_all(out_dir) -> list[Path]:
     b, g = out / "alpha_meso_f32.bin", out / "multiscale.glsl"
     with atomic_path(b, suffix=".bin") as tmp:
         tmp.write_bytes(alpha_meso_nodes().astype("<f4").tobytes())
-    with atomic_path(g, suffix=".glsl") as tmp:
-        tmp.write_text(glsl_source())
+    write_text_atomic(g, glsl_source())
     return [b, g]

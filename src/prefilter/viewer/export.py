@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.fileio import atomic_path, save_json_atomic
+from prefilter.fileio import atomic_path, save_json_atomic, write_text_atomic
 from prefilter.errors import PrefilterError
 
 __all__ = ["BUILTIN_MAPS", "MAX_OBJECTS", "MAX_QUADS", "METHODS", "default_scene",
@@ -223,8 +223,7 @@ def _colormap(scene, atlas: "_Atlas", data: Path) -> dict:
                  glsl_snippet(table.metadata())) + driver_glsl(driver, slope)
     stack = slope_texture(slope)
     _write(data / "colormap_slope_f32.bin", stack.astype("<f4").tobytes())
-    with atomic_path(data / "colormap.glsl", suffix=".glsl") as tmp:
-        tmp.write_text(src)
+    write_text_atomic(data / "colormap.glsl", src)
     return {"glsl": "colormap.glsl", "f32": "colormap_f32.bin", "width": table.n_mean,
             "height": table.n_sigma, "wrap_s": GLSL_WRAP[table.edge].removeprefix("GL_"),
             "chain": chain, "driver": None if driver is None else driver.driver,

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.fileio import atomic_path, save_json_atomic, save_npz_atomic
+from prefilter.fileio import atomic_path, save_json_atomic, save_npz_atomic, write_text_atomic
 from prefilter.errors import PrefilterError
 from prefilter.ltc.glsl import CHANNELS, uniform_nodes
 
@@ -65,8 +65,7 @@ def export_all(table, out_dir) -> list[Path]:
             "depth_index": "ratio_index * A + alpha_index", "filter": "LINEAR, CLAMP_TO_EDGE"}
     save_json_atomic(out / "ggx_aniso_layout.json", meta)
     g = out / "ltc_aniso.glsl"
-    with atomic_path(g, suffix=".glsl") as tmp:
-        tmp.write_text(glsl_source(table))
+    write_text_atomic(g, glsl_source(table))
     return paths + [out / "ggx_aniso_layout.json", g]
 
 
