@@ -129,9 +129,21 @@ def quad_light_rgb(ndf, center, sigma_p, wo, position, frame, light, f0, u) -> n
     if N == 0 or K == 0:
         return np.zeros((N, 3))
     # the K samples of every shading sample at once: rows sample-major (K N)
-    t, b, n = (np.tile(x, (K, 1)) for x in frame)
     uk = u[:, :2 * K].reshape(N, K, 2).transpose(1, 0, 2).reshape(K * N, 2)
     w, pdf = quad_light_sample(light, np.tile(position, (K, 1)), uk)
+    radiance = np.asarray(light.radiance, dtype=np.float64)
+    return _light_samples_rgb(ndf, center, sigma_p, wo, frame, w, pdf, radiance, f0, 0.0)
+
+
+def _light_samples_rgb(ndf, center, sigma_p, wo, frame, w, pdf, L, f0, base) -> np.ndarray:
+    """``(N, 3)``: the mean over ``K`` light samples of ``(f(wo, wi) + base / pi wi.z) L / p``.
+
+    ``w (K N, 3)`` world directions, sample-major, with densities ``pdf (K N,)`` and radiance
+    ``L`` (``(K N, 3)`` or ``(3,)``); samples below the horizon or of zero density count 0.
+    """
+    N = len(wo)
+    K = len(w) // N
+    t, b, n = (np.tile(x, (K, 1)) for x in frame)
     wi = to_local(w, t, b, n)
     wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
     woK = np.tile(wo, (K, 1))
@@ -139,9 +151,9 @@ def quad_light_rgb(ndf, center, sigma_p, wo, position, frame, light, f0, u) -> n
     wi = np.where(ok[:, None], wi, np.array([0.0, 0.0, 1.0]))
     h = half(woK, wi)
     D = ndf(np.tile(center, (K, 1)), np.tile(sigma_p, K), h[:, :2])
-    f = brdf_cos_from_rgb(woK, wi, h, D, f0)
-    val = np.where(ok[:, None], f / np.where(ok, pdf, 1.0)[:, None], 0.0).reshape(K, N, 3)
-    return val.mean(axis=0) * np.asarray(light.radiance, dtype=np.float64)
+    f = brdf_cos_from_rgb(woK, wi, h, D, f0) + base / np.pi * wi[:, 2:3]
+    val = np.where(ok[:, None], f * L / np.where(ok, pdf, 1.0)[:, None], 0.0)
+    return val.reshape(K, N, 3).mean(axis=0)
 
 
 #: Environment lights: directions drawn from the map (texels by luminance times solid angle,
@@ -165,20 +177,9 @@ def environment_rgb(ndf, center, sigma_p, wo, frame, sampler, f0, base, u) -> np
     N, K = len(wo), u.shape[1] // 3
     if N == 0 or K == 0:
         return np.zeros((N, 3))
-    t, b, n = (np.tile(x, (K, 1)) for x in frame)
     uk = u[:, :3 * K].reshape(N, K, 3).transpose(1, 0, 2).reshape(K * N, 3)
     w, pdf = sampler.sample(uk)
-    L = sampler.eval(w)
-    wi = to_local(w, t, b, n)
-    wi /= np.maximum(np.linalg.norm(wi, axis=-1, keepdims=True), 1e-300)
-    woK = np.tile(wo, (K, 1))
-    ok = (pdf > 0) & (wi[:, 2] > 0)
-    wi = np.where(ok[:, None], wi, np.array([0.0, 0.0, 1.0]))
-    h = half(woK, wi)
-    D = ndf(np.tile(center, (K, 1)), np.tile(sigma_p, K), h[:, :2])
-    f = brdf_cos_from_rgb(woK, wi, h, D, f0) + base / np.pi * wi[:, 2:3]
-    val = np.where(ok[:, None], f * L / np.where(ok, pdf, 1.0)[:, None], 0.0)
-    return val.reshape(K, N, 3).mean(axis=0)
+    return _light_samples_rgb(ndf, center, sigma_p, wo, frame, w, pdf, sampler.eval(w), f0, base)
 
 
 def _environments(scene) -> list:
