@@ -46,9 +46,9 @@ from prefilter.glints.pyramid import RESAMPLE_Q_MIN, RESAMPLE_TRUNCATION, resamp
 from prefilter.glints.query import packed
 from prefilter.glints.store import GlintsMap, code_levels
 
-__all__ = ["CODE_FORMATS", "MAX_LEVELS", "WEBGL2_LIMITS", "export_gpu", "export_surface",
-           "glsl_source",
-           "slope_moments", "texture_shape", "write_gpu"]
+__all__ = ["CODE_FORMATS", "MAX_LEVELS", "MAX_RECTS", "SUM_SIZE", "SUM_SLOTS", "WEBGL2_LIMITS",
+           "export_gpu", "export_surface", "glsl_source", "slope_moments", "texture_shape",
+           "write_gpu"]
 
 #: WebGL2's guaranteed minima (WebGL 2.0 spec, sec. 6.3 / OpenGL ES 3.0 table 6.28).
 WEBGL2_LIMITS = {"MAX_TEXTURE_SIZE": 2048, "MAX_ARRAY_TEXTURE_LAYERS": 256,
@@ -56,6 +56,13 @@ WEBGL2_LIMITS = {"MAX_TEXTURE_SIZE": 2048, "MAX_ARRAY_TEXTURE_LAYERS": 256,
 CODE_FORMATS = ("f32", "f16", "u8")
 #: Pyramid levels the GLSL's uniform arrays hold (a 4096^2 map at stride 4 has 11).
 MAX_LEVELS = 12
+#: The queries' per-group sums of the taps' code rows: at most ``SUM_SLOTS`` CP groups and
+#: ``SUM_SIZE`` components in all at once (more are flushed and restarted, still exact); a group
+#: of a higher rank than ``SUM_SIZE`` is refused by :func:`export_gpu`.
+SUM_SLOTS = 16
+SUM_SIZE = 512
+#: Rectangles of one ``glRangeMulti`` call (a quad light's 4 x 4 patches).
+MAX_RECTS = 16
 #: Direct P-NDF below the finest level: truncation in stds (the ``glints`` method's
 #: :data:`prefilter.glints.brdf.FALLBACK_TRUNCATION`).
 FALLBACK_TRUNCATION = 4.0
@@ -153,6 +160,9 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
     B = gm.block
     M = wsc.shape[0]
     meta = np.asarray(meta)
+    if meta.shape[0] and int(meta[:, 0].max()) > SUM_SIZE:
+        raise PrefilterError(f"gm: a CP group of rank {int(meta[:, 0].max())}, the GLSL sums at "
+                             f"most SUM_SIZE = {SUM_SIZE} components of a group")
     ia = _components(meta, M, B)
     Fa = fa.ravel()[ia].astype(np.float64)  # (M, B)
     Fb = fb.ravel()[ia].astype(np.float64)
@@ -266,6 +276,9 @@ def glsl_source() -> str:
     head = "\n".join([
         "// prefilter.glints.gpu: constants of the Python implementation",
         f"#define GLT_MAX_LEVELS {MAX_LEVELS}",
+        f"#define GLT_SLOTS {SUM_SLOTS}",
+        f"#define GLT_SUM_SIZE {SUM_SIZE}",
+        f"#define GLT_MAX_RECTS {MAX_RECTS}",
         f"const float GLT_RESAMPLE_TRUNCATION = {RESAMPLE_TRUNCATION!r};",
         f"const float GLT_RESAMPLE_Q_MIN = {RESAMPLE_Q_MIN!r};",
         f"const float GLT_FALLBACK_TRUNCATION = {FALLBACK_TRUNCATION!r};",
