@@ -35,6 +35,7 @@ void main() {
 """
 
 # load glints.js, upload the exported map, draw `src` over n cases, read the float target back
+# (after conftest.PROGRAM_JS, the ``program_js`` fixture)
 _RUN = """
 const [src, data, n, entry, done] = [arguments[0], arguments[1], arguments[2], arguments[3],
                                      arguments[arguments.length - 1]];
@@ -45,16 +46,7 @@ const [src, data, n, entry, done] = [arguments[0], arguments[1], arguments[2], a
   gl.getExtension('EXT_color_buffer_float');
   const head = '#version 300 es\\nprecision highp float;\\nprecision highp int;\\n' +
     'precision highp sampler2D;\\nprecision highp isampler2D;\\n' + G.GLINTS_HEAD;
-  const sh = (t, s) => { const x = gl.createShader(t); gl.shaderSource(x, head + s);
-    gl.compileShader(x); if (!gl.getShaderParameter(x, gl.COMPILE_STATUS))
-    throw new Error(gl.getShaderInfoLog(x)); return x; };
-  const p = gl.createProgram();
-  gl.attachShader(p, sh(gl.VERTEX_SHADER, 'void main() { gl_Position = vec4(vec2[3](vec2(-1.0, ' +
-    '-1.0), vec2(3.0, -1.0), vec2(-1.0, 3.0))[gl_VertexID], 0.0, 1.0); }'));
-  gl.attachShader(p, sh(gl.FRAGMENT_SHADER, src));
-  gl.linkProgram(p);
-  if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
-  gl.useProgram(p);
+  const p = fullScreenProgram(gl, head, src);
   const map = await G.fetchGlints(gl, new URL('./', location.href).href, entry);
   const u = (name, fn, ...args) => { const l = gl.getUniformLocation(p, name);
     if (l !== null) gl[fn](l, ...args); };
@@ -89,7 +81,7 @@ def surf():
 
 
 @pytest.fixture(scope="module")
-def run_glints(browser, surf, tmp_path_factory):
+def run_glints(browser, surf, tmp_path_factory, program_js):
     from prefilter.viewer import serve
 
     d = tmp_path_factory.mktemp("glints-glsl")
@@ -102,8 +94,8 @@ def run_glints(browser, surf, tmp_path_factory):
 
     def run(src, data):
         data = np.asarray(data, np.float32)
-        out = browser.execute_async_script(_RUN, src, data.reshape(-1).tolist(), data.shape[0],
-                                           entry)
+        out = browser.execute_async_script(program_js + _RUN, src, data.reshape(-1).tolist(),
+                                           data.shape[0], entry)
         if isinstance(out, str):
             raise AssertionError(out)
         return np.array(out, np.float64).reshape(data.shape[0], 4)

@@ -15,8 +15,8 @@ images; ``nb = R / B`` blocks per axis; layout of each in :mod:`prefilter.glints
 * ``meta`` ``(G,)`` RGBA32I: rank, first component, code-row base, code-row stride;
 * ``index`` ``(N nb nb)`` R32I: the code row of block ``(bi, bj)`` of each image (-1: blank);
   ``cell`` ``(N,)`` R32I: the image's cell (group ``cell nb^2 + bi nb + bj``);
-* ``elements`` ``(2 H W)`` RGBA32F: per texel of the normal map ``(s_x, s_y, 0, 0)`` and its
-  Jacobian ``(J00, J01, J10, J11)`` (:func:`prefilter.glints.pndf.elements`), for the direct
+* ``elements`` ``(2 H W)`` RGBA32F: per texel of the normal map ``(s_x, s_y, |J|_F, 0)`` and
+  its Jacobian ``(J00, J01, J10, J11)`` (:func:`prefilter.glints.pndf.elements`), for the direct
   P-NDF below the finest level.
 
 Code variants (:data:`CODE_FORMATS`): ``"f32"`` (the stored codes as float32: exact for 8- and
@@ -224,6 +224,7 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
                                  f"glints map was baked from, got {s_el.shape[:2]}")
         el = np.zeros(s_el.shape[:2] + (2, 4))
         el[..., 0, :2] = s_el
+        el[..., 0, 2] = np.sqrt(np.sum(J * J, axis=(-2, -1)))
         el[..., 1, :] = J.reshape(J.shape[:2] + (4,))
         tex["elements"] = (el.reshape(-1, 4), "RGBA32F")
         params["moments"] = slope_moments(normal_map, sr)
