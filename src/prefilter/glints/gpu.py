@@ -2,18 +2,22 @@
 and sec. 5.1, on the GPU).
 
 Every array of the query kernels (:func:`prefilter.glints.query.packed`) becomes one
-single-channel ``TEXTURE_2D_ARRAY``: flat element ``k`` is texel ``(k % w, (k / w) % h)`` of layer
-``k / (w h)``, with ``w = min(n, MAX_TEXTURE_SIZE)`` and ``h`` up to ``MAX_TEXTURE_SIZE`` rows per
+``TEXTURE_2D_ARRAY`` (single-channel but ``c``, ``meta`` and ``elements``): flat element ``k`` is
+texel ``(k % w, (k / w) % h)`` of layer ``k / (w h)``, with ``w = min(n, MAX_TEXTURE_SIZE)`` and
+``h`` up to ``MAX_TEXTURE_SIZE`` rows per
 layer. Textures (``M``: components, sum of the groups' ranks; ``B``: block; ``G`` groups; ``N``
 images; ``nb = R / B`` blocks per axis; layout of each in :mod:`prefilter.glints._qkernels`):
 
 * ``fa``, ``fb`` ``(M B)``: the row / column factors, rank-innermost per group;
 * ``pa``, ``pb`` ``(M (B + 1))``: their prefix sums (the range query);
-* ``c`` (one value per kept block and component): the third factors' codes;
+* ``c`` RGBA (4 components a texel): the third factors' code rows in use, each in whole texels
+  (zero-padded), so a tap reads ``ceil(r / 4)`` texels;
 * ``w`` ``(M,)`` float32: the scale of each component, so that an NDF pixel of a block of group
-  ``g`` is ``sum_r w[m + r] c[kc + r] fa[i, r] fb[j, r]``;
-* ``meta`` ``(G,)`` RGBA32I: rank, first component, code-row base, code-row stride;
-* ``index`` ``(N nb nb)`` R32I: the code row of block ``(bi, bj)`` of each image (-1: blank);
+  ``g`` is ``sum_r w[m + r] c[kc, r] fa[i, r] fb[j, r]``;
+* ``meta`` ``(G,)`` RGBA32I: rank, first component, 0, 1 (code-row base and stride: ``index``
+  holds the rows' texels);
+* ``index`` ``(N nb nb)`` R32I: the first texel in ``c`` of the code row of block ``(bi, bj)`` of
+  each image (-1: blank);
   ``cell`` ``(N,)`` R32I: the image's cell (group ``cell nb^2 + bi nb + bj``);
 * ``elements`` ``(2 H W)`` RGBA32F: per texel of the normal map ``(s_x, s_y, |J|_F, 0)`` and
   its Jacobian ``(J00, J01, J10, J11)`` (:func:`prefilter.glints.pndf.elements`), for the direct
@@ -22,7 +26,7 @@ images; ``nb = R / B`` blocks per axis; layout of each in :mod:`prefilter.glints
 Code variants (:data:`CODE_FORMATS`): ``"f32"`` (the stored codes as float32: exact for 8- and
 16-bit codes, ``w`` = the kernels' ``wsc``), ``"f16"`` (factors and prefix sums divided by each
 component's code sum, IEEE half; ``c`` in half, exact for 8-bit codes), ``"u8"`` (factors
-requantised to 8 bits of each component's maximum, ``c`` in 8 bits, both ``R8`` UNORM; prefix
+requantised to 8 bits of each component's maximum, ``c`` in 8 bits, ``R8`` / ``RGBA8`` UNORM; prefix
 sums of the 8-bit factors in float32).
 
 Limits (:data:`WEBGL2_LIMITS`, the minima every WebGL2 implementation guarantees):
@@ -104,6 +108,32 @@ def _components(meta, M, B):
     return base[:, None] + np.arange(B)[None, :] * r[g][:, None]
 
 
+def _code_texels(cq, meta, block_index, image_cell, nb):
+    """The code rows in use re-laid for RGBA texels, each in whole texels (zero-padded): returns
+    ``texels (T, 4)``, ``meta (G, 4)`` with code-row base 0 and stride 1, and ``index`` like
+    ``block_index`` holding the first texel of each block's code row (-1: blank)."""
+    meta = np.asarray(meta, np.int64)
+    idx = np.asarray(block_index, np.int64)
+    g = (np.asarray(image_cell, np.int64)[:, None, None] * nb * nb
+         + np.arange(nb)[None, :, None] * nb + np.arange(nb)[None, None, :])
+    used = idx >= 0
+    gu = g[used]
+    start = meta[gu, 2] + idx[used] * meta[gu, 3]
+    rows, first, inv = np.unique(start, return_index=True, return_inverse=True)
+    r = meta[gu[first], 0]
+    s4 = (r + 3) // 4
+    off = np.cumsum(s4) - s4
+    out = np.zeros((int(s4.sum()), 4), np.asarray(cq).dtype)
+    u = np.repeat(np.arange(len(rows)), r)
+    c = np.arange(len(u)) - np.repeat(np.cumsum(r) - r, r)
+    out.reshape(-1)[4 * off[u] + c] = np.asarray(cq)[rows[u] + c]
+    index = np.full(idx.shape, -1, np.int64)
+    index[used] = off[inv.reshape(-1)]
+    m2 = meta.copy()
+    m2[:, 2], m2[:, 3] = 0, 1
+    return out, m2, index
+
+
 def _prefix_layout(vals, meta, B):
     """Prefix sums ``(M, B + 1)`` of per-component values ``(M, B)`` in the kernels'
     rank-innermost flat layout ``m_g (B + 1) + i r_g + r``."""
@@ -167,10 +197,12 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
     Fa = fa.ravel()[ia].astype(np.float64)  # (M, B)
     Fb = fb.ravel()[ia].astype(np.float64)
     W = np.asarray(wsc, np.float64).copy()
-    Cv = np.asarray(cq).astype(np.float64)
+    Ct, meta_gpu, index_gpu = _code_texels(cq, meta, gm.block_index, gm.image_cell,
+                                           gm.resolution // B)
+    Cv = Ct.astype(np.float64)
     if codes == "f32":
         tex = {"fa": (fa.ravel(), "R32F"), "fb": (fb.ravel(), "R32F"),
-               "pa": (pa.ravel(), "R32F"), "pb": (pb.ravel(), "R32F"), "c": (Cv, "R32F")}
+               "pa": (pa.ravel(), "R32F"), "pb": (pb.ravel(), "R32F"), "c": (Cv, "RGBA32F")}
     elif codes == "f16":
         sa, sb = Fa.sum(1), Fb.sum(1)
         na = np.where(sa > 0, sa, 1.0)
@@ -182,7 +214,7 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
             flat[ia] = F / s[:, None]
             tex["f" + name] = (flat.copy(), "R16F")
             tex["p" + name] = (_prefix_layout(F / s[:, None], meta, B), "R16F")
-        tex["c"] = (Cv, "R16F")
+        tex["c"] = (Cv, "RGBA16F")
     else:
         if gm.codes is None:
             raise PrefilterError("codes: 'u8' needs a map with stored codes (version 3), got a "
@@ -198,11 +230,11 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
             tex["f" + name] = (flat.astype(np.uint8), "R8")
             tex["p" + name] = (_prefix_layout(q8 / 255.0, meta, B), "R32F")
         Qc = code_levels(np.asarray(cq).dtype)
-        tex["c"] = (np.rint(Cv * 255.0 / Qc).astype(np.uint8), "R8")
+        tex["c"] = (np.rint(Cv * 255.0 / Qc).astype(np.uint8), "RGBA8")
         W *= Qc
     tex["w"] = (W, "R32F")
-    tex["meta"] = (meta.astype(np.int32), "RGBA32I")
-    tex["index"] = (np.asarray(gm.block_index, np.int32).ravel(), "R32I")
+    tex["meta"] = (meta_gpu.astype(np.int32), "RGBA32I")
+    tex["index"] = (index_gpu.astype(np.int32).ravel(), "R32I")
     tex["cell"] = (np.asarray(gm.image_cell, np.int32), "R32I")
     sr = float(gm.header.get("settings", {}).get("intrinsic_roughness", 0.005)
                if intrinsic_roughness is None else intrinsic_roughness)
@@ -233,7 +265,8 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
         n = data.shape[0]
         shape = texture_shape(n, name, limits)
         dt = {"R32F": np.float32, "R16F": np.float16, "R8": np.uint8, "R32I": np.int32,
-              "RGBA32I": np.int32, "RGBA32F": np.float32}[fmt]
+              "RGBA32I": np.int32, "RGBA32F": np.float32, "RGBA16F": np.float16,
+              "RGBA8": np.uint8}[fmt]
         chans = 4 if fmt.startswith("RGBA") else 1
         full = np.zeros((shape[0] * shape[1] * shape[2], chans), dt)
         full[:n] = np.asarray(data).reshape(n, chans)

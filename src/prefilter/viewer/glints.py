@@ -159,6 +159,10 @@ def glints_frame_times(kind: str = "flakes", distances=tuple(DISTANCES), *, widt
     scenes = {f"d-{d}": glints_scene(kind, d, "point", width, height) for d in distances}
     best = {d: math.inf for d in distances}
     with glint_pages(scenes, (kind,), (codes,), driver) as (drv, url_of):
+        # a SwiftShader frame of the compressed path at 512 x 512 can exceed the client's
+        # default 120 s per command
+        drv.command_executor.client_config.timeout = max(
+            drv.command_executor.client_config.timeout or 0, 1800)
         for _ in range(rounds):
             for d in distances:
                 open_viewer_glints(drv, url_of(f"d-{d}"), kind, codes)

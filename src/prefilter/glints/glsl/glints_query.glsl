@@ -146,12 +146,13 @@ int glBlendTap(GlBlend b, int t, out float w) {
 // -- per-group sums of the taps' code rows -------------------------------------------------
 
 // slots of the groups being summed: group id, its record (rank, first component, code-row
-// base, stride), the offset of its sum in glCw; glCw holds GLT_SUM_SIZE components in all
+// base and stride in texels of glC, 4 components a texel), the offset of its sum in glCw (4
+// components an entry, each group's sum in whole entries); GLT_SUM_SIZE components in all
 int glNs, glCwUsed;
 int glGid[GLT_SLOTS];
 ivec4 glGm[GLT_SLOTS];
 int glGo[GLT_SLOTS];
-float glCw[GLT_SUM_SIZE];
+vec4 glCw[GLT_SUM_SIZE / 4];
 
 // add w times the code row of image img at block (bi, bj) to its group's slot; false: the
 // slots are full (flush, then call again), true: added (or a blank block)
@@ -164,17 +165,18 @@ bool glAddRow(int img, float w, int bi, int bj) {
     for (int v = 0; v < glNs; ++v) if (glGid[v] == g) { u = v; break; }
     if (u < 0) {
         ivec4 meta = glFetchMeta(g);
-        if (glNs == GLT_SLOTS || glCwUsed + meta.x > GLT_SUM_SIZE) return false;
+        int n4 = (meta.x + 3) / 4;
+        if (glNs == GLT_SLOTS || glCwUsed + n4 > GLT_SUM_SIZE / 4) return false;
         u = glNs++;
         glGid[u] = g; glGm[u] = meta; glGo[u] = glCwUsed;
-        glCwUsed += meta.x;
-        for (int r = 0; r < meta.x; ++r) glCw[glGo[u] + r] = 0.0;
+        glCwUsed += n4;
+        for (int e = 0; e < n4; ++e) glCw[glGo[u] + e] = vec4(0.0);
     }
     ivec4 meta = glGm[u];
     GlCursor cc = glCursor(meta.z + k * meta.w, GLT_TEX_C);
-    int o = glGo[u];
-    for (int r = 0; r < meta.x; ++r) {
-        glCw[o + r] += w * texelFetch(glC, cc.p, 0).r;
+    int o = glGo[u], n4 = (meta.x + 3) / 4;
+    for (int e = 0; e < n4; ++e) {
+        glCw[o + e] += w * texelFetch(glC, cc.p, 0);  // zero past the rank
         glStep(cc);
     }
     return true;
@@ -218,7 +220,7 @@ float glFlushPoint(int ia, float wa0, float wa1, int ja, float wb0, float wb1) {
             if (two_a) { fa += wa1 * texelFetch(glFa, a1.p, 0).r; glStep(a1); }
             float fb = wb0 * texelFetch(glFb, b0.p, 0).r;
             if (two_b) { fb += wb1 * texelFetch(glFb, b1.p, 0).r; glStep(b1); }
-            s += texelFetch(glW, cw.p, 0).r * (glCw[o + r] * fa * fb);
+            s += texelFetch(glW, cw.p, 0).r * (glCw[o + r / 4][r % 4] * fa * fb);
             glStep(a0); glStep(b0); glStep(cw);
         }
     }
@@ -279,7 +281,7 @@ float glFlushRect(ivec4 nA, vec4 kA, ivec4 nB, vec4 kB) {
                                   texelFetch(glPa, a2.p, 0).r, texelFetch(glPa, a3.p, 0).r, kA);
             float db = glAxisMass(texelFetch(glPb, b0.p, 0).r, texelFetch(glPb, b1.p, 0).r,
                                   texelFetch(glPb, b2.p, 0).r, texelFetch(glPb, b3.p, 0).r, kB);
-            s += glCw[o + r] * (texelFetch(glW, cw.p, 0).r * (da * db));
+            s += glCw[o + r / 4][r % 4] * (texelFetch(glW, cw.p, 0).r * (da * db));
             glStep(a0); glStep(a1); glStep(a2); glStep(a3);
             glStep(b0); glStep(b1); glStep(b2); glStep(b3); glStep(cw);
         }

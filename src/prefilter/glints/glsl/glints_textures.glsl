@@ -1,5 +1,6 @@
-// Glints map textures (prefilter.glints.gpu.export_gpu): flat arrays in single-channel 2D array
-// textures, element k at texel (k % w, (k / w) % h) of layer k / (w h).
+// Glints map textures (prefilter.glints.gpu.export_gpu): flat arrays in 2D array textures, element
+// k at texel (k % w, (k / w) % h) of layer k / (w h); single-channel but glC (4 codes a texel),
+// glMeta, glElements.
 #define GLT_TEX_FA 0
 #define GLT_TEX_FB 1
 #define GLT_TEX_PA 2
