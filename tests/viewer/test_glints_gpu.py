@@ -93,3 +93,14 @@ def test_quad_light_matches_python(browser):
                               height=36, driver=browser)
     assert r["covered"] > 0.3 * 48 * 36
     assert r["rel_rmse"] <= TOL, r
+
+
+def test_glints_scene_takes_named_and_numeric_distances():
+    from prefilter.errors import PrefilterError
+    from prefilter.viewer.glints import glints_scene
+
+    far, d8 = glints_scene("flakes", "far"), glints_scene("flakes", 8)
+    assert far["camera"] == d8["camera"]
+    for bad in ("farther", -1.0, 0, [8]):
+        with pytest.raises(PrefilterError, match="distance"):
+            glints_scene("flakes", bad)

@@ -29,7 +29,10 @@ def _distance(distance) -> float:
             raise PrefilterError(f"distance: expected one of {sorted(DISTANCES)} or a number, "
                                  f"got {distance!r}")
         return DISTANCES[distance]
-    d = float(distance)
+    try:
+        d = float(distance)
+    except (TypeError, ValueError):
+        d = math.nan
     if not (math.isfinite(d) and d > 0):
         raise PrefilterError(f"distance: expected a positive number, got {distance!r}")
     return d
