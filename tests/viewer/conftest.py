@@ -55,7 +55,7 @@ const fullScreenProgram = (gl, head, src) => {
 """
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def program_js():
     """:data:`PROGRAM_JS` for the test modules' own harnesses."""
     return PROGRAM_JS
