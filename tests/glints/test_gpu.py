@@ -56,23 +56,25 @@ def test_export_variants_reproduce_the_kernel_values(small):
     kc = meta[g, 2] + gm.block_index.ravel()[pick] * meta[g, 3]
     i, j = rng.integers(0, B, pick.size), rng.integers(0, B, pick.size)
 
-    def values(fa_, fb_, c_, w_):
+    def values(fa_, fb_, c_, w_, kc_):
         out = np.zeros(pick.size)
         for n in range(pick.size):
             nr, m = meta[g[n], 0], meta[g[n], 1]
             r = np.arange(nr)
-            out[n] = np.sum(w_[m + r] * c_[kc[n] + r] * fa_[m * B + i[n] * nr + r]
+            out[n] = np.sum(w_[m + r] * c_[kc_[n] + r] * fa_[m * B + i[n] * nr + r]
                             * fb_[m * B + j[n] * nr + r])
         return out
 
-    ref = values(fa.ravel().astype(float), fb.ravel().astype(float), cq.astype(float), wsc)
+    ref = values(fa.ravel().astype(float), fb.ravel().astype(float), cq.astype(float), wsc, kc)
     assert np.sum(ref > 0) > 20
     tol = {"f32": 1e-6, "f16": 2e-3, "u8": 0.05}
     for codes in CODE_FORMATS:
         e = export_gpu(gm, nm, codes=codes)
         t = {name: v["data"].astype(np.float64) for name, v in e["textures"].items()}
         scale = 255.0 if codes == "u8" else 1.0
-        got = values(t["fa"] / scale, t["fb"] / scale, t["c"] / scale, t["w"])
+        # the code rows in RGBA texels: index holds each block's first texel
+        kc_gpu = 4 * e["textures"]["index"]["data"][pick].astype(np.int64)
+        got = values(t["fa"] / scale, t["fb"] / scale, t["c"] / scale, t["w"], kc_gpu)
         err = np.abs(got - ref) / max(ref.max(), 1e-30)
         assert err.max() < tol[codes], (codes, err.max())
         assert e["params"]["textures"]["fa"][0] <= WEBGL2_LIMITS["MAX_TEXTURE_SIZE"]

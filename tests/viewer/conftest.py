@@ -34,24 +34,41 @@ def browser(tmp_path_factory):
 
 # -- the exported GLSL alone in WebGL2 ---------------------------------------------------------
 
-_RUN = """
+#: JS defining ``fullScreenProgram(gl, head, src)``: the WebGL2 program of a full-screen triangle
+#: and fragment shader ``src`` (both after ``head``), linked and in use; compile and link errors
+#: thrown with the driver's log. Shared by the browser harnesses that run GLSL alone
+#: (``run_glsl`` here, tests/viewer/test_glsl_polygon.py, tests/viewer/test_glsl_glints.py).
+PROGRAM_JS = """
+const fullScreenProgram = (gl, head, src) => {
+  const sh = (t, s) => { const x = gl.createShader(t); gl.shaderSource(x, head + s);
+    gl.compileShader(x); if (!gl.getShaderParameter(x, gl.COMPILE_STATUS))
+    throw new Error(gl.getShaderInfoLog(x)); return x; };
+  const p = gl.createProgram();
+  gl.attachShader(p, sh(gl.VERTEX_SHADER, 'void main() { gl_Position = vec4(vec2[3](vec2(-1.0, ' +
+    '-1.0), vec2(3.0, -1.0), vec2(-1.0, 3.0))[gl_VertexID], 0.0, 1.0); }'));
+  gl.attachShader(p, sh(gl.FRAGMENT_SHADER, src));
+  gl.linkProgram(p);
+  if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
+  gl.useProgram(p);
+  return p;
+};
+"""
+
+
+@pytest.fixture(scope="module")
+def program_js():
+    """:data:`PROGRAM_JS` for the test modules' own harnesses."""
+    return PROGRAM_JS
+
+
+_RUN = PROGRAM_JS + """
 const [src, data, n, texs] = arguments;
 const c = document.createElement('canvas');
 const gl = c.getContext('webgl2');
 gl.getExtension('EXT_color_buffer_float');
 gl.getExtension('OES_texture_float_linear');  // LINEAR filtering of RGBA32F
-const head = '#version 300 es\\nprecision highp float;\\nprecision highp int;\\n' +
-  'precision highp sampler2D;\\n';
-const sh = (t, s) => { const x = gl.createShader(t); gl.shaderSource(x, head + s);
-  gl.compileShader(x); if (!gl.getShaderParameter(x, gl.COMPILE_STATUS))
-  throw new Error(gl.getShaderInfoLog(x)); return x; };
-const p = gl.createProgram();
-gl.attachShader(p, sh(gl.VERTEX_SHADER, 'void main() { gl_Position = vec4(vec2[3](vec2(-1.0, ' +
-  '-1.0), vec2(3.0, -1.0), vec2(-1.0, 3.0))[gl_VertexID], 0.0, 1.0); }'));
-gl.attachShader(p, sh(gl.FRAGMENT_SHADER, src));
-gl.linkProgram(p);
-if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
-gl.useProgram(p);
+const p = fullScreenProgram(gl, '#version 300 es\\nprecision highp float;\\n' +
+  'precision highp int;\\nprecision highp sampler2D;\\n', src);
 const tex = (w, h, arr, filter, ws, wt) => { const t = gl.createTexture();
   gl.bindTexture(gl.TEXTURE_2D, t);
   gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, w, h, 0, gl.RGBA, gl.FLOAT, arr);

@@ -1,10 +1,10 @@
 """The viewer's ``glints`` mode against ``prefilter.render.render(scene, "glints")``: the glints
 measurement plane (``prefilter.viewer.glints.glints_scene``, 64^2 built-in maps baked at the
 render's settings, cached under ``$PREFILTER_GLINTS_CACHE``, see tests/conftest.py) at near /
-mid / far under a point light, relative RMSE over hit pixels <= 1 % with float32 codes; float16
-and 8-bit codes are reported (their quantisation is not the Python method's). The default run
-checks flakes at mid distance; the four maps at three distances are slow (a bake per map on
-first use)."""
+mid / far under a point light and far under a quad light, relative RMSE over hit pixels <= 1 %
+with float32 codes; float16 and 8-bit codes are reported (their quantisation is not the Python
+method's). The default run checks flakes at mid distance and under the quad light; the four
+maps at three distances are slow (a bake per map on first use)."""
 
 import numpy as np
 import pytest
@@ -81,3 +81,26 @@ def test_sphere_under_a_directional_light_matches_python(browser):
                               shape="sphere", driver=browser)
     assert r["covered"] > 0.3 * 96 * 72
     assert r["rel_rmse"] <= TOL, r
+
+
+def test_quad_light_matches_python(browser):
+    """A quad light (``measurement_scene``'s square) at the far distance on a 48 x 36 frame:
+    every hit pixel takes Python's range path (2 x 2 patches, 4 x 4 where those are too
+    large), which the page draws with one ``glRangeMulti`` per pixel."""
+    from prefilter.viewer.glints import glints_pixel_match
+
+    (r,) = glints_pixel_match(kinds=("flakes",), distances=("far",), lights="quad", width=48,
+                              height=36, driver=browser)
+    assert r["covered"] > 0.3 * 48 * 36
+    assert r["rel_rmse"] <= TOL, r
+
+
+def test_glints_scene_takes_named_and_numeric_distances():
+    from prefilter.errors import PrefilterError
+    from prefilter.viewer.glints import glints_scene
+
+    far, d8 = glints_scene("flakes", "far"), glints_scene("flakes", 8)
+    assert far["camera"] == d8["camera"]
+    for bad in ("farther", -1.0, 0, [8]):
+        with pytest.raises(PrefilterError, match="distance"):
+            glints_scene("flakes", bad)

@@ -14,7 +14,7 @@ import pytest
 
 from prefilter.glints.brdf import glint_brdf_cos, glint_ndf
 from prefilter.glints.gpu import GLSL_FILES, export_surface, glsl_source, write_gpu
-from prefilter.glints.query import point_flat, range_multi, weights
+from prefilter.glints.query import packed, point_flat, range_multi, weights
 
 STATIC = Path(__file__).resolve().parents[2] / "src" / "prefilter" / "viewer" / "static"
 
@@ -35,6 +35,7 @@ void main() {
 """
 
 # load glints.js, upload the exported map, draw `src` over n cases, read the float target back
+# (after conftest.PROGRAM_JS, the ``program_js`` fixture)
 _RUN = """
 const [src, data, n, entry, done] = [arguments[0], arguments[1], arguments[2], arguments[3],
                                      arguments[arguments.length - 1]];
@@ -45,16 +46,7 @@ const [src, data, n, entry, done] = [arguments[0], arguments[1], arguments[2], a
   gl.getExtension('EXT_color_buffer_float');
   const head = '#version 300 es\\nprecision highp float;\\nprecision highp int;\\n' +
     'precision highp sampler2D;\\nprecision highp isampler2D;\\n' + G.GLINTS_HEAD;
-  const sh = (t, s) => { const x = gl.createShader(t); gl.shaderSource(x, head + s);
-    gl.compileShader(x); if (!gl.getShaderParameter(x, gl.COMPILE_STATUS))
-    throw new Error(gl.getShaderInfoLog(x)); return x; };
-  const p = gl.createProgram();
-  gl.attachShader(p, sh(gl.VERTEX_SHADER, 'void main() { gl_Position = vec4(vec2[3](vec2(-1.0, ' +
-    '-1.0), vec2(3.0, -1.0), vec2(-1.0, 3.0))[gl_VertexID], 0.0, 1.0); }'));
-  gl.attachShader(p, sh(gl.FRAGMENT_SHADER, src));
-  gl.linkProgram(p);
-  if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
-  gl.useProgram(p);
+  const p = fullScreenProgram(gl, head, src);
   const map = await G.fetchGlints(gl, new URL('./', location.href).href, entry);
   const u = (name, fn, ...args) => { const l = gl.getUniformLocation(p, name);
     if (l !== null) gl[fn](l, ...args); };
@@ -89,7 +81,7 @@ def surf():
 
 
 @pytest.fixture(scope="module")
-def run_glints(browser, surf, tmp_path_factory):
+def run_glints(browser, surf, tmp_path_factory, program_js):
     from prefilter.viewer import serve
 
     d = tmp_path_factory.mktemp("glints-glsl")
@@ -102,8 +94,8 @@ def run_glints(browser, surf, tmp_path_factory):
 
     def run(src, data):
         data = np.asarray(data, np.float32)
-        out = browser.execute_async_script(_RUN, src, data.reshape(-1).tolist(), data.shape[0],
-                                           entry)
+        out = browser.execute_async_script(program_js + _RUN, src, data.reshape(-1).tolist(),
+                                           data.shape[0], entry)
         if isinstance(out, str):
             raise AssertionError(out)
         return np.array(out, np.float64).reshape(data.shape[0], 4)
@@ -146,11 +138,26 @@ def _close(gpu, ref, rtol):
     return float(np.max(err))
 
 
-def test_glints_glsl_matches_python(run_glints, surf):
+def _tight(src):
+    """The GLSL with room for 2 groups of at most 144 components in the per-group sums (the
+    flakes map's largest rank): footprints spanning more groups flush and restart."""
+    from prefilter.glints.gpu import SUM_SIZE, SUM_SLOTS
+
+    return (src.replace(f"#define GLT_SLOTS {SUM_SLOTS}\n", "#define GLT_SLOTS 2\n")
+            .replace(f"#define GLT_SUM_SIZE {SUM_SIZE}\n", "#define GLT_SUM_SIZE 144\n"))
+
+
+@pytest.mark.parametrize("sums", ["default", "tight"])
+def test_glints_glsl_matches_python(run_glints, surf, sums):
     rng = np.random.default_rng(3)
     n = 384
     data = _cases(surf, n, rng)
-    out = run_glints(glsl_source() + _MAIN, data)
+    src = glsl_source()
+    if sums == "tight":
+        assert int(np.asarray(packed(surf.gm)[3])[:, 0].max()) <= 144
+        src = _tight(src)
+        assert src != glsl_source()
+    out = run_glints(src + _MAIN, data)
     d = data.astype(np.float64)
     c, sp, q = d[:, 0, :2], d[:, 0, 2], d[:, 1, :2]
     gm = surf.gm
@@ -170,6 +177,42 @@ def test_glints_glsl_matches_python(run_glints, surf):
     assert _close(out[:, 1], ndf, 1e-4) < 1e-4
     assert _close(out[big, 2], rng_, 1e-4) < 1e-4
     assert _close(out[:, 3], brdf, 1e-4) < 1e-4
+
+
+_MULTI = """
+uniform highp sampler2D uIn;
+out vec4 o;
+vec4 at(int k, int i) { return texelFetch(uIn, ivec2(8 * k + i, 0), 0); }
+void main() {
+    int k = int(gl_FragCoord.x);
+    vec4 a = at(k, 0);
+    vec4 rect[GLT_MAX_RECTS];
+    for (int i = 0; i < 4; ++i) rect[i] = at(k, 2 + i);
+    float mean[GLT_MAX_RECTS];
+    glRangeMulti(a.xy, a.z, rect, 4, mean);
+    o = vec4(mean[0], mean[1], mean[2], mean[3]);
+}
+"""
+
+
+def test_glints_glsl_range_multi_matches_python(run_glints, surf):
+    """``glRangeMulti`` (a quad light's patches in one walk over the taps) against
+    ``range_multi`` with four rectangles per footprint, some crossing NDF blocks."""
+    rng = np.random.default_rng(5)
+    n = 128
+    data = _cases(surf, n, rng)
+    data[:, 0, 2] = np.maximum(data[:, 0, 2], surf.sigma_min * 1.01)
+    q = data[:, 1, :2].astype(np.float64)
+    half = 0.01 * rng.uniform(0.3, 3, (n, 4, 2))
+    ctr = q[:, None, :] + rng.normal(0, 0.02, (n, 4, 2))
+    lo, hi = ctr - half, ctr + half
+    data[:, 2:6, :2], data[:, 2:6, 2:] = lo, hi
+    out = run_glints(glsl_source() + _MULTI, data)
+    d = data.astype(np.float64)
+    idx, w, _ = weights(surf.gm, d[:, 0, :2], d[:, 0, 2], interp="resample")
+    ref = range_multi(surf.gm, idx, w, d[:, 2:6, :2], d[:, 2:6, 2:])
+    assert np.sum(ref > 0) > 100
+    assert _close(out, ref, 1e-4) < 1e-4
 
 
 def test_glsl_files_exist():

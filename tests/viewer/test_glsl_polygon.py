@@ -12,20 +12,14 @@ from prefilter.ltc.polygon import clip_to_horizon, polygon_integral, polygon_int
 from prefilter.ltc.table import GGXTable
 from prefilter.viewer import serve
 
+# after conftest.PROGRAM_JS (the ``program_js`` fixture)
 _RUN = """
 const [src, data, n] = arguments;
 const c = document.createElement('canvas');
 const gl = c.getContext('webgl2');
 gl.getExtension('EXT_color_buffer_float');
-const head = '#version 300 es\\nprecision highp float;\\nprecision highp int;\\n';
-const sh = (t, s) => { const x = gl.createShader(t); gl.shaderSource(x, head + s);
-  gl.compileShader(x); if (!gl.getShaderParameter(x, gl.COMPILE_STATUS))
-  throw new Error(gl.getShaderInfoLog(x)); return x; };
-const p = gl.createProgram();
-gl.attachShader(p, sh(gl.VERTEX_SHADER, 'void main() { gl_Position = vec4(vec2[3](vec2(-1.0, ' +
-  '-1.0), vec2(3.0, -1.0), vec2(-1.0, 3.0))[gl_VertexID], 0.0, 1.0); }'));
-gl.attachShader(p, sh(gl.FRAGMENT_SHADER, src));
-gl.linkProgram(p);
+const p = fullScreenProgram(gl, '#version 300 es\\nprecision highp float;\\n' +
+  'precision highp int;\\n', src);
 const tex = (w, arr) => { const t = gl.createTexture(); gl.bindTexture(gl.TEXTURE_2D, t);
   gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA32F, w, 1, 0, gl.RGBA, gl.FLOAT, arr);
   gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, gl.NEAREST);
@@ -44,6 +38,9 @@ const px = new Float32Array(4 * n);
 gl.readPixels(0, 0, n, 1, gl.RGBA, gl.FLOAT, px);
 return Array.from(px);
 """
+
+_LINKED = "'precision highp int;\\n', src);\n"  # the line of _RUN after the program is in use
+assert _LINKED in _RUN
 
 _MAIN = """
 uniform highp sampler2D uIn;  // per case: 3 texels of matrix rows, 4 texels of quad corners
@@ -87,7 +84,7 @@ def _cases(rng, n):
     return T, quads
 
 
-def test_polygon_integral_matches_python(page):
+def test_polygon_integral_matches_python(page, program_js):
     rng = np.random.default_rng(3)
     n = 256
     T, quads = _cases(rng, n)
@@ -95,7 +92,8 @@ def test_polygon_integral_matches_python(page):
     data[:, :3, :3] = T
     data[:, 3:7, :3] = quads
     src = iso_glsl.glsl_source(GGXTable.load()) + _MAIN
-    out = np.array(page.execute_script(_RUN, src, data.reshape(-1).tolist(), n)).reshape(n, 4)
+    out = np.array(page.execute_script(program_js + _RUN, src, data.reshape(-1).tolist(), n))
+    out = out.reshape(n, 4)
     clipped = clip_to_horizon(quads)
     ref_s = polygon_integral_minv(T, clipped)
     ref_d = polygon_integral_minv(np.broadcast_to(np.eye(3), T.shape), quads)
@@ -125,7 +123,7 @@ void main() {
 
 
 @pytest.mark.parametrize("precision", ["f32", "f16"])
-def test_aniso_lookup_in_webgl_matches_table(page, precision):
+def test_aniso_lookup_in_webgl_matches_table(page, program_js, precision):
     """The exported ``ltc_aniso.glsl`` with its 3D textures (hardware LINEAR filtering) against
     ``AnisoGGXTable.lookup``: magnitude and the LTC integral over a quad."""
     from prefilter.ltc.aniso.export import glsl_source, texture_layout
@@ -142,8 +140,7 @@ def test_aniso_lookup_in_webgl_matches_table(page, precision):
     tex = texture_layout(table, np.float16 if precision == "f16" else np.float32)
     src = ("precision highp sampler3D;\n" + glsl_source(table)
            + iso_glsl.glsl_source(GGXTable.load()) + _ANISO_MAIN)
-    run = _RUN.replace("gl.linkProgram(p);", """gl.linkProgram(p);
-gl.useProgram(p);
+    run = program_js + _RUN.replace(_LINKED, _LINKED + """
 gl.getExtension('OES_texture_float_linear');  // LINEAR filtering of RGBA32F
 const [D, H, W] = arguments[3];
 const half = arguments[5];

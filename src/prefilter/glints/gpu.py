@@ -2,27 +2,31 @@
 and sec. 5.1, on the GPU).
 
 Every array of the query kernels (:func:`prefilter.glints.query.packed`) becomes one
-single-channel ``TEXTURE_2D_ARRAY``: flat element ``k`` is texel ``(k % w, (k / w) % h)`` of layer
-``k / (w h)``, with ``w = min(n, MAX_TEXTURE_SIZE)`` and ``h`` up to ``MAX_TEXTURE_SIZE`` rows per
+``TEXTURE_2D_ARRAY`` (single-channel but ``c``, ``meta`` and ``elements``): flat element ``k`` is
+texel ``(k % w, (k / w) % h)`` of layer ``k / (w h)``, with ``w = min(n, MAX_TEXTURE_SIZE)`` and
+``h`` up to ``MAX_TEXTURE_SIZE`` rows per
 layer. Textures (``M``: components, sum of the groups' ranks; ``B``: block; ``G`` groups; ``N``
 images; ``nb = R / B`` blocks per axis; layout of each in :mod:`prefilter.glints._qkernels`):
 
 * ``fa``, ``fb`` ``(M B)``: the row / column factors, rank-innermost per group;
 * ``pa``, ``pb`` ``(M (B + 1))``: their prefix sums (the range query);
-* ``c`` (one value per kept block and component): the third factors' codes;
+* ``c`` RGBA (4 components a texel): the third factors' code rows in use, each in whole texels
+  (zero-padded), so a tap reads ``ceil(r / 4)`` texels;
 * ``w`` ``(M,)`` float32: the scale of each component, so that an NDF pixel of a block of group
-  ``g`` is ``sum_r w[m + r] c[kc + r] fa[i, r] fb[j, r]``;
-* ``meta`` ``(G,)`` RGBA32I: rank, first component, code-row base, code-row stride;
-* ``index`` ``(N nb nb)`` R32I: the code row of block ``(bi, bj)`` of each image (-1: blank);
+  ``g`` is ``sum_r w[m + r] c[kc, r] fa[i, r] fb[j, r]``;
+* ``meta`` ``(G,)`` RGBA32I: rank, first component, 0, 1 (code-row base and stride: ``index``
+  holds the rows' texels);
+* ``index`` ``(N nb nb)`` R32I: the first texel in ``c`` of the code row of block ``(bi, bj)`` of
+  each image (-1: blank);
   ``cell`` ``(N,)`` R32I: the image's cell (group ``cell nb^2 + bi nb + bj``);
-* ``elements`` ``(2 H W)`` RGBA32F: per texel of the normal map ``(s_x, s_y, 0, 0)`` and its
-  Jacobian ``(J00, J01, J10, J11)`` (:func:`prefilter.glints.pndf.elements`), for the direct
+* ``elements`` ``(2 H W)`` RGBA32F: per texel of the normal map ``(s_x, s_y, |J|_F, 0)`` and
+  its Jacobian ``(J00, J01, J10, J11)`` (:func:`prefilter.glints.pndf.elements`), for the direct
   P-NDF below the finest level.
 
 Code variants (:data:`CODE_FORMATS`): ``"f32"`` (the stored codes as float32: exact for 8- and
 16-bit codes, ``w`` = the kernels' ``wsc``), ``"f16"`` (factors and prefix sums divided by each
 component's code sum, IEEE half; ``c`` in half, exact for 8-bit codes), ``"u8"`` (factors
-requantised to 8 bits of each component's maximum, ``c`` in 8 bits, both ``R8`` UNORM; prefix
+requantised to 8 bits of each component's maximum, ``c`` in 8 bits, ``R8`` / ``RGBA8`` UNORM; prefix
 sums of the 8-bit factors in float32).
 
 Limits (:data:`WEBGL2_LIMITS`, the minima every WebGL2 implementation guarantees):
@@ -46,9 +50,9 @@ from prefilter.glints.pyramid import RESAMPLE_Q_MIN, RESAMPLE_TRUNCATION, resamp
 from prefilter.glints.query import packed
 from prefilter.glints.store import GlintsMap, code_levels
 
-__all__ = ["CODE_FORMATS", "MAX_LEVELS", "WEBGL2_LIMITS", "export_gpu", "export_surface",
-           "glsl_source",
-           "slope_moments", "texture_shape", "write_gpu"]
+__all__ = ["CODE_FORMATS", "MAX_LEVELS", "MAX_RECTS", "SUM_SIZE", "SUM_SLOTS", "WEBGL2_LIMITS",
+           "export_gpu", "export_surface", "glsl_source", "slope_moments", "texture_shape",
+           "write_gpu"]
 
 #: WebGL2's guaranteed minima (WebGL 2.0 spec, sec. 6.3 / OpenGL ES 3.0 table 6.28).
 WEBGL2_LIMITS = {"MAX_TEXTURE_SIZE": 2048, "MAX_ARRAY_TEXTURE_LAYERS": 256,
@@ -56,6 +60,13 @@ WEBGL2_LIMITS = {"MAX_TEXTURE_SIZE": 2048, "MAX_ARRAY_TEXTURE_LAYERS": 256,
 CODE_FORMATS = ("f32", "f16", "u8")
 #: Pyramid levels the GLSL's uniform arrays hold (a 4096^2 map at stride 4 has 11).
 MAX_LEVELS = 12
+#: The queries' per-group sums of the taps' code rows: at most ``SUM_SLOTS`` CP groups and
+#: ``SUM_SIZE`` components in all at once (more are flushed and restarted, still exact); a group
+#: of a higher rank than ``SUM_SIZE`` is refused by :func:`export_gpu`.
+SUM_SLOTS = 16
+SUM_SIZE = 512
+#: Rectangles of one ``glRangeMulti`` call (a quad light's 4 x 4 patches).
+MAX_RECTS = 16
 #: Direct P-NDF below the finest level: truncation in stds (the ``glints`` method's
 #: :data:`prefilter.glints.brdf.FALLBACK_TRUNCATION`).
 FALLBACK_TRUNCATION = 4.0
@@ -95,6 +106,32 @@ def _components(meta, M, B):
     comp = np.arange(M)
     base = m0[g] * B + (comp - m0[g])
     return base[:, None] + np.arange(B)[None, :] * r[g][:, None]
+
+
+def _code_texels(cq, meta, block_index, image_cell, nb):
+    """The code rows in use re-laid for RGBA texels, each in whole texels (zero-padded): returns
+    ``texels (T, 4)``, ``meta (G, 4)`` with code-row base 0 and stride 1, and ``index`` like
+    ``block_index`` holding the first texel of each block's code row (-1: blank)."""
+    meta = np.asarray(meta, np.int64)
+    idx = np.asarray(block_index, np.int64)
+    g = (np.asarray(image_cell, np.int64)[:, None, None] * nb * nb
+         + np.arange(nb)[None, :, None] * nb + np.arange(nb)[None, None, :])
+    used = idx >= 0
+    gu = g[used]
+    start = meta[gu, 2] + idx[used] * meta[gu, 3]
+    rows, first, inv = np.unique(start, return_index=True, return_inverse=True)
+    r = meta[gu[first], 0]
+    s4 = (r + 3) // 4
+    off = np.cumsum(s4) - s4
+    out = np.zeros((int(s4.sum()), 4), np.asarray(cq).dtype)
+    u = np.repeat(np.arange(len(rows)), r)
+    c = np.arange(len(u)) - np.repeat(np.cumsum(r) - r, r)
+    out.reshape(-1)[4 * off[u] + c] = np.asarray(cq)[rows[u] + c]
+    index = np.full(idx.shape, -1, np.int64)
+    index[used] = off[inv.reshape(-1)]
+    m2 = meta.copy()
+    m2[:, 2], m2[:, 3] = 0, 1
+    return out, m2, index
 
 
 def _prefix_layout(vals, meta, B):
@@ -153,14 +190,19 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
     B = gm.block
     M = wsc.shape[0]
     meta = np.asarray(meta)
+    if meta.shape[0] and int(meta[:, 0].max()) > SUM_SIZE:
+        raise PrefilterError(f"gm: a CP group of rank {int(meta[:, 0].max())}, the GLSL sums at "
+                             f"most SUM_SIZE = {SUM_SIZE} components of a group")
     ia = _components(meta, M, B)
     Fa = fa.ravel()[ia].astype(np.float64)  # (M, B)
     Fb = fb.ravel()[ia].astype(np.float64)
     W = np.asarray(wsc, np.float64).copy()
-    Cv = np.asarray(cq).astype(np.float64)
+    Ct, meta_gpu, index_gpu = _code_texels(cq, meta, gm.block_index, gm.image_cell,
+                                           gm.resolution // B)
+    Cv = Ct.astype(np.float64)
     if codes == "f32":
         tex = {"fa": (fa.ravel(), "R32F"), "fb": (fb.ravel(), "R32F"),
-               "pa": (pa.ravel(), "R32F"), "pb": (pb.ravel(), "R32F"), "c": (Cv, "R32F")}
+               "pa": (pa.ravel(), "R32F"), "pb": (pb.ravel(), "R32F"), "c": (Cv, "RGBA32F")}
     elif codes == "f16":
         sa, sb = Fa.sum(1), Fb.sum(1)
         na = np.where(sa > 0, sa, 1.0)
@@ -172,7 +214,7 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
             flat[ia] = F / s[:, None]
             tex["f" + name] = (flat.copy(), "R16F")
             tex["p" + name] = (_prefix_layout(F / s[:, None], meta, B), "R16F")
-        tex["c"] = (Cv, "R16F")
+        tex["c"] = (Cv, "RGBA16F")
     else:
         if gm.codes is None:
             raise PrefilterError("codes: 'u8' needs a map with stored codes (version 3), got a "
@@ -188,11 +230,11 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
             tex["f" + name] = (flat.astype(np.uint8), "R8")
             tex["p" + name] = (_prefix_layout(q8 / 255.0, meta, B), "R32F")
         Qc = code_levels(np.asarray(cq).dtype)
-        tex["c"] = (np.rint(Cv * 255.0 / Qc).astype(np.uint8), "R8")
+        tex["c"] = (np.rint(Cv * 255.0 / Qc).astype(np.uint8), "RGBA8")
         W *= Qc
     tex["w"] = (W, "R32F")
-    tex["meta"] = (meta.astype(np.int32), "RGBA32I")
-    tex["index"] = (np.asarray(gm.block_index, np.int32).ravel(), "R32I")
+    tex["meta"] = (meta_gpu.astype(np.int32), "RGBA32I")
+    tex["index"] = (index_gpu.astype(np.int32).ravel(), "R32I")
     tex["cell"] = (np.asarray(gm.image_cell, np.int32), "R32I")
     sr = float(gm.header.get("settings", {}).get("intrinsic_roughness", 0.005)
                if intrinsic_roughness is None else intrinsic_roughness)
@@ -214,6 +256,7 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
                                  f"glints map was baked from, got {s_el.shape[:2]}")
         el = np.zeros(s_el.shape[:2] + (2, 4))
         el[..., 0, :2] = s_el
+        el[..., 0, 2] = np.sqrt(np.sum(J * J, axis=(-2, -1)))
         el[..., 1, :] = J.reshape(J.shape[:2] + (4,))
         tex["elements"] = (el.reshape(-1, 4), "RGBA32F")
         params["moments"] = slope_moments(normal_map, sr)
@@ -222,7 +265,8 @@ def export_gpu(gm: GlintsMap, normal_map=None, *, codes: str = "f32", limits: di
         n = data.shape[0]
         shape = texture_shape(n, name, limits)
         dt = {"R32F": np.float32, "R16F": np.float16, "R8": np.uint8, "R32I": np.int32,
-              "RGBA32I": np.int32, "RGBA32F": np.float32}[fmt]
+              "RGBA32I": np.int32, "RGBA32F": np.float32, "RGBA16F": np.float16,
+              "RGBA8": np.uint8}[fmt]
         chans = 4 if fmt.startswith("RGBA") else 1
         full = np.zeros((shape[0] * shape[1] * shape[2], chans), dt)
         full[:n] = np.asarray(data).reshape(n, chans)
@@ -266,6 +310,9 @@ def glsl_source() -> str:
     head = "\n".join([
         "// prefilter.glints.gpu: constants of the Python implementation",
         f"#define GLT_MAX_LEVELS {MAX_LEVELS}",
+        f"#define GLT_SLOTS {SUM_SLOTS}",
+        f"#define GLT_SUM_SIZE {SUM_SIZE}",
+        f"#define GLT_MAX_RECTS {MAX_RECTS}",
         f"const float GLT_RESAMPLE_TRUNCATION = {RESAMPLE_TRUNCATION!r};",
         f"const float GLT_RESAMPLE_Q_MIN = {RESAMPLE_Q_MIN!r};",
         f"const float GLT_FALLBACK_TRUNCATION = {FALLBACK_TRUNCATION!r};",

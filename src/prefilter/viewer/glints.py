@@ -23,22 +23,36 @@ from prefilter.viewer.glint_maps import (GLINT_MAPS, export_glints, glint_normal
 DISTANCES = {"near": 0.5, "mid": 2.0, "far": 8.0}
 
 
+def _distance(distance) -> float:
+    if isinstance(distance, str):
+        if distance not in DISTANCES:
+            raise PrefilterError(f"distance: expected one of {sorted(DISTANCES)} or a number, "
+                                 f"got {distance!r}")
+        return DISTANCES[distance]
+    try:
+        d = float(distance)
+    except (TypeError, ValueError):
+        d = math.nan
+    if not (math.isfinite(d) and d > 0):
+        raise PrefilterError(f"distance: expected a positive number, got {distance!r}")
+    return d
+
+
 def glints_scene(kind: str, distance: str = "mid", lights: str = "point", width: int = 96,
                  height: int = 72, shape: str = "plane") -> dict:
     """The glints measurement plane (:func:`prefilter.glints.render.measurement_scene`) with
-    built-in map ``kind`` (:data:`GLINT_MAPS`) seen from ``distance`` (:data:`DISTANCES`).
+    built-in map ``kind`` (:data:`GLINT_MAPS`) seen from ``distance`` (a name of
+    :data:`DISTANCES` or a positive number).
 
     ``lights``: ``"point"``, ``"quad"`` (as ``measurement_scene``) or ``"directional"`` (from the
     point light's direction, irradiance 5); ``shape``: ``"plane"`` or ``"sphere"`` (radius
     ``0.25 d`` at the origin, about as many texels per unit length as the plane)."""
     from prefilter.glints.render import measurement_scene
 
-    if distance not in DISTANCES:
-        raise PrefilterError(f"distance: expected one of {sorted(DISTANCES)}, got {distance!r}")
+    d = _distance(distance)
     if shape not in ("plane", "sphere"):
         raise PrefilterError(f"shape: expected 'plane' or 'sphere', got {shape!r}")
     glint_normal_map(kind)  # validates the kind
-    d = DISTANCES[distance]
     sc = measurement_scene(d, kind, size=GLINT_MAPS[kind]["size"], width=width, height=height,
                            lights="point" if lights == "directional" else lights)
     if lights == "directional":
@@ -118,18 +132,43 @@ def glints_pixel_match(kinds=tuple(GLINT_MAPS), distances=tuple(DISTANCES), code
     return rows
 
 
+def glints_paths(kind: str, distance, width: int, height: int) -> dict:
+    """Fractions of the hit pixels of :func:`glints_scene` whose footprint the ``glints`` method
+    (and the page) shades by the direct P-NDF (below the finest level), by a resampled pyramid
+    level (:func:`prefilter.glints.pyramid.resample_weights`) or by the trilinear blend of the
+    top levels, and the median footprint std in texels."""
+    import numpy as np
+
+    from prefilter.glints.pyramid import resample_weights
+    from prefilter.glints.render import pixel_footprints
+    from prefilter.render.scene import load_scene
+
+    surf = glint_surface(kind)
+    c, sp, _ = pixel_footprints(load_scene(glints_scene(kind, distance, "point", width,
+                                                        height)), surf.shape)
+    direct = sp < surf.sigma_min
+    _, _, ok = resample_weights(surf.gm.pyramid, c, sp)
+    n = max(len(sp), 1)
+    return {"direct": float(direct.sum() / n), "resampled": float((ok & ~direct).sum() / n),
+            "trilinear": float((~ok & ~direct).sum() / n), "median_sigma": float(np.median(sp))}
+
+
 def glints_frame_times(kind: str = "flakes", distances=tuple(DISTANCES), *, width: int = 512,
                        height: int = 512, frames: int = 3, rounds: int = 3, codes: str = "f32",
                        driver=None) -> dict:
-    """Frame time in ms of the ``glints`` mode per distance (best of ``rounds`` rounds of
-    ``frames`` synchronised frames, the distances interleaved in each round) at
-    ``width x height``."""
-    scenes = {d: glints_scene(kind, d, "point", width, height) for d in distances}
+    """Frame time in ms of the ``glints`` mode per distance (names of :data:`DISTANCES` or
+    numbers; best of ``rounds`` rounds of ``frames`` synchronised frames, the distances
+    interleaved in each round) at ``width x height``."""
+    scenes = {f"d-{d}": glints_scene(kind, d, "point", width, height) for d in distances}
     best = {d: math.inf for d in distances}
     with glint_pages(scenes, (kind,), (codes,), driver) as (drv, url_of):
+        # a SwiftShader frame of the compressed path at 512 x 512 can exceed the client's
+        # default 120 s per command
+        drv.command_executor.client_config.timeout = max(
+            drv.command_executor.client_config.timeout or 0, 1800)
         for _ in range(rounds):
             for d in distances:
-                open_viewer_glints(drv, url_of(d), kind, codes)
+                open_viewer_glints(drv, url_of(f"d-{d}"), kind, codes)
                 ms = float(drv.execute_script(
                     "return window.prefilterViewer.frameTime(arguments[0]);", frames))
                 if not math.isfinite(ms):

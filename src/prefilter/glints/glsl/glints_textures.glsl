@@ -1,5 +1,6 @@
-// Glints map textures (prefilter.glints.gpu.export_gpu): flat arrays in single-channel 2D array
-// textures, element k at texel (k % w, (k / w) % h) of layer k / (w h).
+// Glints map textures (prefilter.glints.gpu.export_gpu): flat arrays in 2D array textures, element
+// k at texel (k % w, (k / w) % h) of layer k / (w h); single-channel but glC (4 codes a texel),
+// glMeta, glElements.
 #define GLT_TEX_FA 0
 #define GLT_TEX_FB 1
 #define GLT_TEX_PA 2
@@ -39,3 +40,14 @@ int glFetchIndex(int k) { return texelFetch(glIndex, glAt(k, GLT_TEX_INDEX), 0).
 int glFetchCell(int img) { return texelFetch(glCell, glAt(img, GLT_TEX_CELL), 0).r; }
 vec4 glFetchElement(int k) { return texelFetch(glElements, glAt(k, GLT_TEX_ELEMENTS), 0); }
 int glMod(int a, int m) { int r = a % m; return r < 0 ? r + m : r; }
+
+// a cursor over consecutive flat elements of texture t: the texel of element k, then one step
+// per element without the divisions of glAt (a group's rank components are adjacent)
+struct GlCursor { ivec3 p; ivec2 d; };
+GlCursor glCursor(int k, int t) { return GlCursor(glAt(k, t), glDims[t]); }
+void glStep(inout GlCursor c) {
+    if (++c.p.x == c.d.x) {
+        c.p.x = 0;
+        if (++c.p.y == c.d.y) { c.p.y = 0; ++c.p.z; }
+    }
+}

@@ -17,6 +17,8 @@ function formatOf(gl, fmt) {
     case 'R32I': return [gl.R32I, gl.RED_INTEGER, gl.INT, Int32Array];
     case 'RGBA32I': return [gl.RGBA32I, gl.RGBA_INTEGER, gl.INT, Int32Array];
     case 'RGBA32F': return [gl.RGBA32F, gl.RGBA, gl.FLOAT, Float32Array];
+    case 'RGBA16F': return [gl.RGBA16F, gl.RGBA, gl.HALF_FLOAT, Uint16Array];
+    case 'RGBA8': return [gl.RGBA8, gl.RGBA, gl.UNSIGNED_BYTE, Uint8Array];
   }
   throw new Error(`glints texture format ${fmt} unknown`);
 }
