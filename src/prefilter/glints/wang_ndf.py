@@ -40,6 +40,8 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_in
                                    element_split, line_nodes, normal_cdf, pixel_edges, pndf_image,
                                    principal_axis, splat)
 from prefilter.glints._qkernels import pixel_taps
+from prefilter.glints.wang_query import (TilePack, pack_float, pack_point,
+                                         tile_taps)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
                                    implicit_type, pndf_image_implicit, tile_index, tile_window)
@@ -125,10 +127,33 @@ class TiledNDF:
     uniform_sigma: float = math.inf
     block: int = 0
     cp_error: tuple = ()
+    #: a ``wang_store`` version-2 file's levels as stored (dicts of ``mask``, ``a``, ``b``,
+    #: ``c``, ``c_scale``) and their crops; ``images`` is then decoded on first use
+    codes: tuple | None = None
+    crops: tuple = ()
 
     @property
     def n_levels(self) -> int:
         return len(self.images)
+
+    @property
+    def pack(self) -> TilePack:
+        """The compressed pyramids in the query kernels' layout (:mod:`prefilter.glints.
+        wang_query`): from the integer codes when loaded from a version-2 file, else from the
+        float32 CP triples; built once per instance. Uncompressed: an empty pack."""
+        hit = self.__dict__.get("_pack")
+        if hit is None:
+            from prefilter.glints.wang_query import empty_pack, pack_codes
+
+            if not self.block:
+                hit = empty_pack(self.n_levels)
+            elif self.codes is not None:
+                nb = self.resolution // self.block
+                hit = pack_codes(self.codes, self.crops, nb * nb)
+            else:
+                hit = pack_float(self.images)
+            object.__setattr__(self, "_pack", hit)
+        return hit
 
     def stride(self, level: int) -> int:
         return self.stride0 << level
@@ -138,15 +163,22 @@ class TiledNDF:
 
     @property
     def nbytes(self) -> int:
-        """Bytes in memory: tiles, per-tile pyramids (float32 images or CP triples), the mean
-        and per-tile images (no per-area data). A ``wang_store`` version-2 file of compressed
-        pyramids is smaller (integer factor codes); loading decodes it to the same arrays."""
-        levels = sum(a.nbytes if isinstance(a, np.ndarray) else sum(f.nbytes for f in a)
-                     for a in self.images)
+        """Bytes in memory of what the batched queries (:func:`ndf_points`, the renderer) read:
+        tiles, per-tile pyramids (float32 images, or the packed CP factors of :attr:`pack`:
+        the integer codes of a version-2 file, the float32 factors otherwise), the mean and
+        per-tile images (no per-area data). The float32 CP triples of a loaded file, decoded
+        on first use by the per-footprint NumPy paths (:func:`ndf`, :func:`contributions`,
+        :func:`sample`), are not counted."""
+        if self.block:
+            levels = self.pack.nbytes
+        else:
+            levels = sum(a.nbytes for a in self.images)
         return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
 
     def crop(self, level: int) -> int:
         """Footprint centres per axis stored for each tile at ``level``."""
+        if self.codes is not None:
+            return int(self.crops[level])
         a = self.images[level]
         return int((a if isinstance(a, np.ndarray) else a[2]).shape[1])
 
@@ -855,8 +887,8 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 
 @njit_parallel
 def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J, depmask,
-                   seed, index, images, cpA, cpB, cpC, block, k0, st0, sigma0, dep, tile_means,
-                   mean, sr, lo, h,
+                   seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops, block, k0,
+                   st0, sigma0, dep, tile_means, mean, sr, lo, h,
                    min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
@@ -864,16 +896,21 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
     pixel centres); with ``point_sr > 0`` the texels not in the pyramids (below ``min_sigma``
     all of them, above it the dependent texels) add their point densities at ``(qx, qy)[q]``
     with intrinsic roughness ``point_sr`` instead of pixel values. ``block > 0``: compressed
-    levels, the CP triples ``(cpA, cpB, cpC)`` (``images`` unused). ``el_s, el_J``:
+    levels, the arrays of a :class:`prefilter.glints.wang_query.TilePack` (``images``
+    unused), each tap's code rows summed per CP group (:func:`prefilter.glints.wang_query.
+    pack_point`); ``crops (L,)``: centres per axis per level. ``el_s, el_J``:
     :func:`tile_elements`; ``depmask (T, T)``: :func:`dependent_texels`."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
-    rank = cpC[0].shape[4]
-    bk = max(block, 1)
-    nb = R // bk
+    rank = 1
+    for g in range(meta.shape[0]):
+        rank = max(rank, meta[g, 0])
     for q in prange(out.shape[0]):
         out[q] = 0.0
+        cwp = np.empty((16, rank), np.float32)  # per tile type: its taps' summed code rows
+        gsp = np.empty(16, np.int64)
+        slot_of = np.empty(16, np.int64)
         c0, c1, s = cx[q], cy[q], sp[q]
         # the corners with a weight: pixel rows, columns, weights (at most 4)
         cy_ = np.empty(4, np.int64)
@@ -972,66 +1009,40 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
         st = st0 * 2.0**m
         r = math.sqrt(s * s - sg * sg)
         half = tap_trunc * r / st
-        img = images[m]
-        cA, cB, cC = cpA[m], cpB[m], cpC[m]
-        n = cC.shape[1] if block > 0 else img.shape[1]
-        # compressed: the corners' angular blocks (distinct, at most 4) and the rank-one terms
-        # of the query per block, u[k, r] = sum_corners w a_r[i] b_r[j] (glints paper eq. 5)
-        gk = np.empty(4, np.int64)
-        slot = np.empty(4, np.int64)
-        ng = 0
-        for k in range(nc):
-            gg = (cy_[k] // bk) * nb + cx_[k] // bk
-            slot[k] = ng
-            for e in range(ng):
-                if gk[e] == gg:
-                    slot[k] = e
-            if slot[k] == ng:
-                gk[ng] = gg
-                ng += 1
-        u = np.empty((4, rank))
+        n = crops[m]
+        km = k0[m]
         marg = rad + 1.0
-        acc = 0.0
-        dsum = 0.0
-        psum = 0.0
         ti0 = int(math.floor((c0 - marg) / T)) - 1
         tj0 = int(math.floor((c1 - marg) / T)) - 1
         types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
                           int(math.floor((c1 + marg) / T)) + 1, seed, index)
-        for j in range(int(math.floor((c1 - marg) / T)), int(math.floor((c1 + marg) / T)) + 1):
-            gy = (c1 - j * T - 0.5) / st
-            ky0, ky1 = int(math.ceil(gy - half)), int(math.floor(gy + half))
-            ny = 0.0
-            for k in range(ky0, ky1 + 1):
-                ny += math.exp(-0.5 * ((k * st + 0.5 - (c1 - j * T)) / r) ** 2)
-            for i in range(int(math.floor((c0 - marg) / T)), int(math.floor((c0 + marg) / T)) + 1):
-                t = types[j - tj0, i - ti0]
-                gx = (c0 - i * T - 0.5) / st
-                kx0, kx1 = int(math.ceil(gx - half)), int(math.floor(gx + half))
-                nx = 0.0
-                for k in range(kx0, kx1 + 1):
-                    nx += math.exp(-0.5 * ((k * st + 0.5 - (c0 - i * T)) / r) ** 2)
-                if block > 0 and ky0 <= k0[m] + n - 1 and ky1 >= k0[m]:
-                    # a tap then costs `rank` products with its C row per block
-                    u[:ng] = 0.0
-                    for k in range(nc):
-                        g = gk[slot[k]]
-                        for rr in range(rank):
-                            u[slot[k], rr] += (cw[k] * cA[t, g, rr, cy_[k] % bk]
-                                               * cB[t, g, rr, cx_[k] % bk])
-                for ky in range(max(ky0, k0[m]), min(ky1, k0[m] + n - 1) + 1):
-                    wy = math.exp(-0.5 * ((ky * st + 0.5 - (c1 - j * T)) / r) ** 2) / ny
-                    for kx in range(max(kx0, k0[m]), min(kx1, k0[m] + n - 1) + 1):
-                        wx = math.exp(-0.5 * ((kx * st + 0.5 - (c0 - i * T)) / r) ** 2) / nx
-                        v = 0.0
-                        if block > 0:
-                            for e in range(ng):
-                                for rr in range(rank):
-                                    v += cC[t, ky - k0[m], kx - k0[m], gk[e], rr] * u[e, rr]
-                        else:
+        jlo = int(math.floor((c1 - marg) / T))
+        jhi = int(math.floor((c1 + marg) / T))
+        ilo = int(math.floor((c0 - marg) / T))
+        ihi = int(math.floor((c0 + marg) / T))
+        wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1, c0, T, st, r, half, km, n, jlo, jhi,
+                                                  ilo, ihi)
+        acc = 0.0
+        if block > 0:
+            acc = pack_point(Fa, Fb, wsc, cq, bidx, meta, offs[m], goff[m], n, block, types,
+                             jlo - tj0, ilo - ti0, wyt, wxt, kyl, kyh, kxl, kxh, py0[q],
+                             wya[q, 0], wya[q, 1], px0[q], wxa[q, 0], wxa[q, 1], cwp, gsp,
+                             slot_of)
+        else:
+            img = images[m]
+            for jj in range(jhi - jlo + 1):
+                for ii in range(ihi - ilo + 1):
+                    t = types[jlo + jj - tj0, ilo + ii - ti0]
+                    for ky in range(kyl[jj], kyh[jj] + 1):
+                        for kx in range(kxl[ii], kxh[ii] + 1):
+                            v = 0.0
                             for k in range(nc):
-                                v += cw[k] * img[t, ky - k0[m], kx - k0[m], cy_[k], cx_[k]]
-                        acc += wy * wx * v
+                                v += cw[k] * img[t, ky, kx, cy_[k], cx_[k]]
+                            acc += wyt[jj, ky] * wxt[ii, kx] * v
+        dsum = 0.0
+        psum = 0.0
+        for j in range(jlo, jhi + 1):
+            for i in range(ilo, ihi + 1):
                 for e in range(dep.shape[0]):
                     x = i * T + dep[e, 1]
                     y = j * T + dep[e, 0]
@@ -1047,7 +1058,6 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
                         dsum += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
                                                   tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
         out[q] = acc + dsum / (sx * sy * h * h) + psum / (sx * sy)
-
 
 @njit_serial
 def _taps_kernel(f, R, bilinear, p, w):  # pragma: no cover - compiled
@@ -1103,7 +1113,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     py0, px0, wy, wx = _pixel_taps(wn, q, bool(bilinear))
     out = np.empty(sp.shape[0])
     cc = np.ascontiguousarray
-    images, cpA, cpB, cpC = _kernel_levels(wn)
+    images, pk = _kernel_levels(wn)
     el_s, el_J, depmask = _kernel_elements(wn)
     if idx.size:
         # an explicit map may put mismatched edges side by side (a block of the implicit tiling
@@ -1114,7 +1124,8 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     serial(_points_kernel, len(out))(
         cc(c[:, 0]), cc(c[:, 1]), sp, py0, px0, wy, wx, cc(q[:, 0]), cc(q[:, 1]), psr,
         cc(wn.wang.tiles[..., :2]), el_s, el_J, depmask, np.uint64(wn.wang.seed), idx, images,
-        cpA, cpB, cpC,
+        pk.Fa, pk.Fb, pk.wsc, pk.cq, pk.bidx, pk.meta, pk.offs, pk.goff,
+        np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean, wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
@@ -1140,14 +1151,10 @@ def _kernel_elements(wn: TiledNDF):
 
 
 def _kernel_levels(wn: TiledNDF):
-    """The levels as :func:`_points_kernel` takes them: dense images and CP triples as four
-    tuples of C-contiguous float32 arrays, 1-element placeholders for the kind not stored (one
-    compiled kernel serves both)."""
+    """The levels as :func:`_points_kernel` takes them: dense float32 images (1-element
+    placeholders when compressed) and the :class:`~prefilter.glints.wang_query.TilePack` (empty
+    when uncompressed; one compiled kernel serves both per factor dtype)."""
     L = wn.n_levels
-    z4 = np.zeros((1, 1, 1, 1), np.float32)
-    z5 = np.zeros((1, 1, 1, 1, 1), np.float32)
-    if not wn.block:
-        return (tuple(np.ascontiguousarray(a, np.float32) for a in wn.images), (z4,) * L,
-                (z4,) * L, (z5,) * L)
-    return ((z5,) * L,) + tuple(tuple(np.ascontiguousarray(lv[k], np.float32)
-                                      for lv in wn.images) for k in range(3))
+    if wn.block:
+        return (np.zeros((1, 1, 1, 1, 1), np.float32),) * L, wn.pack
+    return tuple(np.ascontiguousarray(a, np.float32) for a in wn.images), wn.pack
