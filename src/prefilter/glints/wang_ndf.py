@@ -40,8 +40,8 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_in
                                    element_split, line_nodes, normal_cdf, pixel_edges, pndf_image,
                                    principal_axis, splat)
 from prefilter.glints._qkernels import pixel_taps
-from prefilter.glints.wang_query import (TilePack, pack_float, pack_point,
-                                         tile_taps)
+from prefilter.glints.wang_query import (TilePack, gauss_row, pack_float, pack_point,
+                                         segment_sums, tile_taps)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
                                    implicit_type, pndf_image_implicit, tile_index, tile_window)
@@ -859,6 +859,42 @@ def _nb_gaussian(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2):  # pragma:
     return math.exp(-(dx * dx + dy * dy) / (2.0 * tot2)), mx, my, a, b, d
 
 
+def dependent_neighbours(wn: TiledNDF) -> np.ndarray:
+    """``(n_dep, 5, 4)`` int64: for each dependent texel (``wn.dependent``) the tile offset
+    ``(dj, di)`` (-1, 0, 1) and tile-relative ``(row, col)`` of itself and of its neighbours
+    ``x + 1``, ``x - 1``, ``y + 1``, ``y - 1`` (:func:`dep_gaussian`'s central differences
+    without integer divisions)."""
+    T = wn.wang.size
+    d = np.asarray(wn.dependent, np.int64).reshape(-1, 2)
+    off = np.array([[0, 0], [0, 1], [0, -1], [1, 0], [-1, 0]])
+    rc = d[:, None, :] + off[None]  # (n, 5, (row, col))
+    return np.ascontiguousarray(np.concatenate([rc // T, rc % T], axis=-1), dtype=np.int64)
+
+
+@njit_serial
+def dep_gaussian(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var, tot2):  # pragma: no cover
+    """:func:`_nb_gaussian` of a dependent texel ``(gx, gy)`` of the tile at ``types[jj,
+    ii]``, its neighbours looked up by the table ``nb5 (5, 4)`` of
+    :func:`dependent_neighbours` (same values, no integer division)."""
+    ty = types
+    s00 = tiles[ty[jj + nb5[0, 0], ii + nb5[0, 1]], nb5[0, 2], nb5[0, 3], 0]
+    s01 = tiles[ty[jj + nb5[0, 0], ii + nb5[0, 1]], nb5[0, 2], nb5[0, 3], 1]
+    t1 = ty[jj + nb5[1, 0], ii + nb5[1, 1]]
+    t2 = ty[jj + nb5[2, 0], ii + nb5[2, 1]]
+    t3 = ty[jj + nb5[3, 0], ii + nb5[3, 1]]
+    t4 = ty[jj + nb5[4, 0], ii + nb5[4, 1]]
+    jx0 = 0.5 * (tiles[t1, nb5[1, 2], nb5[1, 3], 0] - tiles[t2, nb5[2, 2], nb5[2, 3], 0])
+    jx1 = 0.5 * (tiles[t1, nb5[1, 2], nb5[1, 3], 1] - tiles[t2, nb5[2, 2], nb5[2, 3], 1])
+    jy0 = 0.5 * (tiles[t3, nb5[3, 2], nb5[3, 3], 0] - tiles[t4, nb5[4, 2], nb5[4, 3], 0])
+    jy1 = 0.5 * (tiles[t3, nb5[3, 2], nb5[3, 3], 1] - tiles[t4, nb5[4, 2], nb5[4, 3], 1])
+    dx = cx - (gx + 0.5)
+    dy = cy - (gy + 0.5)
+    mx = s00 + f * (jx0 * dx + jy0 * dy)
+    my = s01 + f * (jx1 * dx + jy1 * dy)
+    a, b, d = element_covariance(jx0, jy0, jx1, jy1, var, 0.0)
+    return math.exp(-(dx * dx + dy * dy) / (2.0 * tot2)), mx, my, a, b, d
+
+
 @njit_serial
 def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
               ix):  # pragma: no cover - compiled
@@ -888,7 +924,7 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 @njit_parallel
 def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J, depmask,
                    seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops, block, k0,
-                   st0, sigma0, dep, tile_means, mean, sr, lo, h,
+                   st0, sigma0, dep, depn, tile_means, mean, sr, lo, h,
                    min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
@@ -936,20 +972,20 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
         rad = trunc * math.sqrt(tot2)
         wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
         wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+        gxw = gauss_row(c0, wx0, wx1, tot2)
+        gyw = gauss_row(c1, wy0, wy1, tot2)
         sx = 0.0
-        for x in range(wx0, wx1 + 1):
-            sx += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+        for x in range(gxw.shape[0]):
+            sx += gxw[x]
         sy = 0.0
-        for y in range(wy0, wy1 + 1):
-            sy += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+        for y in range(gyw.shape[0]):
+            sy += gyw[y]
         if s >= wide_sigma:  # tile-type shares: weights per tile column and row, then types
             i0, j0 = wx0 // T, wy0 // T
             wcol = np.zeros(wx1 // T - i0 + 1)
             wrow = np.zeros(wy1 // T - j0 + 1)
-            for x in range(wx0, wx1 + 1):
-                wcol[x // T - i0] += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
-            for y in range(wy0, wy1 + 1):
-                wrow[y // T - j0] += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+            segment_sums(gxw, wx0, T, wcol)
+            segment_sums(gyw, wy0, T, wrow)
             acc = 0.0
             for b in range(wrow.shape[0]):
                 for a in range(wcol.shape[0]):
@@ -969,27 +1005,28 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
             if point:
                 # the tiles' own elements (exact away from the dependent texels, which look
                 # up their neighbours) and separable weights: a few flops and one exp a texel
-                wcx = np.empty(wx1 - wx0 + 1)
-                for x in range(wx0, wx1 + 1):
-                    wcx[x - wx0] = math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+                wcx = gxw
                 for y in range(wy0, wy1 + 1):
                     dy = c1 - (y + 0.5)
-                    wr = math.exp(-dy * dy / (2.0 * tot2))
-                    ry = y % T
-                    for x in range(wx0, wx1 + 1):
-                        rx = x % T
-                        if depmask[ry, rx]:
-                            acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
-                                                   tot2, point_sr, trunc, qx[q], qy[q])
-                            continue
-                        t = types[y // T - tj0, x // T - ti0]
-                        dx = c0 - (x + 0.5)
-                        j00, j01 = el_J[t, ry, rx, 0, 0], el_J[t, ry, rx, 0, 1]
-                        j10, j11 = el_J[t, ry, rx, 1, 0], el_J[t, ry, rx, 1, 1]
-                        ex = qx[q] - el_s[t, ry, rx, 0] - f * (j00 * dx + j01 * dy)
-                        ey = qy[q] - el_s[t, ry, rx, 1] - f * (j10 * dx + j11 * dy)
-                        acc += wr * wcx[x - wx0] * _nb_density(ex, ey, j00, j01, j10, j11, var,
-                                                               point_sr, trunc)
+                    wr = gyw[y - wy0]
+                    ty = y // T
+                    ry = y - ty * T
+                    # texels by tile segments of the row: no integer division per texel
+                    for i in range(wx0 // T, wx1 // T + 1):
+                        t = types[ty - tj0, i - ti0]
+                        for x in range(max(wx0, i * T), min(wx1, i * T + T - 1) + 1):
+                            rx = x - i * T
+                            if depmask[ry, rx]:
+                                acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f,
+                                                       var, tot2, point_sr, trunc, qx[q], qy[q])
+                                continue
+                            dx = c0 - (x + 0.5)
+                            j00, j01 = el_J[t, ry, rx, 0, 0], el_J[t, ry, rx, 0, 1]
+                            j10, j11 = el_J[t, ry, rx, 1, 0], el_J[t, ry, rx, 1, 1]
+                            ex = qx[q] - el_s[t, ry, rx, 0] - f * (j00 * dx + j01 * dy)
+                            ey = qy[q] - el_s[t, ry, rx, 1] - f * (j10 * dx + j11 * dy)
+                            acc += wr * wcx[x - wx0] * _nb_density(ex, ey, j00, j01, j10, j11,
+                                                                   var, point_sr, trunc)
                 out[q] = acc / (sx * sy)
                 continue
             for y in range(wy0, wy1 + 1):
@@ -1051,8 +1088,11 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
                     if point_sr > 0.0:
                         # what the bilinear lookup of their pixel averages approximates, exactly
                         # and at a fraction of the cost (no pixel integrals, one element)
-                        psum += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
-                                                tot2, point_sr, trunc, qx[q], qy[q])
+                        w, mx, my, a_, b_, d_ = dep_gaussian(tiles, types, j - tj0, i - ti0,
+                                                             depn[e], x, y, c0, c1, f, var, tot2)
+                        sr2 = point_sr * point_sr
+                        psum += w * element_density(qx[q] - mx, qy[q] - my, a_ + sr2, b_,
+                                                    d_ + sr2, 8.0 * trunc * trunc)
                         continue
                     for k in range(nc):
                         dsum += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
@@ -1127,7 +1167,8 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         pk.Fa, pk.Fb, pk.wsc, pk.cq, pk.bidx, pk.meta, pk.offs, pk.goff,
         np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
-        cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean, wn.intrinsic_roughness,
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), wn.tile_means, wn.mean,
+        wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
     return out.reshape(shape)

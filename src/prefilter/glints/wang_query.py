@@ -201,6 +201,42 @@ def pack_float(images) -> TilePack:
 
 
 @njit_serial
+def gauss_row(c, x0, x1, tot2):  # pragma: no cover - compiled
+    """``exp(-(c - x - 0.5)^2 / (2 tot2))`` for texels ``x = x0 .. x1`` ``(x1 - x0 + 1,)``: the
+    footprint weights along one axis (Yan et al. 2016), by the recurrence of consecutive ratios
+    (two products a texel), an exact ``exp`` every 32 texels (relative error ~1e-14)."""
+    n = x1 - x0 + 1
+    out = np.empty(max(n, 0))
+    inv = 1.0 / (2.0 * tot2)
+    q = math.exp(-2.0 * inv)
+    g = 0.0
+    r = 0.0
+    for k in range(n):
+        if k % 32 == 0:
+            d = c - (x0 + k) - 0.5
+            g = math.exp(-d * d * inv)
+            r = math.exp((2.0 * d - 1.0) * inv)  # g(k + 1) / g(k)
+        else:
+            g *= r
+            r *= q
+        out[k] = g
+    return out
+
+
+@njit_serial
+def segment_sums(g, x0, T, out):  # pragma: no cover - compiled
+    """``out[a] = sum of g[x - x0]`` over the texels ``x`` of tile ``x0 // T + a`` (``g`` as
+    :func:`gauss_row`; no integer division per texel)."""
+    i0 = x0 // T
+    x1 = x0 + g.shape[0] - 1
+    for a in range(out.shape[0]):
+        acc = 0.0
+        for x in range(max(x0, (i0 + a) * T), min(x1, (i0 + a) * T + T - 1) + 1):
+            acc += g[x - x0]
+        out[a] = acc
+
+
+@njit_serial
 def tile_taps(cy, cx, T, st, r, half, km, n, jlo, jhi, ilo, ihi):  # pragma: no cover
     """Resampling taps per tile row ``jlo..jhi`` and column ``ilo..ihi`` of a footprint centred
     at ``(cx, cy)`` (texels) on level grids of stride ``st`` (crop centres ``km .. km + n - 1``

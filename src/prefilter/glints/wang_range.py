@@ -9,8 +9,8 @@ projected half vectors (glints paper eq. 7), summed over the tiles under the foo
   per CP group and NDF block (:func:`prefilter.glints.wang_query.tile_codes`), then the group's
   factor masses over each rectangle from the prefix sums (``_qkernels._flush_rects``, the
   ``glints`` range kernel's arithmetic); the dependent texels (left out of the pyramids) by
-  their exact elements, each Gaussian's mean over the rectangle approximated by its density at
-  the rectangle's centre with the rectangle's box variance (``w^2 / 12`` per axis) added;
+  their exact elements' masses over the rectangles (the pixel splatting of the images, with
+  rectangle masses);
 * tile-type shares and the expected tiling (``sigma_p >= wide_sigma``): the per-type
   ``sigma_p -> inf`` images' rectangle means from summed-area tables (exact for the
   piecewise-constant images);
@@ -28,10 +28,11 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _axis_rows, _flush_rects, _rect
-from prefilter.glints.pndf import SIGMA_H, TRUNCATION, as_sigma_p, element_density
+from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, line_nodes,
+                                   normal_cdf, principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
-                                      _nb_gaussian, _nb_type, _nb_types)
-from prefilter.glints.wang_query import tile_codes, tile_taps
+                                      _nb_type, _nb_types, dep_gaussian, dependent_neighbours)
+from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes, tile_taps
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
 def summed_tables(wn: TiledNDF) -> np.ndarray:
@@ -68,9 +69,44 @@ def _sat_rect(S, py0, py1, px0, px1):  # pragma: no cover - compiled
             + _sat_at(S, py0, px0))
 
 
+@njit_serial
+def _iso_mass(mx, my, siso, w, x0, x1, y0, y1):  # pragma: no cover - compiled
+    """``w`` times the mass of ``N((mx, my), siso^2 I)`` over ``[x0, x1] x [y0, y1]``."""
+    inv = 1.0 / siso
+    return w * ((normal_cdf((x1 - mx) * inv) - normal_cdf((x0 - mx) * inv))
+                * (normal_cdf((y1 - my) * inv) - normal_cdf((y0 - my) * inv)))
+
+
+@njit_serial
+def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no cover
+    """``w`` times the mass of an element over ``[x0, x1] x [y0, y1]``: the split of
+    ``wang_ndf._nb_element`` (isotropic part, three or a line of isotropic nodes for the
+    rank-one part; ``pndf._pndf_images``' splatting) with rectangle masses instead of pixel
+    masses."""
+    nu1, siso, kappa = element_split(a, b, d, sr)
+    ext = trunc * (kappa + siso)
+    if mx + ext < x0 or mx - ext > x1 or my + ext < y0 or my - ext > y1:
+        return 0.0
+    if kappa < 1e-3 * siso:
+        return _iso_mass(mx, my, siso, w, x0, x1, y0, y1)
+    vx, vy = principal_axis(a, b, d, nu1)
+    if kappa <= 0.7 * siso:
+        t = math.sqrt(3.0) * kappa
+        return (_iso_mass(mx, my, siso, w * (2.0 / 3.0), x0, x1, y0, y1)
+                + _iso_mass(mx + t * vx, my + t * vy, siso, w / 6.0, x0, x1, y0, y1)
+                + _iso_mass(mx - t * vx, my - t * vy, siso, w / 6.0, x0, x1, y0, y1))
+    n, norm = line_nodes(kappa, siso, trunc)
+    acc = 0.0
+    for q in range(n):
+        tq = -trunc + 2.0 * trunc * q / (n - 1)
+        acc += _iso_mass(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
+                         w * math.exp(-0.5 * tq * tq) / norm, x0, x1, y0, y1)
+    return acc
+
+
 @njit_parallel
 def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, cq,
-                   wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, sat,
+                   wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, sat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    point_sr, proto, out, done):  # pragma: no cover - compiled
     """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
@@ -118,12 +154,10 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
         wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
         if s >= wide_sigma:
-            sx = 0.0
-            sy = 0.0
-            for x in range(wx0, wx1 + 1):
-                sx += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
-            for y in range(wy0, wy1 + 1):
-                sy += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+            gxw = gauss_row(c0, wx0, wx1, tot2)
+            gyw = gauss_row(c1, wy0, wy1, tot2)
+            sx = gxw.sum()
+            sy = gyw.sum()
             share = np.zeros(17)
             if s >= uniform_sigma:
                 share[16] = 1.0
@@ -131,10 +165,8 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                 i0, j0 = wx0 // T, wy0 // T
                 wcol = np.zeros(wx1 // T - i0 + 1)
                 wrow = np.zeros(wy1 // T - j0 + 1)
-                for x in range(wx0, wx1 + 1):
-                    wcol[x // T - i0] += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
-                for y in range(wy0, wy1 + 1):
-                    wrow[y // T - j0] += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+                segment_sums(gxw, wx0, T, wcol)
+                segment_sums(gyw, wy0, T, wrow)
                 for b in range(wrow.shape[0]):
                     for a in range(wcol.shape[0]):
                         share[_nb_type(i0 + a, j0 + b, seed, index)] += (wrow[b] * wcol[a]
@@ -200,18 +232,13 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                 _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
         for k in range(K):
             out[q, k] = acc[k] / area[k]
-        # the dependent texels: exact elements; each Gaussian's mean over a rectangle as its
-        # density at the centre with the rectangle's box variance added
+        # the dependent texels: their exact elements' masses over the rectangles (clipped to
+        # the support, as the images)
         f = sh * sh / tot2
         var = s * s * sh * sh / tot2
-        sx = 0.0
-        sy = 0.0
-        for x in range(wx0, wx1 + 1):
-            sx += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
-        for y in range(wy0, wy1 + 1):
-            sy += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
-        sr2 = point_sr * point_sr
-        cut = 8.0 * trunc * trunc
+        sx = gauss_row(c0, wx0, wx1, tot2).sum()
+        sy = gauss_row(c1, wy0, wy1, tot2).sum()
+        hi = lo + R * h
         for j in range(jlo, jhi + 1):
             for i in range(ilo, ihi + 1):
                 for e in range(dep.shape[0]):
@@ -219,18 +246,17 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                     y = j * T + dep[e, 0]
                     if not (wx0 <= x <= wx1 and wy0 <= y <= wy1):
                         continue
-                    w, mx, my, a, b, d = _nb_gaussian(tiles, types, ti0, tj0, x, y, c0, c1, f,
-                                                      var, tot2)
+                    w, mx, my, a, b, d = dep_gaussian(tiles, types, j - tj0, i - ti0, depn[e],
+                                                      x, y, c0, c1, f, var, tot2)
                     w /= sx * sy
                     for k in range(K):
-                        if not act[q, k]:
+                        if not act[q, k] or rbk[k, 0] > rbk[k, 1]:
                             continue
-                        ex = 0.5 * (x0[q, k] + x1[q, k]) - mx
-                        ey = 0.5 * (y0[q, k] + y1[q, k]) - my
-                        bx = (x1[q, k] - x0[q, k]) ** 2 / 12.0
-                        by = (y1[q, k] - y0[q, k]) ** 2 / 12.0
-                        out[q, k] += w * element_density(ex, ey, a + sr2 + bx, b, d + sr2 + by,
-                                                         cut)
+                        ar = (x1[q, k] - x0[q, k]) * (y1[q, k] - y0[q, k])
+                        out[q, k] += _rect_element(mx, my, a, b, d, w, point_sr,
+                                                   max(x0[q, k], lo), min(x1[q, k], hi),
+                                                   max(y0[q, k], lo), min(y1[q, k], hi),
+                                                   trunc) / ar
 
 
 def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, index=None,
@@ -279,7 +305,7 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
         pk.meta, pk.offs, pk.goff, np.array([wn.crop(lv) for lv in range(wn.n_levels)],
                                             np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
-        cc(wn.dependent, dtype=np.int64), summed_tables(wn), -wn.support,
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), summed_tables(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
         _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, out, done)
     return out, done
