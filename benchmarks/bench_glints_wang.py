@@ -12,7 +12,8 @@ default 0.5 / 2 / 8: near / mid / far; ``prefilter.glints.render.measurement_sce
   (``wang.periodic_index_map``, a valid Wang tiling across the wrap) against ``glints-direct``
   on the assembled 128^2 map (the same surface at the same texel scale), both seed 0;
 * memory: ``TiledNDF.nbytes`` (what the queries hold) against the cache file's size, and the
-  resident-set growth of loading the file in a fresh process (``--rss``).
+  resident-set growth of loading the file and packing it in a fresh process (``--rss``,
+  ``/proc/self/statm`` before and after, the modules imported before).
 
 The machine is shared: the load average is printed with each row (``os.getloadavg``). Run
 nice'd: ``nice python benchmarks/bench_glints_wang.py [--repeats 3] [--lights point]
@@ -77,13 +78,15 @@ def _assembled_flip(d, kind, tmp):
 
 
 _RSS = """
-import resource, sys
+import os, sys
 from prefilter.glints.wang_store import load_tiles
-before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
+before = rss()
 wn = load_tiles(sys.argv[1])
 wn.pack
-after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print(after - before, wn.nbytes)
+print(rss() - before, wn.nbytes)
 """
 
 
@@ -95,7 +98,7 @@ def _memory(path, rss: bool) -> dict:
         env = dict(os.environ)
         res = subprocess.run([sys.executable, "-c", _RSS, str(path)], capture_output=True,
                              text=True, env=env, check=True)
-        out["rss_growth_bytes"] = 1024 * int(res.stdout.split()[0])
+        out["rss_growth_bytes"] = int(res.stdout.split()[0])
     return out
 
 

@@ -127,10 +127,10 @@ class TiledNDF:
     uniform_sigma: float = math.inf
     block: int = 0
     cp_error: tuple = ()
-    #: a ``wang_store`` version-2 file's levels as stored (dicts of ``mask``, ``a``, ``b``,
-    #: ``c``, ``c_scale``) and their crops; ``images`` is then decoded on first use
-    codes: tuple | None = None
-    crops: tuple = ()
+    #: a ``wang_store`` version-2 file's levels packed from their integer codes
+    #: (:func:`prefilter.glints.wang_query.pack_codes`); ``images`` is then decoded from it on
+    #: first use
+    packed: TilePack | None = None
 
     @property
     def n_levels(self) -> int:
@@ -139,19 +139,15 @@ class TiledNDF:
     @property
     def pack(self) -> TilePack:
         """The compressed pyramids in the query kernels' layout (:mod:`prefilter.glints.
-        wang_query`): from the integer codes when loaded from a version-2 file, else from the
+        wang_query`): the integer codes when loaded from a version-2 file, else from the
         float32 CP triples; built once per instance. Uncompressed: an empty pack."""
+        if self.packed is not None:
+            return self.packed
         hit = self.__dict__.get("_pack")
         if hit is None:
-            from prefilter.glints.wang_query import empty_pack, pack_codes
+            from prefilter.glints.wang_query import empty_pack
 
-            if not self.block:
-                hit = empty_pack(self.n_levels)
-            elif self.codes is not None:
-                nb = self.resolution // self.block
-                hit = pack_codes(self.codes, self.crops, nb * nb)
-            else:
-                hit = pack_float(self.images)
+            hit = pack_float(self.images) if self.block else empty_pack(self.n_levels)
             object.__setattr__(self, "_pack", hit)
         return hit
 
@@ -177,8 +173,8 @@ class TiledNDF:
 
     def crop(self, level: int) -> int:
         """Footprint centres per axis stored for each tile at ``level``."""
-        if self.codes is not None:
-            return int(self.crops[level])
+        if self.packed is not None:
+            return int(self.packed.crops[level])
         a = self.images[level]
         return int((a if isinstance(a, np.ndarray) else a[2]).shape[1])
 

@@ -137,28 +137,52 @@ def empty_pack(n_levels: int) -> TilePack:
 
 
 class DecodedLevels(Sequence):
-    """Levels of a version-2 file (:attr:`prefilter.glints.wang_ndf.TiledNDF.codes`) as float32
-    CP triples (:func:`prefilter.glints.wang_store.decode_level`), each decoded on first access
-    and kept: what the per-footprint NumPy paths read (the batched kernels read the codes)."""
+    """The levels of a :class:`TilePack` packed from integer codes as float32 CP triples ``(A,
+    Bf (16, nb^2, rank, B), C (16, n, n, nb^2, rank))`` (:class:`prefilter.glints.wang_ndf.
+    TiledNDF`; the values of :func:`prefilter.glints.wang_store.decode_level` up to float32
+    rounding), each decoded on first access and kept: what the per-footprint NumPy paths read
+    (the batched kernels read the pack)."""
 
-    def __init__(self, codes, crops, n_groups: int):
-        self._codes, self._crops, self._n = codes, crops, n_groups
+    def __init__(self, pack: "TilePack"):
+        self._pk = pack
         self._done: dict = {}
 
     def __len__(self) -> int:
-        return len(self._codes)
+        return int(self._pk.crops.shape[0])
 
     def __getitem__(self, lv):
         if isinstance(lv, slice):
             return [self[i] for i in range(*lv.indices(len(self)))]
         lv = range(len(self))[lv]
         if lv not in self._done:
-            from prefilter.glints.wang_store import decode_level
-
-            d = self._codes[lv]
-            self._done[lv] = decode_level(d["mask"], d["a"], d["b"], d["c"], d["c_scale"],
-                                          crop=int(self._crops[lv]), n_groups=self._n)
+            self._done[lv] = _decode(self._pk, lv)
         return self._done[lv]
+
+
+def _decode(pk: "TilePack", lv: int):
+    nb = pk.bidx.shape[0]
+    nb2 = nb * nb
+    n = int(pk.crops[lv])
+    B = pk.block
+    meta = pk.meta[pk.goff[lv]:pk.goff[lv + 1]]
+    live = meta[:, 0] > 0
+    rank = int(pk.meta[:, 0].max())
+    Q = float(code_levels(pk.cq.dtype))
+    A = np.zeros((16 * nb2, rank, B), np.float32)
+    Bf = np.zeros_like(A)
+    ent = meta[live, 1][:, None] * B + np.arange(B * rank)[None]  # (G_live, B rank)
+    A[live] = (pk.Fa[ent].reshape(-1, B, rank).transpose(0, 2, 1) / Q).astype(np.float32)
+    Bf[live] = (pk.Fb[ent].reshape(-1, B, rank).transpose(0, 2, 1) / Q).astype(np.float32)
+    kidx = pk.bidx[:, :, pk.offs[lv]:pk.offs[lv + 1]].reshape(nb2, 16, n, n)
+    kidx = kidx.transpose(1, 2, 3, 0)  # (16, n, n, nb^2)
+    C = np.zeros((16, n, n, nb2, rank), np.float32)
+    t, b, a, g = np.nonzero(kidx >= 0)
+    grp = meta[t * nb2 + g]
+    r = np.arange(rank)[None]
+    rows = pk.cq[(grp[:, 2] + kidx[t, b, a, g].astype(np.int64) * grp[:, 3])[:, None] + r]
+    C[t, b, a, g] = (rows * (pk.wsc[grp[:, 1][:, None] + r].astype(np.float64) * Q * Q)
+                     ).astype(np.float32)
+    return A.reshape(16, nb2, rank, B), Bf.reshape(16, nb2, rank, B), C
 
 
 def pack_codes(levels, crops, n_groups: int) -> TilePack:

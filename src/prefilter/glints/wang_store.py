@@ -55,7 +55,7 @@ from prefilter.glints.pndf import as_intrinsic_roughness, as_support
 from prefilter.glints.store import CODE_DTYPES, code_levels
 from prefilter.glints.wang import WangTiles
 from prefilter.glints.wang_ndf import TiledNDF, dependent_texels
-from prefilter.glints.wang_query import DecodedLevels
+from prefilter.glints.wang_query import DecodedLevels, pack_codes
 
 FORMAT = "prefilter-glints-wang"
 VERSION = 2
@@ -108,8 +108,6 @@ def decode_level(mask, a, b, c, c_scale, crop: int, n_groups: int):
 
 
 def _level_arrays(wn: TiledNDF, lv: int, code_bits: int) -> dict:
-    if wn.codes is not None and wn.codes[lv]["c"].dtype == CODE_DTYPES.get(code_bits):
-        return {f"{k}_{lv}": v for k, v in wn.codes[lv].items()}  # as loaded
     a = wn.images[lv]
     if isinstance(a, np.ndarray):
         return {f"images_{lv}": a}
@@ -141,8 +139,7 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
     arrays["dependent"] = np.asarray(wn.dependent, np.int64)
     for lv in range(wn.n_levels):
         arrays.update(_level_arrays(wn, lv, code_bits))
-    rank = int(wn.codes[0]["a"].shape[1] if wn.codes is not None else wn.images[0][0].shape[2]) \
-        if wn.block else 0
+    rank = int(wn.pack.meta[:, 0].max()) if wn.block else 0
     settings = dict(ndf_res=int(wn.resolution), support=float(wn.support),
                     intrinsic_roughness=float(wn.intrinsic_roughness), stride0=int(wn.stride0),
                     sigma0=float(wn.sigma0), wide_sigma=float(wn.wide_sigma),
@@ -317,15 +314,14 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         _fail(path, "dependent: expected the dependent texels of the stored tiles")
     verify_npz(path, WHAT, raw, format_name=FORMAT, format_version=st["version"])
     L, B = len(st["k0"]), st["B"]
-    codes, crops = None, ()
+    packed = None
     if st["version"] == 2:
-        # the codes are kept as stored (the kernels read them; wang_query.pack_codes), the
+        # the codes packed as stored (the kernels read them; wang_query.pack_codes), the
         # float32 triples decoded on first use by the per-footprint paths only
         nb2 = (st["R"] // B) ** 2
-        codes = tuple({k: data[f"{k}_{lv}"] for k in ("mask", "a", "b", "c", "c_scale")}
-                      for lv in range(L))
-        crops = tuple(st["crops"])
-        images = DecodedLevels(codes, crops, nb2)
+        packed = pack_codes([{k: data[f"{k}_{lv}"] for k in ("mask", "a", "b", "c", "c_scale")}
+                             for lv in range(L)], st["crops"], nb2)
+        images = DecodedLevels(packed)
         tile_means = data["tile_means"]
         mean = tile_means.astype(np.float64).mean(axis=0)
     else:
@@ -334,4 +330,4 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         tile_means, mean = data["tile_means"], data["mean"]
     return TiledNDF(wang, images, tuple(st["k0"]), mean, st["stride0"], st["sigma0"],
                     st["R"], st["S"], st["sr"], st["wide"], data["dependent"],
-                    tile_means, st["uniform"], B, tuple(st["cp_error"]), codes, crops)
+                    tile_means, st["uniform"], B, tuple(st["cp_error"]), packed)
