@@ -28,8 +28,8 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _axis_rows, _flush_rects, _rect
-from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, line_nodes,
-                                   normal_cdf, principal_axis)
+from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, normal_cdf,
+                                   principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
                                       _nb_type, _nb_types, dep_gaussian, dependent_neighbours)
 from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes, tile_taps
@@ -70,8 +70,12 @@ def _sat_rect(S, py0, py1, px0, px1):  # pragma: no cover - compiled
 
 
 @njit_serial
-def _iso_mass(mx, my, siso, w, x0, x1, y0, y1):  # pragma: no cover - compiled
-    """``w`` times the mass of ``N((mx, my), siso^2 I)`` over ``[x0, x1] x [y0, y1]``."""
+def _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc):  # pragma: no cover - compiled
+    """``w`` times the mass of ``N((mx, my), siso^2 I)`` over ``[x0, x1] x [y0, y1]``; 0 when
+    the rectangle is beyond ``trunc`` stds along an axis (``pndf.splat``'s cut)."""
+    rad = trunc * siso
+    if mx + rad < x0 or mx - rad > x1 or my + rad < y0 or my - rad > y1:
+        return 0.0
     inv = 1.0 / siso
     return w * ((normal_cdf((x1 - mx) * inv) - normal_cdf((x0 - mx) * inv))
                 * (normal_cdf((y1 - my) * inv) - normal_cdf((y0 - my) * inv)))
@@ -88,19 +92,40 @@ def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no 
     if mx + ext < x0 or mx - ext > x1 or my + ext < y0 or my - ext > y1:
         return 0.0
     if kappa < 1e-3 * siso:
-        return _iso_mass(mx, my, siso, w, x0, x1, y0, y1)
+        return _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc)
     vx, vy = principal_axis(a, b, d, nu1)
     if kappa <= 0.7 * siso:
         t = math.sqrt(3.0) * kappa
-        return (_iso_mass(mx, my, siso, w * (2.0 / 3.0), x0, x1, y0, y1)
-                + _iso_mass(mx + t * vx, my + t * vy, siso, w / 6.0, x0, x1, y0, y1)
-                + _iso_mass(mx - t * vx, my - t * vy, siso, w / 6.0, x0, x1, y0, y1))
-    n, norm = line_nodes(kappa, siso, trunc)
+        return (_iso_mass(mx, my, siso, w * (2.0 / 3.0), x0, x1, y0, y1, trunc)
+                + _iso_mass(mx + t * vx, my + t * vy, siso, w / 6.0, x0, x1, y0, y1, trunc)
+                + _iso_mass(mx - t * vx, my - t * vy, siso, w / 6.0, x0, x1, y0, y1, trunc))
+    # pndf.line_nodes' nodes; their normaliser by gauss_row's recurrence (no exp a node)
+    n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+    step = 2.0 * trunc / (n - 1)
+    norm = 0.0
+    for gk in gauss_row(0.5 * n, 0, n - 1, 1.0 / (step * step)):
+        norm += gk
+    rn = trunc * siso
+    # the nodes t (in kappa units) whose isotropic part reaches the rectangle: the line's
+    # interval inside it, grown by trunc siso (a long element crosses a small rectangle with a
+    # few of its nodes)
+    tlo, thi = -trunc, trunc
+    for v, m, a0, a1 in ((vx, mx, x0, x1), (vy, my, y0, y1)):
+        if abs(v) > 1e-12:
+            ta = (a0 - rn - m) / (kappa * v)
+            tb = (a1 + rn - m) / (kappa * v)
+            tlo = max(tlo, min(ta, tb))
+            thi = min(thi, max(ta, tb))
+        elif m + rn < a0 or m - rn > a1:
+            return 0.0
+    if tlo > thi:
+        return 0.0
     acc = 0.0
-    for q in range(n):
+    for q in range(max(0, int(math.floor((tlo + trunc) / step))),
+                   min(n - 1, int(math.ceil((thi + trunc) / step))) + 1):
         tq = -trunc + 2.0 * trunc * q / (n - 1)
         acc += _iso_mass(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
-                         w * math.exp(-0.5 * tq * tq) / norm, x0, x1, y0, y1)
+                         w * math.exp(-0.5 * tq * tq) / norm, x0, x1, y0, y1, trunc)
     return acc
 
 
