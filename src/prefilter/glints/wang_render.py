@@ -6,9 +6,9 @@ footprint pyramids (:func:`prefilter.glints.wang_ndf.bake_tiles`, CP-compressed)
 caches them on disk next to the ``glints`` bakes (:func:`prefilter.glints.bake.cache_dir`,
 ``wang-<SHA-1 of the normals>-<SHA-1 of the settings and store version>.npz``,
 :mod:`~prefilter.glints.wang_store` format, 8-bit factor codes by default, written atomically
-under a lock; the render uses the pyramids decoded from the file, also in the baking
-process). The surface is the implicit tiling of the plane (hashing, glints paper sec. 5.5):
-constant storage whatever the area the frame covers.
+under a lock; the render uses the pyramids loaded from the file, their codes packed for the
+query kernels, also in the baking process). The surface is the implicit tiling of the plane
+(hashing, glints paper sec. 5.5): constant storage whatever the area the frame covers.
 
 Texel scale: one texel of the tiling per texel of the exemplar (the footprints of
 :func:`prefilter.glints.render.footprints` on the exemplar's shape), so ``glints-wang`` and
@@ -62,7 +62,7 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: ``wide_tiles`` 1 (per-tile pyramids up to footprints of one tile, then the tile-type shares):
 #: at 0.5 the shares regime's dropped position dependence cost FLIP 0.051 / 0.032 at mid / far
 #: instead of 0.038 / 0.019, for 2.5x / 18x faster frames and 232 instead of 279 MB.
-#: (Those are in-memory sizes.) ``code_bits``: the cache file's CP factors
+#: (Those are float32 pyramid sizes.) ``code_bits``: the cache file's CP factors
 #: (:func:`prefilter.glints.wang_store.save_tiles`): 8 (uint8 codes, the default: 27.7 MB file
 #: instead of 279 MB; FLIP vs the float32 frames 0.0008 / 0.0085 / 0.0034 near / mid / far),
 #: 16 (66.1 MB, 2e-5 / 1.5e-4 / 5e-5), or 0 (float32, format version 1); docs/glints-wang.md,

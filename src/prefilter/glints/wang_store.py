@@ -32,8 +32,10 @@ factors as integer codes, like the glints map store's version 3 (:mod:`prefilter
   ``C = c / Q * c_scale``, ``Q = 2^code_bits - 1``), so ``A Bf C`` is the stored product up
   to the rounding of the codes. All codes uint8 (``code_bits`` 8) or all uint16 (16).
 
-The kernels compute on the decoded float32 triple: the file shrinks, the memory does not
-(:attr:`TiledNDF.nbytes` counts the decoded arrays). Version 1 files still load.
+A loaded version-2 file is held as its codes, packed for the query kernels
+(:func:`prefilter.glints.wang_query.pack_codes`; :attr:`TiledNDF.nbytes` counts the pack), the
+float32 triple decoded from the pack on first use by the per-footprint NumPy paths only.
+Version 1 files still load.
 
 :func:`load_tiles` checks the layout against the header before the checksum, so a malformed
 file gets a precise message; every failure is a :class:`~prefilter.errors.TableFileError`
@@ -303,8 +305,8 @@ def _check_codes(path, data, st, lv) -> None:
 
 def load_tiles(path: str | os.PathLike) -> TiledNDF:
     """Load and validate per-tile Wang pyramids written by :func:`save_tiles` (version 1 or 2;
-    version 2's codes are decoded to the float32 CP triple); any inconsistency (including a
-    checksum mismatch) raises ``TableFileError`` naming the file and the field."""
+    version 2's codes are packed for the kernels, :attr:`TiledNDF.packed`); any inconsistency
+    (including a checksum mismatch) raises ``TableFileError`` naming the file and the field."""
     raw = read_npz(path, WHAT)
     data = {k: v for k, v in raw.items() if k != META_KEY}
     st = _settings(path, _header(path, data))
