@@ -872,6 +872,16 @@ def dep_gaussian(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var, tot2):  # pr
     """:func:`_nb_gaussian` of a dependent texel ``(gx, gy)`` of the tile at ``types[jj,
     ii]``, its neighbours looked up by the table ``nb5 (5, 4)`` of
     :func:`dependent_neighbours` (same values, no integer division)."""
+    mx, my, a, b, d = dep_element(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var)
+    dx = cx - (gx + 0.5)
+    dy = cy - (gy + 0.5)
+    return math.exp(-(dx * dx + dy * dy) / (2.0 * tot2)), mx, my, a, b, d
+
+
+@njit_serial
+def dep_element(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var):  # pragma: no cover
+    """:func:`dep_gaussian` without the footprint weight: the element's mean ``(mx, my)`` and
+    positional covariance ``(a, b, d)``."""
     ty = types
     s00 = tiles[ty[jj + nb5[0, 0], ii + nb5[0, 1]], nb5[0, 2], nb5[0, 3], 0]
     s01 = tiles[ty[jj + nb5[0, 0], ii + nb5[0, 1]], nb5[0, 2], nb5[0, 3], 1]
@@ -888,7 +898,7 @@ def dep_gaussian(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var, tot2):  # pr
     mx = s00 + f * (jx0 * dx + jy0 * dy)
     my = s01 + f * (jx1 * dx + jy1 * dy)
     a, b, d = element_covariance(jx0, jy0, jx1, jy1, var, 0.0)
-    return math.exp(-(dx * dx + dy * dy) / (2.0 * tot2)), mx, my, a, b, d
+    return mx, my, a, b, d
 
 
 @njit_serial
@@ -1084,8 +1094,9 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
                     if point_sr > 0.0:
                         # what the bilinear lookup of their pixel averages approximates, exactly
                         # and at a fraction of the cost (no pixel integrals, one element)
-                        w, mx, my, a_, b_, d_ = dep_gaussian(tiles, types, j - tj0, i - ti0,
-                                                             depn[e], x, y, c0, c1, f, var, tot2)
+                        mx, my, a_, b_, d_ = dep_element(tiles, types, j - tj0, i - ti0,
+                                                         depn[e], x, y, c0, c1, f, var)
+                        w = gxw[x - wx0] * gyw[y - wy0]  # the footprint weight, separable
                         sr2 = point_sr * point_sr
                         psum += w * element_density(qx[q] - mx, qy[q] - my, a_ + sr2, b_,
                                                     d_ + sr2, 8.0 * trunc * trunc)

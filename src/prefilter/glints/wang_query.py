@@ -284,13 +284,15 @@ def tile_taps(cy, cx, T, st, r, half, km, n, jlo, jhi, ilo, ihi):  # pragma: no 
             rel = cc - (t0 + e) * T
             gg = (rel - 0.5) / st
             ka, kb = int(math.ceil(gg - half)), int(math.floor(gg + half))
+            # exp(-((k st + 0.5 - rel) / r)^2 / 2) for k = ka .. kb
+            g = gauss_row(gg + 0.5, ka, kb, (r / st) ** 2)
             nrm = 0.0
-            for k in range(ka, kb + 1):
-                nrm += math.exp(-0.5 * ((k * st + 0.5 - rel) / r) ** 2)
+            for k in range(g.shape[0]):
+                nrm += g[k]
             klo[e] = max(ka, km) - km
             khi[e] = min(kb, km + n - 1) - km
             for k in range(klo[e], khi[e] + 1):
-                wt[e, k] = math.exp(-0.5 * (((k + km) * st + 0.5 - rel) / r) ** 2) / nrm
+                wt[e, k] = g[k + km - ka] / nrm
     return wyt, wxt, kyl, kyh, kxl, kxh
 
 
