@@ -289,9 +289,18 @@ def test_compressed_tiles(wn):
     rank, B = 4, 8
     wc = compress_tiles(wn, rank, B, n_iter_max=10)
     nb = R // B
-    expect = sum(16 * (2 * nb * nb * rank * B + wc.crop(lv) ** 2 * nb * nb * rank) * 4
-                 for lv in range(wc.n_levels))
-    assert wc.nbytes == wn.wang.nbytes + expect + wn.mean.nbytes + wn.tile_means.nbytes
+    # packed for the kernels: the live groups' factors and prefix sums, the kept code rows, the
+    # row index per (image, block) and the group records
+    pk = wc.pack
+    live = sum(int((wc.images[lv][2].max(axis=-1) > 0).any(axis=(1, 2)).sum())
+               for lv in range(wc.n_levels))
+    kept = sum(int((wc.images[lv][2].max(axis=-1) > 0).sum()) for lv in range(wc.n_levels))
+    images = sum(16 * wc.crop(lv) ** 2 for lv in range(wc.n_levels))
+    expect = (4 * live * rank * (2 * B + 2 * (B + 1) + 1) + 4 * kept * rank
+              + 2 * images * nb * nb + 8 * 4 * 16 * nb * nb * wc.n_levels
+              + 8 * (3 * wc.n_levels + 2))
+    assert pk.nbytes == expect
+    assert wc.nbytes == wn.wang.nbytes + pk.nbytes + wn.mean.nbytes + wn.tile_means.nbytes
     assert wc.nbytes < wn.nbytes / 5
     assert all(0.0 < e < 0.5 for e in wc.cp_error)
     g = np.linspace(-SUPPORT, SUPPORT, R, endpoint=False) + SUPPORT / R

@@ -263,7 +263,7 @@ def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support,
 
     from prefilter.glints.wang import synthesize
     from prefilter.glints.wang_ndf import bake_tiles
-    from prefilter.glints.wang_store import save_tiles
+    from prefilter.glints.wang_store import load_tiles, save_tiles
 
     if rank < 0:
         raise PrefilterError(f"--rank: expected a CP rank >= 0 (0: uncompressed), got {rank}")
@@ -275,6 +275,8 @@ def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support,
                         rank=rank or None, block=block, n_iter_max=iters, seed=seed,
                         progress=not quiet)
         save_tiles(wn, out, code_bits=int(code_bits))
+    # what a renderer holds: the file's pyramids as loaded (version 2: the integer codes)
+    wn = load_tiles(out)
     summary = dict(tiles=16, tile=wt.size, levels=wn.n_levels,
                    crops=[wn.crop(lv) for lv in range(wn.n_levels)],
                    rank=rank, block=wn.block, code_bits=int(code_bits) if wn.block else 0,

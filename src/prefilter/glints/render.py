@@ -230,6 +230,41 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
                                                 wo[cand], corners[cand], radiance, f0,
                                                 n_sub=n_sub)
         return out, valid
+    ok, lo_v, hi_v, fac = quad_patches(wo, corners, f0, n_sub)
+    valid = ok & (np.asarray(sigma_p) >= surf.sigma_min) & (surf.gm is not None)
+    out = np.zeros((N, len(np.broadcast_to(f0, (3,)))))
+    if not np.any(valid):
+        return out, valid
+    sel = valid[ok]
+    # one footprint per pixel: its (up to ~170) resampling weights serve all its patches, whose
+    # rectangles share the walk over the taps (range_multi)
+    idx, w, _ = weights(surf.gm, np.asarray(center)[valid], np.asarray(sigma_p)[valid],
+                        interp=QUAD_INTERP)
+    mean = range_multi(surf.gm, idx, w, lo_v[sel], hi_v[sel])
+    k, ja = fac
+    val = k[sel] * (ja[sel] * mean)[..., None]
+    out[valid] = val.sum(axis=1) * np.asarray(radiance, dtype=np.float64)
+    return out, valid
+
+
+def quad_patches(wo, corners, f0, n_sub: int | None = None):
+    """The half-vector geometry of :func:`quad_range` (no NDF query): per shading sample, an
+    ``n_sub x n_sub`` split of the quad, each patch's range rectangle (:data:`QUAD_RECT`) in
+    ``s`` and its factors at the patch centre, ``k = F G / (4 wo_z)`` and ``ja = 4 (wi.h) /
+    h_z`` times the patch's ``s``-polygon area: the specular radiance is ``radiance
+    sum_patches k (ja mean)`` with ``mean`` the footprint NDF's mean over the rectangle.
+
+    Parameters: ``wo (N, 3)``, ``corners (N, 4, 3)``, ``f0`` as :func:`quad_range`.
+
+    Returns
+    -------
+    ok (N,): front face, light above the horizon, every patch's box narrower than
+    ``RANGE_MAX`` and filled >= ``FILL_MIN``; for the ``n`` samples where ``ok``: ``lo``, ``hi``
+    ``(n, n_sub^2, 2)`` (``hi > lo``) and ``factor = (k (n, n_sub^2, C), ja (n, n_sub^2))``.
+    """
+    N = corners.shape[0]
+    n_sub = QUAD_SUB if n_sub is None else int(n_sub)
+    f0 = np.atleast_1d(np.asarray(f0, dtype=np.float64))
     g = (np.arange(n_sub + 1) / n_sub)
     A, B = np.meshgrid(g, g, indexing="ij")
     a, b = A.ravel()[None, :, None], B.ravel()[None, :, None]
@@ -249,22 +284,17 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     front = np.sum(normal * corners[:, 0], -1) < 0.0  # the point is on the emitting side
     valid = (front & np.all(d[..., 2] > _HORIZON, axis=1) & np.all(h[..., 2] > 0, axis=1)
              & (wo[:, 2] > 0) & np.all(hi - lo < RANGE_MAX, axis=(1, 2, 3))
-             & np.all(area >= FILL_MIN * box, axis=(1, 2))
-             & (np.asarray(sigma_p) >= surf.sigma_min) & (surf.gm is not None))
-    out = np.zeros((N, len(np.broadcast_to(f0, (3,)))))
-    if not np.any(valid):
-        return out, valid
+             & np.all(area >= FILL_MIN * box, axis=(1, 2)))
     nv = int(valid.sum())
     m = n_sub * n_sub
+    C = len(np.broadcast_to(f0, (3,)))
+    if not nv:
+        return valid, np.zeros((0, m, 2)), np.ones((0, m, 2)), (np.zeros((0, m, C)),
+                                                                np.zeros((0, m)))
     eps = 1e-9
     if QUAD_RECT == "equal-area":
         lo, hi = _equal_area_rects(x, y, area, lo, hi)
     lo_v, hi_v = lo[valid].reshape(nv, m, 2), hi[valid].reshape(nv, m, 2) + eps
-    # one footprint per pixel: its (up to ~170) resampling weights serve all its patches, whose
-    # rectangles share the walk over the taps (range_multi)
-    idx, w, _ = weights(surf.gm, np.asarray(center)[valid], np.asarray(sigma_p)[valid],
-                        interp=QUAD_INTERP)
-    mean = range_multi(surf.gm, idx, w, lo_v, hi_v)
     # smooth factor at each patch centre direction
     ac = ((np.arange(n_sub) + 0.5) / n_sub)
     Ac, Bc = np.meshgrid(ac, ac, indexing="ij")
@@ -277,9 +307,7 @@ def quad_range(surf: GlintSurface, center, sigma_p, wo, corners, radiance, f0, *
     k, hc = _brdf_terms(wov, wi, f0)
     # k = F G / (4 wo_z): f cos dwi = k D dwi, and dwi = 4 (wi.h) / h_z ds
     jac = 4.0 * np.sum(wi * hc, -1) / np.maximum(hc[..., 2], 1e-300)
-    val = k * (jac * area[valid].reshape(nv, m) * mean)[..., None]
-    out[valid] = val.sum(axis=1) * np.asarray(radiance, dtype=np.float64)
-    return out, valid
+    return valid, lo_v, hi_v, (k, jac * area[valid].reshape(nv, m))
 
 
 def quad_mis(surf: GlintSurface, center, sigma_p, wo, position, frame, light, f0, u, *,

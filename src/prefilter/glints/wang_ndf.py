@@ -40,6 +40,8 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_in
                                    element_split, line_nodes, normal_cdf, pixel_edges, pndf_image,
                                    principal_axis, splat)
 from prefilter.glints._qkernels import pixel_taps
+from prefilter.glints.wang_query import (TilePack, gauss_row, pack_float, pack_point,
+                                         segment_sums, tile_taps)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
                                    implicit_type, pndf_image_implicit, tile_index, tile_window)
@@ -125,10 +127,29 @@ class TiledNDF:
     uniform_sigma: float = math.inf
     block: int = 0
     cp_error: tuple = ()
+    #: a ``wang_store`` version-2 file's levels packed from their integer codes
+    #: (:func:`prefilter.glints.wang_query.pack_codes`); ``images`` is then decoded from it on
+    #: first use
+    packed: TilePack | None = None
 
     @property
     def n_levels(self) -> int:
         return len(self.images)
+
+    @property
+    def pack(self) -> TilePack:
+        """The compressed pyramids in the query kernels' layout (:mod:`prefilter.glints.
+        wang_query`): the integer codes when loaded from a version-2 file, else from the
+        float32 CP triples; built once per instance. Uncompressed: an empty pack."""
+        if self.packed is not None:
+            return self.packed
+        hit = self.__dict__.get("_pack")
+        if hit is None:
+            from prefilter.glints.wang_query import empty_pack
+
+            hit = pack_float(self.images) if self.block else empty_pack(self.n_levels)
+            object.__setattr__(self, "_pack", hit)
+        return hit
 
     def stride(self, level: int) -> int:
         return self.stride0 << level
@@ -138,15 +159,22 @@ class TiledNDF:
 
     @property
     def nbytes(self) -> int:
-        """Bytes in memory: tiles, per-tile pyramids (float32 images or CP triples), the mean
-        and per-tile images (no per-area data). A ``wang_store`` version-2 file of compressed
-        pyramids is smaller (integer factor codes); loading decodes it to the same arrays."""
-        levels = sum(a.nbytes if isinstance(a, np.ndarray) else sum(f.nbytes for f in a)
-                     for a in self.images)
+        """Bytes in memory of what the batched queries (:func:`ndf_points`, the renderer) read:
+        tiles, per-tile pyramids (float32 images, or the packed CP factors of :attr:`pack`:
+        the integer codes of a version-2 file, the float32 factors otherwise), the mean and
+        per-tile images (no per-area data). The float32 CP triples of a loaded file, decoded
+        on first use by the per-footprint NumPy paths (:func:`ndf`, :func:`contributions`,
+        :func:`sample`), are not counted."""
+        if self.block:
+            levels = self.pack.nbytes
+        else:
+            levels = sum(a.nbytes for a in self.images)
         return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
 
     def crop(self, level: int) -> int:
         """Footprint centres per axis stored for each tile at ``level``."""
+        if self.packed is not None:
+            return int(self.packed.crops[level])
         a = self.images[level]
         return int((a if isinstance(a, np.ndarray) else a[2]).shape[1])
 
@@ -827,6 +855,52 @@ def _nb_gaussian(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2):  # pragma:
     return math.exp(-(dx * dx + dy * dy) / (2.0 * tot2)), mx, my, a, b, d
 
 
+def dependent_neighbours(wn: TiledNDF) -> np.ndarray:
+    """``(n_dep, 5, 4)`` int64: for each dependent texel (``wn.dependent``) the tile offset
+    ``(dj, di)`` (-1, 0, 1) and tile-relative ``(row, col)`` of itself and of its neighbours
+    ``x + 1``, ``x - 1``, ``y + 1``, ``y - 1`` (:func:`dep_gaussian`'s central differences
+    without integer divisions)."""
+    T = wn.wang.size
+    d = np.asarray(wn.dependent, np.int64).reshape(-1, 2)
+    off = np.array([[0, 0], [0, 1], [0, -1], [1, 0], [-1, 0]])
+    rc = d[:, None, :] + off[None]  # (n, 5, (row, col))
+    return np.ascontiguousarray(np.concatenate([rc // T, rc % T], axis=-1), dtype=np.int64)
+
+
+@njit_serial
+def dep_gaussian(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var, tot2):  # pragma: no cover
+    """:func:`_nb_gaussian` of a dependent texel ``(gx, gy)`` of the tile at ``types[jj,
+    ii]``, its neighbours looked up by the table ``nb5 (5, 4)`` of
+    :func:`dependent_neighbours` (same values, no integer division)."""
+    mx, my, a, b, d = dep_element(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var)
+    dx = cx - (gx + 0.5)
+    dy = cy - (gy + 0.5)
+    return math.exp(-(dx * dx + dy * dy) / (2.0 * tot2)), mx, my, a, b, d
+
+
+@njit_serial
+def dep_element(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var):  # pragma: no cover
+    """:func:`dep_gaussian` without the footprint weight: the element's mean ``(mx, my)`` and
+    positional covariance ``(a, b, d)``."""
+    ty = types
+    s00 = tiles[ty[jj + nb5[0, 0], ii + nb5[0, 1]], nb5[0, 2], nb5[0, 3], 0]
+    s01 = tiles[ty[jj + nb5[0, 0], ii + nb5[0, 1]], nb5[0, 2], nb5[0, 3], 1]
+    t1 = ty[jj + nb5[1, 0], ii + nb5[1, 1]]
+    t2 = ty[jj + nb5[2, 0], ii + nb5[2, 1]]
+    t3 = ty[jj + nb5[3, 0], ii + nb5[3, 1]]
+    t4 = ty[jj + nb5[4, 0], ii + nb5[4, 1]]
+    jx0 = 0.5 * (tiles[t1, nb5[1, 2], nb5[1, 3], 0] - tiles[t2, nb5[2, 2], nb5[2, 3], 0])
+    jx1 = 0.5 * (tiles[t1, nb5[1, 2], nb5[1, 3], 1] - tiles[t2, nb5[2, 2], nb5[2, 3], 1])
+    jy0 = 0.5 * (tiles[t3, nb5[3, 2], nb5[3, 3], 0] - tiles[t4, nb5[4, 2], nb5[4, 3], 0])
+    jy1 = 0.5 * (tiles[t3, nb5[3, 2], nb5[3, 3], 1] - tiles[t4, nb5[4, 2], nb5[4, 3], 1])
+    dx = cx - (gx + 0.5)
+    dy = cy - (gy + 0.5)
+    mx = s00 + f * (jx0 * dx + jy0 * dy)
+    my = s01 + f * (jx1 * dx + jy1 * dy)
+    a, b, d = element_covariance(jx0, jy0, jx1, jy1, var, 0.0)
+    return mx, my, a, b, d
+
+
 @njit_serial
 def _nb_texel(tiles, types, i0, j0, gx, gy, cx, cy, f, var, tot2, sr, lo, h, R, trunc, iy,
               ix):  # pragma: no cover - compiled
@@ -855,8 +929,8 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 
 @njit_parallel
 def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J, depmask,
-                   seed, index, images, cpA, cpB, cpC, block, k0, st0, sigma0, dep, tile_means,
-                   mean, sr, lo, h,
+                   seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops, block, k0,
+                   st0, sigma0, dep, depn, tile_means, mean, sr, lo, h,
                    min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
@@ -864,16 +938,21 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
     pixel centres); with ``point_sr > 0`` the texels not in the pyramids (below ``min_sigma``
     all of them, above it the dependent texels) add their point densities at ``(qx, qy)[q]``
     with intrinsic roughness ``point_sr`` instead of pixel values. ``block > 0``: compressed
-    levels, the CP triples ``(cpA, cpB, cpC)`` (``images`` unused). ``el_s, el_J``:
+    levels, the arrays of a :class:`prefilter.glints.wang_query.TilePack` (``images``
+    unused), each tap's code rows summed per CP group (:func:`prefilter.glints.wang_query.
+    pack_point`); ``crops (L,)``: centres per axis per level. ``el_s, el_J``:
     :func:`tile_elements`; ``depmask (T, T)``: :func:`dependent_texels`."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
-    rank = cpC[0].shape[4]
-    bk = max(block, 1)
-    nb = R // bk
+    rank = 1
+    for g in range(meta.shape[0]):
+        rank = max(rank, meta[g, 0])
     for q in prange(out.shape[0]):
         out[q] = 0.0
+        cwp = np.empty((16, rank), np.float32)  # per tile type: its taps' summed code rows
+        gsp = np.empty(16, np.int64)
+        slot_of = np.empty(16, np.int64)
         c0, c1, s = cx[q], cy[q], sp[q]
         # the corners with a weight: pixel rows, columns, weights (at most 4)
         cy_ = np.empty(4, np.int64)
@@ -899,20 +978,20 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
         rad = trunc * math.sqrt(tot2)
         wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
         wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+        gxw = gauss_row(c0, wx0, wx1, tot2)
+        gyw = gauss_row(c1, wy0, wy1, tot2)
         sx = 0.0
-        for x in range(wx0, wx1 + 1):
-            sx += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+        for x in range(gxw.shape[0]):
+            sx += gxw[x]
         sy = 0.0
-        for y in range(wy0, wy1 + 1):
-            sy += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+        for y in range(gyw.shape[0]):
+            sy += gyw[y]
         if s >= wide_sigma:  # tile-type shares: weights per tile column and row, then types
             i0, j0 = wx0 // T, wy0 // T
             wcol = np.zeros(wx1 // T - i0 + 1)
             wrow = np.zeros(wy1 // T - j0 + 1)
-            for x in range(wx0, wx1 + 1):
-                wcol[x // T - i0] += math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
-            for y in range(wy0, wy1 + 1):
-                wrow[y // T - j0] += math.exp(-(c1 - y - 0.5) ** 2 / (2.0 * tot2))
+            segment_sums(gxw, wx0, T, wcol)
+            segment_sums(gyw, wy0, T, wrow)
             acc = 0.0
             for b in range(wrow.shape[0]):
                 for a in range(wcol.shape[0]):
@@ -932,27 +1011,28 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
             if point:
                 # the tiles' own elements (exact away from the dependent texels, which look
                 # up their neighbours) and separable weights: a few flops and one exp a texel
-                wcx = np.empty(wx1 - wx0 + 1)
-                for x in range(wx0, wx1 + 1):
-                    wcx[x - wx0] = math.exp(-(c0 - x - 0.5) ** 2 / (2.0 * tot2))
+                wcx = gxw
                 for y in range(wy0, wy1 + 1):
                     dy = c1 - (y + 0.5)
-                    wr = math.exp(-dy * dy / (2.0 * tot2))
-                    ry = y % T
-                    for x in range(wx0, wx1 + 1):
-                        rx = x % T
-                        if depmask[ry, rx]:
-                            acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
-                                                   tot2, point_sr, trunc, qx[q], qy[q])
-                            continue
-                        t = types[y // T - tj0, x // T - ti0]
-                        dx = c0 - (x + 0.5)
-                        j00, j01 = el_J[t, ry, rx, 0, 0], el_J[t, ry, rx, 0, 1]
-                        j10, j11 = el_J[t, ry, rx, 1, 0], el_J[t, ry, rx, 1, 1]
-                        ex = qx[q] - el_s[t, ry, rx, 0] - f * (j00 * dx + j01 * dy)
-                        ey = qy[q] - el_s[t, ry, rx, 1] - f * (j10 * dx + j11 * dy)
-                        acc += wr * wcx[x - wx0] * _nb_density(ex, ey, j00, j01, j10, j11, var,
-                                                               point_sr, trunc)
+                    wr = gyw[y - wy0]
+                    ty = y // T
+                    ry = y - ty * T
+                    # texels by tile segments of the row: no integer division per texel
+                    for i in range(wx0 // T, wx1 // T + 1):
+                        t = types[ty - tj0, i - ti0]
+                        for x in range(max(wx0, i * T), min(wx1, i * T + T - 1) + 1):
+                            rx = x - i * T
+                            if depmask[ry, rx]:
+                                acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f,
+                                                       var, tot2, point_sr, trunc, qx[q], qy[q])
+                                continue
+                            dx = c0 - (x + 0.5)
+                            j00, j01 = el_J[t, ry, rx, 0, 0], el_J[t, ry, rx, 0, 1]
+                            j10, j11 = el_J[t, ry, rx, 1, 0], el_J[t, ry, rx, 1, 1]
+                            ex = qx[q] - el_s[t, ry, rx, 0] - f * (j00 * dx + j01 * dy)
+                            ey = qy[q] - el_s[t, ry, rx, 1] - f * (j10 * dx + j11 * dy)
+                            acc += wr * wcx[x - wx0] * _nb_density(ex, ey, j00, j01, j10, j11,
+                                                                   var, point_sr, trunc)
                 out[q] = acc / (sx * sy)
                 continue
             for y in range(wy0, wy1 + 1):
@@ -972,66 +1052,40 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
         st = st0 * 2.0**m
         r = math.sqrt(s * s - sg * sg)
         half = tap_trunc * r / st
-        img = images[m]
-        cA, cB, cC = cpA[m], cpB[m], cpC[m]
-        n = cC.shape[1] if block > 0 else img.shape[1]
-        # compressed: the corners' angular blocks (distinct, at most 4) and the rank-one terms
-        # of the query per block, u[k, r] = sum_corners w a_r[i] b_r[j] (glints paper eq. 5)
-        gk = np.empty(4, np.int64)
-        slot = np.empty(4, np.int64)
-        ng = 0
-        for k in range(nc):
-            gg = (cy_[k] // bk) * nb + cx_[k] // bk
-            slot[k] = ng
-            for e in range(ng):
-                if gk[e] == gg:
-                    slot[k] = e
-            if slot[k] == ng:
-                gk[ng] = gg
-                ng += 1
-        u = np.empty((4, rank))
+        n = crops[m]
+        km = k0[m]
         marg = rad + 1.0
-        acc = 0.0
-        dsum = 0.0
-        psum = 0.0
         ti0 = int(math.floor((c0 - marg) / T)) - 1
         tj0 = int(math.floor((c1 - marg) / T)) - 1
         types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
                           int(math.floor((c1 + marg) / T)) + 1, seed, index)
-        for j in range(int(math.floor((c1 - marg) / T)), int(math.floor((c1 + marg) / T)) + 1):
-            gy = (c1 - j * T - 0.5) / st
-            ky0, ky1 = int(math.ceil(gy - half)), int(math.floor(gy + half))
-            ny = 0.0
-            for k in range(ky0, ky1 + 1):
-                ny += math.exp(-0.5 * ((k * st + 0.5 - (c1 - j * T)) / r) ** 2)
-            for i in range(int(math.floor((c0 - marg) / T)), int(math.floor((c0 + marg) / T)) + 1):
-                t = types[j - tj0, i - ti0]
-                gx = (c0 - i * T - 0.5) / st
-                kx0, kx1 = int(math.ceil(gx - half)), int(math.floor(gx + half))
-                nx = 0.0
-                for k in range(kx0, kx1 + 1):
-                    nx += math.exp(-0.5 * ((k * st + 0.5 - (c0 - i * T)) / r) ** 2)
-                if block > 0 and ky0 <= k0[m] + n - 1 and ky1 >= k0[m]:
-                    # a tap then costs `rank` products with its C row per block
-                    u[:ng] = 0.0
-                    for k in range(nc):
-                        g = gk[slot[k]]
-                        for rr in range(rank):
-                            u[slot[k], rr] += (cw[k] * cA[t, g, rr, cy_[k] % bk]
-                                               * cB[t, g, rr, cx_[k] % bk])
-                for ky in range(max(ky0, k0[m]), min(ky1, k0[m] + n - 1) + 1):
-                    wy = math.exp(-0.5 * ((ky * st + 0.5 - (c1 - j * T)) / r) ** 2) / ny
-                    for kx in range(max(kx0, k0[m]), min(kx1, k0[m] + n - 1) + 1):
-                        wx = math.exp(-0.5 * ((kx * st + 0.5 - (c0 - i * T)) / r) ** 2) / nx
-                        v = 0.0
-                        if block > 0:
-                            for e in range(ng):
-                                for rr in range(rank):
-                                    v += cC[t, ky - k0[m], kx - k0[m], gk[e], rr] * u[e, rr]
-                        else:
+        jlo = int(math.floor((c1 - marg) / T))
+        jhi = int(math.floor((c1 + marg) / T))
+        ilo = int(math.floor((c0 - marg) / T))
+        ihi = int(math.floor((c0 + marg) / T))
+        wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1, c0, T, st, r, half, km, n, jlo, jhi,
+                                                  ilo, ihi)
+        acc = 0.0
+        if block > 0:
+            acc = pack_point(Fa, Fb, wsc, cq, bidx, meta, offs[m], goff[m], n, block, types,
+                             jlo - tj0, ilo - ti0, wyt, wxt, kyl, kyh, kxl, kxh, py0[q],
+                             wya[q, 0], wya[q, 1], px0[q], wxa[q, 0], wxa[q, 1], cwp, gsp,
+                             slot_of)
+        else:
+            img = images[m]
+            for jj in range(jhi - jlo + 1):
+                for ii in range(ihi - ilo + 1):
+                    t = types[jlo + jj - tj0, ilo + ii - ti0]
+                    for ky in range(kyl[jj], kyh[jj] + 1):
+                        for kx in range(kxl[ii], kxh[ii] + 1):
+                            v = 0.0
                             for k in range(nc):
-                                v += cw[k] * img[t, ky - k0[m], kx - k0[m], cy_[k], cx_[k]]
-                        acc += wy * wx * v
+                                v += cw[k] * img[t, ky, kx, cy_[k], cx_[k]]
+                            acc += wyt[jj, ky] * wxt[ii, kx] * v
+        dsum = 0.0
+        psum = 0.0
+        for j in range(jlo, jhi + 1):
+            for i in range(ilo, ihi + 1):
                 for e in range(dep.shape[0]):
                     x = i * T + dep[e, 1]
                     y = j * T + dep[e, 0]
@@ -1040,14 +1094,17 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
                     if point_sr > 0.0:
                         # what the bilinear lookup of their pixel averages approximates, exactly
                         # and at a fraction of the cost (no pixel integrals, one element)
-                        psum += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
-                                                tot2, point_sr, trunc, qx[q], qy[q])
+                        mx, my, a_, b_, d_ = dep_element(tiles, types, j - tj0, i - ti0,
+                                                         depn[e], x, y, c0, c1, f, var)
+                        w = gxw[x - wx0] * gyw[y - wy0]  # the footprint weight, separable
+                        sr2 = point_sr * point_sr
+                        psum += w * element_density(qx[q] - mx, qy[q] - my, a_ + sr2, b_,
+                                                    d_ + sr2, 8.0 * trunc * trunc)
                         continue
                     for k in range(nc):
                         dsum += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
                                                   tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
         out[q] = acc + dsum / (sx * sy * h * h) + psum / (sx * sy)
-
 
 @njit_serial
 def _taps_kernel(f, R, bilinear, p, w):  # pragma: no cover - compiled
@@ -1103,7 +1160,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     py0, px0, wy, wx = _pixel_taps(wn, q, bool(bilinear))
     out = np.empty(sp.shape[0])
     cc = np.ascontiguousarray
-    images, cpA, cpB, cpC = _kernel_levels(wn)
+    images, pk = _kernel_levels(wn)
     el_s, el_J, depmask = _kernel_elements(wn)
     if idx.size:
         # an explicit map may put mismatched edges side by side (a block of the implicit tiling
@@ -1114,9 +1171,11 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     serial(_points_kernel, len(out))(
         cc(c[:, 0]), cc(c[:, 1]), sp, py0, px0, wy, wx, cc(q[:, 0]), cc(q[:, 1]), psr,
         cc(wn.wang.tiles[..., :2]), el_s, el_J, depmask, np.uint64(wn.wang.seed), idx, images,
-        cpA, cpB, cpC,
+        pk.Fa, pk.Fb, pk.wsc, pk.cq, pk.bidx, pk.meta, pk.offs, pk.goff,
+        np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
-        cc(wn.dependent, dtype=np.int64), wn.tile_means, wn.mean, wn.intrinsic_roughness,
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), wn.tile_means, wn.mean,
+        wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
     return out.reshape(shape)
@@ -1140,14 +1199,10 @@ def _kernel_elements(wn: TiledNDF):
 
 
 def _kernel_levels(wn: TiledNDF):
-    """The levels as :func:`_points_kernel` takes them: dense images and CP triples as four
-    tuples of C-contiguous float32 arrays, 1-element placeholders for the kind not stored (one
-    compiled kernel serves both)."""
+    """The levels as :func:`_points_kernel` takes them: dense float32 images (1-element
+    placeholders when compressed) and the :class:`~prefilter.glints.wang_query.TilePack` (empty
+    when uncompressed; one compiled kernel serves both per factor dtype)."""
     L = wn.n_levels
-    z4 = np.zeros((1, 1, 1, 1), np.float32)
-    z5 = np.zeros((1, 1, 1, 1, 1), np.float32)
-    if not wn.block:
-        return (tuple(np.ascontiguousarray(a, np.float32) for a in wn.images), (z4,) * L,
-                (z4,) * L, (z5,) * L)
-    return ((z5,) * L,) + tuple(tuple(np.ascontiguousarray(lv[k], np.float32)
-                                      for lv in wn.images) for k in range(3))
+    if wn.block:
+        return (np.zeros((1, 1, 1, 1, 1), np.float32),) * L, wn.pack
+    return tuple(np.ascontiguousarray(a, np.float32) for a in wn.images), wn.pack

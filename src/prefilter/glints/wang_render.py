@@ -6,9 +6,9 @@ footprint pyramids (:func:`prefilter.glints.wang_ndf.bake_tiles`, CP-compressed)
 caches them on disk next to the ``glints`` bakes (:func:`prefilter.glints.bake.cache_dir`,
 ``wang-<SHA-1 of the normals>-<SHA-1 of the settings and store version>.npz``,
 :mod:`~prefilter.glints.wang_store` format, 8-bit factor codes by default, written atomically
-under a lock; the render uses the pyramids decoded from the file, also in the baking
-process). The surface is the implicit tiling of the plane (hashing, glints paper sec. 5.5):
-constant storage whatever the area the frame covers.
+under a lock; the render uses the pyramids loaded from the file, their codes packed for the
+query kernels, also in the baking process). The surface is the implicit tiling of the plane
+(hashing, glints paper sec. 5.5): constant storage whatever the area the frame covers.
 
 Texel scale: one texel of the tiling per texel of the exemplar (the footprints of
 :func:`prefilter.glints.render.footprints` on the exemplar's shape), so ``glints-wang`` and
@@ -20,16 +20,19 @@ direct P-NDF below ``min_sigma``, per-tile pyramids, tile-type shares, expected 
 batched Numba query for all samples and lights of an object. Diffuse: Lambert with
 ``base_color``.
 
-Environment lights: ``glints-direct``'s unprefiltered SG estimator
-(:func:`prefilter.glints.render.environment_radiance` with ``prefilter=False``: the fit
-:func:`prefilter.glints.render.environment_sgs`, ``ENV_SAMPLES`` light samples per shading
-sample drawn with :func:`prefilter.glints.envlight.sample_sg`) from the same uniforms
-(:func:`prefilter.glints.render.random_dims` layout, same rows and seed): for a seed both methods
-draw the same directions, so they differ only by the NDF. Untextured quad lights: light
-sampling only (:data:`QUAD_SAMPLES` uniform points on the light's area; no MIS, noisy for sharp
-glints), diffuse by Lambert's polygon formula. The NDF at the half vectors of every sample of
-every light of an object comes from one :func:`prefilter.glints.wang_ndf.ndf_points` call.
-Textured quads are rejected.
+Environment lights: the SG light samples of ``glints``
+(:func:`prefilter.glints.render.environment_sgs` fit, ``ENV_SAMPLES`` samples per shading
+sample drawn with :func:`prefilter.glints.envlight.sample_sg` from the
+:func:`prefilter.glints.render.random_dims` uniforms: the same directions as ``glints`` and
+``glints-direct`` for a seed), the NDF prefiltered over each lobe's epsilon-support
+(``ENV_EPS``; glints paper sec. 5.4, as ``glints``) by range queries across tile borders
+(:func:`prefilter.glints.wang_range.ndf_ranges`), the point NDF below ``min_sigma``.
+Untextured quad lights: range queries over the light's half-vector patches
+(:func:`quad_range_wang`, the patches of :func:`prefilter.glints.render.quad_patches`, as
+``glints``) where they apply; elsewhere light sampling (:data:`QUAD_SAMPLES` uniform points on
+the light's area; no MIS); diffuse by Lambert's polygon formula. The point NDF at the half
+vectors of every remaining sample of every light of an object comes from one
+:func:`prefilter.glints.wang_ndf.ndf_points` call. Textured quads are rejected.
 """
 
 from __future__ import annotations
@@ -59,7 +62,7 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: ``wide_tiles`` 1 (per-tile pyramids up to footprints of one tile, then the tile-type shares):
 #: at 0.5 the shares regime's dropped position dependence cost FLIP 0.051 / 0.032 at mid / far
 #: instead of 0.038 / 0.019, for 2.5x / 18x faster frames and 232 instead of 279 MB.
-#: (Those are in-memory sizes.) ``code_bits``: the cache file's CP factors
+#: (Those are float32 pyramid sizes.) ``code_bits``: the cache file's CP factors
 #: (:func:`prefilter.glints.wang_store.save_tiles`): 8 (uint8 codes, the default: 27.7 MB file
 #: instead of 279 MB; FLIP vs the float32 frames 0.0008 / 0.0085 / 0.0034 near / mid / far),
 #: 16 (66.1 MB, 2e-5 / 1.5e-4 / 5e-5), or 0 (float32, format version 1); docs/glints-wang.md,
@@ -246,14 +249,77 @@ def _quad_samples(ql, position, frame, uq):
     return wi.reshape(n, N, 3), wgt.reshape(n, N, 1) * L
 
 
-def _environment_samples(light, frame, u):
+def _environment_samples(light, frame, u, wn, center, sigma_p, wo, index, point_roughness):
     """SG light samples of an environment light (those of
-    :func:`prefilter.glints.envlight.shade_sg` with ``u``): local directions ``(n, N, 3)`` and
-    the weights ``L(wi) / (n pdf)`` ``(n, N, 3)``; ``u (N, 3 n)``."""
-    from prefilter.glints.envlight import sg_light_samples
-    from prefilter.glints.render import environment_lobes
+    :func:`prefilter.glints.envlight.shade_sg` with ``u``): local directions ``(n, N, 3)``, the
+    weights ``L(wi) / (n pdf)`` ``(n, N, 3)`` and the prefiltered NDF ``(n, N)``: the range mean
+    of the footprint NDF over ``h_xy +- theta_eps / 2`` of the sample's lobe
+    (:data:`prefilter.glints.render.ENV_EPS`; glints paper sec. 5.4, as ``glints``), NaN where
+    the point NDF is used (below ``wn.min_sigma``, as ``glints`` below its finest level) or the
+    sample does not reflect; ``u (N, 3 n)``."""
+    from prefilter.glints.envlight import (_lobe_probabilities, as_lobes, eps_support,
+                                           sg_energy, sg_light_samples)
+    from prefilter.glints.render import ENV_EPS, environment_lobes
 
-    return sg_light_samples(*environment_lobes(light, frame), u)
+    mu, lam, p = as_lobes(*environment_lobes(light, frame))
+    wi, wgt = sg_light_samples(mu, lam, p, u)
+    n = wi.shape[0]
+    D = np.full(wi.shape[:2], np.nan)
+    big = sigma_p >= wn.min_sigma
+    if not (np.any(big) and wn.block):
+        return wi, wgt, D
+    # the lobe each sample was drawn from (envlight._sample_sg's choice)
+    cum = np.cumsum(_lobe_probabilities(mu.mean(axis=1) * sg_energy(lam)))
+    lobe = np.minimum(np.searchsorted(cum, u[:, 0:3 * n:3], side="right"), len(cum) - 1)
+    half_eps = np.maximum(0.5 * eps_support(mu, lam, ENV_EPS)[lobe], 1e-6)  # (N, n)
+    h = wi + wo[None]
+    h /= np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+    ok = (wi[..., 2] > 0) & (h[..., 2] > 0) & (wo[None, :, 2] > 0)  # (n, N)
+    hs = h[..., :2].transpose(1, 0, 2)[big]  # (N_big, n, 2)
+    r = half_eps[big][..., None]
+    mean, _ = ranges(wn, center[big], sigma_p[big], hs - r, hs + r, active=ok.T[big],
+                     index=index, point_roughness=point_roughness)
+    D[:, big] = np.where(ok[:, big], mean.T, 0.0)
+    return wi, wgt, D
+
+
+def quad_range_wang(wn: TiledNDF, center, sigma_p, wo, corners, radiance, f0, *, index=None,
+                    point_roughness=None):
+    """Specular radiance ``(N, 3)`` of a quad light by range queries over its half-vector
+    region (:func:`prefilter.glints.render.quad_range`'s patches, ``QUAD_SUB^2`` then
+    ``(2 QUAD_SUB)^2`` for larger lights, each rectangle's mean from
+    :func:`prefilter.glints.wang_range.ndf_ranges`: across tile borders) and ``done (N,)``:
+    where it applies (the patch conditions of :func:`prefilter.glints.render.quad_patches`,
+    footprints at or above ``wn.min_sigma``, compressed pyramids); 0 elsewhere (light samples
+    there)."""
+    from prefilter.glints.render import QUAD_SUB, quad_patches
+
+    N = len(sigma_p)
+    out = np.zeros((N, 3))
+    done = np.zeros(N, bool)
+    if not wn.block:
+        return out, done
+    for n_sub in (QUAD_SUB, 2 * QUAD_SUB):
+        cand = np.flatnonzero(~done & (sigma_p >= wn.min_sigma))
+        if not cand.size:
+            break
+        ok, lo, hi, (k, ja) = quad_patches(wo[cand], corners[cand], f0, n_sub)
+        if not np.any(ok):
+            continue
+        sel = cand[ok]
+        mean, _ = ranges(wn, center[sel], sigma_p[sel], lo, hi, index=index,
+                         point_roughness=point_roughness)
+        out[sel] = (k * (ja * mean)[..., None]).sum(axis=1) * np.asarray(radiance, np.float64)
+        done[sel] = True
+    return out, done
+
+
+def ranges(wn, center, sigma_p, lo, hi, **kw):
+    """:func:`prefilter.glints.wang_range.ndf_ranges` (imported on first use)."""
+    from prefilter.glints.wang_range import ndf_ranges
+
+    return ndf_ranges(wn, np.ascontiguousarray(center), np.ascontiguousarray(sigma_p), lo, hi,
+                      **kw)
 
 
 def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | None = None,
@@ -309,38 +375,48 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
         # every light sample of the object: directions wi (S, N_k, 3) in the local frame,
         # weights (S, N_k, 3) (irradiance, or radiance over pdf and sample count), and whether
         # its Lambert term comes from the sample (quads: the exact polygon integral instead)
-        wis, wgts, lamb = [], [], []
+        wis, wgts, lamb, pre = [], [], [], []
+        f0 = np.asarray(mat.f0, dtype=np.float64)
         for w, e in incoming:
             wi = to_local(w[m], *frame)
             wis.append(wi / np.linalg.norm(wi, axis=-1, keepdims=True))
             wgts.append(e[m])
             lamb.append(True)
+            pre.append(None)
         for qi, ql in enumerate(lights.quads):
+            corners = np.stack([to_local(v - g.position[m], *frame) for v in ql.vertices], 1)
             if np.any(base > 0):
-                corners = np.stack([to_local(v - g.position[m], *frame) for v in ql.vertices], 1)
                 out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
+            val, done = quad_range_wang(wn, c, sp, wo[m], corners, ql.radiance, f0,
+                                        index=index, point_roughness=st["intrinsic_roughness"])
+            out[m] += val
             wi, wgt = _quad_samples(ql, g.position[m], frame, quad_uniforms(u[m], qi))
+            wgt[:, done] = 0.0  # the range path's samples: not queried, not added
             wis += list(wi)
             wgts += list(wgt)
             lamb += [False] * len(wi)
+            pre += [np.where(done, 0.0, np.nan)] * len(wi)
         for j, light in enumerate(env):
             cols = uniform_columns(nq, "environment", j)
-            wi, wgt = _environment_samples(light, frame, u[m][:, cols])
+            wi, wgt, D = _environment_samples(light, frame, u[m][:, cols], wn, c, sp, wo[m],
+                                              index, st["intrinsic_roughness"])
             wis += list(wi)
             wgts += list(wgt)
             lamb += [True] * len(wi)
+            pre += list(D)
         wi = np.stack(wis)
         wok = np.broadcast_to(wo[m], wi.shape)
         h = half(wok, wi)
-        # only the samples that can reflect are queried (env: ~half below the horizon)
-        act = (wi[..., 2] > 0) & (h[..., 2] > 0) & (wok[..., 2] > 0)
-        D = np.zeros(wi.shape[:2])
+        # only the samples that can reflect are queried (env: ~half below the horizon), and
+        # not those whose NDF a range query gave (prefiltered environment, quad ranges)
+        known = np.stack([np.full(len(c), np.nan) if d is None else d for d in pre])
+        act = (wi[..., 2] > 0) & (h[..., 2] > 0) & (wok[..., 2] > 0) & np.isnan(known)
+        D = np.where(np.isnan(known), 0.0, known)
         if np.any(act):
             D[act] = ndf_points(wn, np.broadcast_to(c, wi.shape[:2] + (2,))[act],
                                 np.broadcast_to(sp, wi.shape[:2])[act], h[act][:, :2],
                                 index=index, bilinear=st["bilinear"],
                                 point_roughness=st["intrinsic_roughness"])
-        f0 = np.asarray(mat.f0, dtype=np.float64)
         spec = brdf_cos_from_ndf(wok, wi, h, D, f0)
         diff = base / np.pi * np.maximum(wi[..., 2], 0.0)[..., None]
         for j in range(len(wi)):

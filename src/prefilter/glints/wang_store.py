@@ -32,8 +32,10 @@ factors as integer codes, like the glints map store's version 3 (:mod:`prefilter
   ``C = c / Q * c_scale``, ``Q = 2^code_bits - 1``), so ``A Bf C`` is the stored product up
   to the rounding of the codes. All codes uint8 (``code_bits`` 8) or all uint16 (16).
 
-The kernels compute on the decoded float32 triple: the file shrinks, the memory does not
-(:attr:`TiledNDF.nbytes` counts the decoded arrays). Version 1 files still load.
+A loaded version-2 file is held as its codes, packed for the query kernels
+(:func:`prefilter.glints.wang_query.pack_codes`; :attr:`TiledNDF.nbytes` counts the pack), the
+float32 triple decoded from the pack on first use by the per-footprint NumPy paths only.
+Version 1 files still load.
 
 :func:`load_tiles` checks the layout against the header before the checksum, so a malformed
 file gets a precise message; every failure is a :class:`~prefilter.errors.TableFileError`
@@ -55,6 +57,7 @@ from prefilter.glints.pndf import as_intrinsic_roughness, as_support
 from prefilter.glints.store import CODE_DTYPES, code_levels
 from prefilter.glints.wang import WangTiles
 from prefilter.glints.wang_ndf import TiledNDF, dependent_texels
+from prefilter.glints.wang_query import DecodedLevels, pack_codes
 
 FORMAT = "prefilter-glints-wang"
 VERSION = 2
@@ -138,7 +141,7 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
     arrays["dependent"] = np.asarray(wn.dependent, np.int64)
     for lv in range(wn.n_levels):
         arrays.update(_level_arrays(wn, lv, code_bits))
-    rank = int(wn.images[0][0].shape[2]) if wn.block else 0
+    rank = int(wn.pack.meta[:, 0].max()) if wn.block else 0
     settings = dict(ndf_res=int(wn.resolution), support=float(wn.support),
                     intrinsic_roughness=float(wn.intrinsic_roughness), stride0=int(wn.stride0),
                     sigma0=float(wn.sigma0), wide_sigma=float(wn.wide_sigma),
@@ -302,8 +305,8 @@ def _check_codes(path, data, st, lv) -> None:
 
 def load_tiles(path: str | os.PathLike) -> TiledNDF:
     """Load and validate per-tile Wang pyramids written by :func:`save_tiles` (version 1 or 2;
-    version 2's codes are decoded to the float32 CP triple); any inconsistency (including a
-    checksum mismatch) raises ``TableFileError`` naming the file and the field."""
+    version 2's codes are packed for the kernels, :attr:`TiledNDF.packed`); any inconsistency
+    (including a checksum mismatch) raises ``TableFileError`` naming the file and the field."""
     raw = read_npz(path, WHAT)
     data = {k: v for k, v in raw.items() if k != META_KEY}
     st = _settings(path, _header(path, data))
@@ -313,17 +316,20 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         _fail(path, "dependent: expected the dependent texels of the stored tiles")
     verify_npz(path, WHAT, raw, format_name=FORMAT, format_version=st["version"])
     L, B = len(st["k0"]), st["B"]
+    packed = None
     if st["version"] == 2:
+        # the codes packed as stored (the kernels read them; wang_query.pack_codes), the
+        # float32 triples decoded on first use by the per-footprint paths only
         nb2 = (st["R"] // B) ** 2
-        images = tuple(decode_level(*(data[f"{k}_{lv}"] for k in ("mask", "a", "b", "c",
-                                                                  "c_scale")),
-                                    crop=st["crops"][lv], n_groups=nb2) for lv in range(L))
-        tile_means = data["tile_means"].astype(np.float64)
-        mean = tile_means.mean(axis=0)
+        packed = pack_codes([{k: data[f"{k}_{lv}"] for k in ("mask", "a", "b", "c", "c_scale")}
+                             for lv in range(L)], st["crops"], nb2)
+        images = DecodedLevels(packed)
+        tile_means = data["tile_means"]
+        mean = tile_means.astype(np.float64).mean(axis=0)
     else:
         images = tuple((data[f"A_{lv}"], data[f"B_{lv}"], data[f"C_{lv}"]) if B
                        else data[f"images_{lv}"] for lv in range(L))
         tile_means, mean = data["tile_means"], data["mean"]
     return TiledNDF(wang, images, tuple(st["k0"]), mean, st["stride0"], st["sigma0"],
                     st["R"], st["S"], st["sr"], st["wide"], data["dependent"],
-                    tile_means, st["uniform"], B, tuple(st["cp_error"]))
+                    tile_means, st["uniform"], B, tuple(st["cp_error"]), packed)

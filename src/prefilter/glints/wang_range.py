@@ -1,0 +1,336 @@
+"""Range queries over the implicit Wang tiling: the mean of a footprint's NDF over rectangles of
+projected half vectors (glints paper eq. 7), summed over the tiles under the footprint.
+
+``ndf_ranges(wn, center, sigma_p, s_min, s_max)``: per footprint, ``K`` rectangles. Regimes of
+:mod:`prefilter.glints.wang_ndf`:
+
+* per-tile pyramids (``min_sigma <= sigma_p < wide_sigma``): the resampling taps of every tile
+  under the footprint (:func:`prefilter.glints.wang_query.tile_taps`), their code rows summed
+  per CP group and NDF block (:func:`prefilter.glints.wang_query.tile_codes`), then the group's
+  factor masses over each rectangle from the prefix sums (``_qkernels._flush_rects``, the
+  ``glints`` range kernel's arithmetic); the dependent texels (left out of the pyramids) by
+  their exact elements' masses over the rectangles (the pixel splatting of the images, with
+  rectangle masses);
+* tile-type shares and the expected tiling (``sigma_p >= wide_sigma``): the per-type
+  ``sigma_p -> inf`` images' rectangle means from summed-area tables (exact for the
+  piecewise-constant images);
+* below ``min_sigma`` (direct P-NDF): not answered (``done`` False; callers use point values or
+  light samples there, as ``glints`` does below its finest level).
+
+Ranges cross tile borders freely: the tiles are summed per footprint, not per rectangle.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from prefilter.errors import PrefilterError
+from prefilter.glints._qkernels import _axis_rows, _flush_rects, _rect
+from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, normal_cdf,
+                                   principal_axis)
+from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
+                                      _nb_type, _nb_types, dep_gaussian, dependent_neighbours)
+from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes, tile_taps
+from prefilter.jit import njit_parallel, njit_serial, prange, serial
+
+def summed_tables(wn: TiledNDF) -> np.ndarray:
+    """Summed-area tables ``(17, R + 1, R + 1)`` float64 of the 16 ``tile_means`` and of
+    ``mean`` (index 16), in pixel units: ``S[t, i, j]`` the sum of rows ``< i``, columns
+    ``< j`` (cached per instance)."""
+    hit = wn.__dict__.get("_sat")
+    if hit is None:
+        imgs = np.concatenate([np.asarray(wn.tile_means, np.float64),
+                               np.asarray(wn.mean, np.float64)[None]])
+        hit = np.zeros((17,) + tuple(np.add(imgs.shape[1:], 1)))
+        hit[:, 1:, 1:] = imgs.cumsum(axis=1).cumsum(axis=2)
+        object.__setattr__(wn, "_sat", hit)
+    return hit
+
+
+@njit_serial
+def _sat_at(S, y, x):  # pragma: no cover - compiled
+    """Integral of the piecewise-constant image over ``[0, y] x [0, x]`` (pixel units, clamped
+    to the image): the summed-area table interpolated bilinearly (exact for such images)."""
+    R = S.shape[0] - 1
+    y = min(max(y, 0.0), float(R))
+    x = min(max(x, 0.0), float(R))
+    i = min(int(y), R - 1)
+    j = min(int(x), R - 1)
+    ty, tx = y - i, x - j
+    return ((1 - ty) * ((1 - tx) * S[i, j] + tx * S[i, j + 1])
+            + ty * ((1 - tx) * S[i + 1, j] + tx * S[i + 1, j + 1]))
+
+
+@njit_serial
+def _sat_rect(S, py0, py1, px0, px1):  # pragma: no cover - compiled
+    return (_sat_at(S, py1, px1) - _sat_at(S, py0, px1) - _sat_at(S, py1, px0)
+            + _sat_at(S, py0, px0))
+
+
+@njit_serial
+def _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc):  # pragma: no cover - compiled
+    """``w`` times the mass of ``N((mx, my), siso^2 I)`` over ``[x0, x1] x [y0, y1]``; 0 when
+    the rectangle is beyond ``trunc`` stds along an axis (``pndf.splat``'s cut)."""
+    rad = trunc * siso
+    if mx + rad < x0 or mx - rad > x1 or my + rad < y0 or my - rad > y1:
+        return 0.0
+    inv = 1.0 / siso
+    return w * ((normal_cdf((x1 - mx) * inv) - normal_cdf((x0 - mx) * inv))
+                * (normal_cdf((y1 - my) * inv) - normal_cdf((y0 - my) * inv)))
+
+
+@njit_serial
+def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no cover
+    """``w`` times the mass of an element over ``[x0, x1] x [y0, y1]``: the split of
+    ``wang_ndf._nb_element`` (isotropic part, three or a line of isotropic nodes for the
+    rank-one part; ``pndf._pndf_images``' splatting) with rectangle masses instead of pixel
+    masses."""
+    nu1, siso, kappa = element_split(a, b, d, sr)
+    ext = trunc * (kappa + siso)
+    if mx + ext < x0 or mx - ext > x1 or my + ext < y0 or my - ext > y1:
+        return 0.0
+    if kappa < 1e-3 * siso:
+        return _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc)
+    vx, vy = principal_axis(a, b, d, nu1)
+    if kappa <= 0.7 * siso:
+        t = math.sqrt(3.0) * kappa
+        return (_iso_mass(mx, my, siso, w * (2.0 / 3.0), x0, x1, y0, y1, trunc)
+                + _iso_mass(mx + t * vx, my + t * vy, siso, w / 6.0, x0, x1, y0, y1, trunc)
+                + _iso_mass(mx - t * vx, my - t * vy, siso, w / 6.0, x0, x1, y0, y1, trunc))
+    # pndf.line_nodes' nodes; their normaliser by gauss_row's recurrence (no exp a node)
+    n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+    step = 2.0 * trunc / (n - 1)
+    norm = 0.0
+    for gk in gauss_row(0.5 * n, 0, n - 1, 1.0 / (step * step)):
+        norm += gk
+    rn = trunc * siso
+    # the nodes t (in kappa units) whose isotropic part reaches the rectangle: the line's
+    # interval inside it, grown by trunc siso (a long element crosses a small rectangle with a
+    # few of its nodes)
+    tlo, thi = -trunc, trunc
+    for v, m, a0, a1 in ((vx, mx, x0, x1), (vy, my, y0, y1)):
+        if abs(v) > 1e-12:
+            ta = (a0 - rn - m) / (kappa * v)
+            tb = (a1 + rn - m) / (kappa * v)
+            tlo = max(tlo, min(ta, tb))
+            thi = min(thi, max(ta, tb))
+        elif m + rn < a0 or m - rn > a1:
+            return 0.0
+    if tlo > thi:
+        return 0.0
+    acc = 0.0
+    for q in range(max(0, int(math.floor((tlo + trunc) / step))),
+                   min(n - 1, int(math.ceil((thi + trunc) / step))) + 1):
+        tq = -trunc + 2.0 * trunc * q / (n - 1)
+        acc += _iso_mass(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
+                         w * math.exp(-0.5 * tq * tq) / norm, x0, x1, y0, y1, trunc)
+    return acc
+
+
+@njit_parallel
+def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, cq,
+                   wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, sat,
+                   lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
+                   point_sr, proto, out, done):  # pragma: no cover - compiled
+    """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
+    ``[q, k]`` (0 for inactive rectangles); ``done[q]`` False below ``min_sigma`` (module
+    docstring). Accumulation of the code rows in ``proto``'s dtype (float32 for 8-bit codes)."""
+    T = tiles.shape[1]
+    nb = bidx.shape[0]
+    nb2 = nb * nb
+    R = nb * B
+    N, K = out.shape
+    L = crops.shape[0]
+    rank = 1
+    for g in range(meta.shape[0]):
+        rank = max(rank, meta[g, 0])
+    pa = Pa.ravel()
+    pb = Pb.ravel()
+    for q in prange(N):
+        for k in range(K):
+            out[q, k] = 0.0
+        s = sp[q]
+        c0, c1 = cx[q], cy[q]
+        done[q] = s >= min_sigma
+        if not done[q]:
+            continue
+        # the rectangles in pixels, their blocks and areas
+        rbk = np.empty((K, 4), np.int64)
+        rcl = np.empty((K, 4))
+        area = np.empty(K)
+        ubi0, ubi1, ubj0, ubj1 = nb, -1, nb, -1
+        for k in range(K):
+            if not act[q, k]:
+                rbk[k, 0], rbk[k, 1], rbk[k, 2], rbk[k, 3] = 0, -1, 0, -1
+                area[k] = 1.0
+                continue
+            ax0, ax1, ay0, ay1, bi0, bi1, bj0, bj1, a = _rect(x0[q, k], y0[q, k], x1[q, k],
+                                                              y1[q, k], lo, h, R, B, nb)
+            rcl[k, 0], rcl[k, 1], rcl[k, 2], rcl[k, 3] = ax0, ax1, ay0, ay1
+            rbk[k, 0], rbk[k, 1], rbk[k, 2], rbk[k, 3] = bi0, bi1, bj0, bj1
+            area[k] = a
+            if bi0 <= bi1 and bj0 <= bj1:
+                ubi0, ubi1 = min(ubi0, bi0), max(ubi1, bi1)
+                ubj0, ubj1 = min(ubj0, bj0), max(ubj1, bj1)
+        tot2 = s * s + sh * sh
+        rad = trunc * math.sqrt(tot2)
+        wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
+        wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+        if s >= wide_sigma:
+            gxw = gauss_row(c0, wx0, wx1, tot2)
+            gyw = gauss_row(c1, wy0, wy1, tot2)
+            sx = gxw.sum()
+            sy = gyw.sum()
+            share = np.zeros(17)
+            if s >= uniform_sigma:
+                share[16] = 1.0
+            else:  # tile-type shares: weights per tile column and row, then types
+                i0, j0 = wx0 // T, wy0 // T
+                wcol = np.zeros(wx1 // T - i0 + 1)
+                wrow = np.zeros(wy1 // T - j0 + 1)
+                segment_sums(gxw, wx0, T, wcol)
+                segment_sums(gyw, wy0, T, wrow)
+                for b in range(wrow.shape[0]):
+                    for a in range(wcol.shape[0]):
+                        share[_nb_type(i0 + a, j0 + b, seed, index)] += (wrow[b] * wcol[a]
+                                                                         / (sx * sy))
+            for k in range(K):
+                if not act[q, k] or rbk[k, 0] > rbk[k, 1]:
+                    continue
+                v = 0.0
+                for t in range(17):
+                    if share[t] != 0.0:
+                        v += share[t] * _sat_rect(sat[t], rcl[k, 2], rcl[k, 3], rcl[k, 0],
+                                                  rcl[k, 1])
+                out[q, k] = v / area[k]
+            continue
+        m = 0
+        for lv in range(L):
+            sg = sigma0 * 2.0**lv
+            st = st0 * 2.0**lv
+            if sg < s and math.sqrt(1.0 - (sg / s) ** 2) * sg / st >= q_min:
+                m = lv
+        sg = sigma0 * 2.0**m
+        st = st0 * 2.0**m
+        r = math.sqrt(s * s - sg * sg)
+        half = tap_trunc * r / st
+        n = crops[m]
+        marg = rad + 1.0
+        ti0 = int(math.floor((c0 - marg) / T)) - 1
+        tj0 = int(math.floor((c1 - marg) / T)) - 1
+        types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
+                          int(math.floor((c1 + marg) / T)) + 1, seed, index)
+        jlo = int(math.floor((c1 - marg) / T))
+        jhi = int(math.floor((c1 + marg) / T))
+        ilo = int(math.floor((c0 - marg) / T))
+        ihi = int(math.floor((c0 + marg) / T))
+        wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1, c0, T, st, r, half, k0[m], n, jlo, jhi,
+                                                  ilo, ihi)
+        cw = np.empty((16, rank), proto.dtype)
+        gs = np.empty(16, np.int64)
+        slot_of = np.empty(16, np.int64)
+        tt = np.empty(9, proto.dtype)
+        rp = np.empty((K, 8), np.int64)
+        rt = np.empty((K, 8))
+        touch = np.empty(K, np.int64)
+        acc = np.zeros(K)
+        for bi in range(ubi0, ubi1 + 1):
+            for bj in range(ubj0, ubj1 + 1):
+                nt = 0
+                for k in range(K):
+                    if rbk[k, 0] <= bi <= rbk[k, 1] and rbk[k, 2] <= bj <= rbk[k, 3]:
+                        touch[nt] = k
+                        nt += 1
+                        (rp[k, 0], rp[k, 1], rp[k, 2], rp[k, 3], rt[k, 0], rt[k, 1],
+                         rt[k, 2], rt[k, 3]) = _axis_rows(rcl[k, 2] - bi * B,
+                                                          rcl[k, 3] - bi * B, B)
+                        (rp[k, 4], rp[k, 5], rp[k, 6], rp[k, 7], rt[k, 4], rt[k, 5],
+                         rt[k, 6], rt[k, 7]) = _axis_rows(rcl[k, 0] - bj * B,
+                                                          rcl[k, 1] - bj * B, B)
+                if nt == 0:
+                    continue
+                ns = tile_codes(cq, bidx[bi, bj], meta, offs[m], goff[m], n,
+                                (bi * nb + bj, nb2), types, jlo - tj0, ilo - ti0, wyt, wxt,
+                                kyl, kyh, kxl, kxh, cw, gs, slot_of)
+                _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
+        for k in range(K):
+            out[q, k] = acc[k] / area[k]
+        # the dependent texels: their exact elements' masses over the rectangles (clipped to
+        # the support, as the images)
+        f = sh * sh / tot2
+        var = s * s * sh * sh / tot2
+        sx = gauss_row(c0, wx0, wx1, tot2).sum()
+        sy = gauss_row(c1, wy0, wy1, tot2).sum()
+        hi = lo + R * h
+        for j in range(jlo, jhi + 1):
+            for i in range(ilo, ihi + 1):
+                for e in range(dep.shape[0]):
+                    x = i * T + dep[e, 1]
+                    y = j * T + dep[e, 0]
+                    if not (wx0 <= x <= wx1 and wy0 <= y <= wy1):
+                        continue
+                    w, mx, my, a, b, d = dep_gaussian(tiles, types, j - tj0, i - ti0, depn[e],
+                                                      x, y, c0, c1, f, var, tot2)
+                    w /= sx * sy
+                    for k in range(K):
+                        if not act[q, k] or rbk[k, 0] > rbk[k, 1]:
+                            continue
+                        ar = (x1[q, k] - x0[q, k]) * (y1[q, k] - y0[q, k])
+                        out[q, k] += _rect_element(mx, my, a, b, d, w, point_sr,
+                                                   max(x0[q, k], lo), min(x1[q, k], hi),
+                                                   max(y0[q, k], lo), min(y1[q, k], hi),
+                                                   trunc) / ar
+
+
+def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, index=None,
+               point_roughness: float | None = None):
+    """Mean NDF values ``(N, K)`` of footprints ``center (N, 2)``, ``sigma_p (N,)`` over ``K``
+    rectangles each, ``[s_min, s_max]`` (``(N, K, 2)``, ``s_max > s_min``) of compressed
+    per-tile pyramids (module docstring), and ``done (N,)``: False below ``wn.min_sigma`` (the
+    values are then 0). ``active (N, K)`` bool: rectangles to evaluate (others 0);
+    ``point_roughness``: the dependent texels' intrinsic roughness (default
+    ``wn.intrinsic_roughness``; the renderer passes its unbaked roughness, as for
+    :func:`prefilter.glints.wang_ndf.ndf_points` with ``bilinear``)."""
+    if not isinstance(wn, TiledNDF) or not wn.block:
+        raise PrefilterError("wn: expected compressed per-tile pyramids (bake_tiles with rank)")
+    c = np.ascontiguousarray(center, dtype=np.float64)
+    sp = np.ascontiguousarray(as_sigma_p(sigma_p), dtype=np.float64)
+    lo_ = np.asarray(s_min, dtype=np.float64)
+    hi_ = np.asarray(s_max, dtype=np.float64)
+    if c.ndim != 2 or c.shape[1] != 2 or sp.shape != c.shape[:1]:
+        raise PrefilterError(f"center, sigma_p: expected shapes (N, 2) and (N,), got {c.shape} "
+                             f"and {sp.shape}")
+    N = c.shape[0]
+    if lo_.ndim != 3 or lo_.shape[0] != N or lo_.shape[2] != 2 or hi_.shape != lo_.shape:
+        raise PrefilterError(f"s_min, s_max: expected shapes (N, K, 2) with N = {N}, got "
+                             f"{lo_.shape} and {hi_.shape}")
+    if np.any(hi_ <= lo_):
+        raise PrefilterError("s_max: expected s_max > s_min in both coordinates")
+    K = lo_.shape[1]
+    act = np.ones((N, K), bool) if active is None else np.asarray(active)
+    if act.dtype != bool or act.shape != (N, K):
+        raise PrefilterError(f"active: expected a bool array of shape {(N, K)}, got "
+                             f"{act.dtype} {act.shape}")
+    idx = _as_index(index)
+    idx = np.zeros((0, 0), np.int64) if idx is None else np.ascontiguousarray(idx, np.int64)
+    psr = wn.intrinsic_roughness if point_roughness is None else float(point_roughness)
+    pk = wn.pack
+    out = np.zeros((N, K))
+    done = np.zeros(N, bool)
+    if N == 0 or K == 0:
+        return out, done
+    cc = np.ascontiguousarray
+    proto = np.empty(0, np.float32 if pk.cq.dtype == np.uint8 else np.float64)
+    serial(_ranges_kernel, N * K)(
+        cc(c[:, 0]), cc(c[:, 1]), sp, cc(lo_[..., 0]), cc(lo_[..., 1]), cc(hi_[..., 0]),
+        cc(hi_[..., 1]), cc(act), cc(wn.wang.tiles[..., :2]),
+        np.uint64(wn.wang.seed), idx, pk.Pa, pk.Pb, pk.cq, pk.wsc, pk.Fa, pk.Fb, pk.bidx,
+        pk.meta, pk.offs, pk.goff, np.array([wn.crop(lv) for lv in range(wn.n_levels)],
+                                            np.int64),
+        int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), summed_tables(wn), -wn.support,
+        2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
+        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, out, done)
+    return out, done
