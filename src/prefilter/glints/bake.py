@@ -339,12 +339,25 @@ def fit_cell_task(job: BakeJob, cid: int) -> int:
     allocation (the groups stored exactly are not fitted)."""
     if job.ck.done(CELL_CHUNK + cid):
         return cid
-    fit_cell(job, cid, *cell_tensors(job, cid))
+    imgs, blocks, blank, tensors, where = cell_tensors(job, cid)
+    stats = cell_stats(job, imgs, blocks, blank)
+    del imgs, blocks
+    fit_cell(job, cid, stats, blank, tensors, where)
     return cid
 
 
-def fit_cell(job: BakeJob, cid: int, imgs, blocks, blank, tensors, where) -> None:
-    """Pass 1 of cell ``cid`` on its :func:`cell_tensors`, saved as its checkpoint part."""
+def cell_stats(job: BakeJob, imgs, blocks, blank) -> dict:
+    """What the assembly needs of a cell's images ``(n, R, R)`` besides its fits: the squared
+    norm of its blank blocks and of its images, the kept blocks, each image's mass."""
+    sq = np.einsum("nabij,nabij->nab", blocks, blocks)
+    return dict(blank2=np.array(sq[blank].sum()), norm2=np.array(sq.sum()),
+                kept=np.array((~blank).sum()),
+                mass=imgs.sum(axis=(1, 2)) * (2 * job.S / job.R) ** 2)
+
+
+def fit_cell(job: BakeJob, cid: int, stats: dict, blank, tensors, where) -> None:
+    """Pass 1 of cell ``cid`` on its :func:`cell_tensors` (``stats``: :func:`cell_stats`), saved
+    as its checkpoint part."""
     nb, B, base = job.nb, job.B, job.base
     live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
     exact = job.exact(int(job.cells[cid, 0]))
@@ -365,12 +378,8 @@ def fit_cell(job: BakeJob, cid: int, imgs, blocks, blank, tensors, where) -> Non
     for g, (ag, bg, cg, e) in res.items():
         a[g], b[g], c[rows[g]:rows[g + 1]] = ag.T, bg.T, cg
         err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g])
-    mass = imgs.sum(axis=(1, 2)) * (2 * job.S / job.R) ** 2
     job.ck.save(CELL_CHUNK + cid, a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g,
-                blank2=np.array(np.einsum("nabij,nabij->", blocks,
-                                          blocks * blank[..., None, None])),
-                norm2=np.array(np.einsum("nij,nij->", imgs, imgs)),
-                kept=np.array((~blank).sum()), mass=mass)
+                **stats)
 
 
 def refit_cell_task(job: BakeJob, cid: int) -> int:
@@ -460,7 +469,10 @@ def sample_cell_task(job: BakeJob, cid: int) -> int:
     """Pass 1 of a sample cell of a one-pass bake (its errors set the rank multiplier)."""
     if not job.ck.done(CELL_CHUNK + cid):
         imgs = cell_images(job, cid)
-        fit_cell(job, cid, imgs, *image_tensors(job, imgs))
+        blocks, blank, tensors, where = image_tensors(job, imgs)
+        stats = cell_stats(job, imgs, blocks, blank)
+        del imgs, blocks
+        fit_cell(job, cid, stats, blank, tensors, where)
     return cid
 
 
@@ -478,9 +490,10 @@ def cell_task(job: BakeJob, cid: int):
            else None)
     if not done:
         blocks, blank, tensors, where = image_tensors(job, imgs)
-        if not job.ck.done(CELL_CHUNK + cid):
-            fit_cell(job, cid, imgs, blocks, blank, tensors, where)
+        stats = cell_stats(job, imgs, blocks, blank)
         del imgs, blocks
+        if not job.ck.done(CELL_CHUNK + cid):
+            fit_cell(job, cid, stats, blank, tensors, where)
         p1 = job.ck.load(CELL_CHUNK + cid)
         refit_cell(job, cid, tensors, p1, cell_ranks(job, cid, p1))
     return out

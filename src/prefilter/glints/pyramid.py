@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from prefilter.glints.levels import LevelFile
 from prefilter.jit import njit_parallel, njit_serial, prange
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
@@ -346,6 +347,9 @@ class LevelStream:
     def _path(self, key) -> Path:
         return self.spill_dir / f"{self.name}-{key[0]}{key[1]}.npy"
 
+    def _even_file(self, yo: int) -> LevelFile:
+        return LevelFile(self._path(("even", yo)), (1, self.nx // 2) + self.image_shape)
+
     def _get(self, key) -> np.ndarray:
         arr = self._mem.get(key)
         if arr is None:
@@ -376,8 +380,10 @@ class LevelStream:
             _add_rows(self._get(("acc", yo)), reach.astype(np.int64), wy, part)
         if y % 2 == 0:  # the images at level l + 1's centres (its difference to level l)
             xs = np.arange(x0 + x0 % 2, x0 + X.shape[0], 2)
-            if xs.size:
+            if xs.size and self.spill_dir is None:
                 self._get(("even", y // 2))[xs // 2] = X[xs - x0]
+            elif xs.size:  # straight to their file: read once, when the row completes
+                self._even_file(y // 2).write_columns(0, int(xs[0]) // 2, X[xs - x0])
 
     def arrived(self, rows) -> list[tuple[int, np.ndarray]]:
         """Mark rows of level ``l`` complete; the level-``l + 1`` rows ``(yo, (nx/2, R, R))``
@@ -391,7 +397,12 @@ class LevelStream:
         for yo in sorted(reached):
             if not self.left[yo] and (("acc", yo) in self._mem or ("acc", yo) in self._disk):
                 c = self._pop(("acc", yo))
-                d = self._pop(("even", yo))
+                if self.spill_dir is None:
+                    d = self._pop(("even", yo))
+                else:
+                    f = self._even_file(yo)
+                    d = f.read(0, 1).reshape(c.shape)
+                    os.remove(f.path)
                 self._norms += _difference_norms(c, d)
                 out.append((yo, c.reshape((self.nx // 2,) + self.image_shape)))
         return out
