@@ -355,9 +355,10 @@ def cell_stats(job: BakeJob, imgs, blocks, blank) -> dict:
                 mass=imgs.sum(axis=(1, 2)) * (2 * job.S / job.R) ** 2)
 
 
-def fit_cell(job: BakeJob, cid: int, stats: dict, blank, tensors, where) -> None:
-    """Pass 1 of cell ``cid`` on its :func:`cell_tensors` (``stats``: :func:`cell_stats`), saved
-    as its checkpoint part."""
+def fit_cell(job: BakeJob, cid: int, stats: dict, blank, tensors, where,
+             save: bool = True) -> dict:
+    """Pass 1 of cell ``cid`` on its :func:`cell_tensors` (``stats``: :func:`cell_stats`): its
+    checkpoint part's arrays, saved unless ``save`` is false."""
     nb, B, base = job.nb, job.B, job.base
     live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
     exact = job.exact(int(job.cells[cid, 0]))
@@ -378,8 +379,10 @@ def fit_cell(job: BakeJob, cid: int, stats: dict, blank, tensors, where) -> None
     for g, (ag, bg, cg, e) in res.items():
         a[g], b[g], c[rows[g]:rows[g + 1]] = ag.T, bg.T, cg
         err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g])
-    job.ck.save(CELL_CHUNK + cid, a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g,
-                **stats)
+    part = dict(a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g, **stats)
+    if save:
+        job.ck.save(CELL_CHUNK + cid, **part)
+    return part
 
 
 def refit_cell_task(job: BakeJob, cid: int) -> int:
@@ -492,9 +495,12 @@ def cell_task(job: BakeJob, cid: int):
         blocks, blank, tensors, where = image_tensors(job, imgs)
         stats = cell_stats(job, imgs, blocks, blank)
         del imgs, blocks
-        if not job.ck.done(CELL_CHUNK + cid):
-            fit_cell(job, cid, stats, blank, tensors, where)
-        p1 = job.ck.load(CELL_CHUNK + cid)
+        p1 = job.ck.load(CELL_CHUNK + cid) if job.ck.done(CELL_CHUNK + cid) else {}
+        if "a" not in p1:  # not a sample cell's part (with the factors the refit starts from)
+            p1 = fit_cell(job, cid, stats, blank, tensors, where, save=False)
+        # the assembly needs no pass-1 factors: the part without them (~2 MB less per cell of
+        # the render's maps), saved before the final part (a resumed bake refits from pass 1)
+        job.ck.save(CELL_CHUNK + cid, **{k: v for k, v in p1.items() if k not in ("a", "b", "c")})
         refit_cell(job, cid, tensors, p1, cell_ranks(job, cid, p1))
     return out
 
@@ -594,7 +600,8 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
         n_chunks = pyr.shape(0)[0] // k
         lvl0 = np.flatnonzero(cells[:, 0] == 0)
         for ch in list(range(1, n_chunks)) + [0]:
-            batch = [int(c) for c in lvl0 if cells[c, 1] == ch * k] + ready
+            # the waiting coarser cells first: their files go before new rows fill others
+            batch = ready + [int(c) for c in lvl0 if cells[c, 1] == ch * k]
             ready = []
             run(batch)
             if streams:
