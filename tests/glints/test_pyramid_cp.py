@@ -200,3 +200,38 @@ def test_exact_cp_reconstructs_and_bounds_the_rank(shape):
     np.testing.assert_allclose(a.sum(axis=0), 1.0)
     np.testing.assert_allclose(b.sum(axis=0), 1.0)
     assert exact_cp(np.zeros(shape))[0].shape == (I, 0)
+
+
+@pytest.mark.parametrize("ny, nx", [(16, 8), (4, 4), (2, 2), (8, 16)])
+def test_level_stream_is_next_level_in_any_order(tmp_path, ny, nx):
+    """The streamed filter (rows in any order, in runs of columns, accumulators spilled to
+    files) gives :func:`next_level`'s images to float32 rounding and the level difference."""
+    from prefilter.glints.pyramid import LevelStream, level_difference, next_level
+
+    rng = np.random.default_rng(0)
+    L = rng.random((ny, nx, 8, 8)).astype(np.float32)
+    ref = next_level(L, 1.0)
+    st = LevelStream((ny, nx), 1.0, (8, 8), spill_dir=tmp_path)
+    got = {}
+    for y in list(range(2, ny)) + [0, 1]:
+        h = nx // 2 + 1 if nx > 2 else 1
+        st.add(y, 0, L[y, :h])
+        st.add(y, h, L[y, h:])
+        for yo, row in st.arrived([y]):
+            got[yo] = row
+        st.spill()
+    out = np.stack([got[i] for i in range(ny // 2)])
+    assert np.abs(out - ref).max() <= 2e-6 * ref.max()
+    assert st.difference == pytest.approx(level_difference(L, ref), rel=1e-5)
+    assert not list(tmp_path.iterdir())
+
+
+def test_budget_multiplier_gives_allocate_ranks():
+    from prefilter.glints.cp import allocate_ranks, budget_multiplier, ranks_for
+
+    rng = np.random.default_rng(3)
+    e, u = rng.random(200) ** 3, rng.integers(10, 40, 200).astype(float)
+    for budget in (8 * u.sum(), 12 * u.sum(), 100 * u.sum()):
+        lam = budget_multiplier(e, u, 8, [8, 12, 16, 24], budget)
+        assert np.array_equal(ranks_for(e, u, 8, [8, 12, 16, 24], lam),
+                              allocate_ranks(e, u, 8, [8, 12, 16, 24], budget))

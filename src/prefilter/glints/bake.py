@@ -38,7 +38,9 @@ import hashlib
 import json
 import math
 import os
+import shutil
 import sys
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager
@@ -55,7 +57,8 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_in
                                    as_ndf_truncation, as_normal_map, as_support, elements,
                                    map_digest, pndf_image)
 from prefilter.glints.levels import LevelFile
-from prefilter.glints.pyramid import Pyramid, next_level_rows, filter_taps, plan, strip_plan
+from prefilter.glints.pyramid import (LevelStream, Pyramid, filter_taps, next_level_rows, plan,
+                                      strip_plan)
 from prefilter.glints.store import CODE_BITS, GlintsMap, decode, encode, pack_mask, save
 
 LEVEL0_CHUNK = 0
@@ -74,6 +77,14 @@ EXACT = -1
 #: all groups, the exact ones then replacing theirs). Bakes with exact levels key their
 #: checkpoints, and the render cache its files, on it (:func:`code_versions`).
 EXACT_BUDGET_RULE = 2
+#: Level-0 cells whose pass-1 errors set a one-pass bake's rank multiplier (spread over the map).
+SAMPLE_CELLS = 4
+#: Version of what a one-pass bake computes (its sample, the order of its filter's sums); its
+#: checkpoints and the render cache key on it (:func:`code_versions`).
+ONE_PASS_VERSION = 1
+#: Numba's default threading layer is not thread-safe: the bake's parallel kernels (level-0
+#: images, the streamed filter) run under this lock when tasks run on threads.
+PARALLEL = threading.Lock()
 
 
 def code_versions(settings: dict) -> dict:
@@ -84,6 +95,8 @@ def code_versions(settings: dict) -> dict:
     out = {"cp_fit": cpmod.FIT_VERSION}
     if settings.get("exact_from_level") is not None:
         out["exact_budget"] = EXACT_BUDGET_RULE
+    if settings.get("one_pass"):
+        out["one_pass"] = ONE_PASS_VERSION
     return out
 
 
@@ -102,11 +115,12 @@ def code_versions(settings: dict) -> dict:
 #: codes. ``ndf_res`` 512 with ``block`` 32: the environment's brushed plane needs 512^2 images;
 #: 32-pixel blocks keep the blocks a range query spans (and the frame time) low. Levels >= 3 are
 #: stored exactly, each image its own group (``exact_cell`` 1: exact ranks <= ``block``, faster
-#: queries). Measurements: docs/glints-part2.md, ``benchmarks/study_glints_scenes.py``.
+#: queries). ``one_pass``: no uncompressed pyramid on disk (:func:`one_pass_stages`).
+#: Measurements: docs/glints-part2.md, ``benchmarks/study_glints_scenes.py``.
 BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
-                     code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1)
+                     code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1, one_pass=True)
 #: Bytes of the window of x-filtered rows that building a coarser level holds
 #: (:func:`prefilter.glints.pyramid.next_level_rows`); wider levels are built in column strips.
 LEVEL_RING_BYTES = 512 << 20
@@ -240,6 +254,12 @@ class BakeJob:
     cells: np.ndarray
     #: the bake's ``level0`` callable (None: the direct P-NDF of the stored normal map)
     level0: object = None
+    #: one-pass bakes (:func:`cell_task`): the rank budget, its split, the candidate ranks and
+    #: the multiplier estimated from the sample cells (:func:`prefilter.glints.cp.ranks_for`)
+    rank: int = 0
+    level_rank: str = "global"
+    candidates: tuple = ()
+    lam: float = 0.0
 
     @property
     def nb(self) -> int:
@@ -250,6 +270,10 @@ class BakeJob:
 
     def exact(self, lv: int) -> bool:
         return self.exact_from_level is not None and lv >= self.exact_from_level
+
+    def cell_file(self, cid: int) -> Path:
+        """The images of a coarser level's cell in a one-pass bake (:func:`cell_task`)."""
+        return self.ck.dir / f"cell{cid}.npy"
 
 
 def cell_bounds(pyr: Pyramid, k_sides) -> np.ndarray:
@@ -293,6 +317,12 @@ def cell_tensors(job: BakeJob, cid: int):
     blocks per group ``g = bi nb + bj`` and the images ``(K_g,)`` they come from."""
     lv, y0, y1, x0, x1 = (int(v) for v in job.cells[cid])
     imgs = job.level(lv).read(y0, y1, x0, x1).astype(np.float64).reshape(-1, job.R, job.R)
+    return (imgs,) + image_tensors(job, imgs)
+
+
+def image_tensors(job: BakeJob, imgs: np.ndarray):
+    """:func:`cell_tensors` of the images ``imgs (n, R, R)`` float64 of a cell: blocks, blank
+    mask, tensors and the images of each tensor's blocks."""
     blocks = cpmod.cut_blocks(imgs, job.B)
     blank = cpmod.blank_mask(blocks, imgs.max(axis=(1, 2)), job.blank_tol)
     tensors, where = [], []
@@ -301,7 +331,7 @@ def cell_tensors(job: BakeJob, cid: int):
             keep = np.flatnonzero(~blank[:, bi, bj])
             where.append(keep)
             tensors.append(np.ascontiguousarray(blocks[keep, bi, bj].transpose(1, 2, 0)))
-    return imgs, blocks, blank, tensors, where
+    return blocks, blank, tensors, where
 
 
 def fit_cell_task(job: BakeJob, cid: int) -> int:
@@ -309,8 +339,27 @@ def fit_cell_task(job: BakeJob, cid: int) -> int:
     allocation (the groups stored exactly are not fitted)."""
     if job.ck.done(CELL_CHUNK + cid):
         return cid
-    nb, B, base = job.nb, job.B, job.base
     imgs, blocks, blank, tensors, where = cell_tensors(job, cid)
+    stats = cell_stats(job, imgs, blocks, blank)
+    del imgs, blocks
+    fit_cell(job, cid, stats, blank, tensors, where)
+    return cid
+
+
+def cell_stats(job: BakeJob, imgs, blocks, blank) -> dict:
+    """What the assembly needs of a cell's images ``(n, R, R)`` besides its fits: the squared
+    norm of its blank blocks and of its images, the kept blocks, each image's mass."""
+    sq = np.einsum("nabij,nabij->nab", blocks, blocks)
+    return dict(blank2=np.array(sq[blank].sum()), norm2=np.array(sq.sum()),
+                kept=np.array((~blank).sum()),
+                mass=imgs.sum(axis=(1, 2)) * (2 * job.S / job.R) ** 2)
+
+
+def fit_cell(job: BakeJob, cid: int, stats: dict, blank, tensors, where,
+             save: bool = True) -> dict:
+    """Pass 1 of cell ``cid`` on its :func:`cell_tensors` (``stats``: :func:`cell_stats`): its
+    checkpoint part's arrays, saved unless ``save`` is false."""
+    nb, B, base = job.nb, job.B, job.base
     live = [g for g, t in enumerate(tensors) if t.shape[2] > 0]
     exact = job.exact(int(job.cells[cid, 0]))
     fit = [] if exact else live
@@ -330,13 +379,10 @@ def fit_cell_task(job: BakeJob, cid: int) -> int:
     for g, (ag, bg, cg, e) in res.items():
         a[g], b[g], c[rows[g]:rows[g + 1]] = ag.T, bg.T, cg
         err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g])
-    mass = imgs.sum(axis=(1, 2)) * (2 * job.S / job.R) ** 2
-    job.ck.save(CELL_CHUNK + cid, a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g,
-                blank2=np.array(np.einsum("nabij,nabij->", blocks,
-                                          blocks * blank[..., None, None])),
-                norm2=np.array(np.einsum("nij,nij->", imgs, imgs)),
-                kept=np.array((~blank).sum()), mass=mass)
-    return cid
+    part = dict(a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g, **stats)
+    if save:
+        job.ck.save(CELL_CHUNK + cid, **part)
+    return part
 
 
 def refit_cell_task(job: BakeJob, cid: int) -> int:
@@ -345,11 +391,17 @@ def refit_cell_task(job: BakeJob, cid: int) -> int:
     decodes."""
     if job.ck.done(FINAL_CHUNK + cid):
         return cid
-    nb, B, base = job.nb, job.B, job.base
-    _, _, _, tensors, _ = cell_tensors(job, cid)
-    p1 = job.ck.load(CELL_CHUNK + cid)
-    rows = p1["rows"]
+    nb = job.nb
     r_cell = job.ck.load(ALLOC_CHUNK)["ranks"][cid * nb * nb:(cid + 1) * nb * nb]
+    refit_cell(job, cid, cell_tensors(job, cid)[3], job.ck.load(CELL_CHUNK + cid), r_cell)
+    return cid
+
+
+def refit_cell(job: BakeJob, cid: int, tensors, p1, r_cell) -> None:
+    """Pass 2 of cell ``cid`` on its tensors, pass-1 part ``p1`` and ranks ``r_cell (nb^2,)``,
+    saved as its final checkpoint part."""
+    nb, B, base = job.nb, job.B, job.base
+    rows = p1["rows"]
     first = {g: (p1["a"][g].T.astype(np.float64), p1["b"][g].T.astype(np.float64),
                  p1["c"][rows[g]:rows[g + 1]].astype(np.float64)) for g in range(nb * nb)}
     fits = dict(first)
@@ -379,7 +431,196 @@ def refit_cell_task(job: BakeJob, cid: int) -> int:
             d = cpmod.reconstruct(a.T, b.T, c) - tensors[g]
             fit2_g[g] = np.einsum("ijk,ijk->", d, d)
     job.ck.save(FINAL_CHUNK + cid, **enc, err2_g=err2_g, fit2_g=fit2_g)
+
+
+def cell_images(job: BakeJob, cid: int) -> np.ndarray:
+    """Images ``(n, R, R)`` float64 of cell ``cid`` of a one-pass bake: at level 0 the direct
+    P-NDF of its centres (or the bake's ``level0`` rows), above it the cell's file written by the
+    streamed filter."""
+    lv, y0, y1, x0, x1 = (int(v) for v in job.cells[cid])
+    R = job.R
+    if lv > 0:
+        f = LevelFile(job.cell_file(cid), (y1 - y0, x1 - x0, R, R))
+        return f.read(0, y1 - y0).astype(np.float64).reshape(-1, R, R)
+    centers, sigma = job.pyr.centers(0), job.pyr.sigma(0)
+    if job.level0 is not None:
+        return np.concatenate([np.asarray(job.level0(y, centers[y:y + 1], sigma),
+                                          np.float64)[0, x0:x1] for y in range(y0, y1)])
+    nm = np.load(job.lk.dir / "normal_map.npy")
+    with PARALLEL:
+        imgs = pndf_image(nm, centers[y0:y1, x0:x1], sigma, R, job.S, job.sr,
+                          ndf_truncation=job.nt, footprint_truncation=job.ft)
+    return imgs.reshape(-1, R, R)
+
+
+def cell_ranks(job: BakeJob, cid: int, p1) -> np.ndarray:
+    """Ranks ``(nb^2,)`` of cell ``cid``'s groups in a one-pass bake: from their pass-1 errors
+    (part ``p1``) and the multiplier ``job.lam`` (:func:`prefilter.glints.cp.ranks_for`),
+    ``rank`` for a uniform split, :data:`EXACT` at the exact levels, 0 without kept blocks."""
+    counts = np.diff(p1["rows"])
+    if job.exact(int(job.cells[cid, 0])):
+        r = np.full(len(counts), EXACT, np.int64)
+    elif job.level_rank == "uniform":
+        r = np.full(len(counts), job.rank, np.int64)
+    else:
+        unit = (job.c_bits // 8) * counts + 2 * job.B * (job.code_bits // 8) + 4
+        r = cpmod.ranks_for(p1["err2_g"], unit, job.base, job.candidates, job.lam)
+    return np.where(counts > 0, r, 0).astype(np.int64)
+
+
+def sample_cell_task(job: BakeJob, cid: int) -> int:
+    """Pass 1 of a sample cell of a one-pass bake (its errors set the rank multiplier)."""
+    if not job.ck.done(CELL_CHUNK + cid):
+        imgs = cell_images(job, cid)
+        blocks, blank, tensors, where = image_tensors(job, imgs)
+        stats = cell_stats(job, imgs, blocks, blank)
+        del imgs, blocks
+        fit_cell(job, cid, stats, blank, tensors, where)
     return cid
+
+
+def cell_task(job: BakeJob, cid: int):
+    """Cell ``cid`` of a one-pass bake while its images are in memory: pass 1 (unless its
+    part exists), its ranks (:func:`cell_ranks`), the refit, encoding and error. Returns the
+    level-0 images ``(k, k, R, R)`` float32 (the coarser levels are filtered from them), None
+    for the other levels."""
+    lv, y0, y1, x0, x1 = (int(v) for v in job.cells[cid])
+    done = job.ck.done(FINAL_CHUNK + cid)
+    if done and lv > 0:
+        return None
+    imgs = cell_images(job, cid)
+    out = (imgs.astype(np.float32).reshape(y1 - y0, x1 - x0, job.R, job.R) if lv == 0
+           else None)
+    if not done:
+        blocks, blank, tensors, where = image_tensors(job, imgs)
+        stats = cell_stats(job, imgs, blocks, blank)
+        del imgs, blocks
+        p1 = job.ck.load(CELL_CHUNK + cid) if job.ck.done(CELL_CHUNK + cid) else {}
+        if "a" not in p1:  # not a sample cell's part (with the factors the refit starts from)
+            p1 = fit_cell(job, cid, stats, blank, tensors, where, save=False)
+        # the assembly needs no pass-1 factors: the part without them (~2 MB less per cell of
+        # the render's maps), saved before the final part (a resumed bake refits from pass 1)
+        job.ck.save(CELL_CHUNK + cid, **{k: v for k, v in p1.items() if k not in ("a", "b", "c")})
+        refit_cell(job, cid, tensors, p1, cell_ranks(job, cid, p1))
+    return out
+
+
+def sample_cells(cells: np.ndarray, n: int = SAMPLE_CELLS) -> list[int]:
+    """Ids of ``n`` level-0 cells on a diagonal of the map's cells (all when there are fewer)."""
+    lvl0 = np.flatnonzero(cells[:, 0] == 0)
+    if len(lvl0) <= n:
+        return [int(c) for c in lvl0]
+    ys, xs = np.unique(cells[lvl0, 1]), np.unique(cells[lvl0, 3])
+    out = []
+    for i in range(n):
+        y, x = ys[(2 * i + 1) * len(ys) // (2 * n)], xs[(2 * i + 1) * len(xs) // (2 * n)]
+        out.append(int(lvl0[(cells[lvl0, 1] == y) & (cells[lvl0, 3] == x)][0]))
+    return sorted(set(out))
+
+
+def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bool):
+    """Stages 1-3 of a one-pass bake: returns the pyramid cut at convergence, the level
+    differences and the job with its cells.
+
+    (a) The rank multiplier from the pass-1 errors of :func:`sample_cells` (a checkpoint part);
+    (b) the level-0 cells, one row of cells after the other, each fitted, given its ranks and
+    refitted while its images are in memory (:func:`cell_task`), its images then filtered into
+    the next level (:class:`prefilter.glints.pyramid.LevelStream`, a stream per level), whose
+    completed rows fill the cells of that level, which run as tasks too once complete. Nothing
+    of the pyramid is stored but the accumulators the filter spills and the files of the
+    coarser cells waiting for their task. The first row of cells processed is the second one:
+    the rows of level 1 that the periodic filter wraps around then all fall into its first row
+    of cells (and so on up), which completes last."""
+    from tqdm import tqdm
+
+    pyr, ck, R = job.pyr, job.ck, job.R
+    cells = job.cells
+    mapper = map_fn or thread_map
+    spill = ck.dir / "stream"
+    shutil.rmtree(spill, ignore_errors=True)
+    spill.mkdir()
+    sample = sample_cells(cells) if (job.level_rank == "global" and not job.exact(0)) else []
+    with cpmod.single_threaded_blas(), \
+            tqdm(total=len(sample) + len(cells), desc="NDF images and CP, one pass",
+                 unit="cell", disable=not progress, file=sys.stderr) as bar:
+        if sample:
+            if not ck.done(ALLOC_CHUNK):
+                _run(mapper, sample_cell_task, job, sample, bar)
+                err2, unit = [], []
+                for cid in sample:
+                    p1 = ck.load(CELL_CHUNK + cid)
+                    counts = np.diff(p1["rows"])
+                    err2.append(p1["err2_g"])
+                    unit.append(np.where(counts > 0, (job.c_bits // 8) * counts
+                                         + 2 * job.B * (job.code_bits // 8) + 4, 0.0))
+                err2, unit = np.concatenate(err2), np.concatenate(unit)
+                lam = cpmod.budget_multiplier(err2, unit, job.base, job.candidates,
+                                              job.rank * unit.sum())
+                ck.save(ALLOC_CHUNK, lam=np.array(lam))
+            else:
+                bar.update(len(sample))
+            job = dataclasses.replace(job, lam=float(ck.load(ALLOC_CHUNK)["lam"]))
+        streams = [LevelStream(pyr.shape(lv), pyr.sigma0 / pyr.stride0, (R, R), spill,
+                               f"l{lv + 1}") for lv in range(pyr.n_levels - 1)]
+        rows_left = {int(c): int(cells[c, 2] - cells[c, 1]) for c in range(len(cells))}
+        at_row: dict = {}
+        for c in range(len(cells)):
+            lv, y0, y1 = (int(v) for v in cells[c, :3])
+            for y in range(y0, y1):
+                at_row.setdefault((lv, y), []).append(c)
+        ready: list[int] = []
+
+        def completed(lv, rows):
+            for y, imgs in rows:
+                for cid in at_row[(lv, y)]:
+                    _, y0, y1, x0, x1 = (int(v) for v in cells[cid])
+                    if not ck.done(FINAL_CHUNK + cid):
+                        LevelFile(job.cell_file(cid), (y1 - y0, x1 - x0, R, R)).write_rows(
+                            y - y0, imgs[None, x0:x1])
+                    rows_left[cid] -= 1
+                    if rows_left[cid] == 0:
+                        ready.append(cid)
+                if lv + 1 < pyr.n_levels:
+                    with PARALLEL:
+                        streams[lv].add(y, 0, imgs)
+                    completed(lv + 1, streams[lv].arrived([y]))
+
+        def run(batch):
+            for cid, imgs in zip(batch, mapper(cell_task, [job] * len(batch), batch)):
+                if imgs is None:
+                    job.cell_file(cid).unlink(missing_ok=True)
+                elif streams:
+                    _, y0, _, x0, _ = (int(v) for v in cells[cid])
+                    for i, row in enumerate(imgs):
+                        with PARALLEL:
+                            streams[0].add(y0 + i, x0, row)
+                bar.update(1)
+
+        k = int(k_sides[0])
+        n_chunks = pyr.shape(0)[0] // k
+        lvl0 = np.flatnonzero(cells[:, 0] == 0)
+        for ch in list(range(1, n_chunks)) + [0]:
+            # the waiting coarser cells first: their files go before new rows fill others
+            batch = ready + [int(c) for c in lvl0 if cells[c, 1] == ch * k]
+            ready = []
+            run(batch)
+            if streams:
+                completed(1, streams[0].arrived(range(ch * k, (ch + 1) * k)))
+            for st in streams:
+                st.spill()
+        while ready:
+            batch, ready = ready, []
+            run(batch)
+    shutil.rmtree(spill, ignore_errors=True)
+    diffs = [st.difference for st in streams]
+    n_keep = pyr.n_levels
+    for i, d in enumerate(diffs):
+        if d < converge:
+            n_keep = i + 2
+            break
+    pyr = pyr.with_levels(n_keep)
+    return pyr, diffs[:n_keep - 1], dataclasses.replace(
+        job, pyr=pyr, cells=cell_bounds(pyr, k_sides[:n_keep]))
 
 
 def thread_map(fn, *iterables):
@@ -425,7 +666,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
          code_bits: int = 8, c_bits: int | None = None,
          exact_from_level: int | None = None, exact_cell: int | None = None,
-         map_fn=None, level0=None) -> dict:
+         map_fn=None, level0=None, one_pass: bool = False) -> dict:
     """Bake ``normal_map (H, W, 3)`` into ``out`` (.npz); returns the summary dict.
 
     Parameters mirror ``prefilter bake glints``; ``support`` is the half-width of the NDF images in
@@ -484,6 +725,18 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     only the map's size and digest); its string attribute ``key`` names what it computes (it
     keys the checkpoints and is recorded as ``settings["level0"]``). Used for the colour
     channels of wave-optics NDFs (:mod:`prefilter.glints.wave.bake`).
+
+    ``one_pass``: the images of each cell are fitted, given their ranks and refitted while they
+    are in memory, and the coarser levels are filtered from them as they come
+    (:func:`one_pass_stages`): no level is stored, so the temporary disk holds the filter's
+    spilled rows and the coarser cells' images waiting for their task instead of the whole
+    uncompressed pyramid. The rank multiplier of the ``"global"`` budget is estimated from the
+    pass-1 errors of :data:`SAMPLE_CELLS` level-0 cells (the budget is then met on them, not
+    exactly on the whole map); tasks: :func:`sample_cell_task`, :func:`cell_task` (level-0 cells
+    return their images to the calling process, which runs the filter). A resumed one-pass
+    bake skips the CP of the finished cells but computes the level-0 images again (the filter's
+    state is not saved). Not with ``levels_dir`` or ``level_rank="level"`` (those bake in two
+    passes).
     """
     from tqdm import tqdm
 
@@ -548,6 +801,10 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["exact_cell"] = exact_cell
     if level0 is not None:
         settings["level0"] = str(level0.key)
+    # a one-pass bake keeps no level (levels_dir asks for them) and has one rank multiplier
+    one_pass = bool(one_pass) and levels_dir is None and level_rank != "level"
+    if one_pass:
+        settings["one_pass"] = True
     digest = map_digest(nm)
     # parts made by another version of the fit or budget rule are not resumed from
     ck = Checkpoints(out, dict(settings, map_sha1=digest, shape=[H, W], **code_versions(settings)))
@@ -573,98 +830,109 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     ny0, nx0 = pyr.shape(0)
     rows_per_chunk = cell // pyr.stride0
     n_chunks = ny0 // rows_per_chunk
-    levels = [LevelFile(lk.dir / "level0.npy", (ny0, nx0, R, R))]
     job = BakeJob(ck=ck, lk=lk, pyr=pyr, R=R, S=S, sr=sr, nt=nt, ft=ft, B=B,
                   blank_tol=blank_tol, base=base, n_iter_max=n_iter_max, tol=tol, seed=seed,
                   code_bits=code_bits, c_bits=c_bits, rows_per_chunk=rows_per_chunk,
                   exact_from_level=exact_from_level, cells=np.zeros((0, 5), np.int64),
-                  level0=level0)
-    pending = [ch for ch in range(n_chunks) if not lk.done(LEVEL0_CHUNK + ch)]
-    with tqdm(total=ny0 * nx0, initial=(n_chunks - len(pending)) * rows_per_chunk * nx0,
-              desc="level 0 NDF images", unit="img", disable=not progress,
-              file=sys.stderr) as bar:
-        # the level-0 kernel is itself parallel (and Numba's default threading layer is not
-        # thread-safe): in this process the chunks run one after the other
-        _run(map_fn or map, level0_task, job, pending, bar, step=rows_per_chunk * nx0)
-    lk.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))
+                  level0=level0, rank=rank, level_rank=level_rank,
+                  candidates=tuple(int(c) for c in candidates))
+    if one_pass:
+        k_sides = [exact_cell if job.exact(lv) and exact_cell is not None
+                   else cell // pyr.stride0 for lv in range(pyr.n_levels)]
+        t_cp = time.perf_counter()
+        job = dataclasses.replace(job, cells=cell_bounds(pyr, k_sides))
+        pyr, diffs, job = one_pass_stages(job, converge, k_sides, map_fn, progress)
+        t_cp1 = t_cp2 = time.perf_counter()
+    else:
+        levels = [LevelFile(lk.dir / "level0.npy", (ny0, nx0, R, R))]
+        pending = [ch for ch in range(n_chunks) if not lk.done(LEVEL0_CHUNK + ch)]
+        with tqdm(total=ny0 * nx0, initial=(n_chunks - len(pending)) * rows_per_chunk * nx0,
+                  desc="level 0 NDF images", unit="img", disable=not progress,
+                  file=sys.stderr) as bar:
+            # the level-0 kernel is itself parallel (and Numba's default threading layer is not
+            # thread-safe): in this process the chunks run one after the other
+            _run(map_fn or map, level0_task, job, pending, bar, step=rows_per_chunk * nx0)
+        lk.save(LEVEL0_CHUNK + n_chunks, done=np.array(1))
 
-    # 2. upper levels by filtering, streamed row by row (pyramid.next_level_rows), in column
-    # strips when the filter's window of rows would exceed LEVEL_RING_BYTES (pyramid.strip_plan)
-    diffs = []
-    for lv in tqdm(range(1, pyr.n_levels), desc="coarser levels", unit="level",
-                   disable=not progress, file=sys.stderr):
-        key = LEVEL_CHUNK + lv
-        below = levels[-1]
-        arr = LevelFile(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R))
-        if not lk.done(key):
-            d2 = np.zeros(2)  # squared norms of (level - level below at its centres), level
-            ny, nx = below.shape[:2]
-            for xo0, xo1, start in strip_plan(nx, pyr.sigma0 / pyr.stride0,
-                                              strip_width(ny, R, LEVEL_RING_BYTES,
-                                                          pyr.sigma0 / pyr.stride0)):
-                n_in = nx if xo1 - xo0 == nx // 2 else 2 * (xo1 - xo0 + 2 * xo0 - start)
-                off = xo0 - start // 2
+        # 2. upper levels by filtering, streamed row by row (pyramid.next_level_rows), in column
+        # strips when the filter's window of rows would exceed LEVEL_RING_BYTES (pyramid.strip_plan)
+        diffs = []
+        for lv in tqdm(range(1, pyr.n_levels), desc="coarser levels", unit="level",
+                       disable=not progress, file=sys.stderr):
+            key = LEVEL_CHUNK + lv
+            below = levels[-1]
+            arr = LevelFile(lk.dir / f"level{lv}.npy", pyr.shape(lv) + (R, R))
+            if not lk.done(key):
+                d2 = np.zeros(2)  # squared norms of (level - level below at its centres), level
+                ny, nx = below.shape[:2]
+                for xo0, xo1, start in strip_plan(nx, pyr.sigma0 / pyr.stride0,
+                                                  strip_width(ny, R, LEVEL_RING_BYTES,
+                                                              pyr.sigma0 / pyr.stride0)):
+                    n_in = nx if xo1 - xo0 == nx // 2 else 2 * (xo1 - xo0 + 2 * xo0 - start)
+                    off = xo0 - start // 2
 
-                def write_row(yo, images, arr=arr, below=below, d2=d2, xo0=xo0, xo1=xo1,
-                              off=off):
-                    images = images[off:off + xo1 - xo0]
-                    arr.write_columns(yo, xo0, images)
-                    c = images.astype(np.float64).ravel()
-                    d = c - below.read(2 * yo, 2 * yo + 1, 2 * xo0, 2 * xo1,
-                                       step=2).astype(np.float64).ravel()
-                    d2 += [np.dot(d, d), np.dot(c, c)]
+                    def write_row(yo, images, arr=arr, below=below, d2=d2, xo0=xo0, xo1=xo1,
+                                  off=off):
+                        images = images[off:off + xo1 - xo0]
+                        arr.write_columns(yo, xo0, images)
+                        c = images.astype(np.float64).ravel()
+                        d = c - below.read(2 * yo, 2 * yo + 1, 2 * xo0, 2 * xo1,
+                                           step=2).astype(np.float64).ravel()
+                        d2 += [np.dot(d, d), np.dot(c, c)]
 
-                next_level_rows(lambda y, below=below, start=start, n_in=n_in:
-                                below.read_periodic(y, start, n_in), (ny, n_in),
-                                pyr.sigma0 / pyr.stride0, write_row, (R, R))
-            lk.save(key, diff=np.array(math.sqrt(d2[0]) / max(math.sqrt(d2[1]), 1e-300)))
-        levels.append(arr)
-        diffs.append(float(lk.load(key)["diff"]))
-        if diffs[-1] < converge:
-            break
-    pyr = pyr.with_levels(len(levels))
+                    next_level_rows(lambda y, below=below, start=start, n_in=n_in:
+                                    below.read_periodic(y, start, n_in), (ny, n_in),
+                                    pyr.sigma0 / pyr.stride0, write_row, (R, R))
+                lk.save(key, diff=np.array(math.sqrt(d2[0]) / max(math.sqrt(d2[1]), 1e-300)))
+            levels.append(arr)
+            diffs.append(float(lk.load(key)["diff"]))
+            if diffs[-1] < converge:
+                break
+        pyr = pyr.with_levels(len(levels))
+        offsets = pyr.offsets
+
+        # 3. compression per cell: a cell is a square of k x k footprint centres of ONE level
+        # (k = cell / stride0, i.e. cell * 2^l texels at level l), so every group holds blocks
+        # of footprints of the same size and about the same number of them at every level; a
+        # level's fit is not dominated by the sharper, higher-energy blocks of the levels below.
+        k_sides = [exact_cell if job.exact(lv) and exact_cell is not None else cell // pyr.stride0
+                   for lv in range(pyr.n_levels)]
+        job = dataclasses.replace(job, pyr=pyr, cells=cell_bounds(pyr, k_sides))
+        n_cells = len(job.cells)
+
+        def run(fn, chunk, desc):
+            pending = [c for c in range(n_cells) if not ck.done(chunk + c)]
+            with cpmod.single_threaded_blas(), \
+                    tqdm(total=n_cells, initial=n_cells - len(pending), desc=desc, unit="cell",
+                         disable=not progress, file=sys.stderr) as bar:
+                _run(map_fn or thread_map, fn, job, pending, bar)
+
+        t_cp = time.perf_counter()
+        run(fit_cell_task, CELL_CHUNK, f"CP fit at rank {base}")
+        t_cp1 = time.perf_counter()
+        # allocation: predicted error drop per byte over all groups of the map (cp.allocate_ranks)
+        if not ck.done(ALLOC_CHUNK):
+            err2_all, counts = [], []
+            for cid in range(n_cells):
+                p1 = ck.load(CELL_CHUNK + cid)
+                err2_all.append(p1["err2_g"])
+                counts.append(np.diff(p1["rows"]))
+            counts = np.concatenate(counts)
+            unit = np.where(counts > 0, c_bytes * counts + unit_bytes_group, 0.0)
+            group_level = np.repeat(job.cells[:, 0], nb * nb)
+            # the budget is the fitted groups' (the exact ones were not fitted: no error to weigh)
+            fitted = (group_level < exact_from_level if exact_from_level is not None
+                      else np.ones(len(unit), bool))
+            ranks_ = np.full(len(unit), EXACT, np.int64)
+            if fitted.any():
+                ranks_[fitted] = split_budget(np.concatenate(err2_all)[fitted], unit[fitted],
+                                              group_level[fitted], rank, base, candidates,
+                                              level_rank)
+            ck.save(ALLOC_CHUNK, ranks=np.where(counts > 0, ranks_, 0).astype(np.int64))
+        run(refit_cell_task, FINAL_CHUNK, "CP refit, encoding")
+        t_cp2 = time.perf_counter()
     offsets = pyr.offsets
-
-    # 3. compression per cell: a cell is a square of k x k footprint centres of ONE level
-    # (k = cell / stride0, i.e. cell * 2^l texels at level l), so every group holds blocks of
-    # footprints of the same size and about the same number of them at every level; a level's fit
-    # is not dominated by the sharper, higher-energy blocks of the levels below it.
-    k_sides = [exact_cell if job.exact(lv) and exact_cell is not None else cell // pyr.stride0
-               for lv in range(pyr.n_levels)]
-    job = dataclasses.replace(job, pyr=pyr, cells=cell_bounds(pyr, k_sides))
     n_cells = len(job.cells)
-
-    def run(fn, chunk, desc):
-        pending = [c for c in range(n_cells) if not ck.done(chunk + c)]
-        with cpmod.single_threaded_blas(), \
-                tqdm(total=n_cells, initial=n_cells - len(pending), desc=desc, unit="cell",
-                     disable=not progress, file=sys.stderr) as bar:
-            _run(map_fn or thread_map, fn, job, pending, bar)
-
-    t_cp = time.perf_counter()
-    run(fit_cell_task, CELL_CHUNK, f"CP fit at rank {base}")
-    t_cp1 = time.perf_counter()
-    # allocation: predicted error drop per byte over all groups of the map (cp.allocate_ranks)
-    if not ck.done(ALLOC_CHUNK):
-        err2_all, counts = [], []
-        for cid in range(n_cells):
-            p1 = ck.load(CELL_CHUNK + cid)
-            err2_all.append(p1["err2_g"])
-            counts.append(np.diff(p1["rows"]))
-        counts = np.concatenate(counts)
-        unit = np.where(counts > 0, c_bytes * counts + unit_bytes_group, 0.0)
-        group_level = np.repeat(job.cells[:, 0], nb * nb)
-        # the budget is the fitted groups' (the exact ones were not fitted: no error to weigh)
-        fitted = (group_level < exact_from_level if exact_from_level is not None
-                  else np.ones(len(unit), bool))
-        ranks_ = np.full(len(unit), EXACT, np.int64)
-        if fitted.any():
-            ranks_[fitted] = split_budget(np.concatenate(err2_all)[fitted], unit[fitted],
-                                          group_level[fitted], rank, base, candidates,
-                                          level_rank)
-        ck.save(ALLOC_CHUNK, ranks=np.where(counts > 0, ranks_, 0).astype(np.int64))
-    run(refit_cell_task, FINAL_CHUNK, "CP refit, encoding")
-    t_cp2 = time.perf_counter()
 
     # 4. assemble
     parts = {k: [] for k in ("ranks", "a", "b", "c", "c_scale")}

@@ -385,11 +385,33 @@ def allocate_ranks(err2: np.ndarray, unit_bytes: np.ndarray, base: int, candidat
     -------
     (G,) int ranks.
     """
+    return ranks_for(err2, unit_bytes, base, candidates,
+                     budget_multiplier(err2, unit_bytes, base, candidates, budget, p), p)
+
+
+def _rank_costs(err2, unit_bytes, base, candidates, p):
     e = np.asarray(err2, dtype=np.float64)
     u = np.asarray(unit_bytes, dtype=np.float64)
     cand = np.unique(np.array([base] + [int(r) for r in candidates if int(r) >= base]))
     pred = e[:, None] * (cand[None, :] / base) ** (-float(p))  # (G, n)
-    cost = u[:, None] * cand[None, :]
+    return e, u, cand, pred, u[:, None] * cand[None, :]
+
+
+def ranks_for(err2: np.ndarray, unit_bytes: np.ndarray, base: int, candidates, lam: float,
+              p: float = 2.0) -> np.ndarray:
+    """Ranks ``(G,)`` minimising ``err2 (r / base)^-p + lam r unit_bytes`` per group over the
+    candidates (:func:`allocate_ranks` for a given multiplier ``lam``)."""
+    _, _, cand, pred, cost = _rank_costs(err2, unit_bytes, base, candidates, p)
+    return cand[np.argmin(pred + float(lam) * cost, axis=1)]
+
+
+def budget_multiplier(err2: np.ndarray, unit_bytes: np.ndarray, base: int, candidates,
+                      budget: float, p: float = 2.0) -> float:
+    """The multiplier ``lambda`` of :func:`allocate_ranks`: the smallest (bisection) whose ranks
+    (:func:`ranks_for`) use at most ``budget`` bytes; 0 when every group fits at its largest
+    useful rank. A one-pass bake estimates it from a sample of groups and gives each group its
+    rank as soon as the group is fitted."""
+    e, u, cand, pred, cost = _rank_costs(err2, unit_bytes, base, candidates, p)
 
     def choose(lam):
         return np.argmin(pred + lam * cost, axis=1)
@@ -397,9 +419,8 @@ def allocate_ranks(err2: np.ndarray, unit_bytes: np.ndarray, base: int, candidat
     def used(j):
         return cost[np.arange(len(e)), j].sum()
 
-    j = choose(0.0)
-    if used(j) <= budget:
-        return cand[j]
+    if used(choose(0.0)) <= budget:
+        return 0.0
     lo, hi = 0.0, max(float(e.max()) / max(float(u[u > 0].min(initial=1.0)), 1e-300), 1e-300)
     while used(choose(hi)) > budget and hi < 1e300:
         hi *= 4.0
@@ -409,4 +430,4 @@ def allocate_ranks(err2: np.ndarray, unit_bytes: np.ndarray, base: int, candidat
             lo = mid
         else:
             hi = mid
-    return cand[choose(hi)]
+    return hi

@@ -19,11 +19,14 @@ larger than the top level are clamped to it (the paper switches to the direct P-
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, prange
+from prefilter.glints.levels import LevelFile
+from prefilter.jit import njit_parallel, njit_serial, prange
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 
@@ -230,6 +233,188 @@ def strip_plan(nx: int, sigma_over_stride: float, width: int) -> list[tuple[int,
     if width >= half:
         return [(0, half, 0)]
     return [(x, min(x + width, half), 2 * x - p) for x in range(0, half, width)]
+
+
+def filter_matrix(n: int, sigma_over_stride: float) -> np.ndarray:
+    """Weights ``(n / 2, n)`` of :func:`filter_taps` on a periodic axis of ``n`` centres:
+    output ``o`` is ``sum_i W[o, i] in[i]`` (taps that wrap onto the same centre add up)."""
+    taps, w = filter_taps(sigma_over_stride)
+    W = np.zeros((n // 2, n))
+    for o in range(n // 2):
+        for t, wt in zip(taps, w):
+            W[o, (2 * o + int(t)) % n] += wt
+    return W
+
+
+@njit_parallel
+def _weighted_images(W, X, out):
+    """``out[o] = sum_i W[o, i] X[i]`` over flattened images ``X (n, P)`` float32, each pixel's
+    sum in float64 in the order of ``i``."""
+    m, n = W.shape
+    P = X.shape[1]
+    nchunk = (P + 4095) // 4096
+    for c in prange(nchunk):
+        p0 = c * 4096
+        p1 = min(P, p0 + 4096)
+        acc = np.empty(p1 - p0)
+        for o in range(m):
+            acc[:] = 0.0
+            for i in range(n):
+                wi = W[o, i]
+                if wi != 0.0:
+                    xi = X[i, p0:p1]
+                    for p in range(p1 - p0):
+                        acc[p] += wi * xi[p]
+            for p in range(p1 - p0):
+                out[o, p0 + p] = acc[p]
+
+
+@njit_parallel
+def _add_rows(acc, idx, a, X):
+    """``acc[idx[k]] += a X[k]`` over flattened images ``(., P)`` float32."""
+    P = X.shape[1]
+    nchunk = (P + 4095) // 4096
+    for c in prange(nchunk):
+        p0 = c * 4096
+        p1 = min(P, p0 + 4096)
+        for k in range(idx.shape[0]):
+            row = acc[idx[k], p0:p1]
+            xk = X[k, p0:p1]
+            for p in range(p1 - p0):
+                row[p] += a * xk[p]
+
+
+@njit_serial
+def _difference_norms(c, d):
+    """``(sum (c - d)^2, sum c^2)`` in float64 of two float32 arrays ``(n, P)``."""
+    dd = 0.0
+    cc = 0.0
+    for i in range(c.shape[0]):
+        for p in range(c.shape[1]):
+            x = np.float64(c[i, p])
+            e = x - np.float64(d[i, p])
+            dd += e * e
+            cc += x * x
+    return dd, cc
+
+
+class LevelStream:
+    """Level ``l + 1`` built while the images of level ``l`` arrive in any order: the scatter
+    form of :func:`next_level` (the same periodic filter, decimated by 2), so a bake never holds
+    or stores a whole level.
+
+    :meth:`add` takes the images of one row of level ``l`` (all of it or a run of columns): they
+    are filtered along x at once (each output image's sum in float64) and added, times their
+    y weight, to the float32 accumulators of the level-``l + 1`` rows they reach; :meth:`arrived`
+    marks rows of level ``l`` complete and returns the level-``l + 1`` rows that then have all
+    their terms. The sums follow the order of arrival (deterministic for a fixed order; they
+    equal :func:`next_level`'s up to float32 rounding). Accumulators are kept in memory while
+    rows keep reaching them; :meth:`spill` moves the others to ``.npy`` files in ``spill_dir``
+    (read back when a row reaches them again). The relative L2 difference between level
+    ``l + 1`` and level ``l`` at the same centres (:attr:`difference`) is summed as rows complete.
+
+    Parameters
+    ----------
+    shape : ``(ny, nx)`` centres of level ``l`` (even).
+    image_shape : ``(R, R)``.
+    """
+
+    def __init__(self, shape: tuple[int, int], sigma_over_stride: float,
+                 image_shape: tuple[int, int], spill_dir=None, name: str = "level"):
+        ny, nx = (int(v) for v in shape)
+        if ny % 2 or nx % 2:
+            raise PrefilterError(f"images: expected an even centre grid, got {ny}x{nx}")
+        self.ny, self.nx, self.image_shape = ny, nx, tuple(int(v) for v in image_shape)
+        self.P = int(np.prod(self.image_shape))
+        self.Wx = filter_matrix(nx, sigma_over_stride)
+        Wy = filter_matrix(ny, sigma_over_stride)
+        self.users = [[(int(o), float(Wy[o, y])) for o in np.flatnonzero(Wy[:, y])]
+                      for y in range(ny)]
+        self.left = {o: set(np.flatnonzero(Wy[o]).tolist()) for o in range(ny // 2)}
+        self.spill_dir = None if spill_dir is None else Path(spill_dir)
+        self.name = name
+        self._mem: dict = {}  # (kind, yo) -> (nx/2, P) float32 in memory
+        self._disk: set = set()  # (kind, yo) in spill files
+        self._touched: set = set()
+        self._norms = np.zeros(2)
+
+    @property
+    def difference(self) -> float:
+        """Relative L2 difference of the completed rows of level ``l + 1`` and level ``l`` at
+        their centres."""
+        return math.sqrt(self._norms[0]) / max(math.sqrt(self._norms[1]), 1e-300)
+
+    def _path(self, key) -> Path:
+        return self.spill_dir / f"{self.name}-{key[0]}{key[1]}.npy"
+
+    def _even_file(self, yo: int) -> LevelFile:
+        return LevelFile(self._path(("even", yo)), (1, self.nx // 2) + self.image_shape)
+
+    def _get(self, key) -> np.ndarray:
+        arr = self._mem.get(key)
+        if arr is None:
+            if key in self._disk:
+                arr = np.load(self._path(key))
+                os.remove(self._path(key))
+                self._disk.discard(key)
+            else:
+                arr = np.zeros((self.nx // 2, self.P), np.float32)
+            self._mem[key] = arr
+        self._touched.add(key)
+        return arr
+
+    def _pop(self, key) -> np.ndarray:
+        arr = self._get(key)
+        del self._mem[key]
+        self._touched.discard(key)
+        return arr
+
+    def add(self, y: int, x0: int, images: np.ndarray) -> None:
+        """Images ``(k, R, R)`` of level ``l`` at row ``y``, columns ``x0 .. x0 + k - 1``."""
+        X = np.ascontiguousarray(np.asarray(images, np.float32).reshape(-1, self.P))
+        cols = self.Wx[:, x0:x0 + X.shape[0]]
+        reach = np.flatnonzero(cols.any(axis=1))
+        part = np.empty((reach.size, self.P), np.float32)
+        _weighted_images(np.ascontiguousarray(cols[reach]), X, part)
+        for yo, wy in self.users[y]:
+            _add_rows(self._get(("acc", yo)), reach.astype(np.int64), wy, part)
+        if y % 2 == 0:  # the images at level l + 1's centres (its difference to level l)
+            xs = np.arange(x0 + x0 % 2, x0 + X.shape[0], 2)
+            if xs.size and self.spill_dir is None:
+                self._get(("even", y // 2))[xs // 2] = X[xs - x0]
+            elif xs.size:  # straight to their file: read once, when the row completes
+                self._even_file(y // 2).write_columns(0, int(xs[0]) // 2, X[xs - x0])
+
+    def arrived(self, rows) -> list[tuple[int, np.ndarray]]:
+        """Mark rows of level ``l`` complete; the level-``l + 1`` rows ``(yo, (nx/2, R, R))``
+        float32 that this completes, in increasing ``yo``."""
+        reached = set()
+        for y in rows:
+            for yo, _ in self.users[int(y)]:
+                self.left[yo].discard(int(y))
+                reached.add(yo)
+        out = []
+        for yo in sorted(reached):
+            if not self.left[yo] and (("acc", yo) in self._mem or ("acc", yo) in self._disk):
+                c = self._pop(("acc", yo))
+                if self.spill_dir is None:
+                    d = self._pop(("even", yo))
+                else:
+                    f = self._even_file(yo)
+                    d = f.read(0, 1).reshape(c.shape)
+                    os.remove(f.path)
+                self._norms += _difference_norms(c, d)
+                out.append((yo, c.reshape((self.nx // 2,) + self.image_shape)))
+        return out
+
+    def spill(self) -> None:
+        """Move the accumulators no row reached since the last call to spill files."""
+        if self.spill_dir is None:
+            return
+        for key in [k for k in self._mem if k not in self._touched]:
+            np.save(self._path(key), self._mem.pop(key))
+            self._disk.add(key)
+        self._touched.clear()
 
 
 def level_difference(prev: np.ndarray, cur: np.ndarray) -> float:

@@ -30,7 +30,7 @@ from prefilter.glints._qkernels import (bilinear_kernel, point_kernel, range_ker
 from prefilter.glints.pndf import as_sigma_p
 from prefilter.glints.pyramid import (RESAMPLE_Q_MIN, RESAMPLE_TRUNCATION, interp_weights,
                                       resample_weights)
-from prefilter.glints.store import PREFIX_MAX, GlintsMap, code_levels
+from prefilter.glints.store import PREFIX_MAX, GlintsMap, code_levels, rank_major
 
 INTERP = ("trilinear", "resample")
 #: Footprint centres (texels) are used as given up to this magnitude, where float64 still
@@ -280,16 +280,9 @@ def packed(gm: GlintsMap):
 
 def _rank_major(f, ranks):
     """Factors ``f (M, n)`` of groups of ``ranks`` (consecutive components) reordered so that
-    group ``g``'s block of ``r_g n`` values is ``[i, r]``: flat index ``m_g n + i r_g + r``."""
-    M, n = f.shape
-    r = np.asarray(ranks, np.int64)
-    m = np.concatenate([[0], np.cumsum(r)])
-    comp_g = np.repeat(np.arange(r.size), r)
-    rr = np.arange(M) - m[comp_g]
-    pos = (m[comp_g] * n + rr)[:, None] + np.arange(n) * r[comp_g][:, None]
-    out = np.empty(M * n, f.dtype)
-    out[pos] = f
-    return out.reshape(M, n) if M else out.reshape(0, n)
+    group ``g``'s block of ``r_g n`` values is ``[i, r]``: flat index ``m_g n + i r_g + r``
+    (:func:`prefilter.glints.store.rank_major`)."""
+    return rank_major(f, ranks)
 
 
 def _meta(ranks, k0, c0, stride):
