@@ -213,21 +213,6 @@ def footprint_window(cx, cy, sp, sh2, trunc, H, W, lim2):
     return x0, x1, y0, y1, sh2 / tot2, sp2 * sh2 / tot2, tot2, False
 
 
-@njit_serial
-def row_window(cx, dy, trunc, tot2, x0, x1, wide):  # pragma: no cover - compiled
-    """The texels ``xa .. xb`` of the window's row at offset ``dy`` within ``trunc`` stds of the
-    footprint's centre in the plane (the disc of radius ``trunc sqrt(tot2)``, not the square:
-    the corners' weights are below ``exp(-trunc^2 / 2)`` of the centre's: ~20 % fewer texels); the
-    whole row for wide footprints."""
-    if wide:
-        return x0, x1
-    rem = trunc * trunc * tot2 - dy * dy
-    if rem < 0.0:
-        return 1, 0
-    xa, xb = texel_window(cx, math.sqrt(rem))
-    return max(xa, x0), min(xb, x1)
-
-
 @njit_inline
 def element_covariance(j00, j01, j10, j11, var, sr2):  # pragma: no cover - compiled
     """Covariance ``(a, b, d)`` = ``[[a, b], [b, d]] = sr2 I + var J J^T`` of an element's
@@ -375,8 +360,7 @@ def _pndf_points(s_el, J, cx, cy, sp, qx, qy, sr, sh, trunc, lim2, out):
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
             r = y % H
-            xa, xb = row_window(cx[q], dy, trunc, tot2, x0, x1, wide)
-            for x in range(xa, xb + 1):
+            for x in range(x0, x1 + 1):
                 dx = cx[q] - (x + 0.5)
                 c = x % W
                 w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
@@ -446,8 +430,7 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, ntrunc, lo, h, lim2, out):
         for y in range(y0, y1 + 1):
             dy = cy[q] - (y + 0.5)
             r = y % H
-            xa, xb = row_window(cx[q], dy, trunc, tot2, x0, x1, wide)
-            for x in range(xa, xb + 1):
+            for x in range(x0, x1 + 1):
                 dx = cx[q] - (x + 0.5)
                 c = x % W
                 w = 1.0 if wide else math.exp(-(dx * dx + dy * dy) / (2.0 * tot2))
@@ -473,7 +456,7 @@ def _pndf_images(s_el, J, cx, cy, sp, sr, sh, trunc, ntrunc, lo, h, lim2, out):
                     tk = -ntrunc + 2.0 * ntrunc * k / (n - 1)
                     wk = w * math.exp(-0.5 * tk * tk) / norm
                     splat(img, px, py, mx + kappa * tk * vx, my + kappa * tk * vy, siso, wk,
-                          lo, h, ntrunc)
+                           lo, h, ntrunc)
         scale = 1.0 / (wsum * h * h)
         for i in range(R):
             for j in range(R):
