@@ -200,7 +200,29 @@ def test_glints_bake_cli_on_two_workers_is_byte_identical(tmp_path, cluster):
     two = runner.invoke(cli, args + ["-o", str(tmp_path / "two.npz"),
                                       "--scheduler", cluster.scheduler_address])
     assert two.exit_code == 0, two.output
-    assert (tmp_path / "one.npz").read_bytes() == (tmp_path / "two.npz").read_bytes()
+    assert (tmp_path / "one.npz").read_bytes() == (tmp_path / "two.npz").read_bytes(), \
+        _npz_differences(tmp_path / "one.npz", tmp_path / "two.npz")
+
+
+def _npz_differences(a: Path, b: Path) -> str:
+    """Which members of two ``.npz`` files differ (and, for the JSON header, which keys), so a
+    failure says where the bytes part."""
+    import json
+
+    da, db = np.load(a), np.load(b)
+    out = []
+    for k in sorted(set(da.files) | set(db.files)):
+        if k not in da.files or k not in db.files:
+            out.append(f"{k}: only in one file")
+        elif k == "header":
+            ha, hb = (json.loads(str(d[k])) for d in (da, db))
+            flat = [(s, x, ha.get(s, {}).get(x), hb.get(s, {}).get(x))
+                    for s in ha for x in (ha[s] if isinstance(ha[s], dict) else {})]
+            out += [f"header.{s}.{x}: {va} != {vb}" for s, x, va, vb in flat if va != vb]
+        elif da[k].shape != db[k].shape or not np.array_equal(da[k], db[k]):
+            n = int(np.sum(da[k] != db[k])) if da[k].shape == db[k].shape else -1
+            out.append(f"{k}: {n} elements differ of {da[k].size}")
+    return "; ".join(out) or "arrays equal, bytes differ"
 
 
 def test_leadr_bands_on_two_workers_are_byte_identical(tmp_path, cluster):
