@@ -782,6 +782,40 @@ def _nb_types(i0, i1, j0, j1, seed, index):  # pragma: no cover - compiled
 
 
 @njit_serial
+def level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T, seed,
+                 index):  # pragma: no cover - compiled
+    """The pyramid level and tile window of a footprint of std ``s`` centred at ``(c0, c1)``
+    (texels) that the tiled point and range queries read: the coarsest level ``m`` whose
+    resampling kernel (std ``sqrt(s^2 - sigma_m^2)``) still spans ``q_min`` strides, its crop
+    size ``n``, the first tile ``(ti0, tj0)`` and tile types of the window ``rad + 1`` texels
+    around the centre, the tile rows ``jlo..jhi`` and columns ``ilo..ihi`` it reads, and
+    :func:`prefilter.glints.wang_query.tile_taps`' taps ``wyt, wxt, kyl, kyh, kxl, kxh``."""
+    m = 0
+    for lv in range(L):
+        sg = sigma0 * 2.0**lv
+        st = st0 * 2.0**lv
+        if sg < s and math.sqrt(1.0 - (sg / s) ** 2) * sg / st >= q_min:
+            m = lv
+    sg = sigma0 * 2.0**m
+    st = st0 * 2.0**m
+    r = math.sqrt(s * s - sg * sg)
+    half = tap_trunc * r / st
+    n = crops[m]
+    marg = rad + 1.0
+    ti0 = int(math.floor((c0 - marg) / T)) - 1
+    tj0 = int(math.floor((c1 - marg) / T)) - 1
+    types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
+                      int(math.floor((c1 + marg) / T)) + 1, seed, index)
+    jlo = int(math.floor((c1 - marg) / T))
+    jhi = int(math.floor((c1 + marg) / T))
+    ilo = int(math.floor((c0 - marg) / T))
+    ihi = int(math.floor((c0 + marg) / T))
+    wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1, c0, T, st, r, half, k0[m], n, jlo, jhi,
+                                              ilo, ihi)
+    return m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl, kxh
+
+
+@njit_serial
 def _nb_s(tiles, types, i0, j0, gx, gy, comp):  # pragma: no cover - compiled; _texel_s
     T = tiles.shape[1]
     return tiles[types[gy // T - j0, gx // T - i0], gy % T, gx % T, comp]
@@ -1042,29 +1076,9 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
                                                  tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
             out[q] = acc / (sx * sy * h * h)
             continue
-        m = 0
-        for lv in range(L):
-            sg = sigma0 * 2.0**lv
-            st = st0 * 2.0**lv
-            if sg < s and math.sqrt(1.0 - (sg / s) ** 2) * sg / st >= q_min:
-                m = lv
-        sg = sigma0 * 2.0**m
-        st = st0 * 2.0**m
-        r = math.sqrt(s * s - sg * sg)
-        half = tap_trunc * r / st
-        n = crops[m]
-        km = k0[m]
-        marg = rad + 1.0
-        ti0 = int(math.floor((c0 - marg) / T)) - 1
-        tj0 = int(math.floor((c1 - marg) / T)) - 1
-        types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
-                          int(math.floor((c1 + marg) / T)) + 1, seed, index)
-        jlo = int(math.floor((c1 - marg) / T))
-        jhi = int(math.floor((c1 + marg) / T))
-        ilo = int(math.floor((c0 - marg) / T))
-        ihi = int(math.floor((c0 + marg) / T))
-        wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1, c0, T, st, r, half, km, n, jlo, jhi,
-                                                  ilo, ihi)
+        (m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
+         kxh) = level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T,
+                             seed, index)
         acc = 0.0
         if block > 0:
             acc = pack_point(Fa, Fb, wsc, cq, bidx, meta, offs[m], goff[m], n, block, types,

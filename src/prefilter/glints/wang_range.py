@@ -31,8 +31,8 @@ from prefilter.glints._qkernels import _axis_rows, _flush_rects, _rect
 from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, normal_cdf,
                                    principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
-                                      _nb_type, _nb_types, dep_gaussian, dependent_neighbours)
-from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes, tile_taps
+                                      _nb_type, dep_gaussian, dependent_neighbours, level_window)
+from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
 def summed_tables(wn: TiledNDF) -> np.ndarray:
@@ -206,28 +206,9 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                                                   rcl[k, 1])
                 out[q, k] = v / area[k]
             continue
-        m = 0
-        for lv in range(L):
-            sg = sigma0 * 2.0**lv
-            st = st0 * 2.0**lv
-            if sg < s and math.sqrt(1.0 - (sg / s) ** 2) * sg / st >= q_min:
-                m = lv
-        sg = sigma0 * 2.0**m
-        st = st0 * 2.0**m
-        r = math.sqrt(s * s - sg * sg)
-        half = tap_trunc * r / st
-        n = crops[m]
-        marg = rad + 1.0
-        ti0 = int(math.floor((c0 - marg) / T)) - 1
-        tj0 = int(math.floor((c1 - marg) / T)) - 1
-        types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
-                          int(math.floor((c1 + marg) / T)) + 1, seed, index)
-        jlo = int(math.floor((c1 - marg) / T))
-        jhi = int(math.floor((c1 + marg) / T))
-        ilo = int(math.floor((c0 - marg) / T))
-        ihi = int(math.floor((c0 + marg) / T))
-        wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1, c0, T, st, r, half, k0[m], n, jlo, jhi,
-                                                  ilo, ihi)
+        (m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
+         kxh) = level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T,
+                             seed, index)
         cw = np.empty((16, rank), proto.dtype)
         gs = np.empty(16, np.int64)
         slot_of = np.empty(16, np.int64)
