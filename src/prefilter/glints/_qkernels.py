@@ -724,6 +724,23 @@ def _axis_rows(u0, u1, B):
     return n0, n1, n2, n3, k0, c0, cm, c1
 
 
+@njit_inline
+def _touching(rbk, rcl, bi, bj, B, touch, rp, rt):  # pragma: no cover - compiled
+    """The rectangles ``k`` (block ranges ``rbk (K, 4)``, clipped pixel bounds ``rcl (K, 4)``)
+    that overlap block ``(bi, bj)``: their ids in ``touch[:nt]``, their :func:`_axis_rows` rows
+    and weights within the block in ``rp[k]``, ``rt[k]`` (rows then columns). Returns ``nt``."""
+    nt = 0
+    for k in range(rbk.shape[0]):
+        if rbk[k, 0] <= bi <= rbk[k, 1] and rbk[k, 2] <= bj <= rbk[k, 3]:
+            touch[nt] = k
+            nt += 1
+            (rp[k, 0], rp[k, 1], rp[k, 2], rp[k, 3], rt[k, 0], rt[k, 1],
+             rt[k, 2], rt[k, 3]) = _axis_rows(rcl[k, 2] - bi * B, rcl[k, 3] - bi * B, B)
+            (rp[k, 4], rp[k, 5], rp[k, 6], rp[k, 7], rt[k, 4], rt[k, 5],
+             rt[k, 6], rt[k, 7]) = _axis_rows(rcl[k, 0] - bj * B, rcl[k, 1] - bj * B, B)
+    return nt
+
+
 @njit_serial
 def _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc):
     """Add ``sum_r cw[slot, r] wsc_r da_r db_r`` of every slot's group to ``acc[k]`` of each
@@ -822,17 +839,7 @@ def range_multi_kernel(Pa, Pb, C, block_index, image_cell, meta, idx, wts, x0, y
                 ubj0, ubj1 = min(ubj0, bj0), max(ubj1, bj1)
         for bi in range(ubi0, ubi1 + 1):
             for bj in range(ubj0, ubj1 + 1):
-                nt = 0
-                for k in range(K):
-                    if rbk[k, 0] <= bi <= rbk[k, 1] and rbk[k, 2] <= bj <= rbk[k, 3]:
-                        touch[nt] = k
-                        nt += 1
-                        (rp[k, 0], rp[k, 1], rp[k, 2], rp[k, 3], rt[k, 0], rt[k, 1],
-                         rt[k, 2], rt[k, 3]) = _axis_rows(rcl[k, 2] - bi * B,
-                                                          rcl[k, 3] - bi * B, B)
-                        (rp[k, 4], rp[k, 5], rp[k, 6], rp[k, 7], rt[k, 4], rt[k, 5],
-                         rt[k, 6], rt[k, 7]) = _axis_rows(rcl[k, 0] - bj * B,
-                                                          rcl[k, 1] - bj * B, B)
+                nt = _touching(rbk, rcl, bi, bj, B, touch, rp, rt)
                 if nt == 0:
                     continue
                 ns = 0

@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from prefilter.errors import PrefilterError
-from prefilter.glints._qkernels import _axis_rows, _flush_rects, _rect
+from prefilter.glints._qkernels import _flush_rects, _rect, _touching
 from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, normal_cdf,
                                    principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
@@ -219,17 +219,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         acc = np.zeros(K)
         for bi in range(ubi0, ubi1 + 1):
             for bj in range(ubj0, ubj1 + 1):
-                nt = 0
-                for k in range(K):
-                    if rbk[k, 0] <= bi <= rbk[k, 1] and rbk[k, 2] <= bj <= rbk[k, 3]:
-                        touch[nt] = k
-                        nt += 1
-                        (rp[k, 0], rp[k, 1], rp[k, 2], rp[k, 3], rt[k, 0], rt[k, 1],
-                         rt[k, 2], rt[k, 3]) = _axis_rows(rcl[k, 2] - bi * B,
-                                                          rcl[k, 3] - bi * B, B)
-                        (rp[k, 4], rp[k, 5], rp[k, 6], rp[k, 7], rt[k, 4], rt[k, 5],
-                         rt[k, 6], rt[k, 7]) = _axis_rows(rcl[k, 0] - bj * B,
-                                                          rcl[k, 1] - bj * B, B)
+                nt = _touching(rbk, rcl, bi, bj, B, touch, rp, rt)
                 if nt == 0:
                     continue
                 ns = tile_codes(cq, bidx[bi, bj], meta, offs[m], goff[m], n,
