@@ -10,7 +10,9 @@ map, seed 1, into an empty folder) that records its wall and CPU seconds and pea
 in the child); the parent polls the parts folder (the bake's temporary disk) every 0.2 s. The
 child then loads the file and times 200 000 point queries at random footprints (``query.point``,
 one call, after a warm-up call). Power laws ``y = a n^p`` (``n`` texels) are fitted by least
-squares in log-log over the measured sizes and extrapolated to 4096^2 and 8192^2.
+squares in log-log over the measured sizes and extrapolated to 4096^2 and 8192^2; the bake's
+peak memory, a fixed part plus a part per texel, gets an affine fit ``y = a + b n`` as well.
+``--rows JSON`` prints the fits again from the rows a ``--json`` run wrote.
 
 Defaults: NDF images of 64^2 pixels (blocks 16, rank budget 16, the bake's other defaults), so
 that 1024^2 runs on a 2-core machine; the render's 512^2 images cost ~60x more per image and
@@ -111,6 +113,38 @@ def power_law(n, y):
     return float(np.exp(log_a)), float(p)
 
 
+def affine(n, y):
+    """``(a, b)`` of ``y = a + b n`` (least squares)."""
+    import numpy as np
+
+    b, a = np.polyfit(np.asarray(n, float), np.asarray(y, float), 1)
+    return float(a), float(b)
+
+
+def print_fits(rows: list) -> dict:
+    """The power-law (and, for the bake's memory, affine) fits of ``rows``, printed as tables."""
+    mib = 2**20
+    n = [r["size"] ** 2 for r in rows]
+    print("\n| cost | exponent p (y ~ texels^p) | 4096^2 | 8192^2 |")
+    print("|---|---|---|---|")
+    fits = {}
+    for key, unit, scale in (("cpu", "s CPU", 1.0), ("wall", "s wall", 1.0),
+                             ("bake_rss", "MiB peak RSS of the bake", mib),
+                             ("rss", "MiB peak RSS with queries", mib),
+                             ("temp", "MiB temp disk", mib),
+                             ("stored", "MiB stored", mib), ("query_ns", "ns per query", 1.0)):
+        y = [max(r[key], 1e-9) / scale for r in rows]
+        c, p = power_law(n, y)
+        fits[key] = dict(a=c, p=p)
+        print(f"| {unit} | {p:.2f} | {c * 4096.0 ** (2 * p):.4g} | {c * 8192.0 ** (2 * p):.4g} |")
+    a0, b = affine(n, [r["bake_rss"] for r in rows])
+    fits["bake_rss_affine"] = dict(a=a0, b=b)
+    print(f"\nbake peak RSS ~ {a0 / mib:.0f} MiB + {b:.0f} B a texel: "
+          f"4096^2 {(a0 + b * 4096.0**2) / 2**30:.2f} GiB, "
+          f"8192^2 {(a0 + b * 8192.0**2) / 2**30:.2f} GiB")
+    return fits
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[128, 256, 512, 1024])
@@ -118,7 +152,11 @@ def main() -> None:
     ap.add_argument("--block", type=int, default=16)
     ap.add_argument("--rank", type=int, default=16)
     ap.add_argument("--json", type=Path, help="also write the rows and fits here")
+    ap.add_argument("--rows", type=Path, help="print the fits of a --json run's rows, bake nothing")
     a = ap.parse_args()
+    if a.rows:
+        print_fits(json.loads(a.rows.read_text())["rows"])
+        return
     kw = dict(ndf_res=a.ndf_res, block=a.block, rank=a.rank)
     print(f"bake settings {kw} (bake()'s defaults otherwise); {os.cpu_count()} cores")
     rows = []
@@ -135,19 +173,7 @@ def main() -> None:
               f"{r['load']:.1f} |", flush=True)
     if len(rows) < 2:
         return
-    n = [r["size"] ** 2 for r in rows]
-    print("\n| cost | exponent p (y ~ texels^p) | 4096^2 | 8192^2 |")
-    print("|---|---|---|---|")
-    fits = {}
-    for key, unit, scale in (("cpu", "s CPU", 1.0), ("wall", "s wall", 1.0),
-                             ("bake_rss", "MiB peak RSS of the bake", mib),
-                             ("rss", "MiB peak RSS with queries", mib),
-                             ("temp", "MiB temp disk", mib),
-                             ("stored", "MiB stored", mib), ("query_ns", "ns per query", 1.0)):
-        y = [max(r[key], 1e-9) / scale for r in rows]
-        c, p = power_law(n, y)
-        fits[key] = dict(a=c, p=p)
-        print(f"| {unit} | {p:.2f} | {c * 4096.0 ** (2 * p):.4g} | {c * 8192.0 ** (2 * p):.4g} |")
+    fits = print_fits(rows)
     if a.json:
         a.json.write_text(json.dumps(dict(settings=kw, rows=rows, fits=fits), indent=1))
 

@@ -216,9 +216,13 @@ def _npz_differences(a: Path, b: Path) -> str:
             out.append(f"{k}: only in one file")
         elif k == "header":
             ha, hb = (json.loads(str(d[k])) for d in (da, db))
-            flat = [(s, x, ha.get(s, {}).get(x), hb.get(s, {}).get(x))
-                    for s in ha for x in (ha[s] if isinstance(ha[s], dict) else {})]
-            out += [f"header.{s}.{x}: {va} != {vb}" for s, x, va, vb in flat if va != vb]
+            for s in sorted(set(ha) | set(hb)):
+                va, vb = ha.get(s), hb.get(s)
+                if isinstance(va, dict) and isinstance(vb, dict):
+                    out += [f"header.{s}.{x}: {va.get(x)} != {vb.get(x)}"
+                            for x in sorted(set(va) | set(vb)) if va.get(x) != vb.get(x)]
+                elif va != vb:
+                    out.append(f"header.{s}: {va} != {vb}")
         elif da[k].shape != db[k].shape or not np.array_equal(da[k], db[k]):
             n = int(np.sum(da[k] != db[k])) if da[k].shape == db[k].shape else -1
             out.append(f"{k}: {n} elements differ of {da[k].size}")
