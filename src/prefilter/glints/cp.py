@@ -32,8 +32,9 @@ from prefilter.errors import PrefilterError
 #: Version of the fit's results: bumped whenever a change to :func:`nn_cp` (or what the bake does
 #: with it) changes the factors it returns for the same inputs. The render and Wang-tile caches and
 #: the bake's checkpoints key on it, so files fitted by an older version are never reused
-#: (2: the relative stop test ``prev - err < tol err``; 1: an absolute one).
-FIT_VERSION = 2
+#: (3: the HALS column sweep reads G by rows, a different rounding; 2: the relative stop test
+#: ``prev - err < tol err``; 1: an absolute one).
+FIT_VERSION = 3
 
 
 def _openblas():
@@ -188,20 +189,23 @@ def _hals(T, R, n_iter_max, tol, seed):
 @numba.njit(fastmath=FASTMATH, cache=True, nogil=True)
 def _hals_columns(F, M, G, eps, pad, tiny):
     """One HALS sweep over the columns of every ``F[g] (rows, R)`` in place, for
-    ``min |X_g - F_g W_g^T|`` with ``M = X W`` and ``G = W^T W``, floored at ``eps[g]``; rows with
-    ``pad[g, k]`` stay zero. Compiled (without the GIL: the bake runs cells in threads) because
-    the column loop is sequential: as NumPy it was ~R small operations per mode and iteration."""
+    ``min |X_g - F_g W_g^T|`` with ``M = X W`` and ``G = W^T W`` (symmetric), floored at
+    ``eps[g]``; rows with ``pad[g, k]`` stay zero. Compiled (without the GIL: the bake runs cells
+    in threads) because the column loop is sequential: as NumPy it was ~R small operations per
+    mode and iteration."""
     n, rows, R = F.shape
     for g in range(n):
         for r in range(R):
             d = max(G[g, r, r], tiny)
+            Gr = G[g, r]  # G is symmetric: its row r is column r, contiguous (a SIMD dot product)
             for k in range(rows):
                 if pad[g, k]:
                     F[g, k, r] = 0.0
                     continue
+                Fk = F[g, k]
                 acc = M[g, k, r]
                 for q in range(R):
-                    acc -= F[g, k, q] * G[g, q, r]
+                    acc -= Fk[q] * Gr[q]
                 v = F[g, k, r] + acc / d
                 F[g, k, r] = v if v > eps[g] else eps[g]
 
