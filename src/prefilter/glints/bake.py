@@ -623,6 +623,22 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
         job, pyr=pyr, cells=cell_bounds(pyr, k_sides[:n_keep]))
 
 
+def significant(x, digits: int = 10):
+    """``x`` (nested dicts and lists) with its floats rounded to ``digits`` significant digits.
+
+    The file's summary statistics are sums of float64 errors over thousands of groups; a bake on
+    a cluster was seen to differ from the same bake in one process in their last bit (the stored
+    arrays identical; cause not found), which broke the byte identity of the file. Ten digits
+    are all the statistics mean."""
+    if isinstance(x, dict):
+        return {k: significant(v, digits) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [significant(v, digits) for v in x]
+    if isinstance(x, float) and math.isfinite(x):
+        return float(f"{x:.{digits}g}")
+    return x
+
+
 def thread_map(fn, *iterables):
     """``map(fn, *iterables)`` on a pool of ``os.cpu_count()`` threads, results in order: the
     CP kernels release the GIL (the default map of the bake's CP passes)."""
@@ -999,8 +1015,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     gm.header = dict(pyramid=pyr.to_dict(), ndf=dict(resolution=R, support=S, block=B, rank=width,
                                                      intrinsic_roughness=sr, sigma_h=SIGMA_H),
                      settings=settings, map_sha1=digest,
-                     summary={k: v for k, v in summary.items()
-                              if not k.startswith("seconds")})
+                     summary=significant({k: v for k, v in summary.items()
+                                          if not k.startswith("seconds")}))
     save(out, gm, enc)
     if not keep_parts:
         ck.clear()

@@ -104,7 +104,7 @@ def baked_surface(normal_map, *, direct: bool = False, settings: dict | None = N
     else:
         st = bake_settings(nm.shape, settings, bilinear=BILINEAR)
         path = cache_path(nm, st)
-        mem = (digest, path.name, INTERP, BILINEAR)
+        mem = (digest, str(path), INTERP, BILINEAR)  # another cache folder bakes (or loads) anew
         if mem not in _SURFACES:
             # several renderers (pytest workers, CLI runs) may share the cache: the first bakes
             # under the lock, the others wait for it and load its file
