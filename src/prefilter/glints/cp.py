@@ -98,9 +98,10 @@ def _khatri_rao(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 def _hals_update(F: np.ndarray, M: np.ndarray, G: np.ndarray, eps: float) -> None:
     """One HALS sweep over the columns of ``F`` for ``min |X - F W^T|`` with ``M = X W``,
     ``G = W^T W``, keeping ``F >= eps`` (in place). The tiny floor ``eps`` keeps a component from
-    dying for good (an all-zero column would zero its Gram entry and never be updated again)."""
-    for r in range(F.shape[1]):
-        F[:, r] = np.maximum(F[:, r] + (M[:, r] - F @ G[:, r]) / max(G[r, r], 1e-300), eps)
+    dying for good (an all-zero column would zero its Gram entry and never be updated again).
+    ``F`` C-contiguous; the sweep is :func:`_hals_columns`' for a batch of one."""
+    _hals_columns(F[None], np.ascontiguousarray(M)[None], np.ascontiguousarray(G)[None],
+                  np.array([eps]), np.zeros((1, F.shape[0]), bool), 1e-300)
 
 
 def nn_cp(tensor: np.ndarray, rank: int, *, n_iter_max: int = 200, tol: float = 1e-5,
