@@ -30,6 +30,22 @@ def test_quiet_bake_is_silent(tmp_path, capsys):
     assert capsys.readouterr().err == ""
 
 
+def test_file_summary_keeps_ten_significant_digits(tmp_path):
+    """The header's summary is the returned summary with its floats at 10 significant digits
+    (so last-bit differences of the error sums do not change the file's bytes)."""
+    from prefilter.glints.store import load
+
+    summary = bake(sinusoid(16, px=16, py=8), tmp_path / "m.npz", progress=False, **SMALL)
+    stored = load(tmp_path / "m.npz").header["summary"]
+    full = summary["rel_l2_error"]
+    assert stored["rel_l2_error"] == float(f"{full:.10g}") and 0.0 < full
+    assert stored["rel_l2_error_per_level"] == [float(f"{x:.10g}")
+                                                for x in summary["rel_l2_error_per_level"]]
+    assert stored["blocks_kept"] == summary["blocks_kept"]  # integers as they are
+    assert gbake.significant({"a": [1.23456789012345, 7], "b": float("nan")})["a"] == \
+        [1.234567890, 7]
+
+
 def test_render_cache_bake_reports_its_file_then_loads_silently(tmp_path, monkeypatch, capsys):
     from prefilter.glints.render import baked_surface
 
