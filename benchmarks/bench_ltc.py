@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from prefilter.ltc import GGXTable
-from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+from prefilter.sphere.polygon import clip_to_horizon, polygon_integral
 from prefilter.ltc.validate import random_configurations, reference_quad_integral
 from prefilter.microfacet import GGX
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from prefilter.errors import TableFileError
 from prefilter.ltc import AnisoGGXTable, GGXTable
-from prefilter.ltc.polygon import polygon_integral_minv
+from prefilter.sphere.polygon import polygon_integral_minv
 from prefilter.ltc.validate import random_quads
 
 

@@ -15,7 +15,7 @@ import argparse
 import numpy as np
 
 from prefilter.ltc.fit_iso import ProbeSettings, _quads_around, refine_entry, view_from_t
-from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+from prefilter.sphere.polygon import clip_to_horizon, polygon_integral
 from prefilter.ltc.table import GGXTable
 from prefilter.ltc.validate import (error_statistics, format_statistics, random_configurations,
                                     reference_quad_integral)

@@ -35,7 +35,7 @@ import numpy as np
 from prefilter.ltc import AnisoGGXTable, GGXTable
 from prefilter.ltc.aniso.fit import lobe_moments
 from prefilter.ltc.aniso.quadfit import acceptance_quads, fit_quad_ltc, quad_references
-from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+from prefilter.sphere.polygon import clip_to_horizon, polygon_integral
 from prefilter.ltc.validate import ALPHA_BINS, FRACTION_BINS, THETA_BINS_DEG
 from prefilter.studies.ltc_aniso import random_aniso_configurations
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.ltc.polygon import (_AREA_RTOL, _PLANE_RTOL, clamped_cosine_integral,
+from prefilter.sphere.polygon import (_AREA_RTOL, _PLANE_RTOL, clamped_cosine_integral,
                                    clip_to_horizon, polygon_integral_minv)
 from prefilter.ltc.shading import scaled_inverse, spec_scale
 from prefilter.render.lights import LightSet
@@ -43,7 +43,7 @@ def shade_ltc_numpy(position, frame_t, frame_b, frame_n, view, alpha, base_color
 
 
 def polygon_integral_numpy(M_inv, vertices, two_sided: bool = False) -> np.ndarray:
-    """NumPy twin of :func:`prefilter.ltc.polygon.polygon_integral_minv`: explicit Sutherland-
+    """NumPy twin of :func:`prefilter.sphere.polygon.polygon_integral_minv`: explicit Sutherland-
     Hodgman (each input edge offers two output slots, valid or not), then the edge sum over
     consecutive valid slots. Same conventions as :func:`polygon_integral_minv`; no input
     validation. Component arrays ``(B, n)`` rather than ``np.cross`` on ``(..., 3)``, which is

@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 
 from prefilter.ltc.export import PRESETS, export_preset, ltc_code_textures
-from prefilter.ltc.polygon import polygon_integral, polygon_integral_minv
+from prefilter.sphere.polygon import polygon_integral, polygon_integral_minv
 from prefilter.ltc.table import GGXTable
 from prefilter.ltc.validate import random_quads
 

@@ -23,7 +23,7 @@ from prefilter.ltc.fit_iso import (
     refine_entry,
     view_from_t,
 )
-from prefilter.ltc.polygon import polygon_integral
+from prefilter.sphere.polygon import polygon_integral
 from prefilter.ltc.validate import clip_to_horizon, random_quads, reference_quad_integral
 from prefilter.microfacet import GGX, reflect
 from prefilter.sphere.sampling import uniform_sphere

@@ -18,7 +18,7 @@ from prefilter.ltc.fit_iso import (
     probe_quads,
     quad_refit_row,
 )
-from prefilter.ltc.polygon import polygon_integral
+from prefilter.sphere.polygon import polygon_integral
 from prefilter.ltc.validate import clip_to_horizon, reference_quad_integral
 from prefilter.microfacet import GGX
 

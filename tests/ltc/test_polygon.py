@@ -14,7 +14,7 @@ from ltc_numpy import polygon_integral_numpy
 
 from prefilter.errors import PrefilterError
 from prefilter.ltc import LTC, clamped_cosine_integral, polygon_integral, polygon_integral_minv
-from prefilter.ltc.polygon import _atan2_pos
+from prefilter.sphere.polygon import _atan2_pos
 from prefilter.sphere import cosine_hemisphere
 
 N_MC = 1_000_000

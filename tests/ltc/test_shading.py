@@ -110,7 +110,7 @@ def test_fused_ltc_shader_diffuse_and_cosine_lobe_are_the_form_factor():
 def test_fused_ltc_shader_rotates_the_table_matrix_to_the_view_azimuth():
     # A constant anisotropic M: the specular part must be the LTC integral (polygon_integral,
     # an independent kernel) with Rz(phi) M Rz(phi)^T over the light clipped at the horizon.
-    from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+    from prefilter.sphere.polygon import clip_to_horizon, polygon_integral
 
     M = np.array([[0.4, 0.0, 0.15], [0.0, 0.7, 0.0], [-0.1, 0.0, 1.0]])
     light = QuadLight(np.array([[-1.0, -1.0, 1.5], [1.0, -1.0, 1.5], [1.0, 1.0, -0.3],

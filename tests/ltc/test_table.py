@@ -6,7 +6,7 @@ import pytest
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.fileio import save_npz_atomic
 from prefilter.ltc import LTC, GGXTable
-from prefilter.ltc.polygon import polygon_integral
+from prefilter.sphere.polygon import polygon_integral
 from prefilter.ltc.table import schlick_scale
 from prefilter.ltc.validate import clip_to_horizon, random_quads, reference_quad_integral
 from prefilter.microfacet import GGX

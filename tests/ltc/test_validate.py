@@ -7,7 +7,7 @@ import pytest
 
 from prefilter.errors import PrefilterError
 from prefilter.ltc import LTC
-from prefilter.ltc.polygon import polygon_integral
+from prefilter.sphere.polygon import polygon_integral
 from prefilter.ltc.validate import (
     clip_to_horizon,
     error_statistics,

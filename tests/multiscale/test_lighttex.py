@@ -12,7 +12,7 @@ import pytest
 
 from prefilter.errors import PrefilterError
 from prefilter.ltc.ltc import LTC
-from prefilter.ltc.polygon import polygon_integral
+from prefilter.sphere.polygon import polygon_integral
 from prefilter.ltc.lighttex import light_texture_lookup_point
 from prefilter.render.lighttex import LightTexture, TexturedQuad, texture_uv
 

@@ -1,6 +1,6 @@
 """The exported GLSL snippets run in WebGL2 against the Python they mirror: the polygon integral
 (``prefilter.ltc.glsl``: ``ltcPolygon``, ``ltcClipHorizon``) against
-``prefilter.ltc.polygon_integral_minv`` / ``clip_to_horizon`` over random transforms (mirrored ones
+``prefilter.sphere.polygon_integral_minv`` / ``clip_to_horizon`` over random transforms (mirrored ones
 included) and quads crossing the horizon; the anisotropic lookup (``ltc_aniso.glsl`` with its 3D
 textures, float32 and float16) against ``AnisoGGXTable.lookup``."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from prefilter.ltc import glsl as iso_glsl
-from prefilter.ltc.polygon import clip_to_horizon, polygon_integral, polygon_integral_minv
+from prefilter.sphere.polygon import clip_to_horizon, polygon_integral, polygon_integral_minv
 from prefilter.ltc.table import GGXTable
 from prefilter.viewer import serve
 

@@ -587,7 +587,7 @@ class _ProbeObjective:
     """``mean_k |log((n E_k(M) + eps) / (r_k + eps))|`` over the probe lights of one entry."""
 
     def __init__(self, quads, references, magnitude, eps, power=1.0):
-        from prefilter.ltc.polygon import clip_to_horizon
+        from prefilter.sphere.polygon import clip_to_horizon
 
         self.clipped = clip_to_horizon(quads)
         self.n = magnitude
@@ -596,7 +596,7 @@ class _ProbeObjective:
         self.log_ref = np.log(np.maximum(references, 0.0) + eps)
 
     def __call__(self, params) -> float:
-        from prefilter.ltc.polygon import polygon_integral
+        from prefilter.sphere.polygon import polygon_integral
 
         M = ltc_from_params(params)
         det = np.linalg.det(M)
@@ -646,7 +646,7 @@ _NM_PROBE = {"xatol": 1e-4, "fatol": 1e-6, "maxiter": 800}
 
 def _row_objective(params, clipped, ref, keep, n, power):
     """Per-entry objective ``(B,)`` and residuals ``(B, K)`` for parameters ``(B, 4)``."""
-    from prefilter.ltc.polygon import polygon_integral
+    from prefilter.sphere.polygon import polygon_integral
 
     M = np.stack([ltc_from_params(p) for p in params])
     good = np.all(np.isfinite(M), axis=(1, 2))
@@ -681,7 +681,7 @@ def quad_refit_row(wo, alphas, params0, settings: QuadFitSettings, *, magnitude=
     dict with ``params`` (B, 4), ``M`` (B, 3, 3) normalised, ``error`` (B,) and ``error_start``
     (B,) (the objective at ``params0``).
     """
-    from prefilter.ltc.polygon import clip_to_horizon
+    from prefilter.sphere.polygon import clip_to_horizon
 
     wo = np.asarray(wo, dtype=np.float64)
     alphas = np.atleast_1d(np.asarray(alphas, dtype=np.float64))

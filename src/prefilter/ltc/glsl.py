@@ -12,7 +12,7 @@ The shader interpolates bilinearly *by hand* (``texelFetch``, four taps per text
 is the table's bilinear interpolation in table space on every GPU, as
 :meth:`prefilter.ltc.table.GGXTable.lookup` computes it (hardware filters quantise their weights).
 :data:`GLSL` also holds the clipped polygon integral (eq. 11 with horizon clipping, the streaming
-form of :func:`prefilter.ltc.polygon._clipped_edge_sum`) and the quad-light shading of
+form of :func:`prefilter.sphere.polygon.clipped_edge_sum`) and the quad-light shading of
 :func:`prefilter.ltc.shading.shade_ltc`, in float32.
 """
 
@@ -134,7 +134,7 @@ float ltcPolygon(mat3 T, vec3 P[5], int n) {{
     }}
     if (hasExit && hasFirst) acc += ltcEdge(e, g);
     float nn = length(N);
-    // float32 tolerances of the float64 tests in prefilter.ltc.polygon
+    // float32 tolerances of the float64 tests in prefilter.sphere.polygon
     if (nn <= 1e-6 * float(n) * vmax * vmax || abs(dot(N, sum)) <= 1e-6 * float(n) * nn * vmax)
         return 0.0;
     return max(0.0, -sign(determinant(T)) * acc * 0.15915494309);

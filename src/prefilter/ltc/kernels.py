@@ -16,7 +16,8 @@ import math
 import numpy as np
 
 from prefilter.jit import njit_parallel, njit_serial, prange
-from prefilter.ltc.polygon import _DET_RTOL2, _INV_2PI, _clipped_edge_sum
+from prefilter.microfacet.ltc import ltc_lookup
+from prefilter.sphere.polygon import clip_to_horizon_jit, polygon_integral_jit
 from prefilter.render.kernels import gscratch, surface_sample
 
 __all__ = ["BLOCK", "ltc_point", "ltc_quads_kernel", "ltc_samples_kernel", "ltc_scratch"]
@@ -26,80 +27,12 @@ BLOCK = 256
 
 
 @njit_serial
-def _interp_index(x, xp):
-    """``np.interp(x, xp, arange(len(xp)))`` for increasing ``xp``."""
-    n = xp.shape[0]
-    if x <= xp[0]:
-        return 0.0
-    if x >= xp[n - 1]:
-        return n - 1.0
-    lo = 0
-    hi = n - 1
-    while hi - lo > 1:  # xp[lo] <= x < xp[hi]
-        mid = (lo + hi) // 2
-        if xp[mid] <= x:
-            lo = mid
-        else:
-            hi = mid
-    return lo + (x - xp[lo]) / (xp[lo + 1] - xp[lo])
-
-
-@njit_serial
-def _polygon(t, verts, n):
-    """Heitz et al. 2016 (eq. 11 after clipping): integral of the clamped cosine over
-    ``t verts[:n]`` (one-sided), as ``prefilter.ltc.polygon._polygon_kernel`` with
-    ``invert=False``: ``t[:9]`` an invertible matrix (row-major, largest entry 1), ``t[9]`` the
-    sign of its determinant."""
-    acc, ok = _clipped_edge_sum(t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8], verts, n)
-    if not ok:
-        return 0.0
-    return max(0.0, -t[9] * acc * _INV_2PI)
-
-
-@njit_serial
-def _clip_to_horizon(P, n, out):
-    """Sutherland-Hodgman of ``P[:n]`` against ``z >= 0`` into ``out[:n + 1]``, padded by
-    repeating the last vertex (all zeros when nothing is above), as ``ltc.clip_to_horizon``."""
-    count = 0
-    for i in range(n):
-        ia = i - 1 if i > 0 else n - 1
-        az = P[ia, 2]
-        bz = P[i, 2]
-        a_in = az >= 0.0
-        b_in = bz >= 0.0
-        if a_in != b_in:
-            s = az / (az - bz)
-            out[count, 0] = P[ia, 0] + s * (P[i, 0] - P[ia, 0])
-            out[count, 1] = P[ia, 1] + s * (P[i, 1] - P[ia, 1])
-            out[count, 2] = 0.0
-            count += 1
-        if b_in:
-            out[count, 0] = P[i, 0]
-            out[count, 1] = P[i, 1]
-            out[count, 2] = bz
-            count += 1
-    if count == 0:
-        for j in range(n + 1):
-            out[j, 0] = 0.0
-            out[j, 1] = 0.0
-            out[j, 2] = 0.0
-    else:
-        for j in range(count, n + 1):
-            out[j, 0] = out[count - 1, 0]
-            out[j, 1] = out[count - 1, 1]
-            out[j, 2] = out[count - 1, 2]
-
-
-@njit_serial
 def ltc_point(geo, mat, qv, qn, qrad, axis_t, axis_r, tab_m, tab_mag, tab_fres, view_z_min,
                P, C, ident, tm, mm, res):
     """Quad-light radiance of one shading point (Heitz et al. 2016, eqs. 10-11), added to
     ``res (3,)``. ``geo (5, 3)``: position, shading t, b, n, unit view; ``mat (7,)``: alpha,
     base colour, f0. Scratch: ``P (4, 3)``, ``C (5, 3)``, ``ident, tm (10,)``, ``mm (9,)``.
     Returns False when the interpolated LTC matrix is singular (nothing added)."""
-    nt = axis_t.shape[0]
-    nr = axis_r.shape[0]
-    a_min = axis_r[0] * axis_r[0]
     t0, t1, t2 = geo[1, 0], geo[1, 1], geo[1, 2]
     b0, b1, b2 = geo[2, 0], geo[2, 1], geo[2, 2]
     n0, n1, n2 = geo[3, 0], geo[3, 1], geo[3, 2]
@@ -112,75 +45,10 @@ def ltc_point(geo, mat, qv, qn, qrad, axis_t, axis_r, tab_m, tab_mag, tab_fres, 
     wx *= inv
     wy *= inv
     wz *= inv
-    # bilinear table lookup in (sqrt(1 - cos theta), sqrt(alpha))
-    ft = _interp_index(math.sqrt(max(0.0, 1.0 - wz)), axis_t)
-    fr = _interp_index(math.sqrt(min(max(mat[0], a_min), 1.0)), axis_r)
-    i = min(np.int64(math.floor(ft)), nt - 2)
-    j = min(np.int64(math.floor(fr)), nr - 2)
-    a = ft - i
-    b = fr - j
-    w00 = (1 - a) * (1 - b)
-    w10 = a * (1 - b)
-    w01 = (1 - a) * b
-    w11 = a * b
-    for e in range(9):
-        r_ = e // 3
-        c_ = e % 3
-        mm[e] = (w00 * tab_m[i, j, r_, c_] + w10 * tab_m[i + 1, j, r_, c_]
-                 + w01 * tab_m[i, j + 1, r_, c_] + w11 * tab_m[i + 1, j + 1, r_, c_])
-    mag = (w00 * tab_mag[i, j] + w10 * tab_mag[i + 1, j] + w01 * tab_mag[i, j + 1]
-           + w11 * tab_mag[i + 1, j + 1])
-    fres = (w00 * tab_fres[i, j] + w10 * tab_fres[i + 1, j] + w01 * tab_fres[i, j + 1]
-            + w11 * tab_fres[i + 1, j + 1])
-    # Rz(phi) M Rz(phi)^T, phi the view's azimuth
-    rho = math.sqrt(wx * wx + wy * wy)
-    if rho > 0.0:
-        c = wx / rho
-        s = wy / rho
-    else:
-        c = 1.0
-        s = 0.0
-    r00 = c * mm[0] - s * mm[3]
-    r01 = c * mm[1] - s * mm[4]
-    r02 = c * mm[2] - s * mm[5]
-    r10 = s * mm[0] + c * mm[3]
-    r11 = s * mm[1] + c * mm[4]
-    r12 = s * mm[2] + c * mm[5]
-    a00 = r00 * c - r01 * s
-    a01 = r00 * s + r01 * c
-    a02 = r02
-    a10 = r10 * c - r11 * s
-    a11 = r10 * s + r11 * c
-    a12 = r12
-    a20 = mm[6] * c - mm[7] * s
-    a21 = mm[6] * s + mm[7] * c
-    a22 = mm[8]
-    # sign(det) adj(M) = |det M| M^-1 (the integral only needs M^-1 up to a positive factor)
-    k00 = a11 * a22 - a12 * a21
-    k01 = a12 * a20 - a10 * a22
-    k02 = a10 * a21 - a11 * a20
-    det = a00 * k00 + a01 * k01 + a02 * k02
-    c0 = a00 * a00 + a10 * a10 + a20 * a20
-    c1 = a01 * a01 + a11 * a11 + a21 * a21
-    c2 = a02 * a02 + a12 * a12 + a22 * a22
-    if not (det * det > _DET_RTOL2 * (c0 * c1 * c2)):
+    ok, mag, fres = ltc_lookup(wx, wy, wz, mat[0], axis_t, axis_r, tab_m, tab_mag, tab_fres,
+                               mm, tm)
+    if not ok:
         return False
-    sg = 1.0 if det > 0.0 else -1.0
-    tm[0] = sg * k00
-    tm[1] = sg * (a02 * a21 - a01 * a22)
-    tm[2] = sg * (a01 * a12 - a02 * a11)
-    tm[3] = sg * k01
-    tm[4] = sg * (a00 * a22 - a02 * a20)
-    tm[5] = sg * (a02 * a10 - a00 * a12)
-    tm[6] = sg * k02
-    tm[7] = sg * (a01 * a20 - a00 * a21)
-    tm[8] = sg * (a00 * a11 - a01 * a10)
-    tmax = 0.0
-    for e in range(9):
-        tmax = max(tmax, abs(tm[e]))
-    for e in range(9):
-        tm[e] /= tmax
-    tm[9] = sg  # det(|det| M^-1) has the sign of det M: undo the mirror
     # Schlick through the table's (n, f5): f0 (n - f5) + f5
     sp0 = mat[4] * (mag - fres) + fres
     sp1 = mat[5] * (mag - fres) + fres
@@ -198,10 +66,10 @@ def ltc_point(geo, mat, qv, qn, qrad, axis_t, axis_r, tab_m, tab_mag, tab_fres, 
             P[vtx, 0] = dx * t0 + dy * t1 + dz * t2
             P[vtx, 1] = dx * b0 + dy * b1 + dz * b2
             P[vtx, 2] = dx * n0 + dy * n1 + dz * n2
-        e_d = _polygon(ident, P, 4)
+        e_d = polygon_integral_jit(ident, P, 4)
         # cut at the shading horizon before the LTC transform (see prefilter.ltc.shading.shade_ltc)
-        _clip_to_horizon(P, 4, C)
-        e_s = _polygon(tm, C, 5)
+        clip_to_horizon_jit(P, 4, C)
+        e_s = polygon_integral_jit(tm, C, 5)
         res[0] += (mat[1] * e_d + sp0 * e_s) * qrad[q, 0]
         res[1] += (mat[2] * e_d + sp1 * e_s) * qrad[q, 1]
         res[2] += (mat[3] * e_d + sp2 * e_s) * qrad[q, 2]

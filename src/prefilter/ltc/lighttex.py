@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.ltc.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
+from prefilter.sphere.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
 from prefilter.ltc.shading import scaled_inverse, shade_ltc, spec_scale
 from prefilter.render.lighttex import texture_uv
 from prefilter.render.shading import local_view, quad_local

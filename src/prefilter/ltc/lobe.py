@@ -5,7 +5,7 @@ with the table's matrix ``M``, magnitude ``n`` and (for Schlick Fresnel) the sca
 :func:`~prefilter.ltc.table.schlick_scale`. ``D_M`` is sampled exactly (:meth:`LTC.sample`), so
 ``pdf = D_M`` and every draw weighs ``n``: the albedo. ``eval`` is the distribution itself,
 including the small mass a fit may put below the horizon, which the polygon integral counts too
-(it clips in the cosine's frame, :mod:`prefilter.ltc.polygon`).
+(it clips in the cosine's frame, :mod:`prefilter.sphere.polygon`).
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ import numpy as np
 
 from prefilter.validation import as_float_array, as_positive_int, as_rng, as_upper_directions
 from prefilter.errors import PrefilterError
-from prefilter.ltc.polygon import clip_to_horizon  # noqa: F401  (re-exported for callers)
+from prefilter.sphere.polygon import clip_to_horizon  # noqa: F401  (re-exported for callers)
 
 #: References below this value (cosine-weighted reflectance) are reported separately: their
 #: relative error is dominated by the lobe's far tails and says little about shading quality.
@@ -224,7 +224,7 @@ def run_acceptance(table, n_configs: int = 2000, n_samples: int = 100_000, seed=
     ``standard_error``, ``theta``, ``alpha``, ``straddle``) and ``stats``
     (:func:`error_statistics`).
     """
-    from prefilter.ltc.polygon import polygon_integral
+    from prefilter.sphere.polygon import polygon_integral
     from prefilter.microfacet import GGX
 
     rng = as_rng(seed, "seed")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+from prefilter.sphere.polygon import clip_to_horizon, polygon_integral
 from prefilter.ltc.validate import error_statistics, random_configurations, reference_quad_integral
 from prefilter.microfacet import GGX
 from prefilter.validation import as_rng

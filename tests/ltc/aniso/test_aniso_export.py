@@ -7,7 +7,7 @@ from prefilter.errors import PrefilterError
 from glsl_numpy import aniso_glsl_twin as glsl_twin
 from glsl_numpy import load_layout
 from prefilter.ltc.aniso.export import export_all, glsl_source, texture_layout, texture_params
-from prefilter.ltc.polygon import clip_to_horizon, polygon_integral, polygon_integral_minv
+from prefilter.sphere.polygon import clip_to_horizon, polygon_integral, polygon_integral_minv
 from prefilter.ltc.validate import random_quads
 
 

@@ -6,7 +6,7 @@ import pytest
 
 from prefilter.errors import PrefilterError
 from prefilter.ltc.aniso.quadfit import acceptance_quads, fit_quad_ltc, quad_references
-from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+from prefilter.sphere.polygon import clip_to_horizon, polygon_integral
 
 
 def view(theta_deg, phi_deg):

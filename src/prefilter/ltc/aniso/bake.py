@@ -30,7 +30,7 @@ from prefilter.ltc.aniso.fit import (
     lobe_moments,
 )
 from prefilter.ltc.aniso.symmetry import enforce
-from prefilter.ltc.polygon import clip_to_horizon
+from prefilter.sphere.polygon import clip_to_horizon
 from prefilter.ltc.aniso.table import TABLE_VERSION, AnisoGGXTable, user_table_path
 
 
@@ -356,7 +356,7 @@ def _objective(err, loss):
 
 def _polish_job(args):
     from prefilter.ltc.aniso.quadfit import fit_quad_ltc, quad_references
-    from prefilter.ltc.polygon import polygon_integral
+    from prefilter.sphere.polygon import polygon_integral
 
     wo, ax, ay, mag, M0, quads, valid, idx, qs = args
     out = np.array(M0, copy=True)

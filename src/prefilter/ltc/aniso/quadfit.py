@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter.errors import PrefilterError
-from prefilter.ltc.polygon import clip_to_horizon, polygon_integral
+from prefilter.sphere.polygon import clip_to_horizon, polygon_integral
 from prefilter.ltc.validate import random_quads
 from prefilter.microfacet import GGX, reflect
 from prefilter.validation import as_rng

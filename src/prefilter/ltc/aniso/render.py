@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from prefilter.ltc.lighttex import shade_textured_quads
-from prefilter.ltc.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
+from prefilter.sphere.polygon import clamped_cosine_integral, clip_to_horizon, polygon_integral_minv
 from prefilter.ltc.shading import scaled_inverse, spec_scale
 from prefilter.render.driver import render_samples, surface_attributes
 from prefilter.render.lighttex import split_lights

@@ -225,7 +225,7 @@ class AnisoGGXTable:
         Returns
         -------
         M : (..., 3, 3) LTC matrix in the tangent frame (positive determinant; invert it or pass
-            it to :func:`~prefilter.ltc.polygon_integral`), magnitude : (...), fresnel : (...).
+            it to :func:`~prefilter.sphere.polygon_integral`), magnitude : (...), fresnel : (...).
             Configurations outside the table's ranges use the nearest border entry.
         """
         wo = as_upper_directions(wo, "wo")
@@ -244,7 +244,7 @@ class AnisoGGXTable:
 
     def shade(self, wo, alpha_x, alpha_y, vertices, *, two_sided: bool = False):
         """``magnitude * polygon_integral(M, vertices)`` (Fresnel 1), batch dims broadcast."""
-        from prefilter.ltc.polygon import polygon_integral
+        from prefilter.sphere.polygon import polygon_integral
 
         M, mag, _ = self.lookup(wo, alpha_x, alpha_y)
         return mag * polygon_integral(M, vertices, two_sided=two_sided)

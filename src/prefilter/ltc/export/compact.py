@@ -99,7 +99,7 @@ def compare_encodings(table, n_configs: int = 2000, n_samples: int = 100_000, se
     the three tables). Returns ``{name: {"bytes": ..., "stats": {threshold: error_statistics}}}``
     with ``name`` in ``full`` (float32 payload of the six numbers), ``half``, ``fit``.
     """
-    from prefilter.ltc.polygon import polygon_integral
+    from prefilter.sphere.polygon import polygon_integral
     from prefilter.ltc.validate import (clip_to_horizon, error_statistics, random_configurations,
                                         reference_quad_integral)
     from prefilter.microfacet import GGX

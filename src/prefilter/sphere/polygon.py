@@ -37,8 +37,8 @@ __all__ = ["clamped_cosine_integral", "polygon_integral", "polygon_integral_minv
 
 _PLANE_RTOL = 1e-12  # plane-through-origin test, relative to the polygon's size
 _AREA_RTOL = 1e-14  # |Newell normal| below this x size^2 is rounding noise (about 100 ulps)
-_DET_RTOL2 = 1e-24  # (|det| / product of column norms)^2 below this counts as singular
-_INV_2PI = 1.0 / (2.0 * math.pi)
+DET_RTOL2 = 1e-24  # (|det| / product of column norms)^2 below this counts as singular
+INV_2PI = 1.0 / (2.0 * math.pi)
 
 
 # --------------------------------------------------------------------------------------------
@@ -124,7 +124,7 @@ def _edge(ax, ay, az, bx, by, bz):
 
 
 @njit_inline
-def _clipped_edge_sum(t00, t01, t02, t10, t11, t12, t20, t21, t22, verts, n):
+def clipped_edge_sum(t00, t01, t02, t10, t11, t12, t20, t21, t22, verts, n):
     """Edge sum of the polygon ``T verts[:n]`` clipped to ``z >= 0`` (Heitz et al. 2016, eq. 11
     before the ``-1/2pi`` factor), for ``T`` rows ``(t00, t01, t02), ...`` scaled to a largest
     entry of 1. Returns ``(acc, ok)``; ``ok`` is False for polygons with no solid angle (edge-on,
@@ -240,7 +240,7 @@ def _polygon_kernel(mats, m_mode, m_idx, verts, v_mode, v_idx, invert, two_sided
         c0 = a00 * a00 + a10 * a10 + a20 * a20
         c1 = a01 * a01 + a11 * a11 + a21 * a21
         c2 = a02 * a02 + a12 * a12 + a22 * a22
-        if not (det * det > _DET_RTOL2 * (c0 * c1 * c2)):  # |det| vs product of column norms
+        if not (det * det > DET_RTOL2 * (c0 * c1 * c2)):  # |det| vs product of column norms
             status[k] = 1
             out[k] = 0.0
             continue
@@ -273,14 +273,14 @@ def _polygon_kernel(mats, m_mode, m_idx, verts, v_mode, v_idx, invert, two_sided
         t20 *= sc
         t21 *= sc
         t22 *= sc
-        acc, ok = _clipped_edge_sum(t00, t01, t02, t10, t11, t12, t20, t21, t22, verts[vi], n)
+        acc, ok = clipped_edge_sum(t00, t01, t02, t10, t11, t12, t20, t21, t22, verts[vi], n)
         if not ok:
             out[k] = 0.0
             continue
 
         # the edge sum is positive for clockwise-from-the-origin winding: flip to front = CCW,
         # and undo the mirror of a negative-determinant transform
-        e = -sgn * acc * _INV_2PI
+        e = -sgn * acc * INV_2PI
         if two_sided:
             out[k] = abs(e)
         else:
@@ -435,3 +435,54 @@ def clip_to_horizon(vertices) -> np.ndarray:
     pad = np.arange(n + 1)[None, :] >= count[:, None]
     out = np.where(pad[..., None], last[:, None, :], out)
     return out.reshape(batch + (n + 1, 3))
+
+
+# --------------------------------------------------------------------------------------------
+# Jitted helpers for one polygon (the shading kernels)
+# --------------------------------------------------------------------------------------------
+
+
+@njit_serial
+def polygon_integral_jit(t, verts, n):
+    """Heitz et al. 2016 (eq. 11 after clipping): integral of the clamped cosine over
+    ``t verts[:n]`` (one-sided), as :func:`polygon_integral_minv` with
+    ``invert=False``: ``t[:9]`` an invertible matrix (row-major, largest entry 1), ``t[9]`` the
+    sign of its determinant."""
+    acc, ok = clipped_edge_sum(t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7], t[8], verts, n)
+    if not ok:
+        return 0.0
+    return max(0.0, -t[9] * acc * INV_2PI)
+
+
+@njit_serial
+def clip_to_horizon_jit(P, n, out):
+    """Sutherland-Hodgman of ``P[:n]`` against ``z >= 0`` into ``out[:n + 1]``, padded by
+    repeating the last vertex (all zeros when nothing is above), as :func:`clip_to_horizon`."""
+    count = 0
+    for i in range(n):
+        ia = i - 1 if i > 0 else n - 1
+        az = P[ia, 2]
+        bz = P[i, 2]
+        a_in = az >= 0.0
+        b_in = bz >= 0.0
+        if a_in != b_in:
+            s = az / (az - bz)
+            out[count, 0] = P[ia, 0] + s * (P[i, 0] - P[ia, 0])
+            out[count, 1] = P[ia, 1] + s * (P[i, 1] - P[ia, 1])
+            out[count, 2] = 0.0
+            count += 1
+        if b_in:
+            out[count, 0] = P[i, 0]
+            out[count, 1] = P[i, 1]
+            out[count, 2] = bz
+            count += 1
+    if count == 0:
+        for j in range(n + 1):
+            out[j, 0] = 0.0
+            out[j, 1] = 0.0
+            out[j, 2] = 0.0
+    else:
+        for j in range(count, n + 1):
+            out[j, 0] = out[count - 1, 0]
+            out[j, 1] = out[count - 1, 1]
+            out[j, 2] = out[count - 1, 2]
