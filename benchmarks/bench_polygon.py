@@ -16,7 +16,8 @@ from pathlib import Path
 import numba
 import numpy as np
 
-from prefilter.sphere.polygon import clamped_cosine_integral, polygon_integral, polygon_integral_minv
+from prefilter.sphere.polygon import (clamped_cosine_integral, polygon_integral,
+                                      polygon_integral_minv)
 
 # the NumPy twin the tests check the kernel against
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "ltc"))

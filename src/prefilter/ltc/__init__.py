@@ -1,7 +1,8 @@
 """Linearly transformed cosines: the distribution, polygon integration and GGX tables."""
 
 from prefilter.ltc.ltc import LTC
-from prefilter.sphere.polygon import clamped_cosine_integral, polygon_integral, polygon_integral_minv
+from prefilter.sphere.polygon import (clamped_cosine_integral, polygon_integral,
+                                      polygon_integral_minv)
 
 __all__ = ["LTC", "clamped_cosine_integral", "polygon_integral", "polygon_integral_minv"]
 

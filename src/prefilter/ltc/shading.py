@@ -32,7 +32,7 @@ def scaled_inverse(M) -> np.ndarray:
     """``|det M| M^-1`` for ``M (N, 3, 3)`` by cross products of the columns (no LAPACK call).
 
     Rows of the adjugate are ``c1 x c2, c2 x c0, c0 x c1``; the polygon integral only needs
-    ``M^-1`` up to a positive factor (:func:`prefilter.sphere.polygon_integral_minv`).
+    ``M^-1`` up to a positive factor (:func:`prefilter.sphere.polygon.polygon_integral_minv`).
     """
     c0, c1, c2 = M[..., :, 0], M[..., :, 1], M[..., :, 2]
     adj = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=-2)

@@ -5,8 +5,8 @@ Conventions (also in ``docs/reference.md``):
 * A quad light is 4 coplanar corners ``v0..v3`` of a convex quad and a constant radiance (rgb).
   It is **one-sided**: it emits towards the side from which its corners are seen
   counter-clockwise, i.e. along the right-handed normal ``n = (v1 - v0) x (v2 - v0)``. This is the
-  side where :func:`prefilter.sphere.polygon_integral` (front face = counter-clockwise seen from the
-  shading point) is positive, so the LTC and Monte Carlo shaders agree on it.
+  side where :func:`prefilter.sphere.polygon.polygon_integral` (front face = counter-clockwise
+  seen from the shading point) is positive, so the LTC and Monte Carlo shaders agree on it.
 * A point light has an intensity (rgb, W/sr): irradiance ``I cos / d^2``.
 * A directional light has a direction of travel and an irradiance (rgb) on a surface facing it.
 

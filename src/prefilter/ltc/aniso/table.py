@@ -225,7 +225,8 @@ class AnisoGGXTable:
         Returns
         -------
         M : (..., 3, 3) LTC matrix in the tangent frame (positive determinant; invert it or pass
-            it to :func:`~prefilter.sphere.polygon_integral`), magnitude : (...), fresnel : (...).
+            it to :func:`~prefilter.sphere.polygon.polygon_integral`), magnitude : (...),
+            fresnel : (...).
             Configurations outside the table's ranges use the nearest border entry.
         """
         wo = as_upper_directions(wo, "wo")
