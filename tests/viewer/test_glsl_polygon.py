@@ -1,8 +1,8 @@
 """The exported GLSL snippets run in WebGL2 against the Python they mirror: the polygon integral
 (``prefilter.ltc.glsl``: ``ltcPolygon``, ``ltcClipHorizon``) against
 ``prefilter.sphere.polygon.polygon_integral_minv`` / ``clip_to_horizon`` over random transforms
-(mirrored ones included) and quads crossing the horizon; the anisotropic lookup (``ltc_aniso.glsl`` with its 3D
-textures, float32 and float16) against ``AnisoGGXTable.lookup``."""
+(mirrored ones included) and quads crossing the horizon; the anisotropic lookup
+(``ltc_aniso.glsl`` with its 3D textures, float32 and float16) against ``AnisoGGXTable.lookup``."""
 
 import numpy as np
 import pytest
