@@ -15,6 +15,8 @@ plane normal-mapped. For each, in the same run:
   alternating (other jobs on a shared machine slow both alike);
 * relative MSE of each (:func:`prefilter.render.metrics.relmse`), the equal-time ratio
   ``relMSE_old / relMSE_new`` and the efficiency ratio ``relMSE_old t_old / (relMSE_new t_new)``;
+* the new estimator without its control variate (``control=none``) at the same sample count,
+  to show what the control variate takes away;
 * bias check: both estimators at ``--bias-spp`` (4096) samples per pixel and ``--bias-seeds``
   seeds each, the ratio of their image means per channel (should be 1 within 0.1 %) and the
   standard error of the old estimator's mean (from its seeds), on a smaller image of the same
@@ -294,8 +296,9 @@ def scenes(width: int, height: int) -> dict:
     return {"flat GGX plane": flat, "normal-mapped plane": showcase_scene(1.0, width, height)}
 
 
-def new(scene, spp, seed):
-    return np.asarray(render(scene, "reference", spp=spp, seed=seed), dtype=np.float64)
+def new(scene, spp, seed, control="ltc"):
+    return np.asarray(render(scene, "reference", spp=spp, seed=seed,
+                             params={"control": control}), dtype=np.float64)
 
 
 def main() -> None:
@@ -357,6 +360,9 @@ def main() -> None:
             print(f"    new  {s:6d} spp  {t:6.3f} s  relMSE {e:.3e}")
         print(f"    truth's own relMSE (floor under the new estimator's): {floor:.1e}")
         print(f"    new  {spp_new:6d} spp  {t_new:6.3f} s  relMSE {e_new:.3e}  (equal time)")
+        plain, t_plain, _ = timed(lambda: new(scene, spp_new, 1, "none"))
+        print(f"    new without the control variate (control=none) at {spp_new} spp: "
+              f"{t_plain:.3f} s, relMSE {relmse(plain, truth):.3e}")
         print(f"    equal-time relMSE ratio (old / new at {spp_new} spp, "
               f"{t_new:.3f} s vs {t_old:.3f} s): {e_old / e_new:.1f}x; efficiency "
               f"(relMSE x time) ratio {e_old * t_old / (e_new * t_new):.1f}x")

@@ -15,6 +15,7 @@ from prefilter.render.estimator import (
     owen_sobol,
 )
 from prefilter.render.lights import QuadLight
+from prefilter.render.reference import control_table
 from quadrature import parallelogram_rule  # tests/render/quadrature.py
 
 # A 1 x 0.6 rectangle at height 1.2, shifted sideways, emitting downwards.
@@ -140,3 +141,51 @@ def test_owen_sobol_points_are_uniform():
     se = np.sqrt(1 / 12 / 4000)
     assert np.all(np.abs(m - 0.5) < 5 * se)
     assert np.all(np.abs(a.var(axis=0) - 1 / 12) < 0.01)
+
+
+def _material_replicates(light, wo, ax, ay, n, reps, control):
+    """``reps`` estimates of ``n`` scrambled Sobol pairs each by the material kernel (base 0,
+    f0 1: the GGX lobe alone), with the control variate's table ``control`` or none."""
+    u = np.concatenate([owen_sobol(np.arange(reps), n, 2, seed=8, block=b) for b in (1, 2)],
+                       axis=-1).reshape(-1, 1, 4)
+    m = len(u)
+    frame = [np.tile(e, (m, 1)) for e in np.eye(3)]
+    total, _, _ = material_mis(light, np.zeros((m, 3)), *frame, np.tile(wo, (m, 1)),
+                               np.full(m, ax), np.full(m, ay), np.zeros((m, 3)),
+                               np.ones((m, 3)), u, keep=False, control=control)
+    return total[:, 0].reshape(reps, n).mean(axis=1)
+
+
+# a quad in front of the shading point, its lower part below the shading horizon
+STANDING = np.array([[1.0, -0.6, -0.4], [1.0, 0.6, -0.4], [1.0, 0.6, 0.9], [1.0, -0.6, 0.9]])
+
+
+@pytest.mark.parametrize("vertices, theta, ax, ay", [
+    (RECT, 30.0, 0.1, 0.1),      # sharp lobe, light edges crossing it
+    (RECT, 60.0, 0.2, 0.35),     # anisotropic within 2:1: the isotropic fit of sqrt(ax ay)
+    (STANDING, 50.0, 0.3, 0.3),  # light crossing the horizon
+    (RECT, 30.0, 0.005, 0.005),  # below the table's alpha range: no control variate
+])
+def test_ltc_control_variate_is_unbiased_and_lowers_the_noise(vertices, theta, ax, ay):
+    light = QuadLight(vertices if np.cross(vertices[1] - vertices[0], vertices[2] - vertices[0])
+                      @ vertices[0] < 0 else vertices[::-1].copy(), 1.0)
+    t = np.radians(theta)
+    wo = np.array([-np.sin(t), 0.0, np.cos(t)])
+    ref = ggx_quadrature(light, wo, ax, ay, panels=96)
+    table = control_table()
+    cv = _material_replicates(light, wo, ax, ay, 256, 64, table)
+    plain = _material_replicates(light, wo, ax, ay, 256, 64, None)
+    se = cv.std() / np.sqrt(len(cv))
+    assert ref > 0.01
+    assert abs(cv.mean() - ref) < 5 * se + 1e-9 * ref, (cv.mean(), ref, se)
+    if ax >= 0.1:
+        assert cv.std() < 0.5 * plain.std(), (cv.std(), plain.std())
+    else:
+        assert np.array_equal(cv, plain)
+    # any table keeps it unbiased: a wrong fit (the lobe tilted and widened) only adds noise
+    wrong = list(table)
+    wrong[2] = table[2] @ np.array([[1.6, 0.0, 0.4], [0.0, 1.3, 0.0], [0.0, 0.0, 1.0]])
+    bad = _material_replicates(light, wo, ax, ay, 256, 64, tuple(
+        np.ascontiguousarray(a) for a in wrong))
+    se = bad.std() / np.sqrt(len(bad))
+    assert abs(bad.mean() - ref) < 5 * se + 1e-9 * ref, (bad.mean(), ref, se)

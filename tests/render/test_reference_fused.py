@@ -45,10 +45,11 @@ def _scenes():
 
 
 @pytest.mark.parametrize("name", ["showcase", "spheres"])
-@pytest.mark.parametrize("spp, pairs", [(16, None), (8, 1), (32, 4)])
-def test_fused_matches_the_numpy_stages(name, spp, pairs):
+@pytest.mark.parametrize("spp, pairs, control", [(16, None, "ltc"), (8, 1, "ltc"),
+                                                 (32, 4, "ltc"), (16, None, "none")])
+def test_fused_matches_the_numpy_stages(name, spp, pairs, control):
     scene = _scenes()[name]
-    st = RenderSettings(spp=spp, seed=3)
+    st = RenderSettings(spp=spp, seed=3, params={"control": control})
     fused = render_reference(scene, st, pairs=pairs)
     staged = render_reference(scene, st, pairs=pairs, fused=False)
     assert fused.max() > 0.05

@@ -203,3 +203,9 @@ def as_table(table):
     if isinstance(table, (str, os.PathLike)):
         return GGXTable.load(table)
     return table
+
+
+def shipped_table() -> GGXTable:
+    """The :class:`GGXTable` shipped with the package, whatever user table exists (the
+    ``reference`` method's control variate: its images must not depend on the user's files)."""
+    return GGXTable.load(shipped_table_path())

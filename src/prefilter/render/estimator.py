@@ -9,6 +9,9 @@ solid angle of a rectangle, Urena et al. 2013, else on the quad's area:
 ``f(w) L(w) p_s(w) / (p_light(w)^2 + p_lobe(w)^2)`` (Veach 1997, eq. 9.14, beta = 2):
 :func:`mis_quad` for any :class:`~prefilter.lobe.Lobe` over arrays, :func:`material_mis_kernel`
 for the material lobe of the renderer (:class:`MaterialLobe`) in Numba, tested equal to it.
+The Numba path takes a control variate (:func:`ltc_control`): the GGX LTC fit of the specular
+lobe, whose polygon integral is exact, subtracted from the lobe at every sample and added back
+analytically.
 
 Sample points (:func:`owen_sobol`): the first ``2^m`` points of the Sobol sequence (Joe and Kuo
 direction numbers, :class:`scipy.stats.qmc.Sobol`), their order shuffled and their coordinates
@@ -34,6 +37,7 @@ from prefilter.lobe import Lobe, sample_weight
 from prefilter.microfacet import GGX, reflect
 from prefilter.microfacet.fresnel import schlick, schlick_jit
 from prefilter.microfacet.ggx import ggx_d_jit, ggx_lambda_jit, ggx_sample_vndf_jit
+from prefilter.microfacet.ltc import ltc_density, ltc_lookup
 from prefilter.render.lights import (
     light_pdf,
     light_sample,
@@ -44,6 +48,7 @@ from prefilter.render.lights import (
     quad_setup_jit,
 )
 from prefilter.render.shading import brdf_cos
+from prefilter.sphere.polygon import clip_to_horizon_jit, polygon_integral_jit
 from prefilter.sphere.sampling import cosine_hemisphere, to_local, to_world
 
 #: Uniforms per quad light per sample: light point (2) and lobe direction (2).
@@ -414,21 +419,63 @@ def specular_probability_jit(woz, base, f0):
 
 
 @njit_inline
+def ltc_control(wox, woy, woz, ax, ay, f0, axis_t, axis_r, tab_m, tab_mag, tab_fres, mm, cvar):
+    """The control variate of :func:`material_mis_pair` at one shading point: the isotropic GGX
+    LTC table's fit of the specular lobe, ``g (rgb) D_M`` (Heitz et al. 2016; Schlick through the
+    table's ``(n, f5)``: ``g = f0 (n - f5) + f5``), for ``alpha = sqrt(ax ay)``. Writes
+    ``cvar (13,)``: the LTC in ``cvar[:10]`` (:func:`prefilter.microfacet.ltc.ltc_lookup`,
+    scratch ``mm``) and ``g`` in ``cvar[10:13]``, zeros (no control variate) where the table does
+    not fit the lobe: ``alpha`` below its range, anisotropy beyond 2:1, or a singular matrix.
+    Returns whether ``g`` is not zero. Any ``g`` leaves the estimate unbiased (its exact
+    integral is added back, :func:`ltc_control_integral`); a close one removes most of the
+    variance of the light's edges crossing the lobe."""
+    for c in range(3):
+        cvar[10 + c] = 0.0
+    alpha = np.sqrt(ax * ay)
+    if alpha < axis_r[0] * axis_r[0] or max(ax, ay) > 2.0 * min(ax, ay):
+        return False
+    ok, mag, fres = ltc_lookup(wox, woy, woz, alpha, axis_t, axis_r, tab_m, tab_mag, tab_fres,
+                               mm, cvar)
+    if not ok:
+        return False
+    for c in range(3):
+        cvar[10 + c] = f0[c] * (mag - fres) + fres
+    return cvar[10] != 0.0 or cvar[11] != 0.0 or cvar[12] != 0.0
+
+
+@njit_inline
+def ltc_control_integral(px, py, pz, ts, bs, ns, verts, cvar, P, C):
+    """``int D_M`` over the quad ``verts (4, 3)`` seen from ``(px, py, pz)`` (frame ``ts, bs,
+    ns``), cut at the shading horizon first as the estimator is (its samples below it count 0):
+    the exact integral of the control variate's lobe (:func:`ltc_control`; one-sided, Heitz et
+    al. 2016, eq. 11). Scratch ``P (4, 3)``, ``C (5, 3)``."""
+    for v in range(4):
+        dx, dy, dz = verts[v, 0] - px, verts[v, 1] - py, verts[v, 2] - pz
+        P[v, 0] = dx * ts[0] + dy * ts[1] + dz * ts[2]
+        P[v, 1] = dx * bs[0] + dy * bs[1] + dz * bs[2]
+        P[v, 2] = dx * ns[0] + dy * ns[1] + dz * ns[2]
+    clip_to_horizon_jit(P, 4, C)
+    return polygon_integral_jit(cvar, C, 5)
+
+
+@njit_inline
 def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base, f0, p_spec,
-                      verts, normal, area, p1, d_plane, rect, sr, u0, u1, u2, u3, power):
+                      verts, normal, area, p1, d_plane, rect, sr, u0, u1, u2, u3, power, cvar):
     """One light/lobe sample pair of :func:`mis_quad` for :class:`MaterialLobe` at the shading
     point ``(px, py, pz)`` with frame ``ts, bs, ns (3,)``, view ``wo`` in that frame, its Smith
     ``lam_o`` and the lobe choice probability ``p_spec`` (:func:`specular_probability_jit`); the
     quad light ``verts (4, 3)``, ``normal (3,)``, ``area``, ``rect`` with
     :func:`prefilter.render.lights.quad_constants` ``p1, d_plane`` and the point's sampling state
     ``sr`` (:func:`prefilter.render.lights.quad_setup_jit`); uniforms ``u0, u1`` (light sample),
-    ``u2, u3`` (lobe direction).
+    ``u2, u3`` (lobe direction). Control variate ``cvar (13,)`` (:func:`ltc_control`): its
+    ``g (rgb) D_M(w)`` is subtracted from the lobe at both samples (``g = 0``: none).
 
     Returns 12 scalars: the light-sample term (rgb, before the light's radiance; 0 where the
     sample adds nothing), the lobe-sample term (rgb), and their points on the light (the shading
     point where the lobe's ray misses it).
     """
     tl0 = tl1 = tl2 = tb0 = tb1 = tb2 = 0.0
+    g0, g1, g2 = cvar[10], cvar[11], cvar[12]
     # -- light sample (lights.light_sample) --
     dx, dy, dz, pl, lx, ly, lz = quad_sample_jit(px, py, pz, verts, normal, area, p1, rect, sr,
                                                  u0, u1)
@@ -441,6 +488,9 @@ def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base
         if wz > 0.0:  # below the shading horizon the lobe is 0
             f_r, f_g, f_b, pb = material_eval_pdf(wox, woy, woz, lam_o, wx, wy, wz, ax, ay, base,
                                                   f0, p_spec)
+            if g0 != 0.0 or g1 != 0.0 or g2 != 0.0:
+                dm = ltc_density(cvar, wx, wy, wz)
+                f_r, f_g, f_b = f_r - g0 * dm, f_g - g1 * dm, f_b - g2 * dm
             w = mis_over(pl, pb, power)
             tl0, tl1, tl2 = f_r * w, f_g * w, f_b * w
     # -- lobe sample: GGX visible normal reflected, or cosine (sample_brdf) --
@@ -460,6 +510,9 @@ def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base
     if plb > 0.0 and bz > 0.0:
         f_r, f_g, f_b, pb = material_eval_pdf(wox, woy, woz, lam_o, bx, by, bz, ax, ay, base, f0,
                                               p_spec)
+        if g0 != 0.0 or g1 != 0.0 or g2 != 0.0:
+            dm = ltc_density(cvar, bx, by, bz)
+            f_r, f_g, f_b = f_r - g0 * dm, f_g - g1 * dm, f_b - g2 * dm
         w = mis_over(pb, plb, power)
         tb0, tb1, tb2 = f_r * w, f_g * w, f_b * w
     return tl0, tl1, tl2, tb0, tb1, tb2, lx, ly, lz, hx, hy, hz
@@ -467,13 +520,16 @@ def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base
 
 @njit_parallel
 def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, area, rect,
-                        is_rect, u, power, keep, acc, out, hit):
+                        is_rect, u, power, keep, cv, axis_t, axis_r, tab_m, tab_mag, tab_fres,
+                        acc, out, hit):
     """:func:`mis_quad` for :class:`MaterialLobe` over ``K`` sample pairs per shading point
     (:func:`material_mis_pair` each).
 
     ``u (N, K, 4)``; writes ``acc[i]`` (rgb), the sum of all terms of point ``i``, and with
     ``keep`` also ``out[i, k, s]`` (rgb) and ``hit[i, k, s]`` (point on the light) for the
-    light (``s = 0``) and lobe (``s = 1``) samples of pair ``k``.
+    light (``s = 0``) and lobe (``s = 1``) samples of pair ``k``. With ``cv``, the LTC table
+    ``axis_t, axis_r, tab_m, tab_mag, tab_fres`` is the control variate (:func:`ltc_control`)
+    and ``acc`` holds ``K`` times its integral besides the terms.
     """
     n = pos.shape[0]
     npairs = u.shape[1]
@@ -482,13 +538,21 @@ def material_mis_kernel(pos, ts, bs, ns, wo, ax, ay, base, f0, verts, normal, ar
         p_spec = specular_probability_jit(wo[i, 2], base[i], f0[i])
         lam_o = ggx_lambda_jit(ax[i], ay[i], wo[i, 0], wo[i, 1], wo[i, 2])
         sr = quad_setup_jit(pos[i, 0], pos[i, 1], pos[i, 2], rect, is_rect)
+        cvar = np.zeros(13)
         for k in range(3):
             acc[i, k] = 0.0
+        if cv and ltc_control(wo[i, 0], wo[i, 1], wo[i, 2], ax[i], ay[i], f0[i], axis_t, axis_r,
+                              tab_m, tab_mag, tab_fres, np.empty(9), cvar):
+            e = npairs * ltc_control_integral(pos[i, 0], pos[i, 1], pos[i, 2], ts[i], bs[i],
+                                              ns[i], verts, cvar, np.empty((4, 3)),
+                                              np.empty((5, 3)))
+            for k in range(3):
+                acc[i, k] = cvar[10 + k] * e
         for j in range(npairs):
             r = material_mis_pair(pos[i, 0], pos[i, 1], pos[i, 2], ts[i], bs[i], ns[i], wo[i, 0],
                                   wo[i, 1], wo[i, 2], lam_o, ax[i], ay[i], base[i], f0[i],
                                   p_spec, verts, normal, area, p1, d_plane, rect, sr, u[i, j, 0],
-                                  u[i, j, 1], u[i, j, 2], u[i, j, 3], power)
+                                  u[i, j, 1], u[i, j, 2], u[i, j, 3], power, cvar)
             for k in range(3):
                 acc[i, k] += r[k]
                 acc[i, k] += r[3 + k]
@@ -516,13 +580,20 @@ def cosine_hemisphere_jit(u1, u2):
 
 
 def material_mis(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, u, *,
-                 heuristic: str = "balance", keep: bool = True):
+                 heuristic: str = "balance", keep: bool = True, control=None):
     """:func:`mis_quad` of :class:`MaterialLobe` by :func:`material_mis_kernel` for ``K``
     sample pairs per point: ``u (N, K, 4)`` -> ``total (N, 3)`` (the sum of all terms) and,
     with ``keep``, ``terms (N, K, 2, 3)``, ``points (N, K, 2, 3)`` (same numbers as
-    :func:`mis_quad` to rounding; ``None`` without ``keep``)."""
+    :func:`mis_quad` to rounding; ``None`` without ``keep``).
+
+    ``control``: ``None``, or the LTC table arrays (:func:`control_arrays`) of the control
+    variate (:func:`ltc_control`; then ``total`` includes ``K`` times its integral and the terms
+    are of the difference: not with ``keep``)."""
     if heuristic not in HEURISTICS:
         raise ValueError(f"heuristic: expected one of {HEURISTICS}, got {heuristic!r}")
+    if control is not None and keep:
+        raise ValueError("control: a control variate needs keep=False (the terms are of the "
+                         "difference, so a light texture cannot weigh them)")
     n, k = u.shape[0], u.shape[1]
 
     def c(a, shape):
@@ -535,6 +606,18 @@ def material_mis(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, 
     serial(material_mis_kernel, n * k)(
         c(position, (n, 3)), c(ts, (n, 3)), c(bs, (n, 3)), c(ns, (n, 3)), c(wo, (n, 3)),
         c(alpha_x, (n,)), c(alpha_y, (n,)), c(base_color, (n, 3)), c(f0, (n, 3)),
-        *quad_arrays(light), c(u, (n, k, DIMS_PER_QUAD)), heuristic == "power", keep, total,
-        terms, points)
+        *quad_arrays(light), c(u, (n, k, DIMS_PER_QUAD)), heuristic == "power", keep,
+        control is not None, *(NO_CONTROL if control is None else control), total, terms, points)
     return (total, terms, points) if keep else (total, None, None)
+
+
+#: Table arrays standing for "no control variate" (same types as :func:`control_arrays`).
+NO_CONTROL = (np.zeros(2), np.zeros(2), np.zeros((2, 2, 3, 3)), np.zeros((2, 2)),
+              np.zeros((2, 2)))
+
+
+def control_arrays(table) -> tuple:
+    """The arrays of an isotropic GGX LTC table (``axis_t, axis_r, M, magnitude, fresnel`` of
+    :class:`prefilter.ltc.table.GGXTable`) as the kernels take them (contiguous float64)."""
+    return tuple(np.ascontiguousarray(getattr(table, a), dtype=np.float64)
+                 for a in ("axis_t", "axis_r", "M", "magnitude", "fresnel"))

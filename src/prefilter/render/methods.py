@@ -96,7 +96,8 @@ _DESCRIPTIONS: dict[str, str] = {
     "ltc": "area lights by the isotropic LTC table, normal and colour from the footprint's mip "
            "level (the naive method)",
     "reference": "ground truth: stratified supersampling, full-resolution textures, MIS Monte "
-                 "Carlo of the true GGX BRDF",
+                 "Carlo of the true GGX BRDF; control=ltc (default) subtracts the LTC fit and "
+                 "adds its exact integral (unbiased, less noise), control=none plain MIS",
     "path": "path tracer: next-event estimation with MIS for quad, point, directional and "
             "environment lights, shadow rays, Russian roulette; bounces=N vertices per path "
             "(1: direct light)",
@@ -148,6 +149,7 @@ _DESCRIPTIONS: dict[str, str] = {
 
 #: Variant settings each method accepts: name -> {key: (allowed values, first = default)}.
 _PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
+    "reference": {"control": ("ltc", "none")},
     "path": {"bounces": ("4", "1", "2", "3", "5", "6", "8", "12", "16")},
     "glints": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
     "glints-direct": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
@@ -224,6 +226,17 @@ def check_params(name: str, params) -> dict[str, str]:
     return out
 
 
+#: What gives the isotropic GGX LTC table the ``reference`` method takes as its control variate,
+#: named like the methods (``"module:attribute"``, imported on first use by :func:`resolve`).
+GGX_TABLE = "prefilter.ltc.table:shipped_table"
+
+
+def resolve(target: str):
+    """The object a ``"module:attribute"`` string names (imported now)."""
+    module, attr = target.split(":")
+    return getattr(importlib.import_module(module), attr)
+
+
 def get_method(name: str) -> Method:
     """The callable registered as ``name`` (imported on first use)."""
     if name not in _REGISTRY:
@@ -231,9 +244,8 @@ def get_method(name: str) -> Method:
             f"method: expected one of {', '.join(available())}, got {name!r}")
     fn = _REGISTRY[name]
     if isinstance(fn, str):
-        module, attr = fn.split(":")
         try:
-            fn = getattr(importlib.import_module(module), attr)
+            fn = resolve(fn)
         except (ImportError, AttributeError) as exc:
             raise PrefilterError(f"method {name!r} is unavailable: {exc}") from exc
         _REGISTRY[name] = fn

@@ -5,9 +5,15 @@ textures (level 0, bilinear). Each quad light is integrated by the MIS estimator
 :mod:`prefilter.render.estimator` (one light sample, uniform in solid angle on rectangles and on
 the area of other quads, and one BRDF sample, GGX visible normals or cosine, per pair; balance
 heuristic, Veach 1997, eq. 9.13), using the true GGX BRDF with Schlick Fresnel
-(:func:`prefilter.render.shading.brdf_cos`): no LTC. ``spp`` is the number of light/BRDF sample
-pairs per pixel; they are shaded in groups of :func:`pairs_per_position` at ``spp / pairs``
-sub-pixel positions (tracing and texture reads cost more than a pair). All uniforms (positions,
+(:func:`prefilter.render.shading.brdf_cos`). By default the isotropic GGX LTC table's fit of the
+specular lobe is a control variate on untextured quads: its exact polygon integral is added and
+its value subtracted from every sample (:func:`prefilter.render.estimator.ltc_control`), which
+keeps the estimate unbiased whatever the fit and removes most of the noise of light edges
+crossing glossy lobes (``--param control=none``: plain MIS). ``spp`` is the number of light/BRDF
+sample pairs per pixel; they are shaded in groups of :func:`pairs_per_position` at
+``spp / pairs`` sub-pixel positions (one pair per position with the control variate, whose
+pairs' error is small; :data:`PAIRS_PER_POSITION` without it, as tracing and texture reads cost
+more than a pair). All uniforms (positions,
 and each light's light and BRDF samples) are per-pixel Owen-scrambled Sobol points
 (:func:`prefilter.render.estimator.owen_sobol`), so the estimator is unbiased and its error falls
 faster than ``O(spp^-1/2)``; ``benchmarks/bench_reference_noise.py`` measures it.
@@ -31,6 +37,8 @@ or thread count.
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from prefilter.jit import njit_parallel, prange
@@ -39,7 +47,11 @@ from prefilter.render.driver import render_positions, surface_attributes, with_s
 from prefilter.microfacet.ggx import ggx_lambda_jit
 from prefilter.render.estimator import (
     HEURISTICS,
+    NO_CONTROL,
     MaterialLobe,
+    control_arrays,
+    ltc_control,
+    ltc_control_integral,
     material_mis,
     material_mis_pair,
     mis_quad,
@@ -68,8 +80,8 @@ from prefilter.render.lights import (
 )
 from prefilter.render.shading import VIEW_Z_MIN, local_view, shade_delta_lights
 
-#: Light/BRDF sample pairs shaded per traced sub-pixel position at high sample counts
-#: (:func:`pairs_per_position`).
+#: Light/BRDF sample pairs shaded per traced sub-pixel position at high sample counts without
+#: the control variate (:func:`pairs_per_position`; with it, one).
 PAIRS_PER_POSITION = 4
 
 
@@ -109,17 +121,18 @@ def estimate_quad(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color,
 
 
 def estimate_quad_fast(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, u, *,
-                       heuristic: str = "balance") -> np.ndarray:
+                       heuristic: str = "balance", control=None) -> np.ndarray:
     """:func:`estimate_quad` by the Numba kernel, averaged over ``K`` pairs when
     ``u (N, K, 4)`` (``u (N, 4)``: one pair, the same numbers as :func:`estimate_quad` to
-    rounding); the light texture, if any, is read afterwards at the samples' points."""
+    rounding); the light texture, if any, is read afterwards at the samples' points.
+    ``control``: the LTC control variate's table (untextured lights only), or ``None``."""
     u = np.asarray(u, dtype=np.float64)
     if u.ndim == 2:
         u = u[:, None]
     textured = getattr(light, "texture", None) is not None
     total, terms, points = material_mis(_geometry(light), position, ts, bs, ns, wo, alpha_x,
                                         alpha_y, base_color, f0, u, heuristic=heuristic,
-                                        keep=textured)
+                                        keep=textured, control=None if textured else control)
     if textured:
         return _combine(light, terms, points)
     return total * (light.radiance / u.shape[1])
@@ -136,7 +149,7 @@ def _combine(light, terms, points) -> np.ndarray:
 
 def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y, base_color, f0,
                     lights: LightSet, u, *, textured=(), kernel: bool = True,
-                    heuristic: str = "balance") -> np.ndarray:
+                    heuristic: str = "balance", control=None) -> np.ndarray:
     """Monte Carlo radiance ``(N, 3)`` at shading points, ``K`` MIS sample pairs per quad light.
 
     Parameters
@@ -156,6 +169,9 @@ def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
         Use the Numba kernel (default) or the NumPy estimator (same numbers to rounding; one
         pair only).
     heuristic : {"balance", "power"}
+    control : tuple of arrays or None
+        The LTC table of the control variate (:func:`prefilter.render.estimator.control_arrays`)
+        for the untextured quads, with ``kernel`` only; ``None``: plain MIS.
 
     Point and directional lights are evaluated exactly (no sampling).
     """
@@ -167,10 +183,12 @@ def shade_reference(position, frame_t, frame_b, frame_n, view, alpha_x, alpha_y,
     f0 = np.asarray(f0, dtype=np.float64)
     wo = local_view(view, ts, bs, ns)
     out = shade_delta_lights(position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, lights)
-    est = estimate_quad_fast if kernel else estimate_quad
     for q, ql in enumerate(tuple(lights.quads) + tuple(textured)):
-        out += est(ql, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, u[:, q],
-                   heuristic=heuristic)
+        args = (ql, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, f0, u[:, q])
+        if kernel:
+            out += estimate_quad_fast(*args, heuristic=heuristic, control=control)
+        else:
+            out += estimate_quad(*args, heuristic=heuristic)
     return out
 
 
@@ -181,7 +199,7 @@ BLOCK = 256
 @njit_parallel
 def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, tex, read, qv, qn,
                              qarea, qrect, qis_rect, qrad, base, m, keys, pixels, npairs, power,
-                             view_z_min, rad):
+                             view_z_min, cv, axis_t, axis_r, tab_m, tab_mag, tab_fres, rad):
     """:func:`shade_reference` for untextured quad lights fused with the surface of each
     sub-pixel position, without intermediate arrays: the surface seen through ``xy (N, 2)``
     (:func:`prefilter.render.kernels.surface_sample`, ``read`` at level 0), the view in its
@@ -208,6 +226,10 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
         tx = np.empty((2, 4))
         geo = np.empty((5, 3))
         mat = np.empty(7)
+        cvar = np.zeros(13)
+        mm = np.empty(9)
+        P = np.empty((4, 3))
+        C = np.empty((5, 3))
         # the scrambles of the current pixel's sets: (light, lobe) per quad light
         seeds = np.empty((2 * nq, 2), np.int64)
         shuffle = np.empty(2 * nq, np.int64)
@@ -232,6 +254,10 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
             ax, ay = mat_f[o, 0], mat_f[o, 1]
             p_spec = specular_probability_jit(woz, base_color, f0)
             lam_o = ggx_lambda_jit(ax, ay, wox, woy, woz)
+            use_cv = cv and ltc_control(wox, woy, woz, ax, ay, f0, axis_t, axis_r, tab_m,
+                                        tab_mag, tab_fres, mm, cvar)
+            if not use_cv:
+                cvar[10] = cvar[11] = cvar[12] = 0.0
             pixel = pixels[i // npos]
             if pixel != last:
                 for b in range(2 * nq):
@@ -246,6 +272,11 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
                 p1, d_plane = qc[q, 0], qc[q, 1]
                 sr = quad_setup_jit(px, py, pz, rq, qis_rect[q])
                 a0 = a1 = a2 = 0.0
+                if use_cv:
+                    # the control variate's integral, once per position: npairs times, as the
+                    # sum below is divided by npairs
+                    e = npairs * ltc_control_integral(px, py, pz, ts, bs, ns, vq, cvar, P, C)
+                    a0, a1, a2 = cvar[10] * e, cvar[11] * e, cvar[12] * e
                 for j in range(npairs):
                     kl = owen_sobol_index(first + j, shl, m)
                     kb = owen_sobol_index(first + j, shb, m)
@@ -254,7 +285,7 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
                                           rq, sr, owen_sobol_coord(base, kl, 0, sl),
                                           owen_sobol_coord(base, kl, 1, sl),
                                           owen_sobol_coord(base, kb, 0, sb),
-                                          owen_sobol_coord(base, kb, 1, sb), power)
+                                          owen_sobol_coord(base, kb, 1, sb), power, cvar)
                     a0 += r[0]
                     a0 += r[3]
                     a1 += r[1]
@@ -266,11 +297,12 @@ def reference_samples_kernel(cam, xy, types, params, mat_f, mat_i, data, info, t
                 rad[i, 2] += a2 * (qrad[q, 2] / npairs)
 
 
-def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance"):
+def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance", control=None):
     """``callable(xy (N, 2), pixels (P,), n, K, seed) -> (N, 3)``:
     :func:`reference_samples_kernel` for ``scene`` (``n`` pairs per pixel, ``K`` per position),
     or ``None`` when the scene needs the staged path (point, directional or textured quad
-    lights, no quad light, textures with too few channels)."""
+    lights, no quad light, textures with too few channels). ``control``: the LTC table arrays of
+    the control variate (:func:`prefilter.render.estimator.control_arrays`) or ``None``."""
     if lights.points or lights.directionals or textured or not lights.quads:
         return None
     packed = pack_materials(scene.objects)
@@ -304,7 +336,8 @@ def fused_shader(scene, lights: LightSet, textured, heuristic: str = "balance"):
         # can round differently (seen at 1e-15), and images must not depend on the chunk size
         reference_samples_kernel(
             cam, xy, types, params, *packed, read, qv, qn, qa, qrect, qis, qr,
-            sobol_base(m, 2), m, keys, pixels, k, power, VIEW_Z_MIN, rad)
+            sobol_base(m, 2), m, keys, pixels, k, power, VIEW_Z_MIN, control is not None,
+            *(NO_CONTROL if control is None else control), rad)
         return rad
 
     return shade
@@ -330,13 +363,25 @@ def pair_blocks(q: int) -> tuple[int, int]:
     return POSITION_BLOCK + 1 + 2 * q, POSITION_BLOCK + 2 + 2 * q
 
 
+@functools.lru_cache(maxsize=1)
+def control_table() -> tuple:
+    """The arrays of the shipped isotropic GGX LTC table
+    (:func:`prefilter.render.estimator.control_arrays`), the reference's control variate; found
+    through the registry's :data:`prefilter.render.methods.GGX_TABLE`."""
+    from prefilter.render.methods import GGX_TABLE, resolve
+
+    return control_arrays(resolve(GGX_TABLE)())
+
+
 def render_reference(scene, settings, *, pairs: int | None = None,
                      heuristic: str = "balance", fused: bool = True) -> np.ndarray:
     """The ``reference`` method: ground truth for ``scene`` at ``settings.spp`` samples per pixel.
 
     Per pixel ``spp / K`` sub-pixel positions (whole pixel footprint), level-0 bilinear textures,
     and per position ``K = pairs_per_position(spp)`` MIS light/BRDF sample pairs per quad light,
-    textured or not (:func:`shade_reference`); ``pairs`` overrides ``K``. Returns ``(H, W, 3)``
+    textured or not (:func:`shade_reference`); ``pairs`` overrides ``K``. The variant setting
+    ``control`` (``settings.params``): ``"ltc"`` (default), the LTC control variate on
+    untextured quads and ``K = 1``; ``"none"``, plain MIS and ``K = 4``. Returns ``(H, W, 3)``
     linear radiance; deterministic for a given ``settings.seed``.
 
     Scenes lit by untextured quad lights only run one Numba pass per row chunk
@@ -349,8 +394,12 @@ def render_reference(scene, settings, *, pairs: int | None = None,
     lights, textured = split_lights(scene, "reference")
     nq = len(lights.quads) + len(textured)
     spp = settings.spp
-    # without quad lights there is nothing to pair: every sample is a sub-pixel position
-    k = (pairs_per_position(spp) if nq else 1) if pairs is None else int(pairs)
+    control = (control_table() if settings.param("control", "ltc") == "ltc" and lights.quads
+               else None)
+    # without quad lights there is nothing to pair: every sample is a sub-pixel position; with
+    # the control variate the pairs' error is small, and positions are worth more than pairs
+    k = ((pairs_per_position(spp, 1 if control else PAIRS_PER_POSITION) if nq else 1)
+         if pairs is None else int(pairs))
     npos = -(-spp // k)
     # leave room for the K pairs of every position in a chunk
     settings = with_settings(settings, chunk_samples=max(1, settings.chunk_samples // k))
@@ -372,7 +421,7 @@ def render_reference(scene, settings, *, pairs: int | None = None,
                                          for b in pair_blocks(q)], axis=-1).reshape(-1, k, 4)
                          for q in range(nq)], axis=1)
 
-    shade = fused_shader(scene, lights, textured, heuristic) if fused else None
+    shade = fused_shader(scene, lights, textured, heuristic, control) if fused else None
     if shade is not None:
         return render_positions(scene, settings,
                                 lambda xy, pixels: shade(xy, pixels, npos * k, k, settings.seed),
@@ -388,7 +437,7 @@ def render_reference(scene, settings, *, pairs: int | None = None,
             rad[g.hit] = shade_reference(gh.position, a["t"], a["b"], a["n"], gh.view,
                                          a["alpha_x"], a["alpha_y"], a["base_color"], a["f0"],
                                          lights, u[g.hit], textured=textured,
-                                         heuristic=heuristic)
+                                         heuristic=heuristic, control=control)
         return rad
 
     return render_positions(scene, settings, radiance, desc="reference", positions=positions,
