@@ -15,6 +15,8 @@ plane normal-mapped. For each, in the same run:
   alternating (other jobs on a shared machine slow both alike);
 * relative MSE of each (:func:`prefilter.render.metrics.relmse`), the equal-time ratio
   ``relMSE_old / relMSE_new`` and the efficiency ratio ``relMSE_old t_old / (relMSE_new t_new)``;
+* the share of pixel values the method clamps at 0 (the control variate can give negative
+  estimates at low sample counts);
 * the new estimator without its control variate (``control=none``) at the same sample count,
   to show what the control variate takes away;
 * bias check: both estimators at ``--bias-spp`` (4096) samples per pixel and ``--bias-seeds``
@@ -39,6 +41,7 @@ from prefilter.report.demo import showcase_scene
 from prefilter.render.metrics import relmse
 from prefilter.render.methods import RenderSettings
 from prefilter.render.driver import render, render_samples, surface_attributes
+from prefilter.render.reference import render_reference
 from prefilter.render.scene import load_scene
 from prefilter.render.shading import local_view, shade_delta_lights
 
@@ -360,6 +363,10 @@ def main() -> None:
             print(f"    new  {s:6d} spp  {t:6.3f} s  relMSE {e:.3e}")
         print(f"    truth's own relMSE (floor under the new estimator's): {floor:.1e}")
         print(f"    new  {spp_new:6d} spp  {t_new:6.3f} s  relMSE {e_new:.3e}  (equal time)")
+        raw = np.asarray(render_reference(scene, RenderSettings(spp=spp_new, seed=1),
+                                          clamp=False))
+        print(f"    values the method clamps at 0 at {spp_new} spp: {np.mean(raw < 0) * 100:.3f} % "
+              f"(smallest {raw.min():.3g}; relMSE unclamped {relmse(raw, truth):.3e})")
         plain, t_plain, _ = timed(lambda: new(scene, spp_new, 1, "none"))
         print(f"    new without the control variate (control=none) at {spp_new} spp: "
               f"{t_plain:.3f} s, relMSE {relmse(plain, truth):.3e}")

@@ -101,7 +101,7 @@ def test_kernels_cache_under_the_fingerprint_directory():
         pytest.skip("NUMBA_CACHE_DIR set by the user: Numba's own rule applies")
     d = Path(numba.config.CACHE_DIR)
     assert d.name == jit.source_fingerprint(Path(jit.__file__).parent)
-    from prefilter.ltc import polygon  # noqa: F401  (a module with kernels)
+    from prefilter.sphere import polygon  # noqa: F401  (a module with kernels)
 
     kernels = [v for v in vars(polygon).values() if hasattr(v, "_cache")]
     assert kernels

@@ -374,14 +374,18 @@ def control_table() -> tuple:
 
 
 def render_reference(scene, settings, *, pairs: int | None = None,
-                     heuristic: str = "balance", fused: bool = True) -> np.ndarray:
+                     heuristic: str = "balance", fused: bool = True,
+                     clamp: bool = True) -> np.ndarray:
     """The ``reference`` method: ground truth for ``scene`` at ``settings.spp`` samples per pixel.
 
     Per pixel ``spp / K`` sub-pixel positions (whole pixel footprint), level-0 bilinear textures,
     and per position ``K = pairs_per_position(spp)`` MIS light/BRDF sample pairs per quad light,
     textured or not (:func:`shade_reference`); ``pairs`` overrides ``K``. The variant setting
     ``control`` (``settings.params``): ``"ltc"`` (default), the LTC control variate on
-    untextured quads and ``K = 1``; ``"none"``, plain MIS and ``K = 4``. Returns ``(H, W, 3)``
+    untextured quads and ``K = 1``; ``"none"``, plain MIS and ``K = 4``. With the control
+    variate a pixel's estimate can fall below zero at low sample counts; ``clamp`` (default)
+    returns ``max(0, estimate)`` per pixel and channel, a bias confined to those pixels (the
+    benchmark counts them: ``benchmarks/bench_reference_noise.py``). Returns ``(H, W, 3)``
     linear radiance; deterministic for a given ``settings.seed``.
 
     Scenes lit by untextured quad lights only run one Numba pass per row chunk
@@ -421,11 +425,16 @@ def render_reference(scene, settings, *, pairs: int | None = None,
                                          for b in pair_blocks(q)], axis=-1).reshape(-1, k, 4)
                          for q in range(nq)], axis=1)
 
+    def clamped(img):
+        # with the control variate a pixel's estimate can fall below 0 (the samples subtracted
+        # outweigh the exact integral added): radiance is never negative
+        return np.maximum(img, 0.0, out=img) if control is not None and clamp else img
+
     shade = fused_shader(scene, lights, textured, heuristic, control) if fused else None
     if shade is not None:
-        return render_positions(scene, settings,
-                                lambda xy, pixels: shade(xy, pixels, npos * k, k, settings.seed),
-                                desc="reference", positions=positions, per_pixel=npos)
+        return clamped(render_positions(
+            scene, settings, lambda xy, pixels: shade(xy, pixels, npos * k, k, settings.seed),
+            desc="reference", positions=positions, per_pixel=npos))
 
     def radiance(xy, pixels):
         g = gbuffer_at(scene, xy)
@@ -440,5 +449,5 @@ def render_reference(scene, settings, *, pairs: int | None = None,
                                          heuristic=heuristic, control=control)
         return rad
 
-    return render_positions(scene, settings, radiance, desc="reference", positions=positions,
-                            per_pixel=npos)
+    return clamped(render_positions(scene, settings, radiance, desc="reference",
+                                    positions=positions, per_pixel=npos))
