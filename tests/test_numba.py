@@ -123,3 +123,35 @@ def test_prune_deletes_only_old_siblings(tmp_path):
     os.utime(cur, (past, past))  # the current one is never deleted
     _prune(cur)
     assert cur.exists() and recent.exists() and not old.exists()
+
+
+def test_kernel_array_is_contiguous_writable_and_copies_only_when_needed():
+    from prefilter.jit import kernel_array
+
+    b = kernel_array(np.arange(3.0), (4, 3))  # broadcast: a writable copy
+    assert b.flags.c_contiguous and b.flags.writeable and b.shape == (4, 3)
+    ro = np.arange(6.0).reshape(2, 3)
+    ro.flags.writeable = False
+    assert kernel_array(ro, (2, 3)).flags.writeable
+    w = np.arange(6.0).reshape(2, 3)
+    assert kernel_array(w, (2, 3)) is w
+    assert kernel_array(np.arange(3), (3,), np.float64).dtype == np.float64
+
+
+def test_broadcast_arguments_do_not_compile_read_only_specializations():
+    # np.broadcast_to views are read-only, and Numba compiles read-only arrays separately: the
+    # GGX sampler with a scalar roughness (broadcast) and with per-point arrays must share one
+    from numba import types as nbt
+
+    from prefilter.jit import serial
+    from prefilter.microfacet import GGX
+    from prefilter.microfacet.ggx import _sample_vndf_kernel
+
+    wo = np.array([0.3, 0.1, 0.9]) / np.linalg.norm([0.3, 0.1, 0.9])
+    u = np.random.default_rng(0).random((5, 2))
+    GGX(0.3).sample_vndf(wo, u)
+    GGX(np.full(5, 0.3), np.full(5, 0.2)).sample_vndf(np.tile(wo, (5, 1)), u)
+    twin = serial(_sample_vndf_kernel, 5)
+    assert twin.signatures
+    for sig in twin.signatures:
+        assert all(a.mutable for a in sig if isinstance(a, nbt.Array)), sig

@@ -25,6 +25,7 @@ import types
 from pathlib import Path
 
 import numba
+import numpy as np
 
 #: LLVM fast-math flags of every kernel: those of ``fastmath=True`` but ``nnan`` and ``ninf``.
 #: With those two LLVM may assume that no value is NaN or infinite, and it does:
@@ -101,6 +102,18 @@ njit_serial = numba.njit(fastmath=FASTMATH, cache=True)
 #: of the shader's time when left to LLVM)
 njit_inline = numba.njit(fastmath=FASTMATH, cache=True, inline="always")
 prange = numba.prange
+
+
+def kernel_array(a, shape, dtype=None):
+    """``a`` broadcast to ``shape`` as a C-contiguous, writable array (of ``dtype``, default its
+    own), to pass to a kernel. Numba compiles a separate specialization for read-only arrays, and
+    ``np.broadcast_to`` views are read-only: without this a kernel compiled twice, depending on
+    whether an argument needed broadcasting. Copies only when ``a`` is read-only, broadcast,
+    non-contiguous or of another dtype."""
+    a = np.asarray(a, dtype=dtype)
+    if a.shape != tuple(shape):
+        a = np.broadcast_to(a, shape)
+    return np.require(a, a.dtype, ["C", "W"])
 
 
 #: Batches smaller than this run a serial twin of a parallel kernel: waking the thread pool costs

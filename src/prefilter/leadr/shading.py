@@ -15,6 +15,7 @@ from functools import lru_cache
 import numpy as np
 from scipy import optimize
 
+from prefilter.jit import kernel_array
 from prefilter.validation import (
     SLOPE_MAX,
     as_directions,
@@ -221,8 +222,7 @@ def _batch(wo, mean, cov, to_world=None, f0=None):
     p = (int(np.prod(shape, dtype=np.int64)),)
 
     def flat(a, tail):
-        return np.ascontiguousarray(np.broadcast_to(a, shape + tail).reshape(p + tail),
-                                    dtype=np.float64)
+        return kernel_array(a, shape + tail, np.float64).reshape(p + tail)
 
     return (shape, flat(wo, (3,)), flat(mu, (2,)), flat(cov, (2, 2)),
             None if to_world is None else flat(to_world, (3, 3)),
@@ -306,7 +306,7 @@ def env_specular(env, wo, mean_slope, slope_cov, n: int = 5, *, spacing=None, f0
     lod_bias = check_scalar(lod_bias, "lod_bias", lo=-LOD_BIAS_MAX, hi=LOD_BIAS_MAX)
     shape, wo, mu, cov, rot, f0a = _batch(wo, mean_slope, slope_cov, to_world, f0)
     if rot is None:
-        rot = np.ascontiguousarray(np.broadcast_to(np.eye(3), (len(wo), 3, 3)))
+        rot = kernel_array(np.eye(3), (len(wo), 3, 3))
     p, w, h = gaussian_grid(n, spacing)
     flat, offsets, heights, widths = env.packed
     out = np.empty((len(wo), flat.shape[1]))

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from prefilter.jit import kernel_array
 from prefilter.errors import PrefilterError
 from prefilter.ltc.table import schlick_scale
 from prefilter.render.lights import LightSet
@@ -83,14 +84,14 @@ def shade_ltc(position, frame_t, frame_b, frame_n, view, alpha, base_color, f0,
     n = len(position)
 
     def c3(a):
-        return np.ascontiguousarray(np.broadcast_to(a, (n, 3)), dtype=np.float64)
+        return kernel_array(a, (n, 3), np.float64)
 
     status = np.zeros(n, np.uint8)
     # Roughness below the table's range uses its smoothest row (the kernel clamps alpha to
     # [alpha_min, 1], documented in docs/reference.md); the light is cut at the shading horizon
     # before the LTC transform, as in the NumPy path.
     serial(ltc_quads_kernel, n)(c3(position), c3(ts), c3(bs), c3(ns), c3(view),
-                     np.ascontiguousarray(np.broadcast_to(alpha, (n,)), dtype=np.float64),
+                     kernel_array(alpha, (n,), np.float64),
                      c3(base_color), c3(f0),
                      np.ascontiguousarray([q.vertices for q in lights.quads], dtype=np.float64),
                      np.ascontiguousarray([q.normal for q in lights.quads], dtype=np.float64),

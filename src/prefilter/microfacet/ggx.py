@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.jit import njit_inline, njit_parallel, prange, serial
+from prefilter.jit import kernel_array, njit_inline, njit_parallel, prange, serial
 from prefilter.validation import as_directions, as_roughness, as_uniform
 from prefilter.microfacet.base import MicrofacetModel
 
@@ -119,7 +119,7 @@ class GGX(MicrofacetModel):
                                     u.shape[:-1])
 
         def flat(a, tail=()):
-            return np.ascontiguousarray(np.broadcast_to(a, shape + tail).reshape((-1,) + tail))
+            return kernel_array(a, shape + tail).reshape((-1,) + tail)
 
         out = np.empty(flat(wo, (3,)).shape)
         serial(_sample_vndf_kernel, len(out))(flat(self.alpha_x), flat(self.alpha_y),

@@ -24,6 +24,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
+from prefilter.jit import kernel_array
 from prefilter.validation import as_float_array
 from prefilter.errors import PrefilterError
 
@@ -208,7 +209,7 @@ def intersect(scene, rays: Rays) -> GBuffer:
     shape = d.shape[:-1]
 
     def flat(a):
-        return np.ascontiguousarray(np.broadcast_to(np.asarray(a, float), d.shape)).reshape(-1, 3)
+        return kernel_array(a, d.shape, np.float64).reshape(-1, 3)
 
     if any(obj.type == "mesh" for obj in scene.objects):
         from prefilter.render.mesh import trace_objects

@@ -32,7 +32,7 @@ import functools
 
 import numpy as np
 
-from prefilter.jit import njit_inline, njit_parallel, prange, serial
+from prefilter.jit import kernel_array, njit_inline, njit_parallel, prange, serial
 from prefilter.lobe import Lobe, sample_weight
 from prefilter.microfacet import GGX, reflect
 from prefilter.microfacet.fresnel import schlick, schlick_jit
@@ -597,7 +597,7 @@ def material_mis(light, position, ts, bs, ns, wo, alpha_x, alpha_y, base_color, 
     n, k = u.shape[0], u.shape[1]
 
     def c(a, shape):
-        return np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=np.float64), shape))
+        return kernel_array(a, shape, np.float64)
 
     total = np.empty((n, 3))
     shape = (n, k, 2, 3) if keep else (1, 1, 2, 3)

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from prefilter.errors import PrefilterError
-from prefilter.jit import njit_inline, njit_parallel, prange, serial
+from prefilter.jit import kernel_array, njit_inline, njit_parallel, prange, serial
 from prefilter.validation import as_float_array
 
 #: Solid angles (sr) outside which a rectangle is sampled by area (the bounds of pbrt-v4's
@@ -426,8 +426,9 @@ def light_sample(light: QuadLight, position, u):
     Returns ``(wi (N, 3), pdf (N,), points (N, 3))``: unit world directions, their solid-angle
     density (0 where the point does not see the emitting side) and the points on the light.
     """
-    pos = np.ascontiguousarray(np.broadcast_to(np.asarray(position, np.float64), (len(u), 3)))
-    u = np.ascontiguousarray(u, dtype=np.float64)
+    u = np.asarray(u, dtype=np.float64)
+    pos = kernel_array(position, (len(u), 3), np.float64)
+    u = kernel_array(u, u.shape)
     n = len(u)
     wi, pdf, pts = np.empty((n, 3)), np.empty(n), np.empty((n, 3))
     serial(light_sample_kernel, n)(pos, u, *quad_arrays(light), wi, pdf, pts)
@@ -437,8 +438,9 @@ def light_sample(light: QuadLight, position, u):
 def light_pdf(light: QuadLight, position, wi):
     """Solid-angle density ``(N,)`` of :func:`light_sample` at unit world directions
     ``wi (N, 3)``, and the rays' hits on the light ``(N, 3)`` (the point itself on a miss)."""
-    w = np.ascontiguousarray(wi, dtype=np.float64)
-    pos = np.ascontiguousarray(np.broadcast_to(np.asarray(position, np.float64), w.shape))
+    w = np.asarray(wi, dtype=np.float64)
+    w = kernel_array(w, w.shape)
+    pos = kernel_array(position, w.shape, np.float64)
     n = len(w)
     pdf, pts = np.empty(n), np.empty((n, 3))
     serial(light_pdf_kernel, n)(pos, w, *quad_arrays(light), pdf, pts)

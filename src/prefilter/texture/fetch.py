@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-from prefilter.jit import njit_inline, njit_parallel, prange, serial
+from prefilter.jit import kernel_array, njit_inline, njit_parallel, prange, serial
 
 #: Edge rules of the fetches: both coordinates wrap, ``v`` is clamped, both are clamped.
 WRAP, CLAMP_V, CLAMP_UV = 0, 1, 2
@@ -129,8 +129,8 @@ def trilinear(packed, uv, lod, *, clamp: int = WRAP) -> np.ndarray:
     data, offsets, heights, widths = packed
     uv = np.asarray(uv, np.float64)
     shape = np.broadcast_shapes(uv.shape[:-1], np.shape(lod))
-    uvf = np.ascontiguousarray(np.broadcast_to(uv, shape + (2,)).reshape(-1, 2))
-    lodf = np.ascontiguousarray(np.broadcast_to(np.asarray(lod, np.float64), shape).reshape(-1))
+    uvf = kernel_array(uv, shape + (2,)).reshape(-1, 2)
+    lodf = kernel_array(lod, shape, np.float64).reshape(-1)
     out = np.empty((uvf.shape[0], data.shape[1]))
     serial(trilinear_kernel, len(uvf))(data, offsets, heights, widths, uvf, lodf, int(clamp), out)
     return out.reshape(shape + (data.shape[1],))
