@@ -48,10 +48,10 @@ $(THREEJS): clients/threejs/package-lock.json
 node_modules: $(THREEJS)
 
 test: $(TEST_STAMP) browser node_modules
-	$(PY) -m pytest -n 2 $(PYTEST_ARGS)
+	$(PY) -m pytest -n 2 --dist loadgroup $(PYTEST_ARGS)
 
 test-all: $(TEST_STAMP) browser node_modules
-	$(PY) -m pytest -n 2 -m "" $(PYTEST_ARGS)
+	$(PY) -m pytest -n 2 --dist loadgroup -m "" $(PYTEST_ARGS)
 
 bench: $(TEST_STAMP)
 	$(PY) benchmarks/run_all.py

@@ -12,6 +12,10 @@ from prefilter.render.driver import render
 from prefilter.viewer import METHODS, pixel_match
 from prefilter.viewer.match import scene
 
+# one worker runs this module (make test distributes with --dist loadgroup): its module
+# fixture renders every case in Python and in the browser (about a minute), once
+pytestmark = pytest.mark.xdist_group("pixel_match")
+
 TOL = 0.01
 LIT = ("delta", "textured", "near-grazing")
 CASES = [(s, m) for s in LIT for m in METHODS if m.startswith("ltc")] + [
