@@ -58,11 +58,14 @@ def _suffix(path: Path) -> str:
 
 
 def _as_hwc(a: np.ndarray, where: str) -> np.ndarray:
+    shape = a.shape
     if a.ndim == 2:
         a = a[..., None]
-    if a.ndim != 3 or not 1 <= a.shape[2] <= 4 or a.shape[0] < 1 or a.shape[1] < 1:
+    if a.ndim != 3 or not 1 <= a.shape[2] <= 4:
         raise PrefilterError(f"{where}: expected an image of shape (H, W) or (H, W, 1..4), "
-                             f"got shape {a.shape}")
+                             f"got shape {shape}")
+    if a.shape[0] < 1 or a.shape[1] < 1:
+        raise PrefilterError(f"{where}: expected a non-empty image, got shape {shape}")
     return a
 
 
