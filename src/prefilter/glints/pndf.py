@@ -36,7 +36,7 @@ import math
 
 import numpy as np
 
-from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange
+from prefilter.jit import kernel_array, njit_inline, njit_parallel, njit_serial, prange
 from prefilter.validation import (
     as_float_array,
     as_positive_int,
@@ -522,10 +522,10 @@ def pndf(normal_map, center, sigma_p, s, intrinsic_roughness: float = DEFAULT_RO
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape, s=q.shape[:-1])
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
     q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
-    sp = np.broadcast_to(sp, shape).reshape(-1)
+    sp = kernel_array(sp, shape).reshape(-1)
     out = np.empty(c.shape[0])
     _pndf_points(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
-                 np.ascontiguousarray(sp), np.ascontiguousarray(q[:, 0]),
+                 sp, np.ascontiguousarray(q[:, 0]),
                  np.ascontiguousarray(q[:, 1]), sr, SIGMA_H, TRUNCATION, wide_limit2(s_el), out)
     return out.reshape(shape)
 
@@ -564,10 +564,10 @@ def pndf_image(normal_map, center, sigma_p, resolution: int = 128, support: floa
     ft = as_ndf_truncation(footprint_truncation, "footprint_truncation")
     shape = broadcast_batch(center=c.shape[:-1], sigma_p=sp.shape)
     c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
-    sp = np.broadcast_to(sp, shape).reshape(-1)
+    sp = kernel_array(sp, shape).reshape(-1)
     out = np.zeros((c.shape[0], R, R))
     _pndf_images(s_el, J, np.ascontiguousarray(c[:, 0]), np.ascontiguousarray(c[:, 1]),
-                 np.ascontiguousarray(sp), sr, SIGMA_H, ft, nt, -S, 2.0 * S / R,
+                 sp, sr, SIGMA_H, ft, nt, -S, 2.0 * S / R,
                  wide_limit2(s_el), out)
     return out.reshape(shape + (R, R))
 

@@ -28,7 +28,7 @@ import weakref
 
 import numpy as np
 
-from prefilter.jit import njit_inline, njit_parallel, njit_serial, prange, serial
+from prefilter.jit import kernel_array, njit_inline, njit_parallel, njit_serial, prange, serial
 from prefilter.validation import as_directions, as_float_array, as_rng
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _quad_masses, _rect_mass
@@ -348,8 +348,8 @@ def sample_s_direct(surf, center, sigma_p, rng=0, *, u=None):
         raise PrefilterError("surf: direct sampling needs the normal map (surface(gm, normal_map))")
     c, sp, shape = as_footprints(center, sigma_p)
     c = wrap_centers(c, _period(surf))
-    cf = np.ascontiguousarray(np.broadcast_to(c, shape + (2,)).reshape(-1, 2))
-    spf = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1), dtype=np.float64)
+    cf = kernel_array(c, shape + (2,)).reshape(-1, 2)
+    spf = kernel_array(sp, shape, np.float64).reshape(-1)
     if u is None:
         u = as_rng(rng).random((cf.shape[0], 3))
     else:

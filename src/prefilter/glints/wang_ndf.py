@@ -32,7 +32,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, njit_serial, prange, serial
+from prefilter.jit import kernel_array, njit_parallel, njit_serial, prange, serial
 from prefilter.validation import as_float_array, as_positive_int, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
@@ -1168,9 +1168,9 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     if bilinear:
         psr = as_intrinsic_roughness(wn.intrinsic_roughness if point_roughness is None
                                      else point_roughness)
-    c = np.broadcast_to(c, shape + (2,)).reshape(-1, 2)
-    sp = np.ascontiguousarray(np.broadcast_to(sp, shape).reshape(-1))
-    q = np.broadcast_to(q, shape + (2,)).reshape(-1, 2)
+    c = kernel_array(c, shape + (2,)).reshape(-1, 2)
+    sp = kernel_array(sp, shape).reshape(-1)
+    q = kernel_array(q, shape + (2,)).reshape(-1, 2)
     py0, px0, wy, wx = _pixel_taps(wn, q, bool(bilinear))
     out = np.empty(sp.shape[0])
     cc = np.ascontiguousarray

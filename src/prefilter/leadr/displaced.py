@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, njit_serial, prange
+from prefilter.jit import kernel_array, njit_parallel, njit_serial, prange
 from prefilter.validation import as_directions, as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.microfacet import Beckmann
@@ -305,7 +305,7 @@ def _first_hits(height, x, y, wo, step):
     h = np.ascontiguousarray(as_float_array(height, "height", ndim_min=2))
     x = np.asarray(x, np.float64).ravel()
     y = np.asarray(y, np.float64).ravel()
-    wo = np.ascontiguousarray(np.broadcast_to(as_directions(wo, "wo"), (x.size, 3)))
+    wo = kernel_array(as_directions(wo, "wo"), (x.size, 3))
     if np.any(wo[:, 2] <= 0.05):
         raise PrefilterError("wo: expected views above the mean plane (z > 0.05), got "
                              f"min z = {wo[:, 2].min():.3g}")

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from prefilter.jit import njit_parallel, prange
+from prefilter.jit import kernel_array, njit_parallel, prange
 from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints.pyramid import plan
 from prefilter.glints.wave.heightfield import Heightfield
@@ -45,7 +45,7 @@ class DirectWave:
     def point(self, center, sigma_p, s) -> np.ndarray:
         """RGB NDF ``(N, 3)`` of footprints ``center (N, 2)``, ``sigma_p (N,)`` at ``s (N, 2)``."""
         c = np.ascontiguousarray(center, np.float64).reshape(-1, 2)
-        sp = np.ascontiguousarray(np.broadcast_to(sigma_p, c.shape[:1]), np.float64)
+        sp = kernel_array(sigma_p, c.shape[:1], np.float64)
         s = np.ascontiguousarray(s, np.float64).reshape(-1, 2)
         out = np.zeros((len(c), 3))
         _direct_points(self.images, float(self.pyr.stride0), float(self.pyr.sigma(0)),
