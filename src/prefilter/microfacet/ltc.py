@@ -17,7 +17,7 @@ import math
 import numpy as np
 
 from prefilter.jit import njit_serial
-from prefilter.sphere.polygon import DET_RTOL2
+from prefilter.sphere.polygon import signed_adjugate
 
 __all__ = ["interp_index", "ltc_density", "ltc_lookup"]
 
@@ -47,7 +47,7 @@ def ltc_lookup(wx, wy, wz, alpha, axis_t, axis_r, tab_m, tab_mag, tab_fres, mm, 
     ``alpha``: writes ``tm (10,)`` (module docstring; scratch ``mm (9,)``) and returns
     ``(ok, magnitude, fresnel)``, the bilinear interpolation in ``(sqrt(1 - cos theta),
     sqrt(alpha))`` (``alpha`` clamped to the table). ``ok`` is False for a singular interpolated
-    matrix (nothing written)."""
+    matrix (``tm`` then holds no LTC)."""
     nt = axis_t.shape[0]
     nr = axis_r.shape[0]
     a_min = axis_r[0] * axis_r[0]
@@ -94,26 +94,11 @@ def ltc_lookup(wx, wy, wz, alpha, axis_t, axis_r, tab_m, tab_mag, tab_fres, mm, 
     a20 = mm[6] * c - mm[7] * s
     a21 = mm[6] * s + mm[7] * c
     a22 = mm[8]
-    # sign(det) adj(M) = |det M| M^-1 (the integral only needs M^-1 up to a positive factor)
-    k00 = a11 * a22 - a12 * a21
-    k01 = a12 * a20 - a10 * a22
-    k02 = a10 * a21 - a11 * a20
-    det = a00 * k00 + a01 * k01 + a02 * k02
-    c0 = a00 * a00 + a10 * a10 + a20 * a20
-    c1 = a01 * a01 + a11 * a11 + a21 * a21
-    c2 = a02 * a02 + a12 * a12 + a22 * a22
-    if not (det * det > DET_RTOL2 * (c0 * c1 * c2)):
+    # |det M| M^-1 (the integral only needs M^-1 up to a positive factor)
+    ok, sg, tm[0], tm[1], tm[2], tm[3], tm[4], tm[5], tm[6], tm[7], tm[8] = signed_adjugate(
+        a00, a01, a02, a10, a11, a12, a20, a21, a22)
+    if not ok:
         return False, 0.0, 0.0
-    sg = 1.0 if det > 0.0 else -1.0
-    tm[0] = sg * k00
-    tm[1] = sg * (a02 * a21 - a01 * a22)
-    tm[2] = sg * (a01 * a12 - a02 * a11)
-    tm[3] = sg * k01
-    tm[4] = sg * (a00 * a22 - a02 * a20)
-    tm[5] = sg * (a02 * a10 - a00 * a12)
-    tm[6] = sg * k02
-    tm[7] = sg * (a01 * a20 - a00 * a21)
-    tm[8] = sg * (a00 * a11 - a01 * a10)
     tmax = 0.0
     for e in range(9):
         tmax = max(tmax, abs(tm[e]))

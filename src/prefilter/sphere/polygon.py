@@ -207,6 +207,28 @@ def clipped_edge_sum(t00, t01, t02, t10, t11, t12, t20, t21, t22, verts, n):
     return acc, True
 
 
+@njit_inline
+def signed_adjugate(a00, a01, a02, a10, a11, a12, a20, a21, a22):
+    """``sign(det M) adj(M) = |det M| M^-1`` of ``M = [[a00, a01, a02], ...]`` (row-major, 9
+    scalars), a positive multiple of the inverse (all the polygon integral needs):
+    ``(ok, sign(det M), t00, ..., t22)``; ``ok`` is False (zeros) when ``M`` is singular,
+    ``|det M|`` below ``sqrt(DET_RTOL2)`` times the product of its column norms."""
+    # cofactors of row 0 give the determinant and the first column of the adjugate
+    k00 = a11 * a22 - a12 * a21
+    k01 = a12 * a20 - a10 * a22
+    k02 = a10 * a21 - a11 * a20
+    det = a00 * k00 + a01 * k01 + a02 * k02
+    c0 = a00 * a00 + a10 * a10 + a20 * a20
+    c1 = a01 * a01 + a11 * a11 + a21 * a21
+    c2 = a02 * a02 + a12 * a12 + a22 * a22
+    if not (det * det > DET_RTOL2 * (c0 * c1 * c2)):  # |det| vs product of column norms
+        return False, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    sgn = 1.0 if det > 0.0 else -1.0
+    return (True, sgn, sgn * k00, sgn * (a02 * a21 - a01 * a22), sgn * (a01 * a12 - a02 * a11),
+            sgn * k01, sgn * (a00 * a22 - a02 * a20), sgn * (a02 * a10 - a00 * a12),
+            sgn * k02, sgn * (a01 * a20 - a00 * a21), sgn * (a00 * a11 - a01 * a10))
+
+
 @njit_parallel
 def _polygon_kernel(mats, m_mode, m_idx, verts, v_mode, v_idx, invert, two_sided, out, status):
     nb = out.shape[0]
@@ -232,30 +254,17 @@ def _polygon_kernel(mats, m_mode, m_idx, verts, v_mode, v_idx, invert, two_sided
         a20 = mats[mi, 2, 0]
         a21 = mats[mi, 2, 1]
         a22 = mats[mi, 2, 2]
-        # cofactors of row 0 give the determinant and the first column of the adjugate
-        k00 = a11 * a22 - a12 * a21
-        k01 = a12 * a20 - a10 * a22
-        k02 = a10 * a21 - a11 * a20
-        det = a00 * k00 + a01 * k01 + a02 * k02
-        c0 = a00 * a00 + a10 * a10 + a20 * a20
-        c1 = a01 * a01 + a11 * a11 + a21 * a21
-        c2 = a02 * a02 + a12 * a12 + a22 * a22
-        if not (det * det > DET_RTOL2 * (c0 * c1 * c2)):  # |det| vs product of column norms
+        ok, sgn, i00, i01, i02, i10, i11, i12, i20, i21, i22 = signed_adjugate(
+            a00, a01, a02, a10, a11, a12, a20, a21, a22)
+        if not ok:
             status[k] = 1
             out[k] = 0.0
             continue
-        sgn = 1.0 if det > 0.0 else -1.0
         if invert:
-            # sign(det) * adj(M) = |det| M^-1: a positive multiple projects to the same polygon
-            t00 = sgn * k00
-            t01 = sgn * (a02 * a21 - a01 * a22)
-            t02 = sgn * (a01 * a12 - a02 * a11)
-            t10 = sgn * k01
-            t11 = sgn * (a00 * a22 - a02 * a20)
-            t12 = sgn * (a02 * a10 - a00 * a12)
-            t20 = sgn * k02
-            t21 = sgn * (a01 * a20 - a00 * a21)
-            t22 = sgn * (a00 * a11 - a01 * a10)
+            # |det| M^-1: a positive multiple projects to the same polygon
+            t00, t01, t02 = i00, i01, i02
+            t10, t11, t12 = i10, i11, i12
+            t20, t21, t22 = i20, i21, i22
         else:
             t00, t01, t02 = a00, a01, a02
             t10, t11, t12 = a10, a11, a12
