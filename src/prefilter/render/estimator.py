@@ -459,8 +459,7 @@ def ltc_control_integral(px, py, pz, ts, bs, ns, verts, cvar, P, C):
 
 
 # Called, not inlined: inlined into the fused reference kernel it nearly doubled that kernel's
-# compile time (42 s vs 24 s on the development machine) for no measurable speed (render
-# times within 6 %, medians equal).
+# compile time for no measurable speed.
 @njit_serial
 def material_mis_pair(px, py, pz, ts, bs, ns, wox, woy, woz, lam_o, ax, ay, base, f0, p_spec,
                       verts, normal, area, p1, d_plane, rect, sr, u0, u1, u2, u3, power, cvar):
