@@ -100,7 +100,8 @@ def test_sample_cells_spread_over_the_map():
 
 
 class _Direct:
-    """A ``level0`` callable giving the direct P-NDF rows (what the bake computes itself)."""
+    """A ``level0`` callable giving the direct P-NDF rows (what the bake computes itself: float32
+    sums)."""
 
     key = "direct-rows"
 
@@ -110,7 +111,7 @@ class _Direct:
     def __call__(self, y, centers, sigma):
         from prefilter.glints.pndf import pndf_image
 
-        return pndf_image(self.nm, centers, sigma, self.R, self.S)
+        return pndf_image(self.nm, centers, sigma, self.R, self.S, dtype=np.float32)
 
 
 def test_one_pass_with_a_level0_callable_gives_the_same_codes(tmp_path):

@@ -432,8 +432,9 @@ def test_exact_from_level_stores_upper_levels_exactly(baked, tmp_path):
     assert 0.9 * 16 <= per_byte <= 16 * (1 + 1e-9)
     # the budget was shared with the upper levels without the option: within 2x of that error
     assert e1[0] < 2 * e0[0]
-    # exact up to a few 16-bit code steps (1.5e-5); the fits of levels 1, 2 err 5-100x more
-    assert max(e1[1:]) < 5e-5 and e1[1] < e0[1] / 5 and e1[2] < e0[2] / 5
+    # exact up to a few 16-bit code steps (1.5e-5); the fit of level 1 errs 5-100x more (level
+    # 2 holds few images: its rank-16 fit reaches the codes' rounding too)
+    assert max(e1[1:]) < 5e-5 and e1[1] < e0[1] / 5
     assert s1["compressed_bytes"] > s0["compressed_bytes"]
     with pytest.raises(PrefilterError, match="exact_from_level"):
         bake(nm, tmp_path / "x.npz", exact_from_level=-1, **kw)

@@ -55,7 +55,7 @@ from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
                                    as_ndf_truncation, as_normal_map, as_support, elements,
-                                   map_digest, pndf_image)
+                                   IMAGE_VERSION, map_digest, pndf_image)
 from prefilter.glints.levels import LevelFile
 from prefilter.glints.pyramid import (LevelStream, Pyramid, filter_taps, next_level_rows, plan,
                                       strip_plan)
@@ -89,10 +89,11 @@ PARALLEL = threading.Lock()
 
 def code_versions(settings: dict) -> dict:
     """The versions of the code a bake with ``settings`` depends on beyond the settings
-    themselves: the CP fit's (``cp_fit``, :data:`prefilter.glints.cp.FIT_VERSION`) and, with exact
+    themselves: the CP fit's (``cp_fit``, :data:`prefilter.glints.cp.FIT_VERSION`), the NDF
+    images' (``ndf_images``, :data:`prefilter.glints.pndf.IMAGE_VERSION`) and, with exact
     levels, the budget rule's (``exact_budget``). The bake's checkpoints and the render and
     Wang-tile caches key on them, so parts and files made by other code are not reused."""
-    out = {"cp_fit": cpmod.FIT_VERSION}
+    out = {"cp_fit": cpmod.FIT_VERSION, "ndf_images": IMAGE_VERSION}
     if settings.get("exact_from_level") is not None:
         out["exact_budget"] = EXACT_BUDGET_RULE
     if settings.get("one_pass"):
@@ -118,7 +119,7 @@ def code_versions(settings: dict) -> dict:
 #: queries). ``one_pass``: no uncompressed pyramid on disk (:func:`one_pass_stages`).
 #: Measurements: docs/glints-part2.md, ``benchmarks/study_glints_scenes.py``.
 BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
-                     intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=50, seed=0,
+                     intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=20, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
                      code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1, one_pass=True)
 #: Bytes of the window of x-filtered rows that building a coarser level holds
@@ -294,8 +295,8 @@ def cell_bounds(pyr: Pyramid, k_sides) -> np.ndarray:
 
 def level0_task(job: BakeJob, ch: int) -> int:
     """Level-0 NDF images of chunk ``ch`` (a row of cells), a row of centres per
-    :func:`prefilter.glints.pndf.pndf_image` call (the float64 images of a whole chunk took 1 GB
-    at 512^2), written into the level file; then its checkpoint part."""
+    :func:`prefilter.glints.pndf.pndf_image` call (the images of a whole chunk took 1 GB at
+    512^2), written into the level file; then its checkpoint part."""
     if job.lk.done(LEVEL0_CHUNK + ch):
         return ch
     lev, centers, sigma = job.level(0), job.pyr.centers(0), job.pyr.sigma(0)
@@ -305,7 +306,8 @@ def level0_task(job: BakeJob, ch: int) -> int:
     for y in range(ch * job.rows_per_chunk, (ch + 1) * job.rows_per_chunk):
         lev.write_rows(y, pndf_image(nm, centers[y:y + 1], sigma, job.R, job.S, job.sr,
                                      elements_=el, ndf_truncation=job.nt,
-                                     footprint_truncation=job.ft) if job.level0 is None
+                                     footprint_truncation=job.ft, dtype=np.float32)
+                       if job.level0 is None
                        else job.level0(y, centers[y:y + 1], sigma))
     job.lk.save(LEVEL0_CHUNK + ch, done=np.array(1))
     return ch
@@ -434,22 +436,23 @@ def refit_cell(job: BakeJob, cid: int, tensors, p1, r_cell) -> None:
 
 
 def cell_images(job: BakeJob, cid: int) -> np.ndarray:
-    """Images ``(n, R, R)`` float64 of cell ``cid`` of a one-pass bake: at level 0 the direct
+    """Images ``(n, R, R)`` float32 of cell ``cid`` of a one-pass bake: at level 0 the direct
     P-NDF of its centres (or the bake's ``level0`` rows), above it the cell's file written by the
     streamed filter."""
     lv, y0, y1, x0, x1 = (int(v) for v in job.cells[cid])
     R = job.R
     if lv > 0:
         f = LevelFile(job.cell_file(cid), (y1 - y0, x1 - x0, R, R))
-        return f.read(0, y1 - y0).astype(np.float64).reshape(-1, R, R)
+        return f.read(0, y1 - y0).reshape(-1, R, R)
     centers, sigma = job.pyr.centers(0), job.pyr.sigma(0)
     if job.level0 is not None:
         return np.concatenate([np.asarray(job.level0(y, centers[y:y + 1], sigma),
-                                          np.float64)[0, x0:x1] for y in range(y0, y1)])
+                                          np.float32)[0, x0:x1] for y in range(y0, y1)])
     nm = np.load(job.lk.dir / "normal_map.npy")
     with PARALLEL:
+        # float32 sums: what the level files store, ~1.5x faster than float64
         imgs = pndf_image(nm, centers[y0:y1, x0:x1], sigma, R, job.S, job.sr,
-                          ndf_truncation=job.nt, footprint_truncation=job.ft)
+                          ndf_truncation=job.nt, footprint_truncation=job.ft, dtype=np.float32)
     return imgs.reshape(-1, R, R)
 
 
@@ -471,7 +474,7 @@ def cell_ranks(job: BakeJob, cid: int, p1) -> np.ndarray:
 def sample_cell_task(job: BakeJob, cid: int) -> int:
     """Pass 1 of a sample cell of a one-pass bake (its errors set the rank multiplier)."""
     if not job.ck.done(CELL_CHUNK + cid):
-        imgs = cell_images(job, cid)
+        imgs = cell_images(job, cid).astype(np.float64)
         blocks, blank, tensors, where = image_tensors(job, imgs)
         stats = cell_stats(job, imgs, blocks, blank)
         del imgs, blocks
@@ -489,9 +492,9 @@ def cell_task(job: BakeJob, cid: int):
     if done and lv > 0:
         return None
     imgs = cell_images(job, cid)
-    out = (imgs.astype(np.float32).reshape(y1 - y0, x1 - x0, job.R, job.R) if lv == 0
-           else None)
+    out = imgs.reshape(y1 - y0, x1 - x0, job.R, job.R) if lv == 0 else None
     if not done:
+        imgs = imgs.astype(np.float64)
         blocks, blank, tensors, where = image_tensors(job, imgs)
         stats = cell_stats(job, imgs, blocks, blank)
         del imgs, blocks

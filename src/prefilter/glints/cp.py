@@ -32,9 +32,16 @@ from prefilter.errors import PrefilterError
 #: Version of the fit's results: bumped whenever a change to :func:`nn_cp` (or what the bake does
 #: with it) changes the factors it returns for the same inputs. The render and Wang-tile caches and
 #: the bake's checkpoints key on it, so files fitted by an older version are never reused
-#: (3: the HALS column sweep reads G by rows, a different rounding; 2: the relative stop test
-#: ``prev - err < tol err``; 1: an absolute one).
-FIT_VERSION = 3
+#: (4: :data:`HALS_SWEEPS` column sweeps per product with the tensor; 3: the HALS column sweep
+#: reads G by rows, a different rounding; 2: the relative stop test ``prev - err < tol err``; 1: an
+#: absolute one).
+FIT_VERSION = 4
+#: HALS column sweeps per mode and iteration, all with the same products ``M = X W`` and
+#: ``G = W^T W`` (the "accelerated HALS" of Gillis and Glineur 2012, Neural Computation 24(4)):
+#: the products with the tensor are the cost of an iteration, a sweep costs ``rows R^2``. On a
+#: level-0 cell of the render's 256^2 gaussian map at rank 24 (158 groups) 20 iterations with 6
+#: sweeps reach 2.91 % relative error in 0.78 s, 50 iterations with one sweep 3.18 % in 1.47 s.
+HALS_SWEEPS = 6
 
 
 def _openblas():
@@ -96,12 +103,13 @@ def _khatri_rao(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def _hals_update(F: np.ndarray, M: np.ndarray, G: np.ndarray, eps: float) -> None:
-    """One HALS sweep over the columns of ``F`` for ``min |X - F W^T|`` with ``M = X W``,
-    ``G = W^T W``, keeping ``F >= eps`` (in place). The tiny floor ``eps`` keeps a component from
-    dying for good (an all-zero column would zero its Gram entry and never be updated again).
-    ``F`` C-contiguous; the sweep is :func:`_hals_columns`' for a batch of one."""
+    """:data:`HALS_SWEEPS` HALS sweeps over the columns of ``F`` for ``min |X - F W^T|`` with
+    ``M = X W``, ``G = W^T W``, keeping ``F >= eps`` (in place). The tiny floor ``eps`` keeps a
+    component from dying for good (an all-zero column would zero its Gram entry and never be
+    updated again).
+    ``F`` C-contiguous; the sweeps are :func:`_hals_columns`' for a batch of one."""
     _hals_columns(F[None], np.ascontiguousarray(M)[None], np.ascontiguousarray(G)[None],
-                  np.array([eps]), np.zeros((1, F.shape[0]), bool), 1e-300)
+                  np.array([eps]), np.zeros((1, F.shape[0]), bool), 1e-300, HALS_SWEEPS)
 
 
 def nn_cp(tensor: np.ndarray, rank: int, *, n_iter_max: int = 200, tol: float = 1e-5,
@@ -188,15 +196,16 @@ def _hals(T, R, n_iter_max, tol, seed):
 
 
 @numba.njit(fastmath=FASTMATH, cache=True, nogil=True)
-def _hals_columns(F, M, G, eps, pad, tiny):
-    """One HALS sweep over the columns of every ``F[g] (rows, R)`` in place, for
+def _hals_columns(F, M, G, eps, pad, tiny, sweeps):
+    """``sweeps`` HALS sweeps over the columns of every ``F[g] (rows, R)`` in place, for
     ``min |X_g - F_g W_g^T|`` with ``M = X W`` and ``G = W^T W`` (symmetric), floored at
     ``eps[g]``; rows with ``pad[g, k]`` stay zero. Compiled (without the GIL: the bake runs cells
     in threads) because the column loop is sequential: as NumPy it was ~R small operations per
     mode and iteration."""
     n, rows, R = F.shape
     for g in range(n):
-        for r in range(R):
+        for it in range(sweeps * R):
+            r = it % R
             d = max(G[g, r, r], tiny)
             Gr = G[g, r]  # G is symmetric: its row r is column r, contiguous (a SIMD dot product)
             for k in range(rows):
@@ -279,8 +288,9 @@ def nn_cp_batch(tensors: list[np.ndarray], rank: int, *, n_iter_max: int = 100,
     no_pad = np.zeros((n, max(I, J)), bool)
 
     def update(F, M, G, mask=None):
-        _hals_columns(F, np.ascontiguousarray(M, dtype=dtype), np.ascontiguousarray(G, dtype=dtype),
-                      eps[:, 0].astype(dtype), no_pad if mask is None else mask, tiny)
+        _hals_columns(F, np.ascontiguousarray(M, dtype=dtype),
+                      np.ascontiguousarray(G, dtype=dtype), eps[:, 0].astype(dtype),
+                      no_pad if mask is None else mask, tiny, HALS_SWEEPS)
 
     prev = np.full(n, np.inf)
     err = np.ones(n)

@@ -37,8 +37,8 @@ from prefilter.validation import as_float_array, as_positive_int, as_rng, broadc
 from prefilter.errors import PrefilterError
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
                                    as_sigma_p, as_support, element_covariance, element_density,
-                                   element_split, line_nodes, normal_cdf, pixel_edges, pndf_image,
-                                   principal_axis, splat)
+                                   element_split, line_nodes, node_reach, normal_cdf, pixel_edges,
+                                   pndf_image, principal_axis, splat_element)
 from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints.wang_query import (TilePack, gauss_row, pack_float, pack_point,
                                          segment_sums, tile_taps)
@@ -513,33 +513,13 @@ def _tile_terms(wn: TiledNDF, c, sp, index):
 
 @njit_serial
 def _splat_elements(mx, my, a, b, d, w, which, sr, lo, h, trunc, imgs):
-    """Add ``w_k`` times element ``k``'s pixel masses to ``imgs[which_k]``: the splatting of
-    ``pndf._pndf_images`` (isotropic part by erf masses, rank-one part by a line quadrature)."""
-    R = imgs.shape[1]
-    hi = lo + R * h
-    px = np.zeros(R)
-    py = np.zeros(R)
+    """Add ``w_k`` times element ``k``'s pixel masses to ``imgs[which_k]``
+    (:func:`prefilter.glints.pndf.splat_element`, the splatting of the direct P-NDF's images)."""
+    px = np.zeros_like(imgs[0, 0])
+    py = np.zeros_like(imgs[0, 0])
     for k in range(mx.shape[0]):
-        img = imgs[which[k]]
-        nu1, siso, kappa = element_split(a[k], b[k], d[k], sr)
-        reach = trunc * math.sqrt(nu1 + sr * sr)
-        if mx[k] + reach < lo or mx[k] - reach > hi or my[k] + reach < lo or my[k] - reach > hi:
-            continue
-        if kappa < 1e-3 * siso:
-            splat(img, px, py, mx[k], my[k], siso, w[k], lo, h, trunc)
-            continue
-        vx, vy = principal_axis(a[k], b[k], d[k], nu1)
-        if kappa <= 0.7 * siso:
-            t = math.sqrt(3.0) * kappa
-            splat(img, px, py, mx[k], my[k], siso, w[k] * (2.0 / 3.0), lo, h, trunc)
-            splat(img, px, py, mx[k] + t * vx, my[k] + t * vy, siso, w[k] / 6.0, lo, h, trunc)
-            splat(img, px, py, mx[k] - t * vx, my[k] - t * vy, siso, w[k] / 6.0, lo, h, trunc)
-            continue
-        n, norm = line_nodes(kappa, siso, trunc)
-        for q in range(n):
-            tq = -trunc + 2.0 * trunc * q / (n - 1)
-            splat(img, px, py, mx[k] + kappa * tq * vx, my[k] + kappa * tq * vy, siso,
-                   w[k] * math.exp(-0.5 * tq * tq) / norm, lo, h, trunc)
+        splat_element(imgs[which[k]], px, py, mx[k], my[k], a[k], b[k], d[k], sr, w[k], lo, h,
+                      trunc)
 
 
 def _texel_s(wn: TiledNDF, index, gx, gy):
@@ -866,7 +846,8 @@ def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no 
     for q in range(n):
         tq = -trunc + 2.0 * trunc * q / (n - 1)
         acc += _nb_pixel(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
-                         w * math.exp(-0.5 * tq * tq) / norm, lo, h, R, trunc, iy, ix)
+                         w * math.exp(-0.5 * tq * tq) / norm, lo, h, R, node_reach(tq, trunc),
+                         iy, ix)
     return acc
 
 

@@ -28,8 +28,8 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _flush_rects, _rect, _touching
-from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, normal_cdf,
-                                   principal_axis)
+from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, node_reach,
+                                   normal_cdf, principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
                                       _nb_type, dep_gaussian, dependent_neighbours, level_window)
 from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes
@@ -125,7 +125,8 @@ def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no 
                    min(n - 1, int(math.ceil((thi + trunc) / step))) + 1):
         tq = -trunc + 2.0 * trunc * q / (n - 1)
         acc += _iso_mass(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
-                         w * math.exp(-0.5 * tq * tq) / norm, x0, x1, y0, y1, trunc)
+                         w * math.exp(-0.5 * tq * tq) / norm, x0, x1, y0, y1,
+                         node_reach(tq, trunc))
     return acc
 
 
