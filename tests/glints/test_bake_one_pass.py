@@ -28,7 +28,8 @@ def test_one_pass_keeps_the_pyramid_and_meets_about_the_budget(tmp_path):
     b = bake(nm, tmp_path / "one.npz", progress=False, one_pass=True, **KW)
     assert load(tmp_path / "one.npz").header["settings"]["one_pass"] is True
     assert a["n_images"] == b["n_images"]
-    assert np.allclose(a["level_differences"], b["level_differences"], rtol=1e-3)
+    # the one-pass difference reads float16 images (LevelStream): 4e-5 apart here at 0.002
+    assert np.allclose(a["level_differences"], b["level_differences"], rtol=1e-3, atol=1e-4)
     assert abs(b["mean_rank_per_byte"] / a["mean_rank_per_byte"] - 1) < 0.25
     assert b["rel_l2_error"] < 1.5 * a["rel_l2_error"]
     assert not (tmp_path / "one.npz.parts").exists()

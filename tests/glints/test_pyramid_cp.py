@@ -222,7 +222,7 @@ def test_level_stream_is_next_level_in_any_order(tmp_path, ny, nx):
         st.spill()
     out = np.stack([got[i] for i in range(ny // 2)])
     assert np.abs(out - ref).max() <= 2e-6 * ref.max()
-    assert st.difference == pytest.approx(level_difference(L, ref), rel=1e-5)
+    assert st.difference == pytest.approx(level_difference(L, ref), rel=1e-4)  # float16 even images
     assert not list(tmp_path.iterdir())
 
 

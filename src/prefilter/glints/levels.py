@@ -1,4 +1,4 @@
-"""A bake's uncompressed pyramid level on disk: a float32 ``.npy`` of NDF images
+"""A bake's uncompressed pyramid level on disk: a float32 (or float16) ``.npy`` of NDF images
 ``(ny, nx, R, R)`` read and written by rows of centres with ``pread`` / ``pwrite``.
 
 A memory map of a level (4.3 GB at level 0 of a 256^2 map with 512^2 images) counts every page
@@ -16,11 +16,14 @@ import numpy as np
 
 class LevelFile:
     """The images of one pyramid level in the ``.npy`` file ``path`` (created, or reopened when
-    its header matches ``shape``: a resumed bake keeps the rows its checkpoints mark done)."""
+    its header matches ``shape`` and ``dtype``: a resumed bake keeps the rows its checkpoints
+    mark done). ``dtype``: float32 (levels) or float16 (what only a statistic reads)."""
 
-    def __init__(self, path: str | os.PathLike, shape: tuple[int, ...]):
+    def __init__(self, path: str | os.PathLike, shape: tuple[int, ...], dtype=np.float32):
         self.path = Path(path)
         self.shape = tuple(int(n) for n in shape)
+        self.dtype = np.dtype(dtype)
+        self.item = self.dtype.itemsize
         self.row_items = int(np.prod(self.shape[1:]))
         self.image_items = int(np.prod(self.shape[2:]))
         self.offset = self._reopen()
@@ -37,27 +40,27 @@ class LevelFile:
                 offset = fh.tell()
         except (OSError, ValueError, EOFError):
             return None  # missing, or killed while the file was being created
-        if shape != self.shape or fortran or dtype != np.float32:
+        if shape != self.shape or fortran or dtype != self.dtype:
             return None
-        if self.path.stat().st_size != offset + 4 * self.row_items * self.shape[0]:
+        if self.path.stat().st_size != offset + self.item * self.row_items * self.shape[0]:
             return None
         return offset
 
     def _create(self) -> int:
-        header = {"descr": np.lib.format.dtype_to_descr(np.dtype(np.float32)),
+        header = {"descr": np.lib.format.dtype_to_descr(self.dtype),
                   "fortran_order": False, "shape": self.shape}
         with open(self.path, "wb") as fh:
             np.lib.format.write_array_header_1_0(fh, header)
             offset = fh.tell()
-            fh.truncate(offset + 4 * self.row_items * self.shape[0])  # sparse until written
+            fh.truncate(offset + self.item * self.row_items * self.shape[0])  # sparse until written
         return offset
 
     def write_rows(self, y0: int, images: np.ndarray) -> None:
         """Write rows ``y0 ..`` of centres: ``images (n, nx, R, R)``."""
-        data = np.ascontiguousarray(images, dtype=np.float32)
+        data = np.ascontiguousarray(images, dtype=self.dtype)
         fd = os.open(self.path, os.O_WRONLY)
         try:
-            view, pos = memoryview(data).cast("B"), self.offset + 4 * self.row_items * y0
+            view, pos = memoryview(data).cast("B"), self.offset + self.item * self.row_items * y0
             while view.nbytes:
                 n = os.pwrite(fd, view, pos)
                 view, pos = view[n:], pos + n
@@ -66,11 +69,11 @@ class LevelFile:
 
     def write_columns(self, y: int, x0: int, images: np.ndarray) -> None:
         """Write images ``(n, R, R)`` at row ``y``, columns ``x0 .. x0 + n - 1``."""
-        data = np.ascontiguousarray(images, dtype=np.float32)
+        data = np.ascontiguousarray(images, dtype=self.dtype)
         fd = os.open(self.path, os.O_WRONLY)
         try:
             view = memoryview(data).cast("B")
-            pos = self.offset + 4 * (self.row_items * y + self.image_items * x0)
+            pos = self.offset + self.item * (self.row_items * y + self.image_items * x0)
             while view.nbytes:
                 n = os.pwrite(fd, view, pos)
                 view, pos = view[n:], pos + n
@@ -89,20 +92,20 @@ class LevelFile:
 
     def read(self, y0: int, y1: int, x0: int = 0, x1: int | None = None,
              step: int = 1) -> np.ndarray:
-        """Images ``(y1 - y0, len(range(x0, x1, step)), R, R)`` float32 of rows ``y0 .. y1 - 1``
-        and columns ``x0, x0 + step, .. < x1`` (a copy)."""
+        """Images ``(y1 - y0, len(range(x0, x1, step)), R, R)`` (the file's dtype) of rows
+        ``y0 .. y1 - 1`` and columns ``x0, x0 + step, .. < x1`` (a copy)."""
         x1 = self.shape[1] if x1 is None else x1
         xs = range(x0, x1, step)
-        out = np.empty((y1 - y0, len(xs)) + self.shape[2:], np.float32)
+        out = np.empty((y1 - y0, len(xs)) + self.shape[2:], self.dtype)
         fd = os.open(self.path, os.O_RDONLY)
         try:
             for i, y in enumerate(range(y0, y1)):
-                row = self.offset + 4 * self.row_items * y
+                row = self.offset + self.item * self.row_items * y
                 # contiguous columns in one read, strided ones image by image
                 runs = ([(x0, out[i])] if step == 1 else
                         [(x, out[i, k]) for k, x in enumerate(xs)])
                 for x, buf in runs:
-                    view, pos = memoryview(buf).cast("B"), row + 4 * self.image_items * x
+                    view, pos = memoryview(buf).cast("B"), row + self.item * self.image_items * x
                     while view.nbytes:
                         n = os.preadv(fd, [view], pos)
                         if n == 0:
