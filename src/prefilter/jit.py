@@ -17,6 +17,7 @@ one (compilation is lazy: only the kernels a process calls are recompiled).
 
 from __future__ import annotations
 
+import ctypes
 import hashlib
 import os
 import shutil
@@ -102,6 +103,18 @@ njit_serial = numba.njit(fastmath=FASTMATH, cache=True)
 #: of the shader's time when left to LLVM)
 njit_inline = numba.njit(fastmath=FASTMATH, cache=True, inline="always")
 prange = numba.prange
+
+
+def release_heap() -> None:
+    """Return the C heap's free pages to the system (glibc's ``malloc_trim``; nothing where there
+    is none). Threads (the kernels', a bake's pool) allocate in glibc arenas of their own whose
+    freed pages stay resident: a glints bake of a 256^2 map left the process at 772 MiB, 243 MiB
+    after this; the render that follows it then peaked ~500 MiB lower."""
+    try:
+        trim = ctypes.CDLL("libc.so.6").malloc_trim
+    except (OSError, AttributeError):
+        return
+    trim(0)
 
 
 def kernel_array(a, shape, dtype=None):

@@ -50,13 +50,14 @@ from pathlib import Path
 import numpy as np
 
 from prefilter.fileio import Checkpoints, atomic_path, bake_lock, exclusive_lock
+from prefilter.jit import release_heap
 from prefilter.validation import as_positive_int
 from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
                                    as_ndf_truncation, as_normal_map, as_support, elements,
                                    IMAGE_VERSION, map_digest, pndf_image)
-from prefilter.glints.levels import LevelFile
+from prefilter.glints.levels import LevelFile, over_peaks
 from prefilter.glints.pyramid import (LevelStream, Pyramid, filter_taps, next_level_rows, plan,
                                       strip_plan)
 from prefilter.glints.store import CODE_BITS, GlintsMap, decode, encode, pack_mask, save
@@ -79,9 +80,10 @@ EXACT = -1
 EXACT_BUDGET_RULE = 2
 #: Level-0 cells whose pass-1 errors set a one-pass bake's rank multiplier (spread over the map).
 SAMPLE_CELLS = 4
-#: Version of what a one-pass bake computes (its sample, the order of its filter's sums); its
-#: checkpoints and the render cache key on it (:func:`code_versions`).
-ONE_PASS_VERSION = 1
+#: Version of what a one-pass bake computes (its sample, the order of its filter's sums, the
+#: float16 files of the fitted levels' cells: 2); its checkpoints and the render cache key on it
+#: (:func:`code_versions`).
+ONE_PASS_VERSION = 2
 #: Numba's default threading layer is not thread-safe: the bake's parallel kernels (level-0
 #: images, the streamed filter) run under this lock when tasks run on threads.
 PARALLEL = threading.Lock()
@@ -203,8 +205,11 @@ def _serialised(fn):
     """Run a bake under :func:`_locked` (``fn.__wrapped__`` is the unlocked bake)."""
     @functools.wraps(fn)
     def locked(normal_map, out, **kwargs):
-        with _locked(out, kwargs.get("levels_dir")):
-            return fn(normal_map, out, **kwargs)
+        try:
+            with _locked(out, kwargs.get("levels_dir")):
+                return fn(normal_map, out, **kwargs)
+        finally:
+            release_heap()  # what the bake's threads freed: the render after it needs it
     return locked
 
 
@@ -217,7 +222,10 @@ def bake_if_missing(normal_map, out, **kwargs) -> bool:
     with _locked(out, kwargs.get("levels_dir")):
         if out.exists():  # baked by the process that held the lock
             return False
-        bake.__wrapped__(normal_map, out, **kwargs)
+        try:
+            bake.__wrapped__(normal_map, out, **kwargs)
+        finally:
+            release_heap()
     return True
 
 
@@ -275,6 +283,35 @@ class BakeJob:
     def cell_file(self, cid: int) -> Path:
         """The images of a coarser level's cell in a one-pass bake (:func:`cell_task`)."""
         return self.ck.dir / f"cell{cid}.npy"
+
+    def cell_files(self, cid: int) -> tuple[LevelFile, LevelFile | None]:
+        """The files a coarser level's cell waits in for its task (:func:`cell_task`): its
+        images and, at the fitted levels, their peaks. Fitted levels wait as float16 images over
+        their peaks (:func:`prefilter.glints.levels.over_peaks`: rounding 5e-4, a hundredth of
+        the fits' error; they were most of the temporary disk at the end of a bake), the exact
+        levels as float32."""
+        lv, y0, y1, x0, x1 = (int(v) for v in self.cells[cid])
+        shape, path = (y1 - y0, x1 - x0), self.cell_file(cid)
+        if self.exact(lv):
+            return LevelFile(path, shape + (self.R, self.R)), None
+        return (LevelFile(path, shape + (self.R, self.R), np.float16),
+                LevelFile(path.with_name(f"{path.stem}-peaks.npy"), shape))
+
+    def write_cell_rows(self, cid: int, y: int, images: np.ndarray) -> None:
+        """Row ``y`` (cell-relative) of cell ``cid``'s images ``(1, k, R, R)`` into its
+        :meth:`cell_files`."""
+        imgs, peaks = self.cell_files(cid)
+        if peaks is None:
+            imgs.write_rows(y, images)
+            return
+        scaled, peak = over_peaks(images)
+        peaks.write_rows(y, peak)
+        imgs.write_rows(y, scaled)
+
+    def remove_cell_files(self, cid: int) -> None:
+        path = self.cell_file(cid)
+        path.unlink(missing_ok=True)
+        path.with_name(f"{path.stem}-peaks.npy").unlink(missing_ok=True)
 
 
 def cell_bounds(pyr: Pyramid, k_sides) -> np.ndarray:
@@ -442,8 +479,11 @@ def cell_images(job: BakeJob, cid: int) -> np.ndarray:
     lv, y0, y1, x0, x1 = (int(v) for v in job.cells[cid])
     R = job.R
     if lv > 0:
-        f = LevelFile(job.cell_file(cid), (y1 - y0, x1 - x0, R, R))
-        return f.read(0, y1 - y0).reshape(-1, R, R)
+        imgs, peaks = job.cell_files(cid)
+        out = imgs.read(0, y1 - y0)
+        if peaks is not None:
+            out = out.astype(np.float32) * peaks.read(0, y1 - y0)[..., None, None]
+        return out.reshape(-1, R, R)
     centers, sigma = job.pyr.centers(0), job.pyr.sigma(0)
     if job.level0 is not None:
         return np.concatenate([np.asarray(job.level0(y, centers[y:y + 1], sigma),
@@ -578,8 +618,7 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
                 for cid in at_row[(lv, y)]:
                     _, y0, y1, x0, x1 = (int(v) for v in cells[cid])
                     if not ck.done(FINAL_CHUNK + cid):
-                        LevelFile(job.cell_file(cid), (y1 - y0, x1 - x0, R, R)).write_rows(
-                            y - y0, imgs[None, x0:x1])
+                        job.write_cell_rows(cid, y - y0, imgs[None, x0:x1])
                     rows_left[cid] -= 1
                     if rows_left[cid] == 0:
                         ready.append(cid)
@@ -591,7 +630,7 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
         def run(batch):
             for cid, imgs in zip(batch, mapper(cell_task, [job] * len(batch), batch)):
                 if imgs is None:
-                    job.cell_file(cid).unlink(missing_ok=True)
+                    job.remove_cell_files(cid)
                 elif streams:
                     _, y0, _, x0, _ = (int(v) for v in cells[cid])
                     for i, row in enumerate(imgs):

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from prefilter.glints.levels import LevelFile
+from prefilter.glints.levels import LevelFile, over_peaks
 from prefilter.jit import njit_parallel, njit_serial, prange
 from prefilter.validation import as_float_array, as_positive_int
 from prefilter.errors import PrefilterError
@@ -387,12 +387,10 @@ class LevelStream:
             if xs.size and self.spill_dir is None:
                 self._get(("even", y // 2))[xs // 2] = X[xs - x0]
             elif xs.size:  # straight to their file: read once, when the row completes
-                imgs = X[xs - x0]
-                peak = imgs.max(axis=1)
-                peak = np.where(peak > 0, peak, 1.0).astype(np.float32)
+                scaled, peak = over_peaks(X[xs - x0].reshape((-1,) + self.image_shape))
                 self._even_scale.setdefault(y // 2, np.ones(self.nx // 2, np.float32))[
                     xs // 2] = peak
-                self._even_file(y // 2).write_columns(0, int(xs[0]) // 2, imgs / peak[:, None])
+                self._even_file(y // 2).write_columns(0, int(xs[0]) // 2, scaled)
 
     def arrived(self, rows) -> list[tuple[int, np.ndarray]]:
         """Mark rows of level ``l`` complete; the level-``l + 1`` rows ``(yo, (nx/2, R, R))``
