@@ -121,7 +121,8 @@ def code_versions(settings: dict) -> dict:
 #: queries). ``one_pass``: no uncompressed pyramid on disk (:func:`one_pass_stages`).
 #: ``n_iter_max`` 30 (with :data:`prefilter.glints.cp.HALS_SWEEPS`): the brushed plane at mid
 #: distance, the measurement scene's hardest cell under a point light, gave FLIP 0.051 / 0.046 /
-#: 0.044 at 20 / 30 / 50 iterations; each iteration is ~1 % of the cold render's bake time.
+#: 0.044 at 20 / 30 / 50 iterations (at 20 the CP took 47 % of the thread time of the docs
+#: example's gaussian-map bake, the level-0 images 35 %).
 #: Measurements: docs/glints-part2.md, ``benchmarks/study_glints_scenes.py``.
 BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=30, seed=0,
