@@ -292,8 +292,8 @@ class BakeJob:
         """The files a coarser level's cell waits in for its task (:func:`cell_task`): its
         images and, at the fitted levels, their peaks. Fitted levels wait as float16 images over
         their peaks (:func:`prefilter.glints.levels.over_peaks`: rounding 5e-4, a hundredth of
-        the fits' error; they were most of the temporary disk at the end of a bake), the exact
-        levels as float32."""
+        the fits' error; at the end of a bake the waiting cells are most of its temporary disk),
+        the exact levels as float32."""
         lv, y0, y1, x0, x1 = (int(v) for v in self.cells[cid])
         shape, path = (y1 - y0, x1 - x0), self.cell_file(cid)
         if self.exact(lv):
