@@ -4,11 +4,7 @@ in a directory named by the kernel sources' fingerprint."""
 
 from __future__ import annotations
 
-import ctypes
-import ctypes.util
 import math
-import os
-import platform
 from pathlib import Path
 
 import numba
@@ -159,46 +155,3 @@ def test_broadcast_arguments_do_not_compile_read_only_specializations():
     assert twin.signatures
     for sig in twin.signatures:
         assert all(a.mutable for a in sig if isinstance(a, nbt.Array)), sig
-
-
-_HEAP_SCRIPT = """
-import threading
-import numpy as np
-from prefilter.jit import release_heap
-
-def rss():
-    return int(open("/proc/self/status").read().split("VmRSS:")[1].split()[0]) / 1024
-
-big = np.ones(16 << 17)  # a freed 16 MiB mmap raises glibc's mmap threshold above 1 MiB
-del big
-pins = []
-
-def work():
-    keep = []
-    for _ in range(300):
-        keep.append(np.ones(1 << 17))  # 1 MiB from the thread's arena
-        pins.append(np.ones(8))  # a live object after each: the arena's top cannot shrink
-    del keep
-
-t = threading.Thread(target=work)
-t.start()
-t.join()
-before = rss()
-release_heap()
-print(before - rss())
-"""
-
-
-@pytest.mark.skipif(not os.path.exists("/proc/self/status") or ctypes.util.find_library("c")
-                    is None or "glibc" not in (platform.libc_ver()[0] or ""),
-                    reason="glibc's malloc_trim on Linux")
-def test_release_heap_returns_what_threads_freed():
-    """Freed pages of a thread's glibc arena stay resident (the bakes' pools left ~530 MiB) until
-    release_heap: 300 MiB allocated between small live objects, freed, then released. In a fresh
-    interpreter: a test worker's heap (other tests' arenas and thresholds) makes the drop vary."""
-    import subprocess
-    import sys
-
-    out = subprocess.run([sys.executable, "-c", _HEAP_SCRIPT], capture_output=True, text=True,
-                         check=True)
-    assert float(out.stdout) > 150
