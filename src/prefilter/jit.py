@@ -109,7 +109,8 @@ def release_heap() -> None:
     """Return the C heap's free pages to the system (glibc's ``malloc_trim``; nothing where there
     is none). Threads (the kernels', a bake's pool) allocate in glibc arenas of their own whose
     freed pages stay resident: a glints bake of a 256^2 map left the process at 772 MiB, 243 MiB
-    after this; the render that follows it then peaked ~500 MiB lower."""
+    after this; the docs example's cold glints render (two bakes, then the render) peaked at
+    1747 MiB instead of 1999 MiB (``benchmarks/bench_glints_cold.py``)."""
     try:
         trim = ctypes.CDLL("libc.so.6").malloc_trim
     except (OSError, AttributeError):

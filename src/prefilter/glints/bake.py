@@ -299,7 +299,11 @@ class BakeJob:
         if self.exact(lv):
             return LevelFile(path, shape + (self.R, self.R)), None
         return (LevelFile(path, shape + (self.R, self.R), np.float16),
-                LevelFile(path.with_name(f"{path.stem}-peaks.npy"), shape))
+                LevelFile(self.cell_peaks_file(cid), shape))
+
+    def cell_peaks_file(self, cid: int) -> Path:
+        """The peaks of a fitted level's cell images (:meth:`cell_files`)."""
+        return self.ck.dir / f"cell{cid}-peaks.npy"
 
     def write_cell_rows(self, cid: int, y: int, images: np.ndarray) -> None:
         """Row ``y`` (cell-relative) of cell ``cid``'s images ``(1, k, R, R)`` into its
@@ -313,9 +317,9 @@ class BakeJob:
         imgs.write_rows(y, scaled)
 
     def remove_cell_files(self, cid: int) -> None:
-        path = self.cell_file(cid)
-        path.unlink(missing_ok=True)
-        path.with_name(f"{path.stem}-peaks.npy").unlink(missing_ok=True)
+        """Delete :meth:`cell_files` (after the cell's task)."""
+        self.cell_file(cid).unlink(missing_ok=True)
+        self.cell_peaks_file(cid).unlink(missing_ok=True)
 
 
 def cell_bounds(pyr: Pyramid, k_sides) -> np.ndarray:

@@ -17,7 +17,9 @@ import numpy as np
 class LevelFile:
     """The images of one pyramid level in the ``.npy`` file ``path`` (created, or reopened when
     its header matches ``shape`` and ``dtype``: a resumed bake keeps the rows its checkpoints
-    mark done). ``dtype``: float32 (levels) or float16 (what only a statistic reads)."""
+    mark done). ``dtype``: float32 (levels) or float16 (images stored over their peaks,
+    :func:`over_peaks`: the one-pass bake's waiting cells of fitted levels and the images only the
+    level difference reads)."""
 
     def __init__(self, path: str | os.PathLike, shape: tuple[int, ...], dtype=np.float32):
         self.path = Path(path)
