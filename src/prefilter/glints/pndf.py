@@ -414,7 +414,8 @@ def node_reach(tk, trunc):  # pragma: no cover - compiled
     """Stds of the isotropic splat of a line node ``tk`` stds out along ``v``
     (:func:`splat_element`): the node carries ``exp(-tk^2 / 2)``, so its splat meets the
     element's cut ``exp(-trunc^2 / 2)`` at ``sqrt(trunc^2 - tk^2)`` (the nodes then cover the
-    cut ellipse instead of the box around it: ~8 % fewer pixel updates at level 0); at least 1."""
+    cut ellipse instead of the box around it: level-0 images of the render bake ~8 % faster, one
+    timed cell); at least 1."""
     return math.sqrt(max(trunc * trunc - tk * tk, 1.0))
 
 
