@@ -7,8 +7,8 @@
 1. ``pndf.splat``: nanoseconds per isotropic splat at the render's NDF resolution, intrinsic
    roughness and cut (6 stds), at 200 000 random positions.
 2. Level-0 NDF images (``pndf_image``, the bake's first stage): CPU milliseconds per image of 16
-   level-0 footprints (std 4 texels, cuts 6 / 6) of the flakes and brushed maps, at 256^2 and
-   512^2.
+   level-0 footprints (std 4 texels, the render bake's cuts) of the flakes and brushed maps, at
+   256^2 and 512^2.
 3. A whole bake of the map with the render's settings (``render.baked_surface`` into an empty
    temporary cache): wall seconds, the CP passes (fit at the base rank, refit) and the rest
    (mostly the level-0 images; then the coarser levels and the encoding), and the file's size.
@@ -54,7 +54,9 @@ def bench_level0(kind: str, R: int, sr: float) -> float:
 
     nm = normal_map(kind, size=128, seed=1)
     c = np.stack(np.meshgrid(np.arange(4) * 32 + 2.0, np.arange(4) * 32 + 2.0), -1).reshape(-1, 2)
-    kw = dict(ndf_truncation=6.0, footprint_truncation=6.0)
+    from prefilter.glints.bake import BAKE_SETTINGS
+
+    kw = {k: BAKE_SETTINGS[k] for k in ("ndf_truncation", "footprint_truncation")}
     pndf_image(nm, c[:1], 4.0, R, 1.0, sr, **kw)  # compile outside the timing
     t = time.process_time()
     pndf_image(nm, c, 4.0, R, 1.0, sr, **kw)

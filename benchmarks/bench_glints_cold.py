@@ -39,10 +39,31 @@ def docs_example() -> dict:
     return json.loads(re.search(r"```json\n(.*?)```", section, re.S).group(1))
 
 
+#: The warm-up renders twice in one process: as is, then with every serial-below threshold at 0
+#: so that the parallel twins of the kernels compile too (a 32 x 18 frame runs the serial ones
+#: only; the full frame of 256^2 maps then compiled the parallel query kernels, ~18 s of its
+#: render).
+WARMUP = """
+import sys
+from prefilter.cli import main
+import prefilter.jit, prefilter.glints.query, prefilter.glints.brdf, prefilter.render.kernels
+def render():
+    try:
+        main(sys.argv[1:])
+    except SystemExit as e:
+        if e.code:
+            raise
+render()
+prefilter.jit.SERIAL_BELOW = prefilter.glints.query.SERIAL_BELOW = 0
+prefilter.glints.brdf.RENDER_SERIAL_BELOW = prefilter.render.kernels.SERIAL_BELOW = 0
+render()
+"""
+
+
 def warmup(root: Path, env: dict) -> float:
     """Compile the kernels a ``glints`` render and its bake call (Numba caches them by source
     version): render a 32 x 18 copy of the docs' example with 32^2 maps into a throwaway glints
-    cache. Returns its wall time."""
+    cache, serial and parallel kernels (:data:`WARMUP`). Returns its wall time."""
     small = docs_example()
     small["camera"].update(width=32, height=18)
     for obj in small["objects"]:
@@ -50,9 +71,9 @@ def warmup(root: Path, env: dict) -> float:
     (root / "warmup.json").write_text(json.dumps(small))
     (root / "warmup-cache").mkdir()
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "from prefilter.cli import main; main()", "render",
-                    str(root / "warmup.json"), "--method", "glints", "--out",
-                    str(root / "warmup.exr")], check=True, capture_output=True,
+    subprocess.run([sys.executable, "-c", WARMUP, "render", str(root / "warmup.json"),
+                    "--method", "glints", "--out", str(root / "warmup.exr")], check=True,
+                   capture_output=True,
                    env=dict(env, PREFILTER_GLINTS_CACHE=str(root / "warmup-cache")))
     return time.perf_counter() - t0
 

@@ -122,3 +122,30 @@ def test_one_pass_with_a_level0_callable_gives_the_same_codes(tmp_path):
          level0=_Direct(nm, KW["ndf_res"], KW["support"]), **KW)
     ga, gb = load(tmp_path / "a.npz"), load(tmp_path / "b.npz")
     assert all(np.array_equal(ga.codes[k], gb.codes[k]) for k in ga.codes)
+
+
+@pytest.mark.parametrize("one_pass", [True, False])
+def test_every_fitted_group_gets_the_iterations_split_between_the_passes(tmp_path, monkeypatch,
+                                                                         one_pass):
+    """Pass 1 runs ``pass1_iters`` cold at the base rank; the final fit continues every fitted
+    group (base rank too) from it for the rest, so each gets ``n_iter_max`` in all."""
+    calls = []
+    real = gbake.cpmod.nn_cp_batch
+
+    def spy(tensors, rank, **kw):
+        calls.append((len(tensors), rank, kw["n_iter_max"], kw.get("init") is not None))
+        return real(tensors, rank, **kw)
+
+    monkeypatch.setattr(gbake.cpmod, "nn_cp_batch", spy)
+    kw = dict(KW, n_iter_max=12)
+    bake(sinusoid(32, px=16, py=8), tmp_path / "m.npz", progress=False, one_pass=one_pass, **kw)
+    n1 = gbake.pass1_iters(12)
+    assert n1 == 6
+    first = [c for c in calls if not c[3]]
+    rest = [c for c in calls if c[3]]
+    base = kw["rank"] // 2
+    assert first and all(c[1] == base and c[2] == n1 for c in first)
+    assert rest and all(c[2] == 12 - n1 for c in rest)
+    assert any(c[1] == base for c in rest) and any(c[1] > base for c in rest)
+    # the sample cells of a one-pass bake are fitted once in pass 1 (their part is reused)
+    assert sum(c[0] for c in rest) == sum(c[0] for c in first)

@@ -106,27 +106,32 @@ def code_versions(settings: dict) -> dict:
 #: The bake of ``prefilter bake glints`` and of the ``glints`` render method (one definition: the
 #: command writes, by default into the render cache, what the renderer reads; :func:`bake_settings`
 #: completes it for a map). ``intrinsic_roughness`` is the model's (direct P-NDF, fallback,
-#: reference), twice Yan et al.'s 0.005 so that the NDF pixels resolve the intrinsic lobe; with
-#: the bilinear lookup the map is baked with :func:`bilinear_bake_roughness` of it. ``support`` 1:
-#: the images cover the whole disk of projected half vectors. ``rank`` 48: the adaptive-rank
-#: storage budget at which the measurement scene's FLIP vs ``glints-direct`` stays <= 0.05 at
-#: every distance. ``blank_tol`` 1e-6: coarser thresholds drop the dim lines and flakes next to a
-#: bright peak that a point light sees at mid and far distance. ``ndf_truncation`` /
-#: ``footprint_truncation`` 6: HDR-FLIP of the mostly black brushed plane exposes the element and
-#: footprint tails beyond 4 stds. ``code_bits`` 16 / ``c_bits`` 8: 8-bit ``a``, ``b`` rounding
-#: shows in the NDF tails, 8-bit ``c`` does not and keeps range queries as fast as all-8-bit
-#: codes. ``ndf_res`` 512 with ``block`` 32: the environment's brushed plane needs 512^2 images;
-#: 32-pixel blocks keep the blocks a range query spans (and the frame time) low. Levels >= 3 are
-#: stored exactly, each image its own group (``exact_cell`` 1: exact ranks <= ``block``, faster
-#: queries). ``one_pass``: no uncompressed pyramid on disk (:func:`one_pass_stages`).
-#: ``n_iter_max`` 30 (with :data:`prefilter.glints.cp.HALS_SWEEPS`): the brushed plane at mid
-#: distance, the measurement scene's hardest cell under a point light, gave FLIP 0.051 / 0.046 /
-#: 0.044 at 20 / 30 / 50 iterations (at 20 the CP took 47 % of the thread time of the docs
-#: example's gaussian-map bake, the level-0 images 35 %).
-#: Measurements: docs/glints-part2.md, ``benchmarks/study_glints_scenes.py``.
+#: reference), twice Yan et al.'s 0.005 so that the NDF pixels resolve the intrinsic lobe; with the
+#: bilinear lookup the map is baked with :func:`bilinear_bake_roughness` of it. ``support`` 1: the
+#: images cover the whole disk of projected half vectors. ``rank`` 48: the adaptive-rank storage
+#: budget at which the measurement scene's FLIP vs ``glints-direct`` stays <= 0.05 at every
+#: distance. ``blank_tol`` 1e-6: coarser thresholds drop the dim lines and flakes next to a bright
+#: peak that a point light sees at mid and far distance. ``ndf_truncation`` 6 /
+#: ``footprint_truncation`` 5: HDR-FLIP of the mostly black brushed plane exposes the element and
+#: footprint tails beyond 4 stds (4 / 4 gave 0.101 / 0.097 at mid / far, 6 / 6 0.078 / 0.079);
+#: cutting the footprints at 5 instead of 6 changes a level-0 cell's images of the docs example's
+#: maps by 7e-7 / 8e-7 relative L2 (at most 4e-6 of an image's peak) and makes them 1.6x / 1.3x
+#: faster (the elements' cut at 5 changes them by 1e-3: the line nodes move). ``code_bits`` 16 /
+#: ``c_bits`` 8: 8-bit ``a``, ``b`` rounding shows in the NDF tails, 8-bit ``c`` does not and keeps
+#: range queries as fast as all-8-bit codes. ``ndf_res`` 512 with ``block`` 32: the environment's
+#: brushed plane needs 512^2 images; 32-pixel blocks keep the blocks a range query spans (and the
+#: frame time) low. Levels >= 3 are stored exactly, each image its own group (``exact_cell`` 1:
+#: exact ranks <= ``block``, faster queries). ``one_pass``: no uncompressed pyramid on disk
+#: (:func:`one_pass_stages`). ``n_iter_max`` 30 (with :data:`prefilter.glints.cp.HALS_SWEEPS` and
+#: :func:`pass1_iters`): the brushed plane at mid distance, the measurement scene's hardest cell
+#: under a point light, gave FLIP 0.051 / 0.061 / 0.047 at 20 / 24 / 30 iterations (not monotonic:
+#: which dim glints a fit keeps decides this cell; ``study_glints_scenes.py --shapes plane --kinds
+#: brushed --bake '{"n_iter_max": N}'``). Where a bake's time goes:
+#: ``benchmarks/bench_glints_stages.py``. Measurements: docs/glints-part2.md,
+#: ``benchmarks/study_glints_scenes.py``.
 BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=30, seed=0,
-                     blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=6.0,
+                     blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=5.0,
                      code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1, one_pass=True)
 #: Bytes of the window of x-filtered rows that building a coarser level holds
 #: (:func:`prefilter.glints.pyramid.next_level_rows`); wider levels are built in column strips.
@@ -411,7 +416,7 @@ def fit_cell(job: BakeJob, cid: int, stats: dict, blank, tensors, where,
     exact = job.exact(int(job.cells[cid, 0]))
     fit = [] if exact else live
     res = dict(zip(fit, cpmod.nn_cp_batch([tensors[g] for g in fit], base,
-                                          n_iter_max=job.n_iter_max, tol=job.tol,
+                                          n_iter_max=pass1_iters(job.n_iter_max), tol=job.tol,
                                           seed=job.seed + cid)))
     rows = np.concatenate([[0], np.cumsum([len(w) for w in where])]).astype(np.int64)
     local = np.full(blank.shape, -1, np.int32)
@@ -432,9 +437,20 @@ def fit_cell(job: BakeJob, cid: int, stats: dict, blank, tensors, where,
     return part
 
 
+def pass1_iters(n_iter_max: int) -> int:
+    """CP iterations of pass 1 (every group at ``base``) out of a bake's ``n_iter_max``: half
+    (at least one). Its errors rank the groups for the allocation; the final fit continues every
+    group from them at its rank for the rest (at least one), so each group gets ``n_iter_max``
+    iterations in all and the promoted groups spend half of theirs at the cheaper base rank.
+    Point-light FLIP of the brushed plane vs ``glints-direct`` (near / mid / far, ``n_iter_max``
+    30, ``benchmarks/study_glints_scenes.py --shapes plane --kinds brushed``): 0.032 / 0.047 /
+    0.036 with half, 0.032 / 0.051 / 0.034 with a third (``FIT_VERSION`` 5)."""
+    return max(1, int(n_iter_max) // 2)
+
+
 def refit_cell_task(job: BakeJob, cid: int) -> int:
-    """Pass 2 of cell ``cid``: the groups given a larger rank (the allocation part), warm-started
-    from pass 1, and those stored exactly; encoding; the error measured on what the loader
+    """Pass 2 of cell ``cid``: every fitted group continued from pass 1 at its allocated rank
+    (:func:`pass1_iters`), those stored exactly; encoding; the error measured on what the loader
     decodes."""
     if job.ck.done(FINAL_CHUNK + cid):
         return cid
@@ -447,16 +463,17 @@ def refit_cell_task(job: BakeJob, cid: int) -> int:
 def refit_cell(job: BakeJob, cid: int, tensors, p1, r_cell) -> None:
     """Pass 2 of cell ``cid`` on its tensors, pass-1 part ``p1`` and ranks ``r_cell (nb^2,)``,
     saved as its final checkpoint part."""
-    nb, B, base = job.nb, job.B, job.base
+    nb, B = job.nb, job.B
     rows = p1["rows"]
     first = {g: (p1["a"][g].T.astype(np.float64), p1["b"][g].T.astype(np.float64),
                  p1["c"][rows[g]:rows[g + 1]].astype(np.float64)) for g in range(nb * nb)}
-    fits = dict(first)
+    fits: dict = {}
     for g in np.flatnonzero(r_cell == EXACT):
         fits[g] = cpmod.exact_cp(tensors[g])[:3]
-    for r in sorted(set(r_cell.tolist()) - {0, base, EXACT}):
+    more = max(1, job.n_iter_max - pass1_iters(job.n_iter_max))
+    for r in sorted(set(r_cell.tolist()) - {0, EXACT}):
         gs = [g for g in range(nb * nb) if r_cell[g] == r]
-        out = cpmod.nn_cp_batch([tensors[g] for g in gs], int(r), n_iter_max=job.n_iter_max,
+        out = cpmod.nn_cp_batch([tensors[g] for g in gs], int(r), n_iter_max=more,
                                 tol=job.tol, seed=job.seed + cid, init=[first[g] for g in gs])
         fits.update({g: o[:3] for g, o in zip(gs, out)})
     groups = [(fits[g][0].T, fits[g][1].T, fits[g][2]) if r_cell[g] else
@@ -586,7 +603,6 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
 
     pyr, ck, R = job.pyr, job.ck, job.R
     cells = job.cells
-    mapper = map_fn or thread_map
     spill = ck.dir / "stream"
     shutil.rmtree(spill, ignore_errors=True)
     spill.mkdir()
@@ -596,7 +612,7 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
                  unit="cell", disable=not progress, file=sys.stderr) as bar:
         if sample:
             if not ck.done(ALLOC_CHUNK):
-                _run(mapper, sample_cell_task, job, sample, bar)
+                _run(map_fn or thread_map, sample_cell_task, job, sample, bar)
                 err2, unit = [], []
                 for cid in sample:
                     p1 = ck.load(CELL_CHUNK + cid)
@@ -635,32 +651,40 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
                         streams[lv].add(y, 0, imgs)
                     completed(lv + 1, streams[lv].arrived([y]))
 
-        def run(batch):
-            for cid, imgs in zip(batch, mapper(cell_task, [job] * len(batch), batch)):
-                if imgs is None:
-                    job.remove_cell_files(cid)
-                elif streams:
-                    _, y0, _, x0, _ = (int(v) for v in cells[cid])
-                    for i, row in enumerate(imgs):
-                        with PARALLEL:
-                            streams[0].add(y0 + i, x0, row)
-                bar.update(1)
+        def consume(cid, imgs):
+            if imgs is None:
+                job.remove_cell_files(cid)
+            elif streams:
+                _, y0, _, x0, _ = (int(v) for v in cells[cid])
+                for i, row in enumerate(imgs):
+                    with PARALLEL:
+                        streams[0].add(y0 + i, x0, row)
+            bar.update(1)
 
-        k = int(k_sides[0])
-        n_chunks = pyr.shape(0)[0] // k
-        lvl0 = np.flatnonzero(cells[:, 0] == 0)
-        for ch in list(range(1, n_chunks)) + [0]:
-            # the waiting coarser cells first: their files go before new rows fill others
-            batch = ready + [int(c) for c in lvl0 if cells[c, 1] == ch * k]
-            ready = []
-            run(batch)
+        def row_done(ch):
             if streams:
                 completed(1, streams[0].arrived(range(ch * k, (ch + 1) * k)))
             for st in streams:
                 st.spill()
-        while ready:
-            batch, ready = ready, []
-            run(batch)
+
+        k = int(k_sides[0])
+        n_chunks = pyr.shape(0)[0] // k
+        lvl0 = np.flatnonzero(cells[:, 0] == 0)
+        rows0 = [(ch, [int(c) for c in lvl0 if cells[c, 1] == ch * k])
+                 for ch in list(range(1, n_chunks)) + [0]]
+        if map_fn is None:
+            ordered_stream(rows0, ready, consume, row_done, job)
+        else:
+            for ch, row in rows0:
+                # the waiting coarser cells first: their files go before new rows fill others
+                batch, ready[:] = ready + row, []
+                for cid, imgs in zip(batch, map_fn(cell_task, [job] * len(batch), batch)):
+                    consume(cid, imgs)
+                row_done(ch)
+            while ready:
+                batch, ready[:] = list(ready), []
+                for cid, imgs in zip(batch, map_fn(cell_task, [job] * len(batch), batch)):
+                    consume(cid, imgs)
     shutil.rmtree(spill, ignore_errors=True)
     diffs = [st.difference for st in streams]
     n_keep = pyr.n_levels
@@ -671,6 +695,37 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
     pyr = pyr.with_levels(n_keep)
     return pyr, diffs[:n_keep - 1], dataclasses.replace(
         job, pyr=pyr, cells=cell_bounds(pyr, k_sides[:n_keep]))
+
+
+def ordered_stream(rows0, ready: list, consume, row_done, job: BakeJob) -> None:
+    """The cell tasks of a one-pass bake on a pool of ``os.cpu_count()`` threads, their results
+    consumed (``consume(cid, result)``) in the order they were submitted, so the filter's sums
+    and the files are the same bytes as with any ``map_fn``; ``row_done(ch)`` after the last
+    cell of each row ``ch`` of level-0 cells in ``rows0`` (``(ch, cell ids)``); the coarser
+    cells it makes ``ready`` are queued before the remaining level-0 cells (their files go
+    first).
+
+    At most one task more than the threads is in flight: a thread starts the next cell while
+    the caller filters a finished one and no thread idles at the end of a row (the per-row
+    batches of a ``map_fn`` wait for their slowest cell). What is queued depends only on the
+    results consumed so far, so the order is deterministic."""
+    from collections import deque
+
+    ends = {row[-1]: ch for ch, row in rows0 if row}
+    queue = deque(c for _, row in rows0 for c in row)
+    threads = max(1, os.cpu_count() or 1)
+    with ThreadPoolExecutor(threads) as pool:
+        flight: deque = deque()
+        while queue or flight or ready:
+            queue.extendleft(reversed(ready))
+            ready.clear()
+            while queue and len(flight) <= threads:
+                cid = queue.popleft()
+                flight.append((cid, pool.submit(cell_task, job, cid)))
+            cid, fut = flight.popleft()
+            consume(cid, fut.result())
+            if cid in ends:
+                row_done(ends[cid])
 
 
 def significant(x, digits: int = 10):
@@ -755,7 +810,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
 
     ``ndf_truncation`` / ``footprint_truncation``: stds at which each element's Gaussian in ``s``
     / the footprint weights are cut in the level-0 NDF images
-    (:func:`prefilter.glints.pndf.pndf_image`); the renderer bakes with 6 / 6.
+    (:func:`prefilter.glints.pndf.pndf_image`); the renderer bakes with 6 / 5
+    (:data:`BAKE_SETTINGS`).
 
     ``code_bits``: 8 (default) or 16 bits per stored factor value (:func:`store.encode`). The
     budget ``rank`` keeps its meaning (the bytes per rank double, so the file about doubles);
@@ -784,7 +840,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     their results as checkpoint parts (workers must share the parts folder), so a pool of
     processes or a cluster's ``map`` gives the same bytes. Default: the level-0 chunks one after
     the other in this process (their kernel is parallel), the cells on a pool of threads
-    (:func:`thread_map`).
+    (:func:`thread_map`; a one-pass bake's cells through :func:`ordered_stream`, which keeps the
+    threads busy across rows of cells: the same bytes).
 
     ``level0``: a callable ``level0(y, centers (1, nx, 2), sigma) -> (1, nx, R, R)`` giving the
     images of level-0 row ``y`` instead of the direct P-NDF of ``normal_map`` (which then gives

@@ -31,11 +31,12 @@ from prefilter.errors import PrefilterError
 
 #: Version of the fit's results: bumped whenever a change to :func:`nn_cp` (or what the bake does
 #: with it) changes the factors it returns for the same inputs. The render and Wang-tile caches and
-#: the bake's checkpoints key on it, so files fitted by an older version are never reused
-#: (4: :data:`HALS_SWEEPS` column sweeps per product with the tensor; 3: the HALS column sweep
-#: reads G by rows, a different rounding; 2: the relative stop test ``prev - err < tol err``; 1: an
-#: absolute one).
-FIT_VERSION = 4
+#: the bake's checkpoints key on it, so files fitted by an older version are never reused (5: the
+#: bake's pass 1 runs half of the iterations, the final fit continues every group,
+#: :func:`prefilter.glints.bake.pass1_iters`; 4: :data:`HALS_SWEEPS` column sweeps per product with
+#: the tensor; 3: the HALS column sweep reads G by rows, a different rounding; 2: the relative stop
+#: test ``prev - err < tol err``; 1: an absolute one).
+FIT_VERSION = 5
 #: HALS column sweeps per mode and iteration, all with the same products ``M = X W`` and
 #: ``G = W^T W`` (the "accelerated HALS" of Gillis and Glineur 2012, Neural Computation 24(4)):
 #: the products with the tensor are the cost of an iteration, a sweep costs ``rows R^2``. On a
