@@ -115,19 +115,19 @@ def code_versions(settings: dict) -> dict:
 #: ``footprint_truncation`` 5: HDR-FLIP of the mostly black brushed plane exposes the element and
 #: footprint tails beyond 4 stds (4 / 4 gave 0.101 / 0.097 at mid / far, 6 / 6 0.078 / 0.079);
 #: cutting the footprints at 5 instead of 6 changes a level-0 cell's images of the docs example's
-#: maps by 7e-7 / 8e-7 relative L2 (at most 4e-6 of an image's peak) and makes them 1.6x / 1.3x
-#: faster (the elements' cut at 5 changes them by 1e-3: the line nodes move). ``code_bits`` 16 /
-#: ``c_bits`` 8: 8-bit ``a``, ``b`` rounding shows in the NDF tails, 8-bit ``c`` does not and keeps
-#: range queries as fast as all-8-bit codes. ``ndf_res`` 512 with ``block`` 32: the environment's
-#: brushed plane needs 512^2 images; 32-pixel blocks keep the blocks a range query spans (and the
-#: frame time) low. Levels >= 3 are stored exactly, each image its own group (``exact_cell`` 1:
-#: exact ranks <= ``block``, faster queries). ``one_pass``: no uncompressed pyramid on disk
-#: (:func:`one_pass_stages`). ``n_iter_max`` 30 (with :data:`prefilter.glints.cp.HALS_SWEEPS` and
-#: :func:`pass1_iters`): the brushed plane at mid distance, the measurement scene's hardest cell
-#: under a point light, gave FLIP 0.051 / 0.061 / 0.047 at 20 / 24 / 30 iterations (not monotonic:
-#: which dim glints a fit keeps decides this cell; ``study_glints_scenes.py --shapes plane --kinds
-#: brushed --bake '{"n_iter_max": N}'``). Where a bake's time goes:
-#: ``benchmarks/bench_glints_stages.py``. Measurements: docs/glints-part2.md,
+#: maps by 7e-7 / 8e-7 relative L2 (at most 4e-6 of an image's peak) and makes them 1.4-1.6x /
+#: 1.3-1.5x faster (the elements' cut at 5 changes them by 1e-3: the line nodes move;
+#: ``benchmarks/bench_glints_cuts.py``). ``code_bits`` 16 / ``c_bits`` 8: 8-bit ``a``, ``b``
+#: rounding shows in the NDF tails, 8-bit ``c`` does not and keeps range queries as fast as
+#: all-8-bit codes. ``ndf_res`` 512 with ``block`` 32: the environment's brushed plane needs 512^2
+#: images; 32-pixel blocks keep the blocks a range query spans (and the frame time) low. Levels >= 3
+#: are stored exactly, each image its own group (``exact_cell`` 1: exact ranks <= ``block``, faster
+#: queries). ``one_pass``: no uncompressed pyramid on disk (:func:`one_pass_stages`). ``n_iter_max``
+#: 30 (with :data:`prefilter.glints.cp.HALS_SWEEPS` and :func:`pass1_iters`): the brushed plane at
+#: mid distance, the measurement scene's hardest cell under a point light, gave FLIP 0.051 / 0.061 /
+#: 0.047 at 20 / 24 / 30 iterations (not monotonic: which dim glints a fit keeps decides this cell;
+#: ``study_glints_scenes.py --shapes plane --kinds brushed --bake '{"n_iter_max": N}'``). Where a
+#: bake's time goes: ``benchmarks/bench_glints_stages.py``. Measurements: docs/glints-part2.md,
 #: ``benchmarks/study_glints_scenes.py``.
 BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=30, seed=0,
