@@ -42,6 +42,7 @@ import shutil
 import sys
 import threading
 import time
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
@@ -675,16 +676,18 @@ def one_pass_stages(job: BakeJob, converge: float, k_sides, map_fn, progress: bo
         if map_fn is None:
             ordered_stream(rows0, ready, consume, row_done, job)
         else:
+            def run(batch):
+                for cid, imgs in zip(batch, map_fn(cell_task, [job] * len(batch), batch)):
+                    consume(cid, imgs)
+
             for ch, row in rows0:
                 # the waiting coarser cells first: their files go before new rows fill others
                 batch, ready[:] = ready + row, []
-                for cid, imgs in zip(batch, map_fn(cell_task, [job] * len(batch), batch)):
-                    consume(cid, imgs)
+                run(batch)
                 row_done(ch)
             while ready:
                 batch, ready[:] = list(ready), []
-                for cid, imgs in zip(batch, map_fn(cell_task, [job] * len(batch), batch)):
-                    consume(cid, imgs)
+                run(batch)
     shutil.rmtree(spill, ignore_errors=True)
     diffs = [st.difference for st in streams]
     n_keep = pyr.n_levels
@@ -709,8 +712,6 @@ def ordered_stream(rows0, ready: list, consume, row_done, job: BakeJob) -> None:
     the caller filters a finished one and no thread idles at the end of a row (the per-row
     batches of a ``map_fn`` wait for their slowest cell). What is queued depends only on the
     results consumed so far, so the order is deterministic."""
-    from collections import deque
-
     ends = {row[-1]: ch for ch, row in rows0 if row}
     queue = deque(c for _, row in rows0 for c in row)
     threads = max(1, os.cpu_count() or 1)
