@@ -39,6 +39,17 @@ def docs_example() -> dict:
     return json.loads(re.search(r"```json\n(.*?)```", section, re.S).group(1))
 
 
+def docs_example_maps() -> dict:
+    """The normal maps ``(H, W, 3)`` of :func:`docs_example`'s objects, by procedural kind
+    (in the scene's order: gaussian, flakes)."""
+    from prefilter.glints.pndf import as_normal_map
+    from prefilter.render.scene import load_scene
+
+    maps = [o.material.normal_map for o in load_scene(docs_example()).objects
+            if getattr(o.material, "normal_map", None) is not None]
+    return {m.spec.get("procedural"): as_normal_map(m.load()) for m in maps}
+
+
 #: The warm-up renders twice in one process: as is, then with every serial-below threshold at 0
 #: so that the parallel twins of the kernels compile too (a 32 x 18 frame runs the serial ones
 #: only; the full frame of 256^2 maps then compiled the parallel query kernels, ~18 s of its

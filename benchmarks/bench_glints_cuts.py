@@ -21,24 +21,18 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_glints_cold import docs_example  # noqa: E402
+from bench_glints_cold import docs_example_maps  # noqa: E402
 
 PAIRS = ((6.0, 6.0), (6.0, 5.0), (6.0, 4.0), (5.0, 5.0), (4.5, 5.0), (7.0, 5.0))
 
 
 def main() -> None:
     from prefilter.glints.bake import BAKE_SETTINGS, bake_settings
-    from prefilter.glints.pndf import as_normal_map, pndf_image
+    from prefilter.glints.pndf import pndf_image
     from prefilter.glints.pyramid import plan
-    from prefilter.render.scene import load_scene
 
     ref_pair = (BAKE_SETTINGS["ndf_truncation"], BAKE_SETTINGS["footprint_truncation"])
-    scene = load_scene(docs_example())
-    for obj in scene.objects:
-        spec = getattr(obj.material, "normal_map", None)
-        if spec is None:
-            continue
-        nm = as_normal_map(spec.load())
+    for kind, nm in docs_example_maps().items():
         st = bake_settings(nm.shape)
         pyr = plan(nm.shape[0], nm.shape[1], st["stride0"], None, None)
         centres = pyr.centers(0)[8:16, 8:16]
@@ -51,7 +45,7 @@ def main() -> None:
         images(*ref_pair)  # compile outside the timing
         ref = images(*ref_pair).astype(np.float64)
         peak = ref.max(axis=(-1, -2), keepdims=True)
-        print(f"{spec.spec.get('procedural')} {nm.shape[0]}^2, one level-0 cell (64 images); "
+        print(f"{kind} {nm.shape[0]}^2, one level-0 cell (64 images); "
               f"against the render bake's cuts {ref_pair[0]:g} / {ref_pair[1]:g}:")
         print("| element / footprint cut (stds) | wall s | rel. L2 | max / peak |")
         print("|---|---|---|---|")

@@ -19,20 +19,17 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_glints_cold import docs_example  # noqa: E402
+from bench_glints_cold import docs_example_maps  # noqa: E402
 
 from prefilter.glints import cp as cpmod  # noqa: E402
 from prefilter.glints.bake import bake_settings  # noqa: E402
-from prefilter.glints.pndf import as_normal_map, pndf_image  # noqa: E402
+from prefilter.glints.pndf import pndf_image  # noqa: E402
 from prefilter.glints.pyramid import plan  # noqa: E402
-from prefilter.render.scene import load_scene  # noqa: E402
 
 
 def cell_tensors():
     """The kept-block tensors ``(B, B, K_g)`` of the cell's groups."""
-    scene = load_scene(docs_example())
-    obj = next(o for o in scene.objects if getattr(o.material, "normal_map", None) is not None)
-    nm = as_normal_map(obj.material.normal_map.load())
+    nm = docs_example_maps()["gaussian"]
     st = bake_settings(nm.shape)
     pyr = plan(nm.shape[0], nm.shape[1], st["stride0"], None, None)
     imgs = pndf_image(nm, pyr.centers(0)[8:16, 8:16], pyr.sigma(0), st["ndf_res"], st["support"],

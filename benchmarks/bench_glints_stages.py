@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_glints_cold import docs_example  # noqa: E402
+from bench_glints_cold import docs_example_maps  # noqa: E402
 
 
 class Timers:
@@ -97,15 +97,10 @@ def main() -> None:
     a = ap.parse_args()
 
     from prefilter.glints import bake as gb
-    from prefilter.glints.pndf import as_normal_map
-    from prefilter.render.scene import load_scene
-
-    scene = load_scene(docs_example())
-    maps = {o.material.normal_map.spec.get("procedural"): o.material.normal_map
-            for o in scene.objects if getattr(o.material, "normal_map", None) is not None}
+    maps = docs_example_maps()
     if a.map not in maps:
         ap.error(f"--map: expected one of {sorted(maps)}, got {a.map!r}")
-    nm = as_normal_map(maps[a.map].load())
+    nm = maps[a.map]
     extra = json.loads(a.bake) if a.bake else {}
     timers = Timers()
     instrument(timers)
