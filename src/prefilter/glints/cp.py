@@ -41,7 +41,7 @@ FIT_VERSION = 5
 #: ``G = W^T W`` (the "accelerated HALS" of Gillis and Glineur 2012, Neural Computation 24(4)):
 #: the products with the tensor are the cost of an iteration, a sweep costs ``rows R^2``. On a
 #: level-0 cell of the render's 256^2 gaussian map at rank 24 (158 groups) 20 iterations with 6
-#: sweeps reach 2.91 % relative error in 0.94 s, 50 iterations with one sweep 3.18 % in 1.53 s
+#: sweeps reach 2.91 % relative error in 0.72 s, 50 iterations with one sweep 3.16 % in 1.55 s
 #: (``benchmarks/bench_glints_hals.py``).
 HALS_SWEEPS = 6
 
