@@ -7,11 +7,11 @@
 1. ``pndf.splat``: nanoseconds per isotropic splat at the render's NDF resolution, intrinsic
    roughness and cut (6 stds), at 200 000 random positions.
 2. Level-0 NDF images (``pndf_image``, the bake's first stage): CPU milliseconds per image of 16
-   level-0 footprints (std 4 texels, the render bake's cuts) of the flakes and brushed maps, at
-   256^2 and 512^2.
+   level-0 footprints (std ``stride0`` texels, the render bake's cuts) of the flakes and
+   brushed maps, at 256^2 and 512^2.
 3. A whole bake of the map with the render's settings (``render.baked_surface`` into an empty
-   temporary cache): wall seconds, the CP passes (fit at the base rank, refit) and the rest
-   (mostly the level-0 images; then the coarser levels and the encoding), and the file's size.
+   temporary cache): wall seconds and the file's size; for two-pass settings also the CP passes
+   (fit at the base rank, refit) and the rest (mostly the level-0 images).
 
 Run the script with another tree on ``PYTHONPATH`` (e.g. from ``git archive``) for a before /
 after comparison; the machine is shared, so compare runs made one after the other.
@@ -48,7 +48,8 @@ def bench_splat(R: int, siso: float, n: int = 200_000) -> float:
 
 
 def bench_level0(kind: str, R: int, sr: float) -> float:
-    """CPU milliseconds per level-0 NDF image (16 footprints of std 4 texels)."""
+    """CPU milliseconds per level-0 NDF image (16 footprints of the render bake's level-0 std,
+    ``stride0`` texels)."""
     from prefilter.glints.pndf import pndf_image
     from prefilter.texture.procedural import normal_map
 
@@ -57,15 +58,17 @@ def bench_level0(kind: str, R: int, sr: float) -> float:
     from prefilter.glints.bake import BAKE_SETTINGS
 
     kw = {k: BAKE_SETTINGS[k] for k in ("ndf_truncation", "footprint_truncation")}
-    pndf_image(nm, c[:1], 4.0, R, 1.0, sr, **kw)  # compile outside the timing
+    sigma0 = float(BAKE_SETTINGS["stride0"])
+    pndf_image(nm, c[:1], sigma0, R, 1.0, sr, **kw)  # compile outside the timing
     t = time.process_time()
-    pndf_image(nm, c, 4.0, R, 1.0, sr, **kw)
+    pndf_image(nm, c, sigma0, R, 1.0, sr, **kw)
     return (time.process_time() - t) / len(c) * 1e3
 
 
 def bench_bake(kind: str) -> dict:
     """The render bake of ``kind`` (128^2) into an empty cache: its summary and wall time."""
     import prefilter.glints.bake as gb
+    from prefilter.glints.bake import BAKE_SETTINGS
     import prefilter.glints.render as gr
     from prefilter.render.scene import load_scene
 
@@ -77,18 +80,17 @@ def bench_bake(kind: str) -> dict:
 
     nm = load_scene(gr.measurement_scene(2.0, kind)).objects[0].material.normal_map.load()
     os.environ["PREFILTER_GLINTS_CACHE"] = tempfile.mkdtemp(prefix="bench-bake-")
-    # baked_surface imports bake_if_missing from the bake module when it runs
-    gb.bake_if_missing, saved = capture, gb.bake_if_missing
+    gr.bake_if_missing, saved = capture, gr.bake_if_missing  # what baked_surface calls
     try:
         t = time.perf_counter()
         gr.baked_surface(nm)
         wall = time.perf_counter() - t
     finally:
-        gb.bake_if_missing = saved
+        gr.bake_if_missing = saved
     s = summaries[0]
     return dict(wall=wall, cp1=s["seconds_cp"][0], cp2=s["seconds_cp"][1],
                 rest=s["seconds"] - sum(s["seconds_cp"]), mb=s["compressed_bytes"] / 1e6,
-                pct=100 * s["ratio"])
+                pct=100 * s["ratio"], one_pass=bool(BAKE_SETTINGS.get("one_pass")))
 
 
 def main():
@@ -112,8 +114,11 @@ def main():
               "(CPU per image)")
     if not a.no_bake:
         b = bench_bake(a.kind)
-        print(f"render bake of {a.kind} 128^2: {b['wall']:.1f} s wall; CP fit {b['cp1']:.1f} s, "
-              f"refit {b['cp2']:.1f} s, rest (mostly level-0 images) {b['rest']:.1f} s; "
+        # a one-pass bake interleaves its stages: no split (bench_glints_stages.py times them)
+        split = ("" if b["one_pass"] else
+                 f"; CP fit {b['cp1']:.1f} s, refit {b['cp2']:.1f} s, rest (mostly level-0 "
+                 f"images) {b['rest']:.1f} s")
+        print(f"render bake of {a.kind} 128^2: {b['wall']:.1f} s wall{split}; "
               f"{b['mb']:.1f} MB ({b['pct']:.2f} % of the uncompressed pyramid)")
 
 

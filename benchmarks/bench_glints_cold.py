@@ -14,6 +14,8 @@ size of the cache the bake leaves. The compiled kernels come from the Numba cach
 otherwise). The machine is shared: wall times vary with the load (printed), CPU times less.
 Unless ``--no-warmup``, a 32 x 18 render of the docs' example with 32^2 maps (own throwaway
 caches) runs first, so that the kernels of this source version are compiled and cached.
+With ``--flip`` a ``glints-direct`` frame of the scene follows (not timed against the targets)
+and the warm frame's HDR-FLIP against it is printed: the speed is not bought with the image.
 """
 
 from __future__ import annotations
@@ -150,6 +152,9 @@ def main() -> None:
     ap.add_argument("--keep", action="store_true", help="keep the folder of caches and images")
     ap.add_argument("--no-warmup", action="store_true",
                     help="no small render first (compilation then counts in the cold run)")
+    ap.add_argument("--flip", action="store_true",
+                    help="then also render glints-direct and print the warm frame's HDR-FLIP "
+                         "against it (after the timed runs)")
     a = ap.parse_args()
 
     from prefilter import jit
@@ -182,6 +187,14 @@ def main() -> None:
     print(f"warm cache: {warm['wall']:.1f} s wall, {warm['cpu']:.1f} s CPU, peak RSS "
           f"{warm['rss']:.0f} MiB")
     print(f"load average after: {os.getloadavg()[0]:.1f}")
+    if a.flip:
+        direct = run(cmd[:-2] + ["glints-direct", "--out", str(root / "direct.exr")], env,
+                     root / "direct.log")
+        from prefilter.render.metrics import flip
+        from prefilter.texture.io import read_image
+
+        err = flip(read_image(root / "direct.exr"), read_image(root / "warm.exr")).mean
+        print(f"glints vs glints-direct ({direct['wall']:.0f} s): HDR-FLIP {err:.4f}")
     print("the cold render's bake stages (the last state of each progress bar):")
     for line in stages((root / "cold.log").read_text(errors="replace")):
         print("  " + line)
