@@ -412,6 +412,8 @@ def test_render_quad_mis_fused_equals_unfused(small_render, monkeypatch, distanc
     from prefilter.render.scene import load_scene
 
     gr = small_render
+    # a finer level 0 than the render's, so that this small frame has footprints in the band
+    monkeypatch.setitem(gr.BAKE_SETTINGS, "stride0", 4)
     sc = load_scene(gr.measurement_scene(distance, "flakes", 64, width=16, height=12,
                                          lights="quad"))
     st = RenderSettings(spp=2, seed=4)

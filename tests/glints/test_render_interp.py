@@ -172,6 +172,7 @@ def test_render_bake_keeps_dim_ndf_blocks(tmp_path, monkeypatch):
     monkeypatch.setitem(gr.BAKE_SETTINGS, "block", 16)  # 16 blocks per image, as measured
     monkeypatch.setitem(gr.BAKE_SETTINGS, "intrinsic_roughness", 0.02)
     monkeypatch.setitem(gr.BAKE_SETTINGS, "rank", 16)
+    monkeypatch.setitem(gr.BAKE_SETTINGS, "stride0", 4)  # 64 level-0 images of the 32^2 map
     monkeypatch.setattr(gr, "_SURFACES", {})
     nm = normal_map("flakes", size=32, seed=1)
     gm = gr.baked_surface(nm).gm

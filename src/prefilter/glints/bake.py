@@ -121,19 +121,26 @@ def code_versions(settings: dict) -> dict:
 #: ``benchmarks/bench_glints_cuts.py``). ``code_bits`` 16 / ``c_bits`` 8: 8-bit ``a``, ``b``
 #: rounding shows in the NDF tails, 8-bit ``c`` does not and keeps range queries as fast as
 #: all-8-bit codes. ``ndf_res`` 512 with ``block`` 32: the environment's brushed plane needs 512^2
-#: images; 32-pixel blocks keep the blocks a range query spans (and the frame time) low. Levels >= 3
-#: are stored exactly, each image its own group (``exact_cell`` 1: exact ranks <= ``block``, faster
-#: queries). ``one_pass``: no uncompressed pyramid on disk (:func:`one_pass_stages`). ``n_iter_max``
-#: 30 (with :data:`prefilter.glints.cp.HALS_SWEEPS` and :func:`pass1_iters`): the brushed plane at
-#: mid distance, the measurement scene's hardest cell under a point light, gave FLIP 0.051 / 0.061 /
+#: images; 32-pixel blocks keep the blocks a range query spans (and the frame time) low.
+#: ``stride0`` 8 with levels >= 2 stored exactly, each image its own group (``exact_cell`` 1: exact
+#: ranks <= ``block``, faster queries): footprints below level 0's spacing are shaded by the direct
+#: P-NDF, so the many small CP fits of a fine level 0 are not made; on the docs' example scene
+#: (``benchmarks/bench_glints_cold.py``) stride 4 with exact levels >= 3 took 391 s cold and gave
+#: HDR-FLIP 0.053 against ``glints-direct``, stride 8 with exact levels >= 2 245 s and 0.030, and
+#: the point-light matrix's worst cell 0.047 and 0.033. The price: footprints of 4-8 texels are
+#: shaded directly, so mid-distance frames take about twice the others (frame time max/min 2.1-2.8
+#: against 1.4-1.5, docs/glints-part2.md). ``one_pass``: no uncompressed pyramid on disk
+#: (:func:`one_pass_stages`). ``n_iter_max`` 30 (with :data:`prefilter.glints.cp.HALS_SWEEPS` and
+#: :func:`pass1_iters`): with ``stride0`` 4 the brushed plane at mid distance, then the
+#: measurement scene's hardest cell under a point light, gave FLIP 0.051 / 0.061 /
 #: 0.047 at 20 / 24 / 30 iterations (not monotonic: which dim glints a fit keeps decides this cell;
 #: ``study_glints_scenes.py --shapes plane --kinds brushed --bake '{"n_iter_max": N}'``). Where a
 #: bake's time goes: ``benchmarks/bench_glints_stages.py``. Measurements: docs/glints-part2.md,
 #: ``benchmarks/study_glints_scenes.py``.
-BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=4,
+BAKE_SETTINGS = dict(rank=48, ndf_res=512, block=32, support=1.0, stride0=8,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, n_iter_max=30, seed=0,
                      blank_tol=1e-6, ndf_truncation=6.0, footprint_truncation=5.0,
-                     code_bits=16, c_bits=8, exact_from_level=3, exact_cell=1, one_pass=True)
+                     code_bits=16, c_bits=8, exact_from_level=2, exact_cell=1, one_pass=True)
 #: Bytes of the window of x-filtered rows that building a coarser level holds
 #: (:func:`prefilter.glints.pyramid.next_level_rows`); wider levels are built in column strips.
 LEVEL_RING_BYTES = 512 << 20
