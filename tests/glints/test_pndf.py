@@ -256,8 +256,8 @@ def test_line_nodes_spacing_and_normaliser():
 def _element_mixture_error(kappa, siso, trunc, rule):
     """Largest error over the peak of an element's node mixture against its exact Gaussian
     ``N(0, siso^2 I + kappa^2 e_x e_x^T)`` on a grid (point values, no pixel boxes): ``rule``
-    "line" (:func:`line_nodes`) or "gauss-hermite" (the 3-point branch of splat_element)."""
-    from prefilter.glints.pndf import line_nodes
+    "line" (:func:`line_nodes`), "gh3" or "gh5" (splat_element's Gauss-Hermite branches)."""
+    from prefilter.glints.pndf import GH5_T, GH5_W, line_nodes
 
     g = np.linspace(-8.0, 8.0, 641) * np.sqrt(siso**2 + kappa**2)
     X, Y = np.meshgrid(g, g)
@@ -271,28 +271,36 @@ def _element_mixture_error(kappa, siso, trunc, rule):
         n, norm = line_nodes(kappa, siso, trunc)
         t = np.linspace(-trunc, trunc, n)
         mix = sum(np.exp(-0.5 * tk * tk) / norm * iso(kappa * tk) for tk in t)
-    else:
+    elif rule == "gh3":
         t = np.sqrt(3.0) * kappa
         mix = 2.0 / 3.0 * iso(0.0) + (iso(t) + iso(-t)) / 6.0
+    else:
+        mix = GH5_W[0] * iso(0.0) + sum(w * (iso(t * kappa) + iso(-t * kappa))
+                                         for t, w in zip(GH5_T, GH5_W[1:]))
     return np.abs(mix - exact).max() / exact.max()
 
 
-def test_line_quadrature_of_long_elements():
-    """Elements much longer than wide: the node mixture is within 1e-3 of the peak (7.4e-4 at
-    kappa = 3 siso: the step is 1.6 stds of the integrand in t)."""
-    for ratio in (3.0, 5.0, 10.0):
-        assert _element_mixture_error(ratio * 0.005, 0.005, 6.0, "line") < 1e-3, ratio
+def test_gauss_hermite_5_nodes():
+    """GH5_T, GH5_W: the 5-point Gauss-Hermite rule of the standard normal."""
+    from prefilter.glints.pndf import GH5_T, GH5_W
+
+    x, w = np.polynomial.hermite_e.hermegauss(5)
+    assert np.allclose(np.sort(x)[3:], GH5_T, rtol=1e-12)
+    assert np.allclose(w[2:] / w.sum(), GH5_W, rtol=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason="known: for kappa ~ siso the node step T/4 is ~2 stds "
-                   "of the integrand in t (1 / sqrt(1 + kappa^2 / siso^2)); up to 2.5e-2 of the "
-                   "peak at kappa = siso, T = 6; and the 3-point Gauss-Hermite branch errs by "
-                   "8.9e-3 at kappa = 0.7 siso (its threshold)")
-def test_element_quadrature_for_kappa_near_siso():
-    """What the images should meet for every element: within 1e-3 of the peak."""
-    errs = [_element_mixture_error(r * 0.005, 0.005, 6.0, "line") for r in (0.8, 1.0, 1.5, 2.0)]
-    errs.append(_element_mixture_error(0.7 * 0.005, 0.005, 6.0, "gauss-hermite"))
-    assert max(errs) < 1e-3, errs
+@pytest.mark.parametrize("trunc", [5.0, 6.0])
+def test_element_quadrature_within_4e_4_of_the_peak(trunc):
+    """Every branch of splat_element at its worst: Gauss-Hermite at its largest kappa, the line
+    rule just above it, near the isotropic std and for long elements."""
+    from prefilter.glints.pndf import GH3_MAX, GH5_MAX
+
+    siso = 0.005
+    errs = {"gh3": _element_mixture_error(GH3_MAX * siso, siso, trunc, "gh3"),
+            "gh5": _element_mixture_error(GH5_MAX * siso, siso, trunc, "gh5")}
+    for r in (GH5_MAX * 1.001, 0.8, 1.0, 1.5, 2.0, 3.0, 5.0, 10.0):
+        errs[r] = _element_mixture_error(r * siso, siso, trunc, "line")
+    assert max(errs.values()) < 4e-4, errs
 
 
 def test_float32_images_and_the_cut_ellipse_keep_the_mass():

@@ -35,10 +35,11 @@ import numpy as np
 from prefilter.jit import kernel_array, njit_parallel, njit_serial, prange, serial
 from prefilter.validation import as_float_array, as_positive_int, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
-                                   as_sigma_p, as_support, element_covariance, element_density,
-                                   element_split, line_nodes, node_reach, normal_cdf, pixel_edges,
-                                   pndf_image, principal_axis, splat_element)
+from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, GH3_MAX, GH5_MAX, GH5_T, GH5_W, SIGMA_H,
+                                   TRUNCATION, as_intrinsic_roughness, as_sigma_p, as_support,
+                                   element_covariance, element_density, element_split, line_nodes,
+                                   node_reach, normal_cdf, pixel_edges, pndf_image, principal_axis,
+                                   splat_element)
 from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints.wang_query import (TilePack, gauss_row, pack_float, pack_point,
                                          segment_sums, tile_taps)
@@ -836,11 +837,20 @@ def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no 
     if kappa < 1e-3 * siso:
         return _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix)
     vx, vy = principal_axis(a, b, d, nu1)
-    if kappa <= 0.7 * siso:
+    if kappa <= GH3_MAX * siso:
         t = math.sqrt(3.0) * kappa
         return (_nb_pixel(mx, my, siso, w * (2.0 / 3.0), lo, h, R, trunc, iy, ix)
                 + _nb_pixel(mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix)
                 + _nb_pixel(mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix))
+    if kappa <= GH5_MAX * siso:
+        acc = _nb_pixel(mx, my, siso, w * GH5_W[0], lo, h, R, trunc, iy, ix)
+        for j in range(2):
+            t = GH5_T[j] * kappa
+            acc += (_nb_pixel(mx + t * vx, my + t * vy, siso, w * GH5_W[j + 1], lo, h, R, trunc,
+                              iy, ix)
+                    + _nb_pixel(mx - t * vx, my - t * vy, siso, w * GH5_W[j + 1], lo, h, R,
+                                trunc, iy, ix))
+        return acc
     n, norm = line_nodes(kappa, siso, trunc)
     acc = 0.0
     for q in range(n):

@@ -28,8 +28,9 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _flush_rects, _rect, _touching
-from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_split, node_reach,
-                                   normal_cdf, principal_axis)
+from prefilter.glints.pndf import (GH3_MAX, GH5_MAX, GH5_T, GH5_W, SIGMA_H, TRUNCATION,
+                                   as_sigma_p, element_split, node_count, node_reach, normal_cdf,
+                                   principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
                                       _nb_type, dep_gaussian, dependent_neighbours, level_window)
 from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes
@@ -94,13 +95,22 @@ def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no 
     if kappa < 1e-3 * siso:
         return _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc)
     vx, vy = principal_axis(a, b, d, nu1)
-    if kappa <= 0.7 * siso:
+    if kappa <= GH3_MAX * siso:
         t = math.sqrt(3.0) * kappa
         return (_iso_mass(mx, my, siso, w * (2.0 / 3.0), x0, x1, y0, y1, trunc)
                 + _iso_mass(mx + t * vx, my + t * vy, siso, w / 6.0, x0, x1, y0, y1, trunc)
                 + _iso_mass(mx - t * vx, my - t * vy, siso, w / 6.0, x0, x1, y0, y1, trunc))
+    if kappa <= GH5_MAX * siso:
+        acc = _iso_mass(mx, my, siso, w * GH5_W[0], x0, x1, y0, y1, trunc)
+        for j in range(2):
+            t = GH5_T[j] * kappa
+            acc += (_iso_mass(mx + t * vx, my + t * vy, siso, w * GH5_W[j + 1], x0, x1, y0, y1,
+                              trunc)
+                    + _iso_mass(mx - t * vx, my - t * vy, siso, w * GH5_W[j + 1], x0, x1, y0,
+                                y1, trunc))
+        return acc
     # pndf.line_nodes' nodes; their normaliser by gauss_row's recurrence (no exp a node)
-    n = max(9, int(math.ceil(2.0 * trunc * kappa / (1.5 * siso))) + 1)
+    n = node_count(kappa, siso, trunc)
     step = 2.0 * trunc / (n - 1)
     norm = 0.0
     for gk in gauss_row(0.5 * n, 0, n - 1, 1.0 / (step * step)):
