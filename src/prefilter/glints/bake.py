@@ -126,8 +126,8 @@ def code_versions(settings: dict) -> dict:
 #: ranks <= ``block``, faster queries): footprints below level 0's spacing are shaded by the direct
 #: P-NDF, so the many small CP fits of a fine level 0 are not made; on the docs' example scene
 #: (``benchmarks/bench_glints_cold.py``) stride 4 with exact levels >= 3 took 391 s cold and gave
-#: HDR-FLIP 0.053 against ``glints-direct``, stride 8 with exact levels >= 2 245 s and 0.030, and
-#: the point-light matrix's worst cell 0.047 and 0.033. The price: footprints of 4-8 texels are
+#: HDR-FLIP 0.053 against ``glints-direct``, stride 8 with exact levels >= 2 259 s and 0.030, and
+#: the point-light matrix's worst cell 0.047 and 0.038. The price: footprints of 4-8 texels are
 #: shaded directly, so mid-distance frames take about twice the others (frame time max/min 2.1-2.8
 #: against 1.4-1.5, docs/glints-part2.md). ``one_pass``: no uncompressed pyramid on disk
 #: (:func:`one_pass_stages`). ``n_iter_max`` 30 (with :data:`prefilter.glints.cp.HALS_SWEEPS` and
