@@ -215,3 +215,27 @@ def test_direct_surfaces_of_one_map_at_two_roughnesses_are_distinct():
     b = gr.baked_surface(nm, direct=True, settings={"intrinsic_roughness": 0.03})
     assert (a.intrinsic_roughness, b.intrinsic_roughness) == (0.02, 0.03)
     assert gr.baked_surface(nm, direct=True, settings={"intrinsic_roughness": 0.02}) is a
+
+
+def test_level0_variant_bakes_level_0_at_its_stride(tmp_path, monkeypatch):
+    """``--param level0=4``: the render bakes (and reads) the map with level 0 at 4 texels, the
+    default at ``BAKE_SETTINGS["stride0"]`` (8); both shade the scene; other values are
+    rejected naming the choices."""
+    import prefilter.glints.render as gr
+    from prefilter.glints.store import load as load_map
+    from prefilter.render.driver import render
+    from prefilter.render.scene import load_scene
+
+    monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path))
+    monkeypatch.setitem(gr.BAKE_SETTINGS, "ndf_res", 64)
+    monkeypatch.setitem(gr.BAKE_SETTINGS, "intrinsic_roughness", 0.02)
+    monkeypatch.setattr(gr, "_SURFACES", {})
+    sc = load_scene(gr.measurement_scene(2.0, "flakes", 32, width=16, height=12))
+    a = render(sc, "glints", seed=1)
+    b = render(sc, "glints", seed=1, params={"level0": "4"})
+    strides = sorted(load_map(p).header["settings"]["stride0"] for p in tmp_path.glob("*.npz"))
+    assert strides == [4, gr.BAKE_SETTINGS["stride0"]]
+    assert np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and a.mean() > 0
+    assert b.mean() == pytest.approx(a.mean(), rel=0.1)
+    with pytest.raises(PrefilterError, match="level0"):
+        render(sc, "glints", params={"level0": "5"})

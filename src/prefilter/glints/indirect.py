@@ -86,12 +86,12 @@ class FootprintGlintLobe(Lobe):
         return wi, sample_weight(val, pdf)
 
 
-def glint_surface(scene, mode: str):
+def glint_surface(scene, mode: str, bake: dict | None = None):
     """``callable(g, spp) -> (lobe, frame)`` for :func:`prefilter.render.pathtrace.trace_paths`:
     objects with a normal map get a :class:`FootprintGlintLobe` in their geometric frame
-    (``mode`` ``"compressed"``: the baked pyramid with the truncated fallback, as ``glints``;
-    ``"direct"``: the exact P-NDF of every footprint, as ``glints-direct``), the others the
-    renderer's material."""
+    (``mode`` ``"compressed"``: the baked pyramid with the truncated fallback, as ``glints``,
+    ``bake`` overriding its settings; ``"direct"``: the exact P-NDF of every footprint, as
+    ``glints-direct``), the others the renderer's material."""
     material = material_surface(scene)
     glinty = np.array([o.material.normal_map is not None for o in scene.objects])
     trunc = FALLBACK_TRUNCATION if mode == "compressed" else None
@@ -111,7 +111,8 @@ def glint_surface(scene, mode: str):
             m = g.object_id == k
             gk = g.select(m)
             mat = scene.objects[int(k)].material
-            surf = baked_surface(mat.normal_map.load(), direct=(mode == "direct"))
+            surf = baked_surface(mat.normal_map.load(), direct=(mode == "direct"),
+                                 settings=bake)
             c, sp = footprints(gk, surf.shape, spp)
             for a, b in zip(frame, two_sided_frame(gk)):
                 a[m] = b
@@ -129,8 +130,9 @@ def render_glints_paths(scene, settings, mode: str, name: str, *,
     :func:`glint_surface`; ``min_depth=1`` keeps the indirect light only; ``stats`` collects the
     lobes' time per vertex. Returns ``(H, W, 3)`` float32."""
     opts = path_options(settings) if options is None else options
-    img = render_paths(scene, settings, glint_surface(scene, mode), opts, desc=name, stats=stats,
-                       min_depth=min_depth)
+    bake = direct_render.bake_overrides(settings) if mode == "compressed" else None
+    img = render_paths(scene, settings, glint_surface(scene, mode, bake), opts, desc=name,
+                       stats=stats, min_depth=min_depth)
     return img.astype(np.float32)
 
 

@@ -476,7 +476,8 @@ def _mis_light_pdf(surf, c, sp, wo, h, D, M, fallback_truncation):
 
 
 def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
-                 use_range: bool | None = None, progress: bool = False) -> np.ndarray:
+                 use_range: bool | None = None, progress: bool = False,
+                 bake: dict | None = None) -> np.ndarray:
     """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's lights.
 
     ``mode``: ``"compressed"`` or ``"direct"``; ``sigma`` overrides the footprint stds (the
@@ -485,7 +486,8 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
     compressed mode), else :func:`quad_mis` with the uniforms ``u (N, n_quads * QUAD_MIS * 11)``;
     the diffuse term by Lambert's polygon formula. Environment lights: see
     :func:`environment_radiance` (uniforms after the quads'). ``progress``: a map baked on
-    first use reports its bake on stderr (:func:`baked_surface`)."""
+    first use reports its bake on stderr (:func:`baked_surface`); ``bake``: settings overriding
+    :data:`BAKE_SETTINGS` (:func:`bake_overrides`)."""
     from prefilter.ltc import clamped_cosine_integral
 
     lights = scene.light_set()
@@ -502,7 +504,7 @@ def shade_glints(scene, g, *, mode: str, spp: int = 1, sigma=None, u=None,
         if mat.normal_map is None:
             raise PrefilterError(f"objects[{int(k)}].material.normal_map: the glints methods "
                                  "expected a normal map (the microstructure), got none")
-        surf = baked_surface(mat.normal_map.load(), direct=(mode == "direct"),
+        surf = baked_surface(mat.normal_map.load(), direct=(mode == "direct"), settings=bake,
                              progress=progress)
         c, sp = footprints(g.select(m), surf.shape, spp)
         if sigma is not None:
@@ -632,16 +634,27 @@ def check_lights(scene, name):
                                  "directional or environment lights, got a textured quad")
 
 
-def bake_maps(scene, *, progress: bool = False) -> None:
+def bake_overrides(settings) -> dict | None:
+    """The bake settings a render's ``settings`` (:class:`prefilter.render.methods.
+    RenderSettings`) override: ``stride0`` from the ``glints`` method's ``level0`` variant, or
+    ``None``. Level 0 at 8 texels (the default, :data:`BAKE_SETTINGS`) bakes fast and leaves
+    footprints below ~10 texels to the direct P-NDF, whose cost grows with their area; at 4 the
+    frame time stays about constant over distance for a longer bake (docs/glints-part2.md)."""
+    level0 = settings.param("level0", str(BAKE_SETTINGS["stride0"]))
+    return None if int(level0) == BAKE_SETTINGS["stride0"] else {"stride0": int(level0)}
+
+
+def bake_maps(scene, *, progress: bool = False, settings: dict | None = None) -> None:
     """Bake the normal maps of ``scene``'s objects that the render cache lacks, all of them
     before any is loaded (:func:`baked_surface`): a bake's memory then never adds to that of the
-    maps a render holds (~3 times a map's stored bytes each)."""
+    maps a render holds (~3 times a map's stored bytes each). ``settings`` override
+    :data:`BAKE_SETTINGS`."""
     for obj in scene.objects:
         nmap = getattr(obj.material, "normal_map", None)
         if nmap is None:
             continue
         nm = as_normal_map(nmap.load())
-        st = bake_settings(nm.shape, bilinear=BILINEAR)
+        st = bake_settings(nm.shape, settings, bilinear=BILINEAR)
         path = cache_path(nm, st)
         path.parent.mkdir(parents=True, exist_ok=True)
         bake_if_missing(nm, path, progress=progress, **st)
@@ -651,13 +664,14 @@ def _render(scene, settings, mode, name):
     from prefilter.render.driver import render_samples
 
     check_lights(scene, name)
+    bake = bake_overrides(settings) if mode == "compressed" else None
     if mode == "compressed":
-        bake_maps(scene, progress=settings.progress)
+        bake_maps(scene, progress=settings.progress, settings=bake)
     spp = settings.spp
     k = random_dims(scene)
     return render_samples(scene, settings,
                           lambda g, u: shade_glints(scene, g, mode=mode, spp=spp, u=u,
-                                                    progress=settings.progress),
+                                                    progress=settings.progress, bake=bake),
                           random_dims=k, stratified=spp > 1, desc=name)
 
 

@@ -131,7 +131,8 @@ _DESCRIPTIONS: dict[str, str] = {
                     "filter=reference: 32 x 32 supersampling of eq. 1",
     "glints": "glints: compressed footprint P-NDF (point query); quad lights by range queries "
               "where valid, else MIS; environment maps by SG prefiltering; bounces=N > 1: "
-              "path-traced, the pyramid queried with each vertex's enlarged footprint",
+              "path-traced, the pyramid queried with each vertex's enlarged footprint; "
+              "level0=4: level 0 at 4 texels (frame time constant over distance, ~1.5x the bake)",
     "glints-direct": "glints: direct P-NDF of every footprint (Yan et al. 2016); quad and "
                      "environment lights by Monte Carlo (MIS, SG sampling); bounces=N > 1: "
                      "path-traced, the direct P-NDF at every vertex",
@@ -151,7 +152,7 @@ _DESCRIPTIONS: dict[str, str] = {
 _PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
     "reference": {"control": ("ltc", "none")},
     "path": {"bounces": ("4", "1", "2", "3", "5", "6", "8", "12", "16")},
-    "glints": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
+    "glints": {"bounces": ("1", "2", "3", "4", "5", "6", "8"), "level0": ("8", "4")},
     "glints-direct": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
     "ltc-multiscale": {"footprint": ("fit", "paper", "mrl")},
     "leadr-env": {"algorithm": ("full", "simplified")},
