@@ -74,7 +74,7 @@ def test_render_passes_its_progress_to_the_bake(monkeypatch):
         raise Stop
 
     monkeypatch.setattr(grender, "baked_surface", spy)
-    monkeypatch.setattr(grender, "bake_maps", lambda scene, progress=False: None)
+    monkeypatch.setattr(grender, "bake_maps", lambda scene, progress=False, settings=None: None)
     scene = load_scene(grender.measurement_scene(2.0, "flakes", 16, width=4, height=3))
     for progress in (True, False):
         try:
