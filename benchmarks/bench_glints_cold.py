@@ -169,8 +169,9 @@ def main() -> None:
     cache.mkdir()
     tmp.mkdir()
     env = dict(os.environ, PREFILTER_GLINTS_CACHE=str(cache), TMPDIR=str(tmp))
-    cmd = [sys.executable, "-c", "from prefilter.cli import main; main()", "render", str(scene),
-           "--method", "glints", "--out"]
+    render_cmd = [sys.executable, "-c", "from prefilter.cli import main; main()", "render",
+                  str(scene), "--method"]
+    cmd = render_cmd + ["glints", "--out"]
     print(f"scene {a.scene or 'docs/scenes.md example'}; Numba cache "
           f"{'held' if warm_kernels else 'did not hold'} kernels of this source version; "
           f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
@@ -188,7 +189,7 @@ def main() -> None:
           f"{warm['rss']:.0f} MiB")
     print(f"load average after: {os.getloadavg()[0]:.1f}")
     if a.flip:
-        direct = run(cmd[:-2] + ["glints-direct", "--out", str(root / "direct.exr")], env,
+        direct = run(render_cmd + ["glints-direct", "--out", str(root / "direct.exr")], env,
                      root / "direct.log")
         from prefilter.render.metrics import flip
         from prefilter.texture.io import read_image
