@@ -15,7 +15,8 @@ from prefilter.glints.pndf import SIGMA_H, TRUNCATION
 from prefilter.glints.wang import (assemble, index_map, pndf_explicit, pndf_image_implicit,
                                    pndf_implicit, synthesize, tile_index)
 from prefilter.glints.wang_ndf import (TiledNDF, bake_tiles, compress_tiles, contributions, ndf,
-                                       ndf_image, ndf_pdf, ndf_points, sample, type_shares)
+                                       ndf_image, ndf_pdf, ndf_points, sample, type_shares,
+                                       vertex_config, vertex_elements)
 
 T = 16
 
@@ -120,6 +121,32 @@ def test_direct_fallback_below_min_sigma(wn, wt):
         assert len(ij) == 0
         np.testing.assert_allclose(imgs[0], pndf_image_implicit(wt, c, sp, R, SUPPORT, SR),
                                    rtol=1e-12, atol=1e-12)
+
+
+def test_vertex_elements_fix_the_dependent_texels(wn, wt):
+    """Every valid 2 x 2 block of tiles (4096: 16 x 8 x 8 x 4) gives the dependent texels at
+    its centre vertex the slopes and central-difference Jacobians of the table row of its
+    vertex configuration (the four edge colours there decide them), and the 16 rows differ."""
+    tab = vertex_elements(wn)
+    S = wt.tiles[..., :2]
+    n, s, w, e = (np.arange(16) >> b & 1 for b in range(4))
+    blocks = 0
+    for tl in range(16):
+        for tr in np.flatnonzero(w == e[tl]):
+            for bl in np.flatnonzero(n == s[tl]):
+                for br in np.flatnonzero((w == e[bl]) & (n == s[tr])):
+                    B = np.concatenate([np.concatenate([S[tl], S[tr]], 1),
+                                        np.concatenate([S[bl], S[br]], 1)], 0)
+                    row = tab[vertex_config(tl, br)]
+                    x = row[:, 0].astype(int) + T
+                    y = row[:, 1].astype(int) + T
+                    jx = 0.5 * (B[y, x + 1] - B[y, x - 1])
+                    jy = 0.5 * (B[y + 1, x] - B[y - 1, x])
+                    want = np.column_stack([B[y, x], jx[:, 0], jy[:, 0], jx[:, 1], jy[:, 1]])
+                    np.testing.assert_array_equal(row[:, 2:], want)
+                    blocks += 1
+    assert blocks == 4096 and len(tab[0]) == len(wn.dependent) > 0
+    assert len({r.tobytes() for r in tab}) == 16
 
 
 def test_tile_shares_of_the_footprint_mass(wn):

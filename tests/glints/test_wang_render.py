@@ -207,6 +207,32 @@ def test_bilinear_points(wn_pair):
                                rtol=1e-2)
 
 
+def test_dependent_texels_by_vertex_equal_neighbour_lookups(wn_pair):
+    """On the implicit tiling the bilinear point queries read the dependent texels' elements
+    from the vertex-configuration table (``vertex_elements``); given the same tiles as an
+    explicit index map they look each neighbour up: the same values (float64 rounding), and the
+    dependent texels count."""
+    from dataclasses import replace
+
+    wn, wc = wn_pair
+    T = wn.wang.size
+    idx = index_map(wn.wang, 40, 40)  # tiles (0..39, 0..39) of the implicit tiling
+    rng = np.random.default_rng(3)
+    n_f = 40
+    sp = rng.uniform(wn.min_sigma, wn.wide_sigma, n_f)
+    c = rng.uniform(8 * T, 32 * T, (n_f, 2))  # the windows stay inside the map
+    s = rng.uniform(-0.45, 0.45, (n_f, 6, 2))
+    for w in (wn, wc):
+        got = ndf_points(w, c[:, None], sp[:, None], s, bilinear=True, point_roughness=0.03)
+        want = ndf_points(w, c[:, None], sp[:, None], s, index=idx, bilinear=True,
+                          point_roughness=0.03)
+        np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12 * want.max())
+        pyr = replace(w, dependent=np.zeros((0, 2), np.int64))
+        alone = ndf_points(pyr, c[:, None], sp[:, None], s, bilinear=True,
+                           point_roughness=0.03)
+        assert np.abs(got - alone).max() > 1e-3 * got.max()
+
+
 def test_errors(tmp_path, monkeypatch):
     monkeypatch.setenv("PREFILTER_GLINTS_CACHE", str(tmp_path))
     assert "glints-wang" in available() and "Wang" in describe("glints-wang")

@@ -893,6 +893,83 @@ def dependent_neighbours(wn: TiledNDF) -> np.ndarray:
 
 
 @njit_serial
+def vertex_config(tl, br):  # pragma: no cover - compiled
+    """Configuration ``0..15`` of a grid vertex of a valid tiling from the types of the tiles
+    above-left ``tl`` and below-right ``br`` of it (ints): the colours of its four edges (right
+    ``n(br)``, below ``w(br)``, left ``s(tl)``, above ``e(tl)``; :func:`~prefilter.glints.wang.
+    edge_colours`' bits), which fix the corner squares of the four tiles meeting there (``wang``
+    module docstring: near a corner the seams cross-fade the two triangles of its edges only)."""
+    return (br & 1) + 2 * ((br >> 2) & 1) + 4 * ((tl >> 1) & 1) + 8 * ((tl >> 3) & 1)
+
+
+def _config_block(wt: WangTiles, k: int) -> np.ndarray:
+    """``(2T, 2T, 2)`` slopes of a valid 2 x 2 block of tiles around a vertex of configuration
+    ``k`` (:func:`vertex_config`; the colours of the block's outer edges are 0)."""
+    n, w, s, e = k & 1, (k >> 1) & 1, (k >> 2) & 1, (k >> 3) & 1
+    tl = 2 * s + 8 * e  # n + 2 s + 4 w + 8 e
+    tr = 2 * n + 4 * e
+    bl = s + 8 * w
+    br = n + 4 * w
+    S = wt.tiles[..., :2]
+    return np.concatenate([np.concatenate([S[tl], S[tr]], axis=1),
+                           np.concatenate([S[bl], S[br]], axis=1)], axis=0)
+
+
+def vertex_elements(wn: TiledNDF) -> np.ndarray:
+    """``(16, n_dep, 8)`` float64: per vertex configuration (:func:`vertex_config`) the elements
+    of the dependent texels of the four tiles' corners at the vertex: offset ``(ox, oy)`` of the
+    texel from the vertex (texel ``(iT + ox, jT + oy)`` of vertex ``(i, j)``), slope ``(s_x,
+    s_y)`` and Jacobian ``(j00, j01, j10, j11)`` (``element_covariance``'s order) by central
+    differences. A static table: the queries read a dependent texel's element from it instead
+    of looking up its neighbour tiles (exact on a valid tiling; tested against the assembled
+    neighbours)."""
+    T = wn.wang.size
+    dep = np.asarray(wn.dependent, np.int64).reshape(-1, 2)
+    out = np.empty((16, len(dep), 8))
+    # the corner of its tile each dependent texel is at, as the tile's offset from the vertex
+    qy = np.where(dep[:, 0] < T // 2, 0, -1)
+    qx = np.where(dep[:, 1] < T // 2, 0, -1)
+    gy = T + qy * T + dep[:, 0]  # row in the block, the vertex at (T, T)
+    gx = T + qx * T + dep[:, 1]
+    for k in range(16):
+        S = _config_block(wn.wang, k)
+        out[k, :, 0] = gx - T
+        out[k, :, 1] = gy - T
+        out[k, :, 2:4] = S[gy, gx]
+        jx = 0.5 * (S[gy, gx + 1] - S[gy, gx - 1])
+        jy = 0.5 * (S[gy + 1, gx] - S[gy - 1, gx])
+        out[k, :, 4], out[k, :, 5] = jx[:, 0], jy[:, 0]
+        out[k, :, 6], out[k, :, 7] = jx[:, 1], jy[:, 1]
+    return out
+
+
+@njit_serial
+def vertex_density(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw, gyw, c0,
+                   c1, qx, qy, f, var, sr2, cut):  # pragma: no cover - compiled
+    """Footprint-weighted point density at ``(qx, qy)`` of the dependent texels of the ``T x T``
+    tiles
+    ``ilo..ihi`` x ``jlo..jhi`` inside the window ``[wx0, wx1] x [wy0, wy1]`` (weights ``gxw``,
+    ``gyw``), by grid vertex: each vertex's elements are the row of :func:`vertex_elements` of
+    its configuration (``types`` from tile ``(ti0, tj0)``, a valid tiling)."""
+    acc = 0.0
+    for j in range(jlo, jhi + 2):
+        for i in range(ilo, ihi + 2):
+            ve = vel[vertex_config(types[j - 1 - tj0, i - 1 - ti0], types[j - tj0, i - ti0])]
+            for e in range(ve.shape[0]):
+                x = i * T + int(ve[e, 0])
+                y = j * T + int(ve[e, 1])
+                if not (wx0 <= x <= wx1 and wy0 <= y <= wy1):
+                    continue
+                dx = c0 - (x + 0.5)
+                dy = c1 - (y + 0.5)
+                a, b, d = element_covariance(ve[e, 4], ve[e, 5], ve[e, 6], ve[e, 7], var, sr2)
+                acc += gxw[x - wx0] * gyw[y - wy0] * element_density(
+                    qx - ve[e, 2] - f * (ve[e, 4] * dx + ve[e, 5] * dy),
+                    qy - ve[e, 3] - f * (ve[e, 6] * dx + ve[e, 7] * dy), a, b, d, cut)
+    return acc
+
+
+@njit_serial
 def dep_gaussian(tiles, types, jj, ii, nb5, gx, gy, cx, cy, f, var, tot2):  # pragma: no cover
     """:func:`_nb_gaussian` of a dependent texel ``(gx, gy)`` of the tile at ``types[jj,
     ii]``, its neighbours looked up by the table ``nb5 (5, 4)`` of
@@ -955,7 +1032,7 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 @njit_parallel
 def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J, depmask,
                    seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops, block, k0,
-                   st0, sigma0, dep, depn, tile_means, mean, sr, lo, h,
+                   st0, sigma0, dep, depn, vel, tile_means, mean, sr, lo, h,
                    min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
@@ -1089,6 +1166,13 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
                             acc += wyt[jj, ky] * wxt[ii, kx] * v
         dsum = 0.0
         psum = 0.0
+        if point_sr > 0.0 and index.size == 0:
+            # the dependent texels by grid vertex, no neighbour lookups (the implicit tiling is
+            # valid)
+            out[q] = acc + vertex_density(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1,
+                                          wy0, wy1, gxw, gyw, c0, c1, qx[q], qy[q], f, var,
+                                          point_sr * point_sr, 8.0 * trunc * trunc) / (sx * sy)
+            continue
         for j in range(jlo, jhi + 1):
             for i in range(ilo, ihi + 1):
                 for e in range(dep.shape[0]):
@@ -1179,7 +1263,8 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         pk.Fa, pk.Fb, pk.wsc, pk.cq, pk.bidx, pk.meta, pk.offs, pk.goff,
         np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
-        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), wn.tile_means, wn.mean,
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_elements(wn),
+        wn.tile_means, wn.mean,
         wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
@@ -1187,6 +1272,17 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
 
 
 _ELEMENTS: dict = {}
+_VERTICES: dict = {}
+
+
+def _vertex_elements(wn: TiledNDF) -> np.ndarray:
+    """:func:`vertex_elements`, cached per tile set and dependent texels (every frame queries
+    the same tiles)."""
+    key = (id(wn.wang), np.asarray(wn.dependent, np.int64).tobytes())
+    hit = _VERTICES.get(key)
+    if hit is None or hit[0] is not wn.wang:
+        hit = _VERTICES[key] = (wn.wang, vertex_elements(wn))
+    return hit[1]
 
 
 def _kernel_elements(wn: TiledNDF):
