@@ -29,10 +29,11 @@ import numpy as np
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _flush_rects, _rect, _touching
 from prefilter.glints.pndf import (GH3_MAX, GH5_MAX, GH5_T, GH5_W, SIGMA_H, TRUNCATION,
-                                   as_sigma_p, element_split, node_count, node_reach, normal_cdf,
-                                   principal_axis)
+                                   as_sigma_p, element_covariance, element_split, node_count,
+                                   node_reach, normal_cdf, principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
-                                      _nb_type, dep_gaussian, dependent_neighbours, level_window)
+                                      _nb_type, _vertex_elements, dep_gaussian,
+                                      dependent_neighbours, level_window, vertex_config)
 from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
@@ -142,7 +143,8 @@ def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no 
 
 @njit_parallel
 def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, cq,
-                   wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, sat,
+                   wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, vel,
+                   sat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    point_sr, proto, out, done):  # pragma: no cover - compiled
     """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
@@ -243,9 +245,17 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         # the support, as the images)
         f = sh * sh / tot2
         var = s * s * sh * sh / tot2
-        sx = gauss_row(c0, wx0, wx1, tot2).sum()
-        sy = gauss_row(c1, wy0, wy1, tot2).sum()
+        gxw = gauss_row(c0, wx0, wx1, tot2)
+        gyw = gauss_row(c1, wy0, wy1, tot2)
+        sx = gxw.sum()
+        sy = gyw.sum()
         hi = lo + R * h
+        if index.size == 0:
+            # by grid vertex, no neighbour lookups (the implicit tiling is valid)
+            _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw,
+                          gyw, c0, c1, f, var, sx * sy, point_sr, act[q], rbk, x0[q], x1[q],
+                          y0[q], y1[q], lo, hi, trunc, out[q])
+            continue
         for j in range(jlo, jhi + 1):
             for i in range(ilo, ihi + 1):
                 for e in range(dep.shape[0]):
@@ -264,6 +274,38 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                                                    max(x0[q, k], lo), min(x1[q, k], hi),
                                                    max(y0[q, k], lo), min(y1[q, k], hi),
                                                    trunc) / ar
+
+
+@njit_serial
+def _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw, gyw, c0,
+                  c1, f, var, norm, sr, act, rbk, x0, x1, y0, y1, lo, hi, trunc,
+                  out):  # pragma: no cover - compiled
+    """``out (K,)`` += the rectangle means of the dependent texels' elements (weights ``gxw``,
+    ``gyw`` over the window ``[wx0, wx1] x [wy0, wy1]``, divided by ``norm``) of the ``T x T``
+    tiles ``ilo..ihi`` x ``jlo..jhi``, by grid vertex: each vertex's elements are the row of
+    ``wang_ndf.vertex_elements`` of its configuration (``types`` from tile ``(ti0, tj0)``, a
+    valid tiling). Rectangles ``[x0, x1] x [y0, y1]`` clipped to ``[lo, hi]``."""
+    for j in range(jlo, jhi + 2):
+        for i in range(ilo, ihi + 2):
+            ve = vel[vertex_config(types[j - 1 - tj0, i - 1 - ti0], types[j - tj0, i - ti0])]
+            for e in range(ve.shape[0]):
+                x = i * T + int(ve[e, 0])
+                y = j * T + int(ve[e, 1])
+                if not (wx0 <= x <= wx1 and wy0 <= y <= wy1):
+                    continue
+                dx = c0 - (x + 0.5)
+                dy = c1 - (y + 0.5)
+                mx = ve[e, 2] + f * (ve[e, 4] * dx + ve[e, 5] * dy)
+                my = ve[e, 3] + f * (ve[e, 6] * dx + ve[e, 7] * dy)
+                a, b, d = element_covariance(ve[e, 4], ve[e, 5], ve[e, 6], ve[e, 7], var, 0.0)
+                w = gxw[x - wx0] * gyw[y - wy0] / norm
+                for k in range(out.shape[0]):
+                    if not act[k] or rbk[k, 0] > rbk[k, 1]:
+                        continue
+                    ar = (x1[k] - x0[k]) * (y1[k] - y0[k])
+                    out[k] += _rect_element(mx, my, a, b, d, w, sr, max(x0[k], lo),
+                                            min(x1[k], hi), max(y0[k], lo), min(y1[k], hi),
+                                            trunc) / ar
 
 
 def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, index=None,
@@ -312,7 +354,8 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
         pk.meta, pk.offs, pk.goff, np.array([wn.crop(lv) for lv in range(wn.n_levels)],
                                             np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
-        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), summed_tables(wn), -wn.support,
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_elements(wn),
+        summed_tables(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
         _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, out, done)
     return out, done
