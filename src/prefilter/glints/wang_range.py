@@ -71,6 +71,25 @@ def _sat_rect(S, py0, py1, px0, px1):  # pragma: no cover - compiled
             + _sat_at(S, py0, px0))
 
 
+_NORMS: dict = {}
+
+
+def line_norms(trunc: float, n_max: int = 4096) -> np.ndarray:
+    """``(n_max,)`` float64: the normaliser of :func:`~prefilter.glints.pndf.line_nodes`'
+    weights for each node count ``n >= 2`` over ``[-trunc, trunc]`` (entries 0 and 1 unused),
+    by :func:`~prefilter.glints.wang_query.gauss_row` as the kernels compute it; a table so
+    that no element allocates its nodes' row (cached per ``trunc``)."""
+    key = (float(trunc), int(n_max))
+    hit = _NORMS.get(key)
+    if hit is None:
+        hit = np.zeros(n_max)
+        for n in range(2, n_max):
+            step = 2.0 * trunc / (n - 1)
+            hit[n] = gauss_row(0.5 * n, 0, n - 1, 1.0 / (step * step)).sum()
+        _NORMS[key] = hit
+    return hit
+
+
 @njit_serial
 def _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc):  # pragma: no cover - compiled
     """``w`` times the mass of ``N((mx, my), siso^2 I)`` over ``[x0, x1] x [y0, y1]``; 0 when
@@ -84,12 +103,21 @@ def _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc):  # pragma: no cover - com
 
 
 @njit_serial
-def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no cover
+def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc, norms):  # pragma: no cover
     """``w`` times the mass of an element over ``[x0, x1] x [y0, y1]``: the split of
     ``wang_ndf._nb_element`` (isotropic part, three or a line of isotropic nodes for the
     rank-one part; ``pndf._pndf_images``' splatting) with rectangle masses instead of pixel
     masses."""
     nu1, siso, kappa = element_split(a, b, d, sr)
+    return _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, x0, x1, y0, y1, trunc, norms)
+
+
+@njit_serial
+def _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, x0, x1, y0, y1, trunc,
+                norms):  # pragma: no cover - compiled
+    """:func:`_rect_element` given the element's :func:`~prefilter.glints.pndf.element_split`
+    ``(nu1, siso, kappa)`` (computed once for all the rectangles of a footprint); ``norms``:
+    :func:`line_norms` of ``trunc``."""
     ext = trunc * (kappa + siso)
     if mx + ext < x0 or mx - ext > x1 or my + ext < y0 or my - ext > y1:
         return 0.0
@@ -110,12 +138,15 @@ def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no 
                     + _iso_mass(mx - t * vx, my - t * vy, siso, w * GH5_W[j + 1], x0, x1, y0,
                                 y1, trunc))
         return acc
-    # pndf.line_nodes' nodes; their normaliser by gauss_row's recurrence (no exp a node)
+    # pndf.line_nodes' nodes; their normaliser tabulated per node count
     n = node_count(kappa, siso, trunc)
     step = 2.0 * trunc / (n - 1)
-    norm = 0.0
-    for gk in gauss_row(0.5 * n, 0, n - 1, 1.0 / (step * step)):
-        norm += gk
+    if n < norms.shape[0]:
+        norm = norms[n]
+    else:
+        norm = 0.0
+        for gk in gauss_row(0.5 * n, 0, n - 1, 1.0 / (step * step)):
+            norm += gk
     rn = trunc * siso
     # the nodes t (in kappa units) whose isotropic part reaches the rectangle: the line's
     # interval inside it, grown by trunc siso (a long element crosses a small rectangle with a
@@ -146,7 +177,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                    wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, vel,
                    sat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
-                   point_sr, proto, out, done):  # pragma: no cover - compiled
+                   point_sr, norms, proto, out, done):  # pragma: no cover - compiled
     """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
     ``[q, k]`` (0 for inactive rectangles); ``done[q]`` False below ``min_sigma`` (module
     docstring). Accumulation of the code rows in ``proto``'s dtype (float32 for 8-bit codes)."""
@@ -254,7 +285,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
             # by grid vertex, no neighbour lookups (the implicit tiling is valid)
             _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw,
                           gyw, c0, c1, f, var, sx * sy, point_sr, act[q], rbk, x0[q], x1[q],
-                          y0[q], y1[q], lo, hi, trunc, out[q])
+                          y0[q], y1[q], lo, hi, trunc, norms, out[q])
             continue
         for j in range(jlo, jhi + 1):
             for i in range(ilo, ihi + 1):
@@ -273,12 +304,12 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                         out[q, k] += _rect_element(mx, my, a, b, d, w, point_sr,
                                                    max(x0[q, k], lo), min(x1[q, k], hi),
                                                    max(y0[q, k], lo), min(y1[q, k], hi),
-                                                   trunc) / ar
+                                                   trunc, norms) / ar
 
 
 @njit_serial
 def _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw, gyw, c0,
-                  c1, f, var, norm, sr, act, rbk, x0, x1, y0, y1, lo, hi, trunc,
+                  c1, f, var, norm, sr, act, rbk, x0, x1, y0, y1, lo, hi, trunc, norms,
                   out):  # pragma: no cover - compiled
     """``out (K,)`` += the rectangle means of the dependent texels' elements (weights ``gxw``,
     ``gyw`` over the window ``[wx0, wx1] x [wy0, wy1]``, divided by ``norm``) of the ``T x T``
@@ -298,14 +329,15 @@ def _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy
                 mx = ve[e, 2] + f * (ve[e, 4] * dx + ve[e, 5] * dy)
                 my = ve[e, 3] + f * (ve[e, 6] * dx + ve[e, 7] * dy)
                 a, b, d = element_covariance(ve[e, 4], ve[e, 5], ve[e, 6], ve[e, 7], var, 0.0)
+                nu1, siso, kappa = element_split(a, b, d, sr)
                 w = gxw[x - wx0] * gyw[y - wy0] / norm
                 for k in range(out.shape[0]):
                     if not act[k] or rbk[k, 0] > rbk[k, 1]:
                         continue
                     ar = (x1[k] - x0[k]) * (y1[k] - y0[k])
-                    out[k] += _rect_element(mx, my, a, b, d, w, sr, max(x0[k], lo),
-                                            min(x1[k], hi), max(y0[k], lo), min(y1[k], hi),
-                                            trunc) / ar
+                    out[k] += _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, max(x0[k], lo),
+                                          min(x1[k], hi), max(y0[k], lo), min(y1[k], hi),
+                                          trunc, norms) / ar
 
 
 def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, index=None,
@@ -357,5 +389,5 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_elements(wn),
         summed_tables(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
-        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, out, done)
+        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, line_norms(TRUNCATION), proto, out, done)
     return out, done
