@@ -41,6 +41,8 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, GH3_MAX, GH5_MAX, GH5_T, G
                                    node_reach, normal_cdf, pixel_edges, pndf_image, principal_axis,
                                    splat_element)
 from prefilter.glints._qkernels import pixel_taps
+from prefilter.glints._simd import exp_neg
+from prefilter.glints.brdf import _ANGULAR_CUT, _exponents, _row_gaussians
 from prefilter.glints.wang_query import (TilePack, gauss_row, pack_float, pack_point,
                                          segment_sums, tile_taps)
 from prefilter.glints.pyramid import next_level
@@ -944,6 +946,58 @@ def vertex_elements(wn: TiledNDF) -> np.ndarray:
 
 
 @njit_serial
+def direct_point(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1, gxw, gyw, c0, c1, f,
+                 var, sr2, qx, qy):  # pragma: no cover - compiled
+    """Direct P-NDF at ``(qx, qy)`` of the texels ``[wx0, wx1] x [wy0, wy1]`` of the implicit
+    tiling before its normalisation: ``sum_i w_i N(q; m_i, cov_i)`` (footprint weights ``gxw``,
+    ``gyw``; ``types`` from tile ``(ti0, tj0)``). The elements come from :func:`tile_planes`
+    ``planes (6, 16, T, T)`` by row segments (``brdf._row_gaussians``: the ``glints-direct``
+    kernels' vectorised form and their cut at 6 stds), the dependent texels' from the vertex
+    table (:func:`vertex_planes` ``vplanes (6, 16, 1, n_dep)`` at offsets ``vofs (n_dep, 2)``
+    from their vertex), written over the tiles' expected-neighbour values."""
+    nx = wx1 - wx0 + 1
+    n = nx * (wy1 - wy0 + 1)
+    G = np.empty((6, n))
+    t = np.empty(n)
+    fdx = np.empty(nx)
+    for x in range(nx):
+        fdx[x] = f * (c0 - (wx0 + x + 0.5))
+    SX, SY, J00, J01, J10, J11 = planes[0], planes[1], planes[2], planes[3], planes[4], planes[5]
+    for y in range(wy0, wy1 + 1):
+        ty = y // T
+        ry = y - ty * T
+        fdy = f * (c1 - (y + 0.5))
+        o = (y - wy0) * nx
+        for i in range(wx0 // T, wx1 // T + 1):
+            tt = types[ty - tj0, i - ti0]
+            xa = max(wx0, i * T)
+            xb = min(wx1, i * T + T - 1)
+            _row_gaussians(J00[tt], J01[tt], J10[tt], J11[tt], SX[tt], SY[tt], ry, xa - i * T,
+                           xb - xa + 1, fdx[xa - wx0:], fdy, var, sr2, gxw[xa - wx0:],
+                           gyw[y - wy0], G, o + xa - wx0)
+    # the dependent texels, by grid vertex, over their expected-neighbour values
+    VX, VY, V00, V01, V10, V11 = (vplanes[0], vplanes[1], vplanes[2], vplanes[3], vplanes[4],
+                                  vplanes[5])
+    for j in range(wy0 // T, wy1 // T + 2):
+        for i in range(wx0 // T, wx1 // T + 2):
+            k = vertex_config(types[j - 1 - tj0, i - 1 - ti0], types[j - tj0, i - ti0])
+            for e in range(VX.shape[2]):
+                x = i * T + vofs[e, 0]
+                y = j * T + vofs[e, 1]
+                if not (wx0 <= x <= wx1 and wy0 <= y <= wy1):
+                    continue
+                _row_gaussians(V00[k], V01[k], V10[k], V11[k], VX[k], VY[k], 0, e, 1,
+                               fdx[x - wx0:], f * (c1 - (y + 0.5)), var, sr2, gxw[x - wx0:],
+                               gyw[y - wy0], G, (y - wy0) * nx + x - wx0)
+    _exponents(qx, qy, G, n, t)
+    acc = 0.0
+    for m in range(n):
+        if t[m] > _ANGULAR_CUT:
+            acc += G[5, m] * exp_neg(t[m])
+    return acc / (2.0 * math.pi)
+
+
+@njit_serial
 def vertex_density(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw, gyw, c0,
                    c1, qx, qy, f, var, sr2, cut):  # pragma: no cover - compiled
     """Footprint-weighted point density at ``(qx, qy)`` of the dependent texels of the ``T x T``
@@ -1032,7 +1086,7 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 @njit_parallel
 def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J, depmask,
                    seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops, block, k0,
-                   st0, sigma0, dep, depn, vel, tile_means, mean, sr, lo, h,
+                   st0, sigma0, dep, depn, vel, planes, vplanes, vofs, tile_means, mean, sr, lo, h,
                    min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
@@ -1110,6 +1164,13 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
             acc = 0.0
             ti0, tj0 = wx0 // T - 1, wy0 // T - 1
             types = _nb_types(ti0, wx1 // T + 1, tj0, wy1 // T + 1, seed, index)
+            if point and index.size == 0:
+                # the implicit tiling: the window's elements as Gaussians row segment by row
+                # segment from the tile planes, the dependent texels from the vertex table
+                out[q] = direct_point(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1,
+                                      gxw, gyw, c0, c1, f, var, point_sr * point_sr, qx[q],
+                                      qy[q]) / (sx * sy)
+                continue
             if point:
                 # the tiles' own elements (exact away from the dependent texels, which look
                 # up their neighbours) and separable weights: a few flops and one exp a texel
@@ -1251,6 +1312,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     cc = np.ascontiguousarray
     images, pk = _kernel_levels(wn)
     el_s, el_J, depmask = _kernel_elements(wn)
+    vel = _vertex_elements(wn)
     if idx.size:
         # an explicit map may put mismatched edges side by side (a block of the implicit tiling
         # wraps so): the border texels look up their actual neighbours
@@ -1263,8 +1325,8 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         pk.Fa, pk.Fb, pk.wsc, pk.cq, pk.bidx, pk.meta, pk.offs, pk.goff,
         np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
-        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_elements(wn),
-        wn.tile_means, wn.mean,
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), vel, tile_planes(wn),
+        vertex_planes(vel), cc(vel[0, :, :2], dtype=np.int64), wn.tile_means, wn.mean,
         wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
@@ -1273,6 +1335,24 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
 
 _ELEMENTS: dict = {}
 _VERTICES: dict = {}
+
+
+def tile_planes(wn: TiledNDF) -> np.ndarray:
+    """``(6, 16, T, T)`` float64: the tiles' elements (:func:`tile_elements`) as the planes
+    ``s_x, s_y, j00, j01, j10, j11`` of ``brdf._row_gaussians`` (cached with them)."""
+    el_s, el_J, _ = _kernel_elements(wn)
+    hit = _ELEMENTS.get(("planes", id(wn.wang)))
+    if hit is None or hit[0] is not el_s:
+        pl = np.stack([el_s[..., 0], el_s[..., 1], el_J[..., 0, 0], el_J[..., 0, 1],
+                       el_J[..., 1, 0], el_J[..., 1, 1]])
+        hit = _ELEMENTS[("planes", id(wn.wang))] = (el_s, np.ascontiguousarray(pl))
+    return hit[1]
+
+
+def vertex_planes(vel: np.ndarray) -> np.ndarray:
+    """``(6, 16, 1, n_dep)`` float64: :func:`vertex_elements`' slopes and Jacobians as planes
+    of one row per configuration (``brdf._row_gaussians``' layout)."""
+    return np.ascontiguousarray(np.moveaxis(vel[..., 2:], -1, 0)[:, :, None, :])
 
 
 def _vertex_elements(wn: TiledNDF) -> np.ndarray:
