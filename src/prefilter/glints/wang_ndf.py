@@ -998,29 +998,41 @@ def direct_point(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1, 
 
 
 @njit_serial
-def vertex_density(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw, gyw, c0,
-                   c1, qx, qy, f, var, sr2, cut):  # pragma: no cover - compiled
+def vertex_density(vplanes, vofs, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1,
+                   gxw, gyw, c0, c1, qx, qy, f, var, sr2):  # pragma: no cover - compiled
     """Footprint-weighted point density at ``(qx, qy)`` of the dependent texels of the ``T x T``
-    tiles
-    ``ilo..ihi`` x ``jlo..jhi`` inside the window ``[wx0, wx1] x [wy0, wy1]`` (weights ``gxw``,
-    ``gyw``), by grid vertex: each vertex's elements are the row of :func:`vertex_elements` of
-    its configuration (``types`` from tile ``(ti0, tj0)``, a valid tiling)."""
-    acc = 0.0
+    tiles ``ilo..ihi`` x ``jlo..jhi`` inside the window ``[wx0, wx1] x [wy0, wy1]`` (weights
+    ``gxw``, ``gyw``), by grid vertex: each vertex's elements are the row of the vertex table
+    (:func:`vertex_planes` ``vplanes``, offsets ``vofs``) of its configuration (``types`` from
+    tile ``(ti0, tj0)``, a valid tiling); as Gaussians of ``brdf._row_gaussians``, cut at 6
+    stds (:func:`direct_point`)."""
+    nd = vofs.shape[0]
+    G = np.empty((6, (jhi - jlo + 2) * (ihi - ilo + 2) * nd))
+    fdx = np.empty(1)
+    wx = np.empty(1)
+    VX, VY, V00, V01, V10, V11 = (vplanes[0], vplanes[1], vplanes[2], vplanes[3], vplanes[4],
+                                  vplanes[5])
+    n = 0
     for j in range(jlo, jhi + 2):
         for i in range(ilo, ihi + 2):
-            ve = vel[vertex_config(types[j - 1 - tj0, i - 1 - ti0], types[j - tj0, i - ti0])]
-            for e in range(ve.shape[0]):
-                x = i * T + int(ve[e, 0])
-                y = j * T + int(ve[e, 1])
+            k = vertex_config(types[j - 1 - tj0, i - 1 - ti0], types[j - tj0, i - ti0])
+            for e in range(nd):
+                x = i * T + vofs[e, 0]
+                y = j * T + vofs[e, 1]
                 if not (wx0 <= x <= wx1 and wy0 <= y <= wy1):
                     continue
-                dx = c0 - (x + 0.5)
-                dy = c1 - (y + 0.5)
-                a, b, d = element_covariance(ve[e, 4], ve[e, 5], ve[e, 6], ve[e, 7], var, sr2)
-                acc += gxw[x - wx0] * gyw[y - wy0] * element_density(
-                    qx - ve[e, 2] - f * (ve[e, 4] * dx + ve[e, 5] * dy),
-                    qy - ve[e, 3] - f * (ve[e, 6] * dx + ve[e, 7] * dy), a, b, d, cut)
-    return acc
+                fdx[0] = f * (c0 - (x + 0.5))
+                wx[0] = gxw[x - wx0]
+                _row_gaussians(V00[k], V01[k], V10[k], V11[k], VX[k], VY[k], 0, e, 1, fdx,
+                               f * (c1 - (y + 0.5)), var, sr2, wx, gyw[y - wy0], G, n)
+                n += 1
+    t = np.empty(n)
+    _exponents(qx, qy, G, n, t)
+    acc = 0.0
+    for m in range(n):
+        if t[m] > _ANGULAR_CUT:
+            acc += G[5, m] * exp_neg(t[m])
+    return acc / (2.0 * math.pi)
 
 
 @njit_serial
@@ -1086,7 +1098,7 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 @njit_parallel
 def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J, depmask,
                    seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops, block, k0,
-                   st0, sigma0, dep, depn, vel, planes, vplanes, vofs, tile_means, mean, sr, lo, h,
+                   st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean, sr, lo, h,
                    min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
@@ -1097,7 +1109,10 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
     levels, the arrays of a :class:`prefilter.glints.wang_query.TilePack` (``images``
     unused), each tap's code rows summed per CP group (:func:`prefilter.glints.wang_query.
     pack_point`); ``crops (L,)``: centres per axis per level. ``el_s, el_J``:
-    :func:`tile_elements`; ``depmask (T, T)``: :func:`dependent_texels`."""
+    :func:`tile_elements`; ``depmask (T, T)``: :func:`dependent_texels`. On the implicit tiling
+    (``index`` empty) the point densities come from ``planes`` (:func:`tile_planes`) and the
+    vertex table ``vplanes``, ``vofs`` (:func:`vertex_planes`), cut at 6 stds; with an explicit
+    map, from neighbour lookups, cut at ``2 trunc`` stds."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
@@ -1230,9 +1245,9 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
         if point_sr > 0.0 and index.size == 0:
             # the dependent texels by grid vertex, no neighbour lookups (the implicit tiling is
             # valid)
-            out[q] = acc + vertex_density(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1,
-                                          wy0, wy1, gxw, gyw, c0, c1, qx[q], qy[q], f, var,
-                                          point_sr * point_sr, 8.0 * trunc * trunc) / (sx * sy)
+            out[q] = acc + vertex_density(vplanes, vofs, T, types, tj0, ti0, jlo, jhi, ilo, ihi,
+                                          wx0, wx1, wy0, wy1, gxw, gyw, c0, c1, qx[q], qy[q], f,
+                                          var, point_sr * point_sr) / (sx * sy)
             continue
         for j in range(jlo, jhi + 1):
             for i in range(ilo, ihi + 1):
@@ -1325,7 +1340,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         pk.Fa, pk.Fb, pk.wsc, pk.cq, pk.bidx, pk.meta, pk.offs, pk.goff,
         np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
-        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), vel, tile_planes(wn),
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), tile_planes(wn),
         vertex_planes(vel), cc(vel[0, :, :2], dtype=np.int64), wn.tile_means, wn.mean,
         wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
