@@ -17,8 +17,9 @@ default 0.5 / 2 / 8: near / mid / far; ``prefilter.glints.render.measurement_sce
 
 The machine is shared: the load average is printed with each row (``os.getloadavg``). Run
 nice'd: ``nice python benchmarks/bench_glints_wang.py [--repeats 3] [--lights point]
-[--distances 0.5 2 8] [--no-flip] [--rss]``. One JSON line per row on stdout, then a markdown
-table.
+[--distances 0.5 2 8] [--no-flip] [--rss] [--breakdown]`` (``--breakdown``: the frame's NDF
+queries by regime, CPU time with and without the dependent texels). One JSON line per row on
+stdout, then a markdown table.
 """
 
 from __future__ import annotations
@@ -102,6 +103,57 @@ def _memory(path, rss: bool) -> dict:
     return out
 
 
+def _breakdown(sc, repeats):
+    """CPU seconds of the NDF queries of one ``glints-wang`` frame by regime (``ndf_points``
+    and ``wang_range.ndf_ranges`` calls recorded during the frame, re-run on their footprints
+    of each regime, best of ``repeats``), with and without the dependent texels (a copy of the
+    ``TiledNDF`` without them: what the pyramids alone cost)."""
+    from dataclasses import replace
+
+    from prefilter.glints import wang_ndf, wang_range, wang_render
+    from prefilter.render.driver import render
+
+    calls = []
+    points, ranges = wang_render.ndf_points, wang_range.ndf_ranges
+
+    def rec_points(wn, c, sp, s, **kw):
+        calls.append(("points", wn, np.asarray(c), np.asarray(sp), (np.asarray(s),), kw))
+        return points(wn, c, sp, s, **kw)
+
+    def rec_ranges(wn, c, sp, lo, hi, **kw):
+        calls.append(("ranges", wn, np.asarray(c), np.asarray(sp), (lo, hi), kw))
+        return ranges(wn, c, sp, lo, hi, **kw)
+
+    wang_render.ndf_points, wang_range.ndf_ranges = rec_points, rec_ranges
+    try:
+        render(sc, "glints-wang")
+    finally:
+        wang_render.ndf_points, wang_range.ndf_ranges = points, ranges
+    out = {}
+    for kind, wn, c, sp, args, kw in calls:
+        fn = points if kind == "points" else ranges
+        reg = np.vectorize(lambda x: wang_ndf._regime(wn, float(x)))(sp)
+        alone = replace(wn, dependent=np.zeros((0, 2), np.int64))
+        for name in ("direct", "tiles", "shares", "uniform"):
+            sel = reg == name
+            if not sel.any() or (kind == "ranges" and name == "direct"):
+                continue
+            sub = [a[sel] for a in args]
+            kws = {k: (v[sel] if isinstance(v, np.ndarray) and v.shape[:sp.ndim] == sp.shape
+                       else v) for k, v in kw.items()}
+            for label, w in (("", wn), ("_pyramids_alone", alone)):
+                fn(w, c[sel], sp[sel], *sub, **kws)  # compile / cache
+                best = float("inf")
+                for _ in range(repeats):
+                    t0 = time.process_time()
+                    fn(w, c[sel], sp[sel], *sub, **kws)
+                    best = min(best, time.process_time() - t0)
+                key = f"{kind}_{name}{label}_s"
+                out[key] = round(out.get(key, 0.0) + best, 4)
+            out[f"{kind}_{name}_n"] = out.get(f"{kind}_{name}_n", 0) + int(sel.sum())
+    return out
+
+
 def main(argv=None):
     from prefilter.glints import wang_render
     from prefilter.glints.render import measurement_scene
@@ -114,6 +166,9 @@ def main(argv=None):
                     choices=["point", "quad", "environment"])
     ap.add_argument("--no-flip", action="store_true")
     ap.add_argument("--rss", action="store_true")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="also the frame's NDF query time by regime, with and without the "
+                         "dependent texels")
     args = ap.parse_args(argv)
     tmp = Path(tempfile.mkdtemp())
     rows = []
@@ -130,6 +185,8 @@ def main(argv=None):
                        glints_cpu_s=[round(x, 4) for x in cpu["glints"]],
                        cpu_ratio=round(med["glints-wang"] / med["glints"], 2),
                        loadavg=[round(x, 2) for x in os.getloadavg()])
+            if args.breakdown:
+                row.update(_breakdown(sc, args.repeats))
             if not args.no_flip:
                 row["flip_wang_vs_direct_assembled"] = round(_assembled_flip(d, kind, tmp), 4)
             if not rows:

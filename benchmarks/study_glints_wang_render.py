@@ -33,7 +33,9 @@ Per distance (``prefilter.glints.render.measurement_scene(d, lights="point")``, 
   ``glints-direct`` render on the assembled map (its cost depends on the footprints, the same
   as on the exemplar). ``--mean-seeds K``: frame means over seeds ``0..K-1`` (``glints-direct``:
   ``1000..``, independent) (ratio,
-  difference in standard errors, relative std of one frame's mean).
+  difference in standard errors, relative std of one frame's mean), and the FLIP of the two
+  methods' images averaged over those seeds, with its floor: ``glints-direct``'s average over
+  its even seeds against its odd ones.
 
 Run: ``.venv/bin/python benchmarks/study_glints_wang_render.py [--repeats 3]
 [--distances 0.5 2 8] [--set key=value ...] [--code-bits 0 8 16] [--no-times]
@@ -160,11 +162,22 @@ def _lights_row(args, wang, tmp, d, kind):
         # frame means over seeds of both: the estimators' agreement beyond one frame. Seeds
         # 1000.. for glints-direct: independent of glints-wang's (shared light samples would
         # correlate them and the standard error below assumes independence)
-        ma = [float(wang_render.render_wang(sc, RenderSettings(seed=k), index=idx).mean())
+        fa = [wang_render.render_wang(sc, RenderSettings(seed=k), index=idx)
               for k in range(args.mean_seeds)]
-        mb = [float(render(sa, "glints-direct", seed=1000 + k).mean())
-              for k in range(args.mean_seeds)]
+        fb = [render(sa, "glints-direct", seed=1000 + k) for k in range(args.mean_seeds)]
+        ma = [float(x.mean()) for x in fa]
+        mb = [float(x.mean()) for x in fb]
         se = np.sqrt(np.var(ma, ddof=1) / len(ma) + np.var(mb, ddof=1) / len(mb))
+        # images averaged over the seeds: what is left of the FLIP without most of the two
+        # estimators' noise, and the floor of that average (glints-direct's even seeds
+        # against its odd ones, half as many frames each)
+        avg_a, avg_b = np.mean(fa, axis=0), np.mean(fb, axis=0)
+        fm, fmc, _ = _flips(avg_a, avg_b, args.stop_exposure)
+        hf, hfc, _ = _flips(np.mean(fb[0::2], axis=0), np.mean(fb[1::2], axis=0),
+                            args.stop_exposure)
+        row.update(flip_seed_mean_wang_vs_direct=fm, flip_capped_seed_mean_wang_vs_direct=fmc,
+                   flip_seed_mean_direct_even_vs_odd=hf,
+                   flip_capped_seed_mean_direct_even_vs_odd=hfc)
         row.update(mean_seeds=args.mean_seeds, mean_ratio_seeds=float(np.mean(ma) / np.mean(mb)),
                    mean_diff_over_se=float((np.mean(ma) - np.mean(mb)) / se),
                    frame_mean_rel_std_wang=float(np.std(ma, ddof=1) / np.mean(ma)),
