@@ -946,19 +946,17 @@ def vertex_elements(wn: TiledNDF) -> np.ndarray:
 
 
 @njit_serial
-def direct_point(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1, gxw, gyw, c0, c1, f,
-                 var, sr2, qx, qy):  # pragma: no cover - compiled
-    """Direct P-NDF at ``(qx, qy)`` of the texels ``[wx0, wx1] x [wy0, wy1]`` of the implicit
-    tiling before its normalisation: ``sum_i w_i N(q; m_i, cov_i)`` (footprint weights ``gxw``,
-    ``gyw``; ``types`` from tile ``(ti0, tj0)``). The elements come from :func:`tile_planes`
-    ``planes (6, 16, T, T)`` by row segments (``brdf._row_gaussians``: the ``glints-direct``
-    kernels' vectorised form and their cut at 6 stds), the dependent texels' from the vertex
-    table (:func:`vertex_planes` ``vplanes (6, 16, 1, n_dep)`` at offsets ``vofs (n_dep, 2)``
-    from their vertex), written over the tiles' expected-neighbour values."""
+def direct_gaussians(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1, gxw, gyw, c0,
+                     c1, f, var, sr2):  # pragma: no cover - compiled
+    """The elements of the texels ``[wx0, wx1] x [wy0, wy1]`` of the implicit tiling as the
+    Gaussians ``G (6, n)`` of ``brdf._row_gaussians`` (footprint weights ``gxw``, ``gyw``;
+    ``types`` from tile ``(ti0, tj0)``), formed once per footprint for all its points
+    (:func:`gaussians_density`): from :func:`tile_planes` ``planes (6, 16, T, T)`` by row
+    segments (``glints-direct``'s vectorised form), the dependent texels' from the vertex table
+    (:func:`vertex_planes` ``vplanes (6, 16, 1, n_dep)`` at offsets ``vofs (n_dep, 2)`` from
+    their vertex), written over the tiles' expected-neighbour values."""
     nx = wx1 - wx0 + 1
-    n = nx * (wy1 - wy0 + 1)
-    G = np.empty((6, n))
-    t = np.empty(n)
+    G = np.empty((6, nx * (wy1 - wy0 + 1)))
     fdx = np.empty(nx)
     for x in range(nx):
         fdx[x] = f * (c0 - (wx0 + x + 0.5))
@@ -975,7 +973,6 @@ def direct_point(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1, 
             _row_gaussians(J00[tt], J01[tt], J10[tt], J11[tt], SX[tt], SY[tt], ry, xa - i * T,
                            xb - xa + 1, fdx[xa - wx0:], fdy, var, sr2, gxw[xa - wx0:],
                            gyw[y - wy0], G, o + xa - wx0)
-    # the dependent texels, by grid vertex, over their expected-neighbour values
     VX, VY, V00, V01, V10, V11 = (vplanes[0], vplanes[1], vplanes[2], vplanes[3], vplanes[4],
                                   vplanes[5])
     for j in range(wy0 // T, wy1 // T + 2):
@@ -989,6 +986,14 @@ def direct_point(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1, 
                 _row_gaussians(V00[k], V01[k], V10[k], V11[k], VX[k], VY[k], 0, e, 1,
                                fdx[x - wx0:], f * (c1 - (y + 0.5)), var, sr2, gxw[x - wx0:],
                                gyw[y - wy0], G, (y - wy0) * nx + x - wx0)
+    return G
+
+
+@njit_serial
+def gaussians_density(G, n, qx, qy, t):  # pragma: no cover - compiled
+    """``sum_i G[5, i] exp(G's exponent at (qx, qy)) / (2 pi)`` over the first ``n`` Gaussians
+    of ``G`` (``brdf._row_gaussians``' layout), each cut at 6 stds (``brdf._ANGULAR_CUT``, as
+    ``glints-direct``); ``t (>= n,)`` scratch."""
     _exponents(qx, qy, G, n, t)
     acc = 0.0
     for m in range(n):
@@ -1005,7 +1010,7 @@ def vertex_density(vplanes, vofs, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, w
     ``gxw``, ``gyw``), by grid vertex: each vertex's elements are the row of the vertex table
     (:func:`vertex_planes` ``vplanes``, offsets ``vofs``) of its configuration (``types`` from
     tile ``(ti0, tj0)``, a valid tiling); as Gaussians of ``brdf._row_gaussians``, cut at 6
-    stds (:func:`direct_point`)."""
+    stds (:func:`gaussians_density`)."""
     nd = vofs.shape[0]
     G = np.empty((6, (jhi - jlo + 2) * (ihi - ilo + 2) * nd))
     fdx = np.empty(1)
@@ -1026,13 +1031,7 @@ def vertex_density(vplanes, vofs, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, w
                 _row_gaussians(V00[k], V01[k], V10[k], V11[k], VX[k], VY[k], 0, e, 1, fdx,
                                f * (c1 - (y + 0.5)), var, sr2, wx, gyw[y - wy0], G, n)
                 n += 1
-    t = np.empty(n)
-    _exponents(qx, qy, G, n, t)
-    acc = 0.0
-    for m in range(n):
-        if t[m] > _ANGULAR_CUT:
-            acc += G[5, m] * exp_neg(t[m])
-    return acc / (2.0 * math.pi)
+    return gaussians_density(G, n, qx, qy, np.empty(n))
 
 
 @njit_serial
@@ -1096,12 +1095,14 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 
 
 @njit_parallel
-def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J, depmask,
-                   seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops, block, k0,
-                   st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean, sr, lo, h,
-                   min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
+def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J,
+                   depmask, seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops,
+                   block, k0, st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean, sr,
+                   lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    out):  # pragma: no cover - compiled
-    """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` at ``sum_ab wya[q, a] wxa[q, b]`` times
+    """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` (queries ``gstart[g] ..
+    gstart[g + 1] - 1`` share one footprint: on the implicit tiling below ``min_sigma`` its
+    elements are formed once for them) at ``sum_ab wya[q, a] wxa[q, b]`` times
     pixel ``(py0 + a, px0 + b)`` (one pixel of weight 1: :func:`ndf`; 2 x 2: bilinear between
     pixel centres); with ``point_sr > 0`` the texels not in the pyramids (below ``min_sigma``
     all of them, above it the dependent texels) add their point densities at ``(qx, qy)[q]``
@@ -1119,157 +1120,182 @@ def _points_kernel(cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s
     rank = 1
     for g in range(meta.shape[0]):
         rank = max(rank, meta[g, 0])
-    for q in prange(out.shape[0]):
-        out[q] = 0.0
-        cwp = np.empty((16, rank), np.float32)  # per tile type: its taps' summed code rows
-        gsp = np.empty(16, np.int64)
-        slot_of = np.empty(16, np.int64)
-        c0, c1, s = cx[q], cy[q], sp[q]
-        # the corners with a weight: pixel rows, columns, weights (at most 4)
-        cy_ = np.empty(4, np.int64)
-        cx_ = np.empty(4, np.int64)
-        cw = np.empty(4)
-        nc = 0
-        for a in range(2):
-            for b in range(2):
-                wab = wya[q, a] * wxa[q, b]
-                if wab != 0.0:
-                    cy_[nc], cx_[nc], cw[nc] = py0[q] + a, px0[q] + b, wab
-                    nc += 1
-        point = s < min_sigma and point_sr > 0.0
-        if nc == 0 and not point_sr > 0.0:
-            continue
-        if s >= uniform_sigma:
-            acc = 0.0
-            for k in range(nc):
-                acc += cw[k] * mean[cy_[k], cx_[k]]
-            out[q] = acc
-            continue
-        tot2 = s * s + sh * sh
-        rad = trunc * math.sqrt(tot2)
-        wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
-        wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
-        gxw = gauss_row(c0, wx0, wx1, tot2)
-        gyw = gauss_row(c1, wy0, wy1, tot2)
-        sx = 0.0
-        for x in range(gxw.shape[0]):
-            sx += gxw[x]
-        sy = 0.0
-        for y in range(gyw.shape[0]):
-            sy += gyw[y]
-        if s >= wide_sigma:  # tile-type shares: weights per tile column and row, then types
-            i0, j0 = wx0 // T, wy0 // T
-            wcol = np.zeros(wx1 // T - i0 + 1)
-            wrow = np.zeros(wy1 // T - j0 + 1)
-            segment_sums(gxw, wx0, T, wcol)
-            segment_sums(gyw, wy0, T, wrow)
-            acc = 0.0
-            for b in range(wrow.shape[0]):
-                for a in range(wcol.shape[0]):
-                    tm = tile_means[_nb_type(i0 + a, j0 + b, seed, index)]
-                    v = 0.0
-                    for k in range(nc):
-                        v += cw[k] * tm[cy_[k], cx_[k]]
-                    acc += wrow[b] * wcol[a] * v
-            out[q] = acc / (sx * sy)
-            continue
-        f = sh * sh / tot2
-        var = s * s * sh * sh / tot2
-        if s < min_sigma:  # direct P-NDF
-            acc = 0.0
+    for gq in prange(gstart.shape[0] - 1):
+        q0, q1 = gstart[gq], gstart[gq + 1]
+        s = sp[q0]
+        if point_sr > 0.0 and index.size == 0 and s < min_sigma and q1 - q0 > 1:
+            # several points of one footprint on the implicit tiling below min_sigma: its
+            # elements' Gaussians formed once (glints-direct's K-point kernels)
+            c0, c1 = cx[q0], cy[q0]
+            tot2 = s * s + sh * sh
+            rad = trunc * math.sqrt(tot2)
+            wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
+            wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+            gxw = gauss_row(c0, wx0, wx1, tot2)
+            gyw = gauss_row(c1, wy0, wy1, tot2)
             ti0, tj0 = wx0 // T - 1, wy0 // T - 1
             types = _nb_types(ti0, wx1 // T + 1, tj0, wy1 // T + 1, seed, index)
-            if point and index.size == 0:
-                # the implicit tiling: the window's elements as Gaussians row segment by row
-                # segment from the tile planes, the dependent texels from the vertex table
-                out[q] = direct_point(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1,
-                                      gxw, gyw, c0, c1, f, var, point_sr * point_sr, qx[q],
-                                      qy[q]) / (sx * sy)
+            G = direct_gaussians(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1,
+                                 gxw, gyw, c0, c1, sh * sh / tot2, s * s * sh * sh / tot2,
+                                 point_sr * point_sr)
+            tt = np.empty(G.shape[1])
+            nrm = gxw.sum() * gyw.sum()
+            for q in range(q0, q1):
+                out[q] = gaussians_density(G, G.shape[1], qx[q], qy[q], tt) / nrm
+            continue
+        for q in range(q0, q1):
+            out[q] = 0.0
+            cwp = np.empty((16, rank), np.float32)  # per tile type: its taps' summed code rows
+            gsp = np.empty(16, np.int64)
+            slot_of = np.empty(16, np.int64)
+            c0, c1, s = cx[q], cy[q], sp[q]
+            # the corners with a weight: pixel rows, columns, weights (at most 4)
+            cy_ = np.empty(4, np.int64)
+            cx_ = np.empty(4, np.int64)
+            cw = np.empty(4)
+            nc = 0
+            for a in range(2):
+                for b in range(2):
+                    wab = wya[q, a] * wxa[q, b]
+                    if wab != 0.0:
+                        cy_[nc], cx_[nc], cw[nc] = py0[q] + a, px0[q] + b, wab
+                        nc += 1
+            point = s < min_sigma and point_sr > 0.0
+            if nc == 0 and not point_sr > 0.0:
                 continue
-            if point:
-                # the tiles' own elements (exact away from the dependent texels, which look
-                # up their neighbours) and separable weights: a few flops and one exp a texel
-                wcx = gxw
-                for y in range(wy0, wy1 + 1):
-                    dy = c1 - (y + 0.5)
-                    wr = gyw[y - wy0]
-                    ty = y // T
-                    ry = y - ty * T
-                    # texels by tile segments of the row: no integer division per texel
-                    for i in range(wx0 // T, wx1 // T + 1):
-                        t = types[ty - tj0, i - ti0]
-                        for x in range(max(wx0, i * T), min(wx1, i * T + T - 1) + 1):
-                            rx = x - i * T
-                            if depmask[ry, rx]:
-                                acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f,
-                                                       var, tot2, point_sr, trunc, qx[q], qy[q])
-                                continue
-                            dx = c0 - (x + 0.5)
-                            j00, j01 = el_J[t, ry, rx, 0, 0], el_J[t, ry, rx, 0, 1]
-                            j10, j11 = el_J[t, ry, rx, 1, 0], el_J[t, ry, rx, 1, 1]
-                            ex = qx[q] - el_s[t, ry, rx, 0] - f * (j00 * dx + j01 * dy)
-                            ey = qy[q] - el_s[t, ry, rx, 1] - f * (j10 * dx + j11 * dy)
-                            acc += wr * wcx[x - wx0] * _nb_density(ex, ey, j00, j01, j10, j11,
-                                                                   var, point_sr, trunc)
+            if s >= uniform_sigma:
+                acc = 0.0
+                for k in range(nc):
+                    acc += cw[k] * mean[cy_[k], cx_[k]]
+                out[q] = acc
+                continue
+            tot2 = s * s + sh * sh
+            rad = trunc * math.sqrt(tot2)
+            wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
+            wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+            gxw = gauss_row(c0, wx0, wx1, tot2)
+            gyw = gauss_row(c1, wy0, wy1, tot2)
+            sx = 0.0
+            for x in range(gxw.shape[0]):
+                sx += gxw[x]
+            sy = 0.0
+            for y in range(gyw.shape[0]):
+                sy += gyw[y]
+            if s >= wide_sigma:  # tile-type shares: weights per tile column and row, then types
+                i0, j0 = wx0 // T, wy0 // T
+                wcol = np.zeros(wx1 // T - i0 + 1)
+                wrow = np.zeros(wy1 // T - j0 + 1)
+                segment_sums(gxw, wx0, T, wcol)
+                segment_sums(gyw, wy0, T, wrow)
+                acc = 0.0
+                for b in range(wrow.shape[0]):
+                    for a in range(wcol.shape[0]):
+                        tm = tile_means[_nb_type(i0 + a, j0 + b, seed, index)]
+                        v = 0.0
+                        for k in range(nc):
+                            v += cw[k] * tm[cy_[k], cx_[k]]
+                        acc += wrow[b] * wcol[a] * v
                 out[q] = acc / (sx * sy)
                 continue
-            for y in range(wy0, wy1 + 1):
-                for x in range(wx0, wx1 + 1):
-                    for k in range(nc):
-                        acc += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
-                                                 tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
-            out[q] = acc / (sx * sy * h * h)
-            continue
-        (m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
-         kxh) = level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T,
-                             seed, index)
-        acc = 0.0
-        if block > 0:
-            acc = pack_point(Fa, Fb, wsc, cq, bidx, meta, offs[m], goff[m], n, block, types,
-                             jlo - tj0, ilo - ti0, wyt, wxt, kyl, kyh, kxl, kxh, py0[q],
-                             wya[q, 0], wya[q, 1], px0[q], wxa[q, 0], wxa[q, 1], cwp, gsp,
-                             slot_of)
-        else:
-            img = images[m]
-            for jj in range(jhi - jlo + 1):
-                for ii in range(ihi - ilo + 1):
-                    t = types[jlo + jj - tj0, ilo + ii - ti0]
-                    for ky in range(kyl[jj], kyh[jj] + 1):
-                        for kx in range(kxl[ii], kxh[ii] + 1):
-                            v = 0.0
-                            for k in range(nc):
-                                v += cw[k] * img[t, ky, kx, cy_[k], cx_[k]]
-                            acc += wyt[jj, ky] * wxt[ii, kx] * v
-        dsum = 0.0
-        psum = 0.0
-        if point_sr > 0.0 and index.size == 0:
-            # the dependent texels by grid vertex, no neighbour lookups (the implicit tiling is
-            # valid)
-            out[q] = acc + vertex_density(vplanes, vofs, T, types, tj0, ti0, jlo, jhi, ilo, ihi,
-                                          wx0, wx1, wy0, wy1, gxw, gyw, c0, c1, qx[q], qy[q], f,
-                                          var, point_sr * point_sr) / (sx * sy)
-            continue
-        for j in range(jlo, jhi + 1):
-            for i in range(ilo, ihi + 1):
-                for e in range(dep.shape[0]):
-                    x = i * T + dep[e, 1]
-                    y = j * T + dep[e, 0]
-                    if not (wx0 <= x <= wx1 and wy0 <= y <= wy1):
-                        continue
-                    if point_sr > 0.0:
-                        # what the bilinear lookup of their pixel averages approximates, exactly
-                        # and at a fraction of the cost (no pixel integrals, one element)
-                        mx, my, a_, b_, d_ = dep_element(tiles, types, j - tj0, i - ti0,
-                                                         depn[e], x, y, c0, c1, f, var)
-                        w = gxw[x - wx0] * gyw[y - wy0]  # the footprint weight, separable
-                        sr2 = point_sr * point_sr
-                        psum += w * element_density(qx[q] - mx, qy[q] - my, a_ + sr2, b_,
-                                                    d_ + sr2, 8.0 * trunc * trunc)
-                        continue
-                    for k in range(nc):
-                        dsum += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
-                                                  tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
-        out[q] = acc + dsum / (sx * sy * h * h) + psum / (sx * sy)
+            f = sh * sh / tot2
+            var = s * s * sh * sh / tot2
+            if s < min_sigma:  # direct P-NDF
+                acc = 0.0
+                ti0, tj0 = wx0 // T - 1, wy0 // T - 1
+                types = _nb_types(ti0, wx1 // T + 1, tj0, wy1 // T + 1, seed, index)
+                if point and index.size == 0:
+                    # the implicit tiling: the window's elements as Gaussians row segment by row
+                    # segment from the tile planes, the dependent texels from the vertex table
+                    G = direct_gaussians(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0,
+                                         wy1, gxw, gyw, c0, c1, f, var, point_sr * point_sr)
+                    out[q] = gaussians_density(G, G.shape[1], qx[q], qy[q],
+                                               np.empty(G.shape[1])) / (sx * sy)
+                    continue
+                if point:
+                    # the tiles' own elements (exact away from the dependent texels, which look
+                    # up their neighbours) and separable weights: a few flops and one exp a texel
+                    wcx = gxw
+                    for y in range(wy0, wy1 + 1):
+                        dy = c1 - (y + 0.5)
+                        wr = gyw[y - wy0]
+                        ty = y // T
+                        ry = y - ty * T
+                        # texels by tile segments of the row: no integer division per texel
+                        for i in range(wx0 // T, wx1 // T + 1):
+                            t = types[ty - tj0, i - ti0]
+                            for x in range(max(wx0, i * T), min(wx1, i * T + T - 1) + 1):
+                                rx = x - i * T
+                                if depmask[ry, rx]:
+                                    acc += _nb_texel_point(tiles, types, ti0, tj0, x, y, c0, c1, f,
+                                                           var, tot2, point_sr, trunc, qx[q], qy[q])
+                                    continue
+                                dx = c0 - (x + 0.5)
+                                j00, j01 = el_J[t, ry, rx, 0, 0], el_J[t, ry, rx, 0, 1]
+                                j10, j11 = el_J[t, ry, rx, 1, 0], el_J[t, ry, rx, 1, 1]
+                                ex = qx[q] - el_s[t, ry, rx, 0] - f * (j00 * dx + j01 * dy)
+                                ey = qy[q] - el_s[t, ry, rx, 1] - f * (j10 * dx + j11 * dy)
+                                acc += wr * wcx[x - wx0] * _nb_density(ex, ey, j00, j01, j10, j11,
+                                                                       var, point_sr, trunc)
+                    out[q] = acc / (sx * sy)
+                    continue
+                for y in range(wy0, wy1 + 1):
+                    for x in range(wx0, wx1 + 1):
+                        for k in range(nc):
+                            acc += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
+                                                     tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
+                out[q] = acc / (sx * sy * h * h)
+                continue
+            (m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
+             kxh) = level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T,
+                                 seed, index)
+            acc = 0.0
+            if block > 0:
+                acc = pack_point(Fa, Fb, wsc, cq, bidx, meta, offs[m], goff[m], n, block, types,
+                                 jlo - tj0, ilo - ti0, wyt, wxt, kyl, kyh, kxl, kxh, py0[q],
+                                 wya[q, 0], wya[q, 1], px0[q], wxa[q, 0], wxa[q, 1], cwp, gsp,
+                                 slot_of)
+            else:
+                img = images[m]
+                for jj in range(jhi - jlo + 1):
+                    for ii in range(ihi - ilo + 1):
+                        t = types[jlo + jj - tj0, ilo + ii - ti0]
+                        for ky in range(kyl[jj], kyh[jj] + 1):
+                            for kx in range(kxl[ii], kxh[ii] + 1):
+                                v = 0.0
+                                for k in range(nc):
+                                    v += cw[k] * img[t, ky, kx, cy_[k], cx_[k]]
+                                acc += wyt[jj, ky] * wxt[ii, kx] * v
+            dsum = 0.0
+            psum = 0.0
+            if point_sr > 0.0 and index.size == 0:
+                # the dependent texels by grid vertex, no neighbour lookups (the implicit tiling is
+                # valid)
+                out[q] = acc + vertex_density(vplanes, vofs, T, types, tj0, ti0, jlo, jhi, ilo, ihi,
+                                              wx0, wx1, wy0, wy1, gxw, gyw, c0, c1, qx[q], qy[q], f,
+                                              var, point_sr * point_sr) / (sx * sy)
+                continue
+            for j in range(jlo, jhi + 1):
+                for i in range(ilo, ihi + 1):
+                    for e in range(dep.shape[0]):
+                        x = i * T + dep[e, 1]
+                        y = j * T + dep[e, 0]
+                        if not (wx0 <= x <= wx1 and wy0 <= y <= wy1):
+                            continue
+                        if point_sr > 0.0:
+                            # what the bilinear lookup of their pixel averages approximates, exactly
+                            # and at a fraction of the cost (no pixel integrals, one element)
+                            mx, my, a_, b_, d_ = dep_element(tiles, types, j - tj0, i - ti0,
+                                                             depn[e], x, y, c0, c1, f, var)
+                            w = gxw[x - wx0] * gyw[y - wy0]  # the footprint weight, separable
+                            sr2 = point_sr * point_sr
+                            psum += w * element_density(qx[q] - mx, qy[q] - my, a_ + sr2, b_,
+                                                        d_ + sr2, 8.0 * trunc * trunc)
+                            continue
+                        for k in range(nc):
+                            dsum += cw[k] * _nb_texel(tiles, types, ti0, tj0, x, y, c0, c1, f, var,
+                                                      tot2, sr, lo, h, R, trunc, cy_[k], cx_[k])
+            out[q] = acc + dsum / (sx * sy * h * h) + psum / (sx * sy)
+
 
 @njit_serial
 def _taps_kernel(f, R, bilinear, p, w):  # pragma: no cover - compiled
@@ -1334,8 +1360,12 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         depmask = depmask.copy()
         depmask[[0, -1]] = True
         depmask[:, [0, -1]] = True
+    # runs of queries of one footprint (the renderer's light samples of a pixel)
+    new = np.ones(len(sp), bool)
+    new[1:] = (c[1:, 0] != c[:-1, 0]) | (c[1:, 1] != c[:-1, 1]) | (sp[1:] != sp[:-1])
+    gstart = np.append(np.flatnonzero(new), len(sp)).astype(np.int64)
     serial(_points_kernel, len(out))(
-        cc(c[:, 0]), cc(c[:, 1]), sp, py0, px0, wy, wx, cc(q[:, 0]), cc(q[:, 1]), psr,
+        gstart, cc(c[:, 0]), cc(c[:, 1]), sp, py0, px0, wy, wx, cc(q[:, 0]), cc(q[:, 1]), psr,
         cc(wn.wang.tiles[..., :2]), el_s, el_J, depmask, np.uint64(wn.wang.seed), idx, images,
         pk.Fa, pk.Fb, pk.wsc, pk.cq, pk.bidx, pk.meta, pk.offs, pk.goff,
         np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),

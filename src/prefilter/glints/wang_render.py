@@ -413,10 +413,14 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
         act = (wi[..., 2] > 0) & (h[..., 2] > 0) & (wok[..., 2] > 0) & np.isnan(known)
         D = np.where(np.isnan(known), 0.0, known)
         if np.any(act):
-            D[act] = ndf_points(wn, np.broadcast_to(c, wi.shape[:2] + (2,))[act],
-                                np.broadcast_to(sp, wi.shape[:2])[act], h[act][:, :2],
-                                index=index, bilinear=st["bilinear"],
-                                point_roughness=st["intrinsic_roughness"])
+            # footprint-major (each pixel's samples together: ndf_points forms a footprint's
+            # elements once for all of them)
+            at = act.T
+            D.T[at] = ndf_points(wn, np.broadcast_to(c[:, None], (len(c), len(wi), 2))[at],
+                                 np.broadcast_to(sp[:, None], at.shape)[at],
+                                 h.transpose(1, 0, 2)[at][:, :2], index=index,
+                                 bilinear=st["bilinear"],
+                                 point_roughness=st["intrinsic_roughness"])
         spec = brdf_cos_from_ndf(wok, wi, h, D, f0)
         diff = base / np.pi * np.maximum(wi[..., 2], 0.0)[..., None]
         for j in range(len(wi)):
