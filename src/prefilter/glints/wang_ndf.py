@@ -946,6 +946,17 @@ def vertex_elements(wn: TiledNDF) -> np.ndarray:
 
 
 @njit_serial
+def footprint_rows(c0, c1, s, sh, trunc):  # pragma: no cover - compiled
+    """The truncation window of footprint ``(c0, c1)``, std ``s`` (texels; element std ``sh``,
+    ``trunc`` stds): ``tot2 = s^2 + sh^2``, its radius and the texel columns ``wx0..wx1`` and
+    rows ``wy0..wy1`` whose centres it holds (the direct P-NDF's window)."""
+    tot2 = s * s + sh * sh
+    rad = trunc * math.sqrt(tot2)
+    return (tot2, rad, int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5)),
+            int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5)))
+
+
+@njit_serial
 def direct_gaussians(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0, wy1, gxw, gyw, c0,
                      c1, f, var, sr2):  # pragma: no cover - compiled
     """The elements of the texels ``[wx0, wx1] x [wy0, wy1]`` of the implicit tiling as the
@@ -1127,10 +1138,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
             # several points of one footprint on the implicit tiling below min_sigma: its
             # elements' Gaussians formed once (glints-direct's K-point kernels)
             c0, c1 = cx[q0], cy[q0]
-            tot2 = s * s + sh * sh
-            rad = trunc * math.sqrt(tot2)
-            wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
-            wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+            tot2, rad, wx0, wx1, wy0, wy1 = footprint_rows(c0, c1, s, sh, trunc)
             gxw = gauss_row(c0, wx0, wx1, tot2)
             gyw = gauss_row(c1, wy0, wy1, tot2)
             ti0, tj0 = wx0 // T - 1, wy0 // T - 1
@@ -1169,10 +1177,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                     acc += cw[k] * mean[cy_[k], cx_[k]]
                 out[q] = acc
                 continue
-            tot2 = s * s + sh * sh
-            rad = trunc * math.sqrt(tot2)
-            wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
-            wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+            tot2, rad, wx0, wx1, wy0, wy1 = footprint_rows(c0, c1, s, sh, trunc)
             gxw = gauss_row(c0, wx0, wx1, tot2)
             gyw = gauss_row(c1, wy0, wy1, tot2)
             sx = 0.0

@@ -33,7 +33,8 @@ from prefilter.glints.pndf import (GH3_MAX, GH5_MAX, GH5_T, GH5_W, SIGMA_H, TRUN
                                    node_reach, normal_cdf, principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
                                       _nb_type, _vertex_elements, dep_gaussian,
-                                      dependent_neighbours, level_window, vertex_config)
+                                      dependent_neighbours, footprint_rows, level_window,
+                                      vertex_config)
 from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
@@ -218,10 +219,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
             if bi0 <= bi1 and bj0 <= bj1:
                 ubi0, ubi1 = min(ubi0, bi0), max(ubi1, bi1)
                 ubj0, ubj1 = min(ubj0, bj0), max(ubj1, bj1)
-        tot2 = s * s + sh * sh
-        rad = trunc * math.sqrt(tot2)
-        wx0, wx1 = int(math.ceil(c0 - rad - 0.5)), int(math.floor(c0 + rad - 0.5))
-        wy0, wy1 = int(math.ceil(c1 - rad - 0.5)), int(math.floor(c1 + rad - 0.5))
+        tot2, rad, wx0, wx1, wy0, wy1 = footprint_rows(c0, c1, s, sh, trunc)
         if s >= wide_sigma:
             gxw = gauss_row(c0, wx0, wx1, tot2)
             gyw = gauss_row(c1, wy0, wy1, tot2)
