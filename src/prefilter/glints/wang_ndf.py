@@ -1192,14 +1192,18 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                 wrow = np.zeros(wy1 // T - j0 + 1)
                 segment_sums(gxw, wx0, T, wcol)
                 segment_sums(gyw, wy0, T, wrow)
-                acc = 0.0
+                # the weight per tile type first, then each type's image once
+                share = np.zeros(16)
                 for b in range(wrow.shape[0]):
                     for a in range(wcol.shape[0]):
-                        tm = tile_means[_nb_type(i0 + a, j0 + b, seed, index)]
+                        share[_nb_type(i0 + a, j0 + b, seed, index)] += wrow[b] * wcol[a]
+                acc = 0.0
+                for t in range(16):
+                    if share[t] != 0.0:
                         v = 0.0
                         for k in range(nc):
-                            v += cw[k] * tm[cy_[k], cx_[k]]
-                        acc += wrow[b] * wcol[a] * v
+                            v += cw[k] * tile_means[t, cy_[k], cx_[k]]
+                        acc += share[t] * v
                 out[q] = acc / (sx * sy)
                 continue
             f = sh * sh / tot2
