@@ -253,11 +253,13 @@ def test_line_nodes_spacing_and_normaliser():
         assert norm == pytest.approx(np.exp(-0.5 * (t / kappa) ** 2).sum(), rel=1e-12)
 
 
-def _element_mixture_error(kappa, siso, trunc, rule):
+def _element_mixture_error(kappa, siso, trunc, n_nodes):
     """Largest error over the peak of an element's node mixture against its exact Gaussian
-    ``N(0, siso^2 I + kappa^2 e_x e_x^T)`` on a grid (point values, no pixel boxes): ``rule``
-    "line" (:func:`line_nodes`), "gh3" or "gh5" (splat_element's Gauss-Hermite branches)."""
-    from prefilter.glints.pndf import GH5_T, GH5_W, line_nodes
+    ``N(0, siso^2 I + kappa^2 e_x e_x^T)`` on a grid (point values, no pixel boxes), the nodes
+    from the library's one rule (``element_nodes`` / ``element_node``, which the splats, the
+    Wang tiles' pixel values and rectangle masses share); ``n_nodes``: the rule expected
+    (3, 5, or 0 for the line nodes)."""
+    from prefilter.glints.pndf import element_node, element_nodes
 
     g = np.linspace(-8.0, 8.0, 641) * np.sqrt(siso**2 + kappa**2)
     X, Y = np.meshgrid(g, g)
@@ -267,16 +269,12 @@ def _element_mixture_error(kappa, siso, trunc, rule):
 
     vx = siso**2 + kappa**2
     exact = np.exp(-0.5 * (X**2 / vx + Y**2 / siso**2)) / (2 * np.pi * np.sqrt(vx) * siso)
-    if rule == "line":
-        n, norm = line_nodes(kappa, siso, trunc)
-        t = np.linspace(-trunc, trunc, n)
-        mix = sum(np.exp(-0.5 * tk * tk) / norm * iso(kappa * tk) for tk in t)
-    elif rule == "gh3":
-        t = np.sqrt(3.0) * kappa
-        mix = 2.0 / 3.0 * iso(0.0) + (iso(t) + iso(-t)) / 6.0
-    else:
-        mix = GH5_W[0] * iso(0.0) + sum(w * (iso(t * kappa) + iso(-t * kappa))
-                                         for t, w in zip(GH5_T, GH5_W[1:]))
+    n, norm = element_nodes(kappa, siso, trunc)
+    assert n == n_nodes if n_nodes else n >= 9
+    mix = 0.0
+    for q in range(n):
+        t, num, den, _ = element_node(kappa, trunc, n, norm, q)
+        mix = mix + num / den * iso(t)
     return np.abs(mix - exact).max() / exact.max()
 
 
@@ -291,15 +289,15 @@ def test_gauss_hermite_5_nodes():
 
 @pytest.mark.parametrize("trunc", [5.0, 6.0])
 def test_element_quadrature_within_4e_4_of_the_peak(trunc):
-    """Every branch of splat_element at its worst: Gauss-Hermite at its largest kappa, the line
-    rule just above it, near the isotropic std and for long elements."""
+    """Every branch of the element rule at its worst: Gauss-Hermite at its largest kappa, the
+    line rule just above it, near the isotropic std and for long elements."""
     from prefilter.glints.pndf import GH3_MAX, GH5_MAX
 
     siso = 0.005
-    errs = {"gh3": _element_mixture_error(GH3_MAX * siso, siso, trunc, "gh3"),
-            "gh5": _element_mixture_error(GH5_MAX * siso, siso, trunc, "gh5")}
+    errs = {"gh3": _element_mixture_error(GH3_MAX * siso, siso, trunc, 3),
+            "gh5": _element_mixture_error(GH5_MAX * siso, siso, trunc, 5)}
     for r in (GH5_MAX * 1.001, 0.8, 1.0, 1.5, 2.0, 3.0, 5.0, 10.0):
-        errs[r] = _element_mixture_error(r * siso, siso, trunc, "line")
+        errs[r] = _element_mixture_error(r * siso, siso, trunc, 0)
     assert max(errs.values()) < 4e-4, errs
 
 

@@ -356,17 +356,78 @@ def node_count(kappa, siso, trunc):  # pragma: no cover - compiled
     return max(9, int(math.ceil(2.0 * trunc * math.sqrt(1.0 + q * q) / 1.5)) + 1)
 
 
+#: Line-node counts tabulated by :data:`LINE_NORMS` (more nodes: the normaliser is summed).
+_NORMS_MAX = 1024
+
+
+def _line_norms(trunc: float, n_max: int) -> np.ndarray:
+    """``(n_max,)``: the normaliser ``sum_k exp(-t_k^2 / 2)`` of ``n`` line nodes ``t_k = -trunc
+    + 2 trunc k / (n - 1)`` for each ``n >= 2`` (entries 0 and 1 unused)."""
+    out = np.zeros(n_max)
+    for n in range(2, n_max):
+        t = -trunc + 2.0 * trunc * np.arange(n) / (n - 1)
+        out[n] = float(np.exp(-0.5 * t * t).sum())
+    return out
+
+
+#: :func:`line_nodes`' normalisers at ``TRUNCATION`` (no sum of ``n`` exponentials a element).
+LINE_NORMS = _line_norms(TRUNCATION, _NORMS_MAX)
+
+
 @njit_inline
 def line_nodes(kappa, siso, trunc):  # pragma: no cover - compiled
     """Node count ``n`` (:func:`node_count`) and weight normaliser ``norm`` of the rank-one
     part's quadrature: nodes ``t_k = kappa (-trunc + 2 trunc k / (n - 1))``, weights
-    ``exp(-t_k^2 / (2 kappa^2)) / norm`` (used when ``kappa > GH5_MAX siso``)."""
+    ``exp(-t_k^2 / (2 kappa^2)) / norm`` (used when ``kappa > GH5_MAX siso``); ``norm`` from
+    :data:`LINE_NORMS` at ``TRUNCATION``."""
     n = node_count(kappa, siso, trunc)
+    if trunc == TRUNCATION and n < _NORMS_MAX:
+        return n, LINE_NORMS[n]
     norm = 0.0
     for k in range(n):
         tk = -trunc + 2.0 * trunc * k / (n - 1)
         norm += math.exp(-0.5 * tk * tk)
     return n, norm
+
+
+@njit_inline
+def element_nodes(kappa, siso, trunc):  # pragma: no cover - compiled
+    """Node count ``n`` and normaliser ``norm`` of an element's quadrature along its rank-one
+    axis (:func:`element_split`): 1 (isotropic, ``kappa < 1e-3 siso``), 3 or 5 (Gauss-Hermite
+    while ``kappa <= GH3_MAX`` / ``GH5_MAX siso``), else :func:`line_nodes`' ``n >= 9``. Node
+    ``q < n``: :func:`element_node`. The one rule of the splats, pixel values and rectangle
+    masses of elements (:func:`splat_element`, ``wang_ndf``, ``wang_range``)."""
+    if kappa < 1e-3 * siso:
+        return 1, 1.0
+    if kappa <= GH3_MAX * siso:
+        return 3, 1.0
+    if kappa <= GH5_MAX * siso:
+        return 5, 1.0
+    return line_nodes(kappa, siso, trunc)
+
+
+@njit_inline
+def element_node(kappa, trunc, n, norm, q):  # pragma: no cover - compiled
+    """Node ``q`` of :func:`element_nodes`' rule ``(n, norm)``: its offset ``t`` along the
+    principal axis (absolute), weight ``num / den`` (as ``w * num / den``, the arithmetic of
+    each rule's own weights) and the stds its isotropic part is cut at. Gauss-Hermite: 3 points
+    (exact mean, variance and kurtosis) or 5, centre first then ``+`` / ``-`` pairs; line:
+    ``t = kappa t_q``, weight ``exp(-t_q^2 / 2) / norm``, cut :func:`node_reach`."""
+    if n == 1:
+        return 0.0, 1.0, 1.0, trunc
+    if n == 3:
+        if q == 0:
+            return 0.0, 2.0 / 3.0, 1.0, trunc
+        t = math.sqrt(3.0) * kappa
+        return (t if q == 1 else -t), 1.0, 6.0, trunc
+    if n == 5:
+        if q == 0:
+            return 0.0, GH5_W[0], 1.0, trunc
+        j = (q - 1) // 2
+        t = GH5_T[j] * kappa
+        return (t if q % 2 == 1 else -t), GH5_W[j + 1], 1.0, trunc
+    tq = -trunc + 2.0 * trunc * q / (n - 1)
+    return kappa * tq, math.exp(-0.5 * tq * tq), norm, node_reach(tq, trunc)
 
 
 @njit_parallel
@@ -459,29 +520,11 @@ def splat_element(img, px, py, mx, my, a, b, d, sr, w, lo, h, trunc):  # pragma:
     reach = trunc * math.sqrt(nu1 + sr * sr)
     if mx + reach < lo or mx - reach > hi or my + reach < lo or my - reach > hi:
         return
-    if kappa < 1e-3 * siso:
-        splat(img, px, py, mx, my, siso, w, lo, h, trunc)
-        return
-    vx, vy = principal_axis(a, b, d, nu1)
-    if kappa <= GH3_MAX * siso:
-        # 3-point Gauss-Hermite along v: exact mean, variance and kurtosis
-        t = math.sqrt(3.0) * kappa
-        splat(img, px, py, mx, my, siso, w * (2.0 / 3.0), lo, h, trunc)
-        splat(img, px, py, mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, trunc)
-        splat(img, px, py, mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, trunc)
-        return
-    if kappa <= GH5_MAX * siso:
-        splat(img, px, py, mx, my, siso, w * GH5_W[0], lo, h, trunc)
-        for j in range(2):
-            t = GH5_T[j] * kappa
-            splat(img, px, py, mx + t * vx, my + t * vy, siso, w * GH5_W[j + 1], lo, h, trunc)
-            splat(img, px, py, mx - t * vx, my - t * vy, siso, w * GH5_W[j + 1], lo, h, trunc)
-        return
-    n, norm = line_nodes(kappa, siso, trunc)
-    for k in range(n):
-        tk = -trunc + 2.0 * trunc * k / (n - 1)
-        splat(img, px, py, mx + kappa * tk * vx, my + kappa * tk * vy, siso,
-              w * math.exp(-0.5 * tk * tk) / norm, lo, h, node_reach(tk, trunc))
+    n, norm = element_nodes(kappa, siso, trunc)
+    vx, vy = principal_axis(a, b, d, nu1) if n > 1 else (0.0, 0.0)
+    for q in range(n):
+        t, num, den, cut = element_node(kappa, trunc, n, norm, q)
+        splat(img, px, py, mx + t * vx, my + t * vy, siso, w * num / den, lo, h, cut)
 
 
 @njit_parallel

@@ -35,11 +35,11 @@ import numpy as np
 from prefilter.jit import kernel_array, njit_parallel, njit_serial, prange, serial
 from prefilter.validation import as_float_array, as_positive_int, as_rng, broadcast_batch
 from prefilter.errors import PrefilterError
-from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, GH3_MAX, GH5_MAX, GH5_T, GH5_W, SIGMA_H,
-                                   TRUNCATION, as_intrinsic_roughness, as_sigma_p, as_support,
-                                   element_covariance, element_density, element_split, line_nodes,
-                                   node_reach, normal_cdf, pixel_edges, pndf_image, principal_axis,
-                                   splat_element)
+from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION,
+                                   as_intrinsic_roughness, as_sigma_p, as_support,
+                                   element_covariance, element_density, element_node,
+                                   element_nodes, element_split, normal_cdf, pixel_edges,
+                                   pndf_image, principal_axis, splat_element)
 from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints._simd import exp_neg
 from prefilter.glints.brdf import _ANGULAR_CUT, _exponents, _row_gaussians
@@ -836,30 +836,12 @@ def _nb_element(mx, my, a, b, d, w, sr, lo, h, R, trunc, iy, ix):  # pragma: no 
     ext = trunc * (kappa + siso) + h
     if abs(lo + (ix + 0.5) * h - mx) > ext or abs(lo + (iy + 0.5) * h - my) > ext:
         return 0.0
-    if kappa < 1e-3 * siso:
-        return _nb_pixel(mx, my, siso, w, lo, h, R, trunc, iy, ix)
-    vx, vy = principal_axis(a, b, d, nu1)
-    if kappa <= GH3_MAX * siso:
-        t = math.sqrt(3.0) * kappa
-        return (_nb_pixel(mx, my, siso, w * (2.0 / 3.0), lo, h, R, trunc, iy, ix)
-                + _nb_pixel(mx + t * vx, my + t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix)
-                + _nb_pixel(mx - t * vx, my - t * vy, siso, w / 6.0, lo, h, R, trunc, iy, ix))
-    if kappa <= GH5_MAX * siso:
-        acc = _nb_pixel(mx, my, siso, w * GH5_W[0], lo, h, R, trunc, iy, ix)
-        for j in range(2):
-            t = GH5_T[j] * kappa
-            acc += (_nb_pixel(mx + t * vx, my + t * vy, siso, w * GH5_W[j + 1], lo, h, R, trunc,
-                              iy, ix)
-                    + _nb_pixel(mx - t * vx, my - t * vy, siso, w * GH5_W[j + 1], lo, h, R,
-                                trunc, iy, ix))
-        return acc
-    n, norm = line_nodes(kappa, siso, trunc)
+    n, norm = element_nodes(kappa, siso, trunc)
+    vx, vy = principal_axis(a, b, d, nu1) if n > 1 else (0.0, 0.0)
     acc = 0.0
     for q in range(n):
-        tq = -trunc + 2.0 * trunc * q / (n - 1)
-        acc += _nb_pixel(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
-                         w * math.exp(-0.5 * tq * tq) / norm, lo, h, R, node_reach(tq, trunc),
-                         iy, ix)
+        t, num, den, cut = element_node(kappa, trunc, n, norm, q)
+        acc += _nb_pixel(mx + t * vx, my + t * vy, siso, w * num / den, lo, h, R, cut, iy, ix)
     return acc
 
 

@@ -28,9 +28,9 @@ import numpy as np
 
 from prefilter.errors import PrefilterError
 from prefilter.glints._qkernels import _flush_rects, _rect, _touching
-from prefilter.glints.pndf import (GH3_MAX, GH5_MAX, GH5_T, GH5_W, SIGMA_H, TRUNCATION,
-                                   as_sigma_p, element_covariance, element_split, node_count,
-                                   node_reach, normal_cdf, principal_axis)
+from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_covariance,
+                                   element_node, element_nodes, element_split, normal_cdf,
+                                   principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
                                       _nb_type, _vertex_elements, dep_gaussian,
                                       dependent_neighbours, footprint_rows, level_window,
@@ -72,25 +72,6 @@ def _sat_rect(S, py0, py1, px0, px1):  # pragma: no cover - compiled
             + _sat_at(S, py0, px0))
 
 
-_NORMS: dict = {}
-
-
-def line_norms(trunc: float, n_max: int = 4096) -> np.ndarray:
-    """``(n_max,)`` float64: the normaliser of :func:`~prefilter.glints.pndf.line_nodes`'
-    weights for each node count ``n >= 2`` over ``[-trunc, trunc]`` (entries 0 and 1 unused),
-    by :func:`~prefilter.glints.wang_query.gauss_row` as the kernels compute it; a table so
-    that no element allocates its nodes' row (cached per ``trunc``)."""
-    key = (float(trunc), int(n_max))
-    hit = _NORMS.get(key)
-    if hit is None:
-        hit = np.zeros(n_max)
-        for n in range(2, n_max):
-            step = 2.0 * trunc / (n - 1)
-            hit[n] = gauss_row(0.5 * n, 0, n - 1, 1.0 / (step * step)).sum()
-        _NORMS[key] = hit
-    return hit
-
-
 @njit_serial
 def _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc):  # pragma: no cover - compiled
     """``w`` times the mass of ``N((mx, my), siso^2 I)`` over ``[x0, x1] x [y0, y1]``; 0 when
@@ -104,72 +85,51 @@ def _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc):  # pragma: no cover - com
 
 
 @njit_serial
-def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc, norms):  # pragma: no cover
+def _rect_element(mx, my, a, b, d, w, sr, x0, x1, y0, y1, trunc):  # pragma: no cover
     """``w`` times the mass of an element over ``[x0, x1] x [y0, y1]``: the split of
     ``wang_ndf._nb_element`` (isotropic part, three or a line of isotropic nodes for the
     rank-one part; ``pndf._pndf_images``' splatting) with rectangle masses instead of pixel
     masses."""
     nu1, siso, kappa = element_split(a, b, d, sr)
-    return _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, x0, x1, y0, y1, trunc, norms)
+    return _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, x0, x1, y0, y1, trunc)
 
 
 @njit_serial
-def _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, x0, x1, y0, y1, trunc,
-                norms):  # pragma: no cover - compiled
+def _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, x0, x1, y0, y1,
+                trunc):  # pragma: no cover - compiled
     """:func:`_rect_element` given the element's :func:`~prefilter.glints.pndf.element_split`
-    ``(nu1, siso, kappa)`` (computed once for all the rectangles of a footprint); ``norms``:
-    :func:`line_norms` of ``trunc``."""
+    ``(nu1, siso, kappa)`` (computed once for all the rectangles of a footprint): the nodes of
+    :func:`~prefilter.glints.pndf.element_nodes`' rule, rectangle masses of their isotropic
+    parts."""
     ext = trunc * (kappa + siso)
     if mx + ext < x0 or mx - ext > x1 or my + ext < y0 or my - ext > y1:
         return 0.0
-    if kappa < 1e-3 * siso:
-        return _iso_mass(mx, my, siso, w, x0, x1, y0, y1, trunc)
-    vx, vy = principal_axis(a, b, d, nu1)
-    if kappa <= GH3_MAX * siso:
-        t = math.sqrt(3.0) * kappa
-        return (_iso_mass(mx, my, siso, w * (2.0 / 3.0), x0, x1, y0, y1, trunc)
-                + _iso_mass(mx + t * vx, my + t * vy, siso, w / 6.0, x0, x1, y0, y1, trunc)
-                + _iso_mass(mx - t * vx, my - t * vy, siso, w / 6.0, x0, x1, y0, y1, trunc))
-    if kappa <= GH5_MAX * siso:
-        acc = _iso_mass(mx, my, siso, w * GH5_W[0], x0, x1, y0, y1, trunc)
-        for j in range(2):
-            t = GH5_T[j] * kappa
-            acc += (_iso_mass(mx + t * vx, my + t * vy, siso, w * GH5_W[j + 1], x0, x1, y0, y1,
-                              trunc)
-                    + _iso_mass(mx - t * vx, my - t * vy, siso, w * GH5_W[j + 1], x0, x1, y0,
-                                y1, trunc))
-        return acc
-    # pndf.line_nodes' nodes; their normaliser tabulated per node count
-    n = node_count(kappa, siso, trunc)
-    step = 2.0 * trunc / (n - 1)
-    if n < norms.shape[0]:
-        norm = norms[n]
-    else:
-        norm = 0.0
-        for gk in gauss_row(0.5 * n, 0, n - 1, 1.0 / (step * step)):
-            norm += gk
-    rn = trunc * siso
-    # the nodes t (in kappa units) whose isotropic part reaches the rectangle: the line's
-    # interval inside it, grown by trunc siso (a long element crosses a small rectangle with a
-    # few of its nodes)
-    tlo, thi = -trunc, trunc
-    for v, m, a0, a1 in ((vx, mx, x0, x1), (vy, my, y0, y1)):
-        if abs(v) > 1e-12:
-            ta = (a0 - rn - m) / (kappa * v)
-            tb = (a1 + rn - m) / (kappa * v)
-            tlo = max(tlo, min(ta, tb))
-            thi = min(thi, max(ta, tb))
-        elif m + rn < a0 or m - rn > a1:
+    n, norm = element_nodes(kappa, siso, trunc)
+    vx, vy = principal_axis(a, b, d, nu1) if n > 1 else (0.0, 0.0)
+    qa, qb = 0, n - 1
+    if n > 5:
+        # the line nodes t (in kappa units) whose isotropic part reaches the rectangle: the
+        # line's interval inside it, grown by trunc siso (a long element crosses a small
+        # rectangle with a few of its nodes)
+        step = 2.0 * trunc / (n - 1)
+        rn = trunc * siso
+        tlo, thi = -trunc, trunc
+        for v, m, a0, a1 in ((vx, mx, x0, x1), (vy, my, y0, y1)):
+            if abs(v) > 1e-12:
+                ta = (a0 - rn - m) / (kappa * v)
+                tb = (a1 + rn - m) / (kappa * v)
+                tlo = max(tlo, min(ta, tb))
+                thi = min(thi, max(ta, tb))
+            elif m + rn < a0 or m - rn > a1:
+                return 0.0
+        if tlo > thi:
             return 0.0
-    if tlo > thi:
-        return 0.0
+        qa = max(0, int(math.floor((tlo + trunc) / step)))
+        qb = min(n - 1, int(math.ceil((thi + trunc) / step)))
     acc = 0.0
-    for q in range(max(0, int(math.floor((tlo + trunc) / step))),
-                   min(n - 1, int(math.ceil((thi + trunc) / step))) + 1):
-        tq = -trunc + 2.0 * trunc * q / (n - 1)
-        acc += _iso_mass(mx + kappa * tq * vx, my + kappa * tq * vy, siso,
-                         w * math.exp(-0.5 * tq * tq) / norm, x0, x1, y0, y1,
-                         node_reach(tq, trunc))
+    for q in range(qa, qb + 1):
+        t, num, den, cut = element_node(kappa, trunc, n, norm, q)
+        acc += _iso_mass(mx + t * vx, my + t * vy, siso, w * num / den, x0, x1, y0, y1, cut)
     return acc
 
 
@@ -178,7 +138,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                    wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, vel,
                    sat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
-                   point_sr, norms, proto, out, done):  # pragma: no cover - compiled
+                   point_sr, proto, out, done):  # pragma: no cover - compiled
     """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
     ``[q, k]`` (0 for inactive rectangles); ``done[q]`` False below ``min_sigma`` (module
     docstring). Accumulation of the code rows in ``proto``'s dtype (float32 for 8-bit codes)."""
@@ -283,7 +243,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
             # by grid vertex, no neighbour lookups (the implicit tiling is valid)
             _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw,
                           gyw, c0, c1, f, var, sx * sy, point_sr, act[q], rbk, x0[q], x1[q],
-                          y0[q], y1[q], lo, hi, trunc, norms, out[q])
+                          y0[q], y1[q], lo, hi, trunc, out[q])
             continue
         for j in range(jlo, jhi + 1):
             for i in range(ilo, ihi + 1):
@@ -302,12 +262,12 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                         out[q, k] += _rect_element(mx, my, a, b, d, w, point_sr,
                                                    max(x0[q, k], lo), min(x1[q, k], hi),
                                                    max(y0[q, k], lo), min(y1[q, k], hi),
-                                                   trunc, norms) / ar
+                                                   trunc) / ar
 
 
 @njit_serial
 def _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw, gyw, c0,
-                  c1, f, var, norm, sr, act, rbk, x0, x1, y0, y1, lo, hi, trunc, norms,
+                  c1, f, var, norm, sr, act, rbk, x0, x1, y0, y1, lo, hi, trunc,
                   out):  # pragma: no cover - compiled
     """``out (K,)`` += the rectangle means of the dependent texels' elements (weights ``gxw``,
     ``gyw`` over the window ``[wx0, wx1] x [wy0, wy1]``, divided by ``norm``) of the ``T x T``
@@ -335,7 +295,7 @@ def _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy
                     ar = (x1[k] - x0[k]) * (y1[k] - y0[k])
                     out[k] += _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, max(x0[k], lo),
                                           min(x1[k], hi), max(y0[k], lo), min(y1[k], hi),
-                                          trunc, norms) / ar
+                                          trunc) / ar
 
 
 def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, index=None,
@@ -387,5 +347,5 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_elements(wn),
         summed_tables(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
-        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, line_norms(TRUNCATION), proto, out, done)
+        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, out, done)
     return out, done
