@@ -290,11 +290,13 @@ def _replace(name, value):
 def test_inconsistent_v2_layouts(saved2, tmp_path):
     """Malformed version-2 files: each rejected with the file and the field named."""
     assert load_tiles(saved2).block == 8
+    nl = load_tiles(saved2).n_levels
+    assert nl >= 2
     cases = {
         r"header.settings.code_bits: expected 8 or 16 with block > 0 \(version 2\), got 12":
             _edit_settings(code_bits=12),
-        r"header.settings.crops: expected 3 crop sizes >= 1 \(one per level\), got \[":
-            _edit_settings(crops=[3]),  # the fixture has 3 levels
+        rf"header.settings.crops: expected {nl} crop sizes >= 1 \(one per level\), got \[":
+            _edit_settings(crops=[3]),  # one entry: fewer than the fixture's levels
         r"header field missing or invalid \(KeyError: 'crops'\)":
             lambda a: _edit_header(settings={k: v for k, v in json.loads(
                 str(a["header"]))["settings"].items() if k != "crops"})(a),

@@ -208,7 +208,8 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     stride0 : level-0 centre stride in texels (``sigma0 = stride0``); default ``T // 8``.
     wide_tiles : footprints with ``sigma_p >= wide_tiles * T`` use the tile-type shares (each
         tile's ``sigma_p -> inf`` NDF times its share of the footprint weight); the pyramid has
-        levels up to the first ``sigma_l >= wide_tiles * T``.
+        the levels that resample some ``sigma_p`` below it (from ``sigma_l / sqrt(1 - 0.6^2)``
+        up: ``sigma_l < 0.8 wide_tiles T``).
     uniform_tiles : footprints with ``sigma_p >= uniform_tiles * T`` use the tile-independent
         NDF (expected tiling, O(1)); ``inf`` never.
     rank, block : if ``rank`` is given, each (tile, level) is compressed like a bake cell
@@ -237,8 +238,10 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
         n_iter_max = as_positive_int(n_iter_max, "n_iter_max")
         if R % block:
             raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {block}")
+    # level l resamples footprints from sigma_l / sqrt(1 - _Q_MIN^2) up (level_window's rule,
+    # the stride equal to the std): only the levels that serve some sigma_p below wide * T
     L = 1
-    while st0 * 2.0 ** (L - 1) < wide * T:
+    while st0 * 2.0**L / math.sqrt(1.0 - _Q_MIN**2) < wide * T:
         L += 1
     sig = [float(st0 << lv) for lv in range(L)]
     k0 = [math.floor((-_margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
