@@ -1318,7 +1318,9 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     ``sigma_p (...)`` at ``s (..., 2)`` (broadcast together), one Numba kernel for all regimes,
     uncompressed or CP-compressed pyramids (compressed: each tap reads its ``C`` row, ``rank``
     numbers, against the query pixel's ``A`` and ``B`` entries). Same arithmetic as
-    :func:`ndf`, without Python per footprint.
+    :func:`ndf`, without Python per footprint. Consecutive queries of one footprint (equal
+    centre and ``sigma_p``, e.g. a pixel's light samples) are taken together: below
+    ``min_sigma`` on the implicit tiling its elements are formed once for all of them.
 
     ``bilinear``: the stored pixel averages interpolated between pixel centres (pixels outside
     the support weigh 0); the texels computed at query time (below ``wn.min_sigma`` all, the
