@@ -132,7 +132,7 @@ def _breakdown(sc, repeats):
     out = {}
     for kind, wn, c, sp, args, kw in calls:
         fn = points if kind == "points" else ranges
-        reg = np.vectorize(lambda x: wang_ndf._regime(wn, float(x)))(sp)
+        reg = np.vectorize(lambda x: wang_ndf.footprint_regime(wn, float(x)))(sp)
         alone = replace(wn, dependent=np.zeros((0, 2), np.int64))
         for name in ("direct", "tiles", "shares", "uniform"):
             sel = reg == name

@@ -370,7 +370,7 @@ def _line_norms(trunc: float, n_max: int) -> np.ndarray:
     return out
 
 
-#: :func:`line_nodes`' normalisers at ``TRUNCATION`` (no sum of ``n`` exponentials a element).
+#: :func:`line_nodes`' normalisers at ``TRUNCATION`` (no sum of ``n`` exponentials an element).
 LINE_NORMS = _line_norms(TRUNCATION, _NORMS_MAX)
 
 

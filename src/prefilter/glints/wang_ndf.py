@@ -432,7 +432,9 @@ _TAP_TRUNCATION = 4.0
 _Q_MIN = 0.6
 
 
-def _regime(wn: TiledNDF, sp: float) -> str:
+def footprint_regime(wn: TiledNDF, sp: float) -> str:
+    """Which of the four regimes (module docstring) serves a footprint of std ``sp``:
+    ``"direct"``, ``"tiles"``, ``"shares"`` or ``"uniform"``."""
     if sp < wn.min_sigma:
         return "direct"
     if sp >= wn.uniform_sigma:
@@ -611,7 +613,7 @@ def contributions(wn: TiledNDF, center, sigma_p, *, index=None):
     tile types' contributions ``share_t * tile_means[t]``.
     """
     c, sp, index = _prepare(wn, center, sigma_p, index)
-    regime = _regime(wn, sp)
+    regime = footprint_regime(wn, sp)
     none = np.zeros((0, 2), np.int64)
     if regime == "direct":
         return none, _direct_image(wn, c, sp, index)[None]
@@ -682,7 +684,7 @@ def ndf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
     type above (plus O(tiles) for the shares below ``wn.uniform_sigma``): bounded."""
     c, sp, index = _prepare(wn, center, sigma_p, index)
     iy, ix, inside = _pixels(wn, s)
-    regime = _regime(wn, sp)
+    regime = footprint_regime(wn, sp)
     if regime == "direct":
         v = _direct_image(wn, c, sp, index)[iy, ix]
     elif regime == "uniform":
@@ -1349,7 +1351,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     cc = np.ascontiguousarray
     images, pk = _kernel_levels(wn)
     el_s, el_J, depmask = _kernel_elements(wn)
-    vel = _vertex_elements(wn)
+    _, vplanes, vofs = _vertex_tables(wn)
     if idx.size:
         # an explicit map may put mismatched edges side by side (a block of the implicit tiling
         # wraps so): the border texels look up their actual neighbours
@@ -1367,7 +1369,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), tile_planes(wn),
-        vertex_planes(vel), cc(vel[0, :, :2], dtype=np.int64), wn.tile_means, wn.mean,
+        vplanes, vofs, wn.tile_means, wn.mean,
         wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
@@ -1375,6 +1377,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
 
 
 _ELEMENTS: dict = {}
+_PLANES: dict = {}
 _VERTICES: dict = {}
 
 
@@ -1382,11 +1385,11 @@ def tile_planes(wn: TiledNDF) -> np.ndarray:
     """``(6, 16, T, T)`` float64: the tiles' elements (:func:`tile_elements`) as the planes
     ``s_x, s_y, j00, j01, j10, j11`` of ``brdf._row_gaussians`` (cached with them)."""
     el_s, el_J, _ = _kernel_elements(wn)
-    hit = _ELEMENTS.get(("planes", id(wn.wang)))
+    hit = _PLANES.get(id(wn.wang))
     if hit is None or hit[0] is not el_s:
         pl = np.stack([el_s[..., 0], el_s[..., 1], el_J[..., 0, 0], el_J[..., 0, 1],
                        el_J[..., 1, 0], el_J[..., 1, 1]])
-        hit = _ELEMENTS[("planes", id(wn.wang))] = (el_s, np.ascontiguousarray(pl))
+        hit = _PLANES[id(wn.wang)] = (el_s, np.ascontiguousarray(pl))
     return hit[1]
 
 
@@ -1396,14 +1399,17 @@ def vertex_planes(vel: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.moveaxis(vel[..., 2:], -1, 0)[:, :, None, :])
 
 
-def _vertex_elements(wn: TiledNDF) -> np.ndarray:
-    """:func:`vertex_elements`, cached per tile set and dependent texels (every frame queries
-    the same tiles)."""
+def _vertex_tables(wn: TiledNDF):
+    """:func:`vertex_elements`, its :func:`vertex_planes` and the texels' integer offsets
+    ``(n_dep, 2)`` from their vertex, cached per tile set and dependent texels (every frame
+    queries the same tiles)."""
     key = (id(wn.wang), np.asarray(wn.dependent, np.int64).tobytes())
     hit = _VERTICES.get(key)
     if hit is None or hit[0] is not wn.wang:
-        hit = _VERTICES[key] = (wn.wang, vertex_elements(wn))
-    return hit[1]
+        vel = vertex_elements(wn)
+        hit = _VERTICES[key] = (wn.wang, vel, vertex_planes(vel),
+                                np.ascontiguousarray(vel[0, :, :2], dtype=np.int64))
+    return hit[1:]
 
 
 def _kernel_elements(wn: TiledNDF):

@@ -32,7 +32,7 @@ from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_cova
                                    element_node, element_nodes, element_split, normal_cdf,
                                    principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
-                                      _nb_type, _vertex_elements, dep_gaussian,
+                                      _nb_type, _vertex_tables, dep_gaussian,
                                       dependent_neighbours, footprint_rows, level_window,
                                       vertex_config)
 from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes
@@ -344,7 +344,7 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
         pk.meta, pk.offs, pk.goff, np.array([wn.crop(lv) for lv in range(wn.n_levels)],
                                             np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
-        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_elements(wn),
+        cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_tables(wn)[0],
         summed_tables(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
         _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, out, done)
