@@ -4,6 +4,7 @@ bytes, corrupt / truncated / wrong-version / inconsistent files (each a TableFil
 file and the field), and the ``prefilter bake glints-wang`` CLI."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -97,7 +98,8 @@ def test_round_trip_codes(wc, tmp_path, bits):
     save_tiles(wc, path, code_bits=bits)
     back = load_tiles(path)
     header = json.loads(str(np.load(path)["header"]))
-    assert header["version"] == VERSION == 2 and header["settings"]["code_bits"] == bits
+    # no vertex pyramids (compress_tiles): version 2
+    assert header["version"] == 2 and header["settings"]["code_bits"] == bits
     assert back.block == wc.block and back.k0 == wc.k0
     # the codes are held as stored (the kernels read them): less than the float32 factors
     assert back.pack.nbytes < wc.pack.nbytes and back.pack.cq.dtype == CODE_DTYPES[bits]
@@ -166,11 +168,42 @@ def test_bake_compressed_level_by_level_equals_compress_tiles(wn, wc, tmp_path):
     for a, b in zip(wb.images, wc.images):
         for x, y in zip(a, b):
             np.testing.assert_array_equal(x, y)
+    # the same bytes without the vertex pyramids (compress_tiles has none)
+    wt_only = replace(wb, vertex_images=(), vertex_cp_error=())
     for bits in (0, 8):
-        assert _saved_bytes(wb, tmp_path / "b.npz", bits) == _saved_bytes(wc, tmp_path / "c.npz",
-                                                                          bits)
+        assert _saved_bytes(wt_only, tmp_path / "b.npz", bits) == _saved_bytes(
+            wc, tmp_path / "c.npz", bits)
     with pytest.raises(PrefilterError, match="block: expected a divisor of ndf_res 16, got 5"):
         bake_tiles(wn.wang, ndf_res=R, rank=2, block=5)
+
+
+def test_round_trip_vertex_pyramids(wn, tmp_path):
+    """A compressed bake's vertex pyramids: version 3 (each vertex level's codes as the tiles'),
+    the queries of the loaded file within the codes' rounding of the baked ones; float32 files
+    (version 1) leave them out and the queries compute the dependent texels exactly."""
+    wb = bake_tiles(wn.wang, ndf_res=R, support=0.5, intrinsic_roughness=0.01, rank=4, block=8,
+                    n_iter_max=20)
+    assert len(wb.vertex_images) == wb.n_levels == len(wb.vertex_cp_error)
+    path = tmp_path / "v3.npz"
+    save_tiles(wb, path)
+    header = json.loads(str(np.load(path)["header"]))
+    assert header["version"] == VERSION == 3
+    assert header["settings"]["vertex_cp_error"] == list(wb.vertex_cp_error)
+    back = load_tiles(path)
+    assert back.vertex_packed is not None and back.vertex_pack.cq.dtype == np.uint8
+    assert back.nbytes == back.wang.nbytes + back.pack.nbytes + back.vertex_pack.nbytes \
+        + back.mean.nbytes + back.tile_means.nbytes
+    rng = np.random.default_rng(5)
+    c = rng.uniform(-20, 40, (400, 2))
+    sp = rng.uniform(wb.min_sigma, wb.wide_sigma, 400)
+    q = rng.uniform(-0.3, 0.3, (400, 2))
+    a, b = ndf_points(wb, c, sp, q), ndf_points(back, c, sp, q)
+    assert np.linalg.norm(b - a) / np.linalg.norm(a) < 2e-2
+    save_tiles(wb, tmp_path / "v1.npz", code_bits=0)
+    v1 = load_tiles(tmp_path / "v1.npz")
+    assert v1.vertex_images == () and v1.vertex_pack is None
+    exact = ndf_points(replace(wb, vertex_images=()), c, sp, q)
+    np.testing.assert_array_equal(ndf_points(v1, c, sp, q), exact)
 
 
 @pytest.mark.parametrize("shape", [(3, 8, 8, 361), (1, 4, 4, 10), (5, 16, 16, 169)])
@@ -211,7 +244,7 @@ def _edit_header(**changes):
 
 def test_wrong_version_and_format(saved, tmp_path):
     p = _rewrite(saved, tmp_path / "v.npz", _edit_header(version=VERSION + 1))
-    with pytest.raises(TableFileError, match=rf"v.npz: header.version: expected 1 or {VERSION}, "
+    with pytest.raises(TableFileError, match=rf"v.npz: header.version: expected 1, 2 or {VERSION}, "
                                              rf"got {VERSION + 1}"):
         load_tiles(p)
     p = _rewrite(saved, tmp_path / "f.npz", _edit_header(format="prefilter-glints"))

@@ -134,6 +134,12 @@ class TiledNDF:
     #: (:func:`prefilter.glints.wang_query.pack_codes`); ``images`` is then decoded from it on
     #: first use
     packed: TilePack | None = None
+    #: compressed bakes: the dependent texels' pyramids on vertex-centred tiles, one per vertex
+    #: configuration (:func:`vertex_tiles`; levels, crops and layout as ``images``), their CP
+    #: errors and, loaded from a file, their pack
+    vertex_images: tuple = ()
+    vertex_cp_error: tuple = ()
+    vertex_packed: TilePack | None = None
 
     @property
     def n_levels(self) -> int:
@@ -154,6 +160,19 @@ class TiledNDF:
             object.__setattr__(self, "_pack", hit)
         return hit
 
+    @property
+    def vertex_pack(self) -> TilePack | None:
+        """:attr:`pack` of the vertex pyramids (``None`` without them)."""
+        if self.vertex_packed is not None:
+            return self.vertex_packed
+        if not self.vertex_images:
+            return None
+        hit = self.__dict__.get("_vpack")
+        if hit is None:
+            hit = pack_float(self.vertex_images)
+            object.__setattr__(self, "_vpack", hit)
+        return hit
+
     def stride(self, level: int) -> int:
         return self.stride0 << level
 
@@ -170,6 +189,8 @@ class TiledNDF:
         :func:`sample`), are not counted."""
         if self.block:
             levels = self.pack.nbytes
+            if self.vertex_pack is not None:
+                levels += self.vertex_pack.nbytes
         else:
             levels = sum(a.nbytes for a in self.images)
         return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
@@ -246,38 +267,62 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     sig = [float(st0 << lv) for lv in range(L)]
     k0 = [math.floor((-_margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
     k1 = [math.ceil((T + _margin(sg) - 0.5) / (st0 << lv)) for lv, sg in enumerate(sig)]
-    # level-0 element canvas: the tile and every texel a cropped level-0 footprint reaches
-    o = st0 * math.ceil((_margin(sig[0]) + st0) / st0)  # tile corner, on the level-0 grid
-    P = o + st0 * math.ceil((T + _margin(sig[0]) + st0) / st0)
     s_el, J_el = tile_elements(wt)
     dep = dependent_texels(wt)
+    kw = dict(L=L, st0=st0, k0=k0, k1=k1, R=R, S=S, sr=sr, rank=rank, block=block,
+              n_iter_max=n_iter_max, seed=seed, progress=progress)
+    done, errs = _pyramid_levels(s_el, J_el, np.broadcast_to(~dep, (16, T, T)),
+                                 desc="tile pyramids", **kw)
+    # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
+    tile_means = np.stack([pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
+                                      elements_=(s_el[t], J_el[t])) for t in range(16)])
+    vdone, verrs = (), ()
+    if rank is not None:
+        # the dependent texels, per vertex configuration, on vertex-centred tiles
+        vs, vJ, vkeep = vertex_tiles(wt, dep)
+        vdone, verrs = _pyramid_levels(vs, vJ, vkeep, desc="vertex pyramids", **kw)
+    wn = TiledNDF(wt, done, tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
+                  sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
+    if rank is None:
+        return wn
+    return replace(wn, block=block, cp_error=errs, vertex_images=vdone, vertex_cp_error=verrs)
+
+
+def _pyramid_levels(s_el, J_el, keep, *, L, st0, k0, k1, R, S, sr, rank, block, n_iter_max,
+                    seed, progress, desc):
+    """The ``L`` pyramid levels of 16 element sets ``s_el (16, T, T, 2)``, ``J_el (16, T, T,
+    2, 2)`` of which the texels ``keep (16, T, T)`` contribute (the others count in the
+    footprint weights only), centres ``k0[l] .. k1[l]`` per axis: level 0 by ``pndf_image``,
+    upper levels by exact Gaussian filtering; with ``rank`` each level compressed and dropped
+    once the next is filtered from it (at most two levels' images held). Returns the levels
+    and their CP errors (empty without ``rank``)."""
+    T = s_el.shape[1]
+    sig0 = float(st0)
+    # level-0 element canvas: the tile and every texel a cropped level-0 footprint reaches
+    o = st0 * math.ceil((_margin(sig0) + st0) / st0)  # tile corner, on the level-0 grid
+    P = o + st0 * math.ceil((T + _margin(sig0) + st0) / st0)
+
     def crop(lv):
         return np.empty((16, k1[lv] - k0[lv] + 1, k1[lv] - k0[lv] + 1, R, R), np.float32)
 
     level = crop(0)
-    tile_means = np.empty((16, R, R))
     g = (np.arange(k0[0], k1[0] + 1) * st0 + 0.5) + o
     cen = np.stack(np.meshgrid(g, g), axis=-1)
     from tqdm import tqdm
 
-    for t in tqdm(range(16), desc="tile pyramids", disable=not progress):
+    for t in tqdm(range(16), desc=desc, disable=not progress):
         cs = np.full((P, P, 2), _AWAY)
         cj = np.zeros((P, P, 2, 2))
-        cs[o:o + T, o:o + T] = np.where(dep[..., None], _AWAY, s_el[t])
+        cs[o:o + T, o:o + T] = np.where(keep[t][..., None], s_el[t], _AWAY)
         cj[o:o + T, o:o + T] = J_el[t]
-        level[t] = pndf_image(None, cen, sig[0], R, S, sr, elements_=(cs, cj))
-        # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
-        tile_means[t] = pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
-                                   elements_=(s_el[t], J_el[t]))
-    # level by level (per tile the same filtering): with ``rank``, level l is compressed and
-    # dropped once level l + 1 is filtered from it, so at most two levels' images are held
+        level[t] = pndf_image(None, cen, sig0, R, S, sr, elements_=(cs, cj))
     done, errs = [], []
     for lv in tqdm(range(1, L + 1), desc="levels", disable=not progress or rank is None):
         nxt = None
         if lv < L:
             nxt = crop(lv)
             for t in range(16):
-                nxt[t] = _filter_crop(level[t], k0[lv - 1], k0[lv], k1[lv], sig[0] / st0)
+                nxt[t] = _filter_crop(level[t], k0[lv - 1], k0[lv], k1[lv], sig0 / st0)
         if rank is None:
             done.append(level)
         else:
@@ -289,9 +334,7 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
             done.append(packed)
             errs.append(err)
         level = nxt
-    wn = TiledNDF(wt, tuple(done), tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
-                  sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
-    return wn if rank is None else replace(wn, block=block, cp_error=tuple(errs))
+    return tuple(done), tuple(errs)
 
 
 def _filter_crop(crop, a0, b0, b1, sigma_over_stride):
@@ -804,6 +847,34 @@ def level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T,
 
 
 @njit_serial
+def vertex_window(s, c0, c1, m, n, sigma0, st0, tap_trunc, km, rad, T, types, ti0,
+                  tj0):  # pragma: no cover - compiled
+    """The vertex tiles (:func:`vertex_tiles`) a footprint of std ``s`` centred at ``(c0, c1)``
+    reads at level ``m`` (crop of ``n`` centres from ``km``), as :func:`level_window` the tiles:
+    their configurations ``(rows, cols)`` (from the tile types ``types`` of first tile ``(ti0,
+    tj0)``, a valid tiling) and :func:`prefilter.glints.wang_query.tile_taps`' taps on the
+    vertex tiles' grids (the tiles' grids shifted by ``T/2``)."""
+    sg = sigma0 * 2.0**m
+    st = st0 * 2.0**m
+    r = math.sqrt(s * s - sg * sg)
+    half = tap_trunc * r / st
+    marg = rad + 1.0
+    hT = 0.5 * T
+    jlo = int(math.floor((c1 - marg + hT) / T))
+    jhi = int(math.floor((c1 + marg + hT) / T))
+    ilo = int(math.floor((c0 - marg + hT) / T))
+    ihi = int(math.floor((c0 + marg + hT) / T))
+    vt = np.empty((jhi - jlo + 1, ihi - ilo + 1), np.int64)
+    for j in range(jlo, jhi + 1):
+        for i in range(ilo, ihi + 1):
+            vt[j - jlo, i - ilo] = vertex_config(types[j - 1 - tj0, i - 1 - ti0],
+                                                 types[j - tj0, i - ti0])
+    wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1 + hT, c0 + hT, T, st, r, half, km, n, jlo, jhi,
+                                              ilo, ihi)
+    return vt, wyt, wxt, kyl, kyh, kxl, kxh
+
+
+@njit_serial
 def _nb_s(tiles, types, i0, j0, gx, gy, comp):  # pragma: no cover - compiled; _texel_s
     T = tiles.shape[1]
     return tiles[types[gy // T - j0, gx // T - i0], gy % T, gx % T, comp]
@@ -912,8 +983,12 @@ def vertex_elements(wn: TiledNDF) -> np.ndarray:
     differences. A static table: the queries read a dependent texel's element from it instead
     of looking up its neighbour tiles (exact on a valid tiling; tested against the assembled
     neighbours)."""
-    T = wn.wang.size
-    dep = np.asarray(wn.dependent, np.int64).reshape(-1, 2)
+    return _vertex_rows(wn.wang, np.asarray(wn.dependent, np.int64).reshape(-1, 2))
+
+
+def _vertex_rows(wt: WangTiles, dep: np.ndarray) -> np.ndarray:
+    """:func:`vertex_elements` of tiles ``wt`` and dependent texels ``dep (n_dep, 2)``."""
+    T = wt.size
     out = np.empty((16, len(dep), 8))
     # the corner of its tile each dependent texel is at, as the tile's offset from the vertex
     qy = np.where(dep[:, 0] < T // 2, 0, -1)
@@ -921,7 +996,7 @@ def vertex_elements(wn: TiledNDF) -> np.ndarray:
     gy = T + qy * T + dep[:, 0]  # row in the block, the vertex at (T, T)
     gx = T + qx * T + dep[:, 1]
     for k in range(16):
-        S = _config_block(wn.wang, k)
+        S = _config_block(wt, k)
         out[k, :, 0] = gx - T
         out[k, :, 1] = gy - T
         out[k, :, 2:4] = S[gy, gx]
@@ -930,6 +1005,27 @@ def vertex_elements(wn: TiledNDF) -> np.ndarray:
         out[k, :, 4], out[k, :, 5] = jx[:, 0], jy[:, 0]
         out[k, :, 6], out[k, :, 7] = jx[:, 1], jy[:, 1]
     return out
+
+
+def vertex_tiles(wt: WangTiles, dep: np.ndarray):
+    """The dependent texels of each vertex configuration as the elements of a ``T x T``
+    *vertex tile* centred on the vertex (vertex ``(i, j)``'s tile covers texels ``iT - T/2 ..
+    iT + T/2 - 1`` per axis, so texel ``(iT + ox, jT + oy)`` is its texel ``(T/2 + oy, T/2 +
+    ox)``): slopes ``(16, T, T, 2)``, Jacobians ``(16, T, T, 2, 2)`` and the mask ``(16, T,
+    T)`` of the texels that are dependent (:func:`dependent_texels` ``dep (T, T)``). The
+    vertex tiles of a valid tiling partition its dependent texels as the tiles partition the
+    others, so their pyramids (:func:`bake_tiles`) complete the per-tile ones."""
+    T = wt.size
+    vel = _vertex_rows(wt, np.argwhere(dep))
+    s = np.zeros((16, T, T, 2))
+    J = np.zeros((16, T, T, 2, 2))
+    keep = np.zeros((16, T, T), bool)
+    ly = T // 2 + vel[0, :, 1].astype(np.int64)
+    lx = T // 2 + vel[0, :, 0].astype(np.int64)
+    s[:, ly, lx] = vel[..., 2:4]
+    J[:, ly, lx] = vel[..., 4:8].reshape(16, -1, 2, 2)
+    keep[:, ly, lx] = True
+    return s, J, keep
 
 
 @njit_serial
@@ -1097,6 +1193,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                    depmask, seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops,
                    block, k0, st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean, sr,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
+                   has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` (queries ``gstart[g] ..
     gstart[g + 1] - 1`` share one footprint: on the implicit tiling below ``min_sigma`` its
@@ -1111,7 +1208,9 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
     :func:`tile_elements`; ``depmask (T, T)``: :func:`dependent_texels`. On the implicit tiling
     (``index`` empty) the point densities come from ``planes`` (:func:`tile_planes`) and the
     vertex table ``vplanes``, ``vofs`` (:func:`vertex_planes`), cut at 6 stds; with an explicit
-    map, from neighbour lookups, cut at ``2 trunc`` stds."""
+    map, from neighbour lookups, cut at ``2 trunc`` stds. ``has_vertex``: on the implicit
+    tiling, above ``min_sigma`` the dependent texels come from the vertex pyramids (the pack
+    arrays ``vFa`` ..., :func:`vertex_window`) instead."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
@@ -1261,6 +1360,15 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                                 for k in range(nc):
                                     v += cw[k] * img[t, ky, kx, cy_[k], cx_[k]]
                                 acc += wyt[jj, ky] * wxt[ii, kx] * v
+            if has_vertex and index.size == 0:
+                # the dependent texels from their vertex pyramids (a valid tiling)
+                vt, vwy, vwx, vkyl, vkyh, vkxl, vkxh = vertex_window(
+                    s, c0, c1, m, n, sigma0, st0, tap_trunc, k0[m], rad, T, types, ti0, tj0)
+                out[q] = acc + pack_point(vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs[m], vgoff[m],
+                                          n, block, vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh,
+                                          py0[q], wya[q, 0], wya[q, 1], px0[q], wxa[q, 0],
+                                          wxa[q, 1], cwp, gsp, slot_of)
+                continue
             dsum = 0.0
             psum = 0.0
             if point_sr > 0.0 and index.size == 0:
@@ -1372,8 +1480,23 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         vplanes, vofs, wn.tile_means, wn.mean,
         wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
-        wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, out)
+        wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, *vertex_args(wn)[:9],
+        out)
     return out.reshape(shape)
+
+
+def vertex_args(wn: TiledNDF) -> tuple:
+    """``(has_vertex, Fa, Fb, wsc, cq, bidx, meta, offs, goff, Pa, Pb)`` of ``wn``'s vertex
+    pyramids for the kernels (an empty pack of the tiles' dtypes without them)."""
+    vp = wn.vertex_pack if wn.block else None
+    if vp is None:
+        pk = wn.pack
+        z = np.zeros(1, np.int64)
+        c = np.ascontiguousarray
+        return (False, c(pk.Fa[:0]), c(pk.Fb[:0]), c(pk.wsc[:0]), c(pk.cq[:0]),
+                c(pk.bidx[:, :, :0]), np.zeros((1, 4), np.int64), z, z, c(pk.Pa[:0]),
+                c(pk.Pb[:0]))
+    return (True, vp.Fa, vp.Fb, vp.wsc, vp.cq, vp.bidx, vp.meta, vp.offs, vp.goff, vp.Pa, vp.Pb)
 
 
 _ELEMENTS: dict = {}

@@ -34,7 +34,7 @@ from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_cova
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
                                       _nb_type, _vertex_tables, dep_gaussian,
                                       dependent_neighbours, footprint_rows, level_window,
-                                      vertex_config)
+                                      vertex_args, vertex_config, vertex_window)
 from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
@@ -138,10 +138,13 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                    wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, vel,
                    sat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
-                   point_sr, proto, out, done):  # pragma: no cover - compiled
+                   point_sr, proto, has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff,
+                   vPa, vPb, out, done):  # pragma: no cover - compiled
     """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
     ``[q, k]`` (0 for inactive rectangles); ``done[q]`` False below ``min_sigma`` (module
-    docstring). Accumulation of the code rows in ``proto``'s dtype (float32 for 8-bit codes)."""
+    docstring). Accumulation of the code rows in ``proto``'s dtype (float32 for 8-bit codes).
+    ``has_vertex``: on the implicit tiling the dependent texels come from the vertex pyramids
+    (``vFa`` ..., :func:`prefilter.glints.wang_ndf.vertex_window`)."""
     T = tiles.shape[1]
     nb = bidx.shape[0]
     nb2 = nb * nb
@@ -153,6 +156,9 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         rank = max(rank, meta[g, 0])
     pa = Pa.ravel()
     pb = Pb.ravel()
+    vpa = vPa.ravel()
+    vpb = vPb.ravel()
+    use_v = has_vertex and index.size == 0
     for q in prange(N):
         for k in range(K):
             out[q, k] = 0.0
@@ -219,6 +225,13 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         rt = np.empty((K, 8))
         touch = np.empty(K, np.int64)
         acc = np.zeros(K)
+        if use_v:
+            vt, vwy, vwx, vkyl, vkyh, vkxl, vkxh = vertex_window(
+                s, c0, c1, m, n, sigma0, st0, tap_trunc, k0[m], rad, T, types, ti0, tj0)
+        else:
+            vt = np.zeros((0, 0), np.int64)
+            vwy, vwx = wyt[:0], wxt[:0]
+            vkyl, vkyh, vkxl, vkxh = kyl[:0], kyh[:0], kxl[:0], kxh[:0]
         for bi in range(ubi0, ubi1 + 1):
             for bj in range(ubj0, ubj1 + 1):
                 nt = _touching(rbk, rcl, bi, bj, B, touch, rp, rt)
@@ -228,8 +241,16 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                                 (bi * nb + bj, nb2), types, jlo - tj0, ilo - ti0, wyt, wxt,
                                 kyl, kyh, kxl, kxh, cw, gs, slot_of)
                 _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
+                if use_v:  # the dependent texels from their vertex pyramids
+                    ns = tile_codes(vcq, vbidx[bi, bj], vmeta, voffs[m], vgoff[m], n,
+                                    (bi * nb + bj, nb2), vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl,
+                                    vkxh, cw, gs, slot_of)
+                    _flush_rects(vpa, vpb, vwsc, vmeta, B, gs, cw, ns, rp, rt, touch, nt, tt,
+                                 acc)
         for k in range(K):
             out[q, k] = acc[k] / area[k]
+        if use_v:
+            continue
         # the dependent texels: their exact elements' masses over the rectangles (clipped to
         # the support, as the images)
         f = sh * sh / tot2
@@ -347,5 +368,5 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_tables(wn)[0],
         summed_tables(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
-        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, out, done)
+        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, *vertex_args(wn), out, done)
     return out, done

@@ -32,7 +32,15 @@ factors as integer codes, like the glints map store's version 3 (:mod:`prefilter
   ``C = c / Q * c_scale``, ``Q = 2^code_bits - 1``), so ``A Bf C`` is the stored product up
   to the rounding of the codes. All codes uint8 (``code_bits`` 8) or all uint16 (16).
 
-A loaded version-2 file is held as its codes, packed for the query kernels
+Version 3 is version 2 plus the vertex pyramids of a compressed bake (the dependent texels per
+vertex configuration, :func:`~prefilter.glints.wang_ndf.vertex_tiles`), in the same layout
+with a ``v`` before each per-level name (``vmask_l``, ``va_l``, ``vb_l``, ``vc_l``,
+``vc_scale_l``; the crops of the tiles' levels) and ``vertex_cp_error`` in the settings.
+:func:`save_tiles` writes version 3 for pyramids with vertex pyramids, version 2 for those
+without; ``code_bits`` 0 (version 1) writes no vertex pyramids (the queries then compute the
+dependent texels exactly, as for uncompressed pyramids).
+
+A loaded version-2 or 3 file is held as its codes, packed for the query kernels
 (:func:`prefilter.glints.wang_query.pack_codes`; :attr:`TiledNDF.nbytes` counts the pack), the
 float32 triple decoded from the pack on first use by the per-footprint NumPy paths only.
 Version 1 files still load.
@@ -60,7 +68,7 @@ from prefilter.glints.wang_ndf import TiledNDF, dependent_texels
 from prefilter.glints.wang_query import DecodedLevels, pack_codes
 
 FORMAT = "prefilter-glints-wang"
-VERSION = 2
+VERSION = 3
 WHAT = "Wang tiles file"
 #: ``code_bits`` of :func:`save_tiles`: 0 = float32 factors (version 1), 8 / 16 = codes
 CODE_BITS = (0, 8, 16)
@@ -109,7 +117,9 @@ def decode_level(mask, a, b, c, c_scale, crop: int, n_groups: int):
     return A, Bf, C
 
 
-def _level_arrays(wn: TiledNDF, lv: int, code_bits: int) -> dict:
+def _level_arrays(wn: TiledNDF, lv: int, code_bits: int, vertex: bool = False) -> dict:
+    if vertex:  # version 3's vertex pyramids: codes only
+        return {f"v{k}_{lv}": v for k, v in encode_level(*wn.vertex_images[lv], code_bits).items()}
     a = wn.images[lv]
     if isinstance(a, np.ndarray):
         return {f"images_{lv}": a}
@@ -120,9 +130,10 @@ def _level_arrays(wn: TiledNDF, lv: int, code_bits: int) -> dict:
 
 def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> None:
     """Write ``wn`` (compressed or not) to the ``.npz`` at ``path`` atomically (module docstring
-    for the layout). ``code_bits``: 8 or 16, compressed pyramids in version 2 (integer codes of
-    the CP factors); 0, the float32 factors (version 1). Uncompressed pyramids are written in
-    version 1 whatever ``code_bits``."""
+    for the layout). ``code_bits``: 8 or 16, compressed pyramids in version 3 (integer codes of
+    the CP factors, with the vertex pyramids; version 2 without them); 0, the float32 factors
+    (version 1, no vertex pyramids). Uncompressed pyramids are written in version 1 whatever
+    ``code_bits``."""
     if not isinstance(wn, TiledNDF):
         raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
     if wn.tile_means is None:
@@ -130,7 +141,8 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
     if isinstance(code_bits, bool) or code_bits not in CODE_BITS:
         raise PrefilterError(f"code_bits: expected one of {CODE_BITS}, got {code_bits!r}")
     code_bits = int(code_bits) if wn.block else 0
-    version = 2 if code_bits else 1
+    vertex = bool(code_bits and wn.vertex_images)
+    version = (3 if vertex else 2) if code_bits else 1
     # version 1: the arrays in the order (hence the bytes) of the files written before version 2
     arrays = {"tiles": np.asarray(wn.wang.tiles, np.float64)}
     if version == 1:
@@ -141,6 +153,8 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
     arrays["dependent"] = np.asarray(wn.dependent, np.int64)
     for lv in range(wn.n_levels):
         arrays.update(_level_arrays(wn, lv, code_bits))
+        if vertex:
+            arrays.update(_level_arrays(wn, lv, code_bits, vertex=True))
     rank = int(wn.pack.meta[:, 0].max()) if wn.block else 0
     settings = dict(ndf_res=int(wn.resolution), support=float(wn.support),
                     intrinsic_roughness=float(wn.intrinsic_roughness), stride0=int(wn.stride0),
@@ -148,8 +162,10 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
                     uniform_sigma=None if math.isinf(wn.uniform_sigma) else float(wn.uniform_sigma),
                     block=int(wn.block), rank=rank, k0=[int(k) for k in wn.k0],
                     cp_error=[float(e) for e in wn.cp_error])
-    if version == 2:
+    if version >= 2:
         settings.update(code_bits=code_bits, crops=[wn.crop(lv) for lv in range(wn.n_levels)])
+    if version == 3:
+        settings.update(vertex_cp_error=[float(e) for e in wn.vertex_cp_error])
     header = dict(format=FORMAT, version=version, tile=int(wn.wang.size),
                   seed=int(wn.wang.seed), settings=settings,
                   arrays={k: {"dtype": v.dtype.str, "shape": list(v.shape)}
@@ -172,14 +188,14 @@ def _header(path, data) -> dict:
     if header.get("format") != FORMAT:
         _fail(path, f"header.format: expected {FORMAT!r}, got {header.get('format')!r}")
     version = header.get("version")
-    if isinstance(version, bool) or version not in (1, VERSION):
-        _fail(path, f"header.version: expected 1 or {VERSION}, got {version!r}")
+    if isinstance(version, bool) or version not in (1, 2, VERSION):
+        _fail(path, f"header.version: expected 1, 2 or {VERSION}, got {version!r}")
     return header
 
 
 def _settings(path, header) -> dict:
     """The header's scalars, typed and range-checked."""
-    v2 = header["version"] == 2
+    v2 = header["version"] >= 2  # the codes (version 3: also the vertex pyramids')
     try:
         st = header["settings"]
         out = dict(T=int(header["tile"]), seed=int(header["seed"]), R=int(st["ndf_res"]),
@@ -192,7 +208,9 @@ def _settings(path, header) -> dict:
                    B=int(st["block"]), rank=int(st["rank"]), k0=[int(k) for k in st["k0"]],
                    cp_error=[float(e) for e in st["cp_error"]], version=header["version"],
                    code_bits=int(st["code_bits"]) if v2 else 0,
-                   crops=[int(n) for n in st["crops"]] if v2 else None)
+                   crops=[int(n) for n in st["crops"]] if v2 else None,
+                   vertex_cp_error=([float(e) for e in st["vertex_cp_error"]]
+                                    if header["version"] == 3 else []))
         shapes = {k: (str(v["dtype"]), tuple(int(n) for n in v["shape"]))
                   for k, v in header["arrays"].items()}
     except PrefilterError as exc:
@@ -218,10 +236,13 @@ def _settings(path, header) -> dict:
     if v2:
         if out["code_bits"] not in CODE_DTYPES or not B:
             _fail(path, f"header.settings.code_bits: expected 8 or 16 with block > 0 "
-                        f"(version 2), got {out['code_bits']} with block {B}")
+                        f"(version {out['version']}), got {out['code_bits']} with block {B}")
         if len(out["crops"]) != L or min(out["crops"]) < 1:
             _fail(path, f"header.settings.crops: expected {L} crop sizes >= 1 (one per level), "
                         f"got {out['crops']}")
+    if out["version"] == 3 and len(out["vertex_cp_error"]) != L:
+        _fail(path, f"header.settings.vertex_cp_error: expected one per level ({L}), got "
+                    f"{len(out['vertex_cp_error'])}")
     out["shapes"] = shapes
     return out
 
@@ -230,7 +251,7 @@ def _expected(st) -> dict:
     """Array name -> (dtype, shape with -1 for the sizes the header does not fix) implied by
     the settings."""
     T, R, B, rank = st["T"], st["R"], st["B"], st["rank"]
-    v2 = st["version"] == 2
+    v2 = st["version"] >= 2
     out = {"tiles": ("<f8", (16, T, T, 3)), "tile_means": ("<f4" if v2 else "<f8", (16, R, R)),
            "dependent": ("<i8", (-1, 2))}
     if not v2:
@@ -240,10 +261,11 @@ def _expected(st) -> dict:
     for lv in range(len(st["k0"])):
         if v2:
             n = st["crops"][lv]
-            out[f"mask_{lv}"] = ("|u1", (2 * n * n * nb2,))  # 16 n^2 nb^2 bits
-            out[f"a_{lv}"] = out[f"b_{lv}"] = (code, (-1, rank, B))
-            out[f"c_{lv}"] = (code, (-1, rank))
-            out[f"c_scale_{lv}"] = ("<f4", (-1, rank))
+            for v in ("", "v") if st["version"] == 3 else ("",):
+                out[f"{v}mask_{lv}"] = ("|u1", (2 * n * n * nb2,))  # 16 n^2 nb^2 bits
+                out[f"{v}a_{lv}"] = out[f"{v}b_{lv}"] = (code, (-1, rank, B))
+                out[f"{v}c_{lv}"] = (code, (-1, rank))
+                out[f"{v}c_scale_{lv}"] = ("<f4", (-1, rank))
         elif B:
             out[f"A_{lv}"] = out[f"B_{lv}"] = ("<f4", (16, nb2, rank, B))
             out[f"C_{lv}"] = ("<f4", (16, -1, -1, nb2, rank))
@@ -278,8 +300,10 @@ def _check_arrays(path, data, st) -> None:
         if k != "tiles" and np.any(a < 0):
             _fail(path, f"{k}: expected non-negative values")
     for lv in range(len(st["k0"])):
-        if st["version"] == 2:
+        if st["version"] >= 2:
             _check_codes(path, data, st, lv)
+            if st["version"] == 3:
+                _check_codes(path, data, st, lv, "v")
             continue
         c = data[f"C_{lv}" if st["B"] else f"images_{lv}"]
         if c.shape[1] != c.shape[2] or c.shape[1] < 1:
@@ -290,23 +314,25 @@ def _check_arrays(path, data, st) -> None:
         _fail(path, "tiles: expected unit normals with n_z > 0")
 
 
-def _check_codes(path, data, st, lv) -> None:
-    """Version 2: the numbers of kept rows and live groups of level ``lv``'s mask against the
-    code arrays (their dtypes and the other dimensions are checked by :func:`_check_arrays`)."""
+def _check_codes(path, data, st, lv, v="") -> None:
+    """Versions 2 and 3: the numbers of kept rows and live groups of level ``lv``'s mask
+    against the code arrays (their dtypes and the other dimensions are checked by
+    :func:`_check_arrays`); ``v = "v"``: of the vertex pyramids."""
     n, nb2 = st["crops"][lv], (st["R"] // st["B"]) ** 2
-    kept = np.unpackbits(data[f"mask_{lv}"]).astype(bool).reshape(16, n * n, nb2)
+    kept = np.unpackbits(data[f"{v}mask_{lv}"]).astype(bool).reshape(16, n * n, nb2)
     K, G = int(kept.sum()), int(kept.any(axis=1).sum())
-    got = [data[f"{k}_{lv}"].shape[0] for k in ("c", "a", "b", "c_scale")]
+    got = [data[f"{v}{k}_{lv}"].shape[0] for k in ("c", "a", "b", "c_scale")]
     if got != [K, G, G, G]:
-        _fail(path, f"c_{lv}, a_{lv}, b_{lv}, c_scale_{lv}: expected {K} rows (kept rows of "
-                    f"mask_{lv}) and {G} live groups, got {got[0]}, {got[1]}, {got[2]}, "
-                    f"{got[3]}")
+        _fail(path, f"{v}c_{lv}, {v}a_{lv}, {v}b_{lv}, {v}c_scale_{lv}: expected {K} rows (kept "
+                    f"rows of {v}mask_{lv}) and {G} live groups, got {got[0]}, {got[1]}, "
+                    f"{got[2]}, {got[3]}")
 
 
 def load_tiles(path: str | os.PathLike) -> TiledNDF:
-    """Load and validate per-tile Wang pyramids written by :func:`save_tiles` (version 1 or 2;
-    version 2's codes are packed for the kernels, :attr:`TiledNDF.packed`); any inconsistency
-    (including a checksum mismatch) raises ``TableFileError`` naming the file and the field."""
+    """Load and validate per-tile Wang pyramids written by :func:`save_tiles` (version 1, 2 or
+    3; version 2 and 3's codes are packed for the kernels, :attr:`TiledNDF.packed` and
+    :attr:`TiledNDF.vertex_packed`); any inconsistency (including a checksum mismatch) raises
+    ``TableFileError`` naming the file and the field."""
     raw = read_npz(path, WHAT)
     data = {k: v for k, v in raw.items() if k != META_KEY}
     st = _settings(path, _header(path, data))
@@ -316,14 +342,20 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         _fail(path, "dependent: expected the dependent texels of the stored tiles")
     verify_npz(path, WHAT, raw, format_name=FORMAT, format_version=st["version"])
     L, B = len(st["k0"]), st["B"]
-    packed = None
-    if st["version"] == 2:
+    packed = vpacked = None
+    vimages = ()
+    if st["version"] >= 2:
         # the codes packed as stored (the kernels read them; wang_query.pack_codes), the
         # float32 triples decoded on first use by the per-footprint paths only
         nb2 = (st["R"] // B) ** 2
         packed = pack_codes([{k: data[f"{k}_{lv}"] for k in ("mask", "a", "b", "c", "c_scale")}
                              for lv in range(L)], st["crops"], nb2)
         images = DecodedLevels(packed)
+        if st["version"] == 3:
+            vpacked = pack_codes([{k: data[f"v{k}_{lv}"]
+                                   for k in ("mask", "a", "b", "c", "c_scale")}
+                                  for lv in range(L)], st["crops"], nb2)
+            vimages = DecodedLevels(vpacked)
         tile_means = data["tile_means"]
         mean = tile_means.astype(np.float64).mean(axis=0)
     else:
@@ -332,4 +364,5 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         tile_means, mean = data["tile_means"], data["mean"]
     return TiledNDF(wang, images, tuple(st["k0"]), mean, st["stride0"], st["sigma0"],
                     st["R"], st["S"], st["sr"], st["wide"], data["dependent"],
-                    tile_means, st["uniform"], B, tuple(st["cp_error"]), packed)
+                    tile_means, st["uniform"], B, tuple(st["cp_error"]), packed, vimages,
+                    tuple(st["vertex_cp_error"]), vpacked)
