@@ -107,7 +107,8 @@ def _breakdown(sc, repeats):
     """CPU seconds of the NDF queries of one ``glints-wang`` frame by regime (``ndf_points``
     and ``wang_range.ndf_ranges`` calls recorded during the frame, re-run on their footprints
     of each regime, best of ``repeats``), with and without the dependent texels (a copy of the
-    ``TiledNDF`` without them: what the pyramids alone cost)."""
+    ``TiledNDF`` without them and their vertex pyramids: what the tiles' pyramids alone
+    cost)."""
     from dataclasses import replace
 
     from prefilter.glints import wang_ndf, wang_range, wang_render
@@ -133,7 +134,8 @@ def _breakdown(sc, repeats):
     for kind, wn, c, sp, args, kw in calls:
         fn = points if kind == "points" else ranges
         reg = np.vectorize(lambda x: wang_ndf.footprint_regime(wn, float(x)))(sp)
-        alone = replace(wn, dependent=np.zeros((0, 2), np.int64))
+        alone = replace(wn, dependent=np.zeros((0, 2), np.int64), vertex_images=(),
+                        vertex_packed=None)
         for name in ("direct", "tiles", "shares", "uniform"):
             sel = reg == name
             if not sel.any() or (kind == "ranges" and name == "direct"):

@@ -1241,7 +1241,6 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
             out[q] = 0.0
             cwp = np.empty((16, rank), np.float32)  # per tile type: its taps' summed code rows
             gsp = np.empty(16, np.int64)
-            slot_of = np.empty(16, np.int64)
             c0, c1, s = cx[q], cy[q], sp[q]
             # the corners with a weight: pixel rows, columns, weights (at most 4)
             cy_ = np.empty(4, np.int64)
@@ -1347,8 +1346,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
             if block > 0:
                 acc = pack_point(Fa, Fb, wsc, cq, bidx, meta, offs[m], goff[m], n, block, types,
                                  jlo - tj0, ilo - ti0, wyt, wxt, kyl, kyh, kxl, kxh, py0[q],
-                                 wya[q, 0], wya[q, 1], px0[q], wxa[q, 0], wxa[q, 1], cwp, gsp,
-                                 slot_of)
+                                 wya[q, 0], wya[q, 1], px0[q], wxa[q, 0], wxa[q, 1], cwp, gsp)
             else:
                 img = images[m]
                 for jj in range(jhi - jlo + 1):
@@ -1367,7 +1365,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                 out[q] = acc + pack_point(vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs[m], vgoff[m],
                                           n, block, vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh,
                                           py0[q], wya[q, 0], wya[q, 1], px0[q], wxa[q, 0],
-                                          wxa[q, 1], cwp, gsp, slot_of)
+                                          wxa[q, 1], cwp, gsp)
                 continue
             dsum = 0.0
             psum = 0.0

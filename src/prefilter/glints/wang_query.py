@@ -297,15 +297,14 @@ def tile_taps(cy, cx, T, st, r, half, km, n, jlo, jhi, ilo, ihi):  # pragma: no 
 
 
 @njit_serial
-def tile_codes(cq, row_idx, meta, off, goff, n, gblk, types, jt, it, wyt, wxt, kyl, kyh, kxl,
-               kxh, cw, gs, slot_of):  # pragma: no cover - compiled
-    """Sum the taps' code rows of one NDF block (``row_idx``: ``bidx[bi, bj]``, ``gblk =
-    (bi nb + bj, nb^2)``) per CP group into ``cw[slot]`` (in ``cw``'s dtype; tiles of one type
-    share their group, so at most 16 slots), group of each slot in ``gs``; returns the slots
-    used. Arguments as :func:`pack_point`."""
-    ns = 0
+def type_weights(types, jt, it, wyt, wxt, kyl, kyh, kxl, kxh, n, W, box):  # pragma: no cover
+    """The resampling taps of the tiles under a footprint summed per tile type (tiles of one
+    type share their images): ``W[t] (n, n)`` the summed tap weights of the type-``t`` tiles
+    (tile ``(jj, ii)`` of type ``types[jt + jj, it + ii]``, taps as :func:`pack_point`'s),
+    written inside ``box[t] = (ky0, ky1, kx0, kx1)`` only (``ky0 > ky1``: no tile of the type).
+    One pass over the taps for all the NDF blocks a query reads."""
     for t in range(16):
-        slot_of[t] = -1
+        box[t, 0], box[t, 1], box[t, 2], box[t, 3] = n, -1, n, -1
     for jj in range(wyt.shape[0]):
         if kyl[jj] > kyh[jj]:
             continue
@@ -313,49 +312,79 @@ def tile_codes(cq, row_idx, meta, off, goff, n, gblk, types, jt, it, wyt, wxt, k
             if kxl[ii] > kxh[ii]:
                 continue
             t = types[jt + jj, it + ii]
-            g = goff + t * gblk[1] + gblk[0]
-            nr = meta[g, 0]
-            if nr == 0:
-                continue
-            sl = slot_of[t]
-            if sl < 0:
-                sl = ns
-                slot_of[t] = sl
-                gs[sl] = g
-                for rr in range(nr):
-                    cw[sl, rr] = 0.0
-                ns += 1
-            cb, strd = meta[g, 2], meta[g, 3]
-            base = off + t * n * n
+            box[t, 0] = min(box[t, 0], kyl[jj])
+            box[t, 1] = max(box[t, 1], kyh[jj])
+            box[t, 2] = min(box[t, 2], kxl[ii])
+            box[t, 3] = max(box[t, 3], kxh[ii])
+    for t in range(16):
+        for ky in range(box[t, 0], box[t, 1] + 1):
+            for kx in range(box[t, 2], box[t, 3] + 1):
+                W[t, ky, kx] = 0.0
+    for jj in range(wyt.shape[0]):
+        if kyl[jj] > kyh[jj]:
+            continue
+        for ii in range(wxt.shape[0]):
+            t = types[jt + jj, it + ii]
             for ky in range(kyl[jj], kyh[jj] + 1):
                 wy = wyt[jj, ky]
-                rimg = base + ky * n
                 for kx in range(kxl[ii], kxh[ii] + 1):
-                    k = row_idx[rimg + kx]
-                    if k < 0:
-                        continue
-                    wt = np.float32(wy * wxt[ii, kx])
-                    e = cb + k * strd
-                    cr = cq[e:e + nr]
-                    for rr in range(nr):
-                        cw[sl, rr] += wt * np.float32(cr[rr])
+                    W[t, ky, kx] += wy * wxt[ii, kx]
+
+
+@njit_serial
+def type_codes(cq, row_idx, meta, off, goff, n, gblk, W, box, cw, gs):  # pragma: no cover
+    """Sum the code rows of one NDF block (``row_idx``: ``bidx[bi, bj]``, ``gblk = (bi nb +
+    bj, nb^2)``) weighted by :func:`type_weights`' ``W``, ``box`` per CP group (one per tile
+    type) into ``cw[slot]`` (in ``cw``'s dtype), group of each slot in ``gs``; returns the
+    slots used. ``off``, ``goff``: the level's first image and group."""
+    ns = 0
+    for t in range(16):
+        if box[t, 0] > box[t, 1]:
+            continue
+        g = goff + t * gblk[1] + gblk[0]
+        nr = meta[g, 0]
+        if nr == 0:
+            continue
+        sl = ns
+        gs[sl] = g
+        for rr in range(nr):
+            cw[sl, rr] = 0.0
+        ns += 1
+        cb, strd = meta[g, 2], meta[g, 3]
+        base = off + t * n * n
+        for ky in range(box[t, 0], box[t, 1] + 1):
+            rimg = base + ky * n
+            for kx in range(box[t, 2], box[t, 3] + 1):
+                k = row_idx[rimg + kx]
+                if k < 0:
+                    continue
+                wt = np.float32(W[t, ky, kx])
+                if wt == 0.0:
+                    continue
+                e = cb + k * strd
+                cr = cq[e:e + nr]
+                for rr in range(nr):
+                    cw[sl, rr] += wt * np.float32(cr[rr])
     return ns
 
 
 @njit_serial
 def pack_point(Fa, Fb, wsc, cq, bidx, meta, off, goff, n, B, types, jt, it, wyt, wxt, kyl, kyh,
-               kxl, kxh, i0, u0, u1, j0, v0, v1, cw, gs, slot_of):  # pragma: no cover
+               kxl, kxh, i0, u0, u1, j0, v0, v1, cw, gs):  # pragma: no cover
     """One footprint's sum over the tiles under it of their resampling taps at level ``m``
     (images from ``off``, groups from ``goff``, ``n`` centres per axis), at the NDF pixel taps
     ``(i0, u0, u1)`` (rows) and ``(j0, v0, v1)`` (columns) of :func:`prefilter.glints.
     _qkernels.pixel_taps`. Tile ``(jj, ii)`` of the window is of type ``types[jt + jj, it +
     ii]``; its taps are the crop rows ``kyl[jj]..kyh[jj]`` weighted ``wyt[jj]`` and columns
-    ``kxl[ii]..kxh[ii]`` weighted ``wxt[ii]``. Per NDF block, the taps' code rows are summed
-    per CP group first (all tiles of one type share their group: at most 16 slots of ``cw``,
-    float32), then one factor product per group (``_qkernels._flush_slots``, as
-    ``resample_point_kernel``; glints paper eq. 5)."""
+    ``kxl[ii]..kxh[ii]`` weighted ``wxt[ii]``. The taps are summed per tile type first
+    (:func:`type_weights`: all tiles of one type share their CP groups), then per NDF block the
+    code rows per group (:func:`type_codes`, at most 16 slots of ``cw``) and one factor product
+    per group (``_qkernels._flush_slots``, as ``resample_point_kernel``; glints paper eq. 5)."""
     nb = bidx.shape[0]
     nb2 = nb * nb
+    W = np.empty((16, n, n))
+    box = np.empty((16, 4), np.int64)
+    type_weights(types, jt, it, wyt, wxt, kyl, kyh, kxl, kxh, n, W, box)
     acc = 0.0
     for di in range(2):
         bi, ia, wi, wa1 = _block_tap(i0, u0, u1, di, B)
@@ -365,7 +394,7 @@ def pack_point(Fa, Fb, wsc, cq, bidx, meta, off, goff, n, B, types, jt, it, wyt,
             bj, ja, wj, wb1 = _block_tap(j0, v0, v1, dj, B)
             if bj < 0:
                 continue
-            ns = tile_codes(cq, bidx[bi, bj], meta, off, goff, n, (bi * nb + bj, nb2), types,
-                            jt, it, wyt, wxt, kyl, kyh, kxl, kxh, cw, gs, slot_of)
+            ns = type_codes(cq, bidx[bi, bj], meta, off, goff, n, (bi * nb + bj, nb2), W, box,
+                            cw, gs)
             acc += _flush_slots(Fa, Fb, wsc, meta, B, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
     return acc

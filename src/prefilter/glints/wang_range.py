@@ -6,7 +6,7 @@ projected half vectors (glints paper eq. 7), summed over the tiles under the foo
 
 * per-tile pyramids (``min_sigma <= sigma_p < wide_sigma``): the resampling taps of every tile
   under the footprint (:func:`prefilter.glints.wang_query.tile_taps`), their code rows summed
-  per CP group and NDF block (:func:`prefilter.glints.wang_query.tile_codes`), then the group's
+  per CP group and NDF block (:func:`prefilter.glints.wang_query.type_codes`), then the group's
   factor masses over each rectangle from the prefix sums (``_qkernels._flush_rects``, the
   ``glints`` range kernel's arithmetic); the dependent texels (left out of the pyramids) by
   their exact elements' masses over the rectangles (the pixel splatting of the images, with
@@ -35,7 +35,7 @@ from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_in
                                       _nb_type, _vertex_tables, dep_gaussian,
                                       dependent_neighbours, footprint_rows, level_window,
                                       vertex_args, vertex_config, vertex_window)
-from prefilter.glints.wang_query import gauss_row, segment_sums, tile_codes
+from prefilter.glints.wang_query import gauss_row, segment_sums, type_codes, type_weights
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
 def summed_tables(wn: TiledNDF) -> np.ndarray:
@@ -219,32 +219,32 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                              seed, index)
         cw = np.empty((16, rank), proto.dtype)
         gs = np.empty(16, np.int64)
-        slot_of = np.empty(16, np.int64)
         tt = np.empty(9, proto.dtype)
         rp = np.empty((K, 8), np.int64)
         rt = np.empty((K, 8))
         touch = np.empty(K, np.int64)
         acc = np.zeros(K)
+        # the taps summed per tile type (and vertex configuration) once for all the blocks
+        W = np.empty((16, n, n))
+        box = np.empty((16, 4), np.int64)
+        type_weights(types, jlo - tj0, ilo - ti0, wyt, wxt, kyl, kyh, kxl, kxh, n, W, box)
+        vW = np.empty((16, n, n))
+        vbox = np.empty((16, 4), np.int64)
         if use_v:
             vt, vwy, vwx, vkyl, vkyh, vkxl, vkxh = vertex_window(
                 s, c0, c1, m, n, sigma0, st0, tap_trunc, k0[m], rad, T, types, ti0, tj0)
-        else:
-            vt = np.zeros((0, 0), np.int64)
-            vwy, vwx = wyt[:0], wxt[:0]
-            vkyl, vkyh, vkxl, vkxh = kyl[:0], kyh[:0], kxl[:0], kxh[:0]
+            type_weights(vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh, n, vW, vbox)
         for bi in range(ubi0, ubi1 + 1):
             for bj in range(ubj0, ubj1 + 1):
                 nt = _touching(rbk, rcl, bi, bj, B, touch, rp, rt)
                 if nt == 0:
                     continue
-                ns = tile_codes(cq, bidx[bi, bj], meta, offs[m], goff[m], n,
-                                (bi * nb + bj, nb2), types, jlo - tj0, ilo - ti0, wyt, wxt,
-                                kyl, kyh, kxl, kxh, cw, gs, slot_of)
+                ns = type_codes(cq, bidx[bi, bj], meta, offs[m], goff[m], n,
+                                (bi * nb + bj, nb2), W, box, cw, gs)
                 _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
                 if use_v:  # the dependent texels from their vertex pyramids
-                    ns = tile_codes(vcq, vbidx[bi, bj], vmeta, voffs[m], vgoff[m], n,
-                                    (bi * nb + bj, nb2), vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl,
-                                    vkxh, cw, gs, slot_of)
+                    ns = type_codes(vcq, vbidx[bi, bj], vmeta, voffs[m], vgoff[m], n,
+                                    (bi * nb + bj, nb2), vW, vbox, cw, gs)
                     _flush_rects(vpa, vpb, vwsc, vmeta, B, gs, cw, ns, rp, rt, touch, nt, tt,
                                  acc)
         for k in range(K):
