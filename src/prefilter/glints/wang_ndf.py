@@ -135,11 +135,13 @@ class TiledNDF:
     #: first use
     packed: TilePack | None = None
     #: compressed bakes: the dependent texels' pyramids on vertex-centred tiles, one per vertex
-    #: configuration (:func:`vertex_tiles`; levels, crops and layout as ``images``), their CP
+    #: configuration (:func:`vertex_tiles`; levels and layout as ``images``, centres from
+    #: ``vertex_k0[l]``: the crops around the vertex its dependent texels reach), their CP
     #: errors and, loaded from a file, their pack
     vertex_images: tuple = ()
     vertex_cp_error: tuple = ()
     vertex_packed: TilePack | None = None
+    vertex_k0: tuple = ()
 
     @property
     def n_levels(self) -> int:
@@ -172,6 +174,11 @@ class TiledNDF:
             hit = pack_float(self.vertex_images)
             object.__setattr__(self, "_vpack", hit)
         return hit
+
+    def vertex_crop(self, level: int) -> int:
+        """Centres per axis of the vertex pyramids at ``level`` (0 without them)."""
+        vp = self.vertex_pack
+        return 0 if vp is None else int(vp.crops[level])
 
     def stride(self, level: int) -> int:
         return self.stride0 << level
@@ -280,12 +287,21 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     if rank is not None:
         # the dependent texels, per vertex configuration, on vertex-centred tiles
         vs, vJ, vkeep = vertex_tiles(wt, dep)
-        vdone, verrs = _pyramid_levels(vs, vJ, vkeep, desc="vertex pyramids", **kw)
+        # their crops: the centres within a margin of the texels (the vertex tiles' other
+        # centres have no contribution)
+        rows = np.flatnonzero(vkeep.any(axis=(0, 2)) | vkeep.any(axis=(0, 1)))
+        vk0 = [math.floor((rows[0] - _margin(sg) - 0.5) / (st0 << lv))
+               for lv, sg in enumerate(sig)]
+        vk1 = [math.ceil((rows[-1] + 1 + _margin(sg) - 0.5) / (st0 << lv))
+               for lv, sg in enumerate(sig)]
+        vdone, verrs = _pyramid_levels(vs, vJ, vkeep, desc="vertex pyramids",
+                                       **dict(kw, k0=vk0, k1=vk1))
     wn = TiledNDF(wt, done, tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
                   sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
     if rank is None:
         return wn
-    return replace(wn, block=block, cp_error=errs, vertex_images=vdone, vertex_cp_error=verrs)
+    return replace(wn, block=block, cp_error=errs, vertex_images=vdone, vertex_cp_error=verrs,
+                   vertex_k0=tuple(vk0))
 
 
 def _pyramid_levels(s_el, J_el, keep, *, L, st0, k0, k1, R, S, sr, rank, block, n_iter_max,
@@ -1193,7 +1209,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                    depmask, seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops,
                    block, k0, st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean, sr,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
-                   has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff,
+                   has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff, vk0, vcrops,
                    out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` (queries ``gstart[g] ..
     gstart[g + 1] - 1`` share one footprint: on the implicit tiling below ``min_sigma`` its
@@ -1210,7 +1226,8 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
     vertex table ``vplanes``, ``vofs`` (:func:`vertex_planes`), cut at 6 stds; with an explicit
     map, from neighbour lookups, cut at ``2 trunc`` stds. ``has_vertex``: on the implicit
     tiling, above ``min_sigma`` the dependent texels come from the vertex pyramids (the pack
-    arrays ``vFa`` ..., :func:`vertex_window`) instead."""
+    arrays ``vFa`` ..., their crops from ``vk0`` of ``vcrops`` centres, :func:`vertex_window`)
+    instead."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
@@ -1360,10 +1377,11 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                                 acc += wyt[jj, ky] * wxt[ii, kx] * v
             if has_vertex and index.size == 0:
                 # the dependent texels from their vertex pyramids (a valid tiling)
+                vn = vcrops[m]
                 vt, vwy, vwx, vkyl, vkyh, vkxl, vkxh = vertex_window(
-                    s, c0, c1, m, n, sigma0, st0, tap_trunc, k0[m], rad, T, types, ti0, tj0)
+                    s, c0, c1, m, vn, sigma0, st0, tap_trunc, vk0[m], rad, T, types, ti0, tj0)
                 out[q] = acc + pack_point(vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs[m], vgoff[m],
-                                          n, block, vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh,
+                                          vn, block, vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh,
                                           py0[q], wya[q, 0], wya[q, 1], px0[q], wxa[q, 0],
                                           wxa[q, 1], cwp, gsp)
                 continue
@@ -1478,23 +1496,24 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         vplanes, vofs, wn.tile_means, wn.mean,
         wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
-        wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, *vertex_args(wn)[:9],
+        wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, *vertex_args(wn)[:11],
         out)
     return out.reshape(shape)
 
 
 def vertex_args(wn: TiledNDF) -> tuple:
-    """``(has_vertex, Fa, Fb, wsc, cq, bidx, meta, offs, goff, Pa, Pb)`` of ``wn``'s vertex
-    pyramids for the kernels (an empty pack of the tiles' dtypes without them)."""
+    """``(has_vertex, Fa, Fb, wsc, cq, bidx, meta, offs, goff, k0, crops, Pa, Pb)`` of ``wn``'s
+    vertex pyramids for the kernels (an empty pack of the tiles' dtypes without them)."""
     vp = wn.vertex_pack if wn.block else None
     if vp is None:
         pk = wn.pack
         z = np.zeros(1, np.int64)
         c = np.ascontiguousarray
         return (False, c(pk.Fa[:0]), c(pk.Fb[:0]), c(pk.wsc[:0]), c(pk.cq[:0]),
-                c(pk.bidx[:, :, :0]), np.zeros((1, 4), np.int64), z, z, c(pk.Pa[:0]),
+                c(pk.bidx[:, :, :0]), np.zeros((1, 4), np.int64), z, z, z, z, c(pk.Pa[:0]),
                 c(pk.Pb[:0]))
-    return (True, vp.Fa, vp.Fb, vp.wsc, vp.cq, vp.bidx, vp.meta, vp.offs, vp.goff, vp.Pa, vp.Pb)
+    return (True, vp.Fa, vp.Fb, vp.wsc, vp.cq, vp.bidx, vp.meta, vp.offs, vp.goff,
+            np.asarray(wn.vertex_k0, np.int64), np.asarray(vp.crops, np.int64), vp.Pa, vp.Pb)
 
 
 _ELEMENTS: dict = {}

@@ -139,7 +139,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                    sat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    point_sr, proto, has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff,
-                   vPa, vPb, out, done):  # pragma: no cover - compiled
+                   vk0, vcrops, vPa, vPb, out, done):  # pragma: no cover - compiled
     """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
     ``[q, k]`` (0 for inactive rectangles); ``done[q]`` False below ``min_sigma`` (module
     docstring). Accumulation of the code rows in ``proto``'s dtype (float32 for 8-bit codes).
@@ -228,12 +228,13 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         W = np.empty((16, n, n))
         box = np.empty((16, 4), np.int64)
         type_weights(types, jlo - tj0, ilo - ti0, wyt, wxt, kyl, kyh, kxl, kxh, n, W, box)
-        vW = np.empty((16, n, n))
+        vn = vcrops[m] if use_v else 0
+        vW = np.empty((16, vn, vn))
         vbox = np.empty((16, 4), np.int64)
         if use_v:
             vt, vwy, vwx, vkyl, vkyh, vkxl, vkxh = vertex_window(
-                s, c0, c1, m, n, sigma0, st0, tap_trunc, k0[m], rad, T, types, ti0, tj0)
-            type_weights(vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh, n, vW, vbox)
+                s, c0, c1, m, vn, sigma0, st0, tap_trunc, vk0[m], rad, T, types, ti0, tj0)
+            type_weights(vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh, vn, vW, vbox)
         for bi in range(ubi0, ubi1 + 1):
             for bj in range(ubj0, ubj1 + 1):
                 nt = _touching(rbk, rcl, bi, bj, B, touch, rp, rt)
@@ -243,7 +244,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                                 (bi * nb + bj, nb2), W, box, cw, gs)
                 _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
                 if use_v:  # the dependent texels from their vertex pyramids
-                    ns = type_codes(vcq, vbidx[bi, bj], vmeta, voffs[m], vgoff[m], n,
+                    ns = type_codes(vcq, vbidx[bi, bj], vmeta, voffs[m], vgoff[m], vn,
                                     (bi * nb + bj, nb2), vW, vbox, cw, gs)
                     _flush_rects(vpa, vpb, vwsc, vmeta, B, gs, cw, ns, rp, rt, touch, nt, tt,
                                  acc)

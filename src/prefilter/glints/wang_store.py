@@ -35,7 +35,8 @@ factors as integer codes, like the glints map store's version 3 (:mod:`prefilter
 Version 3 is version 2 plus the vertex pyramids of a compressed bake (the dependent texels per
 vertex configuration, :func:`~prefilter.glints.wang_ndf.vertex_tiles`), in the same layout
 with a ``v`` before each per-level name (``vmask_l``, ``va_l``, ``vb_l``, ``vc_l``,
-``vc_scale_l``; the crops of the tiles' levels) and ``vertex_cp_error`` in the settings.
+``vc_scale_l``) and ``vertex_cp_error``, ``vertex_k0``, ``vertex_crops`` (their centres per
+level) in the settings.
 :func:`save_tiles` writes version 3 for pyramids with vertex pyramids, version 2 for those
 without; ``code_bits`` 0 (version 1) writes no vertex pyramids (the queries then compute the
 dependent texels exactly, as for uncompressed pyramids).
@@ -165,7 +166,9 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
     if version >= 2:
         settings.update(code_bits=code_bits, crops=[wn.crop(lv) for lv in range(wn.n_levels)])
     if version == 3:
-        settings.update(vertex_cp_error=[float(e) for e in wn.vertex_cp_error])
+        settings.update(vertex_cp_error=[float(e) for e in wn.vertex_cp_error],
+                        vertex_k0=[int(k) for k in wn.vertex_k0],
+                        vertex_crops=[wn.vertex_crop(lv) for lv in range(wn.n_levels)])
     header = dict(format=FORMAT, version=version, tile=int(wn.wang.size),
                   seed=int(wn.wang.seed), settings=settings,
                   arrays={k: {"dtype": v.dtype.str, "shape": list(v.shape)}
@@ -210,7 +213,11 @@ def _settings(path, header) -> dict:
                    code_bits=int(st["code_bits"]) if v2 else 0,
                    crops=[int(n) for n in st["crops"]] if v2 else None,
                    vertex_cp_error=([float(e) for e in st["vertex_cp_error"]]
-                                    if header["version"] == 3 else []))
+                                    if header["version"] == 3 else []),
+                   vertex_k0=([int(k) for k in st["vertex_k0"]]
+                              if header["version"] == 3 else []),
+                   vertex_crops=([int(n) for n in st["vertex_crops"]]
+                                 if header["version"] == 3 else []))
         shapes = {k: (str(v["dtype"]), tuple(int(n) for n in v["shape"]))
                   for k, v in header["arrays"].items()}
     except PrefilterError as exc:
@@ -240,9 +247,14 @@ def _settings(path, header) -> dict:
         if len(out["crops"]) != L or min(out["crops"]) < 1:
             _fail(path, f"header.settings.crops: expected {L} crop sizes >= 1 (one per level), "
                         f"got {out['crops']}")
-    if out["version"] == 3 and len(out["vertex_cp_error"]) != L:
-        _fail(path, f"header.settings.vertex_cp_error: expected one per level ({L}), got "
-                    f"{len(out['vertex_cp_error'])}")
+    if out["version"] == 3:
+        for k in ("vertex_cp_error", "vertex_k0", "vertex_crops"):
+            if len(out[k]) != L:
+                _fail(path, f"header.settings.{k}: expected one per level ({L}), got "
+                            f"{len(out[k])}")
+        if min(out["vertex_crops"]) < 1:
+            _fail(path, f"header.settings.vertex_crops: expected crop sizes >= 1, got "
+                        f"{out['vertex_crops']}")
     out["shapes"] = shapes
     return out
 
@@ -260,8 +272,8 @@ def _expected(st) -> dict:
     code = np.dtype(CODE_DTYPES[st["code_bits"]]).str if v2 else None
     for lv in range(len(st["k0"])):
         if v2:
-            n = st["crops"][lv]
             for v in ("", "v") if st["version"] == 3 else ("",):
+                n = st["vertex_crops"][lv] if v else st["crops"][lv]
                 out[f"{v}mask_{lv}"] = ("|u1", (2 * n * n * nb2,))  # 16 n^2 nb^2 bits
                 out[f"{v}a_{lv}"] = out[f"{v}b_{lv}"] = (code, (-1, rank, B))
                 out[f"{v}c_{lv}"] = (code, (-1, rank))
@@ -318,7 +330,7 @@ def _check_codes(path, data, st, lv, v="") -> None:
     """Versions 2 and 3: the numbers of kept rows and live groups of level ``lv``'s mask
     against the code arrays (their dtypes and the other dimensions are checked by
     :func:`_check_arrays`); ``v = "v"``: of the vertex pyramids."""
-    n, nb2 = st["crops"][lv], (st["R"] // st["B"]) ** 2
+    n, nb2 = st["vertex_crops" if v else "crops"][lv], (st["R"] // st["B"]) ** 2
     kept = np.unpackbits(data[f"{v}mask_{lv}"]).astype(bool).reshape(16, n * n, nb2)
     K, G = int(kept.sum()), int(kept.any(axis=1).sum())
     got = [data[f"{v}{k}_{lv}"].shape[0] for k in ("c", "a", "b", "c_scale")]
@@ -354,7 +366,7 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         if st["version"] == 3:
             vpacked = pack_codes([{k: data[f"v{k}_{lv}"]
                                    for k in ("mask", "a", "b", "c", "c_scale")}
-                                  for lv in range(L)], st["crops"], nb2)
+                                  for lv in range(L)], st["vertex_crops"], nb2)
             vimages = DecodedLevels(vpacked)
         tile_means = data["tile_means"]
         mean = tile_means.astype(np.float64).mean(axis=0)
@@ -365,4 +377,4 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
     return TiledNDF(wang, images, tuple(st["k0"]), mean, st["stride0"], st["sigma0"],
                     st["R"], st["S"], st["sr"], st["wide"], data["dependent"],
                     tile_means, st["uniform"], B, tuple(st["cp_error"]), packed, vimages,
-                    tuple(st["vertex_cp_error"]), vpacked)
+                    tuple(st["vertex_cp_error"]), vpacked, tuple(st["vertex_k0"]))
