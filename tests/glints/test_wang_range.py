@@ -88,8 +88,9 @@ def test_ranges_below_min_sigma_and_inactive(wc):
 def test_vertex_tiles_and_point_queries(wc):
     """The vertex tiles hold each dependent texel of a vertex once, at ``T/2`` plus its offset
     from the vertex (``vertex_elements``' rows); in the per-tile regime on the implicit tiling
-    the point queries read the dependent texels from the vertex pyramids, within their CP error
-    (rank 4: 4.7 % / 2.0 % at levels 0 / 1) of the exact elements' densities."""
+    the point queries' pixel values (not ``bilinear``: that takes the exact point densities)
+    read the dependent texels from the vertex pyramids, within their CP error (rank 4: 4.7 % /
+    2.0 % at levels 0 / 1) of the exact elements' pixel integrals."""
     T = wc.wang.size
     dep = dependent_texels(wc.wang)
     s, J, keep = vertex_tiles(wc.wang, dep)

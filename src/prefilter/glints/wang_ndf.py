@@ -1225,9 +1225,9 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
     (``index`` empty) the point densities come from ``planes`` (:func:`tile_planes`) and the
     vertex table ``vplanes``, ``vofs`` (:func:`vertex_planes`), cut at 6 stds; with an explicit
     map, from neighbour lookups, cut at ``2 trunc`` stds. ``has_vertex``: on the implicit
-    tiling, above ``min_sigma`` the dependent texels come from the vertex pyramids (the pack
-    arrays ``vFa`` ..., their crops from ``vk0`` of ``vcrops`` centres, :func:`vertex_window`)
-    instead."""
+    tiling, above ``min_sigma`` and without ``point_sr`` the dependent texels' pixel values
+    come from the vertex pyramids (the pack arrays ``vFa`` ..., their crops from ``vk0`` of
+    ``vcrops`` centres, :func:`vertex_window`) instead of pixel integrals of their elements."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
@@ -1258,6 +1258,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
             out[q] = 0.0
             cwp = np.empty((16, rank), np.float32)  # per tile type: its taps' summed code rows
             gsp = np.empty(16, np.int64)
+            slot_of = np.empty(16, np.int64)
             c0, c1, s = cx[q], cy[q], sp[q]
             # the corners with a weight: pixel rows, columns, weights (at most 4)
             cy_ = np.empty(4, np.int64)
@@ -1363,7 +1364,8 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
             if block > 0:
                 acc = pack_point(Fa, Fb, wsc, cq, bidx, meta, offs[m], goff[m], n, block, types,
                                  jlo - tj0, ilo - ti0, wyt, wxt, kyl, kyh, kxl, kxh, py0[q],
-                                 wya[q, 0], wya[q, 1], px0[q], wxa[q, 0], wxa[q, 1], cwp, gsp)
+                                 wya[q, 0], wya[q, 1], px0[q], wxa[q, 0], wxa[q, 1], cwp, gsp,
+                                 slot_of)
             else:
                 img = images[m]
                 for jj in range(jhi - jlo + 1):
@@ -1375,15 +1377,16 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                                 for k in range(nc):
                                     v += cw[k] * img[t, ky, kx, cy_[k], cx_[k]]
                                 acc += wyt[jj, ky] * wxt[ii, kx] * v
-            if has_vertex and index.size == 0:
-                # the dependent texels from their vertex pyramids (a valid tiling)
+            if has_vertex and index.size == 0 and not point_sr > 0.0:
+                # the dependent texels' pixel values from their vertex pyramids (a valid tiling;
+                # their point densities below, as cheap and exact)
                 vn = vcrops[m]
                 vt, vwy, vwx, vkyl, vkyh, vkxl, vkxh = vertex_window(
                     s, c0, c1, m, vn, sigma0, st0, tap_trunc, vk0[m], rad, T, types, ti0, tj0)
                 out[q] = acc + pack_point(vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs[m], vgoff[m],
                                           vn, block, vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh,
                                           py0[q], wya[q, 0], wya[q, 1], px0[q], wxa[q, 0],
-                                          wxa[q, 1], cwp, gsp)
+                                          wxa[q, 1], cwp, gsp, slot_of)
                 continue
             dsum = 0.0
             psum = 0.0

@@ -297,6 +297,52 @@ def tile_taps(cy, cx, T, st, r, half, km, n, jlo, jhi, ilo, ihi):  # pragma: no 
 
 
 @njit_serial
+def tile_codes(cq, row_idx, meta, off, goff, n, gblk, types, jt, it, wyt, wxt, kyl, kyh, kxl,
+               kxh, cw, gs, slot_of):  # pragma: no cover - compiled
+    """Sum the taps' code rows of one NDF block (``row_idx``: ``bidx[bi, bj]``, ``gblk =
+    (bi nb + bj, nb^2)``) per CP group into ``cw[slot]`` (in ``cw``'s dtype; tiles of one type
+    share their group, so at most 16 slots), group of each slot in ``gs``; returns the slots
+    used. Arguments as :func:`pack_point`."""
+    ns = 0
+    for t in range(16):
+        slot_of[t] = -1
+    for jj in range(wyt.shape[0]):
+        if kyl[jj] > kyh[jj]:
+            continue
+        for ii in range(wxt.shape[0]):
+            if kxl[ii] > kxh[ii]:
+                continue
+            t = types[jt + jj, it + ii]
+            g = goff + t * gblk[1] + gblk[0]
+            nr = meta[g, 0]
+            if nr == 0:
+                continue
+            sl = slot_of[t]
+            if sl < 0:
+                sl = ns
+                slot_of[t] = sl
+                gs[sl] = g
+                for rr in range(nr):
+                    cw[sl, rr] = 0.0
+                ns += 1
+            cb, strd = meta[g, 2], meta[g, 3]
+            base = off + t * n * n
+            for ky in range(kyl[jj], kyh[jj] + 1):
+                wy = wyt[jj, ky]
+                rimg = base + ky * n
+                for kx in range(kxl[ii], kxh[ii] + 1):
+                    k = row_idx[rimg + kx]
+                    if k < 0:
+                        continue
+                    wt = np.float32(wy * wxt[ii, kx])
+                    e = cb + k * strd
+                    cr = cq[e:e + nr]
+                    for rr in range(nr):
+                        cw[sl, rr] += wt * np.float32(cr[rr])
+    return ns
+
+
+@njit_serial
 def type_weights(types, jt, it, wyt, wxt, kyl, kyh, kxl, kxh, n, W, box):  # pragma: no cover
     """The resampling taps of the tiles under a footprint summed per tile type (tiles of one
     type share their images): ``W[t] (n, n)`` the summed tap weights of the type-``t`` tiles
@@ -370,21 +416,32 @@ def type_codes(cq, row_idx, meta, off, goff, n, gblk, W, box, cw, gs):  # pragma
 
 @njit_serial
 def pack_point(Fa, Fb, wsc, cq, bidx, meta, off, goff, n, B, types, jt, it, wyt, wxt, kyl, kyh,
-               kxl, kxh, i0, u0, u1, j0, v0, v1, cw, gs):  # pragma: no cover
+               kxl, kxh, i0, u0, u1, j0, v0, v1, cw, gs, slot_of):  # pragma: no cover
     """One footprint's sum over the tiles under it of their resampling taps at level ``m``
     (images from ``off``, groups from ``goff``, ``n`` centres per axis), at the NDF pixel taps
     ``(i0, u0, u1)`` (rows) and ``(j0, v0, v1)`` (columns) of :func:`prefilter.glints.
     _qkernels.pixel_taps`. Tile ``(jj, ii)`` of the window is of type ``types[jt + jj, it +
     ii]``; its taps are the crop rows ``kyl[jj]..kyh[jj]`` weighted ``wyt[jj]`` and columns
-    ``kxl[ii]..kxh[ii]`` weighted ``wxt[ii]``. The taps are summed per tile type first
-    (:func:`type_weights`: all tiles of one type share their CP groups), then per NDF block the
-    code rows per group (:func:`type_codes`, at most 16 slots of ``cw``) and one factor product
-    per group (``_qkernels._flush_slots``, as ``resample_point_kernel``; glints paper eq. 5)."""
+    ``kxl[ii]..kxh[ii]`` weighted ``wxt[ii]``. Per NDF block, the taps' code rows are summed
+    per CP group (all tiles of one type share their group: at most 16 slots of ``cw``,
+    float32), then one factor product per group (``_qkernels._flush_slots``, as
+    ``resample_point_kernel``; glints paper eq. 5). Over more than 16 tiles the taps are
+    summed per tile type first (:func:`type_weights`, :func:`type_codes`: fewer code rows read
+    when types repeat); over fewer, tile by tile (:func:`tile_codes`: no extra pass, and a
+    point query reads one NDF block but at block borders)."""
     nb = bidx.shape[0]
     nb2 = nb * nb
-    W = np.empty((16, n, n))
+    rows = 0
+    for jj in range(wyt.shape[0]):
+        rows += kyl[jj] <= kyh[jj]
+    cols = 0
+    for ii in range(wxt.shape[0]):
+        cols += kxl[ii] <= kxh[ii]
+    by_type = rows * cols > 16
+    W = np.empty((16, n, n) if by_type else (0, 0, 0))
     box = np.empty((16, 4), np.int64)
-    type_weights(types, jt, it, wyt, wxt, kyl, kyh, kxl, kxh, n, W, box)
+    if by_type:
+        type_weights(types, jt, it, wyt, wxt, kyl, kyh, kxl, kxh, n, W, box)
     acc = 0.0
     for di in range(2):
         bi, ia, wi, wa1 = _block_tap(i0, u0, u1, di, B)
@@ -394,7 +451,11 @@ def pack_point(Fa, Fb, wsc, cq, bidx, meta, off, goff, n, B, types, jt, it, wyt,
             bj, ja, wj, wb1 = _block_tap(j0, v0, v1, dj, B)
             if bj < 0:
                 continue
-            ns = type_codes(cq, bidx[bi, bj], meta, off, goff, n, (bi * nb + bj, nb2), W, box,
-                            cw, gs)
+            if by_type:
+                ns = type_codes(cq, bidx[bi, bj], meta, off, goff, n, (bi * nb + bj, nb2), W,
+                                box, cw, gs)
+            else:
+                ns = tile_codes(cq, bidx[bi, bj], meta, off, goff, n, (bi * nb + bj, nb2),
+                                types, jt, it, wyt, wxt, kyl, kyh, kxl, kxh, cw, gs, slot_of)
             acc += _flush_slots(Fa, Fb, wsc, meta, B, gs, cw, ns, wi, wa1, wj, wb1, ia, ja)
     return acc
