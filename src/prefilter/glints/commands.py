@@ -275,20 +275,23 @@ def bake_glints_wang(normal_map, out, tile, band, rank, block, ndf_res, support,
                         rank=rank or None, block=block, n_iter_max=iters, seed=seed,
                         progress=not quiet)
         save_tiles(wn, out, code_bits=int(code_bits))
-    # what a renderer holds: the file's pyramids as loaded (version 2: the integer codes)
+    # what a renderer holds: the file's pyramids as loaded (versions 2, 3: the integer codes)
     wn = load_tiles(out)
     summary = dict(tiles=16, tile=wt.size, levels=wn.n_levels,
                    crops=[wn.crop(lv) for lv in range(wn.n_levels)],
                    rank=rank, block=wn.block, code_bits=int(code_bits) if wn.block else 0,
                    memory_bytes=wn.nbytes,
                    file_bytes=os.path.getsize(out), cp_error=list(wn.cp_error),
+                   vertex_cp_error=list(wn.vertex_cp_error),
                    seconds=time.perf_counter() - t0)
     click.echo(f"16 tiles of {wt.size}^2 texels, {wn.n_levels} levels (centres per axis "
                + ", ".join(str(n) for n in summary["crops"]) + ")")
     click.echo(f"storage {wn.nbytes / 2**20:.2f} MiB in memory, file "
                f"{summary['file_bytes'] / 2**20:.2f} MiB"
                + ("" if not wn.block else ", CP rel. L2 error per level "
-                  + ", ".join(f"{100 * e:.1f} %" for e in wn.cp_error)))
+                  + ", ".join(f"{100 * e:.1f} %" for e in wn.cp_error))
+               + ("" if not wn.vertex_cp_error else "; vertex pyramids "
+                  + ", ".join(f"{100 * e:.1f} %" for e in wn.vertex_cp_error)))
     click.echo(f"time {summary['seconds']:.1f} s -> {out}")
     click.echo(json.dumps(summary))
 

@@ -13,7 +13,9 @@ stds: footprints centred on neighbouring tiles reaching in), on the footprint py
 ``pyramid.py`` (level 0 by ``pndf_image`` with the other texels' elements moved out of the NDF
 square, so they count in the normalisation only; upper levels by exact Gaussian filtering).
 The border texels whose Jacobian depends on the neighbour tile beyond its edge colour (the
-corner squares, :func:`dependent_texels`) are left out and added exactly at query time.
+corner squares, :func:`dependent_texels`) are left out and added exactly at query time, or, in
+compressed bakes, from 16 more pyramids of them per vertex configuration (:func:`vertex_tiles`:
+the vertex tiles of a valid tiling partition its dependent texels).
 Queries between centres/levels use Gaussian resampling (``pyramid.resample_weights``' scheme) per
 tile, summed over the tiles under the truncation window; smaller footprints use the direct P-NDF;
 footprints with ``sigma_p >= wide_tiles * T`` use the tile-independent NDF of the expected tiling

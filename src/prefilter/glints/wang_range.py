@@ -8,9 +8,11 @@ projected half vectors (glints paper eq. 7), summed over the tiles under the foo
   under the footprint (:func:`prefilter.glints.wang_query.tile_taps`), their code rows summed
   per CP group and NDF block (:func:`prefilter.glints.wang_query.type_codes`), then the group's
   factor masses over each rectangle from the prefix sums (``_qkernels._flush_rects``, the
-  ``glints`` range kernel's arithmetic); the dependent texels (left out of the pyramids) by
-  their exact elements' masses over the rectangles (the pixel splatting of the images, with
-  rectangle masses);
+  ``glints`` range kernel's arithmetic), the taps summed per tile type first
+  (:func:`prefilter.glints.wang_query.type_weights`: once for all the blocks); the dependent
+  texels (left out of the tiles' pyramids) from the vertex pyramids the same way on the
+  implicit tiling, otherwise (explicit maps, no vertex pyramids) by their exact elements'
+  masses over the rectangles (the pixel splatting of the images, with rectangle masses);
 * tile-type shares and the expected tiling (``sigma_p >= wide_sigma``): the per-type
   ``sigma_p -> inf`` images' rectangle means from summed-area tables (exact for the
   piecewise-constant images);
