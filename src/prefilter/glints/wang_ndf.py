@@ -144,6 +144,10 @@ class TiledNDF:
     vertex_cp_error: tuple = ()
     vertex_packed: TilePack | None = None
     vertex_k0: tuple = ()
+    #: compressed bakes: the same pyramids (tiles' and vertex) of the NDF images averaged over
+    #: ``p x p`` pixels (``bake_tiles(angular_pool=p)``; ``resolution`` ``R / p``, same
+    #: centres), which the range queries read for wide rectangles; ``None``: not made
+    coarse: "TiledNDF | None" = None
 
     @property
     def n_levels(self) -> int:
@@ -200,6 +204,9 @@ class TiledNDF:
             levels = self.pack.nbytes
             if self.vertex_pack is not None:
                 levels += self.vertex_pack.nbytes
+            if self.coarse is not None:
+                c = self.coarse
+                levels += c.pack.nbytes + (0 if c.vertex_pack is None else c.vertex_pack.nbytes)
         else:
             levels = sum(a.nbytes for a in self.images)
         return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
@@ -226,7 +233,7 @@ def _margin(sigma: float) -> float:
 def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
                intrinsic_roughness: float = DEFAULT_ROUGHNESS, stride0: int | None = None,
                wide_tiles: float = 0.5, uniform_tiles: float = 8.0, rank: int | None = None,
-               block: int = 8, n_iter_max: int = 100, seed: int = 0,
+               block: int = 8, n_iter_max: int = 100, seed: int = 0, angular_pool: int = 4,
                progress: bool = False) -> TiledNDF:
     """Per-tile footprint pyramids (glints paper sec. 5.5, Fig. 12), float32, uncompressed or
     CP-compressed (``rank``).
@@ -247,6 +254,11 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
         groups at ``rank``; all-zero groups dropped); ``n_iter_max``, ``seed``: of the fits.
         The same factors as :func:`compress_tiles` of the uncompressed result, with a lower
         memory peak: each level is compressed and dropped once the next one is filtered.
+    angular_pool : with ``rank``, also the pyramids of the images averaged over ``p x p``
+        pixels (``ndf_res / p`` per axis, blocks of ``block``), :attr:`TiledNDF.coarse`: the
+        range queries read them for rectangles of at least ``COARSE_MIN`` of their pixels per
+        side (fewer angular blocks). Made when ``ndf_res / p`` is a multiple of ``block`` with
+        at least 2 x 2 blocks; 0 or 1: never.
     progress : a progress bar per tile (and per compressed level) on stderr.
     """
     T = wt.size
@@ -268,6 +280,11 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
         n_iter_max = as_positive_int(n_iter_max, "n_iter_max")
         if R % block:
             raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {block}")
+    pool = int(angular_pool)
+    if pool < 0 or isinstance(angular_pool, bool):
+        raise PrefilterError(f"angular_pool: expected an integer >= 0, got {angular_pool!r}")
+    if rank is None or pool < 2 or R % pool or (R // pool) % block or R // pool < 2 * block:
+        pool = 0
     # level l resamples footprints from sigma_l / sqrt(1 - _Q_MIN^2) up (level_window's rule,
     # the stride equal to the std): only the levels that serve some sigma_p below wide * T
     L = 1
@@ -279,8 +296,8 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     s_el, J_el = tile_elements(wt)
     dep = dependent_texels(wt)
     kw = dict(L=L, st0=st0, k0=k0, k1=k1, R=R, S=S, sr=sr, rank=rank, block=block,
-              n_iter_max=n_iter_max, seed=seed, progress=progress)
-    done, errs = _pyramid_levels(s_el, J_el, np.broadcast_to(~dep, (16, T, T)),
+              n_iter_max=n_iter_max, seed=seed, progress=progress, pool=pool)
+    done, errs, cdone, cerrs = _pyramid_levels(s_el, J_el, np.broadcast_to(~dep, (16, T, T)),
                                  desc="tile pyramids", **kw)
     # sigma_p -> inf limit on the tile alone: each texel once, N(n_i, sr^2 + sh^2 J J^T)
     tile_means = np.stack([pndf_image(None, (0.5 * T, 0.5 * T), 1e5, R, S, sr,
@@ -296,24 +313,33 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
                for lv, sg in enumerate(sig)]
         vk1 = [math.ceil((rows[-1] + 1 + _margin(sg) - 0.5) / (st0 << lv))
                for lv, sg in enumerate(sig)]
-        vdone, verrs = _pyramid_levels(vs, vJ, vkeep, desc="vertex pyramids",
-                                       **dict(kw, k0=vk0, k1=vk1))
+        vdone, verrs, vcdone, vcerrs = _pyramid_levels(vs, vJ, vkeep, desc="vertex pyramids",
+                                                       **dict(kw, k0=vk0, k1=vk1))
     wn = TiledNDF(wt, done, tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
                   sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
     if rank is None:
         return wn
-    return replace(wn, block=block, cp_error=errs, vertex_images=vdone, vertex_cp_error=verrs,
-                   vertex_k0=tuple(vk0))
+    wn = replace(wn, block=block, cp_error=errs, vertex_images=vdone, vertex_cp_error=verrs,
+                 vertex_k0=tuple(vk0))
+    if not pool:
+        return wn
+    tm = tile_means.reshape(16, R // pool, pool, R // pool, pool).mean(axis=(2, 4))
+    coarse = replace(wn, images=cdone, resolution=R // pool, tile_means=tm,
+                     mean=tm.mean(axis=0), cp_error=cerrs, vertex_images=vcdone,
+                     vertex_cp_error=vcerrs)
+    return replace(wn, coarse=coarse)
 
 
 def _pyramid_levels(s_el, J_el, keep, *, L, st0, k0, k1, R, S, sr, rank, block, n_iter_max,
-                    seed, progress, desc):
+                    seed, progress, desc, pool=0):
     """The ``L`` pyramid levels of 16 element sets ``s_el (16, T, T, 2)``, ``J_el (16, T, T,
     2, 2)`` of which the texels ``keep (16, T, T)`` contribute (the others count in the
     footprint weights only), centres ``k0[l] .. k1[l]`` per axis: level 0 by ``pndf_image``,
     upper levels by exact Gaussian filtering; with ``rank`` each level compressed and dropped
-    once the next is filtered from it (at most two levels' images held). Returns the levels
-    and their CP errors (empty without ``rank``)."""
+    once the next is filtered from it (at most two levels' images held), and with ``pool``
+    also its images averaged over ``pool x pool`` pixels. Returns the levels and their CP
+    errors (empty without ``rank``), and those of the averaged images (empty without
+    ``pool``)."""
     T = s_el.shape[1]
     sig0 = float(st0)
     # level-0 element canvas: the tile and every texel a cropped level-0 footprint reaches
@@ -334,7 +360,7 @@ def _pyramid_levels(s_el, J_el, keep, *, L, st0, k0, k1, R, S, sr, rank, block, 
         cs[o:o + T, o:o + T] = np.where(keep[t][..., None], s_el[t], _AWAY)
         cj[o:o + T, o:o + T] = J_el[t]
         level[t] = pndf_image(None, cen, sig0, R, S, sr, elements_=(cs, cj))
-    done, errs = [], []
+    done, errs, cdone, cerrs = [], [], [], []
     for lv in tqdm(range(1, L + 1), desc="levels", disable=not progress or rank is None):
         nxt = None
         if lv < L:
@@ -344,7 +370,18 @@ def _pyramid_levels(s_el, J_el, keep, *, L, st0, k0, k1, R, S, sr, rank, block, 
         if rank is None:
             done.append(level)
         else:
-            n, tensors = level.shape[1], _level_tensors(level, block)
+            n = level.shape[1]
+            if pool:
+                Rc = R // pool
+                pooled = level.reshape(16, n, n, Rc, pool, Rc, pool).mean(axis=(4, 6),
+                                                                         dtype=np.float64)
+                packed, err = _compress_tensors(_level_tensors(pooled.astype(np.float32),
+                                                               block), 16, n, rank, block,
+                                                n_iter_max, seed + lv - 1)
+                del pooled
+                cdone.append(packed)
+                cerrs.append(err)
+            tensors = _level_tensors(level, block)
             level = None  # the images are freed: the fits need only the tensors
             packed, err = _compress_tensors(tensors, 16, n, rank, block, n_iter_max,
                                             seed + lv - 1)
@@ -352,7 +389,7 @@ def _pyramid_levels(s_el, J_el, keep, *, L, st0, k0, k1, R, S, sr, rank, block, 
             done.append(packed)
             errs.append(err)
         level = nxt
-    return tuple(done), tuple(errs)
+    return tuple(done), tuple(errs), tuple(cdone), tuple(cerrs)
 
 
 def _filter_crop(crop, a0, b0, b1, sigma_over_stride):

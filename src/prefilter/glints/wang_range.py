@@ -40,6 +40,11 @@ from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_in
 from prefilter.glints.wang_query import gauss_row, segment_sums, type_codes, type_weights
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
+#: Rectangles of at least this many coarse pixels per side (:attr:`prefilter.glints.wang_ndf.
+#: TiledNDF.coarse`) are read from the coarse pyramids: their edges cut a coarse pixel by at
+#: most 1/8 of their side.
+COARSE_MIN = 8
+
 def summed_tables(wn: TiledNDF) -> np.ndarray:
     """Summed-area tables ``(17, R + 1, R + 1)`` float64 of the 16 ``tile_means`` and of
     ``mean`` (index 16), in pixel units: ``S[t, i, j]`` the sum of rows ``< i``, columns
@@ -141,12 +146,17 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                    sat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    point_sr, proto, has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff,
-                   vk0, vcrops, vPa, vPb, out, done):  # pragma: no cover - compiled
+                   vk0, vcrops, vPa, vPb, has_coarse, cPa, cPb, ccq, cwsc, cbidx, cmeta, cgoff,
+                   cvPa, cvPb, cvcq, cvwsc, cvbidx, cvmeta, cvgoff, out,
+                   done):  # pragma: no cover - compiled
     """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
     ``[q, k]`` (0 for inactive rectangles); ``done[q]`` False below ``min_sigma`` (module
     docstring). Accumulation of the code rows in ``proto``'s dtype (float32 for 8-bit codes).
     ``has_vertex``: on the implicit tiling the dependent texels come from the vertex pyramids
-    (``vFa`` ..., :func:`prefilter.glints.wang_ndf.vertex_window`)."""
+    (``vFa`` ..., :func:`prefilter.glints.wang_ndf.vertex_window`). ``has_coarse``: the
+    rectangles of at least ``COARSE_MIN`` pixels per side of the coarse pyramids (``c...``,
+    vertex ``cv...``: :attr:`~prefilter.glints.wang_ndf.TiledNDF.coarse`, the same centres,
+    its own groups) are read from them."""
     T = tiles.shape[1]
     nb = bidx.shape[0]
     nb2 = nb * nb
@@ -161,6 +171,13 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
     vpa = vPa.ravel()
     vpb = vPb.ravel()
     use_v = has_vertex and index.size == 0
+    cpa = cPa.ravel()
+    cpb = cPb.ravel()
+    cvpa = cvPa.ravel()
+    cvpb = cvPb.ravel()
+    cnb = cbidx.shape[0]
+    cnb2 = cnb * cnb
+    hc = h * R / max(cnb * B, 1)  # a coarse pixel
     for q in prange(N):
         for k in range(K):
             out[q, k] = 0.0
@@ -219,6 +236,35 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         (m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
          kxh) = level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T,
                              seed, index)
+        # the wide rectangles from the coarse pyramids: their coarse pixels and blocks, and the
+        # fine blocks of the others
+        crbk = np.empty((K, 4), np.int64)
+        crcl = np.empty((K, 4))
+        carea = np.ones(K)
+        cbi0, cbi1, cbj0, cbj1 = cnb, -1, cnb, -1
+        for k in range(K):
+            crbk[k, 0], crbk[k, 1], crbk[k, 2], crbk[k, 3] = 0, -1, 0, -1
+        fbk = rbk  # the rectangles' fine blocks (none for the wide ones)
+        if has_coarse:
+            fbk = rbk.copy()
+            ubi0, ubi1, ubj0, ubj1 = nb, -1, nb, -1
+            for k in range(K):
+                if not act[q, k] or rbk[k, 0] > rbk[k, 1]:
+                    continue
+                if (x1[q, k] - x0[q, k] >= COARSE_MIN * hc
+                        and y1[q, k] - y0[q, k] >= COARSE_MIN * hc):
+                    ax0, ax1, ay0, ay1, bi0, bi1, bj0, bj1, a = _rect(
+                        x0[q, k], y0[q, k], x1[q, k], y1[q, k], lo, hc, cnb * B, B, cnb)
+                    crcl[k, 0], crcl[k, 1], crcl[k, 2], crcl[k, 3] = ax0, ax1, ay0, ay1
+                    crbk[k, 0], crbk[k, 1], crbk[k, 2], crbk[k, 3] = bi0, bi1, bj0, bj1
+                    carea[k] = a
+                    fbk[k, 0], fbk[k, 1] = 0, -1  # not from the fine pyramids
+                    if bi0 <= bi1 and bj0 <= bj1:
+                        cbi0, cbi1 = min(cbi0, bi0), max(cbi1, bi1)
+                        cbj0, cbj1 = min(cbj0, bj0), max(cbj1, bj1)
+                else:
+                    ubi0, ubi1 = min(ubi0, rbk[k, 0]), max(ubi1, rbk[k, 1])
+                    ubj0, ubj1 = min(ubj0, rbk[k, 2]), max(ubj1, rbk[k, 3])
         cw = np.empty((16, rank), proto.dtype)
         gs = np.empty(16, np.int64)
         tt = np.empty(9, proto.dtype)
@@ -239,7 +285,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
             type_weights(vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh, vn, vW, vbox)
         for bi in range(ubi0, ubi1 + 1):
             for bj in range(ubj0, ubj1 + 1):
-                nt = _touching(rbk, rcl, bi, bj, B, touch, rp, rt)
+                nt = _touching(fbk, rcl, bi, bj, B, touch, rp, rt)
                 if nt == 0:
                     continue
                 ns = type_codes(cq, bidx[bi, bj], meta, offs[m], goff[m], n,
@@ -250,8 +296,22 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                                     (bi * nb + bj, nb2), vW, vbox, cw, gs)
                     _flush_rects(vpa, vpb, vwsc, vmeta, B, gs, cw, ns, rp, rt, touch, nt, tt,
                                  acc)
+        cacc = np.zeros(K)
+        for bi in range(cbi0, cbi1 + 1):
+            for bj in range(cbj0, cbj1 + 1):
+                nt = _touching(crbk, crcl, bi, bj, B, touch, rp, rt)
+                if nt == 0:
+                    continue
+                ns = type_codes(ccq, cbidx[bi, bj], cmeta, offs[m], cgoff[m], n,
+                                (bi * cnb + bj, cnb2), W, box, cw, gs)
+                _flush_rects(cpa, cpb, cwsc, cmeta, B, gs, cw, ns, rp, rt, touch, nt, tt, cacc)
+                if use_v:
+                    ns = type_codes(cvcq, cvbidx[bi, bj], cvmeta, voffs[m], cvgoff[m], vn,
+                                    (bi * cnb + bj, cnb2), vW, vbox, cw, gs)
+                    _flush_rects(cvpa, cvpb, cvwsc, cvmeta, B, gs, cw, ns, rp, rt, touch, nt,
+                                 tt, cacc)
         for k in range(K):
-            out[q, k] = acc[k] / area[k]
+            out[q, k] = acc[k] / area[k] + cacc[k] / carea[k]
         if use_v:
             continue
         # the dependent texels: their exact elements' masses over the rectangles (clipped to
@@ -371,5 +431,24 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_tables(wn)[0],
         summed_tables(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
-        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, *vertex_args(wn), out, done)
+        _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, *vertex_args(wn),
+        *_coarse_args(wn), out, done)
     return out, done
+
+
+def _coarse_args(wn: TiledNDF) -> tuple:
+    """``(has_coarse, Pa, Pb, cq, wsc, bidx, meta, goff)`` of ``wn.coarse``'s tile pyramids,
+    then the same of its vertex pyramids (empty arrays of the tiles' dtypes without them)."""
+    c = wn.coarse
+
+    def parts(pk):
+        return (pk.Pa, pk.Pb, pk.cq, pk.wsc, pk.bidx, pk.meta, pk.goff)
+
+    if c is None or (wn.vertex_pack is None) != (c.vertex_pack is None):
+        pk = wn.pack
+        cc = np.ascontiguousarray
+        z = (cc(pk.Pa[:0]), cc(pk.Pb[:0]), cc(pk.cq[:0]), cc(pk.wsc[:0]),
+             cc(pk.bidx[:0, :0, :0]), np.zeros((1, 4), np.int64), np.zeros(1, np.int64))
+        return (False,) + z + z
+    vp = c.vertex_pack if c.vertex_pack is not None else c.pack
+    return (True,) + parts(c.pack) + parts(vp)

@@ -36,7 +36,11 @@ Version 3 is version 2 plus the vertex pyramids of a compressed bake (the depend
 vertex configuration, :func:`~prefilter.glints.wang_ndf.vertex_tiles`), in the same layout
 with a ``v`` before each per-level name (``vmask_l``, ``va_l``, ``vb_l``, ``vc_l``,
 ``vc_scale_l``) and ``vertex_cp_error``, ``vertex_k0``, ``vertex_crops`` (their centres per
-level) in the settings.
+level) in the settings; and, with ``settings.angular_pool`` ``p > 0``, the coarse pyramids
+(:attr:`~prefilter.glints.wang_ndf.TiledNDF.coarse`: the images averaged over ``p x p``
+pixels, the same centres) of the tiles and of the vertices, ``g`` and ``gv`` before the same
+names (``gmask_l``, ..., ``gvc_scale_l``), their errors ``coarse_cp_error``,
+``coarse_vertex_cp_error``.
 :func:`save_tiles` writes version 3 for pyramids with vertex pyramids, version 2 for those
 without; ``code_bits`` 0 (version 1) writes no vertex pyramids (the queries then compute the
 dependent texels exactly, as for uncompressed pyramids).
@@ -144,6 +148,8 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
     code_bits = int(code_bits) if wn.block else 0
     vertex = bool(code_bits and wn.vertex_images)
     version = (3 if vertex else 2) if code_bits else 1
+    cwn = wn.coarse if version == 3 and wn.coarse is not None and wn.coarse.vertex_images \
+        else None
     # version 1: the arrays in the order (hence the bytes) of the files written before version 2
     arrays = {"tiles": np.asarray(wn.wang.tiles, np.float64)}
     if version == 1:
@@ -156,6 +162,10 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
         arrays.update(_level_arrays(wn, lv, code_bits))
         if vertex:
             arrays.update(_level_arrays(wn, lv, code_bits, vertex=True))
+        if cwn is not None:
+            for v in (False, True):
+                arrays.update({"g" + k: a for k, a in _level_arrays(cwn, lv, code_bits,
+                                                                    vertex=v).items()})
     rank = int(wn.pack.meta[:, 0].max()) if wn.block else 0
     settings = dict(ndf_res=int(wn.resolution), support=float(wn.support),
                     intrinsic_roughness=float(wn.intrinsic_roughness), stride0=int(wn.stride0),
@@ -168,7 +178,12 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
     if version == 3:
         settings.update(vertex_cp_error=[float(e) for e in wn.vertex_cp_error],
                         vertex_k0=[int(k) for k in wn.vertex_k0],
-                        vertex_crops=[wn.vertex_crop(lv) for lv in range(wn.n_levels)])
+                        vertex_crops=[wn.vertex_crop(lv) for lv in range(wn.n_levels)],
+                        angular_pool=0 if cwn is None else wn.resolution // cwn.resolution,
+                        coarse_cp_error=[] if cwn is None else [float(e) for e in
+                                                                cwn.cp_error],
+                        coarse_vertex_cp_error=[] if cwn is None else [
+                            float(e) for e in cwn.vertex_cp_error])
     header = dict(format=FORMAT, version=version, tile=int(wn.wang.size),
                   seed=int(wn.wang.seed), settings=settings,
                   arrays={k: {"dtype": v.dtype.str, "shape": list(v.shape)}
@@ -217,7 +232,12 @@ def _settings(path, header) -> dict:
                    vertex_k0=([int(k) for k in st["vertex_k0"]]
                               if header["version"] == 3 else []),
                    vertex_crops=([int(n) for n in st["vertex_crops"]]
-                                 if header["version"] == 3 else []))
+                                 if header["version"] == 3 else []),
+                   pool=int(st["angular_pool"]) if header["version"] == 3 else 0,
+                   coarse_cp_error=([float(e) for e in st["coarse_cp_error"]]
+                                    if header["version"] == 3 else []),
+                   coarse_vertex_cp_error=([float(e) for e in st["coarse_vertex_cp_error"]]
+                                           if header["version"] == 3 else []))
         shapes = {k: (str(v["dtype"]), tuple(int(n) for n in v["shape"]))
                   for k, v in header["arrays"].items()}
     except PrefilterError as exc:
@@ -255,6 +275,14 @@ def _settings(path, header) -> dict:
         if min(out["vertex_crops"]) < 1:
             _fail(path, f"header.settings.vertex_crops: expected crop sizes >= 1, got "
                         f"{out['vertex_crops']}")
+        p = out["pool"]
+        if p and (p < 2 or R % p or (R // p) % B):
+            _fail(path, f"header.settings.angular_pool: expected 0 or a divisor p >= 2 of "
+                        f"ndf_res {R} with ndf_res / p a multiple of block {B}, got {p}")
+        for k in ("coarse_cp_error", "coarse_vertex_cp_error"):
+            if len(out[k]) != (L if p else 0):
+                _fail(path, f"header.settings.{k}: expected {L if p else 0} entries, got "
+                            f"{len(out[k])}")
     out["shapes"] = shapes
     return out
 
@@ -272,9 +300,13 @@ def _expected(st) -> dict:
     code = np.dtype(CODE_DTYPES[st["code_bits"]]).str if v2 else None
     for lv in range(len(st["k0"])):
         if v2:
-            for v in ("", "v") if st["version"] == 3 else ("",):
-                n = st["vertex_crops"][lv] if v else st["crops"][lv]
-                out[f"{v}mask_{lv}"] = ("|u1", (2 * n * n * nb2,))  # 16 n^2 nb^2 bits
+            prefixes = ("",)
+            if st["version"] == 3:
+                prefixes = ("", "v", "g", "gv") if st["pool"] else ("", "v")
+            for v in prefixes:
+                n = st["vertex_crops"][lv] if "v" in v else st["crops"][lv]
+                g2 = (st["R"] // st["pool"] // B) ** 2 if "g" in v else nb2
+                out[f"{v}mask_{lv}"] = ("|u1", (2 * n * n * g2,))  # 16 n^2 nb^2 bits
                 out[f"{v}a_{lv}"] = out[f"{v}b_{lv}"] = (code, (-1, rank, B))
                 out[f"{v}c_{lv}"] = (code, (-1, rank))
                 out[f"{v}c_scale_{lv}"] = ("<f4", (-1, rank))
@@ -315,7 +347,8 @@ def _check_arrays(path, data, st) -> None:
         if st["version"] >= 2:
             _check_codes(path, data, st, lv)
             if st["version"] == 3:
-                _check_codes(path, data, st, lv, "v")
+                for v in ("v", "g", "gv") if st["pool"] else ("v",):
+                    _check_codes(path, data, st, lv, v)
             continue
         c = data[f"C_{lv}" if st["B"] else f"images_{lv}"]
         if c.shape[1] != c.shape[2] or c.shape[1] < 1:
@@ -330,7 +363,8 @@ def _check_codes(path, data, st, lv, v="") -> None:
     """Versions 2 and 3: the numbers of kept rows and live groups of level ``lv``'s mask
     against the code arrays (their dtypes and the other dimensions are checked by
     :func:`_check_arrays`); ``v = "v"``: of the vertex pyramids."""
-    n, nb2 = st["vertex_crops" if v else "crops"][lv], (st["R"] // st["B"]) ** 2
+    n = st["vertex_crops" if "v" in v else "crops"][lv]
+    nb2 = (st["R"] // (st["pool"] if "g" in v else 1) // st["B"]) ** 2
     kept = np.unpackbits(data[f"{v}mask_{lv}"]).astype(bool).reshape(16, n * n, nb2)
     K, G = int(kept.sum()), int(kept.any(axis=1).sum())
     got = [data[f"{v}{k}_{lv}"].shape[0] for k in ("c", "a", "b", "c_scale")]
@@ -354,7 +388,7 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         _fail(path, "dependent: expected the dependent texels of the stored tiles")
     verify_npz(path, WHAT, raw, format_name=FORMAT, format_version=st["version"])
     L, B = len(st["k0"]), st["B"]
-    packed = vpacked = None
+    packed = vpacked = coarse = None
     vimages = ()
     if st["version"] >= 2:
         # the codes packed as stored (the kernels read them; wang_query.pack_codes), the
@@ -370,6 +404,8 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
             vimages = DecodedLevels(vpacked)
         tile_means = data["tile_means"]
         mean = tile_means.astype(np.float64).mean(axis=0)
+        if st["version"] == 3 and st["pool"]:
+            coarse = _coarse(data, st, tile_means, wang)
     else:
         images = tuple((data[f"A_{lv}"], data[f"B_{lv}"], data[f"C_{lv}"]) if B
                        else data[f"images_{lv}"] for lv in range(L))
@@ -377,4 +413,19 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
     return TiledNDF(wang, images, tuple(st["k0"]), mean, st["stride0"], st["sigma0"],
                     st["R"], st["S"], st["sr"], st["wide"], data["dependent"],
                     tile_means, st["uniform"], B, tuple(st["cp_error"]), packed, vimages,
-                    tuple(st["vertex_cp_error"]), vpacked, tuple(st["vertex_k0"]))
+                    tuple(st["vertex_cp_error"]), vpacked, tuple(st["vertex_k0"]), coarse)
+
+
+def _coarse(data, st, tile_means, wang) -> TiledNDF:
+    """The coarse pyramids of a version-3 file with ``angular_pool``, packed as stored."""
+    L, B, p = len(st["k0"]), st["B"], st["pool"]
+    Rc = st["R"] // p
+    packs = [pack_codes([{k: data[f"{v}{k}_{lv}"] for k in ("mask", "a", "b", "c", "c_scale")}
+                         for lv in range(L)], st["vertex_crops" if "v" in v else "crops"],
+                        (Rc // B) ** 2) for v in ("g", "gv")]
+    tm = tile_means.astype(np.float64).reshape(16, Rc, p, Rc, p).mean(axis=(2, 4))
+    return TiledNDF(wang, DecodedLevels(packs[0]),
+                    tuple(st["k0"]), tm.mean(axis=0), st["stride0"], st["sigma0"], Rc, st["S"],
+                    st["sr"], st["wide"], data["dependent"], tm, st["uniform"], B,
+                    tuple(st["coarse_cp_error"]), packs[0], DecodedLevels(packs[1]),
+                    tuple(st["coarse_vertex_cp_error"]), packs[1], tuple(st["vertex_k0"]))
