@@ -9,7 +9,7 @@ import pytest
 from maps import sinusoid
 
 from prefilter.errors import PrefilterError
-from prefilter.glints.wang import index_map, synthesize
+from prefilter.glints.wang import index_map, is_valid_tiling, periodic_index_map, synthesize
 from prefilter.glints.wang_ndf import (bake_tiles, dependent_texels, ndf_image, ndf_points,
                                       vertex_elements, vertex_tiles)
 from prefilter.glints.wang_range import ndf_ranges
@@ -113,3 +113,78 @@ def test_vertex_tiles_and_point_queries(wc):
     rolled = tuple(tuple(np.roll(x, 1, axis=0) for x in lv) for lv in wc.vertex_images)
     wrong = ndf_points(replace(wc, vertex_images=rolled), c, sp, q)
     assert np.linalg.norm(wrong - exact) / np.linalg.norm(exact) > 0.1
+
+
+def test_valid_explicit_maps_read_the_vertex_pyramids(wc):
+    """An explicit map that tiles validly across its wrap (``periodic_index_map``) is read as
+    the implicit tiling (vertex pyramids and tables), within the vertex pyramids' CP error of
+    the exact image means; a wrapped block of the implicit tiling is not valid (exact path)."""
+    P = periodic_index_map(6, 6, rng=1)
+    assert is_valid_tiling(P) and not is_valid_tiling(index_map(wc.wang, 6, 6))
+    rng = np.random.default_rng(8)
+    c = rng.uniform(-60, 60, (12, 2))
+    sp = rng.uniform(wc.min_sigma, wc.wide_sigma, 12)
+    lo, hi, p0, ext = _rects(rng, len(c), 5)
+    want = np.array([_means(ndf_image(wc, c[q], sp[q], index=P), p0[q], ext[q])
+                     for q in range(len(c))])
+    got, _ = ndf_ranges(wc, c, sp, lo, hi, index=P)
+    exact, _ = ndf_ranges(replace(wc, vertex_images=()), c, sp, lo, hi, index=P)
+    assert np.linalg.norm(exact - want) / np.linalg.norm(want) < 1e-3
+    err = np.linalg.norm(got - want) / np.linalg.norm(want)
+    assert 1e-4 < err < 3e-2  # the vertex pyramids' error: they were read
+
+
+@pytest.fixture(scope="module")
+def wpool():
+    wt = synthesize(sinusoid(32, ax=0.25, ay=0.2, px=16, py=8), tile=8, band=2.0, rng=4)
+    return bake_tiles(wt, ndf_res=32, support=SUPPORT, intrinsic_roughness=0.05,
+                      uniform_tiles=4, rank=6, block=4, n_iter_max=40, angular_pool=2)
+
+
+def _covered_means(img, lo, hi):
+    """Means of a piecewise-constant image over rectangles ``lo``, ``hi (K, 2)`` with the
+    partial pixels they cover (exact)."""
+    n = img.shape[0]
+    e = np.arange(n + 1)
+    out = []
+    for a, b in zip(lo, hi):
+        p0 = (a + SUPPORT) * n / (2 * SUPPORT)
+        p1 = (b + SUPPORT) * n / (2 * SUPPORT)
+        wx = np.clip(np.minimum(e[1:], p1[0]) - np.maximum(e[:-1], p0[0]), 0, None)
+        wy = np.clip(np.minimum(e[1:], p1[1]) - np.maximum(e[:-1], p0[1]), 0, None)
+        out.append((wy[:, None] * wx[None] * img).sum() / np.prod(p1 - p0))
+    return np.array(out)
+
+
+def test_coarse_pyramids_serve_wide_rectangles(wpool, tmp_path):
+    """``angular_pool``: rectangles of >= COARSE_MIN coarse pixels per side are read from the
+    pyramids of the pooled images (within their CP error and the coarse pixels' coverage of the
+    exact means; 1.0 % measured), narrower ones from the full-resolution pyramids (the same
+    values as without the coarse pyramids); the store keeps them (version 3)."""
+    from prefilter.glints.wang_range import COARSE_MIN
+    from prefilter.glints.wang_store import load_tiles, save_tiles
+
+    c_ = wpool.coarse
+    assert c_ is not None and c_.resolution == 16 and len(c_.vertex_images) == wpool.n_levels
+    hc = 2 * SUPPORT / c_.resolution
+    rng = np.random.default_rng(2)
+    n = 60
+    c = rng.uniform(-30, 30, (n, 2))
+    sp = rng.uniform(wpool.min_sigma, wpool.wide_sigma, n)
+    lo = rng.uniform(-0.5, -0.1, (n, 2, 2))
+    wide = np.array([COARSE_MIN * hc + 0.05, 0.3])[None, :, None]  # one wide, one narrow
+    hi = lo + wide
+    fine = replace(wpool, coarse=None)
+    got, _ = ndf_ranges(wpool, c, sp, lo, hi)
+    ref, _ = ndf_ranges(fine, c, sp, lo, hi)
+    np.testing.assert_array_equal(got[:, 1], ref[:, 1])
+    exact = np.array([_covered_means(ndf_image(fine, c[q], sp[q]), lo[q], hi[q])
+                      for q in range(n)])
+    rel = np.linalg.norm(got[:, 0] - exact[:, 0]) / np.linalg.norm(exact[:, 0])
+    assert 1e-4 < rel < 3e-2
+    assert np.linalg.norm(ref[:, 0] - exact[:, 0]) / np.linalg.norm(exact[:, 0]) < 1e-3
+    save_tiles(wpool, tmp_path / "p.npz")
+    back = load_tiles(tmp_path / "p.npz")
+    assert back.coarse is not None and back.coarse.resolution == 16
+    again, _ = ndf_ranges(back, c, sp, lo, hi)
+    assert np.linalg.norm(again - got) / np.linalg.norm(got) < 1e-2

@@ -161,6 +161,17 @@ def assemble(wt: WangTiles, index: np.ndarray) -> np.ndarray:
     return t.transpose(0, 2, 1, 3, 4).reshape(ny * T, nx * T, 3)
 
 
+def is_valid_tiling(index) -> bool:
+    """Whether the periodic repetition of the tile index map ``index (ny, nx)`` is a valid Wang
+    tiling: every tile's north colour is the south colour of the tile above, its west colour
+    the east colour of the tile to its left, across the wrap too (as :func:`periodic_index_map`
+    makes them; a block of the implicit tiling, :func:`index_map`, generally is not)."""
+    t = np.asarray(index)
+    n, s, w, e = edge_colours(t)
+    return bool(np.array_equal(n, np.roll(s, 1, axis=0))
+                and np.array_equal(w, np.roll(e, 1, axis=1)))
+
+
 def edge_colours(idx):
     """Edge colours ``(n, s, w, e)`` (each 0 or 1, shaped like ``idx``) of tile indices
     ``n + 2 s + 4 w + 8 e``."""

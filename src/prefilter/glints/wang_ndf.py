@@ -49,7 +49,8 @@ from prefilter.glints.wang_query import (TilePack, gauss_row, pack_float, pack_p
                                          segment_sums, tile_taps)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
-                                   implicit_type, pndf_image_implicit, tile_index, tile_window)
+                                   implicit_type, is_valid_tiling, pndf_image_implicit,
+                                   tile_index, tile_window)
 
 
 def tile_elements(wt: WangTiles) -> tuple[np.ndarray, np.ndarray]:
@@ -1249,7 +1250,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                    block, k0, st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean, sr,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff, vk0, vcrops,
-                   out):  # pragma: no cover - compiled
+                   valid, out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` (queries ``gstart[g] ..
     gstart[g + 1] - 1`` share one footprint: on the implicit tiling below ``min_sigma`` its
     elements are formed once for them) at ``sum_ab wya[q, a] wxa[q, b]`` times
@@ -1266,7 +1267,9 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
     map, from neighbour lookups, cut at ``2 trunc`` stds. ``has_vertex``: on the implicit
     tiling, above ``min_sigma`` and without ``point_sr`` the dependent texels' pixel values
     come from the vertex pyramids (the pack arrays ``vFa`` ..., their crops from ``vk0`` of
-    ``vcrops`` centres, :func:`vertex_window`) instead of pixel integrals of their elements."""
+    ``vcrops`` centres, :func:`vertex_window`) instead of pixel integrals of their elements.
+    ``valid``: the tiling is valid (implicit, or an explicit map that
+    :func:`prefilter.glints.wang.is_valid_tiling`): what "the implicit tiling" above needs."""
     T = tiles.shape[1]
     R = mean.shape[0]
     L = len(images)
@@ -1276,7 +1279,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
     for gq in prange(gstart.shape[0] - 1):
         q0, q1 = gstart[gq], gstart[gq + 1]
         s = sp[q0]
-        if point_sr > 0.0 and index.size == 0 and s < min_sigma and q1 - q0 > 1:
+        if point_sr > 0.0 and valid and s < min_sigma and q1 - q0 > 1:
             # several points of one footprint on the implicit tiling below min_sigma: its
             # elements' Gaussians formed once (glints-direct's K-point kernels)
             c0, c1 = cx[q0], cy[q0]
@@ -1354,7 +1357,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                 acc = 0.0
                 ti0, tj0 = wx0 // T - 1, wy0 // T - 1
                 types = _nb_types(ti0, wx1 // T + 1, tj0, wy1 // T + 1, seed, index)
-                if point and index.size == 0:
+                if point and valid:
                     # the implicit tiling: the window's elements as Gaussians row segment by row
                     # segment from the tile planes, the dependent texels from the vertex table
                     G = direct_gaussians(planes, vplanes, vofs, T, types, ti0, tj0, wx0, wx1, wy0,
@@ -1416,7 +1419,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                                 for k in range(nc):
                                     v += cw[k] * img[t, ky, kx, cy_[k], cx_[k]]
                                 acc += wyt[jj, ky] * wxt[ii, kx] * v
-            if has_vertex and index.size == 0 and not point_sr > 0.0:
+            if has_vertex and valid and not point_sr > 0.0:
                 # the dependent texels' pixel values from their vertex pyramids (a valid tiling;
                 # their point densities below, as cheap and exact)
                 vn = vcrops[m]
@@ -1429,7 +1432,7 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                 continue
             dsum = 0.0
             psum = 0.0
-            if point_sr > 0.0 and index.size == 0:
+            if point_sr > 0.0 and valid:
                 # the dependent texels by grid vertex, no neighbour lookups (the implicit tiling is
                 # valid)
                 out[q] = acc + vertex_density(vplanes, vofs, T, types, tj0, ti0, jlo, jhi, ilo, ihi,
@@ -1518,7 +1521,8 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     images, pk = _kernel_levels(wn)
     el_s, el_J, depmask = _kernel_elements(wn)
     _, vplanes, vofs = _vertex_tables(wn)
-    if idx.size:
+    valid = _valid(idx)
+    if not valid:
         # an explicit map may put mismatched edges side by side (a block of the implicit tiling
         # wraps so): the border texels look up their actual neighbours
         depmask = depmask.copy()
@@ -1539,8 +1543,15 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, *vertex_args(wn)[:11],
-        out)
+        valid, out)
     return out.reshape(shape)
+
+
+def _valid(idx: np.ndarray) -> bool:
+    """Whether the kernels' explicit map ``idx`` (empty: the implicit tiling) is a valid tiling
+    (:func:`prefilter.glints.wang.is_valid_tiling`: then its dependent texels are those of the
+    vertex table, and its other border texels' expected neighbours exact)."""
+    return idx.size == 0 or is_valid_tiling(idx)
 
 
 def vertex_args(wn: TiledNDF) -> tuple:

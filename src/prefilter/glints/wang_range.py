@@ -36,7 +36,7 @@ from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_cova
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
                                       _nb_type, _vertex_tables, dep_gaussian,
                                       dependent_neighbours, footprint_rows, level_window,
-                                      vertex_args, vertex_config, vertex_window)
+                                      _valid, vertex_args, vertex_config, vertex_window)
 from prefilter.glints.wang_query import gauss_row, segment_sums, type_codes, type_weights
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
@@ -147,7 +147,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    point_sr, proto, has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff,
                    vk0, vcrops, vPa, vPb, has_coarse, cPa, cPb, ccq, cwsc, cbidx, cmeta, cgoff,
-                   cvPa, cvPb, cvcq, cvwsc, cvbidx, cvmeta, cvgoff, out,
+                   cvPa, cvPb, cvcq, cvwsc, cvbidx, cvmeta, cvgoff, valid, out,
                    done):  # pragma: no cover - compiled
     """``out[q, k]``: mean NDF of footprint ``(cx, cy, sp)[q]`` over ``[x0, x1] x [y0, y1]``
     ``[q, k]`` (0 for inactive rectangles); ``done[q]`` False below ``min_sigma`` (module
@@ -170,7 +170,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
     pb = Pb.ravel()
     vpa = vPa.ravel()
     vpb = vPb.ravel()
-    use_v = has_vertex and index.size == 0
+    use_v = has_vertex and valid
     cpa = cPa.ravel()
     cpb = cPb.ravel()
     cvpa = cvPa.ravel()
@@ -323,8 +323,8 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         sx = gxw.sum()
         sy = gyw.sum()
         hi = lo + R * h
-        if index.size == 0:
-            # by grid vertex, no neighbour lookups (the implicit tiling is valid)
+        if valid:
+            # by grid vertex, no neighbour lookups (a valid tiling)
             _vertex_rects(vel, T, types, tj0, ti0, jlo, jhi, ilo, ihi, wx0, wx1, wy0, wy1, gxw,
                           gyw, c0, c1, f, var, sx * sy, point_sr, act[q], rbk, x0[q], x1[q],
                           y0[q], y1[q], lo, hi, trunc, out[q])
@@ -432,7 +432,7 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
         summed_tables(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
         _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, *vertex_args(wn),
-        *_coarse_args(wn), out, done)
+        *_coarse_args(wn), _valid(idx), out, done)
     return out, done
 
 
