@@ -20,6 +20,7 @@ SECTIONS = (
     "Colour-map filtering: cases a-d",
     "Glints (part 1): NDF images of footprints",
     "Glints (part 2): rendered frames, compressed vs direct",
+    "Glints (part 3): Wang tiles",
     "Roughness mip chains from a normal map",
     "Colour-map filtering under lights (colormap-lit)",
     "Glints under wave optics",
@@ -34,6 +35,7 @@ TINY = DemoSettings(width=48, height=30, reference_spp=4, flicker_frames=2, tabl
                     leadr_size=32, leadr_blocks=(8,), leadr_shifts=1, leadr_rays=8,
                     glints_map=32, glints_ndf_res=16, glints_rank=4, glints_render_map=16,
                     glints_render_size=(16, 12), glints_render_distances=(2.0,),
+                    glints_wang=(("ndf_res", 16), ("rank", 0)),
                     methods=("ltc", "ltc-multiscale", "leadr-point"), multiscale_maps=("flakes",),
                     colormap_configs=(("plane", 70.0, 1500.0, "far"),), viewer=False)
 
@@ -61,6 +63,8 @@ def test_quick_demo_writes_every_section_with_existing_images(tmp_path, monkeypa
     assert "<code>leadr-point</code>" in showcase and "ltc-multiscale" in showcase
     glints = page.split(f">{SECTIONS[7]}</h2>")[1].split(f">{SECTIONS[8]}</h2>")[0]
     assert "glints-direct" in glints and "speed-up" in glints
+    wang = page.split(f">{SECTIONS[8]}</h2>")[1].split(f">{SECTIONS[9]}</h2>")[0]
+    assert "glints-wang" in wang and "FLIP wang vs direct" in wang
     # the methods that reject the quad-lit showcase: one sentence, not a list of error messages
     assert "<li>" not in showcase and "PrefilterError" not in showcase
     assert showcase.count("Not shown here") == 1

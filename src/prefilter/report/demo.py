@@ -57,11 +57,15 @@ class DemoSettings:
     per texel side of the per-footprint LEADR table; ``glints_*``: normal-map side, NDF image
     resolution and CP rank of the glints bake; ``glints_render_*``: normal-map side, frame size
     and camera distances of the rendered glints frames (the renderer's own bake settings,
-    :data:`prefilter.glints.bake.BAKE_SETTINGS`); ``viewer_*``: screenshot size, pixel-match image
-    size, and whether the viewer section runs the browser at all. ``methods`` (showcase;
-    ``None``: every registered method but :data:`SHOWCASE_EXCLUDE`), ``multiscale_maps`` and
-    ``colormap_configs`` restrict the scenes (for tests: each HDR-FLIP evaluation costs most of
-    a second whatever the image size).
+    :data:`prefilter.glints.bake.BAKE_SETTINGS`); ``glints_wang``: the Wang-tile bake settings
+    of the same frames' ``glints-wang`` renders (``(key, value)`` pairs of
+    :data:`prefilter.glints.wang_render.WANG_SETTINGS`: the renderer's default bake takes
+    minutes; NDF images of 256^2 pixels keep the FLIP against ``glints-direct`` near the
+    default's, 128^2 in ``quick`` doubles it mid and far); ``viewer_*``: screenshot size,
+    pixel-match image size, and whether the viewer section runs the browser at all.
+    ``methods`` (showcase; ``None``: every registered method but :data:`SHOWCASE_EXCLUDE`),
+    ``multiscale_maps`` and ``colormap_configs`` restrict the scenes (for tests: each HDR-FLIP
+    evaluation costs most of a second whatever the image size).
     """
 
     width: int = 256
@@ -86,6 +90,7 @@ class DemoSettings:
     glints_render_map: int = 128
     glints_render_size: tuple[int, int] = (64, 48)
     glints_render_distances: tuple[float, ...] = (0.5, 2.0, 8.0)
+    glints_wang: tuple = (("ndf_res", 256), ("rank", 8), ("block", 16), ("n_iter_max", 30))
     viewer: bool = True
     viewer_size: tuple[int, int] = (384, 288)
     viewer_match_size: tuple[int, int] = (96, 72)
@@ -99,6 +104,8 @@ class DemoSettings:
                    table_samples=10_000, section_width=96, section_height=60, section_spp=16,
                    colormap_size=32, colormap_nref=12, leadr_size=64, leadr_blocks=(16,),
                    leadr_shifts=2, leadr_rays=16, glints_rank=8, glints_render_map=64,
+                   glints_wang=(("ndf_res", 128), ("rank", 8), ("block", 16),
+                                ("n_iter_max", 30)),
                    viewer_size=(256, 192),
                    viewer_match_size=(64, 48))
 
@@ -623,6 +630,69 @@ def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> No
         "lights) is `benchmarks/study_glints_scenes.py` (docs/glints-part2.md).")
 
 
+def _glints_wang_section(report, settings: DemoSettings, seed: int, log) -> None:
+    from prefilter.glints import wang_render
+    from prefilter.glints.render import measurement_scene, pixel_footprints
+    from prefilter.glints.wang import assemble, periodic_index_map
+    from prefilter.render.driver import render
+    from prefilter.render.methods import RenderSettings
+    from prefilter.render.scene import load_scene
+    from prefilter.texture.normalmap import encode_normals
+
+    size = settings.glints_render_map
+    w, h = settings.glints_render_size
+    over = dict(settings.glints_wang)
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="prefilter-demo-wang-") as tmp:
+        for k, d in enumerate(settings.glints_render_distances):
+            spec = measurement_scene(d, "flakes", size, width=w, height=h)
+            sc = load_scene(spec)
+            nm = sc.objects[0].material.normal_map.load()
+            t0 = time.perf_counter()
+            wn = wang_render.baked_tiles(nm, over, progress=True)
+            if k == 0:
+                log(f"glints-wang: tiles baked or loaded in {time.perf_counter() - t0:.1f} s")
+            # a valid periodic tiling of the exemplar's size, and the same surface assembled as
+            # an ordinary normal map for glints-direct
+            n_t = max(1, nm.shape[0] // wn.wang.size)
+            idx = periodic_index_map(n_t, n_t, rng=seed)
+            path = Path(tmp) / f"assembled-{k}.npy"
+            np.save(path, encode_normals(assemble(wn.wang, idx)))
+            spec["objects"][0]["material"]["normal_map"] = str(path)
+            sd = load_scene(spec)
+            rs = RenderSettings(seed=seed)
+            if k == 0:  # compilation, not timed below
+                wang_render.render_wang(sc, rs, index=idx, wang=over)
+                render(sc, "glints", seed=seed)
+                render(sd, "glints-direct", seed=seed)
+            images, times = {}, {}
+            for m, fn in (("glints-wang", lambda: wang_render.render_wang(sc, rs, index=idx,
+                                                                          wang=over)),
+                          ("glints", lambda: render(sc, "glints", seed=seed)),
+                          ("glints-direct", lambda: render(sd, "glints-direct", seed=seed))):
+                t0 = time.perf_counter()
+                images[m] = fn()
+                times[m] = time.perf_counter() - t0
+            cmp = report.add_comparison(f"distance {d:g}", images["glints-direct"],
+                                        {"glints-wang": images["glints-wang"]}, scale=4,
+                                        reference_name="glints-direct (assembled tiling)")[0]
+            _, sp, _ = pixel_footprints(sc, (size, size))
+            rows.append([f"{d:g}", float(np.median(sp)), times["glints-wang"], times["glints"],
+                         times["glints-wang"] / times["glints"], times["glints-direct"],
+                         cmp["flip"]])
+    report.add_table(
+        ["distance", "median footprint std (texels)", "glints-wang (s)", "glints (s)",
+         "wang / glints", "glints-direct (s)", "FLIP wang vs direct"], rows,
+        caption="One frame each at 1 spp, measured now (wall clock, this machine, after an "
+        "untimed first call of each method). `glints-wang` queries the 16 tiles' compressed "
+        "footprint pyramids (the bake settings of this section: "
+        + ", ".join(f"{k} {v}" for k, v in settings.glints_wang) + ") over a valid periodic "
+        "tiling; `glints-direct` renders the same tiling assembled as one normal map; `glints` "
+        "renders the exemplar itself (another surface: its time is the reference cost). The "
+        "default bake and the full measurements (point, quad and environment lights): "
+        "`benchmarks/bench_glints_wang.py`, docs/glints-wang.md.")
+
+
 def _viewer_section(report, settings: DemoSettings, seed: int, log) -> None:
     import os
 
@@ -769,6 +839,13 @@ def run_demo(out: str | Path = "out/demo", *, quick: bool = False, seed: int = 0
         "paper eq. 1) against `glints-direct` (the exact P-NDF summed over the footprint's "
         "texels). Their FLIP difference is the compression error alone.",
         lambda r: _glints_render_section(r, settings, seed, log), log)
+    _section(
+        report, status, "Glints (part 3): Wang tiles",
+        f"The same plane and light on an unbounded surface of 16 Wang tiles synthesised from the "
+        f"{settings.glints_render_map}^2 flakes map (glints paper sec. 5.5): `glints-wang` (per-"
+        "tile compressed pyramids, constant storage whatever the area) against `glints-direct` "
+        "on the same tiling assembled.",
+        lambda r: _glints_wang_section(r, settings, seed, log), log)
     _section(
         report, status, "Roughness mip chains from a normal map",
         "`prefilter bake roughness`: the GGX roughness per mip level that keeps a normal map's "
