@@ -177,8 +177,8 @@ MULTISCALE_METHODS = ("ltc", "ltc-multiscale", "ltc-multiscale footprint=paper")
 #: (``glints-direct`` ran for more than 10 minutes at distance x4 of the quick showcase; the
 #: glints section compares them with ``glints``), and ``glints`` itself, whose pyramid bake for
 #: the showcase's 256^2 normal map adds ~6 minutes to a fresh demo (the glint look is not what
-#: the showcase's area-light comparison is about), and ``glints-wang`` (its per-tile bake takes
-#: ~9 minutes).
+#: the showcase's area-light comparison is about), and ``glints-wang`` (its default per-tile
+#: bake takes ~3 minutes; the "Glints (part 3)" section renders it with a lighter bake).
 SHOWCASE_EXCLUDE = ("reference", "path", "glints", "glints-direct", "glints-reference",
                     "glints-wang")
 
