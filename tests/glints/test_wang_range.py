@@ -158,8 +158,9 @@ def _covered_means(img, lo, hi):
 
 def test_coarse_pyramids_serve_wide_rectangles(wpool, tmp_path):
     """``angular_pool``: rectangles of >= COARSE_MIN coarse pixels per side are read from the
-    pyramids of the pooled images (within their CP error and the coarse pixels' coverage of the
-    exact means; 1.0 % measured), narrower ones from the full-resolution pyramids (the same
+    pyramids of the pooled images (within their CP error, rank 6: 4.6 % / 1.7 % at levels 0 /
+    1, and the coarse pixels' coverage of the exact means; 4.2 % measured at 3.8 coarse pixels
+    per side), narrower ones from the full-resolution pyramids (the same
     values as without the coarse pyramids); the store keeps them (version 3)."""
     from prefilter.glints.wang_range import COARSE_MIN
     from prefilter.glints.wang_store import load_tiles, save_tiles
@@ -172,7 +173,8 @@ def test_coarse_pyramids_serve_wide_rectangles(wpool, tmp_path):
     c = rng.uniform(-30, 30, (n, 2))
     sp = rng.uniform(wpool.min_sigma, wpool.wide_sigma, n)
     lo = rng.uniform(-0.5, -0.1, (n, 2, 2))
-    wide = np.array([COARSE_MIN * hc + 0.05, 0.3])[None, :, None]  # one wide, one narrow
+    wide = np.array([COARSE_MIN * hc + 0.05, 0.8 * COARSE_MIN * hc])[None, :, None]
+    assert wide.max() <= 1.0  # one wide, one narrow, inside the support
     hi = lo + wide
     fine = replace(wpool, coarse=None)
     got, _ = ndf_ranges(wpool, c, sp, lo, hi)
@@ -181,7 +183,7 @@ def test_coarse_pyramids_serve_wide_rectangles(wpool, tmp_path):
     exact = np.array([_covered_means(ndf_image(fine, c[q], sp[q]), lo[q], hi[q])
                       for q in range(n)])
     rel = np.linalg.norm(got[:, 0] - exact[:, 0]) / np.linalg.norm(exact[:, 0])
-    assert 1e-4 < rel < 3e-2
+    assert 1e-4 < rel < 6e-2
     assert np.linalg.norm(ref[:, 0] - exact[:, 0]) / np.linalg.norm(exact[:, 0]) < 1e-3
     save_tiles(wpool, tmp_path / "p.npz")
     back = load_tiles(tmp_path / "p.npz")
