@@ -135,7 +135,9 @@ def _breakdown(sc, repeats):
         fn = points if kind == "points" else ranges
         reg = np.vectorize(lambda x: wang_ndf.footprint_regime(wn, float(x)))(sp)
         alone = replace(wn, dependent=np.zeros((0, 2), np.int64), vertex_images=(),
-                        vertex_packed=None)
+                        vertex_packed=None,
+                        coarse=None if wn.coarse is None else replace(
+                            wn.coarse, vertex_images=(), vertex_packed=None))
         for name in ("direct", "tiles", "shares", "uniform"):
             sel = reg == name
             if not sel.any() or (kind == "ranges" and name == "direct"):

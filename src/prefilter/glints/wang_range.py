@@ -447,7 +447,9 @@ def _coarse_args(wn: TiledNDF) -> tuple:
     def parts(pk):
         return (pk.Pa, pk.Pb, pk.cq, pk.wsc, pk.bidx, pk.meta, pk.goff)
 
-    if c is None or (wn.vertex_pack is None) != (c.vertex_pack is None):
+    # the wide rectangles' dependent texels come from the coarse vertex pyramids when the
+    # queries read vertex pyramids at all (otherwise exactly, for every rectangle)
+    if c is None or (wn.vertex_pack is not None and c.vertex_pack is None):
         pk = wn.pack
         cc = np.ascontiguousarray
         z = (cc(pk.Pa[:0]), cc(pk.Pb[:0]), cc(pk.cq[:0]), cc(pk.wsc[:0]),
