@@ -162,7 +162,6 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
     its own groups) are read from them."""
     T = tiles.shape[1]
     nb = bidx.shape[0]
-    nb2 = nb * nb
     R = nb * B
     N, K = out.shape
     L = crops.shape[0]
@@ -179,7 +178,6 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
     cvpa = cvPa.ravel()
     cvpb = cvPb.ravel()
     cnb = cbidx.shape[0]
-    cnb2 = cnb * cnb
     hc = h * R / max(cnb * B, 1)  # a coarse pixel
     for q in prange(N):
         for k in range(K):
@@ -286,33 +284,16 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
             vt, vwy, vwx, vkyl, vkyh, vkxl, vkxh = vertex_window(
                 s, c0, c1, m, vn, sigma0, st0, tap_trunc, vk0[m], rad, T, types, ti0, tj0)
             type_weights(vt, 0, 0, vwy, vwx, vkyl, vkyh, vkxl, vkxh, vn, vW, vbox)
-        for bi in range(ubi0, ubi1 + 1):
-            for bj in range(ubj0, ubj1 + 1):
-                nt = _touching(fbk, rcl, bi, bj, B, touch, rp, rt)
-                if nt == 0:
-                    continue
-                ns = type_codes(cq, bidx[bi, bj], meta, offs[m], goff[m], n,
-                                (bi * nb + bj, nb2), W, box, cw, gs)
-                _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
-                if use_v:  # the dependent texels from their vertex pyramids
-                    ns = type_codes(vcq, vbidx[bi, bj], vmeta, voffs[m], vgoff[m], vn,
-                                    (bi * nb + bj, nb2), vW, vbox, cw, gs)
-                    _flush_rects(vpa, vpb, vwsc, vmeta, B, gs, cw, ns, rp, rt, touch, nt, tt,
-                                 acc)
+        blocks = (ubi0, ubi1, ubj0, ubj1)
+        _block_masses(blocks, fbk, rcl, B, offs[m], voffs[m], n, vn, (pa, pb, wsc, meta, cq, bidx,
+                      goff[m]), (vpa, vpb, vwsc, vmeta, vcq, vbidx, vgoff[m]), use_v, W, box,
+                      vW, vbox, cw, gs, touch, rp, rt, tt, acc)
         cacc = np.zeros(K)
-        for bi in range(cbi0, cbi1 + 1):
-            for bj in range(cbj0, cbj1 + 1):
-                nt = _touching(crbk, crcl, bi, bj, B, touch, rp, rt)
-                if nt == 0:
-                    continue
-                ns = type_codes(ccq, cbidx[bi, bj], cmeta, offs[m], cgoff[m], n,
-                                (bi * cnb + bj, cnb2), W, box, cw, gs)
-                _flush_rects(cpa, cpb, cwsc, cmeta, B, gs, cw, ns, rp, rt, touch, nt, tt, cacc)
-                if use_v:
-                    ns = type_codes(cvcq, cvbidx[bi, bj], cvmeta, voffs[m], cvgoff[m], vn,
-                                    (bi * cnb + bj, cnb2), vW, vbox, cw, gs)
-                    _flush_rects(cvpa, cvpb, cvwsc, cvmeta, B, gs, cw, ns, rp, rt, touch, nt,
-                                 tt, cacc)
+        blocks = (cbi0, cbi1, cbj0, cbj1)
+        _block_masses(blocks, crbk, crcl, B, offs[m], voffs[m], n, vn, (cpa, cpb, cwsc, cmeta,
+                      ccq, cbidx, cgoff[m]), (cvpa, cvpb, cvwsc, cvmeta, cvcq, cvbidx,
+                                              cvgoff[m]), use_v, W, box, vW, vbox, cw, gs,
+                      touch, rp, rt, tt, cacc)
         for k in range(K):
             out[q, k] = acc[k] / area[k] + cacc[k] / carea[k]
         if use_v:
@@ -350,6 +331,33 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                                                    max(x0[q, k], lo), min(x1[q, k], hi),
                                                    max(y0[q, k], lo), min(y1[q, k], hi),
                                                    trunc) / ar
+
+
+@njit_serial
+def _block_masses(blocks, rbk, rcl, B, off, voff, n, vn, P, VP, use_v, W, box, vW, vbox, cw, gs,
+                  touch, rp, rt, tt, acc):  # pragma: no cover - compiled
+    """``acc[k]`` += the masses over rectangle ``k`` (blocks ``rbk``, pixel bounds ``rcl``) of the
+    tiles' pyramids ``P = (pa, pb, wsc, meta, cq, bidx, goff)`` at one level (images from
+    ``off``, ``n`` centres per axis) weighted by their per-type taps ``W``, ``box``
+    (:func:`prefilter.glints.wang_query.type_weights`), and with ``use_v`` of the vertex
+    pyramids ``VP`` likewise, over the blocks ``blocks = (bi0, bi1, bj0, bj1)``: per block the
+    code rows per CP group, then the groups' factor masses (``_qkernels._flush_rects``)."""
+    pa, pb, wsc, meta, cq, bidx, goff = P
+    vpa, vpb, vwsc, vmeta, vcq, vbidx, vgoff = VP
+    nb = bidx.shape[0]
+    for bi in range(blocks[0], blocks[1] + 1):
+        for bj in range(blocks[2], blocks[3] + 1):
+            nt = _touching(rbk, rcl, bi, bj, B, touch, rp, rt)
+            if nt == 0:
+                continue
+            ns = type_codes(cq, bidx[bi, bj], meta, off, goff, n, (bi * nb + bj, nb * nb), W, box,
+                            cw, gs)
+            _flush_rects(pa, pb, wsc, meta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
+            if use_v:  # the dependent texels from their vertex pyramids
+                ns = type_codes(vcq, vbidx[bi, bj], vmeta, voff, vgoff, vn, (bi * nb + bj,
+                                                                            nb * nb), vW, vbox,
+                                cw, gs)
+                _flush_rects(vpa, vpb, vwsc, vmeta, B, gs, cw, ns, rp, rt, touch, nt, tt, acc)
 
 
 @njit_serial

@@ -588,6 +588,16 @@ def _glints_section(report, settings: DemoSettings, seed: int, log) -> None:
                      "interpolation and compression. Images share the direct image's maximum.")
 
 
+def _timed(frames: dict) -> tuple[dict, dict]:
+    """Each ``name -> callable`` called once, in order: its images and wall times (s)."""
+    images, times = {}, {}
+    for name, fn in frames.items():
+        t0 = time.perf_counter()
+        images[name] = fn()
+        times[name] = time.perf_counter() - t0
+    return images, times
+
+
 def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> None:
     from prefilter.glints.render import cache_dir, measurement_scene, pixel_footprints
     from prefilter.render.driver import render
@@ -606,11 +616,8 @@ def _glints_render_section(report, settings: DemoSettings, seed: int, log) -> No
                 f"pyramids cached in {cache_dir()}")
         if d == settings.glints_render_distances[0]:
             render(sc, "glints-direct", seed=seed)  # compilation, not timed below
-        images, times = {}, {}
-        for m in ("glints", "glints-direct"):
-            t0 = time.perf_counter()
-            images[m] = render(sc, m, seed=seed)
-            times[m] = time.perf_counter() - t0
+        images, times = _timed({m: (lambda m=m: render(sc, m, seed=seed))
+                                for m in ("glints", "glints-direct")})
         cmp = report.add_comparison(f"distance {d:g}", images["glints-direct"],
                                     {"glints": images["glints"]}, scale=4,
                                     reference_name="glints-direct")[0]
@@ -665,14 +672,10 @@ def _glints_wang_section(report, settings: DemoSettings, seed: int, log) -> None
                 wang_render.render_wang(sc, rs, index=idx, wang=over)
                 render(sc, "glints", seed=seed)
                 render(sd, "glints-direct", seed=seed)
-            images, times = {}, {}
-            for m, fn in (("glints-wang", lambda: wang_render.render_wang(sc, rs, index=idx,
-                                                                          wang=over)),
-                          ("glints", lambda: render(sc, "glints", seed=seed)),
-                          ("glints-direct", lambda: render(sd, "glints-direct", seed=seed))):
-                t0 = time.perf_counter()
-                images[m] = fn()
-                times[m] = time.perf_counter() - t0
+            images, times = _timed({
+                "glints-wang": lambda: wang_render.render_wang(sc, rs, index=idx, wang=over),
+                "glints": lambda: render(sc, "glints", seed=seed),
+                "glints-direct": lambda: render(sd, "glints-direct", seed=seed)})
             cmp = report.add_comparison(f"distance {d:g}", images["glints-direct"],
                                         {"glints-wang": images["glints-wang"]}, scale=4,
                                         reference_name="glints-direct (assembled tiling)")[0]
