@@ -307,6 +307,9 @@ def test_tiled_validation(wn, wt):
         bake_tiles(wt, wide_tiles=1.0, uniform_tiles=0.5)
     with pytest.raises(PrefilterError, match="stride0"):
         bake_tiles(wt, stride0=0)
+    for bad in (-1, 2.5, True):
+        with pytest.raises(PrefilterError, match="angular_pool: expected an integer >= 0"):
+            bake_tiles(wt, rank=2, angular_pool=bad)
 
 
 def test_compressed_tiles(wn):

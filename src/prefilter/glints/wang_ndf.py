@@ -281,9 +281,10 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
         n_iter_max = as_positive_int(n_iter_max, "n_iter_max")
         if R % block:
             raise PrefilterError(f"block: expected a divisor of ndf_res {R}, got {block}")
-    pool = int(angular_pool)
-    if pool < 0 or isinstance(angular_pool, bool):
+    if (isinstance(angular_pool, bool) or not isinstance(angular_pool, (int, np.integer))
+            or angular_pool < 0):
         raise PrefilterError(f"angular_pool: expected an integer >= 0, got {angular_pool!r}")
+    pool = int(angular_pool)
     if rank is None or pool < 2 or R % pool or (R // pool) % block or R // pool < 2 * block:
         pool = 0
     # level l resamples footprints from sigma_l / sqrt(1 - _Q_MIN^2) up (level_window's rule,
