@@ -245,8 +245,9 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
 @click.option("--uniform-tiles", default=8.0, show_default=True, type=_POSITIVE,
               help="Footprint std (in tiles) from which the expected tiling is used.")
 @click.option("--code-bits", default="8", show_default=True, type=click.Choice(["0", "8", "16"]),
-              help="Bits per stored CP factor code (file version 2); 0 stores float32 factors "
-                   "(version 1). Uncompressed pyramids (--rank 0) are always float32.")
+              help="Bits per stored CP factor code (file version 3, with the vertex and coarse "
+                   "pyramids); 0 stores float32 factors (version 1, without them). "
+                   "Uncompressed pyramids (--rank 0) are always float32.")
 @shared_options(iters=100,
                 seed=(0, "Seeds the tile synthesis (patches, hashing seed) and the CP fits."),
                 wait=False, quiet=False)
