@@ -45,8 +45,8 @@ from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION,
 from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints._simd import exp_neg
 from prefilter.glints.brdf import _ANGULAR_CUT, _exponents, _row_gaussians
-from prefilter.glints.wang_query import (TilePack, gauss_row, pack_float, pack_point,
-                                         segment_sums, tile_taps)
+from prefilter.glints.wang_query import (TilePack, empty_pack, gauss_row, pack_float,
+                                         pack_point, segment_sums, tile_taps)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
                                    implicit_type, is_valid_tiling, pndf_image_implicit,
@@ -163,8 +163,6 @@ class TiledNDF:
             return self.packed
         hit = self.__dict__.get("_pack")
         if hit is None:
-            from prefilter.glints.wang_query import empty_pack
-
             hit = pack_float(self.images) if self.block else empty_pack(self.n_levels)
             object.__setattr__(self, "_pack", hit)
         return hit
@@ -202,15 +200,15 @@ class TiledNDF:
         on first use by the per-footprint NumPy paths (:func:`ndf`, :func:`contributions`,
         :func:`sample`), are not counted."""
         if self.block:
-            levels = self.pack.nbytes
-            if self.vertex_pack is not None:
-                levels += self.vertex_pack.nbytes
-            if self.coarse is not None:
-                c = self.coarse
-                levels += c.pack.nbytes + (0 if c.vertex_pack is None else c.vertex_pack.nbytes)
+            levels = self._packs_nbytes()
         else:
             levels = sum(a.nbytes for a in self.images)
         return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
+
+    def _packs_nbytes(self) -> int:
+        """Bytes of the packed tile and vertex pyramids, and of the coarse ones'."""
+        n = self.pack.nbytes + (0 if self.vertex_pack is None else self.vertex_pack.nbytes)
+        return n + (0 if self.coarse is None else self.coarse._packs_nbytes())
 
     def crop(self, level: int) -> int:
         """Footprint centres per axis stored for each tile at ``level``."""
@@ -884,23 +882,36 @@ def level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T,
         st = st0 * 2.0**lv
         if sg < s and math.sqrt(1.0 - (sg / s) ** 2) * sg / st >= q_min:
             m = lv
-    sg = sigma0 * 2.0**m
-    st = st0 * 2.0**m
-    r = math.sqrt(s * s - sg * sg)
-    half = tap_trunc * r / st
     n = crops[m]
     marg = rad + 1.0
     ti0 = int(math.floor((c0 - marg) / T)) - 1
     tj0 = int(math.floor((c1 - marg) / T)) - 1
     types = _nb_types(ti0, int(math.floor((c0 + marg) / T)) + 1, tj0,
                       int(math.floor((c1 + marg) / T)) + 1, seed, index)
-    jlo = int(math.floor((c1 - marg) / T))
-    jhi = int(math.floor((c1 + marg) / T))
-    ilo = int(math.floor((c0 - marg) / T))
-    ihi = int(math.floor((c0 + marg) / T))
-    wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1, c0, T, st, r, half, k0[m], n, jlo, jhi,
-                                              ilo, ihi)
+    (jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
+     kxh) = window_taps(s, c0, c1, m, n, sigma0, st0, tap_trunc, k0[m], rad, T, 0.0)
     return m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl, kxh
+
+
+@njit_serial
+def window_taps(s, c0, c1, m, n, sigma0, st0, tap_trunc, km, rad, T,
+                shift):  # pragma: no cover - compiled
+    """The ``T x T`` tiles of a grid shifted by ``-shift`` texels per axis (tile ``i`` covers
+    ``iT - shift .. iT - shift + T``) within ``rad + 1`` texels of a footprint of std ``s``
+    centred at ``(c0, c1)``: rows ``jlo..jhi``, columns ``ilo..ihi``, and their resampling taps
+    at level ``m`` (std ``sqrt(s^2 - sigma_m^2)``, crop of ``n`` centres from ``km``;
+    :func:`prefilter.glints.wang_query.tile_taps`)."""
+    sg = sigma0 * 2.0**m
+    st = st0 * 2.0**m
+    r = math.sqrt(s * s - sg * sg)
+    marg = rad + 1.0
+    jlo = int(math.floor((c1 - marg + shift) / T))
+    jhi = int(math.floor((c1 + marg + shift) / T))
+    ilo = int(math.floor((c0 - marg + shift) / T))
+    ihi = int(math.floor((c0 + marg + shift) / T))
+    wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1 + shift, c0 + shift, T, st, r,
+                                              tap_trunc * r / st, km, n, jlo, jhi, ilo, ihi)
+    return jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl, kxh
 
 
 @njit_serial
@@ -910,24 +921,14 @@ def vertex_window(s, c0, c1, m, n, sigma0, st0, tap_trunc, km, rad, T, types, ti
     reads at level ``m`` (crop of ``n`` centres from ``km``), as :func:`level_window` the tiles:
     their configurations ``(rows, cols)`` (from the tile types ``types`` of first tile ``(ti0,
     tj0)``, a valid tiling) and :func:`prefilter.glints.wang_query.tile_taps`' taps on the
-    vertex tiles' grids (the tiles' grids shifted by ``T/2``)."""
-    sg = sigma0 * 2.0**m
-    st = st0 * 2.0**m
-    r = math.sqrt(s * s - sg * sg)
-    half = tap_trunc * r / st
-    marg = rad + 1.0
-    hT = 0.5 * T
-    jlo = int(math.floor((c1 - marg + hT) / T))
-    jhi = int(math.floor((c1 + marg + hT) / T))
-    ilo = int(math.floor((c0 - marg + hT) / T))
-    ihi = int(math.floor((c0 + marg + hT) / T))
+    vertex tiles' grids (:func:`window_taps`, the tiles' grids shifted by ``T/2``)."""
+    (jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
+     kxh) = window_taps(s, c0, c1, m, n, sigma0, st0, tap_trunc, km, rad, T, 0.5 * T)
     vt = np.empty((jhi - jlo + 1, ihi - ilo + 1), np.int64)
     for j in range(jlo, jhi + 1):
         for i in range(ilo, ihi + 1):
             vt[j - jlo, i - ilo] = vertex_config(types[j - 1 - tj0, i - 1 - ti0],
                                                  types[j - tj0, i - ti0])
-    wyt, wxt, kyl, kyh, kxl, kxh = tile_taps(c1 + hT, c0 + hT, T, st, r, half, km, n, jlo, jhi,
-                                              ilo, ihi)
     return vt, wyt, wxt, kyl, kyh, kxl, kxh
 
 
@@ -1559,15 +1560,10 @@ def vertex_args(wn: TiledNDF) -> tuple:
     """``(has_vertex, Fa, Fb, wsc, cq, bidx, meta, offs, goff, k0, crops, Pa, Pb)`` of ``wn``'s
     vertex pyramids for the kernels (an empty pack of the tiles' dtypes without them)."""
     vp = wn.vertex_pack if wn.block else None
-    if vp is None:
-        pk = wn.pack
-        z = np.zeros(1, np.int64)
-        c = np.ascontiguousarray
-        return (False, c(pk.Fa[:0]), c(pk.Fb[:0]), c(pk.wsc[:0]), c(pk.cq[:0]),
-                c(pk.bidx[:, :, :0]), np.zeros((1, 4), np.int64), z, z, z, z, c(pk.Pa[:0]),
-                c(pk.Pb[:0]))
-    return (True, vp.Fa, vp.Fb, vp.wsc, vp.cq, vp.bidx, vp.meta, vp.offs, vp.goff,
-            np.asarray(wn.vertex_k0, np.int64), np.asarray(vp.crops, np.int64), vp.Pa, vp.Pb)
+    p = vp if vp is not None else empty_pack(wn.n_levels, like=wn.pack)
+    k0 = np.asarray(wn.vertex_k0 if vp is not None else (0,) * wn.n_levels, np.int64)
+    return (vp is not None, p.Fa, p.Fb, p.wsc, p.cq, p.bidx, p.meta, p.offs, p.goff, k0,
+            np.asarray(p.crops, np.int64), p.Pa, p.Pb)
 
 
 _ELEMENTS: dict = {}

@@ -126,14 +126,21 @@ def _assemble(parts, crops, rank, B, n_groups) -> TilePack:
                     crops=np.asarray(crops, np.int64), block=int(B))
 
 
-def empty_pack(n_levels: int) -> TilePack:
-    """A :class:`TilePack` of no group (uncompressed pyramids: the kernels' placeholder)."""
+def empty_pack(n_levels: int, like: TilePack | None = None) -> TilePack:
+    """A :class:`TilePack` of no group: the kernels' placeholder for absent pyramids
+    (uncompressed ones; a bake without vertex or coarse pyramids). ``like``: with its arrays'
+    dtypes (the kernel compiled for ``like`` serves both), else float32."""
     z = np.zeros(n_levels + 1, np.int64)
-    return TilePack(Pa=np.zeros((0, 2), np.float32), Pb=np.zeros((0, 2), np.float32),
-                    cq=np.zeros(0, np.float32), wsc=np.zeros(0, np.float32),
-                    Fa=np.zeros(0, np.float32), Fb=np.zeros(0, np.float32),
-                    bidx=np.zeros((1, 1, 0), np.int16), meta=np.zeros((1, 4), np.int64),
-                    offs=z, goff=z.copy(), crops=np.zeros(n_levels, np.int64), block=0)
+
+    def none(name, width=None):
+        dt = np.float32 if like is None else getattr(like, name).dtype
+        return np.zeros(0 if width is None else (0, width), dt)
+
+    B1 = 2 if like is None else like.Pa.shape[1]
+    return TilePack(Pa=none("Pa", B1), Pb=none("Pb", B1), cq=none("cq"), wsc=none("wsc"),
+                    Fa=none("Fa"), Fb=none("Fb"), bidx=np.zeros((1, 1, 0), np.int16),
+                    meta=np.zeros((1, 4), np.int64), offs=z, goff=z.copy(),
+                    crops=np.zeros(n_levels, np.int64), block=0 if like is None else like.block)
 
 
 class DecodedLevels(Sequence):

@@ -37,7 +37,8 @@ from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_in
                                       _nb_type, _vertex_tables, dep_gaussian,
                                       dependent_neighbours, footprint_rows, level_window,
                                       _valid, vertex_args, vertex_config, vertex_window)
-from prefilter.glints.wang_query import gauss_row, segment_sums, type_codes, type_weights
+from prefilter.glints.wang_query import (empty_pack, gauss_row, segment_sums, type_codes,
+                                         type_weights)
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
 #: Rectangles of at least this many coarse pixels per side (:attr:`prefilter.glints.wang_ndf.
@@ -457,11 +458,7 @@ def _coarse_args(wn: TiledNDF) -> tuple:
 
     # the wide rectangles' dependent texels come from the coarse vertex pyramids when the
     # queries read vertex pyramids at all (otherwise exactly, for every rectangle)
-    if c is None or (wn.vertex_pack is not None and c.vertex_pack is None):
-        pk = wn.pack
-        cc = np.ascontiguousarray
-        z = (cc(pk.Pa[:0]), cc(pk.Pb[:0]), cc(pk.cq[:0]), cc(pk.wsc[:0]),
-             cc(pk.bidx[:0, :0, :0]), np.zeros((1, 4), np.int64), np.zeros(1, np.int64))
-        return (False,) + z + z
-    vp = c.vertex_pack if c.vertex_pack is not None else c.pack
-    return (True,) + parts(c.pack) + parts(vp)
+    use = c is not None and (wn.vertex_pack is None or c.vertex_pack is not None)
+    blank = empty_pack(wn.n_levels, like=wn.pack)
+    vp = c.vertex_pack if use and c.vertex_pack is not None else blank
+    return (use,) + parts(c.pack if use else blank) + parts(vp)
