@@ -177,6 +177,37 @@ def test_bake_compressed_level_by_level_equals_compress_tiles(wn, wc, tmp_path):
         bake_tiles(wn.wang, ndf_res=R, rank=2, block=5)
 
 
+def test_inconsistent_v3_layouts(wn, tmp_path):
+    """Malformed version-3 files (vertex and coarse pyramids): each rejected with the file and
+    the field named."""
+    wb = bake_tiles(wn.wang, ndf_res=R, support=0.5, intrinsic_roughness=0.01, rank=2, block=4,
+                    n_iter_max=5, angular_pool=2)
+    src = tmp_path / "v3.npz"
+    save_tiles(wb, src)
+    back = load_tiles(src)
+    assert back.vertex_packed is not None and back.coarse is not None
+    cases = {
+        r"header.settings.vertex_k0: expected one per level": _edit_settings(vertex_k0=[0]),
+        r"header.settings.vertex_crops: expected crop sizes >= 1":
+            _edit_settings(vertex_crops=[0] * wb.n_levels),
+        r"header.settings.angular_pool: expected 0 or a divisor p >= 2 of ndf_res 16":
+            _edit_settings(angular_pool=3),
+        r"header.settings.coarse_cp_error: expected \d+ entries, got 0":
+            _edit_settings(coarse_cp_error=[]),
+        r"header field missing or invalid \(KeyError: 'vertex_k0'\)":
+            lambda a: _edit_header(settings={k: v for k, v in json.loads(
+                str(a["header"]))["settings"].items() if k != "vertex_k0"})(a),
+        r"vc_0, va_0, vb_0, vc_scale_0: expected \d+ rows \(kept rows of vmask_0\)":
+            _replace("vc_0", lambda c: c[:-1]),
+        r"gvc_0, gva_0, gvb_0, gvc_scale_0: expected \d+ rows \(kept rows of gvmask_0\)":
+            _replace("gvc_0", lambda c: c[:-1]),
+        r"missing arrays \['gc_1'\]": lambda a: a.pop("gc_1"),
+    }
+    for k, (msg, edit) in enumerate(cases.items()):
+        with pytest.raises(TableFileError, match=rf"{k}.npz: {msg}"):
+            load_tiles(_rewrite(src, tmp_path / f"{k}.npz", edit))
+
+
 def test_round_trip_vertex_pyramids(wn, tmp_path):
     """A compressed bake's vertex pyramids: version 3 (each vertex level's codes as the tiles'),
     the queries of the loaded file within the codes' rounding of the baked ones; float32 files

@@ -226,18 +226,16 @@ def _settings(path, header) -> dict:
                    B=int(st["block"]), rank=int(st["rank"]), k0=[int(k) for k in st["k0"]],
                    cp_error=[float(e) for e in st["cp_error"]], version=header["version"],
                    code_bits=int(st["code_bits"]) if v2 else 0,
-                   crops=[int(n) for n in st["crops"]] if v2 else None,
-                   vertex_cp_error=([float(e) for e in st["vertex_cp_error"]]
-                                    if header["version"] == 3 else []),
-                   vertex_k0=([int(k) for k in st["vertex_k0"]]
-                              if header["version"] == 3 else []),
-                   vertex_crops=([int(n) for n in st["vertex_crops"]]
-                                 if header["version"] == 3 else []),
-                   pool=int(st["angular_pool"]) if header["version"] == 3 else 0,
-                   coarse_cp_error=([float(e) for e in st["coarse_cp_error"]]
-                                    if header["version"] == 3 else []),
-                   coarse_vertex_cp_error=([float(e) for e in st["coarse_vertex_cp_error"]]
-                                           if header["version"] == 3 else []))
+                   crops=[int(n) for n in st["crops"]] if v2 else None, pool=0,
+                   vertex_cp_error=[], vertex_k0=[], vertex_crops=[], coarse_cp_error=[],
+                   coarse_vertex_cp_error=[])
+        if header["version"] == 3:
+            out.update(vertex_cp_error=[float(e) for e in st["vertex_cp_error"]],
+                       vertex_k0=[int(k) for k in st["vertex_k0"]],
+                       vertex_crops=[int(n) for n in st["vertex_crops"]],
+                       pool=int(st["angular_pool"]),
+                       coarse_cp_error=[float(e) for e in st["coarse_cp_error"]],
+                       coarse_vertex_cp_error=[float(e) for e in st["coarse_vertex_cp_error"]])
         shapes = {k: (str(v["dtype"]), tuple(int(n) for n in v["shape"]))
                   for k, v in header["arrays"].items()}
     except PrefilterError as exc:
@@ -287,6 +285,29 @@ def _settings(path, header) -> dict:
     return out
 
 
+def _code_sets(st) -> tuple:
+    """The prefixes of a version-2 or 3 file's code arrays: ``""`` the tiles, ``"v"`` the
+    vertex pyramids, ``"g"``, ``"gv"`` the coarse ones (module docstring)."""
+    if st["version"] < 3:
+        return ("",)
+    return ("", "v", "g", "gv") if st["pool"] else ("", "v")
+
+
+def _code_layout(st, v: str, lv: int) -> tuple[int, int]:
+    """Centres per axis and angular blocks per image of level ``lv`` of code set ``v``."""
+    n = st["vertex_crops" if "v" in v else "crops"][lv]
+    return n, (st["R"] // (st["pool"] if "g" in v else 1) // st["B"]) ** 2
+
+
+def _packed(data, st, v: str):
+    """:func:`~prefilter.glints.wang_query.pack_codes` of code set ``v``'s levels."""
+    L = len(st["k0"])
+    levels = [{k: data[f"{v}{k}_{lv}"] for k in ("mask", "a", "b", "c", "c_scale")}
+              for lv in range(L)]
+    return pack_codes(levels, [_code_layout(st, v, lv)[0] for lv in range(L)],
+                      _code_layout(st, v, 0)[1])
+
+
 def _expected(st) -> dict:
     """Array name -> (dtype, shape with -1 for the sizes the header does not fix) implied by
     the settings."""
@@ -300,12 +321,8 @@ def _expected(st) -> dict:
     code = np.dtype(CODE_DTYPES[st["code_bits"]]).str if v2 else None
     for lv in range(len(st["k0"])):
         if v2:
-            prefixes = ("",)
-            if st["version"] == 3:
-                prefixes = ("", "v", "g", "gv") if st["pool"] else ("", "v")
-            for v in prefixes:
-                n = st["vertex_crops"][lv] if "v" in v else st["crops"][lv]
-                g2 = (st["R"] // st["pool"] // B) ** 2 if "g" in v else nb2
+            for v in _code_sets(st):
+                n, g2 = _code_layout(st, v, lv)
                 out[f"{v}mask_{lv}"] = ("|u1", (2 * n * n * g2,))  # 16 n^2 nb^2 bits
                 out[f"{v}a_{lv}"] = out[f"{v}b_{lv}"] = (code, (-1, rank, B))
                 out[f"{v}c_{lv}"] = (code, (-1, rank))
@@ -345,10 +362,8 @@ def _check_arrays(path, data, st) -> None:
             _fail(path, f"{k}: expected non-negative values")
     for lv in range(len(st["k0"])):
         if st["version"] >= 2:
-            _check_codes(path, data, st, lv)
-            if st["version"] == 3:
-                for v in ("v", "g", "gv") if st["pool"] else ("v",):
-                    _check_codes(path, data, st, lv, v)
+            for v in _code_sets(st):
+                _check_codes(path, data, st, lv, v)
             continue
         c = data[f"C_{lv}" if st["B"] else f"images_{lv}"]
         if c.shape[1] != c.shape[2] or c.shape[1] < 1:
@@ -362,9 +377,8 @@ def _check_arrays(path, data, st) -> None:
 def _check_codes(path, data, st, lv, v="") -> None:
     """Versions 2 and 3: the numbers of kept rows and live groups of level ``lv``'s mask
     against the code arrays (their dtypes and the other dimensions are checked by
-    :func:`_check_arrays`); ``v = "v"``: of the vertex pyramids."""
-    n = st["vertex_crops" if "v" in v else "crops"][lv]
-    nb2 = (st["R"] // (st["pool"] if "g" in v else 1) // st["B"]) ** 2
+    :func:`_check_arrays`) of code set ``v`` (:func:`_code_sets`)."""
+    n, nb2 = _code_layout(st, v, lv)
     kept = np.unpackbits(data[f"{v}mask_{lv}"]).astype(bool).reshape(16, n * n, nb2)
     K, G = int(kept.sum()), int(kept.any(axis=1).sum())
     got = [data[f"{v}{k}_{lv}"].shape[0] for k in ("c", "a", "b", "c_scale")]
@@ -393,14 +407,10 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
     if st["version"] >= 2:
         # the codes packed as stored (the kernels read them; wang_query.pack_codes), the
         # float32 triples decoded on first use by the per-footprint paths only
-        nb2 = (st["R"] // B) ** 2
-        packed = pack_codes([{k: data[f"{k}_{lv}"] for k in ("mask", "a", "b", "c", "c_scale")}
-                             for lv in range(L)], st["crops"], nb2)
+        packed = _packed(data, st, "")
         images = DecodedLevels(packed)
         if st["version"] == 3:
-            vpacked = pack_codes([{k: data[f"v{k}_{lv}"]
-                                   for k in ("mask", "a", "b", "c", "c_scale")}
-                                  for lv in range(L)], st["vertex_crops"], nb2)
+            vpacked = _packed(data, st, "v")
             vimages = DecodedLevels(vpacked)
         tile_means = data["tile_means"]
         mean = tile_means.astype(np.float64).mean(axis=0)
@@ -418,11 +428,9 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
 
 def _coarse(data, st, tile_means, wang) -> TiledNDF:
     """The coarse pyramids of a version-3 file with ``angular_pool``, packed as stored."""
-    L, B, p = len(st["k0"]), st["B"], st["pool"]
+    B, p = st["B"], st["pool"]
     Rc = st["R"] // p
-    packs = [pack_codes([{k: data[f"{v}{k}_{lv}"] for k in ("mask", "a", "b", "c", "c_scale")}
-                         for lv in range(L)], st["vertex_crops" if "v" in v else "crops"],
-                        (Rc // B) ** 2) for v in ("g", "gv")]
+    packs = [_packed(data, st, v) for v in ("g", "gv")]
     tm = tile_means.astype(np.float64).reshape(16, Rc, p, Rc, p).mean(axis=(2, 4))
     return TiledNDF(wang, DecodedLevels(packs[0]),
                     tuple(st["k0"]), tm.mean(axis=0), st["stride0"], st["sigma0"], Rc, st["S"],
