@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from maps import sinusoid
 
-from prefilter.fileio import META_KEY
+from prefilter.fileio import META_KEY, save_npz_atomic
 from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints.wang import index_map, synthesize
 from prefilter.glints.wang_ndf import (bake_tiles, compress_tiles, ndf, ndf_image, ndf_points,
@@ -104,7 +104,7 @@ def test_round_trip_codes(wc, tmp_path, bits):
     # the codes are held as stored (the kernels read them): less than the float32 factors
     assert back.pack.nbytes < wc.pack.nbytes and back.pack.cq.dtype == CODE_DTYPES[bits]
     assert back.nbytes == back.wang.nbytes + back.pack.nbytes + back.mean.nbytes \
-        + back.tile_means.nbytes
+        + back.tile_means.nbytes + back.moment_sat.nbytes
     half = 0.5 / (2**bits - 1)
     tol = half + 1e-6  # float32 decoding
     for lv in range(wc.n_levels):
@@ -218,12 +218,12 @@ def test_round_trip_vertex_pyramids(wn, tmp_path):
     path = tmp_path / "v3.npz"
     save_tiles(wb, path)
     header = json.loads(str(np.load(path)["header"]))
-    assert header["version"] == VERSION == 3
+    assert header["version"] == VERSION == 4
     assert header["settings"]["vertex_cp_error"] == list(wb.vertex_cp_error)
     back = load_tiles(path)
     assert back.vertex_packed is not None and back.vertex_pack.cq.dtype == np.uint8
     assert back.nbytes == back.wang.nbytes + back.pack.nbytes + back.vertex_pack.nbytes \
-        + back.mean.nbytes + back.tile_means.nbytes
+        + back.mean.nbytes + back.tile_means.nbytes + back.moment_sat.nbytes
     rng = np.random.default_rng(5)
     c = rng.uniform(-20, 40, (400, 2))
     sp = rng.uniform(wb.min_sigma, wb.wide_sigma, 400)
@@ -235,6 +235,21 @@ def test_round_trip_vertex_pyramids(wn, tmp_path):
     assert v1.vertex_images == () and v1.vertex_pack is None
     exact = ndf_points(replace(wb, vertex_images=()), c, sp, q)
     np.testing.assert_array_equal(ndf_points(v1, c, sp, q), exact)
+    # the moment tables: stored in version 4, computed from the tiles for older files (the same
+    # bytes: the same function of the same tiles)
+    np.testing.assert_array_equal(back.moment_sat, wb.moment_sat)
+    np.testing.assert_array_equal(v1.moment_sat, wb.moment_sat)
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files if k not in (META_KEY, "moment_sat")}
+    h = json.loads(str(arrays["header"]))
+    h["version"] = 3
+    del h["arrays"]["moment_sat"]
+    arrays["header"] = np.array(json.dumps(h, sort_keys=True))
+    save_npz_atomic(tmp_path / "v3.npz", format_name=FORMAT, format_version=3, **arrays)
+    v3 = load_tiles(tmp_path / "v3.npz")
+    np.testing.assert_array_equal(v3.moment_sat, wb.moment_sat)
+    wide = rng.uniform(wb.wide_sigma, wb.uniform_sigma, 400)
+    np.testing.assert_array_equal(ndf_points(v3, c, wide, q), ndf_points(back, c, wide, q))
 
 
 @pytest.mark.parametrize("shape", [(3, 8, 8, 361), (1, 4, 4, 10), (5, 16, 16, 169)])
@@ -275,8 +290,8 @@ def _edit_header(**changes):
 
 def test_wrong_version_and_format(saved, tmp_path):
     p = _rewrite(saved, tmp_path / "v.npz", _edit_header(version=VERSION + 1))
-    with pytest.raises(TableFileError, match=rf"v.npz: header.version: expected 1, 2 or {VERSION}, "
-                                             rf"got {VERSION + 1}"):
+    with pytest.raises(TableFileError, match=rf"v.npz: header.version: expected 1, 2, 3 or "
+                                             rf"{VERSION}, got {VERSION + 1}"):
         load_tiles(p)
     p = _rewrite(saved, tmp_path / "f.npz", _edit_header(format="prefilter-glints"))
     with pytest.raises(TableFileError, match="header.format: expected 'prefilter-glints-wang'"):

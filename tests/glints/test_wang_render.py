@@ -295,7 +295,7 @@ def test_cache_path_is_the_baked_file(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.glob("wang-*.npz")] == [cache_path(nm, over).name]
     with np.load(cache_path(nm, over)) as z:
         header = json.loads(str(z["header"]))
-    assert header["version"] == 3 and header["settings"]["code_bits"] == 8
+    assert header["version"] == 4 and header["settings"]["code_bits"] == 8
     assert wn.wang.size == 8 and wn.block == 4 and wn.images[0][2].dtype == np.float32
 
 

@@ -18,8 +18,12 @@ compressed bakes, from 16 more pyramids of them per vertex configuration (:func:
 the vertex tiles of a valid tiling partition its dependent texels).
 Queries between centres/levels use Gaussian resampling (``pyramid.resample_weights``' scheme) per
 tile, summed over the tiles under the truncation window; smaller footprints use the direct P-NDF;
-footprints with ``sigma_p >= wide_tiles * T`` use the tile-independent NDF of the expected tiling
-(every tile equally likely), which is the position average of the footprint NDF at any size.
+footprints with ``sigma_p >= wide_tiles * T`` the tile-type shares: the footprint's weights
+summed per tile type, times quadratics of each texel's place in its tile
+(:func:`type_moments`), weighting each tile's moment images (:func:`tile_moment_images`, the
+texels' NDFs projected on those quadratics); from ``uniform_tiles * T`` the tile-independent NDF
+of the expected tiling (every tile equally likely), the position average of the footprint NDF
+at any size.
 Optionally CP-compressed per (tile, level, angular block) (:func:`compress_tiles`). Storage: 16
 tiles' pyramids, independent of the synthesised area. Sampling: a tile contribution by mass, a
 pixel by its CDF, uniform in the pixel.
@@ -46,7 +50,7 @@ from prefilter.glints._qkernels import pixel_taps
 from prefilter.glints._simd import exp_neg
 from prefilter.glints.brdf import _ANGULAR_CUT, _exponents, _row_gaussians
 from prefilter.glints.wang_query import (TilePack, empty_pack, gauss_row, pack_float,
-                                         pack_point, segment_sums, tile_taps)
+                                         pack_point, segment_moments, tile_taps)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
                                    implicit_type, is_valid_tiling, pndf_image_implicit,
@@ -149,6 +153,11 @@ class TiledNDF:
     #: ``p x p`` pixels (``bake_tiles(angular_pool=p)``; ``resolution`` ``R / p``, same
     #: centres), which the range queries read for wide rectangles; ``None``: not made
     coarse: "TiledNDF | None" = None
+    #: summed-area tables ``(R + 1, R + 1, 16, 5)`` float32 of the tiles' in-tile moment
+    #: images (:func:`moment_tables` of :func:`tile_moment_images`), which the tile-type
+    #: shares regime weights by the footprint's moments over each tile (:func:`type_moments`);
+    #: ``None``: the shares alone
+    moment_sat: np.ndarray | None = None
 
     @property
     def n_levels(self) -> int:
@@ -203,7 +212,9 @@ class TiledNDF:
             levels = self._packs_nbytes()
         else:
             levels = sum(a.nbytes for a in self.images)
-        return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes)
+        msat = sum(0 if w is None or w.moment_sat is None else w.moment_sat.nbytes
+                   for w in (self, self.coarse))
+        return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes + msat)
 
     def _packs_nbytes(self) -> int:
         """Bytes of the packed tile and vertex pyramids, and of the coarse ones'."""
@@ -242,8 +253,8 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     wt : the 16 tiles (:func:`synthesize`).
     ndf_res, support, intrinsic_roughness : NDF images ``R x R`` over ``[-support, support]^2``.
     stride0 : level-0 centre stride in texels (``sigma0 = stride0``); default ``T // 8``.
-    wide_tiles : footprints with ``sigma_p >= wide_tiles * T`` use the tile-type shares (each
-        tile's ``sigma_p -> inf`` NDF times its share of the footprint weight); the pyramid has
+    wide_tiles : footprints with ``sigma_p >= wide_tiles * T`` use the tile-type shares and
+        in-tile moments (:func:`type_moments`, :attr:`TiledNDF.moment_sat`); the pyramid has
         the levels that resample some ``sigma_p`` below it (from ``sigma_l / sqrt(1 - 0.6^2)``
         up: ``sigma_l < 0.8 wide_tiles T``).
     uniform_tiles : footprints with ``sigma_p >= uniform_tiles * T`` use the tile-independent
@@ -315,8 +326,9 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
                for lv, sg in enumerate(sig)]
         vdone, verrs, vcdone, vcerrs = _pyramid_levels(vs, vJ, vkeep, desc="vertex pyramids",
                                                        **dict(kw, k0=vk0, k1=vk1))
+    msat = moment_tables(tile_moment_images(wt, R, S, sr))
     wn = TiledNDF(wt, done, tuple(k0), tile_means.mean(axis=0), st0, float(st0), R, S,
-                  sr, wide * T, np.argwhere(dep), tile_means, uniform * T)
+                  sr, wide * T, np.argwhere(dep), tile_means, uniform * T, moment_sat=msat)
     if rank is None:
         return wn
     wn = replace(wn, block=block, cp_error=errs, vertex_images=vdone, vertex_cp_error=verrs,
@@ -326,7 +338,7 @@ def bake_tiles(wt: WangTiles, *, ndf_res: int = 64, support: float = 0.5,
     tm = tile_means.reshape(16, R // pool, pool, R // pool, pool).mean(axis=(2, 4))
     coarse = replace(wn, images=cdone, resolution=R // pool, tile_means=tm,
                      mean=tm.mean(axis=0), cp_error=cerrs, vertex_images=vcdone,
-                     vertex_cp_error=vcerrs)
+                     vertex_cp_error=vcerrs, moment_sat=pooled_tables(msat, pool))
     return replace(wn, coarse=coarse)
 
 
@@ -540,16 +552,96 @@ def footprint_regime(wn: TiledNDF, sp: float) -> str:
     return "shares" if sp >= wn.wide_sigma else "tiles"
 
 
+#: The in-tile moments of the tile-type shares regime beyond the shares themselves: degree
+#: pairs ``(dy, dx)`` of :func:`moment_basis`'s polynomials in a texel's row and column within
+#: its tile (total degree <= 2). Position ``k + 1`` of :func:`type_moments`' columns.
+MOMENT_PAIRS = ((0, 1), (1, 0), (0, 2), (1, 1), (2, 0))
+_PAIRS = np.array(((0, 0),) + MOMENT_PAIRS, np.int64)
+
+
+def moment_basis(T: int) -> np.ndarray:
+    """``(3, T)`` discrete orthonormal polynomials of degree 0, 1, 2 on a tile's texel centres
+    ``x + 0.5``: ``(1 / T) sum_x p_a(x) p_b(x) = delta_ab``, ``p_0 = 1``, ``p_1`` increasing,
+    ``p_2`` positive at the edges."""
+    x = np.arange(T) + 0.5 - 0.5 * T
+    q, _ = np.linalg.qr(np.stack([np.ones(T), x, x * x], axis=1))
+    p = q.T * math.sqrt(T)
+    return p * np.sign(p[:, -1:])
+
+
+def tile_moment_images(wt: WangTiles, resolution: int, support: float, intrinsic_roughness: float,
+                       pairs=MOMENT_PAIRS) -> np.ndarray:
+    """``(16, K, R, R)`` float64 in-tile moment images ``E_k = (1 / T^2) sum_i p_dy(y_i)
+    p_dx(x_i) N_i`` of each tile's ``sigma_p -> inf`` elements (the texels of
+    :func:`tile_elements` as in ``tile_means``; ``pairs[k] = (dy, dx)``, :func:`moment_basis`):
+    the projection of the texels' NDFs on polynomials of their position in the tile. The pair
+    ``(0, 0)`` is ``tile_means``."""
+    T = wt.size
+    R = as_positive_int(resolution, "resolution")
+    S = as_support(support)
+    sr = as_intrinsic_roughness(intrinsic_roughness)
+    P = moment_basis(T)
+    s_el, J = tile_elements(wt)
+    sh2 = SIGMA_H**2
+    Jx, Jy = J[..., :, 0], J[..., :, 1]
+    a = sh2 * (Jx[..., 0] ** 2 + Jy[..., 0] ** 2)
+    b = sh2 * (Jx[..., 0] * Jx[..., 1] + Jy[..., 0] * Jy[..., 1])
+    d = sh2 * (Jx[..., 1] ** 2 + Jy[..., 1] ** 2)
+    K = len(pairs)
+    w = np.stack([np.outer(P[dy], P[dx]) / (T * T) for dy, dx in pairs])  # (K, T, T)
+    which = (np.arange(16)[:, None, None, None] * K + np.arange(K)[None, :, None, None])
+    which = np.broadcast_to(which, (16, K, T, T)).ravel()
+
+    def per_k(v):
+        return np.ascontiguousarray(np.broadcast_to(v[:, None], (16, K, T, T)).ravel())
+
+    h = 2.0 * S / R
+    imgs = np.zeros((16 * K, R, R))
+    _splat_elements(per_k(s_el[..., 0]), per_k(s_el[..., 1]), per_k(a), per_k(b), per_k(d),
+                    np.ascontiguousarray(np.broadcast_to(w, (16, K, T, T)).ravel()),
+                    np.ascontiguousarray(which), sr, -S, h, TRUNCATION, imgs)
+    return imgs.reshape(16, K, R, R) / (h * h)
+
+
+def moment_tables(images: np.ndarray) -> np.ndarray:
+    """Summed-area tables ``(R + 1, R + 1, 16, K)`` float32 of images ``(16, K, R, R)``, pixel
+    units, position-major (a lookup reads the 16 K values of one position together); summed
+    in float64: the signed moment images' tables lose < 3e-4 of a density to the float32
+    rounding at R = 256 (measured)."""
+    im = np.asarray(images, np.float64)
+    out = np.zeros((im.shape[2] + 1, im.shape[3] + 1) + im.shape[:2], np.float32)
+    out[1:, 1:] = im.cumsum(axis=2).cumsum(axis=3).transpose(2, 3, 0, 1)
+    return out
+
+
+def pooled_tables(sat: np.ndarray, pool: int) -> np.ndarray:
+    """:func:`moment_tables` of the images averaged over ``pool x pool`` pixels, from the
+    tables of the full-resolution ones."""
+    return np.ascontiguousarray(sat[::pool, ::pool] / np.float32(pool * pool))
+
+
 def type_shares(wn: TiledNDF, center, sigma_p, *, index=None) -> np.ndarray:
     """``(16,)`` share of one footprint's weight on each tile type: the direct P-NDF's Gaussian
     weights over its truncation window (separable sums per tile row and column), summed by
     type. Cost: O(tiles under the footprint)."""
     c, sp, index = _prepare(wn, center, sigma_p, index)
-    return _type_shares(wn, c, sp, index)
+    return _type_moments(wn, c, sp, index)[:, 0]
 
 
-def _type_shares(wn, c, sp, index):
+def type_moments(wn: TiledNDF, center, sigma_p, *, index=None) -> np.ndarray:
+    """``(16, 6)`` per tile type: the footprint's normalised weights summed over the texels of
+    that type's tiles times ``p_dy(y) p_dx(x)`` (:func:`moment_basis`, the texel's place in its
+    tile) for ``(dy, dx)`` = ``(0, 0)`` (column 0: :func:`type_shares`) and
+    :data:`MOMENT_PAIRS`. The tile-type shares regime's NDF is
+    ``sum_t sum_k moments[t, k] E_tk`` (:func:`tile_moment_images`): each texel's NDF
+    projected on quadratics of its position in the tile (exact for the shares' part)."""
+    c, sp, index = _prepare(wn, center, sigma_p, index)
+    return _type_moments(wn, c, sp, index)
+
+
+def _type_moments(wn, c, sp, index):
     T = wn.wang.size
+    P = moment_basis(T)
     tot2 = sp * sp + SIGMA_H**2
     rad = TRUNCATION * math.sqrt(tot2)
     per_axis = []
@@ -557,10 +649,29 @@ def _type_shares(wn, c, sp, index):
         x = np.arange(math.ceil(c[a] - rad - 0.5), math.floor(c[a] + rad - 0.5) + 1)
         w = np.exp(-(c[a] - x - 0.5) ** 2 / (2.0 * tot2))
         tiles, inv = np.unique(x // T, return_inverse=True)
-        per_axis.append((tiles, np.bincount(inv, weights=w) / w.sum()))
-    (ti, wi), (tj, wj) = per_axis
-    t = _lookup(wn, index, ti[None, :], tj[:, None])
-    return np.bincount(t.ravel(), weights=np.outer(wj, wi).ravel(), minlength=16)
+        m = np.stack([np.bincount(inv, weights=w * P[d, x % T]) for d in range(3)], axis=-1)
+        per_axis.append((tiles, m / w.sum()))
+    (ti, mi), (tj, mj) = per_axis
+    t = _lookup(wn, index, ti[None, :], tj[:, None]).ravel()
+    return np.stack([np.bincount(t, weights=np.outer(mj[:, dy], mi[:, dx]).ravel(),
+                                 minlength=16) for dy, dx in _PAIRS], axis=-1)
+
+
+def _moment_pixels(wn: TiledNDF, iy, ix) -> np.ndarray:
+    """``(16, 5, ...)`` values of the moment images at pixels ``(iy, ix)`` from their tables."""
+    S = wn.moment_sat.astype(np.float64)
+    v = S[iy + 1, ix + 1] - S[iy, ix + 1] - S[iy + 1, ix] + S[iy, ix]  # (..., 16, 5)
+    return np.moveaxis(v, (-2, -1), (0, 1))
+
+
+def _shares_values(wn: TiledNDF, c, sp, index, iy, ix) -> np.ndarray:
+    """The tile-type shares regime's NDF at pixels ``(iy, ix)``: ``sum_t sum_k moments[t, k]
+    E_tk``, clamped at 0 (the quadratic projection can dip below)."""
+    mom = _type_moments(wn, c, sp, index)
+    v = np.einsum("t,t...->...", mom[:, 0], wn.tile_means[:, iy, ix])
+    if wn.moment_sat is not None:
+        v = v + np.einsum("tk,tk...->...", mom[:, 1:], _moment_pixels(wn, iy, ix))
+    return np.maximum(v, 0.0)
 
 
 def _level(wn: TiledNDF, sp: float) -> int:
@@ -707,8 +818,8 @@ def contributions(wn: TiledNDF, center, sigma_p, *, index=None):
     carrying its share of the footprint mass; their sum is the footprint's NDF image. For
     footprints below ``wn.min_sigma`` (direct P-NDF) or at/above ``wn.uniform_sigma``
     (tile-independent NDF) ``ij`` is empty and ``images`` holds the one image; between
-    ``wn.wide_sigma`` and ``wn.uniform_sigma`` ``ij`` is empty and ``images (16, R, R)`` are the
-    tile types' contributions ``share_t * tile_means[t]``.
+    ``wn.wide_sigma`` and ``wn.uniform_sigma`` ``ij`` is empty and ``images (1, R, R)`` is the
+    tile-type shares regime's image (:func:`type_moments`).
     """
     c, sp, index = _prepare(wn, center, sigma_p, index)
     regime = footprint_regime(wn, sp)
@@ -718,7 +829,9 @@ def contributions(wn: TiledNDF, center, sigma_p, *, index=None):
     if regime == "uniform":
         return none, wn.mean[None].copy()
     if regime == "shares":
-        return none, _type_shares(wn, c, sp, index)[:, None, None] * wn.tile_means
+        R = wn.resolution
+        iy, ix = np.divmod(np.arange(R * R), R)
+        return none, _shares_values(wn, c, sp, index, iy, ix).reshape(1, R, R)
     m, terms = _tile_terms(wn, c, sp, index)
     ij = np.array([(x[0], x[1]) for x in terms], np.int64).reshape(-1, 2)
     imgs = _dependent_images(wn, c, sp, index, ij)
@@ -788,7 +901,7 @@ def ndf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
     elif regime == "uniform":
         v = wn.mean[iy, ix]
     elif regime == "shares":
-        v = np.einsum("t,t...->...", _type_shares(wn, c, sp, index), wn.tile_means[:, iy, ix])
+        v = _shares_values(wn, c, sp, index, iy, ix)
     else:
         m, terms = _tile_terms(wn, c, sp, index)
         ij = np.array([(x[0], x[1]) for x in terms], np.int64).reshape(-1, 2)
@@ -1246,11 +1359,76 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
     return element_density(ex, ey, a, b, d, 8.0 * trunc * trunc)
 
 
+def shares_args(wn: TiledNDF) -> tuple:
+    """``(mbasis (3, T), pairs (6, 2), msat (R + 1, R + 1, 16, 5 or 0) float32)`` of the
+    kernels' tile-type shares regime (no moment tables: shares alone)."""
+    msat = wn.moment_sat
+    if msat is None:
+        msat = np.zeros((1, 1, 16, 0), np.float32)
+    return moment_basis(wn.wang.size), _PAIRS, msat
+
+
+@njit_serial
+def shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, pairs, seed, index,
+                   n_mom):  # pragma: no cover - compiled; _type_moments
+    """``(16, n_mom)`` :func:`type_moments` of a footprint from its weights ``gxw``, ``gyw``
+    along the texel rows ``wx0 .. wx1`` and columns ``wy0 .. wy1`` (first ``n_mom`` pairs):
+    the in-tile moments per tile column and row (separable), then summed by tile type."""
+    i0, j0 = wx0 // T, wy0 // T
+    wcol = np.zeros((wx1 // T - i0 + 1, 3))
+    wrow = np.zeros((wy1 // T - j0 + 1, 3))
+    segment_moments(gxw, wx0, T, mbasis, wcol)
+    segment_moments(gyw, wy0, T, mbasis, wrow)
+    sx = 0.0
+    for a in range(wcol.shape[0]):
+        sx += wcol[a, 0]
+    sy = 0.0
+    for b in range(wrow.shape[0]):
+        sy += wrow[b, 0]
+    inv = 1.0 / (sx * sy)
+    mom = np.zeros((16, n_mom))
+    for b in range(wrow.shape[0]):
+        for a in range(wcol.shape[0]):
+            t = _nb_type(i0 + a, j0 + b, seed, index)
+            for k in range(n_mom):
+                mom[t, k] += wrow[b, pairs[k, 0]] * wcol[a, pairs[k, 1]] * inv
+    return mom
+
+
+@njit_serial
+def moment_dot(msat, mom, y, x):  # pragma: no cover - compiled
+    """``sum_t sum_k mom[t, k + 1] msat[y, x, t, k]``: the moment tables at one position,
+    weighted (the float32 entries times float64 weights: differences of the entries themselves
+    could be taken in float32 under fast-math)."""
+    v = 0.0
+    for t in range(16):
+        if mom[t, 0] == 0.0:
+            continue
+        for k in range(msat.shape[3]):
+            v += mom[t, k + 1] * msat[y, x, t, k]
+    return v
+
+
+@njit_serial
+def shares_pixel(tile_means, msat, mom, y, x):  # pragma: no cover - compiled
+    """The tile-type shares regime's NDF at pixel ``(y, x)`` before the clamp at 0:
+    ``sum_t mom[t, 0] tile_means[t] + sum_k mom[t, k + 1] E_tk`` (the moment images' pixels
+    from their tables ``msat``; :func:`_shares_values`)."""
+    v = 0.0
+    for t in range(16):
+        v += mom[t, 0] * tile_means[t, y, x]
+    if msat.shape[3]:
+        v += ((moment_dot(msat, mom, y + 1, x + 1) - moment_dot(msat, mom, y, x + 1))
+              - (moment_dot(msat, mom, y + 1, x) - moment_dot(msat, mom, y, x)))
+    return v
+
+
 @njit_parallel
 def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J,
                    depmask, seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops,
-                   block, k0, st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean, sr,
-                   lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
+                   block, k0, st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean,
+                   mbasis, pairs, msat, sr, lo, h, min_sigma, wide_sigma, uniform_sigma, q_min,
+                   tap_trunc, trunc, sh,
                    has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff, vk0, vcrops,
                    valid, out):  # pragma: no cover - compiled
     """``out[q]``: the footprint NDF ``(cx, cy, sp)[q]`` (queries ``gstart[g] ..
@@ -1333,25 +1511,13 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
             sy = 0.0
             for y in range(gyw.shape[0]):
                 sy += gyw[y]
-            if s >= wide_sigma:  # tile-type shares: weights per tile column and row, then types
-                i0, j0 = wx0 // T, wy0 // T
-                wcol = np.zeros(wx1 // T - i0 + 1)
-                wrow = np.zeros(wy1 // T - j0 + 1)
-                segment_sums(gxw, wx0, T, wcol)
-                segment_sums(gyw, wy0, T, wrow)
-                # the weight per tile type first, then each type's image once
-                share = np.zeros(16)
-                for b in range(wrow.shape[0]):
-                    for a in range(wcol.shape[0]):
-                        share[_nb_type(i0 + a, j0 + b, seed, index)] += wrow[b] * wcol[a]
+            if s >= wide_sigma:  # tile-type shares and in-tile moments, per type
+                mom = shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, pairs, seed,
+                                     index, 1 + msat.shape[3])
                 acc = 0.0
-                for t in range(16):
-                    if share[t] != 0.0:
-                        v = 0.0
-                        for k in range(nc):
-                            v += cw[k] * tile_means[t, cy_[k], cx_[k]]
-                        acc += share[t] * v
-                out[q] = acc / (sx * sy)
+                for k in range(nc):
+                    acc += cw[k] * max(shares_pixel(tile_means, msat, mom, cy_[k], cx_[k]), 0.0)
+                out[q] = acc
                 continue
             f = sh * sh / tot2
             var = s * s * sh * sh / tot2
@@ -1541,8 +1707,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), tile_planes(wn),
-        vplanes, vofs, wn.tile_means, wn.mean,
-        wn.intrinsic_roughness,
+        vplanes, vofs, wn.tile_means, wn.mean, *shares_args(wn), wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, *vertex_args(wn)[:11],
         valid, out)

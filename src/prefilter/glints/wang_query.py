@@ -255,16 +255,21 @@ def gauss_row(c, x0, x1, tot2):  # pragma: no cover - compiled
 
 
 @njit_serial
-def segment_sums(g, x0, T, out):  # pragma: no cover - compiled
-    """``out[a] = sum of g[x - x0]`` over the texels ``x`` of tile ``x0 // T + a`` (``g`` as
-    :func:`gauss_row`; no integer division per texel)."""
+def segment_moments(g, x0, T, P, out):  # pragma: no cover - compiled
+    """``out[a, d] = sum of g[x - x0] P[d, x - (i0 + a) T]`` over the texels ``x`` of tile
+    ``i0 + a = x0 // T + a``: the footprint weights' in-tile moments along one axis (``g`` as
+    :func:`gauss_row`, ``P (D, T)`` the polynomials of
+    :func:`prefilter.glints.wang_ndf.moment_basis`; ``d = 0`` the plain sums)."""
     i0 = x0 // T
     x1 = x0 + g.shape[0] - 1
     for a in range(out.shape[0]):
-        acc = 0.0
-        for x in range(max(x0, (i0 + a) * T), min(x1, (i0 + a) * T + T - 1) + 1):
-            acc += g[x - x0]
-        out[a] = acc
+        for d in range(out.shape[1]):
+            out[a, d] = 0.0
+        base = (i0 + a) * T
+        for x in range(max(x0, base), min(x1, base + T - 1) + 1):
+            w = g[x - x0]
+            for d in range(out.shape[1]):
+                out[a, d] += w * P[d, x - base]
 
 
 @njit_serial

@@ -34,10 +34,11 @@ from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_cova
                                    element_node, element_nodes, element_split, normal_cdf,
                                    principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
-                                      _nb_type, _vertex_tables, dep_gaussian,
+                                      _vertex_tables, dep_gaussian, moment_dot,
+                                      shares_args, shares_moments,
                                       dependent_neighbours, footprint_rows, level_window,
                                       _valid, vertex_args, vertex_config, vertex_window)
-from prefilter.glints.wang_query import (empty_pack, gauss_row, segment_sums, type_codes,
+from prefilter.glints.wang_query import (empty_pack, gauss_row, type_codes,
                                          type_weights)
 from prefilter.jit import njit_parallel, njit_serial, prange, serial
 
@@ -75,6 +76,21 @@ def _sat_at(S, y, x):  # pragma: no cover - compiled
     ty, tx = y - i, x - j
     return ((1 - ty) * ((1 - tx) * S[i, j] + tx * S[i, j + 1])
             + ty * ((1 - tx) * S[i + 1, j] + tx * S[i + 1, j + 1]))
+
+
+@njit_serial
+def _moments_at(msat, mom, y, x):  # pragma: no cover - compiled
+    """:func:`_sat_at` of the moment tables weighted by ``mom`` (``wang_ndf.moment_dot``)."""
+    R = msat.shape[0] - 1
+    y = min(max(y, 0.0), float(R))
+    x = min(max(x, 0.0), float(R))
+    i = min(int(y), R - 1)
+    j = min(int(x), R - 1)
+    ty, tx = y - i, x - j
+    return ((1 - ty) * ((1 - tx) * moment_dot(msat, mom, i, j)
+                        + tx * moment_dot(msat, mom, i, j + 1))
+            + ty * ((1 - tx) * moment_dot(msat, mom, i + 1, j)
+                    + tx * moment_dot(msat, mom, i + 1, j + 1)))
 
 
 @njit_serial
@@ -147,7 +163,7 @@ def _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, x0, x1, y0, y1,
 @njit_parallel
 def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, cq,
                    wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, vel,
-                   sat,
+                   sat, mbasis, pairs, msat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    point_sr, proto, has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff,
                    vk0, vcrops, vPa, vPb, has_coarse, cPa, cPb, ccq, cwsc, cbidx, cmeta, cgoff,
@@ -208,32 +224,30 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                 ubj0, ubj1 = min(ubj0, bj0), max(ubj1, bj1)
         tot2, rad, wx0, wx1, wy0, wy1 = footprint_rows(c0, c1, s, sh, trunc)
         if s >= wide_sigma:
-            gxw = gauss_row(c0, wx0, wx1, tot2)
-            gyw = gauss_row(c1, wy0, wy1, tot2)
-            sx = gxw.sum()
-            sy = gyw.sum()
-            share = np.zeros(17)
             if s >= uniform_sigma:
-                share[16] = 1.0
-            else:  # tile-type shares: weights per tile column and row, then types
-                i0, j0 = wx0 // T, wy0 // T
-                wcol = np.zeros(wx1 // T - i0 + 1)
-                wrow = np.zeros(wy1 // T - j0 + 1)
-                segment_sums(gxw, wx0, T, wcol)
-                segment_sums(gyw, wy0, T, wrow)
-                for b in range(wrow.shape[0]):
-                    for a in range(wcol.shape[0]):
-                        share[_nb_type(i0 + a, j0 + b, seed, index)] += (wrow[b] * wcol[a]
-                                                                         / (sx * sy))
+                for k in range(K):
+                    if act[q, k] and rbk[k, 0] <= rbk[k, 1]:
+                        out[q, k] = _sat_rect(sat[16], rcl[k, 2], rcl[k, 3], rcl[k, 0],
+                                              rcl[k, 1]) / area[k]
+                continue
+            # tile-type shares and in-tile moments (wang_ndf.type_moments)
+            mom = shares_moments(wx0, wx1, wy0, wy1, gauss_row(c0, wx0, wx1, tot2),
+                                 gauss_row(c1, wy0, wy1, tot2), T, mbasis, pairs, seed, index,
+                                 1 + msat.shape[3])
             for k in range(K):
                 if not act[q, k] or rbk[k, 0] > rbk[k, 1]:
                     continue
                 v = 0.0
-                for t in range(17):
-                    if share[t] != 0.0:
-                        v += share[t] * _sat_rect(sat[t], rcl[k, 2], rcl[k, 3], rcl[k, 0],
-                                                  rcl[k, 1])
-                out[q, k] = v / area[k]
+                for t in range(16):
+                    if mom[t, 0] != 0.0:
+                        v += mom[t, 0] * _sat_rect(sat[t], rcl[k, 2], rcl[k, 3], rcl[k, 0],
+                                                   rcl[k, 1])
+                if msat.shape[3]:
+                    v += ((_moments_at(msat, mom, rcl[k, 3], rcl[k, 1])
+                           - _moments_at(msat, mom, rcl[k, 2], rcl[k, 1]))
+                          - (_moments_at(msat, mom, rcl[k, 3], rcl[k, 0])
+                             - _moments_at(msat, mom, rcl[k, 2], rcl[k, 0])))
+                out[q, k] = max(v, 0.0) / area[k]
             continue
         (m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
          kxh) = level_window(s, c0, c1, sigma0, st0, L, q_min, tap_trunc, crops, k0, rad, T,
@@ -441,7 +455,7 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
                                             np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_tables(wn)[0],
-        summed_tables(wn), -wn.support,
+        summed_tables(wn), *shares_args(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
         _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, *vertex_args(wn),
         *_coarse_args(wn), _valid(idx), out, done)

@@ -68,7 +68,7 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: 16 (66.1 MB, 2e-5 / 1.5e-4 / 5e-5), or 0 (float32, format version 1); docs/glints-wang.md,
 #: "Storage (version 2)".
 WANG_SETTINGS = dict(tile=32, band=4.0, seed=0, ndf_res=256, support=1.0,
-                     intrinsic_roughness=2 * DEFAULT_ROUGHNESS, stride0=None, wide_tiles=1.0,
+                     intrinsic_roughness=2 * DEFAULT_ROUGHNESS, stride0=None, wide_tiles=0.5,
                      uniform_tiles=8.0, rank=16, block=16, n_iter_max=50, bilinear=True,
                      code_bits=8)
 _TILED: dict = {}

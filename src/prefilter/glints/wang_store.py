@@ -41,11 +41,15 @@ level) in the settings; and, with ``settings.angular_pool`` ``p > 0``, the coars
 pixels, the same centres) of the tiles and of the vertices, ``g`` and ``gv`` before the same
 names (``gmask_l``, ..., ``gvc_scale_l``), their errors ``coarse_cp_error``,
 ``coarse_vertex_cp_error``.
-:func:`save_tiles` writes version 3 for pyramids with vertex pyramids, version 2 for those
+Version 4 is version 3 plus ``moment_sat (R + 1, R + 1, 16, 5)`` float32, the summed-area
+tables of the tiles' in-tile moment images (:func:`~prefilter.glints.wang_ndf.moment_tables`
+of :func:`~prefilter.glints.wang_ndf.tile_moment_images`: the tile-type shares regime's
+corrections, signed). Files of versions 1 to 3 get them computed from their tiles at load.
+:func:`save_tiles` writes version 4 for pyramids with vertex pyramids, version 2 for those
 without; ``code_bits`` 0 (version 1) writes no vertex pyramids (the queries then compute the
 dependent texels exactly, as for uncompressed pyramids).
 
-A loaded version-2 or 3 file is held as its codes, packed for the query kernels
+A loaded version-2, 3 or 4 file is held as its codes, packed for the query kernels
 (:func:`prefilter.glints.wang_query.pack_codes`; :attr:`TiledNDF.nbytes` counts the pack), the
 float32 triple decoded from the pack on first use by the per-footprint NumPy paths only.
 Version 1 files still load.
@@ -69,11 +73,12 @@ from prefilter.errors import PrefilterError, TableFileError
 from prefilter.glints.pndf import as_intrinsic_roughness, as_support
 from prefilter.glints.store import CODE_DTYPES, code_levels
 from prefilter.glints.wang import WangTiles
-from prefilter.glints.wang_ndf import TiledNDF, dependent_texels
+from prefilter.glints.wang_ndf import (TiledNDF, dependent_texels, moment_tables, pooled_tables,
+                                      tile_moment_images)
 from prefilter.glints.wang_query import DecodedLevels, pack_codes
 
 FORMAT = "prefilter-glints-wang"
-VERSION = 3
+VERSION = 4
 WHAT = "Wang tiles file"
 #: ``code_bits`` of :func:`save_tiles`: 0 = float32 factors (version 1), 8 / 16 = codes
 CODE_BITS = (0, 8, 16)
@@ -135,10 +140,10 @@ def _level_arrays(wn: TiledNDF, lv: int, code_bits: int, vertex: bool = False) -
 
 def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> None:
     """Write ``wn`` (compressed or not) to the ``.npz`` at ``path`` atomically (module docstring
-    for the layout). ``code_bits``: 8 or 16, compressed pyramids in version 3 (integer codes of
-    the CP factors, with the vertex pyramids; version 2 without them); 0, the float32 factors
-    (version 1, no vertex pyramids). Uncompressed pyramids are written in version 1 whatever
-    ``code_bits``."""
+    for the layout). ``code_bits``: 8 or 16, compressed pyramids in version 4 (integer codes of
+    the CP factors, with the vertex pyramids and the moment tables; version 2 without them);
+    0, the float32 factors (version 1, no vertex pyramids). Uncompressed pyramids are written
+    in version 1 whatever ``code_bits``."""
     if not isinstance(wn, TiledNDF):
         raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
     if wn.tile_means is None:
@@ -147,8 +152,8 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
         raise PrefilterError(f"code_bits: expected one of {CODE_BITS}, got {code_bits!r}")
     code_bits = int(code_bits) if wn.block else 0
     vertex = bool(code_bits and wn.vertex_images)
-    version = (3 if vertex else 2) if code_bits else 1
-    cwn = wn.coarse if version == 3 and wn.coarse is not None and wn.coarse.vertex_images \
+    version = (VERSION if vertex else 2) if code_bits else 1
+    cwn = wn.coarse if version == VERSION and wn.coarse is not None and wn.coarse.vertex_images \
         else None
     # version 1: the arrays in the order (hence the bytes) of the files written before version 2
     arrays = {"tiles": np.asarray(wn.wang.tiles, np.float64)}
@@ -158,6 +163,8 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
     else:
         arrays.update(tile_means=np.asarray(wn.tile_means, np.float32))
     arrays["dependent"] = np.asarray(wn.dependent, np.int64)
+    if version == VERSION:
+        arrays["moment_sat"] = np.asarray(_moment_sat(wn), np.float32)
     for lv in range(wn.n_levels):
         arrays.update(_level_arrays(wn, lv, code_bits))
         if vertex:
@@ -175,7 +182,7 @@ def save_tiles(wn: TiledNDF, path: str | os.PathLike, *, code_bits: int = 8) -> 
                     cp_error=[float(e) for e in wn.cp_error])
     if version >= 2:
         settings.update(code_bits=code_bits, crops=[wn.crop(lv) for lv in range(wn.n_levels)])
-    if version == 3:
+    if version == VERSION:
         settings.update(vertex_cp_error=[float(e) for e in wn.vertex_cp_error],
                         vertex_k0=[int(k) for k in wn.vertex_k0],
                         vertex_crops=[wn.vertex_crop(lv) for lv in range(wn.n_levels)],
@@ -206,8 +213,8 @@ def _header(path, data) -> dict:
     if header.get("format") != FORMAT:
         _fail(path, f"header.format: expected {FORMAT!r}, got {header.get('format')!r}")
     version = header.get("version")
-    if isinstance(version, bool) or version not in (1, 2, VERSION):
-        _fail(path, f"header.version: expected 1, 2 or {VERSION}, got {version!r}")
+    if isinstance(version, bool) or version not in (1, 2, 3, VERSION):
+        _fail(path, f"header.version: expected 1, 2, 3 or {VERSION}, got {version!r}")
     return header
 
 
@@ -229,7 +236,7 @@ def _settings(path, header) -> dict:
                    crops=[int(n) for n in st["crops"]] if v2 else None, pool=0,
                    vertex_cp_error=[], vertex_k0=[], vertex_crops=[], coarse_cp_error=[],
                    coarse_vertex_cp_error=[])
-        if header["version"] == 3:
+        if header["version"] >= 3:
             out.update(vertex_cp_error=[float(e) for e in st["vertex_cp_error"]],
                        vertex_k0=[int(k) for k in st["vertex_k0"]],
                        vertex_crops=[int(n) for n in st["vertex_crops"]],
@@ -265,7 +272,7 @@ def _settings(path, header) -> dict:
         if len(out["crops"]) != L or min(out["crops"]) < 1:
             _fail(path, f"header.settings.crops: expected {L} crop sizes >= 1 (one per level), "
                         f"got {out['crops']}")
-    if out["version"] == 3:
+    if out["version"] >= 3:
         for k in ("vertex_cp_error", "vertex_k0", "vertex_crops"):
             if len(out[k]) != L:
                 _fail(path, f"header.settings.{k}: expected one per level ({L}), got "
@@ -315,6 +322,8 @@ def _expected(st) -> dict:
     v2 = st["version"] >= 2
     out = {"tiles": ("<f8", (16, T, T, 3)), "tile_means": ("<f4" if v2 else "<f8", (16, R, R)),
            "dependent": ("<i8", (-1, 2))}
+    if st["version"] >= 4:
+        out["moment_sat"] = ("<f4", (R + 1, R + 1, 16, 5))
     if not v2:
         out["mean"] = ("<f8", (R, R))
     nb2 = (R // B) ** 2 if B else 0
@@ -358,7 +367,7 @@ def _check_arrays(path, data, st) -> None:
                         f"{st['shapes'][k]}, got {a.dtype} of shape {a.shape}")
         if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
             _fail(path, f"{k}: expected finite values, got NaN or inf")
-        if k != "tiles" and np.any(a < 0):
+        if k not in ("tiles", "moment_sat") and np.any(a < 0):
             _fail(path, f"{k}: expected non-negative values")
     for lv in range(len(st["k0"])):
         if st["version"] >= 2:
@@ -402,6 +411,10 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         _fail(path, "dependent: expected the dependent texels of the stored tiles")
     verify_npz(path, WHAT, raw, format_name=FORMAT, format_version=st["version"])
     L, B = len(st["k0"]), st["B"]
+    # the tile-type shares regime's moment tables: stored from version 4, computed from the
+    # tiles for older files (the same function of the tiles as the bake's)
+    msat = (data["moment_sat"] if st["version"] >= 4 else
+            moment_tables(tile_moment_images(wang, st["R"], st["S"], st["sr"])))
     packed = vpacked = coarse = None
     vimages = ()
     if st["version"] >= 2:
@@ -409,13 +422,13 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
         # float32 triples decoded on first use by the per-footprint paths only
         packed = _packed(data, st, "")
         images = DecodedLevels(packed)
-        if st["version"] == 3:
+        if st["version"] >= 3:
             vpacked = _packed(data, st, "v")
             vimages = DecodedLevels(vpacked)
         tile_means = data["tile_means"]
         mean = tile_means.astype(np.float64).mean(axis=0)
-        if st["version"] == 3 and st["pool"]:
-            coarse = _coarse(data, st, tile_means, wang)
+        if st["version"] >= 3 and st["pool"]:
+            coarse = _coarse(data, st, tile_means, wang, msat)
     else:
         images = tuple((data[f"A_{lv}"], data[f"B_{lv}"], data[f"C_{lv}"]) if B
                        else data[f"images_{lv}"] for lv in range(L))
@@ -423,11 +436,21 @@ def load_tiles(path: str | os.PathLike) -> TiledNDF:
     return TiledNDF(wang, images, tuple(st["k0"]), mean, st["stride0"], st["sigma0"],
                     st["R"], st["S"], st["sr"], st["wide"], data["dependent"],
                     tile_means, st["uniform"], B, tuple(st["cp_error"]), packed, vimages,
-                    tuple(st["vertex_cp_error"]), vpacked, tuple(st["vertex_k0"]), coarse)
+                    tuple(st["vertex_cp_error"]), vpacked, tuple(st["vertex_k0"]), coarse,
+                    msat)
 
 
-def _coarse(data, st, tile_means, wang) -> TiledNDF:
-    """The coarse pyramids of a version-3 file with ``angular_pool``, packed as stored."""
+def _moment_sat(wn: TiledNDF) -> np.ndarray:
+    """``wn``'s moment tables, computed from its tiles when it has none (a ``TiledNDF`` built
+    by hand)."""
+    if wn.moment_sat is not None:
+        return wn.moment_sat
+    return moment_tables(tile_moment_images(wn.wang, wn.resolution, wn.support,
+                                            wn.intrinsic_roughness))
+
+
+def _coarse(data, st, tile_means, wang, msat) -> TiledNDF:
+    """The coarse pyramids of a version-3 or 4 file with ``angular_pool``, packed as stored."""
     B, p = st["B"], st["pool"]
     Rc = st["R"] // p
     packs = [_packed(data, st, v) for v in ("g", "gv")]
@@ -436,4 +459,5 @@ def _coarse(data, st, tile_means, wang) -> TiledNDF:
                     tuple(st["k0"]), tm.mean(axis=0), st["stride0"], st["sigma0"], Rc, st["S"],
                     st["sr"], st["wide"], data["dependent"], tm, st["uniform"], B,
                     tuple(st["coarse_cp_error"]), packs[0], DecodedLevels(packs[1]),
-                    tuple(st["coarse_vertex_cp_error"]), packs[1], tuple(st["vertex_k0"]))
+                    tuple(st["coarse_vertex_cp_error"]), packs[1], tuple(st["vertex_k0"]),
+                    None, pooled_tables(msat, p))
