@@ -302,7 +302,7 @@ def test_tiled_constant_storage(wn):
     T = wn.wang.size
     per_tile = sum(a[0].nbytes for a in wn.images)
     assert before == (wn.wang.nbytes + 16 * per_tile + wn.mean.nbytes + wn.tile_means.nbytes
-                      + wn.moment_sat.nbytes)
+                      + wn.means_px.nbytes + wn.moment_sat.nbytes)
     for c in ((10.0, 10.0), (1e6 + 0.3, -3e5), (-7e7, 2e7)):
         img = ndf_image(wn, c, 3.0)
         assert np.all(np.isfinite(img))
@@ -352,7 +352,7 @@ def test_compressed_tiles(wn):
               + 8 * (3 * wc.n_levels + 2))
     assert pk.nbytes == expect
     assert wc.nbytes == (wn.wang.nbytes + pk.nbytes + wn.mean.nbytes + wn.tile_means.nbytes
-                         + wn.moment_sat.nbytes)
+                         + wn.means_px.nbytes + wn.moment_sat.nbytes)
     assert wc.nbytes < wn.nbytes / 5
     assert all(0.0 < e < 0.5 for e in wc.cp_error)
     g = np.linspace(-SUPPORT, SUPPORT, R, endpoint=False) + SUPPORT / R

@@ -104,7 +104,7 @@ def test_round_trip_codes(wc, tmp_path, bits):
     # the codes are held as stored (the kernels read them): less than the float32 factors
     assert back.pack.nbytes < wc.pack.nbytes and back.pack.cq.dtype == CODE_DTYPES[bits]
     assert back.nbytes == back.wang.nbytes + back.pack.nbytes + back.mean.nbytes \
-        + back.tile_means.nbytes + back.moment_sat.nbytes
+        + back.tile_means.nbytes + back.means_px.nbytes + back.moment_sat.nbytes
     half = 0.5 / (2**bits - 1)
     tol = half + 1e-6  # float32 decoding
     for lv in range(wc.n_levels):
@@ -223,7 +223,7 @@ def test_round_trip_vertex_pyramids(wn, tmp_path):
     back = load_tiles(path)
     assert back.vertex_packed is not None and back.vertex_pack.cq.dtype == np.uint8
     assert back.nbytes == back.wang.nbytes + back.pack.nbytes + back.vertex_pack.nbytes \
-        + back.mean.nbytes + back.tile_means.nbytes + back.moment_sat.nbytes
+        + back.mean.nbytes + back.tile_means.nbytes + back.means_px.nbytes + back.moment_sat.nbytes
     rng = np.random.default_rng(5)
     c = rng.uniform(-20, 40, (400, 2))
     sp = rng.uniform(wb.min_sigma, wb.wide_sigma, 400)

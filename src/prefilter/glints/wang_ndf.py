@@ -53,7 +53,8 @@ from prefilter.glints.wang_query import (TilePack, empty_pack, gauss_row, pack_f
                                          pack_point, segment_moments, tile_taps)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
-                                   implicit_type, is_valid_tiling, pndf_image_implicit,
+                                   hash_bits, implicit_type, is_valid_tiling,
+                                   pndf_image_implicit,
                                    tile_index, tile_window)
 
 
@@ -177,6 +178,16 @@ class TiledNDF:
         return hit
 
     @property
+    def means_px(self) -> np.ndarray:
+        """``tile_means`` position-major, ``(R, R, 16)`` float64 (the point kernels' tile-type
+        shares read a pixel's 16 values together); built once per instance."""
+        hit = self.__dict__.get("_means_px")
+        if hit is None:
+            hit = np.ascontiguousarray(np.asarray(self.tile_means, np.float64).transpose(1, 2, 0))
+            object.__setattr__(self, "_means_px", hit)
+        return hit
+
+    @property
     def vertex_pack(self) -> TilePack | None:
         """:attr:`pack` of the vertex pyramids (``None`` without them)."""
         if self.vertex_packed is not None:
@@ -205,7 +216,8 @@ class TiledNDF:
         """Bytes in memory of what the batched queries (:func:`ndf_points`, the renderer) read:
         tiles, per-tile pyramids (float32 images, or the packed CP factors of :attr:`pack`:
         the integer codes of a version-2 file, the float32 factors otherwise), the mean and
-        per-tile images (no per-area data). The float32 CP triples of a loaded file, decoded
+        per-tile images (and their position-major float64 copy, :attr:`means_px`), the moment
+        tables (no per-area data). The float32 CP triples of a loaded file, decoded
         on first use by the per-footprint NumPy paths (:func:`ndf`, :func:`contributions`,
         :func:`sample`), are not counted."""
         if self.block:
@@ -214,7 +226,8 @@ class TiledNDF:
             levels = sum(a.nbytes for a in self.images)
         msat = sum(0 if w is None or w.moment_sat is None else w.moment_sat.nbytes
                    for w in (self, self.coarse))
-        return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes + msat)
+        return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes
+                   + self.tile_means.size * 8 + msat)
 
     def _packs_nbytes(self) -> int:
         """Bytes of the packed tile and vertex pyramids, and of the coarse ones'."""
@@ -972,11 +985,25 @@ def _nb_type(i, j, seed, index):  # pragma: no cover - compiled; _lookup
 
 @njit_serial
 def _nb_types(i0, i1, j0, j1, seed, index):  # pragma: no cover - compiled
-    """Tile types ``(j1 - j0 + 1, i1 - i0 + 1)`` of a block of tiles (hashed once per query)."""
-    out = np.empty((j1 - j0 + 1, i1 - i0 + 1), np.int64)
-    for j in range(j0, j1 + 1):
-        for i in range(i0, i1 + 1):
-            out[j - j0, i - i0] = _nb_type(i, j, seed, index)
+    """Tile types ``(j1 - j0 + 1, i1 - i0 + 1)`` of a block of tiles (:func:`_nb_type`); on
+    the implicit tiling each grid vertex hashed once (``implicit_type`` hashes three per
+    tile)."""
+    ny, nx = j1 - j0 + 1, i1 - i0 + 1
+    out = np.empty((ny, nx), np.int64)
+    if index.shape[0] > 0:
+        for j in range(j0, j1 + 1):
+            for i in range(i0, i1 + 1):
+                out[j - j0, i - i0] = index[j % index.shape[0], i % index.shape[1]]
+        return out
+    right = np.empty((ny + 1, nx + 1), np.int64)  # colour of each vertex's right edge
+    below = np.empty((ny + 1, nx + 1), np.int64)  # and of its lower edge
+    for j in range(ny + 1):
+        for i in range(nx + 1):
+            right[j, i], below[j, i] = hash_bits(i0 + i, j0 + j, seed)
+    for j in range(ny):
+        for i in range(nx):
+            out[j, i] = (right[j, i] + 2 * right[j + 1, i] + 4 * below[j, i]
+                         + 8 * below[j, i + 1])
     return out
 
 
@@ -1360,16 +1387,16 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 
 
 def shares_args(wn: TiledNDF) -> tuple:
-    """``(mbasis (3, T), pairs (6, 2), msat (R + 1, R + 1, 16, 5 or 0) float32)`` of the
+    """``(mbasis (3, T), msat (R + 1, R + 1, 16, 5 or 0) float32)`` of the
     kernels' tile-type shares regime (no moment tables: shares alone)."""
     msat = wn.moment_sat
     if msat is None:
         msat = np.zeros((1, 1, 16, 0), np.float32)
-    return moment_basis(wn.wang.size), _PAIRS, msat
+    return moment_basis(wn.wang.size), msat
 
 
 @njit_serial
-def shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, pairs, seed, index,
+def shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, seed, index,
                    n_mom):  # pragma: no cover - compiled; _type_moments
     """``(16, n_mom)`` :func:`type_moments` of a footprint from its weights ``gxw``, ``gyw``
     along the texel rows ``wx0 .. wx1`` and columns ``wy0 .. wy1`` (first ``n_mom`` pairs):
@@ -1377,6 +1404,7 @@ def shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, pairs, seed, index,
     i0, j0 = wx0 // T, wy0 // T
     wcol = np.zeros((wx1 // T - i0 + 1, 3))
     wrow = np.zeros((wy1 // T - j0 + 1, 3))
+    types = _nb_types(i0, wx1 // T, j0, wy1 // T, seed, index)
     segment_moments(gxw, wx0, T, mbasis, wcol)
     segment_moments(gyw, wy0, T, mbasis, wrow)
     sx = 0.0
@@ -1385,13 +1413,32 @@ def shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, pairs, seed, index,
     sy = 0.0
     for b in range(wrow.shape[0]):
         sy += wrow[b, 0]
-    inv = 1.0 / (sx * sy)
+    # per tile row, the column moments summed by type, then times the row's moments
     mom = np.zeros((16, n_mom))
+    col = np.zeros((16, 3))
     for b in range(wrow.shape[0]):
+        col[:] = 0.0
         for a in range(wcol.shape[0]):
-            t = _nb_type(i0 + a, j0 + b, seed, index)
-            for k in range(n_mom):
-                mom[t, k] += wrow[b, pairs[k, 0]] * wcol[a, pairs[k, 1]] * inv
+            t = types[b, a]
+            col[t, 0] += wcol[a, 0]
+            col[t, 1] += wcol[a, 1]
+            col[t, 2] += wcol[a, 2]
+        r0, r1, r2 = wrow[b, 0], wrow[b, 1], wrow[b, 2]
+        for t in range(16):
+            c0 = col[t, 0]
+            if c0 == 0.0:
+                continue
+            mom[t, 0] += r0 * c0
+            if n_mom > 1:  # MOMENT_PAIRS, unrolled
+                mom[t, 1] += r0 * col[t, 1]
+                mom[t, 2] += r1 * c0
+                mom[t, 3] += r0 * col[t, 2]
+                mom[t, 4] += r1 * col[t, 1]
+                mom[t, 5] += r2 * c0
+    inv = 1.0 / (sx * sy)
+    for t in range(16):
+        for k in range(n_mom):
+            mom[t, k] *= inv
     return mom
 
 
@@ -1410,13 +1457,21 @@ def moment_dot(msat, mom, y, x):  # pragma: no cover - compiled
 
 
 @njit_serial
-def shares_pixel(tile_means, msat, mom, y, x):  # pragma: no cover - compiled
+def shares_means(means_px, mom, y, x):  # pragma: no cover - compiled
+    """``sum_t mom[t, 0] tile_means[t, y, x]``: the plain shares' part of a pixel
+    (``means_px``: :attr:`TiledNDF.means_px`)."""
+    v = 0.0
+    for t in range(16):
+        v += mom[t, 0] * means_px[y, x, t]
+    return v
+
+
+@njit_serial
+def shares_pixel(means_px, msat, mom, y, x):  # pragma: no cover - compiled
     """The tile-type shares regime's NDF at pixel ``(y, x)`` before the clamp at 0:
     ``sum_t mom[t, 0] tile_means[t] + sum_k mom[t, k + 1] E_tk`` (the moment images' pixels
     from their tables ``msat``; :func:`_shares_values`)."""
-    v = 0.0
-    for t in range(16):
-        v += mom[t, 0] * tile_means[t, y, x]
+    v = shares_means(means_px, mom, y, x)
     if msat.shape[3]:
         v += ((moment_dot(msat, mom, y + 1, x + 1) - moment_dot(msat, mom, y, x + 1))
               - (moment_dot(msat, mom, y + 1, x) - moment_dot(msat, mom, y, x)))
@@ -1426,8 +1481,8 @@ def shares_pixel(tile_means, msat, mom, y, x):  # pragma: no cover - compiled
 @njit_parallel
 def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, tiles, el_s, el_J,
                    depmask, seed, index, images, Fa, Fb, wsc, cq, bidx, meta, offs, goff, crops,
-                   block, k0, st0, sigma0, dep, depn, planes, vplanes, vofs, tile_means, mean,
-                   mbasis, pairs, msat, sr, lo, h, min_sigma, wide_sigma, uniform_sigma, q_min,
+                   block, k0, st0, sigma0, dep, depn, planes, vplanes, vofs, means_px, mean,
+                   mbasis, msat, sr, lo, h, min_sigma, wide_sigma, uniform_sigma, q_min,
                    tap_trunc, trunc, sh,
                    has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff, vk0, vcrops,
                    valid, out):  # pragma: no cover - compiled
@@ -1512,11 +1567,26 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
             for y in range(gyw.shape[0]):
                 sy += gyw[y]
             if s >= wide_sigma:  # tile-type shares and in-tile moments, per type
-                mom = shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, pairs, seed,
+                mom = shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, seed,
                                      index, 1 + msat.shape[3])
                 acc = 0.0
-                for k in range(nc):
-                    acc += cw[k] * max(shares_pixel(tile_means, msat, mom, cy_[k], cx_[k]), 0.0)
+                if nc == 4 and msat.shape[3]:
+                    # a 2 x 2 block of pixels: the 3 x 3 table positions of its corners once
+                    y0, x0 = cy_[0], cx_[0]
+                    dots = np.empty((3, 3))
+                    for i in range(3):
+                        for j in range(3):
+                            dots[i, j] = moment_dot(msat, mom, y0 + i, x0 + j)
+                    for k in range(4):
+                        i, j = cy_[k] - y0, cx_[k] - x0
+                        v = (shares_means(means_px, mom, cy_[k], cx_[k])
+                             + ((dots[i + 1, j + 1] - dots[i, j + 1])
+                                - (dots[i + 1, j] - dots[i, j])))
+                        acc += cw[k] * max(v, 0.0)
+                else:
+                    for k in range(nc):
+                        acc += cw[k] * max(shares_pixel(means_px, msat, mom, cy_[k], cx_[k]),
+                                           0.0)
                 out[q] = acc
                 continue
             f = sh * sh / tot2
@@ -1707,7 +1777,7 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         np.array([wn.crop(lv) for lv in range(wn.n_levels)], np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), tile_planes(wn),
-        vplanes, vofs, wn.tile_means, wn.mean, *shares_args(wn), wn.intrinsic_roughness,
+        vplanes, vofs, wn.means_px, wn.mean, *shares_args(wn), wn.intrinsic_roughness,
         -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
         wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, *vertex_args(wn)[:11],
         valid, out)

@@ -258,18 +258,29 @@ def gauss_row(c, x0, x1, tot2):  # pragma: no cover - compiled
 def segment_moments(g, x0, T, P, out):  # pragma: no cover - compiled
     """``out[a, d] = sum of g[x - x0] P[d, x - (i0 + a) T]`` over the texels ``x`` of tile
     ``i0 + a = x0 // T + a``: the footprint weights' in-tile moments along one axis (``g`` as
-    :func:`gauss_row`, ``P (D, T)`` the polynomials of
-    :func:`prefilter.glints.wang_ndf.moment_basis`; ``d = 0`` the plain sums)."""
+    :func:`gauss_row`, ``P (3, T)`` the polynomials of
+    :func:`prefilter.glints.wang_ndf.moment_basis`, ``P[0] = 1``: ``d = 0`` the plain sums)."""
     i0 = x0 // T
     x1 = x0 + g.shape[0] - 1
+    p1 = P[1]
+    p2 = P[2]
     for a in range(out.shape[0]):
-        for d in range(out.shape[1]):
-            out[a, d] = 0.0
         base = (i0 + a) * T
-        for x in range(max(x0, base), min(x1, base + T - 1) + 1):
-            w = g[x - x0]
-            for d in range(out.shape[1]):
-                out[a, d] += w * P[d, x - base]
+        lo = max(x0, base)
+        n = min(x1, base + T - 1) + 1 - lo
+        gs = g[lo - x0:lo - x0 + n]
+        q1 = p1[lo - base:lo - base + n]
+        q2 = p2[lo - base:lo - base + n]
+        s0 = 0.0
+        s1 = 0.0
+        s2 = 0.0
+        for k in range(n):
+            s0 += gs[k]
+            s1 += gs[k] * q1[k]
+            s2 += gs[k] * q2[k]
+        out[a, 0] = s0
+        out[a, 1] = s1
+        out[a, 2] = s2
 
 
 @njit_serial

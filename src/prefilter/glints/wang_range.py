@@ -163,7 +163,7 @@ def _rect_split(mx, my, a, b, d, nu1, siso, kappa, w, x0, x1, y0, y1,
 @njit_parallel
 def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, cq,
                    wsc, Fa, Fb, bidx, meta, offs, goff, crops, B, k0, st0, sigma0, dep, depn, vel,
-                   sat, mbasis, pairs, msat,
+                   sat, mbasis, msat,
                    lo, h, min_sigma, wide_sigma, uniform_sigma, q_min, tap_trunc, trunc, sh,
                    point_sr, proto, has_vertex, vFa, vFb, vwsc, vcq, vbidx, vmeta, voffs, vgoff,
                    vk0, vcrops, vPa, vPb, has_coarse, cPa, cPb, ccq, cwsc, cbidx, cmeta, cgoff,
@@ -232,7 +232,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                 continue
             # tile-type shares and in-tile moments (wang_ndf.type_moments)
             mom = shares_moments(wx0, wx1, wy0, wy1, gauss_row(c0, wx0, wx1, tot2),
-                                 gauss_row(c1, wy0, wy1, tot2), T, mbasis, pairs, seed, index,
+                                 gauss_row(c1, wy0, wy1, tot2), T, mbasis, seed, index,
                                  1 + msat.shape[3])
             for k in range(K):
                 if not act[q, k] or rbk[k, 0] > rbk[k, 1]:
