@@ -34,8 +34,8 @@ from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_cova
                                    element_node, element_nodes, element_split, normal_cdf,
                                    principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
-                                      _vertex_tables, dep_gaussian, moment_dot,
-                                      shares_args, shares_moments,
+                                      _vertex_tables, dep_gaussian, shares_args,
+                                      shares_moments,
                                       dependent_neighbours, footprint_rows, level_window,
                                       _valid, vertex_args, vertex_config, vertex_window)
 from prefilter.glints.wang_query import (empty_pack, gauss_row, type_codes,
@@ -51,52 +51,49 @@ from prefilter.jit import njit_parallel, njit_serial, prange, serial
 COARSE_MIN = 3
 
 def summed_tables(wn: TiledNDF) -> np.ndarray:
-    """Summed-area tables ``(17, R + 1, R + 1)`` float64 of the 16 ``tile_means`` and of
-    ``mean`` (index 16), in pixel units: ``S[t, i, j]`` the sum of rows ``< i``, columns
-    ``< j`` (cached per instance)."""
+    """Summed-area tables ``(R + 1, R + 1, 17)`` float64 of the 16 ``tile_means`` and of
+    ``mean`` (index 16), in pixel units, position-major: ``S[i, j, t]`` the sum of rows
+    ``< i``, columns ``< j`` of image ``t`` (cached per instance)."""
     hit = wn.__dict__.get("_sat")
     if hit is None:
         imgs = np.concatenate([np.asarray(wn.tile_means, np.float64),
                                np.asarray(wn.mean, np.float64)[None]])
-        hit = np.zeros((17,) + tuple(np.add(imgs.shape[1:], 1)))
-        hit[:, 1:, 1:] = imgs.cumsum(axis=1).cumsum(axis=2)
+        R = imgs.shape[1]
+        hit = np.zeros((R + 1, R + 1, 17))
+        hit[1:, 1:] = imgs.cumsum(axis=1).cumsum(axis=2).transpose(1, 2, 0)
         object.__setattr__(wn, "_sat", hit)
     return hit
 
 
 @njit_serial
-def _sat_at(S, y, x):  # pragma: no cover - compiled
-    """Integral of the piecewise-constant image over ``[0, y] x [0, x]`` (pixel units, clamped
-    to the image): the summed-area table interpolated bilinearly (exact for such images)."""
+def _weighted_at(S, w, y, x):  # pragma: no cover - compiled
+    """``sum_k w[k]`` times the integral of piecewise-constant image ``k`` over ``[0, y] x
+    [0, x]`` (pixel units, clamped to the image): the summed-area tables ``S (R + 1, R + 1,
+    K)`` interpolated bilinearly (exact for such images). The float32 moment tables' entries
+    are multiplied by the float64 weights before any difference is taken."""
     R = S.shape[0] - 1
     y = min(max(y, 0.0), float(R))
     x = min(max(x, 0.0), float(R))
     i = min(int(y), R - 1)
     j = min(int(x), R - 1)
     ty, tx = y - i, x - j
-    return ((1 - ty) * ((1 - tx) * S[i, j] + tx * S[i, j + 1])
-            + ty * ((1 - tx) * S[i + 1, j] + tx * S[i + 1, j + 1]))
+    d00 = 0.0
+    d01 = 0.0
+    d10 = 0.0
+    d11 = 0.0
+    for k in range(w.shape[0]):
+        d00 += w[k] * S[i, j, k]
+        d01 += w[k] * S[i, j + 1, k]
+        d10 += w[k] * S[i + 1, j, k]
+        d11 += w[k] * S[i + 1, j + 1, k]
+    return (1 - ty) * ((1 - tx) * d00 + tx * d01) + ty * ((1 - tx) * d10 + tx * d11)
 
 
 @njit_serial
-def _moments_at(msat, mom, y, x):  # pragma: no cover - compiled
-    """:func:`_sat_at` of the moment tables weighted by ``mom`` (``wang_ndf.moment_dot``)."""
-    R = msat.shape[0] - 1
-    y = min(max(y, 0.0), float(R))
-    x = min(max(x, 0.0), float(R))
-    i = min(int(y), R - 1)
-    j = min(int(x), R - 1)
-    ty, tx = y - i, x - j
-    return ((1 - ty) * ((1 - tx) * moment_dot(msat, mom, i, j)
-                        + tx * moment_dot(msat, mom, i, j + 1))
-            + ty * ((1 - tx) * moment_dot(msat, mom, i + 1, j)
-                    + tx * moment_dot(msat, mom, i + 1, j + 1)))
-
-
-@njit_serial
-def _sat_rect(S, py0, py1, px0, px1):  # pragma: no cover - compiled
-    return (_sat_at(S, py1, px1) - _sat_at(S, py0, px1) - _sat_at(S, py1, px0)
-            + _sat_at(S, py0, px0))
+def _weighted_rect(S, w, py0, py1, px0, px1):  # pragma: no cover - compiled
+    """``sum_k w[k]`` times image ``k``'s integral over ``[py0, py1] x [px0, px1]``."""
+    return ((_weighted_at(S, w, py1, px1) - _weighted_at(S, w, py0, px1))
+            - (_weighted_at(S, w, py1, px0) - _weighted_at(S, w, py0, px0)))
 
 
 @njit_serial
@@ -224,29 +221,25 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                 ubj0, ubj1 = min(ubj0, bj0), max(ubj1, bj1)
         tot2, rad, wx0, wx1, wy0, wy1 = footprint_rows(c0, c1, s, sh, trunc)
         if s >= wide_sigma:
+            w17 = np.zeros(17)
+            n_m = msat.shape[2] // 16
             if s >= uniform_sigma:
-                for k in range(K):
-                    if act[q, k] and rbk[k, 0] <= rbk[k, 1]:
-                        out[q, k] = _sat_rect(sat[16], rcl[k, 2], rcl[k, 3], rcl[k, 0],
-                                              rcl[k, 1]) / area[k]
-                continue
-            # tile-type shares and in-tile moments (wang_ndf.type_moments)
-            mom = shares_moments(wx0, wx1, wy0, wy1, gauss_row(c0, wx0, wx1, tot2),
-                                 gauss_row(c1, wy0, wy1, tot2), T, mbasis, seed, index,
-                                 1 + msat.shape[3])
+                w17[16] = 1.0
+            else:  # tile-type shares and in-tile moments (wang_ndf.type_moments)
+                mom = shares_moments(wx0, wx1, wy0, wy1, gauss_row(c0, wx0, wx1, tot2),
+                                     gauss_row(c1, wy0, wy1, tot2), T, mbasis, seed, index,
+                                     1 + n_m)
+                w17[:16] = mom[:, 0]
+                wm = np.empty(16 * n_m)
+                for t in range(16):
+                    for j in range(n_m):
+                        wm[t * n_m + j] = mom[t, j + 1]
             for k in range(K):
                 if not act[q, k] or rbk[k, 0] > rbk[k, 1]:
                     continue
-                v = 0.0
-                for t in range(16):
-                    if mom[t, 0] != 0.0:
-                        v += mom[t, 0] * _sat_rect(sat[t], rcl[k, 2], rcl[k, 3], rcl[k, 0],
-                                                   rcl[k, 1])
-                if msat.shape[3]:
-                    v += ((_moments_at(msat, mom, rcl[k, 3], rcl[k, 1])
-                           - _moments_at(msat, mom, rcl[k, 2], rcl[k, 1]))
-                          - (_moments_at(msat, mom, rcl[k, 3], rcl[k, 0])
-                             - _moments_at(msat, mom, rcl[k, 2], rcl[k, 0])))
+                v = _weighted_rect(sat, w17, rcl[k, 2], rcl[k, 3], rcl[k, 0], rcl[k, 1])
+                if n_m and s < uniform_sigma:
+                    v += _weighted_rect(msat, wm, rcl[k, 2], rcl[k, 3], rcl[k, 0], rcl[k, 1])
                 out[q, k] = max(v, 0.0) / area[k]
             continue
         (m, n, ti0, tj0, types, jlo, jhi, ilo, ihi, wyt, wxt, kyl, kyh, kxl,
@@ -455,11 +448,18 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
                                             np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_tables(wn)[0],
-        summed_tables(wn), *shares_args(wn), -wn.support,
+        summed_tables(wn), *_flat_shares_args(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
         _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, *vertex_args(wn),
         *_coarse_args(wn), _valid(idx), out, done)
     return out, done
+
+
+def _flat_shares_args(wn: TiledNDF) -> tuple:
+    """:func:`~prefilter.glints.wang_ndf.shares_args` with the moment tables as ``(R + 1,
+    R + 1, 16 n_moments)`` (a view)."""
+    mbasis, msat = shares_args(wn)
+    return mbasis, msat.reshape(msat.shape[0], msat.shape[1], -1)
 
 
 def _coarse_args(wn: TiledNDF) -> tuple:
