@@ -1387,12 +1387,13 @@ def _nb_density(ex, ey, j00, j01, j10, j11, var, sr, trunc):  # pragma: no cover
 
 
 def shares_args(wn: TiledNDF) -> tuple:
-    """``(mbasis (3, T), msat (R + 1, R + 1, 16, 5 or 0) float32)`` of the
-    kernels' tile-type shares regime (no moment tables: shares alone)."""
+    """``(mbasis (3, T), msat (R + 1, R + 1, 16 n_m) float32)`` of the kernels' tile-type
+    shares regime: the moment tables with the types and moments of a position flattened
+    (``n_m`` 5, or 0 without moment tables: shares alone)."""
     msat = wn.moment_sat
     if msat is None:
         msat = np.zeros((1, 1, 16, 0), np.float32)
-    return moment_basis(wn.wang.size), msat
+    return moment_basis(wn.wang.size), msat.reshape(msat.shape[0], msat.shape[1], -1)
 
 
 @njit_serial
@@ -1413,27 +1414,18 @@ def shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, seed, index,
     sy = 0.0
     for b in range(wrow.shape[0]):
         sy += wrow[b, 0]
-    # per tile row, the column moments summed by type, then times the row's moments
     mom = np.zeros((16, n_mom))
-    col = np.zeros((16, 3))
     for b in range(wrow.shape[0]):
-        col[:] = 0.0
+        r0, r1, r2 = wrow[b, 0], wrow[b, 1], wrow[b, 2]
         for a in range(wcol.shape[0]):
             t = types[b, a]
-            col[t, 0] += wcol[a, 0]
-            col[t, 1] += wcol[a, 1]
-            col[t, 2] += wcol[a, 2]
-        r0, r1, r2 = wrow[b, 0], wrow[b, 1], wrow[b, 2]
-        for t in range(16):
-            c0 = col[t, 0]
-            if c0 == 0.0:
-                continue
+            c0 = wcol[a, 0]
             mom[t, 0] += r0 * c0
             if n_mom > 1:  # MOMENT_PAIRS, unrolled
-                mom[t, 1] += r0 * col[t, 1]
+                mom[t, 1] += r0 * wcol[a, 1]
                 mom[t, 2] += r1 * c0
-                mom[t, 3] += r0 * col[t, 2]
-                mom[t, 4] += r1 * col[t, 1]
+                mom[t, 3] += r0 * wcol[a, 2]
+                mom[t, 4] += r1 * wcol[a, 1]
                 mom[t, 5] += r2 * c0
     inv = 1.0 / (sx * sy)
     for t in range(16):
@@ -1443,17 +1435,25 @@ def shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, seed, index,
 
 
 @njit_serial
-def moment_dot(msat, mom, y, x):  # pragma: no cover - compiled
-    """``sum_t sum_k mom[t, k + 1] msat[y, x, t, k]``: the moment tables at one position,
-    weighted (the float32 entries times float64 weights: differences of the entries themselves
-    could be taken in float32 under fast-math)."""
+def weighted_dot(S, w, y, x):  # pragma: no cover - compiled
+    """``sum_k w[k] S[y, x, k]`` (the float32 tables' entries times float64 weights before
+    any difference between positions is taken: under fast-math those could be float32)."""
     v = 0.0
-    for t in range(16):
-        if mom[t, 0] == 0.0:
-            continue
-        for k in range(msat.shape[3]):
-            v += mom[t, k + 1] * msat[y, x, t, k]
+    for k in range(w.shape[0]):
+        v += w[k] * S[y, x, k]
     return v
+
+
+@njit_serial
+def moment_weights(mom):  # pragma: no cover - compiled
+    """``(16 n_m,)`` the moments ``mom[:, 1:]`` of :func:`shares_moments` in the flattened
+    tables' order (type-major)."""
+    n_m = mom.shape[1] - 1
+    w = np.empty(16 * n_m)
+    for t in range(16):
+        for k in range(n_m):
+            w[t * n_m + k] = mom[t, k + 1]
+    return w
 
 
 @njit_serial
@@ -1467,14 +1467,15 @@ def shares_means(means_px, mom, y, x):  # pragma: no cover - compiled
 
 
 @njit_serial
-def shares_pixel(means_px, msat, mom, y, x):  # pragma: no cover - compiled
+def shares_pixel(means_px, msat, mom, wm, y, x):  # pragma: no cover - compiled
     """The tile-type shares regime's NDF at pixel ``(y, x)`` before the clamp at 0:
     ``sum_t mom[t, 0] tile_means[t] + sum_k mom[t, k + 1] E_tk`` (the moment images' pixels
-    from their tables ``msat``; :func:`_shares_values`)."""
+    from their flattened tables ``msat`` weighted by ``wm``, :func:`moment_weights`;
+    :func:`_shares_values`)."""
     v = shares_means(means_px, mom, y, x)
-    if msat.shape[3]:
-        v += ((moment_dot(msat, mom, y + 1, x + 1) - moment_dot(msat, mom, y, x + 1))
-              - (moment_dot(msat, mom, y + 1, x) - moment_dot(msat, mom, y, x)))
+    if wm.shape[0]:
+        v += ((weighted_dot(msat, wm, y + 1, x + 1) - weighted_dot(msat, wm, y, x + 1))
+              - (weighted_dot(msat, wm, y + 1, x) - weighted_dot(msat, wm, y, x)))
     return v
 
 
@@ -1568,15 +1569,16 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                 sy += gyw[y]
             if s >= wide_sigma:  # tile-type shares and in-tile moments, per type
                 mom = shares_moments(wx0, wx1, wy0, wy1, gxw, gyw, T, mbasis, seed,
-                                     index, 1 + msat.shape[3])
+                                     index, 1 + msat.shape[2] // 16)
+                wm = moment_weights(mom)
                 acc = 0.0
-                if nc == 4 and msat.shape[3]:
+                if nc == 4 and wm.shape[0]:
                     # a 2 x 2 block of pixels: the 3 x 3 table positions of its corners once
                     y0, x0 = cy_[0], cx_[0]
                     dots = np.empty((3, 3))
                     for i in range(3):
                         for j in range(3):
-                            dots[i, j] = moment_dot(msat, mom, y0 + i, x0 + j)
+                            dots[i, j] = weighted_dot(msat, wm, y0 + i, x0 + j)
                     for k in range(4):
                         i, j = cy_[k] - y0, cx_[k] - x0
                         v = (shares_means(means_px, mom, cy_[k], cx_[k])
@@ -1585,8 +1587,8 @@ def _points_kernel(gstart, cx, cy, sp, py0, px0, wya, wxa, qx, qy, point_sr, til
                         acc += cw[k] * max(v, 0.0)
                 else:
                     for k in range(nc):
-                        acc += cw[k] * max(shares_pixel(means_px, msat, mom, cy_[k], cx_[k]),
-                                           0.0)
+                        acc += cw[k] * max(shares_pixel(means_px, msat, mom, wm, cy_[k],
+                                                        cx_[k]), 0.0)
                 out[q] = acc
                 continue
             f = sh * sh / tot2

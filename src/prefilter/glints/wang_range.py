@@ -34,8 +34,8 @@ from prefilter.glints.pndf import (SIGMA_H, TRUNCATION, as_sigma_p, element_cova
                                    element_node, element_nodes, element_split, normal_cdf,
                                    principal_axis)
 from prefilter.glints.wang_ndf import (_Q_MIN, _TAP_TRUNCATION, TiledNDF, _as_index,
-                                      _vertex_tables, dep_gaussian, shares_args,
-                                      shares_moments,
+                                      _vertex_tables, dep_gaussian, moment_weights,
+                                      shares_args, shares_moments, weighted_dot,
                                       dependent_neighbours, footprint_rows, level_window,
                                       _valid, vertex_args, vertex_config, vertex_window)
 from prefilter.glints.wang_query import (empty_pack, gauss_row, type_codes,
@@ -77,16 +77,9 @@ def _weighted_at(S, w, y, x):  # pragma: no cover - compiled
     i = min(int(y), R - 1)
     j = min(int(x), R - 1)
     ty, tx = y - i, x - j
-    d00 = 0.0
-    d01 = 0.0
-    d10 = 0.0
-    d11 = 0.0
-    for k in range(w.shape[0]):
-        d00 += w[k] * S[i, j, k]
-        d01 += w[k] * S[i, j + 1, k]
-        d10 += w[k] * S[i + 1, j, k]
-        d11 += w[k] * S[i + 1, j + 1, k]
-    return (1 - ty) * ((1 - tx) * d00 + tx * d01) + ty * ((1 - tx) * d10 + tx * d11)
+    return ((1 - ty) * ((1 - tx) * weighted_dot(S, w, i, j) + tx * weighted_dot(S, w, i, j + 1))
+            + ty * ((1 - tx) * weighted_dot(S, w, i + 1, j)
+                    + tx * weighted_dot(S, w, i + 1, j + 1)))
 
 
 @njit_serial
@@ -223,6 +216,7 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
         if s >= wide_sigma:
             w17 = np.zeros(17)
             n_m = msat.shape[2] // 16
+            wm = np.zeros(0)
             if s >= uniform_sigma:
                 w17[16] = 1.0
             else:  # tile-type shares and in-tile moments (wang_ndf.type_moments)
@@ -230,15 +224,12 @@ def _ranges_kernel(cx, cy, sp, x0, y0, x1, y1, act, tiles, seed, index, Pa, Pb, 
                                      gauss_row(c1, wy0, wy1, tot2), T, mbasis, seed, index,
                                      1 + n_m)
                 w17[:16] = mom[:, 0]
-                wm = np.empty(16 * n_m)
-                for t in range(16):
-                    for j in range(n_m):
-                        wm[t * n_m + j] = mom[t, j + 1]
+                wm = moment_weights(mom)
             for k in range(K):
                 if not act[q, k] or rbk[k, 0] > rbk[k, 1]:
                     continue
                 v = _weighted_rect(sat, w17, rcl[k, 2], rcl[k, 3], rcl[k, 0], rcl[k, 1])
-                if n_m and s < uniform_sigma:
+                if wm.shape[0]:
                     v += _weighted_rect(msat, wm, rcl[k, 2], rcl[k, 3], rcl[k, 0], rcl[k, 1])
                 out[q, k] = max(v, 0.0) / area[k]
             continue
@@ -448,18 +439,11 @@ def ndf_ranges(wn: TiledNDF, center, sigma_p, s_min, s_max, *, active=None, inde
                                             np.int64),
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), _vertex_tables(wn)[0],
-        summed_tables(wn), *_flat_shares_args(wn), -wn.support,
+        summed_tables(wn), *shares_args(wn), -wn.support,
         2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma, wn.uniform_sigma, _Q_MIN,
         _TAP_TRUNCATION, TRUNCATION, SIGMA_H, psr, proto, *vertex_args(wn),
         *_coarse_args(wn), _valid(idx), out, done)
     return out, done
-
-
-def _flat_shares_args(wn: TiledNDF) -> tuple:
-    """:func:`~prefilter.glints.wang_ndf.shares_args` with the moment tables as ``(R + 1,
-    R + 1, 16 n_moments)`` (a view)."""
-    mbasis, msat = shares_args(wn)
-    return mbasis, msat.reshape(msat.shape[0], msat.shape[1], -1)
 
 
 def _coarse_args(wn: TiledNDF) -> tuple:
