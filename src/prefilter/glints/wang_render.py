@@ -51,22 +51,20 @@ from prefilter.glints.wang_ndf import TiledNDF, ndf_points
 #: those of ``glints`` (:data:`prefilter.glints.bake.BAKE_SETTINGS`, whole disk of half
 #: vectors); ``ndf_res`` 256 (pixel 0.78 intrinsic stds, as ``glints``): at 128 the FLIP against
 #: ``glints-direct`` on the assembled map is 0.127 instead of 0.074 at mid distance; the cost
-#: is the bake (4.1 GiB peak RSS, ~9-12 min on the shared machine) and
-#: 232 MB of storage at ``rank`` 16 with ``block`` 16 (stored-image error 2.5 / 1.7 / 1.0 % per
-#: level on the flakes map; docs/glints-wang.md, "Rendering"). ``bilinear``: NDF values
+#: is the bake (docs/glints-wang.md, "Not done / limits": minutes, GiB of peak RSS) at
+#: ``rank`` 16 with ``block`` 16. ``bilinear``: NDF values
 #: interpolated between pixel centres, the pyramids baked with
 #: :func:`prefilter.glints.bake.bilinear_bake_roughness` (the interpolation's blur restores the
 #: intrinsic roughness), the texels evaluated at query time as point densities
 #: (:func:`prefilter.glints.wang_ndf.ndf_points`); the pixel's value instead: FLIP 0.167 /
 #: 0.120 / 0.104 instead of 0.004 / 0.029 / 0.027 (tests/glints/test_wang_render.py scene).
-#: ``wide_tiles`` 1 (per-tile pyramids up to footprints of one tile, then the tile-type shares):
-#: at 0.5 the shares regime's dropped position dependence cost FLIP 0.051 / 0.032 at mid / far
-#: instead of 0.038 / 0.019, for 2.5x / 18x faster frames and 232 instead of 279 MB.
-#: (Those are float32 pyramid sizes.) ``code_bits``: the cache file's CP factors
-#: (:func:`prefilter.glints.wang_store.save_tiles`): 8 (uint8 codes, the default: 27.7 MB file
-#: instead of 279 MB; FLIP vs the float32 frames 0.0008 / 0.0085 / 0.0034 near / mid / far),
-#: 16 (66.1 MB, 2e-5 / 1.5e-4 / 5e-5), or 0 (float32, format version 1); docs/glints-wang.md,
-#: "Storage (version 2)".
+#: ``wide_tiles`` 0.5 (per-tile pyramids up to footprints of half a tile, then the tile-type
+#: shares with in-tile moments, :func:`prefilter.glints.wang_ndf.type_moments`): point-light FLIP
+#: 0.032 / 0.018 at mid / far (0.042 / 0.033 with the shares alone), one pyramid level fewer
+#: than at 1, and far frames within 1.5x of ``glints``' (docs/glints-wang.md). ``code_bits``:
+#: the cache file's CP factors (:func:`prefilter.glints.wang_store.save_tiles`): 8 (uint8
+#: codes, the default), 16, or 0 (float32, format version 1); docs/glints-wang.md, "Storage
+#: (version 2)".
 WANG_SETTINGS = dict(tile=32, band=4.0, seed=0, ndf_res=256, support=1.0,
                      intrinsic_roughness=2 * DEFAULT_ROUGHNESS, stride0=None, wide_tiles=0.5,
                      uniform_tiles=8.0, rank=16, block=16, n_iter_max=50, bilinear=True,
