@@ -108,11 +108,9 @@ def test_index_map_equals_direct_on_assembled_map(tmp_path, monkeypatch):
     24 pixels: near / mid / far frames (median footprint std 0.58 / 2.3 / 9.3 texels: the
     direct, per-tile and tile-type-share regimes) against glints-direct on the assembled map.
     What differs: the bilinear NDF lookup (pixel pitch 0.78 intrinsic stds) and the shares
-    regime's dropped position dependence. Measured FLIP 0.0023 / 0.021 / 0.022, mean ratios
-    1.000 / 1.001 / 1.000 (wide_tiles 0.5: 0.0023 / 0.037 / 0.031); the hashed tiling instead
-    of the index map: 0.66 at near. (wide_tiles 0.5 with a block of the implicit tiling as the
-    map, mismatched across the wrap, and the pixel's value instead of bilinear: 0.167 / 0.120 /
-    0.104; bilinear: 0.004 / 0.029 / 0.027.)"""
+    regime's in-tile moments (quadratic in the texel's place in its tile). Measured FLIP
+    0.0024 / 0.024 / 0.025, mean ratios 1.000 / 1.000 / 1.000; the hashed tiling instead of the
+    index map: 0.66 at near."""
     exemplar = sinusoid(32, ax=0.3, ay=0.25, px=16, py=8)
     wang = dict(tile=8, band=2.0, ndf_res=32, support=1.0, intrinsic_roughness=0.08, rank=0,
                 uniform_tiles=64.0)
@@ -334,11 +332,9 @@ def test_compressed_index_map_against_direct(tmp_path, monkeypatch):
     """CP-compressed per-tile pyramids (rank 16, blocks 16), T = 16 on a 64^2 Gaussian
     heightfield exemplar, R = 64 over the whole disk, intrinsic roughness 0.04 (pixel 0.78
     stds, as the render default): frames with median footprints 2.3 / 4.6 / 18.6 texels (per-tile
-    regime from 2.5, shares from 16) against glints-direct on the assembled map. Measured FLIP
-    0.047 / 0.071 / 0.032, mean ratios within 0.4 %; the hashed tiling: 0.41; storage 17.5 MB.
-    With wide_tiles 0.5 (shares from 8): 0.047 / 0.073 / 0.022, uncompressed 0.013 / 0.022 /
-    0.022 (14.6 / 199 MB). Those are float32 factors (code_bits 0; 16: within 1.2e-4); with
-    the default 8-bit file: 0.055 / 0.065 / 0.029 (one run each). ~35-60 s."""
+    regime from 2.5, shares from 8) against glints-direct on the assembled map. Measured FLIP
+    0.049 / 0.046 / 0.018 (the default 8-bit file), mean ratios within 0.14 %; the hashed
+    tiling: 0.41; 4.1 MB held. ~15-60 s."""
     from maps import gaussian_heightfield
 
     exemplar = gaussian_heightfield(64, corr=3, slope_std=0.15, seed=2)[0]
