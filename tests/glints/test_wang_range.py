@@ -67,6 +67,16 @@ def test_ranges_match_image_means(wc, vertex):
                     assert err < bound and rel < bound, (sp, err, rel)
                 else:
                     np.testing.assert_allclose(got[q], want, rtol=1e-9, atol=1e-12)
+    # the tile-type shares without the in-tile moments: the plain shares' image means
+    plain = replace(wc, moment_sat=None)
+    sp = 1.5 * wc.wide_sigma
+    lo, hi, p0, ext = _rects(rng, len(c), 5)
+    got, _ = ndf_ranges(plain, c, np.full(len(c), sp), lo, hi)
+    with_m, _ = ndf_ranges(wc, c, np.full(len(c), sp), lo, hi)
+    for q in range(len(c)):
+        want = _means(ndf_image(plain, c[q], sp), p0[q], ext[q])
+        np.testing.assert_allclose(got[q], want, rtol=1e-9, atol=1e-12)
+    assert np.abs(with_m - got).max() > 1e-3 * np.abs(got).max()
 
 
 def test_ranges_below_min_sigma_and_inactive(wc):

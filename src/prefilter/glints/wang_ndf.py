@@ -904,7 +904,7 @@ def ndf(wn: TiledNDF, center, sigma_p, s, *, index=None) -> np.ndarray:
     """NDF values ``(...)`` of one footprint at ``s (..., 2)``: the value of the image pixel
     holding ``s`` (0 outside the support), summed over the tiles under the footprint.
 
-    Cost per ``s``: taps x tiles under the footprint below ``wn.wide_sigma``, one value per tile
+    Cost per ``s``: taps x tiles under the footprint below ``wn.wide_sigma``, 6 values per tile
     type above (plus O(tiles) for the shares below ``wn.uniform_sigma``): bounded."""
     c, sp, index = _prepare(wn, center, sigma_p, index)
     iy, ix, inside = _pixels(wn, s)
