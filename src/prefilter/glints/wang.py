@@ -111,12 +111,19 @@ def hash_bits(i, j, seed):  # pragma: no cover - compiled
 
 
 @njit_serial
+def edge_type(n, s, w, e):  # pragma: no cover - compiled
+    """Tile index ``n + 2 s + 4 w + 8 e`` of the edge colours (0 or 1) north, south, west, east
+    (:func:`edge_colours` inverts it; on the implicit tiling they are the right-edge bits of
+    the tile's upper-left grid vertex and of the vertex below it, and the lower-edge bits of
+    that vertex and of the one to its right, :func:`hash_bits`)."""
+    return n + 2 * s + 4 * w + 8 * e
+
+
+@njit_serial
 def implicit_type(i, j, seed):  # pragma: no cover - compiled
     """Tile index of the implicit tiling at tile ``(i, j)`` from the colours of its edges."""
     r_ij, b_ij = hash_bits(i, j, seed)
-    r_below = hash_bits(i, j + 1, seed)[0]
-    b_right = hash_bits(i + 1, j, seed)[1]
-    return r_ij + 2 * r_below + 4 * b_ij + 8 * b_right
+    return edge_type(r_ij, hash_bits(i, j + 1, seed)[0], b_ij, hash_bits(i + 1, j, seed)[1])
 
 
 @njit_serial

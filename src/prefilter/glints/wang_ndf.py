@@ -53,7 +53,7 @@ from prefilter.glints.wang_query import (TilePack, empty_pack, gauss_row, pack_f
                                          pack_point, segment_moments, tile_taps)
 from prefilter.glints.pyramid import next_level
 from prefilter.glints.wang import (WangTiles, as_center, as_one_sigma_p, assemble, edge_colours,
-                                   hash_bits, implicit_type, is_valid_tiling,
+                                   edge_type, hash_bits, implicit_type, is_valid_tiling,
                                    pndf_image_implicit,
                                    tile_index, tile_window)
 
@@ -582,6 +582,15 @@ def moment_basis(T: int) -> np.ndarray:
     return p * np.sign(p[:, -1:])
 
 
+def _positional_covariance(Jx, Jy, var):
+    """``(a, b, d)`` of ``var J J^T`` for texels' slope derivatives ``Jx = ds/dx``, ``Jy =
+    ds/dy`` ``(..., 2)``: the positional part of their elements' covariance (NumPy arrays;
+    ``pndf.element_covariance`` is the compiled scalar form)."""
+    return (var * (Jx[..., 0] ** 2 + Jy[..., 0] ** 2),
+            var * (Jx[..., 0] * Jx[..., 1] + Jy[..., 0] * Jy[..., 1]),
+            var * (Jx[..., 1] ** 2 + Jy[..., 1] ** 2))
+
+
 def tile_moment_images(wt: WangTiles, resolution: int, support: float, intrinsic_roughness: float,
                        pairs=MOMENT_PAIRS) -> np.ndarray:
     """``(16, K, R, R)`` float64 in-tile moment images ``E_k = (1 / T^2) sum_i p_dy(y_i)
@@ -595,11 +604,7 @@ def tile_moment_images(wt: WangTiles, resolution: int, support: float, intrinsic
     sr = as_intrinsic_roughness(intrinsic_roughness)
     P = moment_basis(T)
     s_el, J = tile_elements(wt)
-    sh2 = SIGMA_H**2
-    Jx, Jy = J[..., :, 0], J[..., :, 1]
-    a = sh2 * (Jx[..., 0] ** 2 + Jy[..., 0] ** 2)
-    b = sh2 * (Jx[..., 0] * Jx[..., 1] + Jy[..., 0] * Jy[..., 1])
-    d = sh2 * (Jx[..., 1] ** 2 + Jy[..., 1] ** 2)
+    a, b, d = _positional_covariance(J[..., :, 0], J[..., :, 1], SIGMA_H**2)
     K = len(pairs)
     w = np.stack([np.outer(P[dy], P[dx]) / (T * T) for dy, dx in pairs])  # (K, T, T)
     which = (np.arange(16)[:, None, None, None] * K + np.arange(K)[None, :, None, None])
@@ -787,9 +792,7 @@ def _dependent_images(wn: TiledNDF, c, sp, index, ij):
     dy = c[1] - (gy + 0.5)
     f, var = sh2 / tot2, sp * sp * sh2 / tot2
     mean = s0 + f * (Jx * dx[:, None] + Jy * dy[:, None])
-    a = var * (Jx[:, 0] ** 2 + Jy[:, 0] ** 2)
-    b = var * (Jx[:, 0] * Jx[:, 1] + Jy[:, 0] * Jy[:, 1])
-    d = var * (Jx[:, 1] ** 2 + Jy[:, 1] ** 2)
+    a, b, d = _positional_covariance(Jx, Jy, var)
     w = np.exp(-(dx * dx + dy * dy) / (2 * tot2))
     cc = np.ascontiguousarray
     h = 2.0 * wn.support / R
@@ -1002,8 +1005,7 @@ def _nb_types(i0, i1, j0, j1, seed, index):  # pragma: no cover - compiled
             right[j, i], below[j, i] = hash_bits(i0 + i, j0 + j, seed)
     for j in range(ny):
         for i in range(nx):
-            out[j, i] = (right[j, i] + 2 * right[j + 1, i] + 4 * below[j, i]
-                         + 8 * below[j, i + 1])
+            out[j, i] = edge_type(right[j, i], right[j + 1, i], below[j, i], below[j, i + 1])
     return out
 
 
