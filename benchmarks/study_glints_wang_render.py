@@ -37,10 +37,22 @@ Per distance (``prefilter.glints.render.measurement_scene(d, lights="point")``, 
   methods' images averaged over those seeds, with its floor: ``glints-direct``'s average over
   its even seeds against its odd ones.
 
+* ``--exact-seeds K`` (with ``--lights quad environment``; instead of the rows above): against
+  ``glints-wang``'s own ``direct=True`` mode (``wang_render.render_wang``: the direct P-NDF of
+  the tiling at every footprint, light samples without range queries or lobe prefilter; under
+  the environment pixel for pixel ``glints-direct`` on the assembled map, tested; under the quad
+  light sampling where ``glints-direct`` uses MIS, the same expected image), which costs
+  seconds where ``glints-direct`` takes minutes at far: FLIP of ``glints-wang``'s frames averaged
+  over seeds ``0..K-1`` against the ``direct`` frames averaged over ``1000..`` (floor: the
+  ``direct`` frames' even seeds against their odd ones) and the frame-mean ratio; the same
+  estimator at seed 0 (``ranges=False``: the tiling and compression error alone, FLIP and mean
+  ratio against ``direct`` at seed 0); and the range queries' / lobe prefilter's effect on the
+  frame mean (``glints-wang`` over ``ranges=False`` at the same seeds, paired, K seeds).
+
 Run: ``.venv/bin/python benchmarks/study_glints_wang_render.py [--repeats 3]
 [--distances 0.5 2 8] [--set key=value ...] [--code-bits 0 8 16] [--no-times]
 [--lights point quad environment] [--stop-exposure 12] [--direct-floor]
-[--mean-seeds K]`` (``--set`` overrides
+[--mean-seeds K] [--exact-seeds K]`` (``--set`` overrides
 ``WANG_SETTINGS``, values as JSON). One JSON line per (lights, distance) on stdout.
 """
 
@@ -91,6 +103,7 @@ def main(argv=None):
     ap.add_argument("--stop-exposure", type=float, default=12.0)
     ap.add_argument("--direct-floor", action="store_true")
     ap.add_argument("--mean-seeds", type=int, default=0)
+    ap.add_argument("--exact-seeds", type=int, default=0)
     args = ap.parse_args(argv)
     wang = {k: json.loads(v) for k, v in (kv.split("=", 1) for kv in args.set)}
     if wang:
@@ -100,6 +113,8 @@ def main(argv=None):
         for d in args.distances:
             if kind == "point":
                 _point_row(args, wang, tmp, d)
+            elif args.exact_seeds:
+                _exact_row(args, tmp, d, kind)
             else:
                 _lights_row(args, wang, tmp, d, kind)
 
@@ -190,6 +205,46 @@ def _lights_row(args, wang, tmp, d, kind):
                    direct_over_wang=t_direct / min(wall["glints-wang"]),
                    glints_over_wang=min(wall["glints"]) / min(wall["glints-wang"]))
     print(json.dumps(row), flush=True)
+
+
+def _exact_row(args, tmp, d, kind):
+    """One ``--exact-seeds`` row (module docstring)."""
+    from prefilter.glints import wang_render
+    from prefilter.render.methods import RenderSettings
+
+    sc, _, wn, _, idx, _ = _assembled(d, kind, tmp)
+    K = args.exact_seeds
+
+    def frame(seed, **kw):
+        t0 = time.perf_counter()
+        img = wang_render.render_wang(sc, RenderSettings(seed=seed), index=idx, **kw)
+        return img, time.perf_counter() - t0
+
+    fa = [frame(k) for k in range(K)]
+    fn = [frame(k, ranges=False)[0] for k in range(K)]
+    fe = [frame(1000 + k, direct=True) for k in range(K)]
+    e0 = frame(0, direct=True)[0]
+    wang_s = float(np.median([t for _, t in fa]))
+    direct_s = float(np.median([t for _, t in fe]))
+    fa, fe = [x for x, _ in fa], [x for x, _ in fe]
+    ma, me = [float(x.mean()) for x in fa], [float(x.mean()) for x in fe]
+    se = np.sqrt(np.var(ma, ddof=1) / K + np.var(me, ddof=1) / K)
+    paired = [a / n for a, n in zip(ma, (float(x.mean()) for x in fn))]
+    fm, fmc, _ = _flips(np.mean(fa, axis=0), np.mean(fe, axis=0), args.stop_exposure)
+    hf, hfc, _ = _flips(np.mean(fe[0::2], axis=0), np.mean(fe[1::2], axis=0),
+                        args.stop_exposure)
+    sf, sfc, _ = _flips(fn[0], e0, args.stop_exposure)
+    print(json.dumps(dict(
+        lights=kind, distance=d, tile=wn.wang.size, exact_seeds=K,
+        flip_seed_mean_wang_vs_exact=fm, flip_capped_seed_mean_wang_vs_exact=fmc,
+        flip_seed_mean_exact_even_vs_odd=hf, flip_capped_seed_mean_exact_even_vs_odd=hfc,
+        mean_ratio_wang_over_exact=float(np.mean(ma) / np.mean(me)),
+        mean_diff_over_se=float((np.mean(ma) - np.mean(me)) / se),
+        flip_same_estimator_vs_exact=sf, flip_capped_same_estimator_vs_exact=sfc,
+        mean_ratio_same_estimator=float(fn[0].mean() / e0.mean()),
+        mean_ratio_ranges_over_same_estimator=float(np.mean(paired)),
+        mean_ratio_ranges_over_same_estimator_se=float(np.std(paired, ddof=1) / np.sqrt(K)),
+        wang_frame_s=round(wang_s, 3), exact_frame_s=round(direct_s, 3))), flush=True)
 
 
 def _point_row(args, wang, tmp, d):

@@ -1726,7 +1726,7 @@ def _pixel_taps(wn: TiledNDF, q, bilinear: bool):
 
 
 def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool = False,
-               point_roughness: float | None = None) -> np.ndarray:
+               point_roughness: float | None = None, direct: bool = False) -> np.ndarray:
     """Batched :func:`ndf`: NDF values ``(...)`` of footprints ``center (..., 2)``,
     ``sigma_p (...)`` at ``s (..., 2)`` (broadcast together), one Numba kernel for all regimes,
     uncompressed or CP-compressed pyramids (compressed: each tap reads its ``C`` row, ``rank``
@@ -1741,7 +1741,11 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
     densities with intrinsic roughness ``point_roughness`` (default
     ``wn.intrinsic_roughness``). Bake with
     :func:`prefilter.glints.bake.bilinear_bake_roughness` of it so that the interpolation's blur
-    restores it (as the ``glints`` render cache does)."""
+    restores it (as the ``glints`` render cache does).
+
+    ``direct``: the direct P-NDF of the tiling at every footprint (no pyramid, share or expected
+    tiling regime): the reference the regimes approximate, ``glints-direct``'s NDF on the
+    assembled tiling; its cost grows with the footprint's texels."""
     if not isinstance(wn, TiledNDF):
         raise PrefilterError(f"wn: expected a TiledNDF (bake_tiles), got {type(wn).__name__}")
     c = as_float_array(center, "center", ndim_min=1, last_dim=2)
@@ -1782,9 +1786,9 @@ def ndf_points(wn: TiledNDF, center, sigma_p, s, *, index=None, bilinear: bool =
         int(wn.block), np.asarray(wn.k0, np.int64), float(wn.stride0), wn.sigma0,
         cc(wn.dependent, dtype=np.int64), dependent_neighbours(wn), tile_planes(wn),
         vplanes, vofs, wn.means_px, wn.mean, *shares_args(wn), wn.intrinsic_roughness,
-        -wn.support, 2.0 * wn.support / wn.resolution, wn.min_sigma, wn.wide_sigma,
-        wn.uniform_sigma, _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, *vertex_args(wn)[:11],
-        valid, out)
+        -wn.support, 2.0 * wn.support / wn.resolution,
+        *((math.inf,) * 3 if direct else (wn.min_sigma, wn.wide_sigma, wn.uniform_sigma)),
+        _Q_MIN, _TAP_TRUNCATION, TRUNCATION, SIGMA_H, *vertex_args(wn)[:11], valid, out)
     return out.reshape(shape)
 
 

@@ -247,14 +247,15 @@ def _quad_samples(ql, position, frame, uq):
     return wi.reshape(n, N, 3), wgt.reshape(n, N, 1) * L
 
 
-def _environment_samples(light, frame, u, wn, center, sigma_p, wo, index, point_roughness):
+def _environment_samples(light, frame, u, wn, center, sigma_p, wo, index, point_roughness, *,
+                         prefilter: bool = True):
     """SG light samples of an environment light (those of
     :func:`prefilter.glints.envlight.shade_sg` with ``u``): local directions ``(n, N, 3)``, the
     weights ``L(wi) / (n pdf)`` ``(n, N, 3)`` and the prefiltered NDF ``(n, N)``: the range mean
     of the footprint NDF over ``h_xy +- theta_eps / 2`` of the sample's lobe
     (:data:`prefilter.glints.render.ENV_EPS`; glints paper sec. 5.4, as ``glints``), NaN where
-    the point NDF is used (below ``wn.min_sigma``, as ``glints`` below its finest level) or the
-    sample does not reflect; ``u (N, 3 n)``."""
+    the point NDF is used (below ``wn.min_sigma``, as ``glints`` below its finest level, and
+    everywhere without ``prefilter``) or the sample does not reflect; ``u (N, 3 n)``."""
     from prefilter.glints.envlight import (_lobe_probabilities, as_lobes, eps_support,
                                            sg_energy, sg_light_samples)
     from prefilter.glints.render import ENV_EPS, environment_lobes
@@ -264,7 +265,7 @@ def _environment_samples(light, frame, u, wn, center, sigma_p, wo, index, point_
     n = wi.shape[0]
     D = np.full(wi.shape[:2], np.nan)
     big = sigma_p >= wn.min_sigma
-    if not (np.any(big) and wn.block):
+    if not (prefilter and np.any(big) and wn.block):
         return wi, wgt, D
     # the lobe each sample was drawn from (envlight._sample_sg's choice)
     cum = np.cumsum(_lobe_probabilities(mu.mean(axis=1) * sg_energy(lam)))
@@ -321,7 +322,7 @@ def ranges(wn, center, sigma_p, lo, hi, **kw):
 
 
 def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | None = None,
-               progress: bool = False) -> np.ndarray:
+               progress: bool = False, ranges: bool = True, direct: bool = False) -> np.ndarray:
     """Radiance ``(N, 3)`` of hit samples ``g`` under the scene's lights.
 
     Point and directional lights: the BRDF at the light direction. Untextured quads: light
@@ -332,7 +333,11 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
     ``u (N, random_dims(scene))``: the ``glints`` uniforms layout (needed with quad or
     environment lights). ``index``: an explicit ``(ny, nx)`` tile index map (periodic, tile
     ``(0, 0)`` at texel ``(0, 0)``) instead of the hashing; ``settings``: overrides of
-    :data:`WANG_SETTINGS`.
+    :data:`WANG_SETTINGS`. ``ranges`` False: no range queries (quad lights by light samples
+    only, the environment's NDF at the samples' half vectors without the lobe prefilter: then
+    the same estimator as ``glints-direct`` for environments); ``direct``: also the direct P-NDF
+    of the tiling at every footprint (:func:`prefilter.glints.wang_ndf.ndf_points`' ``direct``):
+    ``glints-direct``'s NDF on the tiling, the reference of the regimes, with these estimators.
     """
     from prefilter.glints.brdf import brdf_cos_from_ndf, half
     from prefilter.glints.render import footprints, random_dims, uniform_columns
@@ -385,9 +390,13 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
             corners = np.stack([to_local(v - g.position[m], *frame) for v in ql.vertices], 1)
             if np.any(base > 0):
                 out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
-            val, done = quad_range_wang(wn, c, sp, wo[m], corners, ql.radiance, f0,
-                                        index=index, point_roughness=st["intrinsic_roughness"])
-            out[m] += val
+            if ranges and not direct:
+                val, done = quad_range_wang(wn, c, sp, wo[m], corners, ql.radiance, f0,
+                                            index=index,
+                                            point_roughness=st["intrinsic_roughness"])
+                out[m] += val
+            else:
+                done = np.zeros(len(sp), bool)
             wi, wgt = _quad_samples(ql, g.position[m], frame, quad_uniforms(u[m], qi))
             wgt[:, done] = 0.0  # the range path's samples: not queried, not added
             wis += list(wi)
@@ -397,7 +406,8 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
         for j, light in enumerate(env):
             cols = uniform_columns(nq, "environment", j)
             wi, wgt, D = _environment_samples(light, frame, u[m][:, cols], wn, c, sp, wo[m],
-                                              index, st["intrinsic_roughness"])
+                                              index, st["intrinsic_roughness"],
+                                              prefilter=ranges and not direct)
             wis += list(wi)
             wgts += list(wgt)
             lamb += [True] * len(wi)
@@ -418,7 +428,7 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
                                  np.broadcast_to(sp[:, None], at.shape)[at],
                                  h.transpose(1, 0, 2)[at][:, :2], index=index,
                                  bilinear=st["bilinear"],
-                                 point_roughness=st["intrinsic_roughness"])
+                                 point_roughness=st["intrinsic_roughness"], direct=direct)
         spec = brdf_cos_from_ndf(wok, wi, h, D, f0)
         diff = base / np.pi * np.maximum(wi[..., 2], 0.0)[..., None]
         for j in range(len(wi)):
@@ -426,11 +436,13 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
     return out
 
 
-def render_wang(scene, settings, *, index=None, wang: dict | None = None) -> np.ndarray:
+def render_wang(scene, settings, *, index=None, wang: dict | None = None, ranges: bool = True,
+                direct: bool = False) -> np.ndarray:
     """Linear radiance ``(H, W, 3)`` float32 of ``scene`` by ``glints-wang`` (module docstring).
 
     ``index``: explicit periodic tile index map (see :func:`shade_wang`); ``wang``: overrides
-    of :data:`WANG_SETTINGS`. The uniforms per sample are those of ``glints`` /
+    of :data:`WANG_SETTINGS`; ``ranges``, ``direct``: the estimators and the reference NDF of
+    :func:`shade_wang`. The uniforms per sample are those of ``glints`` /
     ``glints-direct`` (:func:`prefilter.glints.render.random_dims`, same rows and seed): the
     same light samples. The registered method is this with the defaults."""
     from prefilter.glints.render import random_dims
@@ -441,7 +453,8 @@ def render_wang(scene, settings, *, index=None, wang: dict | None = None) -> np.
     spp = settings.spp
     img = render_samples(scene, settings,
                          lambda g, u: shade_wang(scene, g, spp=spp, u=u, index=index,
-                                                 settings=wang, progress=settings.progress),
+                                                 settings=wang, progress=settings.progress,
+                                                 ranges=ranges, direct=direct),
                          random_dims=random_dims(scene), stratified=spp > 1, desc="glints-wang")
     return img.astype(np.float32)
 
