@@ -298,11 +298,17 @@ def test_sampling_pdf_equals_eval_and_chi2(wn):
 
 
 def test_tiled_constant_storage(wn):
+    """``nbytes`` counts every array the queries read, the range queries' summed-area tables
+    from their first use on, and does not grow with the queried area."""
+    from prefilter.glints.wang_range import summed_tables
+
+    sat = summed_tables(wn)  # what a range query builds (cached on the instance)
     before = wn.nbytes
     T = wn.wang.size
     per_tile = sum(a[0].nbytes for a in wn.images)
     assert before == (wn.wang.nbytes + 16 * per_tile + wn.mean.nbytes + wn.tile_means.nbytes
-                      + wn.means_px.nbytes + wn.moment_sat.nbytes)
+                      + wn.means_px.nbytes + wn.moment_sat.nbytes + sat.nbytes)
+    assert sat.nbytes == (R + 1) ** 2 * 17 * 8
     for c in ((10.0, 10.0), (1e6 + 0.3, -3e5), (-7e7, 2e7)):
         img = ndf_image(wn, c, 3.0)
         assert np.all(np.isfinite(img))

@@ -217,7 +217,9 @@ class TiledNDF:
         tiles, per-tile pyramids (float32 images, or the packed CP factors of :attr:`pack`:
         the integer codes of a version-2 file, the float32 factors otherwise), the mean and
         per-tile images (and their position-major float64 copy, :attr:`means_px`), the moment
-        tables (no per-area data). The float32 CP triples of a loaded file, decoded
+        tables, and the range queries' summed-area tables of those images once a range query
+        built them (:func:`prefilter.glints.wang_range.summed_tables`; no per-area data). The
+        float32 CP triples of a loaded file, decoded
         on first use by the per-footprint NumPy paths (:func:`ndf`, :func:`contributions`,
         :func:`sample`), are not counted."""
         if self.block:
@@ -226,8 +228,9 @@ class TiledNDF:
             levels = sum(a.nbytes for a in self.images)
         msat = sum(0 if w is None or w.moment_sat is None else w.moment_sat.nbytes
                    for w in (self, self.coarse))
+        sat = self.__dict__.get("_sat")
         return int(self.wang.nbytes + levels + self.mean.nbytes + self.tile_means.nbytes
-                   + self.tile_means.size * 8 + msat)
+                   + self.tile_means.size * 8 + msat + (0 if sat is None else sat.nbytes))
 
     def _packs_nbytes(self) -> int:
         """Bytes of the packed tile and vertex pyramids, and of the coarse ones'."""
