@@ -162,6 +162,15 @@ def test_direct_mode_is_glints_direct_on_assembled_map(tmp_path, monkeypatch):
             print(lights, d, same, approx)
             assert b.mean() > 0 and same < 1e-5
             assert 1e-4 < approx < 0.03
+    # the registered method's variants: the same frames (the hashed tiling)
+    monkeypatch.setenv("PREFILTER_GLINTS_WANG_SETTINGS", json.dumps(wang))
+    for est, kw in (("prefiltered", {}), ("samples", dict(ranges=False)),
+                    ("direct", dict(direct=True))):
+        a = render(specs[0], "glints-wang", seed=1, params={"estimator": est})
+        b = render_wang(specs[0], RenderSettings(seed=1), **kw)
+        assert a.tobytes() == b.tobytes()
+    with pytest.raises(PrefilterError, match="estimator"):
+        render(specs[0], "glints-wang", params={"estimator": "exact"})
 
 
 def _dependent_points(wn, idx, c, sp, s, sr):

@@ -462,5 +462,9 @@ def render_wang(scene, settings, *, index=None, wang: dict | None = None, ranges
 def render_glints_wang(scene, settings) -> np.ndarray:
     """The ``glints-wang`` method: glint BRDF with the footprint NDF of the implicit Wang
     tiling of the material's normal map (point, directional, untextured quad and environment
-    lights)."""
-    return render_wang(scene, settings)
+    lights). Variant ``estimator``: ``prefiltered`` (the default: range queries for quads, the
+    environment's lobe prefilter), ``samples`` (``ranges=False``), ``direct`` (``direct=True``:
+    the direct P-NDF of the tiling at every footprint, the reference; its cost grows with the
+    footprint)."""
+    est = settings.param("estimator", "prefiltered")
+    return render_wang(scene, settings, ranges=est == "prefiltered", direct=est == "direct")

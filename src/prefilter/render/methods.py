@@ -139,7 +139,11 @@ _DESCRIPTIONS: dict[str, str] = {
     "glints-reference": "glints ground truth: footprint supersampling, point P-NDF of the map; "
                         "quad and environment lights by Monte Carlo",
     "glints-wang": "glints on the implicit Wang tiling of the normal map (the exemplar): per-tile "
-                   "CP-compressed footprint pyramids, constant storage; point/directional lights",
+                   "CP-compressed footprint pyramids, constant storage; point, directional, "
+                   "quad (range queries) and environment (SG prefiltering) lights; "
+                   "estimator=samples: light samples with the point NDF (no range query or "
+                   "prefilter); estimator=direct: also the direct P-NDF of the tiling (the "
+                   "reference)",
     "glints-wave": "glints under wave optics: compressed RGB pyramid of the diffraction NDF of "
                    "the heightfield in extras.glints_wave (Yan et al. 2018, 8 wavelengths); "
                    "point/directional lights",
@@ -154,6 +158,7 @@ _PARAMS: dict[str, dict[str, tuple[str, ...]]] = {
     "path": {"bounces": ("4", "1", "2", "3", "5", "6", "8", "12", "16")},
     "glints": {"bounces": ("1", "2", "3", "4", "5", "6", "8"), "level0": ("8", "4")},
     "glints-direct": {"bounces": ("1", "2", "3", "4", "5", "6", "8")},
+    "glints-wang": {"estimator": ("prefiltered", "samples", "direct")},
     "ltc-multiscale": {"footprint": ("fit", "paper", "mrl")},
     "leadr-env": {"algorithm": ("full", "simplified")},
     "leadr-env-naive": {"algorithm": ("full", "simplified")},
