@@ -284,6 +284,9 @@ class BakeJob:
     #: the multiplier estimated from the sample cells (:func:`prefilter.glints.cp.ranks_for`)
     rank: int = 0
     level_rank: str = "global"
+    #: the allocation's weight of each group's squared error: its squared norm to this power's
+    #: negative (``bake(error_weight=...)``)
+    error_weight: float = 0.0
     candidates: tuple = ()
     lam: float = 0.0
 
@@ -438,7 +441,9 @@ def fit_cell(job: BakeJob, cid: int, stats: dict, blank, tensors, where,
         local[where[g], bi, bj] = rows[g] + np.arange(len(where[g]), dtype=np.int32)
     for g, (ag, bg, cg, e) in res.items():
         a[g], b[g], c[rows[g]:rows[g + 1]] = ag.T, bg.T, cg
-        err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g])
+        # the allocation's error of the group: squared, times its squared norm ** -error_weight
+        err2_g[g] = e**2 * np.einsum("ijk,ijk->", tensors[g], tensors[g]) ** (
+            1.0 - job.error_weight)
     part = dict(a=a, b=b, c=c, rows=rows, local=local, err2_g=err2_g, **stats)
     if save:
         job.ck.save(CELL_CHUNK + cid, **part)
@@ -792,7 +797,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
          max_levels: int | None = None, blank_tol: float = 1e-4, n_iter_max: int = 50,
          tol: float = 1e-4, seed: int = 0, progress: bool = True, keep_parts: bool = False,
          levels_dir=None, max_rank: int | None = None, level_rank: str = "global",
-         ndf_truncation: float = TRUNCATION, footprint_truncation: float = TRUNCATION,
+         error_weight: float = 0.0, ndf_truncation: float = TRUNCATION,
+         footprint_truncation: float = TRUNCATION,
          code_bits: int = 8, c_bits: int | None = None,
          exact_from_level: int | None = None, exact_cell: int | None = None,
          map_fn=None, level0=None, one_pass: bool = False) -> dict:
@@ -815,6 +821,12 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
     with about twice the rank of the top levels'); ``"level"`` gives every pyramid level its own
     budget of ``rank`` per byte (the same total, the same mean rank per byte at every level);
     ``"uniform"`` gives every group rank ``rank`` (``max_rank`` is then unused).
+
+    ``error_weight`` (in ``[0, 2]``): the allocation weighs each group's squared error by its
+    squared norm to the power ``-error_weight``. 0 (default) minimises the total squared error,
+    so the bright blocks of the NDF images take most of the rank; 1 weighs the groups' relative
+    errors alike, giving the dim blocks (the NDF images' tails) more. The same bytes; on the
+    wave-optics speckle images 0.75 lowers the near frame's FLIP (docs/glints-wave.md).
 
     ``ndf_truncation`` / ``footprint_truncation``: stds at which each element's Gaussian in ``s``
     / the footprint weights are cut in the level-0 NDF images
@@ -906,6 +918,11 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         raise PrefilterError(f"max_rank: expected at least rank = {rank}, got {max_rank}")
     if level_rank not in LEVEL_RANK:
         raise PrefilterError(f"level_rank: expected one of {LEVEL_RANK}, got {level_rank!r}")
+    if (isinstance(error_weight, bool) or not isinstance(error_weight, (int, float, np.integer,
+                                                                         np.floating))
+            or not 0.0 <= float(error_weight) <= 2.0):
+        raise PrefilterError(f"error_weight: expected a number in [0, 2], got {error_weight!r}")
+    error_weight = float(error_weight)
     # pass 1 fits every group at rank // 2; the budget (rank per group on average, weighted by
     # bytes) is then spent where the predicted error drop per byte is largest
     base = max(1, rank // 2)
@@ -928,6 +945,8 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         settings["c_bits"] = c_bits
     if exact_from_level is not None:
         settings["exact_from_level"] = exact_from_level
+    if error_weight:
+        settings["error_weight"] = error_weight
     if exact_cell is not None:
         settings["exact_cell"] = exact_cell
     if level0 is not None:
@@ -965,7 +984,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
                   blank_tol=blank_tol, base=base, n_iter_max=n_iter_max, tol=tol, seed=seed,
                   code_bits=code_bits, c_bits=c_bits, rows_per_chunk=rows_per_chunk,
                   exact_from_level=exact_from_level, cells=np.zeros((0, 5), np.int64),
-                  level0=level0, rank=rank, level_rank=level_rank,
+                  level0=level0, rank=rank, level_rank=level_rank, error_weight=error_weight,
                   candidates=tuple(int(c) for c in candidates))
     if one_pass:
         k_sides = [exact_cell if job.exact(lv) and exact_cell is not None

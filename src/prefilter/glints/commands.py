@@ -136,6 +136,10 @@ _D = BAKE_SETTINGS
               type=click.Choice(["global", "level", "uniform"]),
               help="How the rank budget is spread: over all groups, per pyramid level (equal "
                    "query work at every footprint size), or every group at --rank.")
+@click.option("--error-weight", default=0.0, show_default=True, type=FiniteFloat(0.0, 2.0),
+              help="The allocation weighs each group's squared error by its squared norm to "
+                   "this power's negative: 0 minimises the total error, 1 evens the groups' "
+                   "relative errors (more rank for the NDF images' dim blocks).")
 @shared_options(ndf_res=_D["ndf_res"], block=_D["block"], support=_D["support"],
                 roughness=(_D["intrinsic_roughness"],
                            "Intrinsic roughness sigma_r of the model; the map is baked sharper "
@@ -174,10 +178,10 @@ _D = BAKE_SETTINGS
                    "of block^2: faster queries).")
 @shared_options(iters=_D["n_iter_max"], seed=_D["seed"], wait=False, quiet=False)
 @scheduler_options
-def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, support, roughness,
-                stride0, sigma0, cell, converge, blank_tol, ndf_truncation, footprint_truncation,
-                code_bits, c_bits, exact_from_level, exact_cell, iters, seed, wait, quiet,
-                scheduler, workers):
+def bake_glints(normal_map, out, rank, max_rank, level_rank, error_weight, ndf_res, block, support,
+                roughness, stride0, sigma0, cell, converge, blank_tol, ndf_truncation,
+                footprint_truncation, code_bits, c_bits, exact_from_level, exact_cell, iters, seed,
+                wait, quiet, scheduler, workers):
     """Precompute and compress the NDF pyramid of NORMAL_MAP (glints paper, sec. 4).
 
     NORMAL_MAP is an image (PNG/EXR, OpenGL convention), a .npy of unit normals (H, W, 3), or
@@ -195,6 +199,7 @@ def bake_glints(normal_map, out, rank, max_rank, level_rank, ndf_res, block, sup
         settings["cell"] = cell
     # arguments outside BAKE_SETTINGS enter the settings (and the cache key) only when given
     for k, v, default in (("max_rank", max_rank, None), ("level_rank", level_rank, "global"),
+                          ("error_weight", error_weight, 0.0),
                           ("sigma0", sigma0, None), ("converge", converge, 0.01)):
         if v != default:
             settings[k] = v
@@ -340,6 +345,10 @@ _W = WAVE_SETTINGS
               help="Units of a file's heights: metres, or texel units (times --texel-size).")
 @click.option("--rank", default=_W["rank"], show_default=True, type=click.IntRange(1),
               help="Mean CP rank per group and channel: the storage budget.")
+@click.option("--error-weight", default=0.0, show_default=True, type=FiniteFloat(0.0, 2.0),
+              help="The rank allocation's weight of each group's squared error: its squared "
+                   "norm to this power's negative (0.75: more rank for the dim speckle blocks, "
+                   "lower FLIP near the camera; docs/glints-wave.md).")
 @shared_options(ndf_res=_W["ndf_res"], block=_W["block"], support=_W["support"])
 @click.option("--stride0", default=_W["stride0"], show_default=True, type=click.IntRange(1),
               help="Level-0 footprint (coherence area) stride (texels).")
@@ -349,8 +358,8 @@ _W = WAVE_SETTINGS
               help=f"Spatial cell of a group at level 0 (texels) [default: {_W['cell']}, at most "
                    "the heightfield's side].")
 @shared_options(wait=False, quiet=False)
-def bake_glints_wave(heightfield, out, texel_size, units, rank, ndf_res, block, support, stride0,
-                     sigma0, cell, wait, quiet):
+def bake_glints_wave(heightfield, out, texel_size, units, rank, error_weight, ndf_res, block,
+                     support, stride0, sigma0, cell, wait, quiet):
     """Precompute and compress the wave-optics RGB NDF pyramid of HEIGHTFIELD (glint paper sec.
     4.1 with Yan et al. 2018's NDF; docs/glints-wave.md).
 
@@ -371,6 +380,8 @@ def bake_glints_wave(heightfield, out, texel_size, units, rank, ndf_res, block, 
         settings["cell"] = cell
     if sigma0 is not None:
         settings["sigma0"] = sigma0
+    if error_weight:
+        settings["error_weight"] = error_weight
     st = wave_settings(hf.shape, settings)
     if out is None:
         out = cache_path(hf, st)
