@@ -63,6 +63,20 @@ def test_bake_without_out_is_what_the_render_method_reads(tmp_path, capfd, monke
     assert wm.channels[0].header == wb.load_wave(path).channels[0].header
 
 
+def test_cache_path_keys_the_settings_and_the_cp_fit_version(monkeypatch):
+    """The render cache's file changes with the settings (``error_weight``) and with the CP
+    fit's version: a map fitted by other code is not reused."""
+    from prefilter.glints import cp
+
+    hf = wb.as_heightfield_spec(SPEC)
+    st = wb.wave_settings(hf.shape)
+    path = wb.cache_path(hf, st)
+    assert wb.cache_path(hf, dict(st)) == path
+    assert wb.cache_path(hf, dict(st, error_weight=0.75)) != path
+    monkeypatch.setattr(cp, "FIT_VERSION", cp.FIT_VERSION + 1)
+    assert wb.cache_path(hf, st) != path
+
+
 def test_bake_resumes_from_its_level0_parts(tmp_path, capfd, monkeypatch):
     """A bake stopped after the level-0 images (interrupted as the first channel's CP starts)
     resumes without computing any of them again and writes the bytes of an uninterrupted

@@ -60,13 +60,16 @@ def wave_settings(shape, settings: dict | None = None) -> dict:
 def cache_path(hf: Heightfield, settings: dict) -> Path:
     """Where the render methods keep the map of ``hf`` baked with ``settings`` (the full
     :func:`wave_settings`): ``wave-<key>.npz`` in the glints cache
-    (:func:`prefilter.glints.bake.cache_dir`), keyed by the heights' digest, the settings and
-    :data:`WAVE_VERSION`; the channels are :func:`channel_paths` of it."""
+    (:func:`prefilter.glints.bake.cache_dir`), keyed by the heights' digest, the settings,
+    :data:`WAVE_VERSION` and the CP fit's version (:data:`prefilter.glints.cp.FIT_VERSION`: a
+    map fitted by other code is not reused); the channels are :func:`channel_paths` of it."""
     import hashlib
 
+    from prefilter.glints import cp
     from prefilter.glints.bake import cache_dir
 
-    key = json.dumps(dict(settings, heights=hf.digest, version=WAVE_VERSION), sort_keys=True)
+    key = json.dumps(dict(settings, heights=hf.digest, version=WAVE_VERSION,
+                          cp_fit=cp.FIT_VERSION), sort_keys=True)
     return cache_dir() / f"wave-{hashlib.sha1(key.encode()).hexdigest()[:16]}.npz"
 
 
