@@ -345,10 +345,11 @@ _W = WAVE_SETTINGS
               help="Units of a file's heights: metres, or texel units (times --texel-size).")
 @click.option("--rank", default=_W["rank"], show_default=True, type=click.IntRange(1),
               help="Mean CP rank per group and channel: the storage budget.")
-@click.option("--error-weight", default=0.0, show_default=True, type=FiniteFloat(0.0, 2.0),
+@click.option("--error-weight", default=_W["error_weight"], show_default=True,
+              type=FiniteFloat(0.0, 2.0),
               help="The rank allocation's weight of each group's squared error: its squared "
-                   "norm to this power's negative (0.75: more rank for the dim speckle blocks, "
-                   "lower FLIP near the camera; docs/glints-wave.md).")
+                   "norm to this power's negative (0: the total error; 1: relative errors, "
+                   "more rank for the dim speckle blocks, lower FLIP near the camera).")
 @shared_options(ndf_res=_W["ndf_res"], block=_W["block"], support=_W["support"])
 @click.option("--stride0", default=_W["stride0"], show_default=True, type=click.IntRange(1),
               help="Level-0 footprint (coherence area) stride (texels).")
@@ -380,8 +381,7 @@ def bake_glints_wave(heightfield, out, texel_size, units, rank, error_weight, nd
         settings["cell"] = cell
     if sigma0 is not None:
         settings["sigma0"] = sigma0
-    if error_weight:
-        settings["error_weight"] = error_weight
+    settings["error_weight"] = error_weight
     st = wave_settings(hf.shape, settings)
     if out is None:
         out = cache_path(hf, st)

@@ -37,6 +37,27 @@ def test_bake_summary_and_files(baked):
     assert wm.level0_key.startswith("{") and hf.digest in wm.level0_key
 
 
+def test_channels_share_one_pyramid(tmp_path, monkeypatch):
+    """Each channel stops adding levels where its own images converge; a channel that stopped
+    below another is baked again up to the tallest, so the three load together."""
+    hf = hfm.isotropic_noise(32, seed=3)
+    real, calls = wb.bake, []
+
+    def green_stops_early(nm, path, **kw):
+        first_green = str(path).endswith(".G.npz") and not any(".G." in c for c, _ in calls)
+        calls.append((str(path), kw.get("max_levels")))
+        return real(nm, path, **(dict(kw, max_levels=2) if first_green else kw))
+
+    monkeypatch.setattr(wb, "bake", green_stops_early)
+    out = tmp_path / "w.npz"
+    wb.bake_wave(hf, out, rank=4, progress=False)
+    wm = wb.load_wave(out)
+    n = {gm.pyramid.n_levels for gm in wm.channels}
+    assert len(n) == 1 and n.pop() > 2
+    assert [c.rsplit(".", 2)[1] for c, _ in calls] == ["R", "G", "B", "G"]
+    assert calls[-1][1] == wm.pyramid.n_levels
+
+
 @pytest.mark.slow
 def test_bake_resumes_from_its_parts(baked, tmp_path, monkeypatch):
     """A bake whose outputs are gone resumes from its checkpoints (no NDF image recomputed) and
