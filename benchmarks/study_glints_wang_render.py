@@ -150,6 +150,20 @@ def _flips(test, ref, stop):
     return float(fl.mean), float(fc.mean), float(top)
 
 
+def _seed_means(fa, fb, stop):
+    """Frames ``fa`` of ``glints-wang`` against independent reference frames ``fb`` (one per
+    seed): FLIP and capped FLIP of the two seed averages (what is left without most of the two
+    estimators' noise), those of the reference's even-seed average against its odd-seed one (the
+    floor: half as many frames each), the frame-mean ratio and its difference in standard
+    errors."""
+    ma, mb = [float(x.mean()) for x in fa], [float(x.mean()) for x in fb]
+    se = np.sqrt(np.var(ma, ddof=1) / len(ma) + np.var(mb, ddof=1) / len(mb))
+    fm, fmc, _ = _flips(np.mean(fa, axis=0), np.mean(fb, axis=0), stop)
+    hf, hfc, _ = _flips(np.mean(fb[0::2], axis=0), np.mean(fb[1::2], axis=0), stop)
+    return (fm, fmc, hf, hfc, float(np.mean(ma) / np.mean(mb)),
+            float((np.mean(ma) - np.mean(mb)) / se))
+
+
 def _lights_row(args, wang, tmp, d, kind):
     """One ``--lights quad|environment`` row (module docstring)."""
     from prefilter.glints import wang_render
@@ -180,21 +194,13 @@ def _lights_row(args, wang, tmp, d, kind):
         fa = [wang_render.render_wang(sc, RenderSettings(seed=k), index=idx)
               for k in range(args.mean_seeds)]
         fb = [render(sa, "glints-direct", seed=1000 + k) for k in range(args.mean_seeds)]
-        ma = [float(x.mean()) for x in fa]
-        mb = [float(x.mean()) for x in fb]
-        se = np.sqrt(np.var(ma, ddof=1) / len(ma) + np.var(mb, ddof=1) / len(mb))
-        # images averaged over the seeds: what is left of the FLIP without most of the two
-        # estimators' noise, and the floor of that average (glints-direct's even seeds
-        # against its odd ones, half as many frames each)
-        avg_a, avg_b = np.mean(fa, axis=0), np.mean(fb, axis=0)
-        fm, fmc, _ = _flips(avg_a, avg_b, args.stop_exposure)
-        hf, hfc, _ = _flips(np.mean(fb[0::2], axis=0), np.mean(fb[1::2], axis=0),
-                            args.stop_exposure)
+        fm, fmc, hf, hfc, ratio, z = _seed_means(fa, fb, args.stop_exposure)
         row.update(flip_seed_mean_wang_vs_direct=fm, flip_capped_seed_mean_wang_vs_direct=fmc,
                    flip_seed_mean_direct_even_vs_odd=hf,
                    flip_capped_seed_mean_direct_even_vs_odd=hfc)
-        row.update(mean_seeds=args.mean_seeds, mean_ratio_seeds=float(np.mean(ma) / np.mean(mb)),
-                   mean_diff_over_se=float((np.mean(ma) - np.mean(mb)) / se),
+        ma = [float(x.mean()) for x in fa]
+        mb = [float(x.mean()) for x in fb]
+        row.update(mean_seeds=args.mean_seeds, mean_ratio_seeds=ratio, mean_diff_over_se=z,
                    frame_mean_rel_std_wang=float(np.std(ma, ddof=1) / np.mean(ma)),
                    frame_mean_rel_std_direct=float(np.std(mb, ddof=1) / np.mean(mb)))
     if not args.no_times:
@@ -227,19 +233,14 @@ def _exact_row(args, tmp, d, kind):
     wang_s = float(np.median([t for _, t in fa]))
     direct_s = float(np.median([t for _, t in fe]))
     fa, fe = [x for x, _ in fa], [x for x, _ in fe]
-    ma, me = [float(x.mean()) for x in fa], [float(x.mean()) for x in fe]
-    se = np.sqrt(np.var(ma, ddof=1) / K + np.var(me, ddof=1) / K)
-    paired = [a / n for a, n in zip(ma, (float(x.mean()) for x in fn))]
-    fm, fmc, _ = _flips(np.mean(fa, axis=0), np.mean(fe, axis=0), args.stop_exposure)
-    hf, hfc, _ = _flips(np.mean(fe[0::2], axis=0), np.mean(fe[1::2], axis=0),
-                        args.stop_exposure)
+    paired = [float(a.mean()) / float(n.mean()) for a, n in zip(fa, fn)]
+    fm, fmc, hf, hfc, ratio, z = _seed_means(fa, fe, args.stop_exposure)
     sf, sfc, _ = _flips(fn[0], e0, args.stop_exposure)
     print(json.dumps(dict(
         lights=kind, distance=d, tile=wn.wang.size, exact_seeds=K,
         flip_seed_mean_wang_vs_exact=fm, flip_capped_seed_mean_wang_vs_exact=fmc,
         flip_seed_mean_exact_even_vs_odd=hf, flip_capped_seed_mean_exact_even_vs_odd=hfc,
-        mean_ratio_wang_over_exact=float(np.mean(ma) / np.mean(me)),
-        mean_diff_over_se=float((np.mean(ma) - np.mean(me)) / se),
+        mean_ratio_wang_over_exact=ratio, mean_diff_over_se=z,
         flip_same_estimator_vs_exact=sf, flip_capped_same_estimator_vs_exact=sfc,
         mean_ratio_same_estimator=float(fn[0].mean() / e0.mean()),
         mean_ratio_ranges_over_same_estimator=float(np.mean(paired)),

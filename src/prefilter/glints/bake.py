@@ -52,7 +52,7 @@ import numpy as np
 
 from prefilter.fileio import Checkpoints, atomic_path, bake_lock, exclusive_lock
 from prefilter.jit import release_heap
-from prefilter.validation import as_positive_int
+from prefilter.validation import as_positive_int, check_scalar
 from prefilter.errors import PrefilterError
 from prefilter.glints import cp as cpmod
 from prefilter.glints.pndf import (DEFAULT_ROUGHNESS, SIGMA_H, TRUNCATION, as_intrinsic_roughness,
@@ -918,11 +918,7 @@ def bake(normal_map, out, *, rank: int = 16, ndf_res: int = 128, block: int = 16
         raise PrefilterError(f"max_rank: expected at least rank = {rank}, got {max_rank}")
     if level_rank not in LEVEL_RANK:
         raise PrefilterError(f"level_rank: expected one of {LEVEL_RANK}, got {level_rank!r}")
-    if (isinstance(error_weight, bool) or not isinstance(error_weight, (int, float, np.integer,
-                                                                         np.floating))
-            or not 0.0 <= float(error_weight) <= 2.0):
-        raise PrefilterError(f"error_weight: expected a number in [0, 2], got {error_weight!r}")
-    error_weight = float(error_weight)
+    error_weight = check_scalar(error_weight, "error_weight", lo=0.0, hi=2.0)
     # pass 1 fits every group at rank // 2; the budget (rank per group on average, weighted by
     # bytes) is then spent where the predicted error drop per byte is largest
     base = max(1, rank // 2)

@@ -347,6 +347,7 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
 
     check_lights(scene)
     st = wang_settings(settings)
+    prefiltered = ranges and not direct  # quad range queries, the environment's lobe prefilter
     lights = scene.light_set()
     env = [lt for lt in scene.lights if lt.type == "environment"]
     nq = len(lights.quads)
@@ -390,7 +391,7 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
             corners = np.stack([to_local(v - g.position[m], *frame) for v in ql.vertices], 1)
             if np.any(base > 0):
                 out[m] += base * ql.radiance * clamped_cosine_integral(corners)[:, None]
-            if ranges and not direct:
+            if prefiltered:
                 val, done = quad_range_wang(wn, c, sp, wo[m], corners, ql.radiance, f0,
                                             index=index,
                                             point_roughness=st["intrinsic_roughness"])
@@ -407,7 +408,7 @@ def shade_wang(scene, g, *, spp: int = 1, u=None, index=None, settings: dict | N
             cols = uniform_columns(nq, "environment", j)
             wi, wgt, D = _environment_samples(light, frame, u[m][:, cols], wn, c, sp, wo[m],
                                               index, st["intrinsic_roughness"],
-                                              prefilter=ranges and not direct)
+                                              prefilter=prefiltered)
             wis += list(wi)
             wgts += list(wgt)
             lamb += [True] * len(wi)

@@ -167,7 +167,7 @@ def bake_wave(hf: Heightfield, out, *, rank: int = 32, error_weight: float = 1.0
             channel(c)
         # each channel stops adding levels where its own images converge; the three must share
         # one pyramid: those that stopped early are baked again up to the tallest
-        n_levels = [load(p).pyramid.n_levels for p in channel_paths(out)]
+        n_levels = [len(summary["channels"][c]["rel_l2_error_per_level"]) for c in CHANNELS]
         for c, n in enumerate(n_levels):
             if n < max(n_levels):
                 channel(c, max_levels=max(n_levels), converge=0.0)
